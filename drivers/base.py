@@ -1,0 +1,956 @@
+"""Abstract base classes, one per device kind.
+
+The pattern: a public method validates its arguments and the device state, then calls
+a ``_do_*`` hook that a concrete driver implements. Hooks raise a
+:mod:`drivers.errors` exception on failure; they never return an error flag. Out-of-range
+targets raise *before* any motion (nothing is clipped silently).
+
+Lifecycle: every device is a context manager, ``close()`` is idempotent, and a device
+that failed in its constructor has closed whatever it had opened. No ``__del__``.
+
+Units are part of the names or stated here: rotary axes work in degrees, linear axes in
+millimetres, velocities in units/s, accelerations in units/s², exposures in
+microseconds, optical power in watts, wavelengths in nanometres.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drivers.errors import (
+    DeviceTimeout,
+    LimitError,
+    MotionError,
+    NotHomedError,
+    StateError,
+    UnsupportedFeature,
+)
+
+__all__ = [
+    "AxisKind",
+    "AxisStatus",
+    "Camera",
+    "Device",
+    "DeviceIdentity",
+    "Frame",
+    "FrameRing",
+    "LightSource",
+    "MotionAxis",
+    "PixelFormat",
+    "PowerMeter",
+    "Roi",
+]
+
+
+# --------------------------------------------------------------------------- devices
+
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    """Who a device says it is. Stored with every run for provenance."""
+
+    vendor: str
+    model: str
+    serial: str
+    firmware: str = ""
+    extra: dict[str, str] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "vendor": self.vendor,
+            "model": self.model,
+            "serial": self.serial,
+            "firmware": self.firmware,
+            **{f"extra.{k}": v for k, v in self.extra.items()},
+        }
+
+
+class Device(ABC):
+    """Common lifecycle of every device.
+
+    Parameters
+    ----------
+    name
+        The role name the bench profile gives the device; every error names it.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._closed = False
+        self._identity: DeviceIdentity | None = None
+
+    # lifecycle ----------------------------------------------------------------
+    def close(self) -> None:
+        """Release the device. Safe to call any number of times."""
+        if self._closed:
+            return
+        self._closed = True
+        self._do_close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _check_open(self, command: str) -> None:
+        if self._closed:
+            raise StateError(
+                "device is closed", device=self.name, command=command,
+                hint="open a new connection",
+            )
+
+    @property
+    def identity(self) -> DeviceIdentity:
+        """Vendor, model, serial number and firmware as reported by the device."""
+        self._check_open("identity")
+        if self._identity is None:
+            self._identity = self._do_identity()
+        return self._identity
+
+    @abstractmethod
+    def _do_identity(self) -> DeviceIdentity: ...
+
+    @abstractmethod
+    def _do_close(self) -> None: ...
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open"
+        return f"<{type(self).__name__} {self.name!r} {state}>"
+
+
+# --------------------------------------------------------------------------- motion
+
+
+class AxisKind(enum.Enum):
+    """Rotary axes work in degrees, linear axes in millimetres."""
+
+    ROTARY = "deg"
+    LINEAR = "mm"
+
+    @property
+    def units(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class AxisStatus:
+    """A snapshot of an axis, decoded from the controller's status reply."""
+
+    position: float
+    is_moving: bool
+    is_homed: bool
+    is_enabled: bool
+    is_homing: bool = False
+    at_forward_limit: bool = False
+    at_reverse_limit: bool = False
+    error: str | None = None
+
+
+class MotionAxis(Device):
+    """One motion axis (rotation or linear stage).
+
+    Motion is non-blocking: :meth:`move_to`, :meth:`move_by` and :meth:`home` start the
+    motion and return; :meth:`wait` blocks until it ends or its timeout passes (then the
+    axis is stopped and :class:`~drivers.errors.DeviceTimeout` raised). Passing
+    ``wait=True`` does both.
+
+    Parameters
+    ----------
+    name
+        Role name (e.g. ``"sample_theta"``).
+    kind
+        Rotary (degrees) or linear (millimetres).
+    soft_limits
+        ``(low, high)`` in axis units; targets outside raise :class:`LimitError` before
+        anything moves.
+    position_tolerance
+        How far from its target a finished move may stop and still count as arrived
+        (stepper and servo controllers often stop a few counts short).
+    poll_interval
+        Seconds between status polls while waiting.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        kind: AxisKind,
+        soft_limits: tuple[float, float] = (-math.inf, math.inf),
+        position_tolerance: float = 0.01,
+        poll_interval: float = 0.01,
+    ) -> None:
+        super().__init__(name)
+        self.kind = kind
+        self._soft_limits = (-math.inf, math.inf)
+        self.soft_limits = soft_limits
+        if not position_tolerance > 0:
+            raise ValueError("position_tolerance must be > 0")
+        self.position_tolerance = float(position_tolerance)
+        self.poll_interval = float(poll_interval)
+        self._target: float | None = None
+
+    @property
+    def units(self) -> str:
+        return self.kind.units
+
+    # limits -------------------------------------------------------------------
+    @property
+    def soft_limits(self) -> tuple[float, float]:
+        return self._soft_limits
+
+    @soft_limits.setter
+    def soft_limits(self, limits: tuple[float, float]) -> None:
+        low, high = (float(v) for v in limits)
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise ValueError(f"soft limits must satisfy low < high, got ({low}, {high})")
+        self._soft_limits = (low, high)
+
+    def check_target(self, target: float, command: str = "move") -> float:
+        """Return ``target`` as float, or raise :class:`LimitError` if it is out of range."""
+        target = float(target)
+        low, high = self._soft_limits
+        if not math.isfinite(target):
+            raise ValueError(f"{self.name}: target must be finite, got {target}")
+        if not low <= target <= high:
+            raise LimitError(
+                f"target {target:g} {self.units} is outside the soft limits "
+                f"[{low:g}, {high:g}] {self.units}",
+                device=self.name, command=command,
+                hint="choose a target inside the limits or change them in the bench profile",
+            )
+        return target
+
+    # state --------------------------------------------------------------------
+    def status(self) -> AxisStatus:
+        self._check_open("status")
+        return self._do_status()
+
+    @property
+    def position(self) -> float:
+        """Actual position in axis units."""
+        self._check_open("position")
+        return self._do_get_position()
+
+    @property
+    def is_moving(self) -> bool:
+        return self.status().is_moving
+
+    @property
+    def is_homed(self) -> bool:
+        return self.status().is_homed
+
+    @property
+    def is_enabled(self) -> bool:
+        return self.status().is_enabled
+
+    @property
+    def target(self) -> float | None:
+        """The last commanded target, or ``None`` before any move."""
+        return self._target
+
+    # commands -----------------------------------------------------------------
+    def enable(self) -> None:
+        self._check_open("enable")
+        self._do_enable()
+
+    def disable(self) -> None:
+        self._check_open("disable")
+        self._do_disable()
+
+    def home(self, *, wait: bool = True, timeout: float = 120.0) -> None:
+        """Find the reference position (the axis's zero)."""
+        self._check_open("home")
+        self._target = None
+        self._do_home()
+        if wait:
+            self._wait_for(lambda s: s.is_homed and not s.is_homing and not s.is_moving,
+                           timeout, "home")
+            self._target = None
+
+    def move_to(self, target: float, *, wait: bool = False, timeout: float = 60.0) -> None:
+        """Start a move to an absolute ``target`` in axis units."""
+        self._check_open("move_to")
+        target = self.check_target(target, "move_to")
+        self._require_ready("move_to")
+        self._target = target
+        self._do_move_absolute(target)
+        if wait:
+            self.wait(timeout)
+
+    def move_by(self, delta: float, *, wait: bool = False, timeout: float = 60.0) -> None:
+        """Start a move by ``delta`` from the present target (or position)."""
+        self._check_open("move_by")
+        delta = float(delta)
+        if not math.isfinite(delta):
+            raise ValueError(f"{self.name}: delta must be finite, got {delta}")
+        base = self._target if self._target is not None else self._do_get_position()
+        target = self.check_target(base + delta, "move_by")
+        self._require_ready("move_by")
+        self._target = target
+        self._do_move_relative(delta, target)
+        if wait:
+            self.wait(timeout)
+
+    def wait(self, timeout: float = 60.0) -> float:
+        """Block until motion ends; return the final position.
+
+        Raises
+        ------
+        DeviceTimeout
+            The axis was still moving after ``timeout`` seconds; it has been stopped.
+        MotionError
+            It stopped farther than ``position_tolerance`` from the commanded target.
+        """
+        self._check_open("wait")
+        status = self._wait_for(lambda s: not s.is_moving, timeout, "wait")
+        if status.at_forward_limit or status.at_reverse_limit:
+            raise LimitError(
+                f"a limit switch stopped the axis at {status.position:.6g} {self.units}",
+                device=self.name, command="wait",
+                hint="check the soft limits against the stage travel and re-home",
+            )
+        if self._target is not None:
+            miss = status.position - self._target
+            if abs(miss) > self.position_tolerance:
+                raise MotionError(
+                    f"stopped at {status.position:.6g} {self.units}, "
+                    f"{miss:+.3g} {self.units} from the target {self._target:.6g}",
+                    device=self.name, command="wait",
+                    hint="check for obstruction or following errors; "
+                    "raise position_tolerance only if the stage is known to stop short",
+                )
+        return status.position
+
+    def stop(self) -> None:
+        """Stop any motion now. Always allowed, also on a device in error."""
+        if self._closed:
+            return
+        self._do_stop()
+
+    @property
+    def velocity(self) -> float:
+        """Maximum move velocity in units/s."""
+        self._check_open("velocity")
+        return self._do_get_velocity()
+
+    @velocity.setter
+    def velocity(self, value: float) -> None:
+        self._check_open("set velocity")
+        value = _positive(value, "velocity")
+        self._do_set_velocity(value)
+
+    @property
+    def acceleration(self) -> float:
+        """Acceleration in units/s²."""
+        self._check_open("acceleration")
+        return self._do_get_acceleration()
+
+    @acceleration.setter
+    def acceleration(self, value: float) -> None:
+        self._check_open("set acceleration")
+        value = _positive(value, "acceleration")
+        self._do_set_acceleration(value)
+
+    # helpers ------------------------------------------------------------------
+    def _require_ready(self, command: str) -> None:
+        status = self._do_status()
+        if not status.is_enabled:
+            raise StateError("axis is disabled", device=self.name, command=command,
+                             hint="call enable() first")
+        if not status.is_homed:
+            raise NotHomedError("axis is not homed", device=self.name, command=command,
+                                hint="call home() first")
+
+    def _wait_for(self, done, timeout: float, command: str) -> AxisStatus:
+        if not timeout > 0:
+            raise ValueError("timeout must be > 0")
+        deadline = time.monotonic() + timeout
+        while True:
+            status = self._do_status()
+            if status.error:
+                self.stop()
+                self._raise_status_error(status, command)
+            if done(status):
+                return status
+            if time.monotonic() >= deadline:
+                self.stop()
+                raise DeviceTimeout(
+                    f"still not done after {timeout:g} s (position {status.position:.6g} "
+                    f"{self.units}); motion stopped",
+                    device=self.name, command=command,
+                    hint="raise the timeout or check velocity/homing parameters",
+                )
+            time.sleep(self.poll_interval)
+
+    def _raise_status_error(self, status: AxisStatus, command: str) -> None:
+        """Turn a status with ``error`` set into an exception; drivers may refine it."""
+        from drivers.errors import ControllerError
+
+        raise ControllerError(status.error or "controller error", device=self.name,
+                              command=command)
+
+    # hooks --------------------------------------------------------------------
+    @abstractmethod
+    def _do_status(self) -> AxisStatus: ...
+
+    def _do_get_position(self) -> float:
+        return self._do_status().position
+
+    @abstractmethod
+    def _do_enable(self) -> None: ...
+
+    @abstractmethod
+    def _do_disable(self) -> None: ...
+
+    @abstractmethod
+    def _do_home(self) -> None: ...
+
+    @abstractmethod
+    def _do_move_absolute(self, target: float) -> None: ...
+
+    def _do_move_relative(self, delta: float, target: float) -> None:
+        """Default: an absolute move to the validated ``target``."""
+        self._do_move_absolute(target)
+
+    @abstractmethod
+    def _do_stop(self) -> None: ...
+
+    @abstractmethod
+    def _do_get_velocity(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_velocity(self, value: float) -> None: ...
+
+    @abstractmethod
+    def _do_get_acceleration(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_acceleration(self, value: float) -> None: ...
+
+
+def _positive(value: float, what: str) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{what} must be a finite number > 0, got {value}")
+    return value
+
+
+# --------------------------------------------------------------------------- camera
+
+
+class PixelFormat(enum.Enum):
+    """Monochrome pixel formats; the number is the significant bit depth."""
+
+    MONO8 = 8
+    MONO10 = 10
+    MONO12 = 12
+    MONO16 = 16
+
+    @property
+    def bit_depth(self) -> int:
+        return self.value
+
+    @property
+    def dtype(self) -> np.dtype:
+        return np.dtype(np.uint8 if self.value <= 8 else np.uint16)
+
+
+@dataclass(frozen=True)
+class Roi:
+    """Region of interest in unbinned sensor pixels: origin (x, y) and size."""
+
+    x: int
+    y: int
+    width: int
+    height: int
+
+    def validate(self, sensor_width: int, sensor_height: int) -> Roi:
+        values = (self.x, self.y, self.width, self.height)
+        if any(int(v) != v for v in values):
+            raise ValueError(f"ROI fields must be integers, got {self}")
+        if self.x < 0 or self.y < 0 or self.width < 1 or self.height < 1:
+            raise ValueError(f"ROI must have x, y >= 0 and a positive size, got {self}")
+        if self.x + self.width > sensor_width or self.y + self.height > sensor_height:
+            raise ValueError(
+                f"ROI {self} exceeds the sensor ({sensor_width} x {sensor_height} px)"
+            )
+        return self
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One image with the settings it was actually taken with.
+
+    ``data`` has shape (height, width) in DN; ``timestamp`` is seconds since the epoch
+    at the end of the exposure; ``saturation_dn`` is the level at or above which a pixel
+    must be treated as saturated.
+    """
+
+    data: np.ndarray
+    index: int
+    timestamp: float
+    exposure_us: float
+    gain: float
+    saturation_dn: float
+    bit_depth: int
+    roi: Roi
+    binning: int = 1
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+class FrameRing:
+    """A bounded, thread-safe ring buffer of frames that counts what it drops.
+
+    When full, the oldest frame is dropped (and counted): a slow consumer sees the most
+    recent frames, never an unbounded backlog.
+    """
+
+    def __init__(self, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self._frames: deque[Frame] = deque()
+        self._capacity = int(capacity)
+        self._dropped = 0
+        self._cond = threading.Condition()
+
+    @property
+    def capacity(self) -> int:
+        return self._capacity
+
+    @property
+    def dropped(self) -> int:
+        with self._cond:
+            return self._dropped
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._frames)
+
+    def put(self, frame: Frame) -> None:
+        with self._cond:
+            if len(self._frames) >= self._capacity:
+                self._frames.popleft()
+                self._dropped += 1
+            self._frames.append(frame)
+            self._cond.notify_all()
+
+    def get(self, timeout: float) -> Frame | None:
+        """Oldest buffered frame, waiting up to ``timeout`` s; ``None`` if none came."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: bool(self._frames), timeout):
+                return None
+            return self._frames.popleft()
+
+    def clear(self) -> int:
+        """Discard everything buffered; return how many frames were discarded."""
+        with self._cond:
+            n = len(self._frames)
+            self._frames.clear()
+            return n
+
+
+class Camera(Device):
+    """An area camera delivering monochrome frames.
+
+    Stale-frame policy: any change of exposure, gain, ROI, binning or pixel format, and
+    any call to :meth:`invalidate` (the engine calls it after every move), discards the
+    frames buffered so far; the next frame returned by :meth:`acquire` started its
+    exposure after the change. Drivers whose backend buffers internally discard
+    ``stale_frames`` frames in :meth:`_do_invalidate`.
+    """
+
+    #: Exposure range in microseconds, (min, max); drivers override.
+    exposure_range_us: tuple[float, float] = (1.0, 60e6)
+    #: Gain range in the device's units, (min, max); drivers override.
+    gain_range: tuple[float, float] = (0.0, 0.0)
+
+    def __init__(self, name: str, *, ring_capacity: int = 16) -> None:
+        super().__init__(name)
+        self._ring = FrameRing(ring_capacity)
+        self._stream_thread: threading.Thread | None = None
+        self._stream_stop = threading.Event()
+        self._stream_error: BaseException | None = None
+
+    # settings -----------------------------------------------------------------
+    @property
+    def sensor_shape(self) -> tuple[int, int]:
+        """(height, width) of the full sensor in unbinned pixels."""
+        return self._do_sensor_shape()
+
+    @property
+    def exposure_us(self) -> float:
+        self._check_open("exposure_us")
+        return self._do_get_exposure_us()
+
+    @exposure_us.setter
+    def exposure_us(self, value: float) -> None:
+        self._check_open("set exposure_us")
+        value = float(value)
+        low, high = self.exposure_range_us
+        if not (math.isfinite(value) and low <= value <= high):
+            raise ValueError(
+                f"{self.name}: exposure {value:g} us outside [{low:g}, {high:g}] us"
+            )
+        self._do_set_exposure_us(value)
+        self.invalidate()
+
+    @property
+    def gain(self) -> float:
+        self._check_open("gain")
+        return self._do_get_gain()
+
+    @gain.setter
+    def gain(self, value: float) -> None:
+        self._check_open("set gain")
+        value = float(value)
+        low, high = self.gain_range
+        if not (math.isfinite(value) and low <= value <= high):
+            raise ValueError(f"{self.name}: gain {value:g} outside [{low:g}, {high:g}]")
+        self._do_set_gain(value)
+        self.invalidate()
+
+    @property
+    def roi(self) -> Roi:
+        self._check_open("roi")
+        return self._do_get_roi()
+
+    @roi.setter
+    def roi(self, roi: Roi) -> None:
+        self._check_open("set roi")
+        height, width = self.sensor_shape
+        self._do_set_roi(roi.validate(width, height))
+        self.invalidate()
+
+    @property
+    def binning(self) -> int:
+        self._check_open("binning")
+        return self._do_get_binning()
+
+    @binning.setter
+    def binning(self, value: int) -> None:
+        self._check_open("set binning")
+        if int(value) != value or value < 1:
+            raise ValueError(f"{self.name}: binning must be a positive integer, got {value}")
+        self._do_set_binning(int(value))
+        self.invalidate()
+
+    @property
+    def pixel_format(self) -> PixelFormat:
+        self._check_open("pixel_format")
+        return self._do_get_pixel_format()
+
+    @pixel_format.setter
+    def pixel_format(self, fmt: PixelFormat) -> None:
+        self._check_open("set pixel_format")
+        if not isinstance(fmt, PixelFormat):
+            raise TypeError(f"{self.name}: pixel_format must be a PixelFormat, got {fmt!r}")
+        self._do_set_pixel_format(fmt)
+        self.invalidate()
+
+    @property
+    def bit_depth(self) -> int:
+        return self.pixel_format.bit_depth
+
+    # acquisition --------------------------------------------------------------
+    def invalidate(self) -> None:
+        """Forget buffered frames: the scene or the settings changed."""
+        self._ring.clear()
+        if not self._closed:
+            self._do_invalidate()
+
+    def trigger(self) -> None:
+        """Software trigger: start one exposure now."""
+        self._check_open("trigger")
+        self._do_trigger()
+
+    def acquire(self, n: int = 1, *, timeout: float | None = None) -> list[Frame]:
+        """Take ``n`` fresh frames and return them in order.
+
+        ``timeout`` defaults to 2 s plus twice the total exposure time.
+        """
+        self._check_open("acquire")
+        if int(n) != n or n < 1:
+            raise ValueError(f"{self.name}: n must be a positive integer, got {n}")
+        if self.is_streaming:
+            raise StateError("camera is streaming", device=self.name, command="acquire",
+                             hint="stop_streaming() first, or read from the stream")
+        if timeout is None:
+            timeout = 2.0 + 2.0 * int(n) * self._do_get_exposure_us() * 1e-6
+        deadline = time.monotonic() + timeout
+        frames = []
+        for _ in range(int(n)):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise DeviceTimeout(
+                    f"only {len(frames)} of {n} frames within {timeout:g} s",
+                    device=self.name, command="acquire",
+                )
+            frames.append(self._do_acquire_one(remaining))
+        return frames
+
+    # streaming ----------------------------------------------------------------
+    @property
+    def is_streaming(self) -> bool:
+        return self._stream_thread is not None and self._stream_thread.is_alive()
+
+    @property
+    def dropped_frames(self) -> int:
+        return self._ring.dropped
+
+    def start_streaming(self) -> None:
+        """Acquire continuously into the ring buffer on a background thread."""
+        self._check_open("start_streaming")
+        if self.is_streaming:
+            return
+        self._stream_stop.clear()
+        self._stream_error = None
+        self._ring.clear()
+        self._stream_thread = threading.Thread(
+            target=self._stream_loop, name=f"{self.name}-stream", daemon=True
+        )
+        self._stream_thread.start()
+
+    def stop_streaming(self, timeout: float = 5.0) -> None:
+        thread = self._stream_thread
+        if thread is None:
+            return
+        self._stream_stop.set()
+        thread.join(timeout)
+        if thread.is_alive():
+            raise DeviceTimeout("streaming thread did not stop", device=self.name,
+                                command="stop_streaming")
+        self._stream_thread = None
+
+    def next_frame(self, timeout: float = 1.0) -> Frame:
+        """Oldest frame in the stream buffer; raises if none arrives within ``timeout``."""
+        frame = self._ring.get(timeout)
+        if frame is None:
+            if self._stream_error is not None:
+                raise self._stream_error
+            raise DeviceTimeout(f"no frame within {timeout:g} s", device=self.name,
+                                command="next_frame")
+        return frame
+
+    def _stream_loop(self) -> None:
+        try:
+            while not self._stream_stop.is_set():
+                exposure_s = self._do_get_exposure_us() * 1e-6
+                self._ring.put(self._do_acquire_one(2.0 + 2.0 * exposure_s))
+        except BaseException as err:  # surfaced by next_frame()
+            self._stream_error = err
+
+    def _do_close(self) -> None:
+        if self._stream_thread is not None:
+            self._stream_stop.set()
+            self._stream_thread.join(5.0)
+            self._stream_thread = None
+        self._do_close_camera()
+
+    # hooks --------------------------------------------------------------------
+    @abstractmethod
+    def _do_sensor_shape(self) -> tuple[int, int]: ...
+
+    @abstractmethod
+    def _do_get_exposure_us(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_exposure_us(self, value: float) -> None: ...
+
+    @abstractmethod
+    def _do_get_gain(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_gain(self, value: float) -> None: ...
+
+    @abstractmethod
+    def _do_get_roi(self) -> Roi: ...
+
+    @abstractmethod
+    def _do_set_roi(self, roi: Roi) -> None: ...
+
+    def _do_get_binning(self) -> int:
+        return 1
+
+    def _do_set_binning(self, value: int) -> None:
+        if value != 1:
+            raise UnsupportedFeature(f"binning {value} is not supported", device=self.name,
+                                     command="set binning")
+
+    @abstractmethod
+    def _do_get_pixel_format(self) -> PixelFormat: ...
+
+    def _do_set_pixel_format(self, fmt: PixelFormat) -> None:
+        if fmt is not self._do_get_pixel_format():
+            raise UnsupportedFeature(f"pixel format {fmt.name} is not supported",
+                                     device=self.name, command="set pixel_format")
+
+    def _do_invalidate(self) -> None:
+        """Discard frames the backend may have buffered; default: nothing buffered."""
+
+    def _do_trigger(self) -> None:
+        raise UnsupportedFeature("software trigger is not supported", device=self.name,
+                                 command="trigger")
+
+    @abstractmethod
+    def _do_acquire_one(self, timeout: float) -> Frame: ...
+
+    @abstractmethod
+    def _do_close_camera(self) -> None: ...
+
+
+# --------------------------------------------------------------------------- source
+
+
+class LightSource(Device):
+    """A light source or a shutter in front of one.
+
+    ``is_on`` means light reaches the sample (source on *and* shutter open). Dark frames
+    are taken with it off; the run engine turns it off on abort and on any fault.
+    """
+
+    #: Power setpoint range in watts, or ``None`` where the source has no setpoint.
+    power_range_w: tuple[float, float] | None = None
+
+    def turn_on(self) -> None:
+        self._check_open("turn_on")
+        self._do_set_on(True)
+
+    def turn_off(self) -> None:
+        """Turn the light off. Always allowed; a no-op on a closed device."""
+        if self._closed:
+            return
+        self._do_set_on(False)
+
+    @property
+    def is_on(self) -> bool:
+        self._check_open("is_on")
+        return self._do_is_on()
+
+    @property
+    def power_w(self) -> float:
+        self._check_open("power_w")
+        if self.power_range_w is None:
+            raise UnsupportedFeature("this source has no power setpoint", device=self.name,
+                                     command="power_w")
+        return self._do_get_power_w()
+
+    @power_w.setter
+    def power_w(self, value: float) -> None:
+        self._check_open("set power_w")
+        if self.power_range_w is None:
+            raise UnsupportedFeature("this source has no power setpoint", device=self.name,
+                                     command="set power_w")
+        value = float(value)
+        low, high = self.power_range_w
+        if not (math.isfinite(value) and low <= value <= high):
+            raise ValueError(f"{self.name}: power {value:g} W outside [{low:g}, {high:g}] W")
+        self._do_set_power_w(value)
+
+    @abstractmethod
+    def _do_set_on(self, on: bool) -> None: ...
+
+    @abstractmethod
+    def _do_is_on(self) -> bool: ...
+
+    def _do_get_power_w(self) -> float:
+        raise UnsupportedFeature("no power readback", device=self.name, command="power_w")
+
+    def _do_set_power_w(self, value: float) -> None:
+        raise UnsupportedFeature("no power setpoint", device=self.name, command="set power_w")
+
+
+# --------------------------------------------------------------------------- power meter
+
+
+class PowerMeter(Device):
+    """An optical power meter (photodiode or thermal sensor head)."""
+
+    #: Wavelength correction range in nm, (min, max); drivers read it from the device.
+    wavelength_range_nm: tuple[float, float] = (200.0, 20000.0)
+
+    @property
+    def wavelength_nm(self) -> float:
+        self._check_open("wavelength_nm")
+        return self._do_get_wavelength_nm()
+
+    @wavelength_nm.setter
+    def wavelength_nm(self, value: float) -> None:
+        self._check_open("set wavelength_nm")
+        value = float(value)
+        low, high = self.wavelength_range_nm
+        if not (math.isfinite(value) and low <= value <= high):
+            raise ValueError(
+                f"{self.name}: wavelength {value:g} nm outside the sensor's "
+                f"[{low:g}, {high:g}] nm"
+            )
+        self._do_set_wavelength_nm(value)
+
+    @property
+    def averaging(self) -> int:
+        self._check_open("averaging")
+        return self._do_get_averaging()
+
+    @averaging.setter
+    def averaging(self, count: int) -> None:
+        self._check_open("set averaging")
+        if int(count) != count or count < 1:
+            raise ValueError(f"{self.name}: averaging count must be >= 1, got {count}")
+        self._do_set_averaging(int(count))
+
+    @property
+    def auto_range(self) -> bool:
+        self._check_open("auto_range")
+        return self._do_get_auto_range()
+
+    @auto_range.setter
+    def auto_range(self, on: bool) -> None:
+        self._check_open("set auto_range")
+        self._do_set_auto_range(bool(on))
+
+    def read_power_w(self) -> float:
+        """One (averaged) power reading in watts."""
+        self._check_open("read_power_w")
+        return self._do_read_power_w()
+
+    def zero(self, *, timeout: float = 10.0) -> None:
+        """Dark-zero the sensor: the light must be blocked."""
+        self._check_open("zero")
+        self._do_zero(timeout)
+
+    @abstractmethod
+    def _do_get_wavelength_nm(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_wavelength_nm(self, value: float) -> None: ...
+
+    @abstractmethod
+    def _do_get_averaging(self) -> int: ...
+
+    @abstractmethod
+    def _do_set_averaging(self, count: int) -> None: ...
+
+    @abstractmethod
+    def _do_get_auto_range(self) -> bool: ...
+
+    @abstractmethod
+    def _do_set_auto_range(self, on: bool) -> None: ...
+
+    @abstractmethod
+    def _do_read_power_w(self) -> float: ...
+
+    @abstractmethod
+    def _do_zero(self, timeout: float) -> None: ...

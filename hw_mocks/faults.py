@@ -1,0 +1,173 @@
+"""Seeded fault injection at the transport seam.
+
+Every frame an emulator sends passes through its :class:`FaultInjector`, which may drop,
+delay, split, corrupt, prefix with garbage, precede with an unsolicited message, cut the
+link, or put the device into an error state. Faults fire by schedule ("the 3rd reply")
+or by probability from a seeded generator, so every faulty run can be replayed.
+
+The injector only decides *what happens to bytes*; device-specific parts (what an
+unsolicited message or an error state looks like) come from the emulator through the
+:class:`FaultTarget` protocol.
+"""
+
+from __future__ import annotations
+
+import enum
+import itertools
+import random
+import threading
+from dataclasses import dataclass, field
+from typing import Protocol
+
+__all__ = ["Delivery", "FaultInjector", "FaultKind", "FaultRule", "FaultTarget"]
+
+
+class FaultKind(enum.Enum):
+    DROP = "drop"                  # the reply never arrives
+    DELAY = "delay"                # it arrives `delay_s` late (past the driver's timeout)
+    SPLIT = "split"                # it arrives in `chunks` pieces `gap_s` apart
+    CORRUPT = "corrupt"            # `nbytes` random bit flips
+    GARBAGE = "garbage"            # `nbytes` random bytes before it
+    UNSOLICITED = "unsolicited"    # an unsolicited device message before it
+    DISCONNECT = "disconnect"      # the link dies: reads and writes raise from now on
+    ERROR_STATE = "error_state"    # the device enters an error state (`code` is passed on)
+
+
+class FaultTarget(Protocol):
+    def unsolicited_frame(self) -> bytes: ...
+
+    def enter_error_state(self, code: str | None = None) -> None: ...
+
+
+@dataclass
+class FaultRule:
+    """When and how a fault fires.
+
+    ``nth`` fires on the n-th frame (1-based) counted from when the rule was added;
+    otherwise ``probability`` is drawn per frame. ``times`` bounds how often it fires
+    (``None`` = unbounded).
+    """
+
+    kind: FaultKind
+    nth: int | None = None
+    probability: float = 0.0
+    times: int | None = 1
+    delay_s: float = 1.0
+    chunks: int = 3
+    gap_s: float = 0.01
+    nbytes: int = 1
+    code: str | None = None
+    fired: int = 0
+    _base: int = field(default=0, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.nth is None and not 0.0 < self.probability <= 1.0:
+            raise ValueError("a rule needs nth >= 1 or 0 < probability <= 1")
+        if self.nth is not None and self.nth < 1:
+            raise ValueError("nth counts from 1")
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """A piece of bytes to deliver ``delay_s`` after the frame was produced."""
+
+    delay_s: float
+    data: bytes
+
+
+class FaultInjector:
+    """Applies :class:`FaultRule` s to outgoing frames.
+
+    Thread-safe; ``log`` records every fault fired as ``(frame_number, kind)``.
+    """
+
+    def __init__(self, seed: int = 0) -> None:
+        self._rng = random.Random(seed)
+        self._rules: list[FaultRule] = []
+        self._count = 0
+        self._lock = threading.Lock()
+        self.disconnected = False
+        self.log: list[tuple[int, FaultKind]] = []
+
+    def add(self, rule: FaultRule) -> FaultRule:
+        with self._lock:
+            rule._base = self._count
+            self._rules.append(rule)
+        return rule
+
+    def schedule(self, kind: FaultKind, nth: int = 1, **params) -> FaultRule:
+        """Fire ``kind`` on the ``nth`` frame from now."""
+        return self.add(FaultRule(kind, nth=nth, **params))
+
+    def randomly(self, kind: FaultKind, probability: float, times: int | None = None,
+                 **params) -> FaultRule:
+        """Fire ``kind`` on each frame with ``probability``."""
+        return self.add(FaultRule(kind, probability=probability, times=times, **params))
+
+    def clear(self) -> None:
+        """Remove all rules and reconnect the link."""
+        with self._lock:
+            self._rules.clear()
+            self.disconnected = False
+
+    def reconnect(self) -> None:
+        self.disconnected = False
+
+    @property
+    def frames_seen(self) -> int:
+        return self._count
+
+    def process(self, frame: bytes, target: FaultTarget) -> list[Delivery]:
+        """What actually goes on the wire for ``frame``."""
+        with self._lock:
+            self._count += 1
+            n = self._count
+            firing = [r for r in self._rules if self._fires(r, n)]
+            for rule in firing:
+                rule.fired += 1
+                self.log.append((n, rule.kind))
+            out = [Delivery(0.0, frame)]
+            for rule in firing:
+                out = self._apply(rule, out, target)
+            self._rules = [r for r in self._rules if r.times is None or r.fired < r.times]
+            return out
+
+    def _fires(self, rule: FaultRule, n: int) -> bool:
+        if rule.times is not None and rule.fired >= rule.times:
+            return False
+        if rule.nth is not None:
+            return n - rule._base == rule.nth
+        return self._rng.random() < rule.probability
+
+    def _apply(self, rule: FaultRule, out: list[Delivery], target: FaultTarget
+               ) -> list[Delivery]:
+        kind = rule.kind
+        data = b"".join(d.data for d in out)
+        if kind is FaultKind.DROP:
+            return []
+        if kind is FaultKind.DELAY:
+            return [Delivery(d.delay_s + rule.delay_s, d.data) for d in out]
+        if kind is FaultKind.SPLIT:
+            k = max(1, min(rule.chunks, len(data)))
+            cuts = sorted(self._rng.sample(range(1, len(data)), k - 1)) if k > 1 else []
+            bounds = [0, *cuts, len(data)]
+            return [Delivery(i * rule.gap_s, data[a:b])
+                    for i, (a, b) in enumerate(itertools.pairwise(bounds))]
+        if kind is FaultKind.CORRUPT:
+            buf = bytearray(data)
+            for _ in range(rule.nbytes):
+                if buf:
+                    buf[self._rng.randrange(len(buf))] ^= 1 << self._rng.randrange(8)
+            return [Delivery(out[0].delay_s if out else 0.0, bytes(buf))]
+        if kind is FaultKind.GARBAGE:
+            junk = bytes(self._rng.randrange(256) for _ in range(rule.nbytes))
+            return [Delivery(0.0, junk), *out]
+        if kind is FaultKind.UNSOLICITED:
+            return [Delivery(0.0, target.unsolicited_frame()), *out]
+        if kind is FaultKind.DISCONNECT:
+            self.disconnected = True
+            return []
+        if kind is FaultKind.ERROR_STATE:
+            target.enter_error_state(rule.code)
+            return out
+        raise AssertionError(kind)

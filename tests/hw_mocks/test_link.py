@@ -1,0 +1,114 @@
+"""The emulator link carries frames faithfully, and each injected fault does what it says."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from serial.serialutil import SerialException
+
+from hw_mocks import registry
+from hw_mocks.faults import FaultKind
+from tests.hw_mocks.echo_emulator import EchoSerial
+
+
+def open_echo(name="e1", **kw):
+    port = EchoSerial(None, baudrate=9600, timeout=0.05, **kw)
+    port.port = f"simecho://{name}"
+    port.open()
+    return port
+
+
+def test_round_trip_and_shared_instance():
+    port = open_echo()
+    port.write(b"hello\n")
+    assert port.read_until(b"\r\n") == b"OK hello\r\n"
+    again = open_echo()
+    assert again.emulator is port.emulator is registry.get("simecho", "e1")
+
+
+def test_wrong_baud_rate_gets_no_answer():
+    port = EchoSerial(None, baudrate=115200, timeout=0.02)
+    port.port = "simecho://e2"
+    port.open()
+    port.write(b"x\n")
+    assert port.read(10) == b""
+
+
+def test_drop_then_normal():
+    port = open_echo()
+    port.emulator.faults.schedule(FaultKind.DROP, nth=1)
+    port.write(b"a\n")
+    assert port.read(10) == b""
+    port.write(b"b\n")
+    assert port.read_until(b"\r\n") == b"OK b\r\n"
+
+
+def test_delay_keeps_order_and_arrives_late():
+    port = open_echo()
+    port.emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.1)
+    port.write(b"a\n")
+    t0 = time.monotonic()
+    assert port.read(10) == b""  # 50 ms timeout: nothing yet
+    port.write(b"b\n")
+    port.timeout = 0.5
+    assert port.read(len(b"OK a\r\nOK b\r\n")) == b"OK a\r\nOK b\r\n"
+    assert time.monotonic() - t0 >= 0.09
+
+
+def test_split_garbage_corrupt_unsolicited():
+    port = open_echo()
+    faults = port.emulator.faults
+    faults.schedule(FaultKind.SPLIT, nth=1, chunks=3, gap_s=0.005)
+    port.timeout = 0.5
+    port.write(b"abcdef\n")
+    assert port.read(11) == b"OK abcdef\r\n"
+    faults.schedule(FaultKind.GARBAGE, nth=1, nbytes=4)
+    port.write(b"g\n")
+    data = port.read(4 + 6)
+    assert data.endswith(b"OK g\r\n") and len(data) == 10
+    faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
+    port.write(b"hhhh\n")
+    corrupted = port.read(9)
+    assert corrupted != b"OK hhhh\r\n" and len(corrupted) == 9
+    faults.schedule(FaultKind.UNSOLICITED, nth=1)
+    port.write(b"u\n")
+    assert port.read(8 + 6) == b"!ALERT\r\nOK u\r\n"
+    assert [k for _, k in faults.log] == [FaultKind.SPLIT, FaultKind.GARBAGE,
+                                          FaultKind.CORRUPT, FaultKind.UNSOLICITED]
+
+
+def test_disconnect_and_reconnect():
+    port = open_echo()
+    port.emulator.faults.schedule(FaultKind.DISCONNECT, nth=2)
+    port.write(b"1\n")
+    assert port.read_until(b"\r\n") == b"OK 1\r\n"
+    port.write(b"2\n")
+    with pytest.raises(SerialException):
+        port.read(1)
+    port.close()
+    port = open_echo()
+    port.write(b"3\n")
+    assert port.read_until(b"\r\n") == b"OK 3\r\n"
+
+
+def test_error_state_and_probabilistic_faults_are_reproducible():
+    def run(seed, name):
+        port = open_echo(name=f"{name}?seed={seed}")
+        port.emulator.faults.randomly(FaultKind.DROP, probability=0.3)
+        got = []
+        for i in range(40):
+            port.write(b"%d\n" % i)
+            got.append(port.read_until(b"\r\n") != b"")
+        return got
+
+    first = run(7, "a")
+    assert first == run(7, "b")
+    assert first != run(8, "c")
+    assert 0 < sum(not g for g in first) < 40
+    port = open_echo(name="err")
+    port.emulator.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="X")
+    port.write(b"a\n")
+    port.read_until(b"\r\n")
+    port.write(b"b\n")
+    assert port.read_until(b"\r\n") == b"ERR b\r\n"
