@@ -1,0 +1,152 @@
+"""The contract every :class:`drivers.base.MotionAxis` implementation must keep.
+
+A driver's test module subclasses :class:`MotionAxisContract` and provides a fixture
+``axis_factory``: a callable returning a freshly opened axis (a fresh emulator behind it)
+with soft limits that include ``CONTRACT_RANGE``. Run it once per transport (in-process
+URL and pseudo-terminal), e.g. with a parametrised fixture.
+
+The assertions are about behaviour a user relies on: limits refuse before motion, a
+move ends within tolerance of its target, a stop really stops, waits never hang.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from drivers.base import AxisStatus, DeviceIdentity, MotionAxis
+from drivers.errors import DeviceTimeout, LimitError, NotHomedError, StateError
+
+#: Targets used by the contract, in axis units; soft limits must include them.
+CONTRACT_RANGE = (-10.0, 10.0)
+
+
+class MotionAxisContract:
+    """Mixin of contract tests; needs the fixture ``axis_factory``."""
+
+    #: Seconds a short contract move may take at the emulator's speed.
+    move_timeout = 20.0
+
+    @pytest.fixture
+    def axis(self, axis_factory):
+        axis = axis_factory()
+        yield axis
+        axis.close()
+
+    @pytest.fixture
+    def ready_axis(self, axis):
+        axis.enable()
+        axis.home(timeout=self.move_timeout)
+        return axis
+
+    # identity and lifecycle ---------------------------------------------------
+    def test_is_a_motion_axis_with_identity(self, axis):
+        assert isinstance(axis, MotionAxis)
+        ident = axis.identity
+        assert isinstance(ident, DeviceIdentity)
+        assert ident.model and ident.serial
+        assert axis.units in ("deg", "mm")
+
+    def test_close_is_idempotent_and_closed_axis_refuses(self, axis):
+        axis.close()
+        axis.close()
+        with pytest.raises(StateError):
+            axis.move_to(1.0)
+        axis.stop()  # stopping a closed axis is harmless
+
+    def test_context_manager_closes(self, axis_factory):
+        with axis_factory() as axis:
+            assert not axis.closed
+        assert axis.closed
+
+    # homing and state ---------------------------------------------------------
+    def test_move_before_homing_is_refused(self, axis):
+        axis.enable()
+        if axis.is_homed:
+            pytest.skip("this controller powers up referenced")
+        with pytest.raises(NotHomedError):
+            axis.move_to(1.0)
+
+    def test_home_sets_reference(self, ready_axis):
+        status = ready_axis.status()
+        assert isinstance(status, AxisStatus)
+        assert status.is_homed and not status.is_moving
+        assert abs(status.position) <= ready_axis.position_tolerance
+
+    # motion -------------------------------------------------------------------
+    def test_out_of_limit_target_raises_before_motion(self, ready_axis):
+        low, high = ready_axis.soft_limits
+        before = ready_axis.position
+        with pytest.raises(LimitError):
+            ready_axis.move_to(high + 1.0)
+        with pytest.raises(LimitError):
+            ready_axis.move_by(low - high - 1.0)
+        assert not ready_axis.is_moving
+        assert ready_axis.position == pytest.approx(before, abs=ready_axis.position_tolerance)
+
+    def test_non_finite_target_is_a_value_error(self, ready_axis):
+        with pytest.raises(ValueError):
+            ready_axis.move_to(math.nan)
+
+    @pytest.mark.parametrize("target", [7.5, -3.25, 0.5])
+    def test_absolute_move_arrives_within_tolerance(self, ready_axis, target):
+        ready_axis.move_to(target)
+        final = ready_axis.wait(self.move_timeout)
+        assert final == pytest.approx(target, abs=ready_axis.position_tolerance)
+        assert ready_axis.position == pytest.approx(target, abs=ready_axis.position_tolerance)
+        assert not ready_axis.is_moving
+
+    def test_relative_moves_accumulate_from_target(self, ready_axis):
+        ready_axis.move_to(2.0, wait=True, timeout=self.move_timeout)
+        ready_axis.move_by(1.5, wait=True, timeout=self.move_timeout)
+        ready_axis.move_by(-4.0, wait=True, timeout=self.move_timeout)
+        assert ready_axis.position == pytest.approx(-0.5, abs=ready_axis.position_tolerance)
+
+    def test_move_is_non_blocking_and_reports_moving(self, ready_axis):
+        ready_axis.velocity = ready_axis.velocity  # round-trips
+        ready_axis.move_to(CONTRACT_RANGE[1])
+        assert ready_axis.is_moving
+        ready_axis.wait(self.move_timeout)
+        assert not ready_axis.is_moving
+
+    def test_stop_halts_short_of_target(self, ready_axis):
+        # Slow enough that the stop surely arrives mid-move at any emulator speed.
+        ready_axis.velocity = ready_axis.velocity / 100.0
+        ready_axis.move_to(CONTRACT_RANGE[1])
+        ready_axis.stop()
+        deadline = time.monotonic() + self.move_timeout
+        while ready_axis.is_moving and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert not ready_axis.is_moving
+        assert ready_axis.position < CONTRACT_RANGE[1] - ready_axis.position_tolerance
+
+    def test_wait_times_out_and_stops(self, ready_axis):
+        ready_axis.velocity = ready_axis.velocity / 100.0
+        ready_axis.move_to(CONTRACT_RANGE[1])
+        with pytest.raises(DeviceTimeout) as info:
+            ready_axis.wait(0.05)
+        assert info.value.device == ready_axis.name
+        deadline = time.monotonic() + self.move_timeout
+        while ready_axis.is_moving and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert not ready_axis.is_moving
+
+    def test_velocity_and_acceleration_round_trip(self, ready_axis):
+        v = ready_axis.velocity
+        ready_axis.velocity = v / 2.0
+        assert ready_axis.velocity == pytest.approx(v / 2.0, rel=0.01)
+        a = ready_axis.acceleration
+        ready_axis.acceleration = a / 2.0
+        assert ready_axis.acceleration == pytest.approx(a / 2.0, rel=0.01)
+        with pytest.raises(ValueError):
+            ready_axis.velocity = -1.0
+
+    def test_disabled_axis_refuses_motion(self, ready_axis):
+        ready_axis.disable()
+        with pytest.raises(StateError):
+            ready_axis.move_to(1.0)
+        ready_axis.enable()
+        ready_axis.move_to(1.0, wait=True, timeout=self.move_timeout)
+        assert ready_axis.position == pytest.approx(1.0, abs=ready_axis.position_tolerance)
