@@ -1,0 +1,268 @@
+"""Fully normalised associated Legendre functions by stable recurrences, and Gauss–Legendre nodes.
+
+The functions are λ_l^m(cos θ) = √((2l+1)/(4π) (l−m)!/(l+m)!) P_l^m(cos θ), without the
+Condon–Shortley phase (see :mod:`analysis.sh.convention`), so that
+∫ λ_l^m(cos θ)² sin θ dθ = 1/(2π).
+
+Recurrences (numerics.md §4.3, "fully normalized three-term recurrences"):
+
+* sectoral seed:  λ_0^0 = 1/√(4π),  λ_m^m = √((2m+1)/(2m)) sin θ · λ_{m−1}^{m−1};
+* first step:     λ_{m+1}^m = √(2m+3) cos θ · λ_m^m;
+* l-recurrence:   λ_l^m = a_lm (cos θ · λ_{l−1}^m − b_lm λ_{l−2}^m),
+  a_lm = √((4l²−1)/(l²−m²)),  b_lm = √(((l−1)²−m²)/(4(l−1)²−1)).
+
+Near the poles the sectoral seed sin^m θ underflows long before the values at higher l become
+representable again (numerics.md §4.3; jmert/AssociatedLegendrePolynomials.jl #27). We carry a
+separate integer exponent, the approach of libpsht/libsharp (Reinecke 2011,
+arXiv:1010.2084 §3.1.1), which extends the range Holmes & Featherstone (2002, J. Geodesy 76,
+279–299) obtain with a fixed 10^−280 scale factor: a value is stored as
+``mantissa · 2^(600·e)`` with integer e ≤ 0; while e < 0 its magnitude is below 2^−300 and it
+is left out of sums, and once the recurrence has grown the mantissa past 2^300 it is rescaled
+and e incremented. No value is ever computed from sin^m θ directly or from factorials.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+__all__ = [
+    "gauss_legendre",
+    "iterate_degrees",
+    "legendre_table",
+    "sectoral_seeds",
+    "step_coefficients",
+]
+
+#: Exponent step of the scaled representation, in bits.
+SCALE_BITS = 600
+_BIG = 2.0**SCALE_BITS
+_SMALL = 2.0**-SCALE_BITS
+#: A scaled mantissa above this is rescaled (its true value is then ≥ 2^−300).
+_UPPER = 2.0**300
+#: A sectoral seed below this moves to the next (more negative) exponent.
+_LOWER = 2.0**-450
+
+
+def sectoral_seeds(sin_theta: np.ndarray, mmax: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sectoral values λ_m^m(θ) for m = 0 … mmax in scaled form.
+
+    Parameters
+    ----------
+    sin_theta : ndarray of shape (N,)
+        sin θ ≥ 0 at the evaluation points (pass sin θ computed from θ, not √(1−x²), so
+        that points near the poles keep their relative accuracy).
+    mmax : int
+
+    Returns
+    -------
+    mantissa : ndarray of shape (mmax+1, N)
+    exponent : ndarray of int64, shape (mmax+1, N)
+        λ_m^m = mantissa · 2^(600·exponent); exponent ≤ 0.
+    """
+    s = np.asarray(sin_theta, dtype=float)
+    mant = np.empty((mmax + 1, s.size))
+    expo = np.zeros((mmax + 1, s.size), dtype=np.int64)
+    cur = np.full(s.size, 1.0 / np.sqrt(4.0 * np.pi))
+    cur_e = np.zeros(s.size, dtype=np.int64)
+    mant[0] = cur
+    for m in range(1, mmax + 1):
+        cur = cur * (np.sqrt((2.0 * m + 1.0) / (2.0 * m)) * s)
+        low = (np.abs(cur) < _LOWER) & (cur != 0.0)
+        if low.any():
+            cur = np.where(low, cur * _BIG, cur)
+            cur_e = cur_e - low
+        mant[m] = cur
+        expo[m] = cur_e
+    return mant, expo
+
+
+def step_coefficients(m: np.ndarray, l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients (a_lm, a_lm·b_lm) of the l-recurrence for l ≥ m+2 (arrays broadcast)."""
+    m = np.asarray(m, dtype=float)
+    l = np.asarray(l, dtype=float)
+    a = np.sqrt((4.0 * l * l - 1.0) / ((l - m) * (l + m)))
+    lm1 = l - 1.0
+    b = np.sqrt(((lm1 - m) * (lm1 + m)) / (4.0 * lm1 * lm1 - 1.0))
+    return a, a * b
+
+
+def iterate_degrees(
+    m0: int,
+    m1: int,
+    lmax: int,
+    cos_theta: np.ndarray,
+    seed_mant: np.ndarray,
+    seed_exp: np.ndarray,
+    *,
+    check_every: int = 4,
+) -> Iterator[tuple[int, int, np.ndarray]]:
+    """Run the l-recurrence for orders m0 ≤ m < m1 at once, vectorised over orders and points.
+
+    Yields, for k = l − m = 0, 1, …, (k, n_active, values) where ``values[:n_active]`` holds
+    λ_{m+k}^m for the orders m0 … m0+n_active−1 (those with m + k ≤ lmax) at every point.
+    Values whose true magnitude is below 2^−300 (still in scaled form) are yielded as 0:
+    they cannot matter next to the O(1) values of the same transform. The yielded array is
+    reused by the next step, so consumers must not keep a reference to it.
+
+    Parameters
+    ----------
+    m0, m1 : int
+        Orders to run (m0 < m1 ≤ lmax+1).
+    lmax : int
+    cos_theta : ndarray of shape (N,)
+    seed_mant, seed_exp : ndarray of shape (m1−m0, N)
+        Sectoral seeds for those orders from :func:`sectoral_seeds`.
+    check_every : int
+        Steps between rescaling checks; the growth over four steps stays far below the
+        2^700 head-room between the rescale threshold and overflow.
+    """
+    x = np.asarray(cos_theta, dtype=float)[None, :]
+    rows = m1 - m0
+    m = np.arange(m0, m1, dtype=float)
+    p2 = np.array(seed_mant, dtype=float, copy=True)
+    e = np.array(seed_exp, dtype=np.int64, copy=True)
+    scaled = bool((e < 0).any())
+    live = (e == 0).astype(float) if scaled else None
+    out = np.empty_like(p2)
+
+    def emit(p: np.ndarray, n: int) -> np.ndarray:
+        if live is None:
+            return p
+        np.multiply(p[:n], live[:n], out=out[:n])
+        return out
+
+    yield 0, rows, emit(p2, rows)
+    n1 = min(m1, lmax) - m0  # rows with m+1 ≤ lmax
+    if n1 <= 0:
+        return
+    p1 = np.empty_like(p2)
+    p1[:n1] = np.sqrt(2.0 * m[:n1] + 3.0)[:, None] * x * p2[:n1]
+    yield 1, n1, emit(p1, n1)
+    tmp = np.empty_like(p2)
+    for k in range(2, lmax - m0 + 1):
+        n = min(m1, lmax - k + 1) - m0
+        if n <= 0:
+            break
+        a, ab = step_coefficients(m[:n], m[:n] + k)
+        np.multiply(p1[:n], x, out=tmp[:n])
+        tmp[:n] *= a[:, None]
+        p2[:n] *= ab[:, None]
+        np.subtract(tmp[:n], p2[:n], out=p2[:n])
+        # p2 now holds λ_{m+k}; swap roles so p1 is the newest.
+        p1, p2 = p2, p1
+        if live is not None and k % check_every == 0:
+            big = (e[:n] < 0) & (np.abs(p1[:n]) > _UPPER)
+            if big.any():
+                p1[:n][big] *= _SMALL
+                p2[:n][big] *= _SMALL
+                e[:n][big] += 1
+                live[:n] = e[:n] == 0
+                if live.all():
+                    live = None
+        yield k, n, emit(p1, n)
+
+
+def legendre_table(lmax: int, theta: np.ndarray) -> np.ndarray:
+    """λ_l^m(cos θ) for all 0 ≤ m ≤ l ≤ lmax at the given colatitudes.
+
+    Parameters
+    ----------
+    lmax : int
+    theta : array_like of shape (N,)
+        Colatitudes in radians, 0 ≤ θ ≤ π.
+
+    Returns
+    -------
+    ndarray of shape (lmax+1, lmax+1, N)
+        ``table[l, m]``; entries with m > l are 0. Values are accurate to full relative
+        precision down to the smallest normal double; values that are truly below it
+        underflow gracefully (the scaled mantissa is converted with ``ldexp``).
+    """
+    th = np.atleast_1d(np.asarray(theta, dtype=float))
+    if th.ndim != 1:
+        raise ValueError("theta must be one-dimensional")
+    if np.any((th < 0) | (th > np.pi)):
+        raise ValueError("colatitudes must lie in [0, π]")
+    x = np.cos(th)
+    s = np.sin(th)
+    mant, expo = sectoral_seeds(s, lmax)
+    table = np.zeros((lmax + 1, lmax + 1, th.size))
+    for m in range(lmax + 1):
+        # Full precision for tiny values: run this order with its own exponent.
+        p2 = mant[m].copy()
+        e = expo[m].copy()
+        table[m, m] = np.ldexp(p2, SCALE_BITS * e)
+        if m == lmax:
+            break
+        p1 = np.sqrt(2.0 * m + 3.0) * x * p2
+        table[m + 1, m] = np.ldexp(p1, SCALE_BITS * e)
+        for l in range(m + 2, lmax + 1):
+            a, ab = step_coefficients(m, l)
+            p1, p2 = a * x * p1 - ab * p2, p1
+            big = (e < 0) & (np.abs(p1) > _UPPER)
+            if big.any():
+                p1 = np.where(big, p1 * _SMALL, p1)
+                p2 = np.where(big, p2 * _SMALL, p2)
+                e = e + big
+            table[l, m] = np.ldexp(p1, SCALE_BITS * e)
+    return table
+
+
+def gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre nodes as colatitudes θ_j (ascending) and weights w_j, for n points.
+
+    Newton iteration on P_n(cos θ) in the variable θ, started from Tricomi's asymptotic
+    approximation θ_j ≈ π(4j−1)/(4n+2) (Abramowitz & Stegun 22.16.6), with P_n and P_{n−1}
+    from the three-term recurrence. Working in θ keeps the polar nodes to full relative
+    accuracy, which the seeds sin^m θ of the Legendre recurrence need. Weights
+    w_j = 2 / ((dP_n/dθ)²) (A&S 25.4.29 with dx = −sin θ dθ), so Σ w_j = 2 and
+    Σ_j w_j f(cos θ_j) = ∫_{−1}^{1} f(x) dx exactly for polynomials of degree ≤ 2n−1.
+
+    Returns
+    -------
+    theta : ndarray of shape (n,)
+    weights : ndarray of shape (n,)
+    """
+    if n < 1:
+        raise ValueError("n must be ≥ 1")
+    half = (n + 1) // 2
+    j = np.arange(1, half + 1, dtype=float)
+    theta = np.pi * (4.0 * j - 1.0) / (4.0 * n + 2.0)
+    theta = theta + (n - 1.0) / (8.0 * n**3) * np.cos(theta) / np.maximum(np.sin(theta), 1e-300)
+    for _ in range(100):
+        x = np.cos(theta)
+        s = np.sin(theta)
+        p0 = np.ones_like(x)
+        p1 = x.copy()
+        for k in range(2, n + 1):
+            p0, p1 = p1, ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k
+        if n == 1:
+            p0, p1 = np.ones_like(x), x
+        # dP_n/dθ = −sin θ P'_n = −n (P_{n−1} − x P_n) / sin θ
+        dp = -n * (p0 - x * p1) / s
+        delta = p1 / dp
+        theta = theta - delta
+        if np.max(np.abs(delta)) < 1e-15:
+            break
+    # One more evaluation at the converged nodes for the weights.
+    x = np.cos(theta)
+    s = np.sin(theta)
+    p0 = np.ones_like(x)
+    p1 = x.copy()
+    for k in range(2, n + 1):
+        p0, p1 = p1, ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k
+    if n == 1:
+        p0, p1 = np.ones_like(x), x
+    dp = -n * (p0 - x * p1) / s
+    w = 2.0 / dp**2
+    # Mirror the northern nodes: θ → π − θ; the middle node (odd n) is θ = π/2 exactly.
+    if n % 2 == 1:
+        theta[-1] = 0.5 * np.pi
+        th_all = np.concatenate([theta, np.pi - theta[-2::-1]])
+        w_all = np.concatenate([w, w[-2::-1]])
+    else:
+        th_all = np.concatenate([theta, np.pi - theta[::-1]])
+        w_all = np.concatenate([w, w[::-1]])
+    return th_all, w_all
