@@ -129,7 +129,7 @@ def smith_g1(mu: ArrayLike, alpha: ArrayLike, *, distribution: str = "ggx") -> N
     return mu / (mu + ml)
 
 
-def _mu_lambda(distribution: str):  # noqa: ANN202 - internal dispatch
+def _mu_lambda(distribution: str):
     if distribution == "ggx":
         return ggx_mu_lambda
     if distribution == "beckmann":

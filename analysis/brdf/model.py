@@ -175,7 +175,10 @@ class BRDFModel:
         """A copy with other default start values."""
         s = self._check(start)
         return replace(
-            self, params=tuple(replace(ps, start=float(v)) for ps, v in zip(self.params, s))
+            self,
+            params=tuple(
+                replace(ps, start=float(v)) for ps, v in zip(self.params, s, strict=True)
+            ),
         )
 
     def __add__(self, other: BRDFModel) -> BRDFModel:
@@ -221,7 +224,7 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
         labels.append(label)
     specs: list[ParamSpec] = []
     slices: list[slice] = []
-    for label, m in zip(labels, parts):
+    for label, m in zip(labels, parts, strict=True):
         start = len(specs)
         specs.extend(replace(ps, name=f"{label}.{ps.name}") for ps in m.params)
         slices.append(slice(start, len(specs)))
@@ -231,7 +234,7 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
 
     def value(p: NDArray[np.float64], g: Geometry) -> NDArray[np.float64]:
         total = np.zeros(g.shape)
-        for m, sl in zip(parts, slices):
+        for m, sl in zip(parts, slices, strict=True):
             total = total + m.value_fn(p[sl], g)
         return total
 
@@ -239,7 +242,8 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
     if all(m.jac_fn is not None for m in parts):
 
         def jac(p: NDArray[np.float64], g: Geometry) -> NDArray[np.float64]:
-            return np.concatenate([m.jac_fn(p[sl], g) for m, sl in zip(parts, slices)], axis=-1)
+            cols = [m.jac_fn(p[sl], g) for m, sl in zip(parts, slices, strict=True)]
+            return np.concatenate(cols, axis=-1)
 
     return CompositeModel(
         name="+".join(m.name for m in parts),

@@ -1,0 +1,460 @@
+"""Bounded least-squares fitting of BRDF models with uncertainties.
+
+Method
+------
+* Parameters flagged ``log`` in the model (widths, exponents) are fitted as u = ln p, the
+  others as u = p; bounds are mapped accordingly (numerics.md §4.2, "fit log α with bounds").
+* Residuals r_j, chosen by ``residual``:
+
+  - ``"absolute"``: r = (y − m)/σ, σ the per-point standard uncertainty (1 if not given);
+  - ``"relative"``: r = (y − m)/|y|, divided by σ/|y| instead when σ is given (i.e. the same
+    as absolute with σ) — without σ it is the fit of relative errors;
+  - ``"log"``: r = (ln(y+ε) − ln(m+ε))/s with s = σ/(y+ε) when σ is given, else 1; ε =
+    ``log_floor`` keeps zeros finite (numerics.md §4.2, log-relative metrics).
+
+* The noise model is explicit: the r_j are independent N(0, s²), with s = 1 when σ is given
+  (``sigma`` known) and s estimated as √(χ²/dof) otherwise. The log-likelihood, AIC, AICc and
+  BIC follow from it (:func:`information_criteria`); an estimated s counts as one more
+  parameter. Likelihood constants that do not depend on the model are dropped, so compare
+  criteria only between fits of the same data with the same residual and noise settings.
+* ``loss`` ∈ {"linear", "soft_l1", "huber", "cauchy", "arctan"} is passed to
+  :func:`scipy.optimize.least_squares` (robust loss keeps outliers and the specular peak from
+  dominating); information criteria assume "linear".
+* The Jacobian of the residuals is analytic where the model provides ∂f/∂p
+  (chain rule through the log parameterisation and the residual transform), otherwise
+  central differences on the cached geometry — the geometry is built once per fit.
+* Multi-start: the default start plus ``n_starts − 1`` seeded random starts (log-uniform for
+  log parameters), keeping the lowest cost.
+* Covariance: C_u = s² (JᵀJ)⁺ at the optimum (pseudo-inverse; rank deficiency is flagged),
+  mapped to natural units with the diagonal d p/d u (= p for log parameters); correlations
+  from C. Optional case-resampling bootstrap (``n_bootstrap``) gives a second set of standard
+  errors and percentile intervals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from analysis.brdf.geometry import Geometry, make_geometry
+from analysis.brdf.model import BRDFModel
+
+_RESIDUALS = ("absolute", "relative", "log")
+_LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+
+
+@dataclass(frozen=True)
+class BootstrapResult:
+    """Case-resampling bootstrap of a fit.
+
+    Attributes
+    ----------
+    samples : ndarray, shape (B_ok, k)
+        Parameter vectors of the converged replicates (natural units).
+    stderr : ndarray, shape (k,)
+        Sample standard deviation of ``samples``.
+    ci_low, ci_high : ndarray, shape (k,)
+        2.5 % and 97.5 % percentiles.
+    n_failed : int
+        Replicates that did not converge (excluded).
+    """
+
+    samples: NDArray[np.float64]
+    stderr: NDArray[np.float64]
+    ci_low: NDArray[np.float64]
+    ci_high: NDArray[np.float64]
+    n_failed: int
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Result of :func:`fit_brdf`.
+
+    Attributes
+    ----------
+    model_name : str
+    param_names, units : tuple of str
+    params, stderr : ndarray, shape (k,)
+        Best-fit values and 1σ standard errors from the covariance (natural units).
+    covariance, correlation : ndarray, shape (k, k)
+    chi2 : float
+        Σ r² of the normalised residuals (the loss is not applied).
+    dof : int
+        n − k.
+    noise_scale : float
+        s: 1 if σ was given, else √(χ²/dof).
+    log_likelihood, aic, aicc, bic : float
+        From the noise model (see the module docstring).
+    residuals : ndarray, shape (n,)
+        Normalised residuals r at the optimum.
+    converged : bool
+    message : str
+    nfev : int
+        Model evaluations of the best start.
+    at_bound : tuple of bool
+        Parameters that ended on a bound (their standard errors are unreliable).
+    rank_deficient : bool
+        JᵀJ was singular at the optimum (parameters not all identifiable).
+    residual_kind, loss : str
+    bootstrap : BootstrapResult or None
+    """
+
+    model_name: str
+    param_names: tuple[str, ...]
+    units: tuple[str, ...]
+    params: NDArray[np.float64]
+    stderr: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    correlation: NDArray[np.float64]
+    chi2: float
+    dof: int
+    noise_scale: float
+    log_likelihood: float
+    aic: float
+    aicc: float
+    bic: float
+    residuals: NDArray[np.float64] = field(repr=False)
+    converged: bool
+    message: str
+    nfev: int
+    at_bound: tuple[bool, ...]
+    rank_deficient: bool
+    residual_kind: str
+    loss: str
+    bootstrap: BootstrapResult | None = None
+
+    @property
+    def n_params(self) -> int:
+        return len(self.params)
+
+    @property
+    def reduced_chi2(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    def param_dict(self) -> dict[str, float]:
+        """{name: value}."""
+        return dict(zip(self.param_names, (float(v) for v in self.params), strict=True))
+
+    def table(self) -> list[tuple[str, float, float, str]]:
+        """Rows (name, value, stderr, unit) for reports."""
+        return [
+            (n, float(v), float(e), u)
+            for n, v, e, u in zip(
+                self.param_names, self.params, self.stderr, self.units, strict=True
+            )
+        ]
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """Everything the residual function needs, computed once per fit."""
+
+    model: BRDFModel
+    geometry: Geometry
+    y: NDArray[np.float64]
+    scale: NDArray[np.float64]  # divides the residual
+    residual: str
+    log_floor: float
+    log_mask: NDArray[np.bool_]
+
+
+def _to_internal(p: NDArray, log_mask: NDArray) -> NDArray:
+    return np.where(log_mask, np.log(np.where(log_mask, p, 1.0)), p)
+
+
+def _to_natural(u: NDArray, log_mask: NDArray) -> NDArray:
+    return np.where(log_mask, np.exp(np.where(log_mask, u, 0.0)), u)
+
+
+def _residuals(u: NDArray, pr: _Problem) -> NDArray:
+    p = _to_natural(u, pr.log_mask)
+    m = pr.model.value_fn(p, pr.geometry)
+    if pr.residual == "log":
+        return (np.log(pr.y + pr.log_floor) - np.log(np.maximum(m, 0.0) + pr.log_floor)) / pr.scale
+    return (pr.y - m) / pr.scale
+
+
+def _jacobian(u: NDArray, pr: _Problem) -> NDArray:
+    p = _to_natural(u, pr.log_mask)
+    jf = pr.model.jacobian_geometry(p, pr.geometry)  # (n, k), ∂m/∂p
+    jf = jf * np.where(pr.log_mask, p, 1.0)[None, :]  # ∂p/∂u
+    if pr.residual == "log":
+        m = pr.model.value_fn(p, pr.geometry)
+        return -jf / ((np.maximum(m, 0.0) + pr.log_floor) * pr.scale)[:, None]
+    return -jf / pr.scale[:, None]
+
+
+def information_criteria(
+    chi2: float, n: int, k: int, *, sigma_known: bool, log_scale_sum: float = 0.0
+) -> tuple[float, float, float, float]:
+    """(log L, AIC, AICc, BIC) of Gaussian residuals.
+
+    Known scale (s = 1): −2 ln L = χ² + n ln 2π + 2 Σ ln σ_j.
+    Unknown scale (profiled, ŝ² = χ²/n): −2 ln L = n (ln(2π χ²/n) + 1) + 2 Σ ln σ_j, and the
+    scale counts as a parameter. AIC = −2 ln L + 2k', AICc = AIC + 2k'(k'+1)/(n − k' − 1),
+    BIC = −2 ln L + k' ln n (Akaike 1974; Hurvich & Tsai 1989; Schwarz 1978).
+    ``log_scale_sum`` is Σ ln σ_j of the residual normalisation (model independent).
+    """
+    kk = k if sigma_known else k + 1
+    if sigma_known:
+        m2ll = chi2 + n * np.log(2.0 * np.pi) + 2.0 * log_scale_sum
+    else:
+        m2ll = n * (np.log(2.0 * np.pi * max(chi2, 1e-300) / n) + 1.0) + 2.0 * log_scale_sum
+    aic = m2ll + 2.0 * kk
+    aicc = aic + (2.0 * kk * (kk + 1) / (n - kk - 1) if n - kk - 1 > 0 else np.inf)
+    bic = m2ll + kk * np.log(n)
+    return -0.5 * m2ll, float(aic), float(aicc), float(bic)
+
+
+def _random_starts(model: BRDFModel, n: int, rng: np.random.Generator) -> list[NDArray]:
+    lo, hi, lm = model.lower, model.upper, model.log_mask
+    starts = []
+    for _ in range(n):
+        p = np.empty(model.n_params)
+        for j in range(model.n_params):
+            if lm[j]:
+                a = np.log(lo[j])
+                b = np.log(hi[j]) if np.isfinite(hi[j]) else a + 10.0
+                p[j] = np.exp(rng.uniform(a, b))
+            else:
+                b = hi[j] if np.isfinite(hi[j]) else lo[j] + 10.0 * max(1.0, abs(lo[j]))
+                # sample the lower part of wide linear ranges: scales rarely sit near the top
+                b = min(b, lo[j] + 2.0 * max(abs(model.start[j] - lo[j]), 1e-3) * 2.0)
+                p[j] = rng.uniform(lo[j], b)
+        starts.append(p)
+    return starts
+
+
+def _covariance(
+    jac: NDArray, s2: float, p: NDArray, log_mask: NDArray
+) -> tuple[NDArray, bool]:
+    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    tol = np.finfo(float).eps * max(jac.shape) * (sv[0] if sv.size else 0.0)
+    keep = sv > tol
+    rank_def = not bool(np.all(keep))
+    inv = np.zeros_like(sv)
+    inv[keep] = 1.0 / sv[keep] ** 2
+    cov_u = (vt.T * inv) @ vt * s2
+    d = np.where(log_mask, p, 1.0)
+    cov = cov_u * d[:, None] * d[None, :]
+    if rank_def:
+        # directions with no information have unbounded variance
+        null = ~keep
+        bad = np.any(np.abs(vt[null]) > 1e-8, axis=0)
+        cov[bad, :] = np.nan
+        cov[:, bad] = np.nan
+    return cov, rank_def
+
+
+def fit_brdf(
+    model: BRDFModel,
+    brdf: ArrayLike,
+    theta_i: ArrayLike,
+    phi_i: ArrayLike,
+    theta_r: ArrayLike,
+    phi_r: ArrayLike,
+    *,
+    sigma: ArrayLike | None = None,
+    residual: str = "absolute",
+    loss: str = "linear",
+    f_scale: float = 1.0,
+    start: ArrayLike | None = None,
+    n_starts: int = 1,
+    seed: int = 0,
+    n_bootstrap: int = 0,
+    log_floor: float = 1e-6,
+    max_nfev: int | None = None,
+    geometry: Geometry | None = None,
+) -> FitResult:
+    """Fit ``model`` to measured BRDF values.
+
+    Parameters
+    ----------
+    model : BRDFModel
+    brdf : array_like, shape (n,)
+        Measured BRDF (1/sr). Not modified.
+    theta_i, phi_i, theta_r, phi_r : array_like, broadcast to shape (n,)
+        Geometry in radians (conventions of :mod:`analysis.brdf.geometry`).
+    sigma : array_like or None
+        Standard uncertainty of ``brdf`` (same unit), scalar or shape (n,). When given the
+        noise scale is known (s = 1); otherwise it is estimated.
+    residual : {"absolute", "relative", "log"}
+    loss : {"linear", "soft_l1", "huber", "cauchy", "arctan"}
+    f_scale : float
+        Soft margin of the robust loss (in units of the normalised residual).
+    start : array_like or None
+        Start vector (natural units); default the model's.
+    n_starts : int
+        Total starts (≥ 1), the extra ones random with ``seed``.
+    n_bootstrap : int
+        Bootstrap replicates (0 = none), resampling cases with ``seed``.
+    log_floor : float
+        ε of the log residual.
+    geometry : Geometry or None
+        Prebuilt geometry of the n points (saves rebuilding it, e.g. in cross-validation).
+
+    Returns
+    -------
+    FitResult
+    """
+    if residual not in _RESIDUALS:
+        raise ValueError(f"residual must be one of {_RESIDUALS}")
+    if loss not in _LOSSES:
+        raise ValueError(f"loss must be one of {_LOSSES}")
+    if n_starts < 1:
+        raise ValueError("n_starts must be at least 1")
+    y = np.asarray(brdf, dtype=float).reshape(-1)
+    g = geometry if geometry is not None else make_geometry(theta_i, phi_i, theta_r, phi_r)
+    if g.shape != y.shape:
+        g = make_geometry(
+            *np.broadcast_arrays(
+                *(np.asarray(a, dtype=float) for a in (theta_i, phi_i, theta_r, phi_r))
+            )
+        )
+        if g.shape != y.shape:
+            raise ValueError(f"angles broadcast to {g.shape} but brdf has shape {y.shape}")
+    if not np.all(np.isfinite(y)):
+        raise ValueError("brdf contains NaN or inf")
+    n = y.size
+    k = model.n_params
+    if n <= k:
+        raise ValueError(f"need more data points ({n}) than parameters ({k})")
+    sigma_known = sigma is not None
+    sig = np.ones(n) if sigma is None else np.broadcast_to(np.asarray(sigma, float), (n,)).copy()
+    if np.any(sig <= 0):
+        raise ValueError("sigma must be positive")
+    if residual == "absolute":
+        scale = sig
+    elif residual == "relative":
+        scale = sig if sigma_known else np.maximum(np.abs(y), log_floor)
+    else:
+        scale = sig / (np.maximum(y, 0.0) + log_floor) if sigma_known else np.ones(n)
+    log_mask = model.log_mask
+    pr = _Problem(model, g, y, scale, residual, float(log_floor), log_mask)
+
+    lo_u = _to_internal(model.lower, log_mask)
+    hi_u = np.where(log_mask, np.log(np.where(log_mask, model.upper, 1.0)), model.upper)
+    hi_u = np.where(np.isinf(model.upper), np.inf, hi_u)
+    p0 = model.start if start is None else np.asarray(start, dtype=float).reshape(-1)
+    if p0.size != k:
+        raise ValueError(f"start must have {k} values")
+    rng = np.random.default_rng(seed)
+    starts = [np.clip(p0, model.lower, model.upper), *_random_starts(model, n_starts - 1, rng)]
+
+    best = None
+    for s in starts:
+        u0 = np.clip(_to_internal(s, log_mask), lo_u, hi_u)
+        # keep strictly inside for trf
+        span = np.where(np.isfinite(hi_u - lo_u), hi_u - lo_u, 1.0)
+        u0 = np.clip(u0, lo_u + 1e-10 * span, hi_u - 1e-10 * span)
+        res = least_squares(
+            _residuals,
+            u0,
+            jac=_jacobian,
+            bounds=(lo_u, hi_u),
+            method="trf",
+            loss=loss,
+            f_scale=f_scale,
+            x_scale="jac",
+            max_nfev=max_nfev,
+            args=(pr,),
+        )
+        if best is None or res.cost < best.cost:
+            best = res
+    assert best is not None
+    return _finish(model, pr, best, sigma_known, np.sum(np.log(scale)), loss, n_bootstrap, seed)
+
+
+def _finish(
+    model: BRDFModel,
+    pr: _Problem,
+    res: object,
+    sigma_known: bool,
+    log_scale_sum: float,
+    loss: str,
+    n_bootstrap: int,
+    seed: int,
+) -> FitResult:
+    u = np.asarray(res.x)  # type: ignore[attr-defined]
+    p = _to_natural(u, pr.log_mask)
+    r = _residuals(u, pr)
+    n, k = r.size, p.size
+    chi2 = float(r @ r)
+    dof = n - k
+    s2 = 1.0 if sigma_known else chi2 / dof
+    jac = _jacobian(u, pr)
+    cov, rank_def = _covariance(jac, s2, p, pr.log_mask)
+    with np.errstate(invalid="ignore"):
+        stderr = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(stderr, stderr)
+    ll, aic, aicc, bic = information_criteria(
+        chi2, n, k, sigma_known=sigma_known, log_scale_sum=float(log_scale_sum)
+    )
+    lo, hi = model.lower, model.upper
+    tol = 1e-6 * np.maximum(1.0, np.abs(p))
+    at_bound = tuple(bool(b) for b in (np.abs(p - lo) <= tol) | (np.abs(p - hi) <= tol))
+    boot = _bootstrap(model, pr, p, loss, n_bootstrap, seed) if n_bootstrap > 0 else None
+    return FitResult(
+        model_name=model.name,
+        param_names=model.param_names,
+        units=model.units,
+        params=p,
+        stderr=stderr,
+        covariance=cov,
+        correlation=corr,
+        chi2=chi2,
+        dof=dof,
+        noise_scale=float(np.sqrt(s2)),
+        log_likelihood=float(ll),
+        aic=aic,
+        aicc=aicc,
+        bic=bic,
+        residuals=r,
+        converged=bool(res.status > 0),  # type: ignore[attr-defined]
+        message=str(res.message),  # type: ignore[attr-defined]
+        nfev=int(res.nfev),  # type: ignore[attr-defined]
+        at_bound=at_bound,
+        rank_deficient=rank_def,
+        residual_kind=pr.residual,
+        loss=loss,
+        bootstrap=boot,
+    )
+
+
+def _bootstrap(
+    model: BRDFModel, pr: _Problem, p_best: NDArray, loss: str, n_boot: int, seed: int
+) -> BootstrapResult:
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xB007]))
+    n = pr.y.size
+    log_mask = pr.log_mask
+    lo_u = _to_internal(model.lower, log_mask)
+    hi_u = np.where(log_mask, np.log(np.where(log_mask, model.upper, 1.0)), model.upper)
+    u0 = np.clip(_to_internal(p_best, log_mask), lo_u, hi_u)
+    span = np.where(np.isfinite(hi_u - lo_u), hi_u - lo_u, 1.0)
+    u0 = np.clip(u0, lo_u + 1e-10 * span, hi_u - 1e-10 * span)
+    samples = []
+    failed = 0
+    for _ in range(n_boot):
+        idx = rng.integers(0, n, n)
+        sub = _Problem(
+            model, pr.geometry.take(idx), pr.y[idx], pr.scale[idx], pr.residual,
+            pr.log_floor, log_mask,
+        )
+        res = least_squares(
+            _residuals, u0, jac=_jacobian, bounds=(lo_u, hi_u), method="trf",
+            loss=loss, x_scale="jac", args=(sub,),
+        )
+        if res.status > 0:
+            samples.append(_to_natural(res.x, log_mask))
+        else:
+            failed += 1
+    arr = np.array(samples).reshape(-1, model.n_params)
+    if arr.shape[0] >= 2:
+        se = arr.std(axis=0, ddof=1)
+        lo_ci, hi_ci = np.percentile(arr, [2.5, 97.5], axis=0)
+    else:
+        se = lo_ci = hi_ci = np.full(model.n_params, np.nan)
+    return BootstrapResult(arr, se, lo_ci, hi_ci, failed)
