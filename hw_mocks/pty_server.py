@@ -75,3 +75,15 @@ class PtyServer:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def serve_url(url: str) -> PtyServer:
+    """Serve the emulator named by a ``simapt://``/``simsmc://`` URL on a new pty."""
+    import importlib
+
+    from hw_mocks import registry
+
+    scheme, name, options = registry.parse_url(url)
+    handler = importlib.import_module(f"hw_mocks.urlhandler.protocol_{scheme}").Serial
+    emulator = registry.get_or_create(scheme, name, handler.factory, options)
+    return PtyServer(emulator)
