@@ -30,6 +30,7 @@ import numpy as np
 __all__ = [
     "gauss_legendre",
     "iterate_degrees",
+    "legendre_order",
     "legendre_table",
     "sectoral_seeds",
     "step_coefficients",
@@ -164,6 +165,63 @@ def iterate_degrees(
         yield k, n, emit(p1, n)
 
 
+def legendre_order(m: int, lmax: int, theta: np.ndarray) -> np.ndarray:
+    """λ_l^m(cos θ) for one order m and all degrees m ≤ l ≤ lmax.
+
+    Parameters
+    ----------
+    m, lmax : int
+        0 ≤ m ≤ lmax.
+    theta : array_like of shape (N,)
+        Colatitudes in radians, 0 ≤ θ ≤ π.
+
+    Returns
+    -------
+    ndarray of shape (lmax−m+1, N)
+        Row i holds degree l = m + i, to full relative precision down to the smallest
+        normal double; values truly below it underflow gracefully (the scaled mantissa is
+        converted with ``ldexp`` only at the end).
+    """
+    th = _check_theta(theta)
+    if not 0 <= m <= lmax:
+        raise ValueError("need 0 ≤ m ≤ lmax")
+    x = np.cos(th)
+    # The sectoral seed by the same scaled product as the transforms, for this m only.
+    p2 = np.full(th.size, 1.0 / np.sqrt(4.0 * np.pi))
+    e = np.zeros(th.size, dtype=np.int64)
+    s = np.sin(th)
+    for mm in range(1, m + 1):
+        p2 = p2 * (np.sqrt((2.0 * mm + 1.0) / (2.0 * mm)) * s)
+        low = (np.abs(p2) < _LOWER) & (p2 != 0.0)
+        p2 = np.where(low, p2 * _BIG, p2)
+        e = e - low
+    out = np.empty((lmax - m + 1, th.size))
+    out[0] = np.ldexp(p2, SCALE_BITS * e)
+    if m == lmax:
+        return out
+    p1 = np.sqrt(2.0 * m + 3.0) * x * p2
+    out[1] = np.ldexp(p1, SCALE_BITS * e)
+    for l in range(m + 2, lmax + 1):
+        a, ab = step_coefficients(m, l)
+        p1, p2 = a * x * p1 - ab * p2, p1
+        big = (e < 0) & (np.abs(p1) > _UPPER)
+        if big.any():
+            p1 = np.where(big, p1 * _SMALL, p1)
+            p2 = np.where(big, p2 * _SMALL, p2)
+            e = e + big
+        out[l - m] = np.ldexp(p1, SCALE_BITS * e)
+    return out
+
+
+def _check_theta(theta: np.ndarray) -> np.ndarray:
+    th = np.atleast_1d(np.asarray(theta, dtype=float))
+    if th.ndim != 1:
+        raise ValueError("theta must be one-dimensional")
+    if np.any((th < 0) | (th > np.pi)):
+        raise ValueError("colatitudes must lie in [0, π]")
+    return th
+
+
 def legendre_table(lmax: int, theta: np.ndarray) -> np.ndarray:
     """λ_l^m(cos θ) for all 0 ≤ m ≤ l ≤ lmax at the given colatitudes.
 
@@ -176,37 +234,12 @@ def legendre_table(lmax: int, theta: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray of shape (lmax+1, lmax+1, N)
-        ``table[l, m]``; entries with m > l are 0. Values are accurate to full relative
-        precision down to the smallest normal double; values that are truly below it
-        underflow gracefully (the scaled mantissa is converted with ``ldexp``).
+        ``table[l, m]``; entries with m > l are 0 (see :func:`legendre_order` for accuracy).
     """
-    th = np.atleast_1d(np.asarray(theta, dtype=float))
-    if th.ndim != 1:
-        raise ValueError("theta must be one-dimensional")
-    if np.any((th < 0) | (th > np.pi)):
-        raise ValueError("colatitudes must lie in [0, π]")
-    x = np.cos(th)
-    s = np.sin(th)
-    mant, expo = sectoral_seeds(s, lmax)
+    th = _check_theta(theta)
     table = np.zeros((lmax + 1, lmax + 1, th.size))
     for m in range(lmax + 1):
-        # Full precision for tiny values: run this order with its own exponent.
-        p2 = mant[m].copy()
-        e = expo[m].copy()
-        table[m, m] = np.ldexp(p2, SCALE_BITS * e)
-        if m == lmax:
-            break
-        p1 = np.sqrt(2.0 * m + 3.0) * x * p2
-        table[m + 1, m] = np.ldexp(p1, SCALE_BITS * e)
-        for l in range(m + 2, lmax + 1):
-            a, ab = step_coefficients(m, l)
-            p1, p2 = a * x * p1 - ab * p2, p1
-            big = (e < 0) & (np.abs(p1) > _UPPER)
-            if big.any():
-                p1 = np.where(big, p1 * _SMALL, p1)
-                p2 = np.where(big, p2 * _SMALL, p2)
-                e = e + big
-            table[l, m] = np.ldexp(p1, SCALE_BITS * e)
+        table[m:, m] = legendre_order(m, lmax, th)
     return table
 
 

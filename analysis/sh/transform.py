@@ -40,6 +40,8 @@ __all__ = [
 
 #: Target size in bytes of one (orders × northern rings) block of the recurrence.
 _BLOCK_BYTES = 1 << 18
+#: Degrees grouped per batched matrix product.
+_K_BUFFER = 16
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,36 @@ def _blocks(lmax: int, n_rings: int) -> list[tuple[int, int]]:
     return [(m0, min(m0 + rows, lmax + 1)) for m0 in range(0, lmax + 1, rows)]
 
 
+def _buffered_degrees(
+    m0: int,
+    m1: int,
+    lmax: int,
+    x: np.ndarray,
+    seed_mant: np.ndarray,
+    seed_exp: np.ndarray,
+):
+    """Group the recurrence steps of one block in buffers of shape (rows, kb, rings).
+
+    Yields (k0, buffer) with buffer[:, i] = λ_{m+k0+i}^m; rows whose degree would exceed lmax
+    hold finite stale values, to be multiplied by zero coefficients (synthesis) or discarded
+    (analysis). Grouping lets one batched matrix product do the sums over l, which is far
+    cheaper in numpy than one rank-1 update per degree.
+    """
+    rows = m1 - m0
+    nk = lmax - m0 + 1
+    kb_max = min(_K_BUFFER, nk)
+    buf = np.zeros((rows, kb_max, x.size))
+    k0 = 0
+    for k, n, lam in iterate_degrees(m0, m1, lmax, x, seed_mant, seed_exp):
+        buf[:n, k - k0] = lam[:n]
+        if k - k0 + 1 == kb_max or k == nk - 1:
+            yield k0, buf[:, : k - k0 + 1]
+            k0 = k + 1
+            kb_max = min(_K_BUFFER, nk - k0)
+            if kb_max <= 0:
+                return
+
+
 def synthesis(coeffs: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     """Evaluate a real SH expansion on a Gauss–Legendre grid (inverse transform).
 
@@ -131,14 +163,19 @@ def synthesis(coeffs: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     g_n = np.zeros((lmax + 1, nh), dtype=complex)
     g_s = np.zeros((lmax + 1, nh), dtype=complex)
     for m0, m1 in _blocks(lmax, nh):
-        rows = m1 - m0
-        acc = np.zeros((2, rows, nh, 2))  # [parity, order, ring, re/im]
+        # coefficient rows [Re even, Im even, Re odd, Im odd] for each step k of the block
         zb = z[m0:m1]
-        zv = np.stack([zb.real, zb.imag], axis=-1)  # (rows, L+1, 2)
-        for k, n, lam in iterate_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
-            acc[k & 1, :n] += lam[:n, :, None] * zv[:n, k][:, None, :]
-        even = acc[0, ..., 0] + 1j * acc[0, ..., 1]
-        odd = acc[1, ..., 0] + 1j * acc[1, ..., 1]
+        coef = np.zeros((m1 - m0, 4, lmax + 1))
+        coef[:, 0, 0::2] = zb.real[:, 0::2]
+        coef[:, 1, 0::2] = zb.imag[:, 0::2]
+        coef[:, 2, 1::2] = zb.real[:, 1::2]
+        coef[:, 3, 1::2] = zb.imag[:, 1::2]
+        acc = np.zeros((m1 - m0, 4, nh))
+        for k0, buf in _buffered_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
+            kb = buf.shape[1]
+            acc += np.matmul(coef[:, :, k0 : k0 + kb], buf)
+        even = acc[:, 0] + 1j * acc[:, 1]
+        odd = acc[:, 2] + 1j * acc[:, 3]
         g_n[m0:m1] = even + odd
         g_s[m0:m1] = even - odd
     # Real harmonics of order m > 0 carry √2; irfft divides by nphi and doubles m > 0.
@@ -190,16 +227,21 @@ def analysis(values: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     scale[0] = 1.0
     f_even = f_even * scale[:, None]
     f_odd = f_odd * scale[:, None]
-    fe_v = np.stack([f_even.real, f_even.imag], axis=-1)
-    fo_v = np.stack([f_odd.real, f_odd.imag], axis=-1)
+    # columns [Re even, Im even, Re odd, Im odd] per order and ring
+    rhs = np.stack([f_even.real, f_even.imag, f_odd.real, f_odd.imag], axis=-1)
     mant, expo = sectoral_seeds(s, lmax)
     z = np.zeros((lmax + 1, lmax + 1, 2))
     for m0, m1 in _blocks(lmax, nh):
-        fe = fe_v[m0:m1]
-        fo = fo_v[m0:m1]
-        for k, n, lam in iterate_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
-            src = fo if k & 1 else fe
-            z[m0 : m0 + n, k] = np.einsum("ij,ijc->ic", lam[:n], src[:n])
+        r = rhs[m0:m1]
+        for k0, buf in _buffered_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
+            kb = buf.shape[1]
+            prod = np.matmul(buf, r)  # (rows, kb, 4)
+            par = (np.arange(k0, k0 + kb) & 1)[None, :]
+            z[m0:m1, k0 : k0 + kb, 0] = np.where(par == 0, prod[..., 0], prod[..., 2])
+            z[m0:m1, k0 : k0 + kb, 1] = np.where(par == 0, prod[..., 1], prod[..., 3])
+    # Entries with m + k > L were computed from stale buffer rows: they are not coefficients.
+    m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
+    z[m_idx + k_idx > lmax] = 0.0
     return _z_to_coeffs(z[..., 0] + 1j * z[..., 1], lmax)
 
 

@@ -1,0 +1,215 @@
+"""Legendre recurrences, convention and transforms (issue 7 §1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis.sh.convention import (
+    PROJECT_CONVENTION,
+    SHConvention,
+    convert,
+    degrees_orders,
+    lm_index,
+    lmax_from_size,
+)
+from analysis.sh.legendre import gauss_legendre, legendre_order, legendre_table
+from analysis.sh.transform import (
+    analysis,
+    directions_to_angles,
+    evaluate,
+    fit_scattered,
+    gl_grid,
+    real_sh_matrix,
+    synthesis,
+)
+
+mp = pytest.importorskip("mpmath")
+
+
+def _reference_lambda(l: int, m: int, theta: float) -> mp.mpf:
+    """λ_l^m(cos θ) from the explicit finite sum of P_l^m, in high precision.
+
+    P_l(x) = 2^−l Σ_k (−1)^k C(l,k) C(2l−2k,l) x^(l−2k) differentiated m times: independent
+    of the recurrences under test. The sum cancels catastrophically, so it runs with about
+    0.7·l + 60 digits (the largest term is ~C(2l,l)), and is checked against a run with
+    200 more digits.
+    """
+
+    def at(dps: int) -> mp.mpf:
+        with mp.workdps(dps):
+            x = mp.cos(mp.mpf(theta))
+            s = mp.sin(mp.mpf(theta))
+            tot = mp.mpf(0)
+            for k in range(0, (l - m) // 2 + 1):
+                n = l - 2 * k
+                tot += (
+                    (-1) ** k
+                    * mp.binomial(l, k)
+                    * mp.binomial(2 * l - 2 * k, l)
+                    * mp.ff(n, m)
+                    * x ** (n - m)
+                )
+            norm = mp.sqrt((2 * l + 1) / (4 * mp.pi) * mp.factorial(l - m) / mp.factorial(l + m))
+            return +(s**m * tot / mp.mpf(2) ** l * norm)
+
+    dps = int(0.7 * l) + 60
+    a, b = at(dps), at(dps + 200)
+    assert abs(a - b) <= abs(b) * mp.mpf(10) ** -30
+    return b
+
+
+def _check_against_reference(l: int, m: int, theta: float) -> None:
+    ours = legendre_order(m, l, np.array([theta]))[-1, 0]
+    ref = _reference_lambda(l, m, theta)
+    assert np.isfinite(ours)
+    if abs(ref) >= mp.mpf("1e-300"):
+        assert abs(ours - ref) <= 1e-10 * abs(ref), (l, m, theta, ours, ref)
+    else:
+        # Truly below the double range: graceful underflow, never garbage.
+        assert abs(ours) <= 1e-300
+
+
+@pytest.mark.parametrize(
+    ("l", "m", "theta"),
+    [(60, 0, 0.3), (100, 100, 0.05), (150, 75, 0.7), (200, 199, 3.1), (120, 40, 1e-3)],
+)
+def test_legendre_matches_high_precision(l: int, m: int, theta: float) -> None:
+    _check_against_reference(l, m, theta)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("l", "m", "theta"),
+    [
+        (2048, 0, 0.7),
+        (2048, 150, 0.05),  # near the pole, seed sin^150 θ ~ 1e−195 grows back to 6e−14
+        (2048, 100, 0.001),  # seed underflows (1e−450) yet the value is 2e−156
+        (2048, 1000, 0.05),  # truly 2e−877: must come back as 0, not NaN
+        (2048, 1500, 0.9),
+        (2048, 2048, 1.3),
+        (500, 250, 0.05),  # SciPy returns 0 here, truth 4.3e−223 (numerics.md §2.3)
+        (1000, 999, 3.1),
+    ],
+)
+def test_legendre_high_degree_against_high_precision(l: int, m: int, theta: float) -> None:
+    _check_against_reference(l, m, theta)
+
+
+def test_legendre_orthonormality_by_quadrature() -> None:
+    lmax = 40
+    theta, w = gauss_legendre(lmax + 1)
+    table = legendre_table(lmax, theta)
+    for m in (0, 3, 17, 40):
+        g = table[m:, m] @ (table[m:, m] * w).T * 2.0 * np.pi
+        np.testing.assert_allclose(g, np.eye(lmax - m + 1), atol=1e-13)
+
+
+def test_gauss_legendre_matches_numpy() -> None:
+    for n in (1, 2, 5, 40, 101):
+        theta, w = gauss_legendre(n)
+        x_ref, w_ref = np.polynomial.legendre.leggauss(n)
+        order = np.argsort(np.cos(theta))
+        np.testing.assert_allclose(np.cos(theta)[order], x_ref, atol=1e-14)
+        np.testing.assert_allclose(w[order], w_ref, atol=1e-13)
+        assert np.all(np.diff(theta) > 0)
+
+
+def test_real_harmonics_match_graphics_constants() -> None:
+    # Ramamoorthi & Hanrahan 2001 constants (numerics.md §3.1), at a random direction.
+    d = np.array([0.3, -0.5, 0.6])
+    d /= np.linalg.norm(d)
+    x, y, z = d
+    th, ph = directions_to_angles(d)
+    y_num = real_sh_matrix(2, np.array([th]), np.array([ph]))[0]
+    c0, c1, c2, c20 = 0.5 / np.sqrt(np.pi), np.sqrt(3 / (4 * np.pi)), 0.5 * np.sqrt(
+        15 / np.pi
+    ), 0.25 * np.sqrt(5 / np.pi)
+    expect = [c0, c1 * y, c1 * z, c1 * x, c2 * x * y, c2 * y * z, c20 * (3 * z * z - 1),
+              c2 * x * z, 0.5 * c2 * (x * x - y * y)]
+    np.testing.assert_allclose(y_num, expect, atol=1e-15)
+
+
+def test_convention_conversion_round_trip_and_values() -> None:
+    rng = np.random.default_rng(1)
+    c = rng.standard_normal(16)
+    cs_complex = SHConvention(kind="complex", condon_shortley=True)
+    a = convert(c, source=PROJECT_CONVENTION, target=cs_complex)
+    back = convert(a, source=cs_complex, target=PROJECT_CONVENTION)
+    np.testing.assert_allclose(back, c, atol=1e-15)
+    # Reality condition of CS complex coefficients: a_l,−m = (−1)^m conj(a_lm).
+    l, m = degrees_orders(3)
+    pos = m > 0
+    np.testing.assert_allclose(
+        a[lm_index(l[pos], -m[pos])], (-1.0) ** m[pos] * np.conj(a[pos]), atol=1e-15
+    )
+    # Function values agree: Σ a_lm Y_l^m (CS) = Σ c_lm Y_lm (real).
+    th, ph = 0.8, 2.1
+    ycs = []
+    for ll, mm in zip(l, m, strict=True):
+        lam = legendre_order(abs(mm), ll, np.array([th]))[-1, 0]
+        val = lam * np.exp(1j * abs(mm) * ph)
+        if mm > 0:
+            val *= (-1) ** mm
+        if mm < 0:
+            val = np.conj(val)
+        ycs.append(val)
+    f_complex = np.sum(a * np.array(ycs))
+    f_real = evaluate(c, np.array(th), np.array(ph))
+    assert abs(f_complex.imag) < 1e-14
+    assert abs(f_complex.real - f_real) < 1e-14
+    with pytest.raises(ValueError):
+        lmax_from_size(15)
+
+
+@pytest.mark.parametrize("lmax", [0, 1, 2, 7, 32, 128])
+def test_round_trip_small(lmax: int) -> None:
+    rng = np.random.default_rng(lmax)
+    grid = gl_grid(lmax)
+    c = rng.standard_normal((lmax + 1) ** 2)
+    f = synthesis(c, grid=grid)
+    assert f.shape == grid.shape
+    err = np.max(np.abs(analysis(f, grid=grid) - c)) / np.max(np.abs(c))
+    assert err < 1e-13
+
+
+def test_synthesis_matches_pointwise_evaluation() -> None:
+    rng = np.random.default_rng(5)
+    grid = gl_grid(12)
+    c = rng.standard_normal(169)
+    th, ph = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    np.testing.assert_allclose(synthesis(c, grid=grid), evaluate(c, th, ph), atol=1e-12)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("lmax", [1024, 2048])
+def test_round_trip_high_degree(lmax: int) -> None:
+    rng = np.random.default_rng(11)
+    grid = gl_grid(lmax)
+    c = rng.standard_normal((lmax + 1) ** 2)
+    f = synthesis(c, grid=grid)
+    assert np.all(np.isfinite(f))
+    c2 = analysis(f, grid=grid)
+    assert np.all(np.isfinite(c2))
+    assert np.max(np.abs(c2 - c)) / np.max(np.abs(c)) <= 1e-10
+
+
+def test_scattered_fit_recovers_band_limited_signal_with_mask() -> None:
+    rng = np.random.default_rng(3)
+    lmax = 6
+    c = rng.standard_normal((lmax + 1) ** 2)
+    v = rng.standard_normal((4000, 3))
+    th, ph = directions_to_angles(v / np.linalg.norm(v, axis=1, keepdims=True))
+    f = evaluate(c, th, ph)
+    mask = th < 0.75 * np.pi  # a cap around the south pole is unobserved
+    fit = fit_scattered(f, th, ph, lmax=lmax, mask=mask)
+    np.testing.assert_allclose(fit.coeffs, c, atol=1e-9)
+    assert fit.rank == (lmax + 1) ** 2
+    assert fit.n_samples == int(mask.sum())
+    # With noise, the reported errors describe the actual scatter.
+    sigma = 0.05
+    noisy = f + sigma * rng.standard_normal(f.shape)
+    fit_n = fit_scattered(noisy, th, ph, lmax=lmax, mask=mask)
+    assert abs(fit_n.noise_sigma / sigma - 1) < 0.1
+    z = (fit_n.coeffs - c) / fit_n.coeff_std
+    assert 0.7 < np.sqrt(np.mean(z**2)) < 1.3
