@@ -29,8 +29,8 @@ __all__ = [
     "project_4d",
     "propagate",
     "propagate_4d",
-    "sample_columns",
     "sample_along_curves",
+    "sample_columns",
 ]
 
 Interpolation = Literal["linear", "cubic", "fourier"]

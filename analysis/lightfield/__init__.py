@@ -1,0 +1,73 @@
+"""Light fields from scattered light: data types, operators, reconstruction, localisation.
+
+Implements the flatland plenoptic NLOS analysis of Sasaki's thesis (physics.md §§3–4,
+equations S1–S3): propagation and scattering of light fields, the unfolded forward model
+(S2-3/S2-6), the per-scattering-point reconstruction (S2-13 … S2-38) with diagnostics and
+regularisation, and localisation by (radiance-preserving) refocusing and depth filtering.
+"""
+
+from .brdf import MATERIALS, FlatlandBRDF, SpatiallyVaryingBRDF, material
+from .diagnostics import (
+    Diagnostics,
+    NoiseEstimate,
+    degree_of_specularity,
+    noise_psd_from_coefficients,
+    noise_psd_from_frames,
+    relative_noise_error,
+)
+from .field import LightField2D, LightField4D, theta_grid, uniform_grid
+from .forward import UnfoldedScene
+from .propagate import (
+    project,
+    project_4d,
+    propagate,
+    propagate_4d,
+    sample_along_curves,
+)
+from .reconstruct import Reconstruction, reconstruct, solve_curves
+from .regularize import RegularizationResult, regularize, truncation_level_mse
+from .scatter import scatter
+from .spectral import (
+    SeparableSpectra,
+    brdf_fourier_matrix,
+    coefficients,
+    fourier_orders,
+    separable_spectra,
+    synthesize,
+)
+
+__all__ = [
+    "MATERIALS",
+    "Diagnostics",
+    "FlatlandBRDF",
+    "LightField2D",
+    "LightField4D",
+    "NoiseEstimate",
+    "Reconstruction",
+    "RegularizationResult",
+    "SeparableSpectra",
+    "SpatiallyVaryingBRDF",
+    "UnfoldedScene",
+    "brdf_fourier_matrix",
+    "coefficients",
+    "degree_of_specularity",
+    "fourier_orders",
+    "material",
+    "noise_psd_from_coefficients",
+    "noise_psd_from_frames",
+    "project",
+    "project_4d",
+    "propagate",
+    "propagate_4d",
+    "reconstruct",
+    "regularize",
+    "relative_noise_error",
+    "sample_along_curves",
+    "scatter",
+    "separable_spectra",
+    "solve_curves",
+    "synthesize",
+    "theta_grid",
+    "truncation_level_mse",
+    "uniform_grid",
+]
