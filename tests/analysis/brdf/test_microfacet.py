@@ -84,7 +84,7 @@ def test_weak_white_furnace(dist: str, theta_o: float) -> None:
         (mf.blinn_phong_d, mf.blinn_phong_d_ds),
     ],
 )
-def test_distribution_derivatives(fn, dfn) -> None:  # noqa: ANN001
+def test_distribution_derivatives(fn, dfn) -> None:
     c = np.linspace(0.3, 1.0, 15)
     a = 0.37 if fn is not mf.blinn_phong_d else 12.0
     h = 1e-6 * a
