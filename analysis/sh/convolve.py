@@ -1,0 +1,218 @@
+"""Spherical convolution B_lm = A_l L_lm and Wiener deconvolution of lighting.
+
+Physics.md §5 (Mahajan et al. M4, M5, M7); numerics.md §3.10 and §4.4. The Wiener filter
+A*_l = A_l / (A_l² + K_l) never divides by zero: bands with A_l = 0 exactly (odd l > 1 for a
+Lambertian kernel) are unobservable and are returned as zero with a flag, and K_l > 0 is
+chosen per band from the noise level as K_l = σ² / P_L(l), σ² the noise variance of one
+coefficient and P_L(l) a power law fitted to the lighting power estimated from the data
+(numerics.md §4.4). The effective number of recovered degrees of freedom
+Σ_l (2l+1) A_l²/(A_l² + K_l) and the K_l actually used are reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis.sh.convention import band_slice, degrees_orders, lmax_from_size
+
+__all__ = [
+    "WienerResult",
+    "band_power",
+    "convolve",
+    "estimate_coefficient_noise",
+    "per_coefficient",
+    "wiener_deconvolve",
+]
+
+
+def per_coefficient(per_band: np.ndarray, lmax: int) -> np.ndarray:
+    """Expand a per-degree array (≥ lmax+1 entries) to the flat (L+1)² layout."""
+    v = np.asarray(per_band)
+    if v.shape[0] < lmax + 1:
+        raise ValueError(f"need {lmax + 1} per-band values, got {v.shape[0]}")
+    l, _ = degrees_orders(lmax)
+    return v[l]
+
+
+def convolve(lighting: np.ndarray, filt: np.ndarray) -> np.ndarray:
+    """B_lm = A_l L_lm (M4/M5).
+
+    Parameters
+    ----------
+    lighting : ndarray of shape ((L+1)², ...)
+    filt : ndarray of shape (≥ L+1,)
+        A_l.
+
+    Returns
+    -------
+    ndarray of the shape of ``lighting``
+    """
+    c = np.asarray(lighting, dtype=float)
+    lmax = lmax_from_size(c.shape[0])
+    a = per_coefficient(np.asarray(filt, dtype=float), lmax)
+    return c * a.reshape((-1,) + (1,) * (c.ndim - 1))
+
+
+def band_power(coeffs: np.ndarray) -> np.ndarray:
+    """Mean power per degree, P(l) = (1/(2l+1)) Σ_m c_lm², shape (L+1,)."""
+    c = np.asarray(coeffs, dtype=float)
+    lmax = lmax_from_size(c.shape[0])
+    return np.array([np.mean(c[band_slice(l)] ** 2) for l in range(lmax + 1)])
+
+
+def _unobservable(filt: np.ndarray, tol: float) -> np.ndarray:
+    a = np.abs(filt)
+    return a <= tol * a.max()
+
+
+def estimate_coefficient_noise(
+    coeffs: np.ndarray,
+    filt: np.ndarray,
+    *,
+    null_tol: float = 1e-12,
+    negligible: float = 1e-3,
+) -> tuple[float, int]:
+    """Noise σ of one coefficient, estimated from bands that hold no signal.
+
+    Bands with A_l = 0 (exact null space, e.g. odd l > 1 for Lambert) contain only noise;
+    when there are none, bands with |A_l| < ``negligible``·max|A| are used. Robust scale:
+    1.4826 · median |c| of those coefficients (the MAD of zero-mean Gaussian noise).
+
+    Returns
+    -------
+    sigma : float
+    n_used : int
+        Number of coefficients the estimate rests on.
+
+    Raises
+    ------
+    ValueError
+        When no band is signal-free: pass the noise level explicitly then.
+    """
+    c = np.asarray(coeffs, dtype=float)
+    lmax = lmax_from_size(c.size)
+    a = np.asarray(filt, dtype=float)[: lmax + 1]
+    null = _unobservable(a, null_tol)
+    if not null.any():
+        null = np.abs(a) < negligible * np.abs(a).max()
+    if not null.any():
+        raise ValueError("no signal-free band to estimate the noise from; pass noise_sigma")
+    vals = np.concatenate([c[band_slice(l)] for l in np.nonzero(null)[0]])
+    return float(1.4826 * np.median(np.abs(vals))), int(vals.size)
+
+
+@dataclass(frozen=True)
+class WienerResult:
+    """Result of :func:`wiener_deconvolve`.
+
+    Attributes
+    ----------
+    coeffs : ndarray of shape ((L+1)²,)
+        Estimated lighting L̂_lm; exactly 0 in unobservable bands.
+    gain : ndarray of shape (L+1,)
+        A*_l = A_l/(A_l² + K_l) actually applied (0 where unobservable).
+    k : ndarray of shape (L+1,)
+        K_l used (nan where unobservable, where no K applies).
+    unobservable : ndarray of bool, shape (L+1,)
+        Bands with A_l = 0: no information, returned as zero.
+    dof : float
+        Effective recovered degrees of freedom Σ (2l+1) A_l²/(A_l² + K_l).
+    noise_sigma : float
+        σ used to choose K (nan when K was given).
+    spectrum_slope : float
+        Exponent p of the fitted lighting spectrum P_L(l) ∝ (l+1)^−p (nan when K was given).
+    """
+
+    coeffs: np.ndarray
+    gain: np.ndarray
+    k: np.ndarray
+    unobservable: np.ndarray
+    dof: float
+    noise_sigma: float
+    spectrum_slope: float
+
+
+def _fit_lighting_spectrum(
+    b: np.ndarray, a: np.ndarray, sigma: float, observable: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """Power-law fit of P_L(l) from P_B(l) = A_l² P_L(l) + σ² over bands well above noise."""
+    lmax = a.size - 1
+    pb = band_power(b)
+    l = np.arange(lmax + 1)
+    n_m = 2 * l + 1
+    # A band is informative when its power exceeds the noise by several standard errors.
+    good = observable & (pb > sigma**2 * (1.0 + 3.0 * np.sqrt(2.0 / n_m)))
+    pl = np.where(good, (pb - sigma**2) / np.where(observable, a**2, 1.0), np.nan)
+    if good.sum() >= 2:
+        x = np.log(l[good] + 1.0)
+        y = np.log(pl[good])
+        w = n_m[good]
+        slope, icpt = np.polyfit(x, y, 1, w=np.sqrt(w))
+        model = np.exp(icpt + slope * np.log(l + 1.0))
+        return model, float(-slope)
+    level = np.nanmean(pl) if good.any() else float(np.mean(pb))
+    return np.full(lmax + 1, max(level, np.finfo(float).tiny)), 0.0
+
+
+def wiener_deconvolve(
+    image_coeffs: np.ndarray,
+    filt: np.ndarray,
+    *,
+    noise_sigma: float | None = None,
+    k: float | np.ndarray | None = None,
+    null_tol: float = 1e-12,
+) -> WienerResult:
+    """Lighting from the SH coefficients of an image of known BRDF (M7).
+
+    L̂_lm = A*_l B_lm, A*_l = A_l / (A_l² + K_l).
+
+    Parameters
+    ----------
+    image_coeffs : ndarray of shape ((L+1)²,)
+        B_lm.
+    filt : ndarray of shape (≥ L+1,)
+        A_l of the BRDF (:mod:`analysis.sh.filters`).
+    noise_sigma : float, optional
+        Noise σ of one coefficient of B. Estimated with :func:`estimate_coefficient_noise`
+        when neither this nor ``k`` is given.
+    k : float or ndarray of shape (L+1,), optional
+        Explicit regularisation (scalar or per band), > 0. Overrides the automatic choice.
+    null_tol : float
+        |A_l| ≤ null_tol·max|A| counts as an exact zero (unobservable band).
+
+    Returns
+    -------
+    WienerResult
+    """
+    b = np.asarray(image_coeffs, dtype=float)
+    lmax = lmax_from_size(b.size)
+    a = np.asarray(filt, dtype=float)[: lmax + 1]
+    if a.size < lmax + 1:
+        raise ValueError("filter shorter than the coefficient band limit")
+    unobs = _unobservable(a, null_tol)
+    observable = ~unobs
+    slope = float("nan")
+    sigma_used = float("nan")
+    if k is not None:
+        k_arr = np.broadcast_to(np.asarray(k, dtype=float), (lmax + 1,)).copy()
+        if np.any(k_arr[observable] <= 0):
+            raise ValueError("K must be > 0 (K = 0 is the unstable inverse filter)")
+    else:
+        if noise_sigma is None:
+            noise_sigma, _ = estimate_coefficient_noise(b, a, null_tol=null_tol)
+        sigma_used = float(noise_sigma)
+        if sigma_used <= 0:
+            raise ValueError("noise_sigma must be > 0")
+        p_l, slope = _fit_lighting_spectrum(b, a, sigma_used, observable)
+        k_arr = sigma_used**2 / p_l
+    gain = np.zeros(lmax + 1)
+    gain[observable] = a[observable] / (a[observable] ** 2 + k_arr[observable])
+    k_out = np.where(observable, k_arr, np.nan)
+    coeffs = b * per_coefficient(gain, lmax)
+    l = np.arange(lmax + 1)
+    frac = np.zeros(lmax + 1)
+    frac[observable] = a[observable] ** 2 / (a[observable] ** 2 + k_arr[observable])
+    dof = float(np.sum((2 * l + 1) * frac))
+    return WienerResult(coeffs, gain, k_out, unobs, dof, sigma_used, slope)
