@@ -158,6 +158,13 @@ def regularize(
         lv[order] = np.arange(n_k)
     else:
         lv = np.asarray(levels, dtype=np.int64)
+    if signal_power is None:
+        # trust the pooled spectrum only up to the first level where it is
+        # indistinguishable from noise: beyond it a chance excess at a mode whose noise
+        # gain is astronomically large would otherwise leak into the estimate
+        empty = [u for u in np.unique(lv) if not np.any(sp[lv == u] > 0)]
+        if empty:
+            sp = np.where(lv < empty[0], sp, 0.0)
     name, param = "none", float("nan")
 
     if method == "none":
