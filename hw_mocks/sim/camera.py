@@ -1,0 +1,361 @@
+"""The simulated camera: renders the virtual bench through a pinhole onto an EMVA 1288 sensor.
+
+A :class:`SimulatedCamera` implements :class:`drivers.base.Camera` (the only project import
+it may use besides :mod:`hw_mocks`). On every frame it
+
+1. takes a snapshot of the world (:mod:`hw_mocks.sim.world`): axis positions read from the
+   firmware emulators, source state, scene;
+2. traces one ray per pixel centre from the pinhole, which sits on the detector arm at
+   ``world.arm_length_mm + camera_z`` from the sample and looks at the sample centre (image
+   up = lab y), and asks the scene for the radiance along it (continuous geometry: each pixel
+   its own direction, nothing from an analysis grid);
+3. converts radiance to photons per second with the camera equation
+   ``Φ = L · A_ap · (p/f)² · cos⁴α`` (A_ap the entrance-pupil area, p the pixel pitch, f the
+   focal length, α the field angle) and ``n = Φ λ / (h c)``;
+4. exposes the sensor (:mod:`hw_mocks.sim.sensor`) for the set exposure time and gain.
+
+The noise-free rendering is cached per world state, ROI and binning: a still scene streams
+at the speed of the noise generator.
+
+URL: ``simcam://<name>?world=sim&seed=1`` with optional ``width``, ``height`` (sensor px),
+``focal_length_mm`` (default 50), ``aperture_mm`` (entrance pupil, default 12.5, i.e. f/4),
+``format`` (MONO8/10/12/16, default MONO12), ``stale`` (frames a V4L2-like backend keeps
+buffered, default 0: see below) and ``realtime`` (1: ``acquire`` takes the exposure time in
+wall-clock time; default 0).
+
+Stale frames: with ``stale=N`` the camera behaves like a driver queue holding N frames:
+each acquired frame was captured N acquisitions earlier, until :meth:`invalidate` (which
+the engine calls after every move and the base class after every settings change)
+discards the queue. Tests use it to prove that callers invalidate after moves.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.base import Camera, DeviceIdentity, Frame, PixelFormat, Roi
+from drivers.errors import DeviceTimeout
+from hw_mocks import registry
+from hw_mocks.sim.sensor import Sensor, SensorParams
+from hw_mocks.sim.world import VirtualBench, WorldState, get_world
+
+__all__ = ["OpticsParams", "SimulatedCamera", "open_from_url"]
+
+PLANCK_J_S = 6.62607015e-34
+SPEED_OF_LIGHT_M_S = 299792458.0
+
+
+@dataclass(frozen=True)
+class OpticsParams:
+    """Pinhole camera: focal length and entrance-pupil diameter (mm)."""
+
+    focal_length_mm: float = 50.0
+    aperture_diameter_mm: float = 12.5
+
+    def __post_init__(self) -> None:
+        if not (self.focal_length_mm > 0 and self.aperture_diameter_mm > 0):
+            raise ValueError("focal length and aperture must be > 0")
+
+
+class SimulatedCamera(Camera):
+    """A physics-true camera on the virtual bench.
+
+    Parameters
+    ----------
+    name
+        Role name.
+    world
+        The virtual bench it looks at (default ``get_world("sim")``).
+    seed
+        Fixes the sensor's fixed pattern and each frame's noise.
+    sensor
+        EMVA 1288 parameters.
+    optics
+        Pinhole optics.
+    pixel_format
+        Initial output format.
+    stale_buffers
+        Frames held in a simulated driver queue (see the module docstring).
+    realtime
+        Whether acquisition waits for the exposure time.
+    """
+
+    exposure_range_us = (10.0, 10e6)
+    gain_range = (0.0, 24.0)
+
+    def __init__(
+        self,
+        name: str = "camera",
+        *,
+        world: VirtualBench | None = None,
+        seed: int = 0,
+        sensor: SensorParams | None = None,
+        optics: OpticsParams | None = None,
+        pixel_format: PixelFormat = PixelFormat.MONO12,
+        stale_buffers: int = 0,
+        realtime: bool = False,
+        ring_capacity: int = 16,
+    ) -> None:
+        super().__init__(name, ring_capacity=ring_capacity)
+        self.world = world if world is not None else get_world("sim")
+        self.seed = int(seed)
+        self.sensor = Sensor(sensor or SensorParams(), seed=self.seed)
+        self.optics = optics or OpticsParams()
+        if stale_buffers < 0:
+            raise ValueError("stale_buffers must be >= 0")
+        self.stale_buffers = int(stale_buffers)
+        self.realtime = bool(realtime)
+        p = self.sensor.params
+        self._exposure_us = 1000.0
+        self._gain_db = 0.0
+        self._roi = Roi(0, 0, p.width, p.height)
+        self._binning = 1
+        self._format = pixel_format
+        self._index = 0
+        self._lock = threading.RLock()
+        self._pending: deque[Frame] = deque()  # software-triggered frames
+        self._backlog: deque[Frame] = deque()  # simulated driver queue (stale frames)
+        self._cache_key: tuple | None = None
+        self._cache_rate: NDArray[np.float32] | None = None
+
+    # ------------------------------------------------------------------ rendering
+    def camera_frame(self, state: WorldState) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """(pinhole position mm, forward, right, down) unit vectors in the lab frame."""
+        pose = state.pose
+        center = pose.detector_dir * pose.detector_distance_mm
+        forward = -pose.detector_dir
+        right = np.cross(forward, [0.0, 1.0, 0.0])
+        right /= np.linalg.norm(right)
+        down = np.cross(forward, right)
+        return center, forward, right, down
+
+    def photon_rate(self, state: WorldState | None = None, *, roi: Roi | None = None
+                    ) -> NDArray[np.float32]:
+        """Photons per second on each unbinned pixel of the ROI (noise-free ground truth).
+
+        Returns
+        -------
+        ndarray, shape (roi.height, roi.width), float32
+        """
+        state = state if state is not None else self.world.snapshot()
+        roi = roi if roi is not None else self._roi
+        key = (state.key, roi, self.optics)
+        with self._lock:
+            if key == self._cache_key and self._cache_rate is not None:
+                return self._cache_rate
+        p = self.sensor.params
+        center, forward, right, down = self.camera_frame(state)
+        pitch_mm = p.pixel_pitch_um * 1e-3
+        f = self.optics.focal_length_mm
+        cx, cy = (p.width - 1) / 2.0, (p.height - 1) / 2.0
+        u = (np.arange(roi.x, roi.x + roi.width) - cx) * (pitch_mm / f)
+        v = (np.arange(roi.y, roi.y + roi.height) - cy) * (pitch_mm / f)
+        dirs = (forward[None, None, :] + u[None, :, None] * right[None, None, :]
+                + v[:, None, None] * down[None, None, :])
+        norm = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2)
+        dirs /= norm[..., None]
+        cos_alpha = 1.0 / norm
+        radiance = state.scene.radiance(center, dirs, state)
+        aperture_m2 = math.pi * (0.5e-3 * self.optics.aperture_diameter_mm) ** 2
+        etendue = aperture_m2 * (p.pixel_pitch_um * 1e-3 / f) ** 2
+        photon_j = PLANCK_J_S * SPEED_OF_LIGHT_M_S / (state.source.wavelength_nm * 1e-9)
+        rate = (radiance * (etendue / photon_j) * cos_alpha**4).astype(np.float32)
+        with self._lock:
+            self._cache_key, self._cache_rate = key, rate
+        return rate
+
+    def expected_dn(self, state: WorldState | None = None) -> NDArray[np.float64]:
+        """Noise-free mean DN at the present settings (ground truth for tests)."""
+        roi = self._roi
+        return self.sensor.expected_dn(
+            self.photon_rate(state, roi=roi), self._exposure_us, gain_db=self._gain_db,
+            bits=self._format.bit_depth, roi=(roi.x, roi.y, roi.width, roi.height),
+            binning=self._binning,
+        )
+
+    @property
+    def system_gain_dn_per_e(self) -> float:
+        """K at the present gain and pixel format (the simulator's truth)."""
+        return self.sensor.params.system_gain(self._gain_db, self._format.bit_depth)
+
+    def radiometric_response(self):
+        """The :class:`analysis.radiometry.CameraResponse` of this camera, as a perfect
+        calibration would give it (at the source's present wavelength)."""
+        from analysis.radiometry import CameraResponse
+
+        p = self.sensor.params
+        return CameraResponse(
+            system_gain_dn_per_e=self.system_gain_dn_per_e,
+            quantum_efficiency=p.quantum_efficiency,
+            wavelength_nm=self.world.source.wavelength_nm,
+            pixel_pitch_um=p.pixel_pitch_um * self._binning,
+            focal_length_mm=self.optics.focal_length_mm,
+            aperture_diameter_mm=self.optics.aperture_diameter_mm,
+        )
+
+    def _capture(self) -> Frame:
+        """Render and expose one frame of the world as it is now."""
+        with self._lock:
+            state = self.world.snapshot()
+            roi, b, fmt = self._roi, self._binning, self._format
+            exposure, gain = self._exposure_us, self._gain_db
+            index = self._index
+            self._index += 1
+        rate = self.photon_rate(state, roi=roi)
+        bits = fmt.bit_depth
+        data = self.sensor.expose(
+            rate, exposure, gain_db=gain, bits=bits,
+            roi=(roi.x, roi.y, roi.width, roi.height), binning=b, frame_index=index,
+        )
+        return Frame(
+            data=data, index=index, timestamp=time.time(), exposure_us=exposure, gain=gain,
+            saturation_dn=self.sensor.saturation_dn(gain_db=gain, bits=bits, binning=b),
+            bit_depth=bits, roi=roi, binning=b,
+            metadata={
+                "simulated": True,
+                "world": self.world.name,
+                "positions": dict(state.positions),
+                "source_on": state.source.on,
+                "system_gain_dn_per_e": self.sensor.params.system_gain(gain, bits),
+            },
+        )
+
+    # ------------------------------------------------------------------ hooks
+    def _do_identity(self) -> DeviceIdentity:
+        p = self.sensor.params
+        return DeviceIdentity(
+            vendor="scatterlab", model="SimCam EMVA1288", serial=f"SIM{self.seed:06d}",
+            firmware="1.0", extra={"sensor": f"{p.width}x{p.height}", "world": self.world.name},
+        )
+
+    def _do_sensor_shape(self) -> tuple[int, int]:
+        p = self.sensor.params
+        return p.height, p.width
+
+    def _do_get_exposure_us(self) -> float:
+        return self._exposure_us
+
+    def _do_set_exposure_us(self, value: float) -> None:
+        with self._lock:
+            self._exposure_us = value
+
+    def _do_get_gain(self) -> float:
+        return self._gain_db
+
+    def _do_set_gain(self, value: float) -> None:
+        with self._lock:
+            self._gain_db = value
+
+    def _do_get_roi(self) -> Roi:
+        return self._roi
+
+    def _do_set_roi(self, roi: Roi) -> None:
+        with self._lock:
+            self._roi = roi
+
+    def _do_get_binning(self) -> int:
+        return self._binning
+
+    def _do_set_binning(self, value: int) -> None:
+        if value not in (1, 2, 4):
+            from drivers.errors import UnsupportedFeature
+
+            raise UnsupportedFeature(f"binning {value} is not supported (1, 2 or 4)",
+                                     device=self.name, command="set binning")
+        with self._lock:
+            self._binning = value
+
+    def _do_get_pixel_format(self) -> PixelFormat:
+        return self._format
+
+    def _do_set_pixel_format(self, fmt: PixelFormat) -> None:
+        with self._lock:
+            self._format = fmt
+
+    def _do_invalidate(self) -> None:
+        with self._lock:
+            self._pending.clear()
+            self._backlog.clear()
+
+    def _do_trigger(self) -> None:
+        frame = self._capture()
+        with self._lock:
+            self._pending.append(frame)
+
+    def _do_acquire_one(self, timeout: float) -> Frame:
+        with self._lock:
+            if self._pending:
+                return self._pending.popleft()
+        if self.realtime:
+            wait = self._exposure_us * 1e-6
+            if wait > timeout:
+                raise DeviceTimeout(f"exposure {wait:g} s exceeds the timeout {timeout:g} s",
+                                    device=self.name, command="acquire")
+            time.sleep(wait)
+        if self.stale_buffers == 0:
+            return self._capture()
+        with self._lock:
+            empty = not self._backlog
+        if empty:  # the driver queue fills as soon as capture (re)starts
+            for _ in range(self.stale_buffers):
+                frame = self._capture()
+                with self._lock:
+                    self._backlog.append(frame)
+        frame = self._capture()
+        with self._lock:
+            self._backlog.append(frame)
+            return self._backlog.popleft()
+
+    def _do_close_camera(self) -> None:
+        with self._lock:
+            self._pending.clear()
+            self._backlog.clear()
+            self._cache_rate = None
+
+
+def open_from_url(url: str, *, name: str | None = None) -> SimulatedCamera:
+    """Open ``simcam://<name>?world=sim&seed=1[&width=..&height=..&format=MONO16...]``."""
+    scheme, host, options = registry.parse_url(url)
+    if scheme != "simcam":
+        raise ValueError(f"expected a simcam:// URL, got {url!r}")
+    opts: dict[str, Any] = dict(options)
+    known = {"world", "seed", "width", "height", "focal_length_mm", "aperture_mm", "format",
+             "stale", "realtime", "pixel_pitch_um"}
+    unknown = set(opts) - known
+    if unknown:
+        raise ValueError(f"unknown simcam options {sorted(unknown)}; known {sorted(known)}")
+    sensor = SensorParams()
+    changes: dict[str, Any] = {}
+    for key in ("width", "height"):
+        if key in opts:
+            changes[key] = int(opts[key])
+    if "pixel_pitch_um" in opts:
+        changes["pixel_pitch_um"] = float(opts["pixel_pitch_um"])
+    sensor = replace(sensor, **changes)
+    optics = OpticsParams(
+        focal_length_mm=float(opts.get("focal_length_mm", 50.0)),
+        aperture_diameter_mm=float(opts.get("aperture_mm", 12.5)),
+    )
+    fmt_name = str(opts.get("format", "MONO12")).upper()
+    try:
+        fmt = PixelFormat[fmt_name]
+    except KeyError:
+        raise ValueError(f"unknown pixel format {fmt_name!r}") from None
+    return SimulatedCamera(
+        name or host,
+        world=get_world(opts.get("world", "sim")),
+        seed=int(opts.get("seed", 0)),
+        sensor=sensor,
+        optics=optics,
+        pixel_format=fmt,
+        stale_buffers=int(opts.get("stale", 0)),
+        realtime=str(opts.get("realtime", "0")).lower() in ("1", "true", "yes"),
+    )

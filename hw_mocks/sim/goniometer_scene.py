@@ -1,0 +1,328 @@
+"""The goniometer scene: a flat sample with a ground-truth BRDF under a collimated beam.
+
+Physics (physics.md §1, hardware.md §5d-e). The sample is a disk of radius
+``sample_radius_mm`` in the plane through the lab origin with normal n (the pose of
+:mod:`hw_mocks.sim.world`). A collimated Gaussian beam of power P and 1/e² radius w travels
+along −ω_s through the origin, with intensity I(r⊥) = 2P/(πw²) exp(−2 r⊥²/w²) across it. A
+point x of the sample plane receives the irradiance
+
+    E(x) = I(r⊥(x)) · cos θi,       r⊥² = |x|² − (x·ω_s)²,
+
+so the illuminated footprint is stretched by 1/cos θi along the plane of incidence and its
+total power is P (under-filled sample). The radiance leaving x towards an observer at o is
+
+    L(x → o) = f(θi, φi; θr(x), φr(x)) · E(x),      ω_r(x) = (o − x)/|o − x|,
+
+with the angles of ω_s and ω_r(x) in the sample frame (conventions of
+:mod:`analysis.brdf.geometry`). Every ray and every point of an aperture gets its own
+direction: geometry is continuous, never an analysis grid. A camera looking at the sample
+sees the footprint foreshortened by cos θr through its own projection.
+
+Optional terms:
+
+* ``target``: ``"sample"`` (the BRDF under test), ``"reference"`` (a reference standard,
+  by default an ideal Lambertian of reflectance 0.99 — real PTFE deviates at large angles,
+  hardware.md §5d), or ``"none"`` (no sample: the beam passes through, which gives the
+  instrument signature and the direct-beam power measurement).
+* Instrument signature (stray light from the source optics, air scatter): a veiling
+  radiance ``L_sig = f_sig(ψ) · E_peak`` added to every ray, with the BRDF-equivalent
+  ``f_sig(ψ) = signature_sr / (1 + (ψ/ψ₀)²)`` (1/sr) of the angle ψ between the observer's
+  direction from the sample and the forward beam, and E_peak = 2P/(πw²). On a point detector
+  it contributes ``f_sig(ψ) · P · Ω``, the definition of a BRDF-equivalent signal.
+* Ambient light: a uniform radiance added to every ray, source on or off (room light in
+  the white-furnace approximation); removed by dark frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hw_mocks.sim.world import WorldState
+
+__all__ = ["BrdfFunction", "GoniometerScene", "brdf_from_model", "lambertian_brdf"]
+
+#: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays.
+BrdfFunction = Callable[[Any, Any, Any, Any], NDArray[np.float64]]
+
+
+def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | None = None
+                    ) -> BrdfFunction:
+    """A ground-truth BRDF from the :mod:`analysis.brdf` registry.
+
+    Parameters
+    ----------
+    name
+        A registry name, e.g. ``"lambert"`` or ``"lambert+ggx"`` (Lambertian + Cook–Torrance
+        with the GGX distribution and Smith masking).
+    params
+        Parameter vector in the model's order, or a mapping by parameter name (missing
+        names take the model's start values); default the start values.
+    """
+    from analysis.brdf import get_model
+
+    model = get_model(name)
+    if params is None:
+        vector = model.start
+    elif isinstance(params, Mapping):
+        unknown = set(params) - set(model.param_names)
+        if unknown:
+            raise ValueError(f"{name} has no parameters {sorted(unknown)}; "
+                             f"it has {model.param_names}")
+        vector = np.array([float(params.get(k, s))
+                           for k, s in zip(model.param_names, model.start, strict=True)])
+    else:
+        vector = np.asarray(params, dtype=float)
+        if vector.size != model.n_params:
+            raise ValueError(f"{name} takes {model.n_params} parameters {model.param_names}")
+
+    def brdf(theta_i, phi_i, theta_r, phi_r):
+        return model.evaluate(vector, theta_i, phi_i, theta_r, phi_r)
+
+    brdf.model_name = name  # type: ignore[attr-defined]
+    brdf.params = tuple(float(v) for v in vector)  # type: ignore[attr-defined]
+    return brdf
+
+
+def lambertian_brdf(reflectance: float) -> BrdfFunction:
+    """f = ρ/π: the ideal diffuse reference standard."""
+    if not 0.0 <= reflectance <= 1.0:
+        raise ValueError("reflectance must lie in [0, 1]")
+    value = reflectance / math.pi
+
+    def brdf(theta_i, phi_i, theta_r, phi_r):
+        return np.full(np.broadcast(theta_i, phi_i, theta_r, phi_r).shape, value)
+
+    return brdf
+
+
+@dataclass(frozen=True)
+class GoniometerScene:
+    """A flat sample (or reference, or nothing) under a collimated beam.
+
+    Attributes
+    ----------
+    brdf : BrdfFunction
+        Ground truth of the sample, f(θi, φi, θr, φr) in 1/sr.
+    sample_radius_mm : float
+    target : {"sample", "reference", "none"}
+    reference_brdf : BrdfFunction
+        The reference standard's BRDF (default ideal Lambertian, ρ = 0.99).
+    signature_sr : float
+        Peak BRDF-equivalent instrument signature (1/sr); 0 disables it.
+    signature_width_deg : float
+        ψ₀ of the signature's Lorentzian fall-off.
+    ambient_radiance : float
+        Ambient radiance in W m⁻² sr⁻¹.
+    spot_samples : int
+        Grid points per side over the footprint for aperture integrals.
+    aperture_samples : int
+        Grid points per side over a detector aperture.
+    """
+
+    brdf: BrdfFunction = field(default_factory=lambda: lambertian_brdf(0.5))
+    sample_radius_mm: float = 12.5
+    target: str = "sample"
+    reference_brdf: BrdfFunction = field(default_factory=lambda: lambertian_brdf(0.99))
+    signature_sr: float = 0.0
+    signature_width_deg: float = 2.0
+    ambient_radiance: float = 0.0
+    spot_samples: int = 48
+    aperture_samples: int = 9
+
+    def __post_init__(self) -> None:
+        if self.target not in ("sample", "reference", "none"):
+            raise ValueError(f"target must be sample, reference or none, got {self.target!r}")
+        if not self.sample_radius_mm > 0:
+            raise ValueError("sample_radius_mm must be > 0")
+        if self.signature_sr < 0 or self.ambient_radiance < 0:
+            raise ValueError("signature_sr and ambient_radiance must be >= 0")
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> GoniometerScene:
+        """From a plain dict: ``brdf`` (registry name, default "lambert"), ``params``
+        (list or table), ``reference_reflectance``, and the dataclass fields by name."""
+        cfg = dict(config)
+        name = cfg.pop("brdf", "lambert")
+        params = cfg.pop("params", None)
+        if params is None and name == "lambert":
+            params = [0.5]
+        reference = float(cfg.pop("reference_reflectance", 0.99))
+        allowed = {"sample_radius_mm", "target", "signature_sr", "signature_width_deg",
+                   "ambient_radiance", "spot_samples", "aperture_samples"}
+        unknown = set(cfg) - allowed
+        if unknown:
+            raise ValueError(f"unknown scene keys {sorted(unknown)}")
+        return cls(brdf=brdf_from_model(name, params),
+                   reference_brdf=lambertian_brdf(reference), **cfg)
+
+    # helpers ------------------------------------------------------------------
+    def _active_brdf(self) -> BrdfFunction | None:
+        if self.target == "sample":
+            return self.brdf
+        if self.target == "reference":
+            return self.reference_brdf
+        return None
+
+    def _signature(self, observer_dir: NDArray[np.float64], state: WorldState) -> float:
+        """BRDF-equivalent signature f_sig(ψ) (1/sr) for an observer direction."""
+        if self.signature_sr == 0.0 or not state.source.on:
+            return 0.0
+        forward = -state.pose.source_dir
+        cos_psi = float(np.clip(np.dot(observer_dir, forward), -1.0, 1.0))
+        psi = math.degrees(math.acos(cos_psi))
+        return self.signature_sr / (1.0 + (psi / self.signature_width_deg) ** 2)
+
+    @staticmethod
+    def _beam_intensity(points: NDArray[np.float64], state: WorldState) -> NDArray[np.float64]:
+        """Beam intensity (W/m², perpendicular to the beam) at lab points (mm), shape (...)."""
+        peak = state.source.peak_intensity_w_m2()
+        if peak == 0.0:
+            return np.zeros(points.shape[:-1])
+        along = points @ state.pose.source_dir
+        r2 = np.einsum("...k,...k->...", points, points) - along * along
+        w = state.source.beam_radius_mm
+        return peak * np.exp(-2.0 * np.maximum(r2, 0.0) / (w * w))
+
+    # Scene protocol ------------------------------------------------------------
+    def radiance(
+        self, origin_mm: NDArray[np.float64], directions: NDArray[np.float64],
+        state: WorldState,
+    ) -> NDArray[np.float64]:
+        """Radiance (W m⁻² sr⁻¹) seen from ``origin_mm`` along unit ``directions``
+        (shape (..., 3), pointing away from the observer), shape (...)."""
+        pose = state.pose
+        o = np.asarray(origin_mm, dtype=float)
+        d = np.asarray(directions, dtype=float)
+        n = pose.normal
+        dist = float(np.linalg.norm(o))
+        observer_dir = o / dist if dist > 0 else pose.detector_dir
+        veil = self.ambient_radiance + self._signature(observer_dir, state) * (
+            state.source.peak_intensity_w_m2()
+        )
+        out = np.full(d.shape[:-1], veil, dtype=float)
+        brdf = self._active_brdf()
+        on = n @ pose.source_dir > 0.0 and state.source.on
+        height = float(o @ n)
+        if brdf is None or not on or height <= 0.0:
+            return out  # nothing lit, or we look at the back of the sample
+        dn = d @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(dn < 0.0, -height / np.where(dn < 0.0, dn, -1.0), -1.0)
+        hit = t > 0.0
+        points = o + t[..., np.newaxis] * d
+        local = pose.to_sample(points)
+        hit &= local[..., 0] ** 2 + local[..., 1] ** 2 <= self.sample_radius_mm**2
+        if not hit.any():
+            return out
+        p_hit = points[hit]
+        irradiance = self._beam_intensity(p_hit, state) * float(n @ pose.source_dir)
+        lit = irradiance > 0.0
+        if not lit.any():
+            return out
+        # Only evaluate the BRDF where light actually falls (the beam tails are cut at
+        # 1e-30 of the peak by underflow, far below any sensor's dark level).
+        ti, pi = pose.local_angles(pose.source_dir)
+        to_obs = -d[hit][lit]
+        tr, pr = pose.local_angles(to_obs)
+        values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
+        lit_radiance = np.zeros(p_hit.shape[0])
+        lit_radiance[lit] = values * irradiance[lit]
+        out[hit] += lit_radiance
+        return out
+
+    def power_on_aperture(
+        self, center_mm: NDArray[np.float64], facing: NDArray[np.float64],
+        diameter_mm: float, state: WorldState,
+    ) -> float:
+        """Power (W) on a disk aperture: scattered light integrated over the footprint and
+        the aperture (both sampled on grids), the direct beam where nothing blocks it,
+        ambient light over the hemisphere, and the instrument signature."""
+        pose = state.pose
+        c = np.asarray(center_mm, dtype=float)
+        f = np.asarray(facing, dtype=float)
+        f = f / np.linalg.norm(f)
+        radius = 0.5 * diameter_mm
+        aperture_area_m2 = math.pi * (radius * 1e-3) ** 2
+        # Aperture points: a square grid clipped to the disk, on the plane ⟂ f.
+        e1 = np.cross(f, [0.0, 1.0, 0.0])
+        if np.linalg.norm(e1) < 1e-9:
+            e1 = np.cross(f, [1.0, 0.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(f, e1)
+        m = self.aperture_samples
+        g = (np.arange(m) + 0.5) / m * 2.0 - 1.0
+        gu, gv = np.meshgrid(g * radius, g * radius, indexing="ij")
+        inside = gu**2 + gv**2 <= radius**2
+        a_pts = c + gu[inside][:, None] * e1 + gv[inside][:, None] * e2
+        da_ap = aperture_area_m2 / a_pts.shape[0]
+
+        power = 0.0
+        # Ambient radiance over the hemisphere in front of the head: π L A.
+        power += math.pi * self.ambient_radiance * aperture_area_m2
+        if not state.source.on:
+            return power
+        p_in = state.source.power_w
+        dist = float(np.linalg.norm(c))
+        observer_dir = c / dist if dist > 0 else pose.detector_dir
+        omega = aperture_area_m2 / (dist * 1e-3) ** 2 if dist > 0 else 0.0
+        power += self._signature(observer_dir, state) * p_in * omega
+
+        n = pose.normal
+        cos_i = float(n @ pose.source_dir)
+        brdf = self._active_brdf()
+        # Direct beam: aperture points whose ray back towards the source misses the sample.
+        if float(f @ pose.source_dir) > 0.0:
+            blocked = np.zeros(a_pts.shape[0], dtype=bool)
+            if brdf is not None:
+                sn = float(pose.source_dir @ n)
+                if abs(sn) > 1e-12:
+                    t = -(a_pts @ n) / sn
+                    hit = a_pts + t[:, None] * pose.source_dir
+                    loc = pose.to_sample(hit)
+                    blocked = (t > 0) & (loc[:, 0] ** 2 + loc[:, 1] ** 2
+                                         <= self.sample_radius_mm**2)
+            downstream = a_pts @ pose.source_dir < 0.0
+            beam = self._beam_intensity(a_pts, state) * float(f @ pose.source_dir)
+            power += float(np.sum(np.where(~blocked & downstream, beam, 0.0)) * da_ap)
+        if brdf is None or cos_i <= 0.0 or float(c @ n) <= 0.0:
+            return power
+        # Scattered light: footprint grid in sample coordinates aligned with the beam.
+        s_loc = pose.to_sample(pose.source_dir)
+        proj = np.hypot(s_loc[0], s_loc[1])
+        eu = np.array([s_loc[0], s_loc[1]]) / proj if proj > 1e-12 else np.array([1.0, 0.0])
+        ev = np.array([-eu[1], eu[0]])
+        w = state.source.beam_radius_mm
+        half_u = min(3.2 * w / max(cos_i, 1e-3), self.sample_radius_mm)
+        half_v = min(3.2 * w, self.sample_radius_mm)
+        k = self.spot_samples
+        gu = ((np.arange(k) + 0.5) / k * 2.0 - 1.0) * half_u
+        gv = ((np.arange(k) + 0.5) / k * 2.0 - 1.0) * half_v
+        uu, vv = np.meshgrid(gu, gv, indexing="ij")
+        xs = uu * eu[0] + vv * ev[0]
+        ys = uu * eu[1] + vv * ev[1]
+        on_sample = xs**2 + ys**2 <= self.sample_radius_mm**2
+        axes = pose.sample_axes
+        spot = xs[on_sample][:, None] * axes[0] + ys[on_sample][:, None] * axes[1]
+        da_spot = (2 * half_u / k) * (2 * half_v / k) * 1e-6
+        irradiance = self._beam_intensity(spot, state) * cos_i
+        keep = irradiance > 1e-12 * irradiance.max()
+        spot, irradiance = spot[keep], irradiance[keep]
+        vec = a_pts[None, :, :] - spot[:, None, :]  # spot → aperture, mm
+        r2 = np.einsum("ijk,ijk->ij", vec, vec)
+        r = np.sqrt(r2)
+        unit = vec / r[..., None]
+        cos_r = unit @ n
+        cos_a = -(unit @ f)
+        tr, pr = pose.local_angles(unit)
+        ti, pi = pose.local_angles(pose.source_dir)
+        values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
+        integrand = (values * irradiance[:, None] * np.clip(cos_r, 0.0, None)
+                     * np.clip(cos_a, 0.0, None) / (r2 * 1e-6))
+        power += float(integrand.sum() * da_spot * da_ap)
+        return power

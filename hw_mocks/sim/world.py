@@ -1,0 +1,460 @@
+"""The virtual bench: one physical world shared by every simulated device.
+
+A :class:`VirtualBench` holds
+
+* the **axis positions**, read live from the firmware emulators in :mod:`hw_mocks.registry`
+  (``emulator.stage.physical_position()``, degrees or millimetres) and keyed by role
+  (``sample_theta``, ``sample_phi``, ``sample_tilt``, ``detector_theta``, ``source_theta``,
+  ``camera_z``), so a move commanded through a real driver moves the world;
+* the **source** state (on/off, power, wavelength, beam radius), changed by
+  :class:`hw_mocks.sim.source.SimulatedSource`;
+* a **scene** (this module knows only its protocol; :mod:`hw_mocks.sim.goniometer_scene`
+  implements the goniometer scene).
+
+It provides the optical power at the power-meter head (:meth:`VirtualBench.optical_power_w`,
+the callable the PM100USB emulator is given) and the camera pose for the simulated camera.
+
+Lab frame and kinematics (stated once here)
+-------------------------------------------
+Right-handed lab frame: **y** is the common rotation axis of ``sample_theta``,
+``detector_theta`` and ``source_theta``; **z** points from the sample towards the source
+when every axis reads 0; x completes the frame (the plane of incidence is x–z). Lengths in
+mm, angles in degrees at the interface (radians inside). ``R_a(θ)`` is a right-handed
+rotation by θ about axis a.
+
+* Direction towards the source: ``ω_s = R_y(source_theta) ẑ``.
+* Sample frame: ``R = R_y(sample_theta) · R_x(sample_tilt) · R_z(sample_phi)`` maps the
+  sample's own axes (x_s, y_s, n) = R (x̂, ŷ, ẑ); the normal n is ẑ at zero. So
+  ``sample_theta`` turns the mount about the lab axis, ``sample_tilt`` tips the normal out of
+  the plane of incidence and ``sample_phi`` spins the sample about its normal.
+* Detector arm direction: ``ω_d = R_y(detector_theta) ẑ``; the camera (or the power-meter
+  head) sits at ``(arm_length_mm + camera_z) · ω_d`` looking at the origin, image "up" = ŷ.
+* The scattering angles follow :mod:`analysis.brdf.geometry`: θ from the normal,
+  φ = atan2(ω·y_s, ω·x_s). With ``sample_theta = θ`` and ``detector_theta = 2θ`` the detector
+  sits in the specular direction (θr = θi, φr = φi + π): the classic θ–2θ geometry. The
+  detector cannot reach ``detector_theta = 0`` without blocking the beam.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hw_mocks import registry
+
+__all__ = [
+    "BenchPose",
+    "PowerMeterHead",
+    "RoleSpec",
+    "Scene",
+    "SourceState",
+    "VirtualBench",
+    "WorldState",
+    "configure_world",
+    "get_world",
+    "reset_worlds",
+    "rotation",
+]
+
+ROLES = ("sample_theta", "sample_phi", "sample_tilt", "detector_theta", "source_theta",
+         "camera_z")
+
+
+def rotation(axis: str, angle_rad: float) -> NDArray[np.float64]:
+    """Right-handed 3×3 rotation matrix about the lab axis ``"x"``, ``"y"`` or ``"z"``."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    if axis == "x":
+        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    if axis == "y":
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    if axis == "z":
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    raise ValueError(f"axis must be x, y or z, got {axis!r}")
+
+
+@dataclass(frozen=True)
+class SourceState:
+    """The light source: collimated Gaussian beam of 1/e² radius ``beam_radius_mm``."""
+
+    on: bool = False
+    power_w: float = 1e-3
+    wavelength_nm: float = 633.0
+    beam_radius_mm: float = 2.0
+    max_power_w: float = 5e-3
+
+    def peak_intensity_w_m2(self) -> float:
+        """On-axis intensity 2P/(π w²) of the Gaussian beam, perpendicular to it (W/m²)."""
+        if not self.on:
+            return 0.0
+        w = self.beam_radius_mm * 1e-3
+        return 2.0 * self.power_w / (math.pi * w * w)
+
+
+@dataclass(frozen=True)
+class BenchPose:
+    """Geometry derived from the axis positions (lab frame, unit vectors, mm).
+
+    Attributes
+    ----------
+    source_dir : ndarray, shape (3,)
+        ω_s, from the sample towards the source (the beam travels along −ω_s).
+    sample_axes : ndarray, shape (3, 3)
+        Rows x_s, y_s, n of the sample frame in lab coordinates.
+    detector_dir : ndarray, shape (3,)
+        ω_d, from the sample towards the detector arm.
+    detector_distance_mm : float
+        Distance of the camera's pinhole (or the meter head) from the sample centre.
+    """
+
+    source_dir: NDArray[np.float64]
+    sample_axes: NDArray[np.float64]
+    detector_dir: NDArray[np.float64]
+    detector_distance_mm: float
+
+    @property
+    def normal(self) -> NDArray[np.float64]:
+        return self.sample_axes[2]
+
+    def to_sample(self, vectors: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Lab vectors of shape (..., 3) in sample coordinates (x_s, y_s, n)."""
+        return vectors @ self.sample_axes.T
+
+    def local_angles(self, vectors: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+        """(θ, φ) in radians of lab direction(s) in the sample frame (analysis.brdf)."""
+        loc = self.to_sample(np.asarray(vectors, dtype=float))
+        norm = np.linalg.norm(loc, axis=-1)
+        theta = np.arccos(np.clip(loc[..., 2] / norm, -1.0, 1.0))
+        phi = np.arctan2(loc[..., 1], loc[..., 0])
+        return theta, phi
+
+    @property
+    def incidence_deg(self) -> float:
+        return float(np.degrees(self.local_angles(self.source_dir)[0]))
+
+    @property
+    def scatter_deg(self) -> float:
+        return float(np.degrees(self.local_angles(self.detector_dir)[0]))
+
+
+@dataclass(frozen=True)
+class WorldState:
+    """A consistent snapshot: positions, pose, source, scene and a hashable cache key."""
+
+    positions: Mapping[str, float]
+    pose: BenchPose
+    source: SourceState
+    scene: Scene
+    key: tuple
+
+
+@dataclass(frozen=True)
+class PowerMeterHead:
+    """Where the power-meter head sits: on the detector arm, facing the sample."""
+
+    distance_mm: float = 300.0
+    aperture_diameter_mm: float = 9.5
+
+
+class Scene(Protocol):
+    """What the virtual bench needs from a scene."""
+
+    def radiance(
+        self, origin_mm: NDArray[np.float64], directions: NDArray[np.float64],
+        state: WorldState,
+    ) -> NDArray[np.float64]:
+        """Radiance (W m⁻² sr⁻¹) arriving at ``origin_mm`` from the lab ``directions``
+        (shape (..., 3), unit vectors pointing away from the observer)."""
+        ...
+
+    def power_on_aperture(
+        self, center_mm: NDArray[np.float64], facing: NDArray[np.float64],
+        diameter_mm: float, state: WorldState,
+    ) -> float:
+        """Optical power (W) on a disk aperture at ``center_mm`` whose normal is ``facing``."""
+        ...
+
+
+@dataclass(frozen=True)
+class RoleSpec:
+    """Where one role's position comes from.
+
+    Either ``url`` (an emulator, ``scheme://name?options``; its stage's physical position)
+    or the constant ``value``. ``scale`` and ``offset`` map the stage to the world
+    (``world = scale · stage + offset``): a sign flip, or a mounting offset to be found by a
+    calibration.
+    """
+
+    url: str | None = None
+    value: float = 0.0
+    scale: float = 1.0
+    offset: float = 0.0
+
+    @classmethod
+    def parse(cls, spec: Any) -> RoleSpec:
+        if isinstance(spec, RoleSpec):
+            return spec
+        if isinstance(spec, int | float):
+            return cls(value=float(spec))
+        if isinstance(spec, str):
+            registry.parse_url(spec)  # validates the form
+            return cls(url=spec)
+        if isinstance(spec, Mapping):
+            unknown = set(spec) - {"url", "value", "scale", "offset"}
+            if unknown:
+                raise ValueError(f"unknown role keys {sorted(unknown)}")
+            if spec.get("url") is not None:
+                registry.parse_url(str(spec["url"]))
+            return cls(
+                url=spec.get("url"), value=float(spec.get("value", 0.0)),
+                scale=float(spec.get("scale", 1.0)), offset=float(spec.get("offset", 0.0)),
+            )
+        raise TypeError(f"a role is a URL, a number or a table, got {spec!r}")
+
+
+def _emulator_for(url: str):
+    """The emulator behind ``url``, created through its URL handler's factory if needed
+    (so the world and a driver that connects later share one instance)."""
+    scheme, name, options = registry.parse_url(url)
+    try:
+        return registry.get(scheme, name)
+    except KeyError:
+        pass
+    try:
+        module = importlib.import_module(f"hw_mocks.urlhandler.protocol_{scheme}")
+    except ImportError as err:
+        raise KeyError(f"no emulator {scheme}://{name} and no URL handler for {scheme}://") \
+            from err
+    factory = module.Serial.factory
+    return registry.get_or_create(scheme, name, factory, options)
+
+
+class VirtualBench:
+    """The physical world of the simulated bench.
+
+    Parameters
+    ----------
+    name
+        Registry name (``get_world(name)``).
+    roles
+        Role → :class:`RoleSpec` (or its plain form: URL string, number, or table).
+        Roles not given read 0 (``camera_z`` 0 mm, angles 0°).
+    scene
+        The scene; default: the goniometer scene with a Lambertian sample.
+    source
+        Initial source state.
+    arm_length_mm
+        Distance from the sample centre to the camera pinhole at ``camera_z = 0``.
+    power_meter
+        Geometry of the power-meter head on the detector arm.
+    """
+
+    def __init__(
+        self,
+        name: str = "sim",
+        *,
+        roles: Mapping[str, Any] | None = None,
+        scene: Scene | None = None,
+        source: SourceState | None = None,
+        arm_length_mm: float = 300.0,
+        power_meter: PowerMeterHead | None = None,
+    ) -> None:
+        self.name = name
+        self._lock = threading.RLock()
+        self._roles: dict[str, RoleSpec] = {}
+        for role, spec in (roles or {}).items():
+            self._roles[role] = RoleSpec.parse(spec)
+        if scene is None:
+            from hw_mocks.sim.goniometer_scene import GoniometerScene
+
+            scene = GoniometerScene()
+        self._scene = scene
+        self._source = source or SourceState()
+        if not arm_length_mm > 0:
+            raise ValueError("arm_length_mm must be > 0")
+        self.arm_length_mm = float(arm_length_mm)
+        self.power_meter = power_meter or PowerMeterHead()
+        self._version = 0
+        self._power_cache: dict[tuple, float] = {}
+
+    # configuration --------------------------------------------------------------
+    @classmethod
+    def from_config(cls, name: str, config: Mapping[str, Any]) -> VirtualBench:
+        """Build from a plain dict (the bench profile's ``[simulation]`` table).
+
+        Keys: ``roles`` (role → URL | number | {url, scale, offset, value}), ``scene``
+        (see :meth:`hw_mocks.sim.goniometer_scene.GoniometerScene.from_config`),
+        ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
+        ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm}).
+        """
+        known = {"roles", "scene", "source", "arm_length_mm", "power_meter"}
+        unknown = set(config) - known
+        if unknown:
+            raise ValueError(f"unknown [simulation] keys {sorted(unknown)}; known {sorted(known)}")
+        from hw_mocks.sim.goniometer_scene import GoniometerScene
+
+        scene = GoniometerScene.from_config(config.get("scene", {}))
+        source = SourceState(**dict(config.get("source", {})))
+        pm = PowerMeterHead(**dict(config.get("power_meter", {})))
+        return cls(
+            name, roles=config.get("roles"), scene=scene, source=source,
+            arm_length_mm=float(config.get("arm_length_mm", 300.0)), power_meter=pm,
+        )
+
+    def set_role(self, role: str, spec: Any) -> None:
+        with self._lock:
+            self._roles[role] = RoleSpec.parse(spec)
+            self._version += 1
+
+    @property
+    def roles(self) -> dict[str, RoleSpec]:
+        return dict(self._roles)
+
+    # state ------------------------------------------------------------------------
+    @property
+    def scene(self) -> Scene:
+        return self._scene
+
+    @scene.setter
+    def scene(self, scene: Scene) -> None:
+        with self._lock:
+            self._scene = scene
+            self._version += 1
+
+    @property
+    def source(self) -> SourceState:
+        return self._source
+
+    def update_source(self, **changes: Any) -> SourceState:
+        """Change source fields (``on``, ``power_w``, ...); returns the new state."""
+        with self._lock:
+            new = replace(self._source, **changes)
+            if not 0.0 <= new.power_w <= new.max_power_w:
+                raise ValueError(f"power {new.power_w:g} W outside [0, {new.max_power_w:g}] W")
+            self._source = new
+            return new
+
+    def position(self, role: str) -> float:
+        """World position of ``role`` (deg or mm)."""
+        spec = self._roles.get(role)
+        if spec is None:
+            return 0.0
+        if spec.url is None:
+            return spec.value
+        stage = _emulator_for(spec.url).stage
+        return spec.scale * float(stage.physical_position()) + spec.offset
+
+    def positions(self) -> dict[str, float]:
+        return {role: self.position(role) for role in ROLES}
+
+    def pose(self, positions: Mapping[str, float] | None = None) -> BenchPose:
+        p = dict(positions) if positions is not None else self.positions()
+        rad = {k: math.radians(p.get(k, 0.0)) for k in ROLES if k != "camera_z"}
+        z = np.array([0.0, 0.0, 1.0])
+        source_dir = rotation("y", rad["source_theta"]) @ z
+        r = (rotation("y", rad["sample_theta"]) @ rotation("x", rad["sample_tilt"])
+             @ rotation("z", rad["sample_phi"]))
+        detector_dir = rotation("y", rad["detector_theta"]) @ z
+        return BenchPose(
+            source_dir=source_dir, sample_axes=r.T.copy(), detector_dir=detector_dir,
+            detector_distance_mm=self.arm_length_mm + p.get("camera_z", 0.0),
+        )
+
+    def snapshot(self) -> WorldState:
+        """Everything a device needs to render the world now, with a cache key."""
+        with self._lock:
+            positions = self.positions()
+            source, scene, version = self._source, self._scene, self._version
+        key = (
+            self.name, version, id(scene),
+            tuple(round(positions[k], 9) for k in ROLES),
+            source,
+        )
+        return WorldState(positions=positions, pose=self.pose(positions), source=source,
+                          scene=scene, key=key)
+
+    # devices ------------------------------------------------------------------------
+    def optical_power_w(self, wavelength_nm: float) -> float:
+        """Optical power (W) on the power-meter head, as a meter set to ``wavelength_nm``
+        would report it.
+
+        The head (a silicon photodiode) sits on the detector arm at
+        ``power_meter.distance_mm`` facing the sample. The physical power comes from the
+        scene; a meter whose wavelength correction is set to λ_set while the light is at
+        λ_src reports ``P · R(λ_src)/R(λ_set)`` (its responsivity correction is wrong by
+        that ratio), with R the approximate silicon responsivity of :func:`si_responsivity`.
+        """
+        state = self.snapshot()
+        key = (state.key, float(wavelength_nm), self.power_meter)
+        cached = self._power_cache.get(key)
+        if cached is not None:
+            return cached
+        pose = state.pose
+        center = pose.detector_dir * self.power_meter.distance_mm
+        power = state.scene.power_on_aperture(
+            center, -pose.detector_dir, self.power_meter.aperture_diameter_mm, state
+        )
+        reported = power * si_responsivity(state.source.wavelength_nm) / si_responsivity(
+            float(wavelength_nm)
+        )
+        if len(self._power_cache) > 256:
+            self._power_cache.clear()
+        self._power_cache[key] = reported
+        return reported
+
+    def power_callable(self) -> Callable[[float], float]:
+        """The ``optical_power_w(wavelength_nm) -> W`` callable for the PM100USB emulator."""
+        return self.optical_power_w
+
+
+def si_responsivity(wavelength_nm: float) -> float:
+    """Approximate responsivity (A/W) of a silicon photodiode, 350–1100 nm.
+
+    R = η(λ) · q λ / (h c) with an external quantum efficiency that rises from 0.5 at
+    350 nm to 0.85 near 850 nm and falls to 0 at the band edge (1100 nm). A smooth model of
+    the published Si curves (peak ≈ 0.6 A/W near 950 nm), good enough to make a wrong
+    wavelength setting visible; outside the band a small floor avoids division by zero.
+    """
+    lam = float(wavelength_nm)
+    if lam <= 850.0:
+        eqe = 0.5 + 0.35 * max(lam - 350.0, 0.0) / 500.0
+    else:
+        eqe = 0.85 * max(1100.0 - lam, 0.0) / 250.0
+    eqe = max(eqe, 1e-3)
+    return eqe * lam * 1e-9 / 1.23984198e-6  # q λ/(h c) = λ[m] / 1.2398 µm per (A/W)
+
+
+# ------------------------------------------------------------------------ registry
+
+_worlds: dict[str, VirtualBench] = {}
+_worlds_lock = threading.Lock()
+
+
+def get_world(name: str = "sim") -> VirtualBench:
+    """The world called ``name``, created with default settings if new."""
+    with _worlds_lock:
+        world = _worlds.get(name)
+        if world is None:
+            world = _worlds[name] = VirtualBench(name)
+        return world
+
+
+def configure_world(name: str, config: Mapping[str, Any] | VirtualBench) -> VirtualBench:
+    """(Re)create the world ``name`` from a ``[simulation]`` dict (or install one)."""
+    world = config if isinstance(config, VirtualBench) else VirtualBench.from_config(name, config)
+    with _worlds_lock:
+        _worlds[name] = world
+    return world
+
+
+def reset_worlds() -> None:
+    """Forget every world (tests call this with :func:`hw_mocks.registry.reset`)."""
+    with _worlds_lock:
+        _worlds.clear()
+
