@@ -50,6 +50,7 @@ __all__ = [
     "decode_chan_value",
     "decode_homeparams",
     "decode_hw_info",
+    "decode_payload",
     "decode_rich_response",
     "decode_status_update",
     "decode_statusbits",
@@ -491,3 +492,29 @@ class RichResponse:
 def decode_rich_response(msg: AptMessage) -> RichResponse:
     msg_id, code, notes = _unpack("<HH64s", msg, "HW_RICHRESPONSE")
     return RichResponse(msg_id, code, _cstr(notes))
+
+
+_DECODERS = {
+    M.HW_GET_INFO: decode_hw_info,
+    M.HW_RICHRESPONSE: decode_rich_response,
+    M.MOT_GET_POSCOUNTER: lambda m: decode_chan_value(m, "MOT_GET_POSCOUNTER"),
+    M.MOT_GET_VELPARAMS: decode_velparams,
+    M.MOT_GET_HOMEPARAMS: decode_homeparams,
+    M.MOT_GET_STATUSBITS: decode_statusbits,
+    M.MOT_GET_STATUSUPDATE: decode_status_update,
+    M.MOT_GET_DCSTATUSUPDATE: decode_status_update,
+}
+
+
+def decode_payload(msg: AptMessage) -> object:
+    """Decode the data packet of any device-to-host message this module knows.
+
+    Returns the payload object (``None`` for header-only messages and for ids whose data
+    is not interpreted); raises :class:`ProtocolError` if the data does not fit.
+    """
+    if msg.msg_id in (M.MOT_MOVE_COMPLETED, M.MOT_MOVE_STOPPED):
+        return None if msg.data is None else decode_status_update(msg)
+    decoder = _DECODERS.get(msg.msg_id)
+    if decoder is None:
+        return None
+    return decoder(msg)
