@@ -2,10 +2,12 @@
 
 Serial settings: 57600 baud, 8N1, CR LF terminator, ASCII (hardware reference §1a;
 hvl_ccb and QMI use 57600 — several drivers on GitHub wrongly use CONEX-CC's 921600).
-Flow control: XON/XOFF by default, as a driver comment in the reference reports for the
-SMC100 (**unverified** against the manual; pass ``xonxoff=False`` if a controller
-misbehaves). Our requests and replies never contain the XON/XOFF bytes, so the setting
-only matters if the controller throttles the host.
+Flow control: none by default. A driver comment quoted in the reference says the SMC100
+uses XON/XOFF (**unverified** against the manual). We leave it off on purpose: this
+driver sends one short request at a time and waits for its answer, so it can never fill
+the controller's input buffer, and with XON/XOFF on a single noise byte 0x13 on the line
+would freeze the host's output until a 0x11 happened to arrive, a stall no timeout or
+retry can clear. ``xonxoff=True`` turns it on for a setup that needs it.
 
 Protocol rules this driver follows (see :mod:`drivers.smc100_protocol`):
 
@@ -118,7 +120,8 @@ class Smc100Axis(MotionAxis):
     reset_timeout
         Seconds a reset (``RS``) may take before the controller answers again.
     xonxoff
-        Software flow control when opening ``port`` from a path or URL.
+        Software flow control when opening ``port`` from a path or URL (default off; see
+        the module docstring).
 
     Raises
     ------
@@ -141,7 +144,7 @@ class Smc100Axis(MotionAxis):
         reply_timeout: float = 0.5,
         retries: int = 2,
         reset_timeout: float = 15.0,
-        xonxoff: bool = True,
+        xonxoff: bool = False,
     ) -> None:
         if isinstance(kind, str):
             kind = AxisKind[kind.upper()]

@@ -166,13 +166,13 @@ class Smc100Emulator(FirmwareEmulator):
             home_velocity=self.model.home_velocity,
             start_position=float(start),
         )
-        # Parameters in flash (restored by RS) and their working copies.
-        self._stored = {
+        #: Parameters in flash (restored by RS); ``params`` holds the working copies.
+        self.stored = {
             "VA": self.model.velocity, "AC": self.model.acceleration,
             "OH": self.model.home_velocity, "OT": float(homing_timeout_s),
             "SL": self.model.software_limits[0], "SR": self.model.software_limits[1],
         }
-        self.params = dict(self._stored)
+        self.params = dict(self.stored)
         self._apply_params()
         self.state = _NOTREF_RESET
         self.error_latch = "@"
@@ -181,6 +181,8 @@ class Smc100Emulator(FirmwareEmulator):
         self._busy_until = -math.inf
         self._after_busy: int | None = None
         self._home_started = 0.0
+        self._home_from = 0.0
+        self._home_fail_at: float | None = None
         #: Requests swallowed by a busy window (for tests).
         self.ignored: list[bytes] = []
 
@@ -245,13 +247,18 @@ class Smc100Emulator(FirmwareEmulator):
         if self._after_busy is not None and now >= self._busy_until:
             self.state, self._after_busy = self._after_busy, None
         if self.state == _HOMING:
-            if not self.stage.is_homing() and self.stage.homed:
-                self.state = _READY_HOMING
-                self.setpoint = 0.0
-            elif now - self._home_started > self.params["OT"]:
-                self.stage.stop(immediate=True)
+            # Checked before asking the stage: a late poll must not see a homing run
+            # finish that OT had already aborted.
+            if self._home_fail_at is not None and now >= self._home_fail_at:
+                travelled = (self._home_fail_at - self._home_started) * self.stage.home_velocity
+                where = self._home_from - math.copysign(travelled, self._home_from)
+                self.stage.teleport(where)  # where the run stopped when OT expired
+                self.stage.homed = False
                 self.fault_bits |= _BIT_HOMING_TIMEOUT
                 self.state = _NOTREF_HOMING
+            elif not self.stage.is_homing() and self.stage.homed:
+                self.state = _READY_HOMING
+                self.setpoint = 0.0
         elif self.state == _MOVING and not self.stage.is_moving():
             if self.stage.at_limit is not None:
                 # End of run reached: the motor is switched off where the switch tripped.
@@ -360,8 +367,12 @@ class Smc100Emulator(FirmwareEmulator):
             self._refuse()
         else:
             self.fault_bits = 0
+            self._home_from = self.stage.physical_position()
             self.stage.start_homing()
             self._home_started = self.clock.now()
+            run = abs(self._home_from) / self.stage.home_velocity
+            over = run > self.params["OT"]
+            self._home_fail_at = self._home_started + self.params["OT"] if over else None
             self.state = _HOMING
 
     def _cmd_PA(self, arg: str) -> None:
@@ -417,7 +428,7 @@ class Smc100Emulator(FirmwareEmulator):
         self.stage.counter_offset = self.stage.physical_position()
         self.stage.homed = False
         self.stage.at_limit = None
-        self.params = dict(self._stored)
+        self.params = dict(self.stored)
         self._apply_params()
         self.fault_bits = 0
         self.error_latch = "@"
@@ -434,7 +445,7 @@ class Smc100Emulator(FirmwareEmulator):
                 self._refuse()
         elif arg == "0":
             if family == "config":
-                self._stored = dict(self.params)
+                self.stored = dict(self.params)
                 self._busy_until = self.clock.now() + self.pw0_busy_s
                 self._after_busy = _NOTREF_CONFIG
             else:
@@ -458,7 +469,7 @@ class Smc100Emulator(FirmwareEmulator):
             return None
         self.params[key] = value
         if family == "config":
-            self._stored[key] = value
+            self.stored[key] = value
         self._apply_params()
         return None
 
