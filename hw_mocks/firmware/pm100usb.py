@@ -156,7 +156,7 @@ class SensorHead:
 def _parse_pattern(pattern: str) -> tuple[tuple[str, str, bool], ...]:
     """``"[SENSe]:CORRection:WAVelength"`` → ((short, long, optional), ...)."""
     nodes = []
-    for part in pattern.split(":"):
+    for part in pattern.replace("[:", ":[").split(":"):
         optional = part.startswith("[")
         name = part.strip("[]")
         short = "".join(c for c in name if not c.islower())
