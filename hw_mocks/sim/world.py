@@ -160,6 +160,8 @@ class PowerMeterHead:
 
     distance_mm: float = 300.0
     aperture_diameter_mm: float = 9.5
+    #: ``simusb://`` URL of the PM100USB emulator bound to this head, if any.
+    url: str | None = None
 
 
 class Scene(Protocol):
@@ -291,7 +293,9 @@ class VirtualBench:
         Keys: ``roles`` (role → URL | number | {url, scale, offset, value}), ``scene``
         (see :meth:`hw_mocks.sim.goniometer_scene.GoniometerScene.from_config`),
         ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
-        ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm}).
+        ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}).
+        With a power-meter ``url`` the PM100USB emulator is created and bound
+        (:meth:`bind_power_meter`).
         """
         known = {"roles", "scene", "source", "arm_length_mm", "power_meter"}
         unknown = set(config) - known
@@ -302,10 +306,13 @@ class VirtualBench:
         scene = GoniometerScene.from_config(config.get("scene", {}))
         source = SourceState(**dict(config.get("source", {})))
         pm = PowerMeterHead(**dict(config.get("power_meter", {})))
-        return cls(
+        world = cls(
             name, roles=config.get("roles"), scene=scene, source=source,
             arm_length_mm=float(config.get("arm_length_mm", 300.0)), power_meter=pm,
         )
+        if pm.url is not None:
+            world.bind_power_meter()
+        return world
 
     def set_role(self, role: str, spec: Any) -> None:
         with self._lock:
@@ -380,18 +387,19 @@ class VirtualBench:
                           scene=scene, key=key)
 
     # devices ------------------------------------------------------------------------
-    def optical_power_w(self, wavelength_nm: float) -> float:
-        """Optical power (W) on the power-meter head, as a meter set to ``wavelength_nm``
-        would report it.
+    def optical_power_w(self, wavelength_nm: float | None = None) -> float:
+        """Optical power (W) arriving on the power-meter head.
 
-        The head (a silicon photodiode) sits on the detector arm at
-        ``power_meter.distance_mm`` facing the sample. The physical power comes from the
-        scene; a meter whose wavelength correction is set to λ_set while the light is at
-        λ_src reports ``P · R(λ_src)/R(λ_set)`` (its responsivity correction is wrong by
-        that ratio), with R the approximate silicon responsivity of :func:`si_responsivity`.
+        The head sits on the detector arm at ``power_meter.distance_mm`` facing the sample;
+        the scene integrates scattered light over the footprint and the aperture, adds the
+        direct beam where nothing blocks it, ambient light and the instrument signature.
+        The source is monochromatic (``source.wavelength_nm``): ``wavelength_nm`` is the
+        wavelength the asker believes the light has, accepted for the PM100USB emulator's
+        ``optical_power_w(wavelength_nm)`` interface; the physical power does not depend on
+        it (the emulator applies its own responsivity mismatch).
         """
         state = self.snapshot()
-        key = (state.key, float(wavelength_nm), self.power_meter)
+        key = (state.key, self.power_meter)
         cached = self._power_cache.get(key)
         if cached is not None:
             return cached
@@ -400,34 +408,35 @@ class VirtualBench:
         power = state.scene.power_on_aperture(
             center, -pose.detector_dir, self.power_meter.aperture_diameter_mm, state
         )
-        reported = power * si_responsivity(state.source.wavelength_nm) / si_responsivity(
-            float(wavelength_nm)
-        )
         if len(self._power_cache) > 256:
             self._power_cache.clear()
-        self._power_cache[key] = reported
-        return reported
+        self._power_cache[key] = power
+        return power
 
     def power_callable(self) -> Callable[[float], float]:
         """The ``optical_power_w(wavelength_nm) -> W`` callable for the PM100USB emulator."""
         return self.optical_power_w
 
+    def bind_power_meter(self, target: Any = None) -> Any:
+        """Connect a PM100USB firmware model to this world and return it.
 
-def si_responsivity(wavelength_nm: float) -> float:
-    """Approximate responsivity (A/W) of a silicon photodiode, 350–1100 nm.
+        ``target`` is the firmware object, a ``simusb://name`` URL (the device is created
+        through :func:`hw_mocks.usb.backend_from_url` if needed), or ``None`` for
+        ``power_meter.url``. Sets its ``optical_power_w`` callable and the light's
+        wavelength (the source's).
+        """
+        target = self.power_meter.url if target is None else target
+        if target is None:
+            raise ValueError("no power meter to bind: give a firmware or a simusb:// URL")
+        if isinstance(target, str):
+            from hw_mocks import usb
 
-    R = η(λ) · q λ / (h c) with an external quantum efficiency that rises from 0.5 at
-    350 nm to 0.85 near 850 nm and falls to 0 at the band edge (1100 nm). A smooth model of
-    the published Si curves (peak ≈ 0.6 A/W near 950 nm), good enough to make a wrong
-    wavelength setting visible; outside the band a small floor avoids division by zero.
-    """
-    lam = float(wavelength_nm)
-    if lam <= 850.0:
-        eqe = 0.5 + 0.35 * max(lam - 350.0, 0.0) / 500.0
-    else:
-        eqe = 0.85 * max(1100.0 - lam, 0.0) / 250.0
-    eqe = max(eqe, 1e-3)
-    return eqe * lam * 1e-9 / 1.23984198e-6  # q λ/(h c) = λ[m] / 1.2398 µm per (A/W)
+            _scheme, name, _options = registry.parse_url(target)
+            usb.backend_from_url(target)
+            target = usb.get_firmware(name)
+        target.optical_power_w = self.optical_power_w
+        target.light_wavelength_nm = self._source.wavelength_nm
+        return target
 
 
 # ------------------------------------------------------------------------ registry
