@@ -122,6 +122,7 @@ def solve_curves(
     p_max: int | None = None,
     signal_power: ArrayLike | None = None,
     gamma_min: float = 1e-6,
+    pool: ArrayLike | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.complex128],
            RegularizationResult, Diagnostics, str, bool, str]:
     """Solve the per-point problems for curves already sampled, shape (R, N).
@@ -129,7 +130,9 @@ def solve_curves(
     Returns ``(O, Õ, α, regularization, diagnostics, solver, recoverable, message)`` with
     O of shape (R, N) (the object radiance on the cell-centred θ grid of ``domain_rad``).
     ``noise`` is a :class:`NoiseEstimate`, a white PSD (float, coefficient
-    normalisation, σ²/N) or None to estimate it from the high-|p| tail.
+    normalisation, σ²/N) or None to estimate it from the high-|p| tail.  ``pool`` (R,)
+    marks the points allowed to shape the shared filter (default: all that pass the
+    tail-outlier test).
     """
     mc = np.atleast_2d(np.asarray(curves, dtype=float))
     n_r, n = mc.shape
@@ -145,7 +148,10 @@ def solve_curves(
         est = NoiseEstimate(np.full(n, psd), float(np.sqrt(psd * n)), "given", 0)
     psd = np.broadcast_to(est.psd, (n,))
     # points whose curve is inconsistent with the model do not shape the shared filter
-    pool = ~tail_outliers(m_coef, est)
+    pool_ok = ~tail_outliers(m_coef, est)
+    if pool is not None:
+        pool_ok &= np.asarray(pool, dtype=bool)
+    pool = pool_ok
     tn = np.broadcast_to(np.asarray(normal_angle_rad, dtype=float), (n_r,))
     per_point_tilt = np.ndim(normal_angle_rad) > 0
     separable = _is_separable(brdf)
@@ -275,6 +281,7 @@ def reconstruct(
     obj, o_coef, alpha, reg, diag, used, ok, msg = solve_curves(
         curves, brdf, lf_meas.domain_rad, points_mm=c, normal_angle_rad=normal_angle_rad,
         method=method, solver=solver, noise=noise, tau=tau, p_max=p_max, gamma_min=gamma_min,
+        pool=valid.all(axis=1),
     )
     a, b = lf_meas.domain_rad
     width = getattr(getattr(brdf, "base", brdf), "specular_width_rad", 0.0)

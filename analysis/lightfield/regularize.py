@@ -162,9 +162,16 @@ def regularize(
         # trust the pooled spectrum only up to the first level where it is
         # indistinguishable from noise: beyond it a chance excess at a mode whose noise
         # gain is astronomically large would otherwise leak into the estimate
-        empty = [u for u in np.unique(lv) if not np.any(sp[lv == u] > 0)]
+        uniq = np.unique(lv)
+        empty = [u for u in uniq if not np.any(sp[lv == u] > 0)]
         if empty:
             sp = np.where(lv < empty[0], sp, 0.0)
+        # an object spectrum does not grow with order; excess power that does (growing
+        # like 1/|s_k|²) is model mismatch amplified by the inverse, so cap each level at
+        # the running minimum of the level means below it
+        means = np.array([sp[lv == u].mean() for u in uniq])
+        envelope = np.minimum.accumulate(means)
+        sp = np.minimum(sp, envelope[np.searchsorted(uniq, lv)])
     name, param = "none", float("nan")
 
     if method == "none":
