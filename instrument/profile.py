@@ -33,6 +33,12 @@ Schema (all lengths in mm, angles in degrees)::
     min_bistatic_deg = 6.0             # detector must stay this far from the beam
     source_theta_deg = 0.0             # fixed source direction in the lab frame
 
+    [[geometry.collision]]             # arm-collision zones (any number; optional)
+    axis = "detector_theta"            # an axis role
+    range = [150.0, 180.0]             # forbidden interval of that axis (or of the difference)
+    relative_to = "sample_theta"       # optional: the zone applies to axis − relative_to
+    reason = "arm hits the sample holder"
+
     [simulation]                       # only for emulated benches; passed to hw_mocks
     world = "sim"
     ...
@@ -50,6 +56,7 @@ from typing import Any
 __all__ = [
     "AXIS_ROLES",
     "BenchProfile",
+    "CollisionZone",
     "DeviceSpec",
     "FieldError",
     "GeometrySpec",
@@ -130,12 +137,38 @@ class DeviceSpec:
 
 
 @dataclass(frozen=True)
+class CollisionZone:
+    """A forbidden interval of one axis (or of ``axis − relative_to``), in axis units."""
+
+    axis: str
+    low: float
+    high: float
+    relative_to: str | None = None
+    reason: str = "arm collision"
+
+    def hit(self, positions: dict[str, float]) -> bool:
+        if self.axis not in positions:
+            return False
+        value = positions[self.axis]
+        if self.relative_to is not None:
+            if self.relative_to not in positions:
+                return False
+            value -= positions[self.relative_to]
+        return self.low <= value <= self.high
+
+    def describe(self) -> str:
+        what = self.axis if self.relative_to is None else f"{self.axis} - {self.relative_to}"
+        return f"{what} in [{self.low:g}, {self.high:g}] ({self.reason})"
+
+
+@dataclass(frozen=True)
 class GeometrySpec:
     kind: str = "in_plane"
     detector_distance_mm: float = 300.0
     detector_aperture_mm: float = 5.0
     min_bistatic_deg: float = 6.0
     source_theta_deg: float = 0.0
+    collisions: tuple[CollisionZone, ...] = ()
 
     @property
     def detector_solid_angle_sr(self) -> float:
@@ -298,7 +331,7 @@ def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:
 
 def _geometry(v: _Validator, t: dict, path: str) -> GeometrySpec:
     v.unknown(t, path, {"kind", "detector_distance_mm", "detector_aperture_mm",
-                        "min_bistatic_deg", "source_theta_deg"})
+                        "min_bistatic_deg", "source_theta_deg", "collision"})
     default = GeometrySpec()
     kind = v.string(t, "kind", path) or default.kind
     if kind not in ("in_plane", "out_of_plane"):
@@ -316,7 +349,39 @@ def _geometry(v: _Validator, t: dict, path: str) -> GeometrySpec:
     if not _is_number(source) or not -180 <= source <= 180:
         v.error(f"{path}.source_theta_deg", "must be a number of degrees in [-180, 180]")
         source = default.source_theta_deg
-    return GeometrySpec(kind, float(distance), float(aperture), float(bistatic), float(source))
+    collisions = _collisions(v, t.get("collision", []), f"{path}.collision")
+    return GeometrySpec(kind, float(distance), float(aperture), float(bistatic), float(source),
+                        collisions)
+
+
+def _collisions(v: _Validator, raw: Any, path: str) -> tuple[CollisionZone, ...]:
+    if not isinstance(raw, list):
+        v.error(path, "must be an array of tables ([[geometry.collision]])")
+        return ()
+    zones = []
+    for i, t in enumerate(raw):
+        where = f"{path}[{i}]"
+        if not isinstance(t, dict):
+            v.error(where, "must be a table")
+            continue
+        v.unknown(t, where, {"axis", "range", "relative_to", "reason"})
+        axis = v.string(t, "axis", where, required=True)
+        if axis is not None and axis not in AXIS_ROLES:
+            v.error(f"{where}.axis", f"must be an axis role: {', '.join(AXIS_ROLES)}")
+            axis = None
+        rel = v.string(t, "relative_to", where)
+        if rel is not None and rel not in AXIS_ROLES:
+            v.error(f"{where}.relative_to", f"must be an axis role: {', '.join(AXIS_ROLES)}")
+            rel = None
+        reason = v.string(t, "reason", where) or "arm collision"
+        rng = t.get("range")
+        if (not isinstance(rng, list) or len(rng) != 2
+                or not all(_is_number(x) for x in rng) or not rng[0] < rng[1]):
+            v.error(f"{where}.range", "must be [low, high], two finite numbers with low < high")
+            continue
+        if axis is not None:
+            zones.append(CollisionZone(axis, float(rng[0]), float(rng[1]), rel, reason))
+    return tuple(zones)
 
 
 def _is_number(x: Any) -> bool:

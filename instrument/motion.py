@@ -1,0 +1,78 @@
+"""Move-time model for planning: trapezoidal velocity profiles, simultaneous axes.
+
+A point-to-point move of distance d with maximum velocity v and acceleration a (symmetric
+acceleration and deceleration, starting and ending at rest) takes
+
+    t = d/v + v/a          if d ≥ v²/a   (reaches v: accelerate, cruise, decelerate)
+    t = 2·sqrt(d/a)        otherwise    (triangular profile, peak velocity sqrt(a·d))
+
+(any motion-control text; it is the profile the APT and SMC100 controllers run). Axes of a
+step start together, so a step lasts as long as its slowest axis. This module is the
+planner's own model and deliberately independent of the emulators in ``hw_mocks``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["AxisDynamics", "move_time", "move_times", "route_time", "step_time"]
+
+
+@dataclass(frozen=True)
+class AxisDynamics:
+    """Velocity (units/s), acceleration (units/s²) and a per-move settle/overhead time (s)."""
+
+    velocity: float
+    acceleration: float
+    settle_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (self.velocity > 0 and self.acceleration > 0 and self.settle_s >= 0):
+            raise ValueError(f"need velocity, acceleration > 0 and settle_s >= 0: {self}")
+
+
+def move_time(distance: float, dyn: AxisDynamics) -> float:
+    """Seconds for one trapezoidal move of ``|distance|``; 0 for no move."""
+    d = abs(float(distance))
+    if d == 0.0:
+        return 0.0
+    v, a = dyn.velocity, dyn.acceleration
+    if d >= v * v / a:
+        return d / v + v / a + dyn.settle_s
+    return 2.0 * math.sqrt(d / a) + dyn.settle_s
+
+
+def move_times(distance: np.ndarray, dyn: AxisDynamics) -> np.ndarray:
+    """Vectorised :func:`move_time` for an array of distances (any shape)."""
+    d = np.abs(np.asarray(distance, dtype=float))
+    v, a = dyn.velocity, dyn.acceleration
+    t = np.where(d >= v * v / a, d / v + v / a, 2.0 * np.sqrt(d / a))
+    return np.where(d > 0, t + dyn.settle_s, 0.0)
+
+
+def step_time(a: Mapping[str, float], b: Mapping[str, float],
+              dynamics: Mapping[str, AxisDynamics]) -> float:
+    """Seconds from positions ``a`` to ``b`` with all axes started together."""
+    times = [move_time(b[r] - a.get(r, b[r]), dynamics[r]) for r in b if r in dynamics]
+    return max(times, default=0.0)
+
+
+def route_time(targets: np.ndarray, axes: Sequence[str], dynamics: Mapping[str, AxisDynamics],
+               *, start: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """Total motion time of visiting the rows of ``targets`` (shape (N, A)) in order.
+
+    Returns the total seconds and the per-step times, shape (N,) (step k ends at point k;
+    step 0 starts at ``start`` or costs nothing without one).
+    """
+    t = np.asarray(targets, dtype=float)
+    if t.size == 0:
+        return 0.0, np.zeros(0)
+    prev = np.vstack([t[:1] if start is None else np.asarray(start, float)[None, :], t[:-1]])
+    per_axis = np.stack([move_times(t[:, k] - prev[:, k], dynamics[r])
+                         for k, r in enumerate(axes)], axis=1)
+    steps = per_axis.max(axis=1)
+    return float(steps.sum()), steps

@@ -1,0 +1,268 @@
+"""From a validated plan spec and a bench profile to an ordered, guarded :class:`Plan`.
+
+The plan's points are generated in a natural (raster) order, turned into axis targets by
+the bench's kinematics, checked by :mod:`instrument.guard` (nothing moves if any point is
+rejected), then ordered for short motion time. :meth:`Plan.commands` is the generator of
+typed commands the engine runs; it skips points already done (resume).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from instrument import guard
+from instrument.kinematics import Angles, UnreachableError, kinematics_for
+from instrument.motion import AxisDynamics, route_time
+from instrument.plans.commands import (
+    Acquire,
+    Command,
+    Move,
+    PointDone,
+    ScanPoint,
+    SetLight,
+)
+from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, specular_cone
+from instrument.plans.order import optimise_order
+from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
+from instrument.profile import BenchProfile, FieldError
+
+__all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of"]
+
+#: Used for planning when a profile gives no velocity/acceleration for an axis.
+DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
+
+
+@dataclass(frozen=True)
+class PlanEstimate:
+    n_points: int
+    travel: dict[str, float]       # total distance per axis, axis units
+    motion_s: float
+    acquisition_s: float
+
+    @property
+    def total_s(self) -> float:
+        return self.motion_s + self.acquisition_s
+
+
+@dataclass(frozen=True)
+class Plan:
+    spec: PlanSpec
+    profile: BenchProfile
+    axes: tuple[str, ...]
+    points: tuple[ScanPoint, ...]   # execution order; points[k].index == k
+    dropped_in_beam: int = 0        # points left out by ``skip_beam_points``
+
+    @property
+    def kind(self) -> str:
+        return self.spec.kind
+
+    def targets_array(self) -> np.ndarray:
+        """Targets of every point, shape (N, len(axes)); NaN where a point leaves an axis."""
+        out = np.full((len(self.points), len(self.axes)), np.nan)
+        col = {r: k for k, r in enumerate(self.axes)}
+        for p in self.points:
+            for r, v in p.targets:
+                out[p.index, col[r]] = v
+        return out
+
+    def commands(self, done: frozenset[int] | set[int] = frozenset()) -> Iterator[Command]:
+        """The typed commands of every point not in ``done``, in execution order."""
+        light: bool | None = None
+        policy = self.spec.acquisition
+        for p in self.points:
+            if p.index in done:
+                continue
+            if light is not p.light:
+                light = p.light
+                yield SetLight(p.light)
+            yield Move(p.index, p.targets)
+            yield Acquire(p.index, policy, p.label, p.light, p.exposure_us)
+            yield PointDone(p.index)
+
+    def estimate(self, *, start: dict[str, float] | None = None) -> PlanEstimate:
+        """Points, travel and duration from the axes' dynamics and the exposures."""
+        t = self.targets_array()
+        t = _fill_forward(t, start, self.axes)
+        dyn = dynamics_of(self.profile, self.axes)
+        travel = {r: float(np.abs(np.diff(t[:, k])).sum()) for k, r in enumerate(self.axes)}
+        motion, _ = route_time(t, self.axes, dyn)
+        pol = self.spec.acquisition
+        acq = sum(pol.estimated_seconds(p.exposure_us) for p in self.points)
+        return PlanEstimate(len(self.points), travel, motion, acq)
+
+
+def _fill_forward(t: np.ndarray, start: dict[str, float] | None, axes) -> np.ndarray:
+    """Axes a point does not move keep their previous target (or start, or 0)."""
+    t = t.copy()
+    for k, r in enumerate(axes):
+        prev = (start or {}).get(r, 0.0)
+        for i in range(len(t)):
+            if math.isnan(t[i, k]):
+                t[i, k] = prev
+            prev = t[i, k]
+    return t
+
+
+def dynamics_of(profile: BenchProfile, axes) -> dict[str, AxisDynamics]:
+    out = {}
+    for r in axes:
+        spec = profile.devices.get(r)
+        if spec is None or spec.velocity is None or spec.acceleration is None:
+            out[r] = DEFAULT_DYNAMICS
+        else:
+            out[r] = AxisDynamics(spec.velocity, spec.acceleration)
+    return out
+
+
+# --------------------------------------------------------------------------- generation
+
+
+def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
+    s = spec.scan
+    kind = spec.kind
+    kin = kinematics_for(profile.geometry.kind,
+                         source_theta_deg=profile.geometry.source_theta_deg)
+    limits = {r: d.limits for r, d in profile.axes.items() if d.limits is not None}
+    label = {"reference": "reference", "signature": "signature"}.get(kind, "sample")
+    errors: list[FieldError] = []
+
+    def geo_point(a: Angles, lab: str = label) -> ScanPoint | None:
+        try:
+            pos = kin.positions(a, limits=limits)
+        except UnreachableError as err:
+            errors.append(FieldError("scan", f"{err} on a {profile.geometry.kind} bench"))
+            return None
+        return ScanPoint(0, tuple((r, float(pos[r])) for r in kin.axes), a, lab)
+
+    pts: list[ScanPoint] = []
+    angles: list[Angles] = []
+    if kind in ("brdf_in_plane", "reference", "signature"):
+        theta_r = _expand(s["theta_r"])
+        for ti in _expand(s["theta_i"]):
+            rs = list(theta_r)
+            if "specular" in s:
+                hw, step = s["specular"]["half_width_deg"], s["specular"]["step_deg"]
+                n = math.floor(hw / step + 1e-9)
+                rs += [ti_abs + k * step for k in range(-n, n + 1)
+                       for ti_abs in (abs(ti),) if abs(ti_abs + k * step) < 90]
+                rs = sorted(set(round(r, 9) for r in rs))
+            for tr in rs:
+                angles.append(_in_plane_angles(ti, tr))
+    elif kind == "brdf_hemisphere":
+        grid, _ = equal_solid_angle_grid(int(s["n_directions"]),
+                                         float(s.get("theta_max_deg", 85.0)))
+        for ti in _expand(s["theta_i"]):
+            for pi in _expand(s.get("phi_i", [0.0])):
+                dirs = [tuple(d) for d in grid]
+                if "specular" in s:
+                    sp = s["specular"]
+                    dirs += specular_cone(ti, pi, half_width_deg=sp["half_width_deg"],
+                                          rings=int(sp.get("rings", 2)),
+                                          per_ring=int(sp.get("per_ring", 8)))
+                angles += [Angles(float(ti), float(pi) % 360.0 if ti > 0 else 0.0,
+                                  float(th), float(ph)) for th, ph in dirs]
+    if angles:
+        if s.get("reciprocity", False):
+            keep = dedupe_reciprocal(angles, isotropic=bool(s.get("isotropic", True)))
+            angles = [angles[i] for i in keep]
+        for a in angles:
+            p = geo_point(a)
+            if p is not None:
+                pts.append(p)
+    elif kind == "lightfield":
+        fixed = [(r, float(s[r])) for r in ("sample_theta", "detector_theta") if r in s]
+        for z in _expand(s["camera_z"]):
+            pts.append(ScanPoint(0, (*fixed, ("camera_z", float(z))), None, "lightfield"))
+    elif kind in ("dark", "flat_field"):
+        fixed = tuple((r, float(v)) for r, v in s.get("positions", {}).items())
+        lab, light = ("dark", False) if kind == "dark" else ("flat", True)
+        for e in _expand(s["exposures_us"]):
+            for k in range(int(s.get("frames", 1))):
+                pts.append(ScanPoint(0, fixed, None, lab, light, float(e), (("repeat", k),)))
+    elif kind == "photon_transfer":
+        fixed = tuple((r, float(v)) for r, v in s.get("positions", {}).items())
+        for e in _ptc_exposures(s["exposures_us"]):
+            for k in range(int(s.get("pairs", 2))):
+                for frame in (0, 1):  # a pair: the difference frame cancels fixed pattern
+                    pts.append(ScanPoint(0, fixed, None, "ptc", True, e,
+                                         (("pair", k), ("frame", frame))))
+            if s.get("dark", True):
+                for frame in (0, 1):
+                    pts.append(ScanPoint(0, fixed, None, "dark", False, e, (("frame", frame),)))
+    if errors:
+        raise PlanError(f"plan {spec.name!r}", errors[:20])
+    if spec.acquisition.dark == "start" and kind not in ("dark", "photon_transfer"):
+        darks = [ScanPoint(0, (), None, "dark", False, None)]
+        pts = darks + pts
+    return pts
+
+
+def _in_plane_angles(theta_i: float, theta_r_signed: float) -> Angles:
+    """Plan-file signed angles → sample-frame angles.
+
+    θi ≥ 0 puts the source at φi = 0 (θi < 0 at φi = 180°); θr > 0 is on the specular
+    side (φr opposite to φi), θr < 0 on the source side.
+    """
+    phi_i = 0.0 if theta_i >= 0 else 180.0
+    phi_r = (phi_i + 180.0) % 360.0 if theta_r_signed >= 0 else phi_i
+    return Angles(abs(theta_i), phi_i, abs(theta_r_signed), phi_r)
+
+
+def _expand(x) -> list[float]:
+    if isinstance(x, dict):
+        start, stop, step = float(x["start"]), float(x["stop"]), float(x["step"])
+        n = math.floor((stop - start) / step + 1e-9) + 1
+        return [start + k * step for k in range(n)]
+    return [float(e) for e in x]
+
+
+def _ptc_exposures(x) -> list[float]:
+    if isinstance(x, dict) and "n" in x:
+        n = int(x["n"])
+        if x.get("log", True):
+            return list(np.geomspace(float(x["start"]), float(x["stop"]), n))
+        return list(np.linspace(float(x["start"]), float(x["stop"]), n))
+    return _expand(x)
+
+
+def build_plan(spec: PlanSpec, profile: BenchProfile, *,
+               start: dict[str, float] | None = None) -> Plan:
+    """Expand, guard and order ``spec`` for ``profile``.
+
+    Raises
+    ------
+    PlanError
+        The plan does not fit this bench (unreachable angles, too many points).
+    GuardError
+        Some points violate limits, the beam or collision zones (nothing has moved).
+    """
+    raw = _raw_points(spec, profile)
+    if not raw:
+        raise PlanError(f"plan {spec.name!r}", [FieldError("scan", "expands to no points")])
+    if len(raw) > MAX_POINTS:
+        raise PlanError(f"plan {spec.name!r}", [FieldError(
+            "scan", f"expands to {len(raw)} points; at most {MAX_POINTS}")])
+    raw = [replace(p, index=i) for i, p in enumerate(raw)]
+    dropped = 0
+    if spec.scan.get("skip_beam_points", False):
+        beam = {v.index for v in guard.check(raw, profile) if v.reason == "beam"}
+        dropped = len(beam)
+        raw = [replace(p, index=i)
+               for i, p in enumerate(p for p in raw if p.index not in beam)]
+    guard.enforce(raw, profile)
+    axes = tuple(dict.fromkeys(r for p in raw for r, _ in p.targets))
+    # Points that move nothing (dark frames taken at the start) stay first, in order.
+    head = [p for p in raw if not p.targets]
+    body = [p for p in raw if p.targets]
+    if (spec.order == "optimised" and axes and len(body) > 2
+            and all(len(p.targets) == len(axes) for p in body)):
+        t = np.array([[dict(p.targets)[r] for r in axes] for p in body])
+        st = None if start is None else np.array([start.get(r, 0.0) for r in axes])
+        order = optimise_order(t, axes, dynamics_of(profile, axes), start=st)
+        body = [body[int(j)] for j in order]
+    points = tuple(replace(p, index=k) for k, p in enumerate(head + body))
+    return Plan(spec, profile, axes, points, dropped)

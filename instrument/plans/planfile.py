@@ -1,0 +1,354 @@
+"""Plan files (TOML): parsing and field-level validation.
+
+Like bench profiles, plan files are untrusted: :func:`parse_plan` reports *every* problem
+as a :class:`~instrument.profile.FieldError` (``scan.theta_i[2]: ...``) inside a
+:class:`PlanError` and never raises anything else for bad input. Schema::
+
+    [plan]
+    kind = "brdf_in_plane"        # see KINDS
+    name = "grey paint, in-plane"
+    order = "optimised"           # "optimised" (travel-time) | "raster" (as generated)
+
+    [sample]
+    name = "RAL7040"              # required
+    description = ""
+
+    [scan]                        # kind-specific, see below
+    ...
+
+    [acquisition]                 # AcquisitionPolicy fields, all optional
+    mode = "fixed"                # "fixed" | "auto"
+    exposure_us = 10000
+    frames = 1                    # frames averaged per point
+    hdr = false
+    dark = "none"                 # "none" | "per_point" | "start"
+    detectors = ["camera", "power_meter"]
+
+    [calibration]                 # run ids or file paths of calibration runs (optional)
+    dark = "..."; reference = "..."; signature = "..."; flat = "..."
+
+[scan] by kind (angles in degrees; a *range* is ``{start, stop, step}`` inclusive, or an
+explicit list):
+
+* ``brdf_in_plane`` / ``reference`` / ``signature``: ``theta_i`` (list), ``theta_r``
+  (range; signed: > 0 on the specular side of the normal, < 0 on the source side),
+  optional ``specular = {half_width_deg, step_deg}`` for extra sampling around the
+  specular direction, ``reciprocity = true`` to drop reciprocity-equivalent points;
+  ``reference`` also takes ``reference_name`` and ``reflectance``;
+  ``skip_beam_points = true`` leaves out (and reports) the points whose detector would sit
+  in the incident beam instead of rejecting the plan.
+* ``brdf_hemisphere``: ``theta_i`` (list), ``phi_i`` (list, default [0]),
+  ``n_directions`` (cells of the equal-solid-angle grid), ``theta_max_deg`` (≤ 89),
+  optional ``specular = {half_width_deg, rings, per_ring}``, ``reciprocity``,
+  ``isotropic`` (default true: only φr − φi matters for de-duplication).
+* ``lightfield``: ``camera_z`` (range or list, mm), optional ``sample_theta`` and
+  ``detector_theta`` (fixed, degrees).
+* ``dark`` / ``flat_field``: ``exposures_us`` (list), ``frames`` (per exposure), optional
+  fixed axis positions ``positions = {role = value}``.
+* ``photon_transfer``: ``exposures_us`` (range or list) or ``{start, stop, n, log}``,
+  ``pairs`` (frame pairs per exposure, default 2), ``dark = true`` (dark at each exposure).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
+from instrument.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
+
+__all__ = ["KINDS", "PlanError", "PlanSpec", "load_plan", "parse_plan"]
+
+KINDS = ("brdf_in_plane", "brdf_hemisphere", "lightfield", "dark", "reference", "signature",
+         "flat_field", "photon_transfer")
+ORDERS = ("optimised", "raster")
+#: The largest point count a plan may expand to (protects against typos like step=1e-6).
+MAX_POINTS = 1_000_000
+
+
+class PlanError(ProfileError):
+    """A plan file failed validation; ``errors`` lists every offending field."""
+
+
+@dataclass(frozen=True)
+class PlanSpec:
+    kind: str
+    name: str
+    order: str
+    sample_name: str
+    sample_description: str
+    scan: dict[str, Any]
+    acquisition: AcquisitionPolicy
+    calibration: dict[str, str] = field(default_factory=dict)
+    source_text: str = ""
+
+
+def load_plan(path: str | Path) -> PlanSpec:
+    """Read and validate a plan file."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise PlanError(str(p), [FieldError("file", f"cannot read: {err}")]) from err
+    return parse_plan(text, source=str(p))
+
+
+def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
+    """Validate TOML ``text`` into a :class:`PlanSpec` or raise :class:`PlanError`."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise PlanError(source, [FieldError("toml", f"not valid TOML: {err}")]) from err
+    v = _Validator()
+    v.unknown(data, "", {"plan", "sample", "scan", "acquisition", "calibration"})
+    plan = v.table(data, "plan", required=True)
+    v.unknown(plan, "plan", {"kind", "name", "order"})
+    kind = v.string(plan, "kind", "plan", required=True)
+    if kind is not None and kind not in KINDS:
+        v.error("plan.kind", f"unknown kind {kind!r}; use one of {', '.join(KINDS)}")
+        kind = None
+    name = v.string(plan, "name", "plan") or (kind or "plan")
+    order = v.string(plan, "order", "plan") or "optimised"
+    if order not in ORDERS:
+        v.error("plan.order", f"must be one of {', '.join(ORDERS)}")
+        order = "optimised"
+    sample = v.table(data, "sample", required=kind not in (None, "dark", "signature",
+                                                           "flat_field", "photon_transfer"))
+    v.unknown(sample, "sample", {"name", "description"})
+    sample_name = v.string(sample, "name", "sample",
+                           required="sample" in data) or ("(none)" if not sample else "")
+    sample_desc = v.string(sample, "description", "sample") or ""
+    scan = v.table(data, "scan", required=True)
+    if kind is not None:
+        _SCAN_CHECKS[kind](v, scan, "scan")
+    acq = _acquisition(v, v.table(data, "acquisition"), "acquisition")
+    calib = v.table(data, "calibration")
+    v.unknown(calib, "calibration", {"dark", "reference", "signature", "flat"})
+    calibration = {}
+    for key in list(calib):
+        val = v.string(calib, key, "calibration")
+        if val is not None:
+            calibration[key] = val
+    if v.errors or kind is None:
+        raise PlanError(source, v.errors or [FieldError("plan.kind", "is required")])
+    return PlanSpec(kind, name, order, sample_name, sample_desc, dict(scan), acq,
+                    calibration, text)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _num(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def number(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
+           required: bool = False, integer: bool = False) -> float | None:
+    """A number in [lo, hi] (an int if ``integer``), or None with an error recorded."""
+    if key not in t:
+        if required:
+            v.error(f"{path}.{key}", "is required")
+        return None
+    x = t[key]
+    if integer and (not isinstance(x, int) or isinstance(x, bool)):
+        v.error(f"{path}.{key}", f"must be an integer from {lo:g} to {hi:g}, got {x!r}")
+        return None
+    if not _num(x) or not lo <= x <= hi:
+        v.error(f"{path}.{key}", f"must be a number from {lo:g} to {hi:g}, got {x!r}")
+        return None
+    return x
+
+
+def values(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
+           required: bool = True, allow_range: bool = True) -> list[float] | None:
+    """An explicit list of numbers, or an inclusive range table {start, stop, step}."""
+    where = f"{path}.{key}"
+    if key not in t:
+        if required:
+            v.error(where, "is required")
+        return None
+    x = t[key]
+    if isinstance(x, list):
+        if not x:
+            v.error(where, "must not be empty")
+            return None
+        bad = [i for i, e in enumerate(x) if not _num(e) or not lo <= e <= hi]
+        for i in bad[:5]:
+            v.error(f"{where}[{i}]", f"must be a number from {lo:g} to {hi:g}, got {x[i]!r}")
+        return None if bad else [float(e) for e in x]
+    if allow_range and isinstance(x, dict):
+        v.unknown(x, where, {"start", "stop", "step"})
+        start = number(v, x, "start", where, lo=lo, hi=hi, required=True)
+        stop = number(v, x, "stop", where, lo=lo, hi=hi, required=True)
+        step = number(v, x, "step", where, lo=1e-6, hi=hi - lo, required=True)
+        if start is None or stop is None or step is None:
+            return None
+        if stop < start:
+            v.error(where, f"stop ({stop:g}) must be >= start ({start:g})")
+            return None
+        n = math.floor((stop - start) / step + 1e-9) + 1
+        if n > MAX_POINTS:
+            v.error(f"{where}.step", f"gives {n} values; at most {MAX_POINTS}")
+            return None
+        return [float(start + k * step) for k in range(n)]
+    v.error(where, "must be a list of numbers" + (" or {start, stop, step}" if allow_range
+                                                 else ""))
+    return None
+
+
+def _boolean(v: _Validator, t: dict, key: str, path: str) -> None:
+    if key in t and not isinstance(t[key], bool):
+        v.error(f"{path}.{key}", "must be true or false")
+
+
+def _specular(v: _Validator, t: dict, path: str, keys: set[str]) -> None:
+    if "specular" not in t:
+        return
+    s = t["specular"]
+    where = f"{path}.specular"
+    if not isinstance(s, dict):
+        v.error(where, "must be a table")
+        return
+    v.unknown(s, where, keys)
+    number(v, s, "half_width_deg", where, lo=0.01, hi=45.0, required=True)
+    if "step_deg" in keys:
+        number(v, s, "step_deg", where, lo=0.01, hi=45.0, required=True)
+    if "rings" in keys:
+        number(v, s, "rings", where, lo=1, hi=50, integer=True)
+        number(v, s, "per_ring", where, lo=3, hi=360, integer=True)
+
+
+def _in_plane(v: _Validator, t: dict, path: str) -> None:
+    v.unknown(t, path, {"theta_i", "theta_r", "specular", "reciprocity", "reference_name",
+                        "reflectance", "skip_beam_points"})
+    _boolean(v, t, "skip_beam_points", path)
+    values(v, t, "theta_i", path, lo=-89.9, hi=89.9, allow_range=True)
+    values(v, t, "theta_r", path, lo=-89.9, hi=89.9)
+    _specular(v, t, path, {"half_width_deg", "step_deg"})
+    _boolean(v, t, "reciprocity", path)
+    v.string(t, "reference_name", path)
+    number(v, t, "reflectance", path, lo=0.0, hi=1.0)
+
+
+def _hemisphere(v: _Validator, t: dict, path: str) -> None:
+    v.unknown(t, path, {"theta_i", "phi_i", "n_directions", "theta_max_deg", "specular",
+                        "reciprocity", "isotropic", "skip_beam_points"})
+    _boolean(v, t, "skip_beam_points", path)
+    values(v, t, "theta_i", path, lo=0.0, hi=89.9)
+    values(v, t, "phi_i", path, lo=-360.0, hi=360.0, required=False)
+    number(v, t, "n_directions", path, lo=1, hi=100000, integer=True, required=True)
+    number(v, t, "theta_max_deg", path, lo=1.0, hi=89.0)
+    _specular(v, t, path, {"half_width_deg", "rings", "per_ring"})
+    _boolean(v, t, "reciprocity", path)
+    _boolean(v, t, "isotropic", path)
+
+
+def _lightfield(v: _Validator, t: dict, path: str) -> None:
+    v.unknown(t, path, {"camera_z", "sample_theta", "detector_theta"})
+    values(v, t, "camera_z", path, lo=-1000.0, hi=1000.0)
+    number(v, t, "sample_theta", path, lo=-360.0, hi=360.0)
+    number(v, t, "detector_theta", path, lo=-360.0, hi=360.0)
+
+
+def _positions(v: _Validator, t: dict, path: str) -> None:
+    if "positions" not in t:
+        return
+    pos = t["positions"]
+    if not isinstance(pos, dict):
+        v.error(f"{path}.positions", "must be a table {role = value}")
+        return
+    for role, x in pos.items():
+        if role not in AXIS_ROLES:
+            v.error(f"{path}.positions.{role}", f"not an axis role: {', '.join(AXIS_ROLES)}")
+        elif not _num(x):
+            v.error(f"{path}.positions.{role}", "must be a finite number")
+
+
+def _frames_at(v: _Validator, t: dict, path: str) -> None:
+    v.unknown(t, path, {"exposures_us", "frames", "positions"})
+    values(v, t, "exposures_us", path, lo=1.0, hi=60e6)
+    number(v, t, "frames", path, lo=1, hi=10000, integer=True)
+    _positions(v, t, path)
+
+
+def _ptc(v: _Validator, t: dict, path: str) -> None:
+    v.unknown(t, path, {"exposures_us", "pairs", "dark", "positions"})
+    x = t.get("exposures_us")
+    if isinstance(x, dict) and "n" in x:
+        where = f"{path}.exposures_us"
+        v.unknown(x, where, {"start", "stop", "n", "log"})
+        start = number(v, x, "start", where, lo=1.0, hi=60e6, required=True)
+        stop = number(v, x, "stop", where, lo=1.0, hi=60e6, required=True)
+        number(v, x, "n", where, lo=2, hi=10000, integer=True, required=True)
+        _boolean(v, x, "log", where)
+        if start is not None and stop is not None and stop <= start:
+            v.error(where, "stop must be greater than start")
+    else:
+        values(v, t, "exposures_us", path, lo=1.0, hi=60e6)
+    number(v, t, "pairs", path, lo=1, hi=1000, integer=True)
+    _boolean(v, t, "dark", path)
+    _positions(v, t, path)
+
+
+_SCAN_CHECKS = {
+    "brdf_in_plane": _in_plane,
+    "reference": _in_plane,
+    "signature": _in_plane,
+    "brdf_hemisphere": _hemisphere,
+    "lightfield": _lightfield,
+    "dark": _frames_at,
+    "flat_field": _frames_at,
+    "photon_transfer": _ptc,
+}
+
+
+def _acquisition(v: _Validator, t: dict, path: str) -> AcquisitionPolicy:
+    d = AcquisitionPolicy()
+    v.unknown(t, path, set(d.__dataclass_fields__))
+    mode = v.string(t, "mode", path) or d.mode
+    if mode not in MODES:
+        v.error(f"{path}.mode", f"must be one of {', '.join(MODES)}")
+        mode = d.mode
+    dark = v.string(t, "dark", path) or d.dark
+    if dark not in DARK_POLICIES:
+        v.error(f"{path}.dark", f"must be one of {', '.join(DARK_POLICIES)}")
+        dark = d.dark
+    exp = number(v, t, "exposure_us", path, lo=1.0, hi=60e6)
+    emin = number(v, t, "min_exposure_us", path, lo=1.0, hi=60e6)
+    emax = number(v, t, "max_exposure_us", path, lo=1.0, hi=60e6)
+    target = number(v, t, "target_fraction", path, lo=0.05, hi=0.99)
+    factor = number(v, t, "hdr_factor", path, lo=1.5, hi=1000.0)
+    brackets = number(v, t, "max_brackets", path, lo=1, hi=16, integer=True)
+    frames = number(v, t, "frames", path, lo=1, hi=10000, integer=True)
+    readout = number(v, t, "readout_s", path, lo=0.0, hi=60.0)
+    _boolean(v, t, "hdr", path)
+    detectors = d.detectors
+    if "detectors" in t:
+        raw = t["detectors"]
+        if (not isinstance(raw, list) or not raw
+                or not all(isinstance(x, str) and x in DETECTORS for x in raw)):
+            v.error(f"{path}.detectors", f"must be a non-empty list drawn from "
+                    f"{', '.join(DETECTORS)}")
+        else:
+            detectors = tuple(dict.fromkeys(raw))
+    emin_v = emin if emin is not None else d.min_exposure_us
+    emax_v = emax if emax is not None else d.max_exposure_us
+    if emin_v > emax_v:
+        v.error(f"{path}.min_exposure_us", "must not exceed max_exposure_us")
+    exp_v = exp if exp is not None else d.exposure_us
+    if exp is not None and not emin_v <= exp_v <= emax_v:
+        v.error(f"{path}.exposure_us", "must lie within [min_exposure_us, max_exposure_us]")
+    return AcquisitionPolicy(
+        mode=mode, exposure_us=float(exp_v), min_exposure_us=float(emin_v),
+        max_exposure_us=float(emax_v),
+        target_fraction=float(target if target is not None else d.target_fraction),
+        hdr=bool(t.get("hdr", d.hdr)) if isinstance(t.get("hdr", d.hdr), bool) else d.hdr,
+        hdr_factor=float(factor if factor is not None else d.hdr_factor),
+        max_brackets=int(brackets if brackets is not None else d.max_brackets),
+        frames=int(frames if frames is not None else d.frames),
+        dark=dark, detectors=detectors,
+        readout_s=float(readout if readout is not None else d.readout_s),
+    )
