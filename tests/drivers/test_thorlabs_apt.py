@@ -1,0 +1,525 @@
+"""AptMotor: byte-exact transcripts, the motion contract on both transports, field quirks
+and every injected fault.
+
+Transcript bytes are written out by hand from ``shared/reference/hardware.md`` §1c (header
+layouts, ids, the K10CR1 and KDC101 scaling), independently of the driver's packers.
+"""
+
+from __future__ import annotations
+
+import itertools
+import struct
+import time
+from dataclasses import replace
+
+import pytest
+import serial
+
+from drivers.base import AxisKind
+from drivers.errors import (
+    ConnectionFailed,
+    ControllerError,
+    DeviceTimeout,
+    LimitError,
+    MotionError,
+    ProtocolError,
+)
+from drivers.thorlabs_apt import STAGES, AptMotor
+from hw_mocks import registry
+from hw_mocks.clock import ScaledClock
+from hw_mocks.faults import FaultKind
+from hw_mocks.firmware.apt import DEFAULTS, AptEmulator
+from hw_mocks.pty_server import PtyServer
+from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.motion_contract import MotionAxisContract
+
+H = bytes.fromhex
+SPEED = 200  # emulated seconds per real second
+FAST = {"rts_settle_s": 0.0, "flush_s": 0.0}
+
+
+# --------------------------------------------------------------------------- transcripts
+
+
+def info_reply(serial_no: int, model: bytes, stage_id: int = 0) -> bytes:
+    space = bytes(10) + struct.pack("<H", stage_id)
+    payload = struct.pack("<l8sH4s48s12sHHH", serial_no, model, 16, bytes([3, 0, 1, 0]),
+                          b"test", space, 1, 0, 1)
+    return H("06 00 54 00 81 50") + payload
+
+
+# K10CR1 parameters written on open: home reverse (2), reverse switch (1), 10 deg/s
+# (10 * 7329109 = 73291090 = 0x045E5552), offset 0; velocity 10 deg/s, 10 deg/s^2 (15020).
+K10_HOME = "01 00 02 00 01 00 52 55 5E 04 00 00 00 00"
+K10_VEL = "01 00 00 00 00 00 AC 3A 00 00 52 55 5E 04"
+# PRM1-Z8 on a KDC101: 10 deg/s = 19196.4 counts/s * 2048/6e6 * 65536 = 429417 (0x068D69);
+# 10 deg/s^2 = 19196.4 * (2048/6e6)^2 * 65536 = 147.
+PRM_HOME = "01 00 02 00 01 00 69 8D 06 00 00 00 00 00"
+PRM_VEL = "01 00 00 00 00 00 93 00 00 00 69 8D 06 00"
+
+
+def open_steps(info: bytes, home: str, vel: str, stale: bytes = b"") -> list[tuple[bytes, bytes]]:
+    head = [(b"", stale)] if stale else []
+    return [
+        *head,
+        (H("12 00 00 00 50 01"), b""),                        # HW_STOP_UPDATEMSGS
+        (H("05 00 00 00 50 01"), info),                       # HW_REQ_INFO
+        (H("10 02 01 01 50 01"), b""),                        # enable ch1: no reply
+        (H("11 02 01 00 50 01"), H("12 02 01 01 01 50")),     # REQ -> GET enabled
+        (H("40 04 0E 00 D0 01") + H(home), b""),              # MOT_SET_HOMEPARAMS
+        (H("41 04 01 00 50 01"), H("42 04 0E 00 81 50") + H(home)),
+        (H("13 04 0E 00 D0 01") + H(vel), b""),               # MOT_SET_VELPARAMS
+        (H("14 04 01 00 50 01"), H("15 04 0E 00 81 50") + H(vel)),
+    ]
+
+
+def k10_status(status: str, counts: str) -> list[tuple[bytes, bytes]]:
+    return [
+        (H("29 04 01 00 50 01"), H("2A 04 06 00 81 50 01 00") + H(status)),
+        (H("11 04 01 00 50 01"), H("12 04 06 00 81 50 01 00") + H(counts)),
+    ]
+
+
+def transcript_motor(steps, stage="K10CR1", **kw) -> tuple[AptMotor, TranscriptSerial]:
+    port = TranscriptSerial(steps, baudrate=115200)
+    motor = AptMotor(port, name="rot", stage=stage, timeout=0.2, **FAST, **kw)
+    return motor, port
+
+
+def test_k10cr1_open_identify_home_move_stop_transcript():
+    homed_idle = "00 25 00 80"  # enabled | settled | homed | connected
+    steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL,
+                       stale=H("91 04 0E 00 81 50") + bytes(14))
+    steps += [
+        # home: parameters again, then MOT_MOVE_HOME; MOVE_HOMED arrives unsolicited
+        (H("40 04 0E 00 D0 01") + H(K10_HOME), b""),
+        (H("41 04 01 00 50 01"), H("42 04 0E 00 81 50") + H(K10_HOME)),
+        (H("43 04 01 00 50 01"), b""),
+        (H("29 04 01 00 50 01"), H("44 04 01 00 01 50") + H("2A 04 06 00 81 50 01 00")
+         + H(homed_idle)),
+        (H("11 04 01 00 50 01"), H("12 04 06 00 81 50 01 00 00 00 00 00")),
+        # move_to(45): status check, MOT_MOVE_ABSOLUTE 6144000 counts, poll until settled
+        *k10_status(homed_idle, "00 00 00 00"),
+        (H("53 04 06 00 D0 01 01 00 00 C0 5D 00"), b""),
+        *k10_status("10 24 00 A0", "00 A0 5D 00"),  # moving CW | active
+        # MOVE_COMPLETED (14-byte status form) interleaved before the status reply;
+        # the stage stopped 3 counts short of 6144000
+        (H("29 04 01 00 50 01"), H("64 04 0E 00 81 50 01 00 FD BF 5D 00 00 00 00 00")
+         + H(homed_idle) + H("2A 04 06 00 81 50 01 00") + H(homed_idle)),
+        (H("11 04 01 00 50 01"), H("12 04 06 00 81 50 01 00 FD BF 5D 00")),
+        # position, then a profiled stop
+        (H("11 04 01 00 50 01"), H("12 04 06 00 81 50 01 00 FD BF 5D 00")),
+        (H("65 04 01 02 50 01"), b""),
+    ]
+    motor, port = transcript_motor(steps, poll_interval=0.0)
+    ident = motor.identity
+    assert (ident.vendor, ident.model, ident.serial, ident.firmware) == (
+        "Thorlabs", "K10CR1", "55000123", "1.0.3")
+    assert motor.kind is AxisKind.ROTARY
+    motor.home(timeout=1.0)
+    motor.move_to(45.0)
+    final = motor.wait(timeout=1.0)
+    assert final == pytest.approx(45.0 - 3 / (409600 / 3))
+    assert motor.position == pytest.approx(45.0, abs=1e-4)
+    motor.stop()
+    port.assert_complete()
+    assert motor.unsolicited_count == 2  # MOVE_HOMED, MOVE_COMPLETED
+    motor.close()
+    motor.close()
+
+
+def test_kdc101_prm1_transcript_uses_dc_status_and_relative_moves():
+    def dc(status: str, counts: str) -> tuple[bytes, bytes]:
+        return (H("90 04 01 00 50 01"),
+                H("91 04 0E 00 81 50 01 00") + H(counts) + bytes(4) + H(status))
+
+    homed_idle = "00 25 00 80"
+    steps = open_steps(info_reply(27000456, b"KDC101", stage_id=6), PRM_HOME, PRM_VEL)
+    steps += [
+        dc(homed_idle, "00 00 00 00"),                       # move_to(45): ready check
+        (H("53 04 06 00 D0 01 01 00 70 51 01 00"), b""),    # 45 deg = 86384 counts
+        dc(homed_idle, "70 51 01 00"),                       # wait: settled at target
+        # move_by(-1): ready check, position counter, MOT_MOVE_RELATIVE by -1919 counts
+        # (round(44 * 1919.64) - 86384 = 84464 - 86384)
+        dc(homed_idle, "70 51 01 00"),
+        (H("11 04 01 00 50 01"), H("12 04 06 00 81 50 01 00 70 51 01 00")),
+        (H("48 04 06 00 D0 01 01 00") + struct.pack("<i", 84464 - 86384), b""),
+        # velocity query and change keep the acceleration
+        (H("14 04 01 00 50 01"), H("15 04 0E 00 81 50") + H(PRM_VEL)),
+        (H("14 04 01 00 50 01"), H("15 04 0E 00 81 50") + H(PRM_VEL)),
+        (H("13 04 0E 00 D0 01 01 00 00 00 00 00 93 00 00 00")
+         + struct.pack("<i", 214708), b""),               # 5 deg/s
+        (H("14 04 01 00 50 01"), H("15 04 0E 00 81 50 01 00 00 00 00 00 93 00 00 00")
+         + struct.pack("<i", 214708)),
+    ]
+    motor, port = transcript_motor(steps, stage="PRM1-Z8")
+    assert motor.identity.extra["stage"] == "PRM1-Z8"
+    motor.move_to(45.0, wait=True, timeout=1.0)
+    motor.move_by(-1.0)
+    assert motor.velocity == pytest.approx(10.0, rel=1e-5)
+    motor.velocity = 5.0
+    port.assert_complete()
+
+
+def test_status_decoding_of_limits_homing_and_errors():
+    steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL)
+    steps += k10_status("01 02 00 80", "00 00 00 00")        # CW limit, homing
+    steps += k10_status("02 04 00 C0", "00 00 00 00")        # CCW limit, homed, error
+    motor, port = transcript_motor(steps)
+    s = motor.status()
+    assert s.at_forward_limit and not s.at_reverse_limit
+    assert s.is_homing and s.is_moving and not s.is_homed and s.is_enabled
+    s = motor.status()
+    assert s.at_reverse_limit and s.is_homed and s.error and "ERROR" in s.error
+    port.assert_complete()
+
+
+def test_wrong_model_fails_open_and_closes_the_port():
+    steps = open_steps(info_reply(27000456, b"KDC101", stage_id=6), K10_HOME, K10_VEL)[:2]
+    port = TranscriptSerial(steps, baudrate=115200)
+    with pytest.raises(ConnectionFailed) as info:
+        AptMotor(port, name="rot", stage="K10CR1", timeout=0.2, **FAST)
+    assert info.value.device == "rot" and info.value.command == "HW_REQ_INFO"
+    assert "KDC101" in str(info.value)
+    assert not port.is_open
+
+
+def test_rich_response_error_is_a_controller_error_with_code():
+    steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL)
+    rich = struct.pack("<HH64s", 0x0453, 0x21, b"refused")
+    steps += [(H("29 04 01 00 50 01"), H("81 00 44 00 81 50") + rich)]
+    motor, port = transcript_motor(steps)
+    with pytest.raises(ControllerError) as info:
+        motor.status()
+    err = info.value
+    assert err.code == 0x21 and err.device == "rot" and err.command == "MOT_REQ_STATUSBITS"
+    assert "MOT_MOVE_ABSOLUTE" in str(err) and "refused" in str(err)
+    port.assert_complete()
+
+
+def test_constructor_validates_arguments():
+    with pytest.raises(ValueError, match="unknown APT stage"):
+        AptMotor("simapt://x", name="a", stage="Z825")
+    with pytest.raises(ValueError, match="velocity"):
+        AptMotor("simapt://x", name="a", stage="K10CR1", velocity=50.0)
+    with pytest.raises(ValueError, match="counter range"):
+        AptMotor("simapt://x", name="a", stage="K10CR1", soft_limits=(-1e6, 1e6))
+
+
+def test_stage_scaling_table():
+    k10 = STAGES["K10CR1"]
+    assert k10.counts_per_unit == pytest.approx(136533.33, abs=0.01)
+    assert (k10.velocity_scale, k10.acceleration_scale) == (7329109.0, 1502.0)
+    prm = STAGES["PRM1-Z8"]
+    assert prm.counts_per_unit == 1919.6418578623391
+    # KDC101: velocity = counts/s * 2048/6e6 * 65536 -> 42941.66 per deg/s for a PRM1-Z8
+    assert prm.velocity_scale == pytest.approx(42941.66, abs=0.01)
+    assert prm.acceleration_scale == pytest.approx(14.66, abs=0.01)
+    mts = STAGES["MTS25-Z8"]
+    assert mts.counts_per_unit == 34304.0 and mts.kind is AxisKind.LINEAR
+    assert mts.velocity_scale == pytest.approx(767367.49, abs=0.01)
+    assert mts.acceleration_scale == pytest.approx(261.93, abs=0.01)
+
+
+# --------------------------------------------------------------------------- contract
+
+QUERIES = {
+    "K10CR1": "model=K10CR1",
+    "PRM1-Z8": "model=KDC101&stage=PRM1-Z8",
+    "MTS25-Z8": "model=KDC101&stage=MTS25-Z8",
+}
+_names = itertools.count()
+
+
+def driver_options(stage: str) -> dict:
+    # The linear stage's zero is put mid-travel by the home offset, so that the
+    # contract's targets in [-10, 10] mm lie inside its 25 mm travel.
+    return {"home_offset": 12.5} if stage == "MTS25-Z8" else {}
+
+
+@pytest.fixture(params=[(s, t) for s in QUERIES for t in ("url", "pty")],
+                ids=lambda p: f"{p[0]}-{p[1]}")
+def axis_factory(request):
+    stage, transport = request.param
+    servers: list[PtyServer] = []
+
+    def make() -> AptMotor:
+        name = f"ax{next(_names)}"
+        options = {**FAST, **driver_options(stage)}
+        if transport == "url":
+            return AptMotor(f"simapt://{name}?{QUERIES[stage]}&speed={SPEED}", name=name,
+                            stage=stage, **options)
+        model = "K10CR1" if stage == "K10CR1" else "KDC101"
+        server = PtyServer(AptEmulator(name, model=model, stage=stage,
+                                       clock=ScaledClock(SPEED)))
+        servers.append(server)
+        return AptMotor(server.path, name=name, stage=stage, **options)
+
+    yield make
+    for server in servers:
+        server.close()
+
+
+class TestAptMotorContract(MotionAxisContract):
+    pass
+
+
+# --------------------------------------------------------------------------- behaviour
+
+
+def open_url(name="ax", stage="K10CR1", extra="", **kw) -> AptMotor:
+    url = f"simapt://{name}?{QUERIES[stage]}&speed={SPEED}{extra}"
+    return AptMotor(url, name=name, stage=stage, **{**FAST, **driver_options(stage), **kw})
+
+
+def test_pty_open_tolerates_rts_ioctl_failure():
+    server = PtyServer(AptEmulator("p", clock=ScaledClock(SPEED)))
+    with server, AptMotor(server.path, name="p", **FAST) as motor:
+        assert motor.rts_cycled is False
+        assert motor.identity.model == "K10CR1"
+    with open_url("u") as motor:
+        assert motor.rts_cycled is True
+
+
+def test_homing_completes_although_power_up_home_velocity_is_zero():
+    motor = open_url()
+    emu = registry.get("simapt", "ax")
+    assert emu.defaults.power_up_home_velocity == 0.0
+    assert emu.stage.home_velocity == pytest.approx(10.0)  # the driver wrote it
+    motor.home(timeout=5.0)
+    assert motor.is_homed
+    assert emu.stage.physical_position() == pytest.approx(0.0, abs=1e-9)
+
+
+def test_stale_messages_after_reconnect_are_discarded():
+    motor = open_url()
+    motor.home(timeout=5.0)
+    motor.move_to(12.0, wait=True, timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    emu.updates_on = True  # a previous session left the status stream running
+    motor.close()
+    again = open_url()  # on_connect puts a partial frame and stale frames in the pipe
+    assert emu.connections == 2 and not emu.updates_on
+    assert again.position == pytest.approx(12.0, abs=again.position_tolerance)
+    assert again.is_homed
+
+
+def test_stale_bytes_arriving_after_the_flush_are_resynchronised():
+    motor = open_url()
+    emu = registry.get("simapt", "ax")
+    frame = emu._status_update_frame()
+    emu._pending += [frame[3:], frame]  # a partial frame, then a whole one
+    assert motor.position == pytest.approx(0.0)
+    assert motor._unpacker.discarded >= 1 and motor.unsolicited_count >= 1
+
+
+def test_stop_short_is_within_default_tolerance_but_not_a_tiny_one():
+    motor = open_url(extra="&stop_short=100&seed=3")
+    motor.home(timeout=5.0)
+    motor.move_to(20.0, wait=True, timeout=5.0)
+    counts = registry.get("simapt", "ax").position_counts()
+    short = round(20.0 * 409600 / 3) - counts
+    assert 0 < short <= 100
+    motor.position_tolerance = 1e-6
+    with pytest.raises(MotionError) as info:
+        motor.move_to(30.0, wait=True, timeout=5.0)
+    assert info.value.device == "ax" and info.value.command == "wait"
+
+
+def test_status_stream_does_not_disturb_queries():
+    motor = open_url(stage="PRM1-Z8")
+    emu = registry.get("simapt", "ax")
+    emu._start_updates(0, 0, None)
+    motor.home(timeout=5.0)
+    motor.move_to(-30.0, wait=True, timeout=5.0)
+    assert motor.position == pytest.approx(-30.0, abs=motor.position_tolerance)
+    assert motor.unsolicited_count > 2
+
+
+def test_controller_that_answers_set_enable_is_tolerated():
+    emu = registry.get_or_create(
+        "simapt", "ax",
+        lambda n, o: AptEmulator(n, model="KDC101", clock=ScaledClock(SPEED),
+                                 defaults=replace(DEFAULTS, replies_to_set_enable=True)))
+    motor = open_url(stage="PRM1-Z8")
+    assert emu.enabled
+    motor.disable()
+    motor.enable()
+    motor.home(timeout=5.0)
+    motor.move_to(5.0, wait=True, timeout=5.0)
+    assert motor.position == pytest.approx(5.0, abs=motor.position_tolerance)
+
+
+def test_limit_switch_stops_linear_stage():
+    motor = open_url(stage="MTS25-Z8", soft_limits=(-13.0, 20.0))
+    motor.home(timeout=5.0)
+    with pytest.raises(LimitError) as info:
+        motor.move_to(14.0, wait=True, timeout=10.0)  # travel ends 12.5 mm past zero
+    assert info.value.device == "ax"
+    status = motor.status()
+    assert status.at_forward_limit
+    assert status.position == pytest.approx(12.5, abs=1e-3)
+    motor.move_to(0.0, wait=True, timeout=10.0)
+    assert not motor.status().at_forward_limit
+
+
+def test_stage_mismatch_on_kdc101_is_refused():
+    with pytest.raises(ConnectionFailed, match="MTS25-Z8"):
+        AptMotor(f"simapt://ax?{QUERIES['PRM1-Z8']}", name="ax", stage="MTS25-Z8", **FAST)
+
+
+def test_identify_blinks():
+    motor = open_url()
+    motor.identify()
+    assert motor.position == 0.0  # a query after it, so the emulator has seen it
+    assert registry.get("simapt", "ax").identify_count == 1
+
+
+# --------------------------------------------------------------------------- faults
+
+REQ_POS = H("11 04 01 00 50 01")
+
+
+def test_fault_drop_is_recovered_by_retrying_the_query():
+    motor = open_url(timeout=0.1)
+    emu = registry.get("simapt", "ax")
+    emu.faults.schedule(FaultKind.DROP, nth=1)
+    before = emu.received_log.count(REQ_POS)
+    assert motor.position == 0.0
+    assert emu.received_log.count(REQ_POS) - before == 2
+
+
+def test_fault_drop_every_reply_ends_in_a_typed_timeout():
+    motor = open_url(timeout=0.1, retries=1)
+    registry.get("simapt", "ax").faults.randomly(FaultKind.DROP, 1.0)
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeout) as info:
+        motor.position  # noqa: B018
+    assert time.monotonic() - t0 < 0.6
+    err = info.value
+    assert err.device == "ax" and err.command == "MOT_REQ_POSCOUNTER"
+    assert "GET_POSCOUNTER" in str(err)
+
+
+def test_fault_delay_past_timeout_retries_and_discards_the_late_reply():
+    motor = open_url(timeout=0.1, stage="PRM1-Z8")
+    motor.home(timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    emu.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)
+    assert motor.position == pytest.approx(0.0, abs=1e-3)
+    time.sleep(0.2)
+    count = motor.unsolicited_count
+    motor.move_to(3.0, wait=True, timeout=5.0)
+    assert motor.position == pytest.approx(3.0, abs=motor.position_tolerance)
+    assert motor.unsolicited_count > count  # the late reply was consumed, not used
+
+
+def test_fault_split_reply_is_reassembled():
+    motor = open_url()
+    registry.get("simapt", "ax").faults.schedule(FaultKind.SPLIT, nth=1, chunks=4,
+                                                 gap_s=0.01)
+    assert motor.velocity == pytest.approx(10.0)
+
+
+def test_fault_garbage_before_a_reply_is_skipped():
+    motor = open_url(stage="PRM1-Z8")
+    registry.get("simapt", "ax").faults.schedule(FaultKind.GARBAGE, nth=1, nbytes=23)
+    assert motor.velocity == pytest.approx(10.0, rel=1e-5)
+    assert motor._unpacker.discarded >= 1
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_fault_corrupt_ends_in_recovery_or_a_typed_error(seed):
+    motor = open_url(extra=f"&seed={seed}", timeout=0.1)
+    emu = registry.get("simapt", "ax")
+    emu.faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
+    try:
+        value = motor.position
+    except (ProtocolError, DeviceTimeout) as err:
+        assert err.device == "ax" and err.command == "MOT_REQ_POSCOUNTER"
+    else:
+        # A flipped header bit is caught and the query retried; a flipped data bit is
+        # undetectable (APT has no checksum) and can only be corrected by the next read.
+        assert isinstance(value, float)
+    assert motor.position == 0.0
+
+
+def test_fault_corrupt_header_is_retried():
+    recovered = 0
+    for seed in range(12):
+        registry.reset()
+        motor = open_url(extra=f"&seed={seed}", timeout=0.05)
+        emu = registry.get("simapt", "ax")
+        emu.faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
+        before = emu.received_log.count(REQ_POS)
+        value = motor.position
+        if emu.received_log.count(REQ_POS) - before == 2:
+            recovered += 1
+            assert value == 0.0
+        motor.close()
+    assert recovered >= 2  # the 12 seeds hit the header (6 of 12 bytes) several times
+
+
+def test_fault_unsolicited_message_is_consumed():
+    motor = open_url(stage="PRM1-Z8")
+    emu = registry.get("simapt", "ax")
+    emu.faults.schedule(FaultKind.UNSOLICITED, nth=1)
+    emu.faults.schedule(FaultKind.UNSOLICITED, nth=2)
+    assert motor.velocity == pytest.approx(10.0, rel=1e-5)
+    assert motor.position == 0.0
+    assert motor.unsolicited_count == 2
+
+
+def test_fault_disconnect_is_connection_failed_and_reconnect_recovers():
+    motor = open_url()
+    motor.home(timeout=5.0)
+    registry.get("simapt", "ax").faults.schedule(FaultKind.DISCONNECT, nth=1)
+    with pytest.raises(ConnectionFailed) as info:
+        motor.move_to(5.0)  # the ready check's reply is lost with the link
+    assert info.value.device == "ax" and info.value.command == "MOT_REQ_STATUSBITS"
+    motor.close()
+    again = open_url()  # reopening the port reconnects the emulated cable
+    assert again.is_homed
+    again.move_to(5.0, wait=True, timeout=5.0)
+    assert again.position == pytest.approx(5.0, abs=again.position_tolerance)
+
+
+def test_fault_error_state_is_a_controller_error_and_reenable_recovers():
+    motor = open_url(stage="PRM1-Z8")
+    motor.home(timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    emu.stage.velocity = 0.5  # a slow move, so the fault lands mid-way
+    motor.move_to(10.0)
+    emu.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0x21")
+    with pytest.raises(ControllerError) as info:
+        motor.wait(timeout=5.0)
+    err = info.value
+    # The HW_RICHRESPONSE arrives during the status poll of the wait.
+    assert err.device == "ax" and err.command == "MOT_REQ_DCSTATUSUPDATE"
+    assert err.code == 0x21 and "0x0021" in str(err)
+    assert motor.status().error  # latched in the status bits
+    with pytest.raises(ControllerError):
+        motor.wait(timeout=5.0)
+    motor.enable()  # the documented recovery: re-enable the channel
+    assert motor.status().error is None
+    motor.move_to(10.0, wait=True, timeout=10.0)
+    assert motor.position == pytest.approx(10.0, abs=motor.position_tolerance)
+
+
+def test_motion_refused_in_error_state_names_the_command():
+    motor = open_url(stage="PRM1-Z8")
+    motor.home(timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    emu.enter_error_state("7")
+    with pytest.raises(ControllerError) as info:
+        motor.move_to(1.0)
+    assert info.value.code == 7
+
+
+def test_failed_open_leaves_the_port_closed():
+    port = serial.serial_for_url("simapt://dead?speed=200", baudrate=115200)
+    registry.get("simapt", "dead").faults.randomly(FaultKind.DROP, 1.0)
+    with pytest.raises(DeviceTimeout) as info:
+        AptMotor(port, name="dead", timeout=0.05, retries=0, **FAST)
+    assert info.value.command == "HW_REQ_INFO"
+    assert not port.is_open
