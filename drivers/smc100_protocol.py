@@ -222,15 +222,18 @@ def match_reply(line: bytes, address: int, command: str) -> str | None:
         raise ProtocolError(f"incomplete reply line {line!r} (no CR LF)")
     body = line[: -len(TERMINATOR)]
     expected = echo(address, command)
-    start = 0
+    # The rightmost echo wins: noise before a reply may itself contain the echo, while
+    # no reply value (a number, hex digits, one letter, a stage or version text)
+    # contains its own address and command.
+    end = len(body)
     while True:
-        at = body.find(expected, start)
+        at = body.rfind(expected, 0, end)
         if at < 0:
             return None
         # A digit just before the echo means another address ("12TS" is not "2TS").
         if at == 0 or not chr(body[at - 1]).isdigit():
             break
-        start = at + 1
+        end = at + len(expected) - 1
     raw = body[at + len(expected):]
     if any(not 0x20 <= b < 0x7F for b in raw):
         raise ProtocolError(f"reply to {expected.decode()} carries non-ASCII bytes: {line!r}")
