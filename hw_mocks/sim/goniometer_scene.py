@@ -255,11 +255,14 @@ class GoniometerScene:
             e1 = np.cross(f, [1.0, 0.0, 0.0])
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(f, e1)
-        m = self.aperture_samples
-        g = (np.arange(m) + 0.5) / m * 2.0 - 1.0
-        gu, gv = np.meshgrid(g * radius, g * radius, indexing="ij")
-        inside = gu**2 + gv**2 <= radius**2
-        a_pts = c + gu[inside][:, None] * e1 + gv[inside][:, None] * e2
+
+        def disk_points(m: int) -> NDArray[np.float64]:
+            g = ((np.arange(m) + 0.5) / m * 2.0 - 1.0) * radius
+            gu, gv = np.meshgrid(g, g, indexing="ij")
+            inside = gu**2 + gv**2 <= radius**2
+            return c + gu[inside][:, None] * e1 + gv[inside][:, None] * e2
+
+        a_pts = disk_points(self.aperture_samples)
         da_ap = aperture_area_m2 / a_pts.shape[0]
 
         power = 0.0
@@ -278,18 +281,23 @@ class GoniometerScene:
         brdf = self._active_brdf()
         # Direct beam: aperture points whose ray back towards the source misses the sample.
         if float(f @ pose.source_dir) > 0.0:
-            blocked = np.zeros(a_pts.shape[0], dtype=bool)
+            # The beam is narrow: sample the aperture finely enough to resolve it (w/8).
+            m = min(max(self.aperture_samples,
+                        math.ceil(8.0 * diameter_mm / state.source.beam_radius_mm)), 256)
+            b_pts = disk_points(m)
+            db = aperture_area_m2 / b_pts.shape[0]
+            blocked = np.zeros(b_pts.shape[0], dtype=bool)
             if brdf is not None:
                 sn = float(pose.source_dir @ n)
                 if abs(sn) > 1e-12:
-                    t = -(a_pts @ n) / sn
-                    hit = a_pts + t[:, None] * pose.source_dir
+                    t = -(b_pts @ n) / sn
+                    hit = b_pts + t[:, None] * pose.source_dir
                     loc = pose.to_sample(hit)
                     blocked = (t > 0) & (loc[:, 0] ** 2 + loc[:, 1] ** 2
                                          <= self.sample_radius_mm**2)
-            downstream = a_pts @ pose.source_dir < 0.0
-            beam = self._beam_intensity(a_pts, state) * float(f @ pose.source_dir)
-            power += float(np.sum(np.where(~blocked & downstream, beam, 0.0)) * da_ap)
+            downstream = b_pts @ pose.source_dir < 0.0
+            beam = self._beam_intensity(b_pts, state) * float(f @ pose.source_dir)
+            power += float(np.sum(np.where(~blocked & downstream, beam, 0.0)) * db)
         if brdf is None or cos_i <= 0.0 or float(c @ n) <= 0.0:
             return power
         # Scattered light: footprint grid in sample coordinates aligned with the beam.
