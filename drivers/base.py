@@ -571,6 +571,13 @@ class Camera(Device):
     frames buffered so far; the next frame returned by :meth:`acquire` started its
     exposure after the change. Drivers whose backend buffers internally discard
     ``stale_frames`` frames in :meth:`_do_invalidate`.
+
+    Units: exposure in µs (``NaN`` where a backend cannot report it, e.g. a file source),
+    gain in the device's units (dB for the simulated camera), ROI in unbinned sensor
+    pixels; ``Frame.data`` has shape (roi.height // binning, roi.width // binning).
+    Streaming (:meth:`start_streaming`) fills a bounded :class:`FrameRing` from a worker
+    thread; when the consumer falls behind, the oldest frames are dropped and counted in
+    :attr:`dropped_frames`. ``acquire`` is refused while streaming.
     """
 
     #: Exposure range in microseconds, (min, max); drivers override.
@@ -673,7 +680,11 @@ class Camera(Device):
             self._do_invalidate()
 
     def trigger(self) -> None:
-        """Software trigger: start one exposure now."""
+        """Software trigger: start one exposure now.
+
+        The triggered frames are returned, in order, by the next :meth:`acquire` calls
+        before any new exposure starts; :meth:`invalidate` discards them.
+        """
         self._check_open("trigger")
         self._do_trigger()
 
@@ -689,7 +700,7 @@ class Camera(Device):
             raise StateError("camera is streaming", device=self.name, command="acquire",
                              hint="stop_streaming() first, or read from the stream")
         if timeout is None:
-            timeout = 2.0 + 2.0 * int(n) * self._do_get_exposure_us() * 1e-6
+            timeout = 2.0 + 2.0 * int(n) * self._exposure_s_for_timeout()
         deadline = time.monotonic() + timeout
         frames = []
         for _ in range(int(n)):
@@ -748,10 +759,15 @@ class Camera(Device):
     def _stream_loop(self) -> None:
         try:
             while not self._stream_stop.is_set():
-                exposure_s = self._do_get_exposure_us() * 1e-6
+                exposure_s = self._exposure_s_for_timeout()
                 self._ring.put(self._do_acquire_one(2.0 + 2.0 * exposure_s))
         except BaseException as err:  # surfaced by next_frame()
             self._stream_error = err
+
+    def _exposure_s_for_timeout(self) -> float:
+        """Exposure in seconds for timeouts; 0 where the backend cannot tell (NaN)."""
+        exposure_us = self._do_get_exposure_us()
+        return exposure_us * 1e-6 if math.isfinite(exposure_us) else 0.0
 
     def _do_close(self) -> None:
         if self._stream_thread is not None:
