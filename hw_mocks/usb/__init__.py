@@ -70,7 +70,7 @@ def backend_from_url(url: str) -> EmulatedUsbtmcBackend:
                 seed=int(options.get("seed", 0)),
             )
             _backends[name] = backend
-    firmware.faults.reconnect()
+    backend.replug()
     return backend
 
 

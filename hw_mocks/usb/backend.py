@@ -188,7 +188,8 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
         """State right after the device is plugged in (or re-plugged)."""
         self.kernel_driver_active = self.kernel_driver_at_plug
         self.configuration = 1 if self.configured_at_plug else 0
-        self.claimed: set[int] = set()
+        #: Claimed interfaces and the handle that holds each.
+        self.claimed: dict[int, _Handle] = {}
         self.out_halted = False
         self.in_halted = False
         self._reset_io()
@@ -211,8 +212,10 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
         self.firmware.faults.disconnected = True
 
     def replug(self) -> None:
-        """Backdoor: plug the cable back in."""
-        self.firmware.faults.reconnect()
+        """Backdoor: plug the cable back in (the kernel driver binds again)."""
+        with self._lock:
+            self.firmware.faults.reconnect()
+            self._alive()
 
     def _alive(self) -> None:
         """Raise ENODEV while unplugged; reset USB state after a re-plug."""
@@ -325,6 +328,9 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
     def close_device(self, dev_handle):
         with self._lock:
             self._handles.discard(dev_handle)
+            # Closing a handle releases what it claimed (as libusb_close does).
+            for intf in [i for i, h in self.claimed.items() if h is dev_handle]:
+                del self.claimed[intf]
 
     def set_configuration(self, dev_handle, config_value):
         with self._lock:
@@ -352,14 +358,16 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
             self._check(dev_handle)
             if self.configuration != 1 or intf != 0:
                 raise _usb_error("Entity not found", _LIBUSB_NOT_FOUND, errno.ENOENT)
-            if self.kernel_driver_active:
+            holder = self.claimed.get(intf)
+            if self.kernel_driver_active or (holder is not None and holder is not dev_handle):
                 raise _usb_error("Resource busy", _LIBUSB_BUSY, errno.EBUSY)
-            self.claimed.add(intf)
+            self.claimed[intf] = dev_handle
 
     def release_interface(self, dev_handle, intf):
         with self._lock:
             self._check(dev_handle)
-            self.claimed.discard(intf)
+            if self.claimed.get(intf) is dev_handle:
+                del self.claimed[intf]
 
     def is_kernel_driver_active(self, dev_handle, intf):
         with self._lock:
@@ -383,6 +391,8 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
     def clear_halt(self, dev_handle, ep):
         with self._lock:
             self._check(dev_handle)
+            # On the wire this is CLEAR_FEATURE(ENDPOINT_HALT); log it as such.
+            self.control_log.append((0x02, 0x01, 0, ep, 0))
             self._clear_halt(ep)
 
     def _clear_halt(self, ep: int) -> None:
