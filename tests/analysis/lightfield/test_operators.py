@@ -94,7 +94,7 @@ def test_propagation_round_trip_and_projection_conserves_flux():
 def test_sample_along_curves_equals_back_propagation_and_flags_outside():
     lf = gauss_field()
     pts = lf.y_mm[100:110]
-    vals, valid = sample_along_curves(lf, pts, 30.0, method="cubic")
+    vals, _ = sample_along_curves(lf, pts, 30.0, method="cubic")
     ref = propagate(lf, -30.0, method="cubic").radiance[100:110]
     assert np.allclose(vals, ref, atol=1e-12)
     v2, ok2 = sample_along_curves(lf, [195.0], 100.0)

@@ -129,7 +129,7 @@ def test_tilted_and_inhomogeneous_walls_reconstruct_the_object():
     res = solve_curves(m, GLOSSY, DOM, method="truncation", noise=1e-14, p_max=15,
                        normal_angle_rad=np.full(pts.size, tilt))
     sv = SpatiallyVaryingBRDF(GLOSSY, lambda y: 1.0 + 0.004 * y, lambda y: np.ones_like(y))
-    scene2, m2 = curves(sv, pts, OBJ)
+    _, m2 = curves(sv, pts, OBJ)
     res2 = solve_curves(m2, sv, DOM, method="truncation", noise=1e-14, p_max=15,
                         points_mm=pts)
     inner = np.abs(th) < 0.4
