@@ -506,7 +506,14 @@ class AptEmulator(FirmwareEmulator):
         _chan, direction, switch, vel, offset = struct.unpack("<HHHii", data)
         self.home_direction, self.home_limit_switch = direction, switch
         self.home_velocity_du, self.home_offset_counts = vel, offset
+        # StageMechanics times homing from its start at one speed: a new speed mid-way
+        # applies from now on, from where the stage is (not retroactively).
+        homing = self.stage.is_homing()
+        if homing:
+            self.stage.stop(immediate=True)
         self.stage.home_velocity = vel / self.profile.velocity_scale
+        if homing:
+            self.stage.start_homing()
         return []
 
     def _req_homeparams(self, p1, p2, data):
