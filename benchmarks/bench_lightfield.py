@@ -84,9 +84,11 @@ def dense(n_y: int, n_t: int) -> dict:
     tracemalloc.start()
     a = scene.operator_matrix(noisy.y_mm, th, noisy.dtheta_rad, noisy.y_mm).toarray()
     b = noisy.radiance.ravel()
-    t0 = time.perf_counter()
-    np.linalg.lstsq(a, b, rcond=1e-2)
-    t_lstsq = time.perf_counter() - t0
+    t_lstsq = np.inf
+    for _ in range(2):  # best of two: the box is shared
+        t0 = time.perf_counter()
+        np.linalg.lstsq(a, b, rcond=1e-2)
+        t_lstsq = min(t_lstsq, time.perf_counter() - t0)
     # lstsq is a truncated SVD: sweep its rcond on one SVD and keep the oracle-best
     u, s, vt = np.linalg.svd(a, full_matrices=False)
     ub = u.T @ b

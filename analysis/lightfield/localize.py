@@ -137,13 +137,16 @@ class Resolution:
 
 
 def effective_p_max(filter_factors: ArrayLike, orders: ArrayLike) -> float:
-    """p̂_max of a filter: ``(Σ_p φ_p − 1)/2`` (a truncation at P gives exactly P).
+    """p̂_max of a filter: the highest |p| whose filter factor is at least ½ (half power).
 
-    ``filter_factors`` (K,) or (R, K) (averaged over points), ``orders`` (K,).
+    A truncation at P gives exactly P; for a smooth (Wiener, Tikhonov) filter this is its
+    cut-off order.  ``filter_factors`` (K,) or (R, K) (averaged over points), ``orders``
+    (K,) the Fourier orders (or mode levels) of the factors; −1 when nothing passes.
     """
     phi = np.atleast_2d(np.asarray(filter_factors, dtype=float)).mean(axis=0)
-    del orders
-    return max(0.0, (float(phi.sum()) - 1.0) / 2.0)
+    p = np.abs(np.asarray(orders))
+    passed = p[phi >= 0.5]
+    return float(passed.max()) if passed.size else -1.0
 
 
 def theoretical_resolution(
