@@ -323,6 +323,16 @@ class AptEmulator(FirmwareEmulator):
         # its scaling is not documented for these controllers.
         return struct.pack("<HlhHL", 1, self.position_counts(), 0, 0, self.status_bits())
 
+    def status_update_frame(self) -> bytes:
+        """The status-update frame this controller streams (backdoor for tests)."""
+        with self.lock:
+            return self._status_update_frame()
+
+    def send_unsolicited(self, data: list[bytes]) -> None:
+        """Backdoor for tests: put bytes on the wire with the next poll, unasked."""
+        with self.lock:
+            self._pending += data
+
     def _status_update_frame(self) -> bytes:
         if self.profile.stepper:
             data = struct.pack("<HllL", 1, self.position_counts(), 0, self.status_bits())

@@ -307,8 +307,8 @@ def test_stale_messages_after_reconnect_are_discarded():
 def test_stale_bytes_arriving_after_the_flush_are_resynchronised():
     motor = open_url()
     emu = registry.get("simapt", "ax")
-    frame = emu._status_update_frame()
-    emu._pending += [frame[3:], frame]  # a partial frame, then a whole one
+    frame = emu.status_update_frame()
+    emu.send_unsolicited([frame[3:], frame])  # a partial frame, then a whole one
     assert motor.position == pytest.approx(0.0)
     assert motor._unpacker.discarded >= 1 and motor.unsolicited_count >= 1
 
@@ -329,7 +329,7 @@ def test_stop_short_is_within_default_tolerance_but_not_a_tiny_one():
 def test_status_stream_does_not_disturb_queries():
     motor = open_url(stage="PRM1-Z8")
     emu = registry.get("simapt", "ax")
-    emu._start_updates(0, 0, None)
+    emu.updates_on = True  # as after HW_START_UPDATEMSGS
     motor.home(timeout=5.0)
     motor.move_to(-30.0, wait=True, timeout=5.0)
     assert motor.position == pytest.approx(-30.0, abs=motor.position_tolerance)

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hw_mocks import registry
 from hw_mocks.clock import ManualClock
@@ -276,3 +278,17 @@ def test_emulator_imports_nothing_from_drivers():
     modules += [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
     assert not [m for m in modules if m.split(".")[0] == "drivers"]
     assert math.isfinite(PROFILES[("K10CR1", "K10CR1")].counts_per_unit)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.binary(max_size=40), max_size=10))
+def test_arbitrary_host_bytes_never_crash_the_emulator(chunks):
+    emu, clock = make("KDC101")
+    for chunk in chunks:
+        for frame in emu.receive(chunk):
+            assert frame[5] == 0x50  # everything it sends is a well-formed device frame
+        clock.advance(0.1)
+        emu.poll()
+    # and it still answers a proper request afterwards
+    emu.on_connect()  # a reconnect drops any half-received request
+    assert query(emu, short(0x0005, 0, 0), 0x0006)
