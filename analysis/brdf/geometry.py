@@ -207,9 +207,12 @@ class Geometry:
 
 
 def _check_polar(theta: NDArray[np.float64], name: str) -> None:
-    if not np.all(np.isfinite(theta)):
+    if theta.size == 0:
+        return
+    lo, hi = float(np.min(theta)), float(np.max(theta))  # NaN propagates into both
+    if not (np.isfinite(lo) and np.isfinite(hi)):
         raise ValueError(f"{name} contains NaN or inf")
-    if np.any(theta < -_ANGLE_TOL) or np.any(theta > np.pi / 2 + _ANGLE_TOL):
+    if lo < -_ANGLE_TOL or hi > np.pi / 2 + _ANGLE_TOL:
         raise ValueError(f"{name} must lie in [0, pi/2] radians (upper hemisphere)")
 
 

@@ -181,6 +181,28 @@ def smith_visibility_dalpha(
     return -0.25 * dden / den**2
 
 
+def ggx_smith_visibility_parts(
+    mu_i: ArrayLike, mu_r: ArrayLike, alpha: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(V, Si, Sr) of the GGX height-correlated visibility, S = √(α² + (1−α²)μ²), so that
+    :func:`ggx_smith_dv_dalpha` can reuse them (fitting evaluates both at the same α)."""
+    mi = np.maximum(np.asarray(mu_i, dtype=float), MU_FLOOR)
+    mr = np.maximum(np.asarray(mu_r, dtype=float), MU_FLOOR)
+    a2 = alpha * alpha
+    si = np.sqrt(a2 + (1.0 - a2) * mi * mi)
+    sr = np.sqrt(a2 + (1.0 - a2) * mr * mr)
+    return 0.5 / np.maximum(mr * si + mi * sr, _DEN_FLOOR), si, sr
+
+
+def ggx_smith_dv_dalpha(
+    mu_i: ArrayLike, mu_r: ArrayLike, alpha: float, v: NDArray, si: NDArray, sr: NDArray
+) -> NDArray[np.float64]:
+    """∂V/∂α = −2V² α (μr(1−μi²)/Si + μi(1−μr²)/Sr) from the parts above."""
+    mi = np.maximum(np.asarray(mu_i, dtype=float), MU_FLOOR)
+    mr = np.maximum(np.asarray(mu_r, dtype=float), MU_FLOOR)
+    return -2.0 * alpha * v * v * (mr * (1.0 - mi * mi) / si + mi * (1.0 - mr * mr) / sr)
+
+
 def separable_smith_visibility(
     mu_i: ArrayLike, mu_r: ArrayLike, alpha: ArrayLike, *, distribution: str = "beckmann"
 ) -> NDArray[np.float64]:

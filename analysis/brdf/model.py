@@ -69,7 +69,8 @@ class BRDFModel:
     value_fn : callable
         ``value_fn(p, geometry) -> ndarray`` of the geometry's shape.
     jac_fn : callable or None
-        ``jac_fn(p, geometry) -> ndarray`` of shape S + (k,): ∂f/∂p_j in natural units.
+        ``jac_fn(p, geometry) -> ndarray`` of shape S + (k,): ∂f/∂p_j in natural units; it
+        must return a new array (callers may modify it in place).
     energy_bounded : bool
         Whether the model promises DHR ≤ 1 for parameters in its physical range (stated in
         ``validity``).
@@ -233,9 +234,9 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
         raise ValueError(f"cannot add models with different units {sorted(units)}")
 
     def value(p: NDArray[np.float64], g: Geometry) -> NDArray[np.float64]:
-        total = np.zeros(g.shape)
-        for m, sl in zip(parts, slices, strict=True):
-            total = total + m.value_fn(p[sl], g)
+        total = np.array(parts[0].value_fn(p[slices[0]], g), dtype=float, copy=True)
+        for m, sl in zip(parts[1:], slices[1:], strict=True):
+            total += m.value_fn(p[sl], g)
         return total
 
     jac: JacFn | None = None

@@ -115,19 +115,42 @@ def cook_torrance(
             return 1.0
         return g._get(("fresnel", n), lambda: fresnel_unpolarized(g.cos_beta, n))
 
+    # F·D·V and its α-derivative depend only on α: memoise the last one per geometry, so the
+    # value and the Jacobian at the same parameters (every fitting iteration) share the work.
+    key = ("cook_torrance", distribution, masking, n)
+
+    fused = distribution == "ggx" and masking == "smith"
+
+    def terms(a: float, g: Geometry) -> tuple[NDArray, ...]:
+        """(F·D·V, F·D, V, extra) at width a, memoised for the last a; extra holds the GGX
+        Smith S terms reused by the derivative."""
+        hit = g.cache.get(key)
+        if hit is not None and hit[0] == a:
+            return hit[1]
+        fd = fres(g) * dist(g.cos_theta_h, a, g)
+        if fused:
+            v, si, sr = mf.ggx_smith_visibility_parts(g.mu_i, g.mu_r, a)
+            extra: tuple[NDArray, ...] = (si, sr)
+        else:
+            v, extra = vis(a, g), ()
+        out = (fd * v, fd, v, extra)
+        g.cache[key] = (a, out)
+        return out
+
+    def lobe(a: float, g: Geometry) -> NDArray:
+        return terms(a, g)[0]
+
+    def dlobe(a: float, g: Geometry) -> NDArray:
+        _, fd, v, extra = terms(a, g)
+        dv = mf.ggx_smith_dv_dalpha(g.mu_i, g.mu_r, a, v, *extra) if fused else dvis(a, g)
+        return fres(g) * ddist(g.cos_theta_h, a, g) * v + fd * dv
+
     def value(p: NDArray, g: Geometry) -> NDArray:
-        a = float(p[1])
-        return p[0] * fres(g) * dist(g.cos_theta_h, a, g) * vis(a, g)
+        return p[0] * lobe(float(p[1]), g)
 
     def jac(p: NDArray, g: Geometry) -> NDArray:
         a = float(p[1])
-        c = g.cos_theta_h
-        f = fres(g)
-        d = dist(c, a, g)
-        v = vis(a, g)
-        dks = f * d * v
-        dal = p[0] * f * (ddist(c, a, g) * v + d * dvis(a, g))
-        return np.stack(np.broadcast_arrays(dks, dal), axis=-1)
+        return np.stack(np.broadcast_arrays(lobe(a, g), p[0] * dlobe(a, g)), axis=-1)
 
     default = distribution if masking == "smith" else f"{distribution}_vcavity"
     fdesc = "F ≡ 1" if n is None else f"full Fresnel with n = {n}"

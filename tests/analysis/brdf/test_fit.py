@@ -160,3 +160,25 @@ def test_parameter_at_bound_is_flagged() -> None:
     y, sig, _ = noisy(m, [0.6, 0.0], ANGLES, seed=4, rel=0.01)
     fit = fit_brdf(m, y, *ANGLES, sigma=sig)
     assert fit.params[1] < 0.05
+
+
+def test_unidentifiable_parameter_is_flagged() -> None:
+    # two identical lobes: only the sum of their scales is identifiable
+    from analysis.brdf import sum_models
+
+    m = sum_models(get_model("lambert"), get_model("lambert"))
+    y, sig, _ = noisy(get_model("lambert"), [0.6], ANGLES, seed=2, rel=0.01)
+    fit = fit_brdf(m, y, *ANGLES, sigma=sig, start=[0.3, 0.3])
+    assert fit.rank_deficient
+    assert np.all(np.isnan(fit.stderr))
+    assert fit.params.sum() == pytest.approx(0.6, rel=0.01)
+
+
+def test_covariance_matches_direct_inverse() -> None:
+    m = get_model("lambert+ggx")
+    y, sig, _ = noisy(m, [0.3, 0.5, 0.2], ANGLES, seed=12)
+    fit = fit_brdf(m, y, *ANGLES, sigma=sig)
+    from analysis.brdf.geometry import make_geometry
+
+    j = m.jacobian_geometry(fit.params, make_geometry(*ANGLES)) / sig[:, None]
+    np.testing.assert_allclose(fit.covariance, np.linalg.inv(j.T @ j), rtol=1e-6)
