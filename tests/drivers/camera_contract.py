@@ -1,0 +1,170 @@
+"""The camera contract: what every :class:`drivers.base.Camera` implementation must do.
+
+A driver's test module subclasses :class:`CameraContract` and provides a fixture
+``camera_factory`` returning a *callable* that opens a fresh camera (closed by the fixture
+afterwards). The source behind it must deliver at least 100 frames; the suite keeps frames
+small and never waits on real exposures longer than a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from drivers.base import Camera, PixelFormat, Roi
+from drivers.errors import DeviceTimeout, StateError, UnsupportedFeature
+
+
+class CameraContract:
+    """Mixin of contract tests; needs a ``camera_factory`` fixture."""
+
+    @pytest.fixture
+    def camera(self, camera_factory) -> Camera:
+        cam = camera_factory()
+        yield cam
+        cam.close()
+
+    # identity and geometry -------------------------------------------------------------
+    def test_identity_and_sensor_shape(self, camera):
+        ident = camera.identity
+        assert ident.vendor and ident.model and ident.serial
+        height, width = camera.sensor_shape
+        assert height >= 1 and width >= 1
+        roi = camera.roi
+        assert roi.x + roi.width <= width and roi.y + roi.height <= height
+        assert isinstance(camera.pixel_format, PixelFormat)
+        assert camera.bit_depth == camera.pixel_format.bit_depth
+
+    # acquisition ------------------------------------------------------------------------
+    def test_acquire_returns_consistent_frames(self, camera):
+        frames = camera.acquire(3)
+        assert len(frames) == 3
+        roi, b, fmt = camera.roi, camera.binning, camera.pixel_format
+        for f in frames:
+            assert f.data.shape == (roi.height // b, roi.width // b)
+            assert f.data.dtype == fmt.dtype
+            assert f.bit_depth == fmt.bit_depth
+            assert f.roi == roi and f.binning == b
+            assert 0 < f.saturation_dn <= 2**f.bit_depth - 1
+            assert int(f.data.max()) <= 2**f.bit_depth - 1
+        idx = [f.index for f in frames]
+        assert idx == sorted(idx) and len(set(idx)) == 3
+        stamps = [f.timestamp for f in frames]
+        assert stamps == sorted(stamps)
+        assert abs(stamps[-1] - time.time()) < 60.0
+
+    @pytest.mark.parametrize("n", [0, -1, 1.5])
+    def test_acquire_rejects_bad_counts(self, camera, n):
+        with pytest.raises(ValueError):
+            camera.acquire(n)
+
+    # settings are honoured or refused, never ignored ------------------------------------
+    def test_exposure_is_honoured_or_refused(self, camera):
+        low, high = camera.exposure_range_us
+        target = float(min(max(2000.0, low), high))
+        try:
+            camera.exposure_us = target
+        except UnsupportedFeature:
+            return
+        assert camera.exposure_us == pytest.approx(target, rel=0.01)
+        assert camera.acquire(1)[0].exposure_us == pytest.approx(target, rel=0.01)
+
+    def test_gain_is_honoured_or_refused(self, camera):
+        low, high = camera.gain_range
+        target = 0.5 * (low + high)
+        try:
+            camera.gain = target
+        except UnsupportedFeature:
+            return
+        assert camera.gain == pytest.approx(target, rel=0.01, abs=1e-9)
+        assert camera.acquire(1)[0].gain == pytest.approx(target, rel=0.01, abs=1e-9)
+
+    def test_out_of_range_settings_raise_before_anything_changes(self, camera):
+        _low, high = camera.exposure_range_us
+        before = camera.exposure_us
+        with pytest.raises(ValueError):
+            camera.exposure_us = high * 10.0 + 1.0
+        with pytest.raises(ValueError):
+            camera.exposure_us = float("nan")
+        assert camera.exposure_us == before or (np.isnan(before) and np.isnan(camera.exposure_us))
+        height, width = camera.sensor_shape
+        with pytest.raises(ValueError):
+            camera.roi = Roi(0, 0, width + 1, height)
+        with pytest.raises(ValueError):
+            camera.binning = 0
+        with pytest.raises(TypeError):
+            camera.pixel_format = "MONO8"
+
+    def test_roi_is_honoured_or_refused(self, camera):
+        height, width = camera.sensor_shape
+        roi = Roi(width // 4, height // 4, max(width // 2, 1), max(height // 2, 1))
+        try:
+            camera.roi = roi
+        except UnsupportedFeature:
+            return
+        assert camera.roi == roi
+        frame = camera.acquire(1)[0]
+        assert frame.data.shape == (roi.height, roi.width)
+        assert frame.roi == roi
+
+    def test_pixel_format_is_honoured_or_refused(self, camera):
+        for fmt in PixelFormat:
+            try:
+                camera.pixel_format = fmt
+            except UnsupportedFeature:
+                continue
+            assert camera.pixel_format is fmt
+            frame = camera.acquire(1)[0]
+            assert frame.data.dtype == fmt.dtype and frame.bit_depth == fmt.bit_depth
+
+    # trigger, invalidate ------------------------------------------------------------------
+    def test_software_trigger_or_refusal(self, camera):
+        try:
+            camera.trigger()
+        except UnsupportedFeature:
+            return
+        after_trigger = time.time()
+        frame = camera.acquire(1)[0]
+        assert frame.timestamp <= after_trigger  # the exposure the trigger started
+        camera.trigger()
+        camera.invalidate()  # discards the triggered frame; acquiring still works
+        assert camera.acquire(1)[0].timestamp > after_trigger
+
+    # streaming ----------------------------------------------------------------------------
+    def test_streaming_fills_a_bounded_ring_and_counts_drops(self, camera):
+        camera.start_streaming()
+        try:
+            first = camera.next_frame(timeout=5.0)
+            assert first.data.size > 0
+            with pytest.raises(StateError):
+                camera.acquire(1)
+            deadline = time.monotonic() + 10.0
+            while camera.dropped_frames == 0 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert camera.dropped_frames > 0  # nobody read: the oldest frames went
+            second = camera.next_frame(timeout=5.0)
+            assert second.index > first.index
+        finally:
+            camera.stop_streaming()
+        assert not camera.is_streaming
+        assert camera.acquire(1)[0].data.size > 0
+
+    def test_next_frame_times_out_when_not_streaming(self, camera):
+        with pytest.raises(DeviceTimeout):
+            camera.next_frame(timeout=0.05)
+
+    # lifecycle -------------------------------------------------------------------------
+    def test_close_is_idempotent_and_final(self, camera_factory):
+        cam = camera_factory()
+        with cam:
+            cam.acquire(1)
+        assert cam.closed
+        cam.close()
+        with pytest.raises(StateError):
+            cam.acquire(1)
+        with pytest.raises(StateError):
+            _ = cam.exposure_us
+        with pytest.raises(StateError):
+            cam.exposure_us = 1000.0
