@@ -370,10 +370,11 @@ class AptMotor(MotionAxis):
                     msg = self._await(reply_id, command)
                     return decode(msg)
                 except (DeviceTimeout, ProtocolError) as err:
-                    if isinstance(err, ProtocolError) and err.device is None:
-                        err = ProtocolError(err.message, device=self.name, command=command,
-                                            hint=err.hint)
                     last = err
+                    if isinstance(err, ProtocolError) and err.device is None:
+                        last = ProtocolError(err.message, device=self.name, command=command,
+                                             hint=err.hint)
+                        last.__cause__ = err
                     log.debug("%s: %s attempt %d failed: %s", self.name, command,
                               attempt + 1, err)
         assert last is not None
@@ -440,7 +441,8 @@ class AptMotor(MotionAxis):
             raise ControllerError(
                 "the controller reported an error event (HW_RESPONSE)",
                 device=self.name, command=command,
-                hint="read status() for the error bits; re-enable the axis to clear it",
+                hint="read status() for the error bits; disable and re-enable the axis "
+                     "(or power-cycle the controller) to clear it",
             )
         if msg.msg_id == MessageId.HW_RICHRESPONSE:
             rich = apt.decode_rich_response(msg)
@@ -449,7 +451,8 @@ class AptMotor(MotionAxis):
                 f"the controller reported error code 0x{rich.code:04X} "
                 f"({rich.notes or 'no description'}; concerning {about})",
                 code=rich.code, device=self.name, command=command,
-                hint="read status() for the error bits; re-enable the axis to clear it",
+                hint="read status() for the error bits; disable and re-enable the axis "
+                     "(or power-cycle the controller) to clear it",
             )
         self.unsolicited_count += 1
         self.last_unsolicited = msg

@@ -363,6 +363,14 @@ def test_limit_switch_stops_linear_stage():
     assert not motor.status().at_forward_limit
 
 
+def test_stepping_clock_makes_motion_deterministic():
+    # step=: every clock reading advances emulated time, so polling drives the motion.
+    motor = AptMotor("simapt://ax?model=K10CR1&step=0.05", name="ax", **FAST)
+    motor.home(timeout=5.0)
+    motor.move_to(-60.0, wait=True, timeout=5.0)
+    assert motor.position == pytest.approx(-60.0, abs=motor.position_tolerance)
+
+
 def test_stage_mismatch_on_kdc101_is_refused():
     with pytest.raises(ConnectionFailed, match="MTS25-Z8"):
         AptMotor(f"simapt://ax?{QUERIES['PRM1-Z8']}", name="ax", stage="MTS25-Z8", **FAST)
