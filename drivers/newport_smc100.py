@@ -41,6 +41,7 @@ millimetres for linear ones); no scaling happens here.
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import serial
@@ -147,7 +148,10 @@ class Smc100Axis(MotionAxis):
         xonxoff: bool = False,
     ) -> None:
         if isinstance(kind, str):
-            kind = AxisKind[kind.upper()]
+            try:
+                kind = AxisKind[kind.upper()]
+            except KeyError:
+                raise ValueError(f"kind must be 'rotary' or 'linear', got {kind!r}") from None
         format_command(address, "TS")  # validates the address before anything opens
         if not reply_timeout > 0 or not reset_timeout > 0:
             raise ValueError("timeouts must be > 0")
@@ -162,6 +166,9 @@ class Smc100Axis(MotionAxis):
         self.retries = int(retries)
         self.reset_timeout = float(reset_timeout)
         self._rx = bytearray()
+        # One exchange (request and its reply, or a command and its TE) at a time: a
+        # stop() from another thread must not read the reply a poll is waiting for.
+        self._io_lock = threading.RLock()
         #: Replies skipped while waiting for ours (stale, foreign or noise), for diagnosis.
         self.skipped_lines = 0
         #: A command error left in the latch before we connected (``None`` if clean).
@@ -277,9 +284,10 @@ class Smc100Axis(MotionAxis):
         last: DeviceError | None = None
         text = self._text(command, value)
         for _ in range(attempts):
-            self._send(command, value)
             try:
-                return parse(self._read_reply(command, text, timeout))
+                with self._io_lock:
+                    self._send(command, value)
+                    return parse(self._read_reply(command, text, timeout))
             except (DeviceTimeout, ProtocolError) as err:
                 last = err
         assert last is not None
@@ -290,10 +298,10 @@ class Smc100Axis(MotionAxis):
 
     def _read_error(self, text: str) -> CommandErrorCode | None:
         """Read the TE latch once (never retried: reading clears it)."""
-        sent = self._send("TE")
         try:
-            value = self._read_reply("TE", sent)
-            return parse_error_code(value)
+            with self._io_lock:
+                sent = self._send("TE")
+                return parse_error_code(self._read_reply("TE", sent))
         except ProtocolError as err:
             raise ProtocolError(f"unreadable error reply after {text}: {err.message}",
                                 device=self.name, command=text,
@@ -307,8 +315,9 @@ class Smc100Axis(MotionAxis):
 
     def _command(self, command: str, value: float | str | None = None) -> None:
         """An unanswered command, checked with TE; raises the mapped error if refused."""
-        text = self._send(command, value)
-        code = self._read_error(text)
+        with self._io_lock:
+            text = self._send(command, value)
+            code = self._read_error(text)
         if code is not None:
             raise self._refusal(code, text)
 
@@ -440,8 +449,9 @@ class Smc100Axis(MotionAxis):
         self._command("PR", delta)
 
     def _do_stop(self) -> None:
-        text = self._send("ST")
-        code = self._read_error(text)
+        with self._io_lock:
+            text = self._send("ST")
+            code = self._read_error(text)
         # After a stop, relative moves count from where the axis comes to rest.
         self._target = None
         if code is not None and code.letter not in _STATE_LETTERS | {"H"}:
@@ -468,7 +478,8 @@ class Smc100Axis(MotionAxis):
 
     # helpers ------------------------------------------------------------------
     def _reset(self) -> None:
-        self._send("RS")  # answers nothing, and nothing at all while it reboots
+        with self._io_lock:
+            self._send("RS")  # answers nothing, and nothing at all while it reboots
         self._wait_answering("RS")
         self._target = None
         if self._velocity_set is not None:

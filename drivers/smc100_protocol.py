@@ -231,7 +231,7 @@ def match_reply(line: bytes, address: int, command: str) -> str | None:
         if at < 0:
             return None
         # A digit just before the echo means another address ("12TS" is not "2TS").
-        if at == 0 or not chr(body[at - 1]).isdigit():
+        if at == 0 or not 0x30 <= body[at - 1] <= 0x39:  # ASCII digits only
             break
         end = at + len(expected) - 1
     raw = body[at + len(expected):]

@@ -227,7 +227,11 @@ class Smc100Emulator(FirmwareEmulator):
     def enter_error_state(self, code: str | None = None) -> None:
         """Set positioner error bits (``code``: 4 hex digits, default following error)."""
         with self.lock:
-            bits = int(code, 16) if code else _BIT_FOLLOWING
+            try:
+                bits = int(code, 16) if code else _BIT_FOLLOWING
+            except ValueError:
+                raise ValueError(f"SMC100 error state code must be 4 hex digits of "
+                                 f"positioner error bits, got {code!r}") from None
             self._update()
             self.fault_bits |= bits
             family = _family(self.state)
