@@ -149,6 +149,38 @@ class FitResult:
         """{name: value}."""
         return dict(zip(self.param_names, (float(v) for v in self.params), strict=True))
 
+    def to_dict(self) -> dict[str, object]:
+        """Plain Python/NumPy values (for storing in a run file's analysis group or JSON)."""
+        out: dict[str, object] = {
+            "model": self.model_name,
+            "param_names": list(self.param_names),
+            "units": list(self.units),
+            "params": self.params.tolist(),
+            "stderr": self.stderr.tolist(),
+            "covariance": self.covariance.tolist(),
+            "correlation": self.correlation.tolist(),
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "noise_scale": self.noise_scale,
+            "log_likelihood": self.log_likelihood,
+            "aic": self.aic,
+            "aicc": self.aicc,
+            "bic": self.bic,
+            "converged": self.converged,
+            "message": self.message,
+            "nfev": self.nfev,
+            "at_bound": list(self.at_bound),
+            "rank_deficient": self.rank_deficient,
+            "residual_kind": self.residual_kind,
+            "loss": self.loss,
+        }
+        if self.bootstrap is not None:
+            out["bootstrap_stderr"] = self.bootstrap.stderr.tolist()
+            out["bootstrap_ci_low"] = self.bootstrap.ci_low.tolist()
+            out["bootstrap_ci_high"] = self.bootstrap.ci_high.tolist()
+            out["bootstrap_n"] = int(self.bootstrap.samples.shape[0])
+        return out
+
     def table(self) -> list[tuple[str, float, float, str]]:
         """Rows (name, value, stderr, unit) for reports."""
         return [

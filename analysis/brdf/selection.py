@@ -21,7 +21,7 @@ there are at least two incidence angles.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -91,6 +91,16 @@ class SelectionResult:
     @property
     def chosen_fit(self) -> FitResult:
         return self.fits[self.chosen]
+
+    def to_dict(self) -> dict[str, object]:
+        """Plain values: the decision, the table (one dict per model) and every fit."""
+        return {
+            "chosen": self.chosen,
+            "criterion": self.criterion,
+            "rule": self.rule,
+            "table": [asdict(r) for r in self.table],
+            "fits": {k: f.to_dict() for k, f in self.fits.items()},
+        }
 
 
 def incidence_groups(theta_i: ArrayLike, *, decimals: int = 6) -> np.ndarray:

@@ -182,3 +182,17 @@ def test_covariance_matches_direct_inverse() -> None:
 
     j = m.jacobian_geometry(fit.params, make_geometry(*ANGLES)) / sig[:, None]
     np.testing.assert_allclose(fit.covariance, np.linalg.inv(j.T @ j), rtol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["lambert+ggx", "oren_nayar+beckmann", "ward", "hapke"])
+def test_lm_and_trf_solvers_reach_the_same_optimum(name: str) -> None:
+    m = get_model(name)
+    true = np.asarray(TRUTH[name])
+    y, sig, _ = noisy(m, true, ANGLES, seed=17, rel=0.03)
+    a = fit_brdf(m, y, *ANGLES, sigma=sig, solver="lm")
+    b = fit_brdf(m, y, *ANGLES, sigma=sig, solver="trf")
+    assert a.converged and b.converged
+    assert np.all(np.abs(a.params - b.params) <= 1e-3 * a.stderr + 1e-12)
+    assert a.chi2 == pytest.approx(b.chi2, rel=1e-9)
+    with pytest.raises(ValueError):
+        fit_brdf(m, y, *ANGLES, solver="lm", loss="cauchy")

@@ -85,3 +85,16 @@ def test_duplicate_candidates_rejected() -> None:
         select_model(parse_model_list("lambert,lambert"), y, *angles, sigma=sig)
     with pytest.raises(ValueError):
         select_model(parse_model_list("lambert"), y, *angles, sigma=sig, criterion="r2")
+
+
+def test_selection_result_serialises_to_plain_values() -> None:
+    import json
+
+    angles = scan_angles(6, out_of_plane=False)
+    y, sig, _ = noisy(get_model("lambert"), [0.5], angles, seed=0)
+    res = select_model(parse_model_list("lambert,lambert+ggx"), y, *angles, sigma=sig,
+                       run_cv=False)
+    d = json.loads(json.dumps(res.to_dict()))
+    assert d["chosen"] == "lambert"
+    assert [r["name"] for r in d["table"]] == ["lambert", "lambert+ggx"]
+    assert d["fits"]["lambert"]["param_names"] == ["rho"]
