@@ -19,6 +19,7 @@ device rejects sends no response, so its timeout is turned into the queued
 from __future__ import annotations
 
 import re
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -125,6 +126,8 @@ class PM100USB(PowerMeter):
     ) -> None:
         super().__init__(name)
         self.zero_poll_s = float(zero_poll_s)
+        # A setting and its SYST:ERR? check must not interleave with another thread's.
+        self._lock = threading.RLock()
         self._link = UsbtmcDevice(
             vendor_id=vendor_id, product_id=product_id, serial_number=serial_number,
             backend=backend, timeout_s=timeout_s, name=name,
@@ -191,21 +194,23 @@ class PM100USB(PowerMeter):
         self._command(command)
 
     def _query(self, command: str) -> str:
-        try:
-            return self._link.query(command)
-        except DeviceTimeout as timeout:
-            # A rejected query sends no response: the error queue says why.
-            errors = self._drain_errors()
-            if errors:
-                raise self._controller_error(errors, command) from timeout
-            raise
+        with self._lock:
+            try:
+                return self._link.query(command)
+            except DeviceTimeout as timeout:
+                # A rejected query sends no response: the error queue says why.
+                errors = self._drain_errors()
+                if errors:
+                    raise self._controller_error(errors, command) from timeout
+                raise
 
     def _query_number(self, command: str) -> float:
         return parse_scpi_number(self._query(command), command=command, device=self.name)
 
     def _command(self, command: str) -> None:
-        self._link.write(command)
-        errors = self._drain_errors()
+        with self._lock:
+            self._link.write(command)
+            errors = self._drain_errors()
         if errors:
             raise self._controller_error(errors, command)
 

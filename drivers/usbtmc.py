@@ -227,7 +227,7 @@ class UsbtmcDevice:
         self._btag = 0
         self._closed = False
         self._interface: int | None = None
-        self._detached = False
+        self._detached: int | None = None   # interface taken from the kernel driver
         self.dev = self._find(vendor_id, product_id, serial_number, backend)
         try:
             self._open(chunk_size, read_size)
@@ -270,7 +270,7 @@ class UsbtmcDevice:
         try:
             if self._kernel_driver_active(number):
                 self.dev.detach_kernel_driver(number)
-                self._detached = True
+                self._detached = number
             self._ensure_configuration(intf)
             usb.util.claim_interface(self.dev, number)
             self._interface = number
@@ -346,13 +346,15 @@ class UsbtmcDevice:
         try:
             if self._interface is not None:
                 usb.util.release_interface(dev, self._interface)
-            if self._detached and self._interface is not None:
-                # Give the interface back to the kernel driver we took it from.
-                dev.attach_kernel_driver(self._interface)
+            if self._detached is not None:
+                # Give the interface back to the kernel driver we took it from, also
+                # when opening failed after the detach.
+                dev.attach_kernel_driver(self._detached)
         except (usb.core.USBError, NotImplementedError):
             pass   # unplugged or unsupported: nothing left to give back
         finally:
             self._interface = None
+            self._detached = None
             with contextlib.suppress(usb.core.USBError):
                 usb.util.dispose_resources(dev)
 

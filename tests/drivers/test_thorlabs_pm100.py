@@ -9,6 +9,7 @@ out as ``(I − I_zero)/R(λ_set)``.
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import numpy as np
@@ -311,3 +312,29 @@ def test_any_in_range_wavelength_round_trips_through_the_firmware(wavelength):
     assert fw.error_queue == []
     reply = fw.receive(b"SENS:CORR:WAV?\n")[0]
     assert float(reply) == pytest.approx(float(f"{wavelength:.9g}"), rel=1e-6)
+
+
+def test_threads_sharing_the_meter_never_interleave_a_setting_and_its_error_check(meter):
+    failures: list[BaseException] = []
+
+    def settings_worker() -> None:
+        try:
+            for k in range(1, 40):
+                meter.averaging = k
+        except Exception as err:
+            failures.append(err)
+
+    def readings_worker() -> None:
+        try:
+            for _ in range(40):
+                parse_scpi_number(f"{meter.read_power_w():.6E}")
+        except Exception as err:
+            failures.append(err)
+
+    threads = [threading.Thread(target=settings_worker), threading.Thread(target=readings_worker)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=30)
+    assert failures == []
+    assert meter.averaging == 39
