@@ -24,6 +24,21 @@ How this driver deals with the protocol's habits
   distance away"): the base class accepts a final position within ``position_tolerance``.
 * Only idempotent queries are retried (after a timeout or an undecodable reply); motion
   commands are sent once. Every read has a deadline.
+
+Faults and what follows them
+----------------------------
+=========================  ===========================================================
+lost or late reply         the query is re-sent (``retries`` times), a late reply is
+                           consumed as stale later; then :class:`DeviceTimeout`
+reply split in pieces      reassembled by the stream parser
+garbage before a reply     skipped byte by byte (resynchronisation)
+corrupted header           the frame is rejected, the query retried as for a lost reply
+corrupted data bytes       undetectable (APT has no checksum); the next poll corrects it
+unsolicited message        consumed (counted in ``unsolicited_count``)
+link lost                  :class:`ConnectionFailed`; recover by closing and opening anew
+controller error           :class:`ControllerError` (HW_RESPONSE/RICHRESPONSE ``code``, or
+                           the status error bits); disable/enable the axis, re-home
+=========================  ===========================================================
 """
 
 from __future__ import annotations
