@@ -17,8 +17,10 @@ Default behaviour, declared once (see :data:`STAGE_MODELS` and :class:`Smc100Emu
   counter zeroed at the switch. A homing run longer than ``OT`` seconds ends in ``0B``
   with the homing time-out bit.
 - ``PA``/``PR`` move (only in READY, ``32``–``38``): ``28`` MOVING along a trapezoidal
-  profile with ``VA``/``AC``, then ``33`` READY from MOVING. Targets outside the software
-  limits ``SL``/``SR`` are refused with ``G``. ``PR`` counts from the set-point (``TH``).
+  profile with ``VA``/``AC``; the state stays MOVING for ``settle_s`` after the profile
+  ends (the servo settling into its in-position window), then ``33`` READY from
+  MOVING. Targets outside the software limits ``SL``/``SR`` are refused with ``G``.
+  ``PR`` counts from the set-point (``TH``).
 - ``ST`` decelerates a move at ``AC`` (→ ``33``) or aborts a homing run (→ ``0B``).
 - ``MM0``/``MM1``: READY ↔ DISABLE (``3C``/``34``); ``MM1`` clears fault bits.
 - ``RS`` reboots: nothing is answered for ``reset_busy_s`` (a "busy, no reply" window),
@@ -128,6 +130,8 @@ class Smc100Emulator(FirmwareEmulator):
         Length of the "busy, no reply" windows after ``RS`` and ``PW0`` (clock seconds).
     homing_timeout_s
         ``OT`` at power-up.
+    settle_s
+        Time a move stays MOVING after its profile ends (clock seconds).
     """
 
     scheme = "simsmc"
@@ -143,6 +147,7 @@ class Smc100Emulator(FirmwareEmulator):
         reset_busy_s: float = 0.5,
         pw0_busy_s: float = 3.0,
         homing_timeout_s: float = 120.0,
+        settle_s: float = 0.01,
         clock: Clock | None = None,
         seed: int = 0,
     ) -> None:
@@ -156,6 +161,8 @@ class Smc100Emulator(FirmwareEmulator):
         self.kind = kind
         self.reset_busy_s = float(reset_busy_s)
         self.pw0_busy_s = float(pw0_busy_s)
+        self.settle_s = float(settle_s)
+        self._motion_end = 0.0
         self.serial_number = f"B{10000 + seed % 90000:05d}"
         start = self.model.start_position if start_position is None else start_position
         self.stage = StageMechanics(
@@ -268,7 +275,7 @@ class Smc100Emulator(FirmwareEmulator):
                 # End of run reached: the motor is switched off where the switch tripped.
                 self.state = _DISABLE_MOVING
                 self.setpoint = self.stage.position()
-            else:
+            elif now >= self._motion_end + self.settle_s:
                 self.state = _READY_MOVING
 
     def _error_bits(self) -> int:
@@ -398,13 +405,15 @@ class Smc100Emulator(FirmwareEmulator):
             self.error_latch = "G"
             return
         self.setpoint = target
-        self.stage.move_to(target)
+        self._motion_end = self.clock.now() + self.stage.move_to(target)
         self.state = _MOVING
         self._update()  # a zero-length move is over at once
 
     def _cmd_ST(self, arg: str) -> None:
         family = _family(self.state)
         if family == "moving":
+            speed = abs(self.stage.velocity_now())
+            self._motion_end = self.clock.now() + speed / self.stage.acceleration
             self.stage.stop(immediate=False)
             target = self.stage.target()
             self.setpoint = self.stage.position() if target is None else target

@@ -8,7 +8,8 @@ the same controller):
 - ``speed=<factor>`` or ``step=<seconds>``: the emulator clock
   (:func:`hw_mocks.emulator.clock_from_options`);
 - ``seed``: fault-injector seed (default 0); ``start``: physical power-up position;
-- ``reset_busy``/``pw0_busy``: lengths of the "busy, no reply" windows in clock seconds.
+- ``reset_busy``/``pw0_busy``: lengths of the "busy, no reply" windows in clock seconds;
+- ``settle``: how long a move stays MOVING after its profile ends (clock seconds).
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ def _make(name: str, options: dict[str, str]) -> FirmwareEmulator:
         extra["reset_busy_s"] = float(options["reset_busy"])
     if "pw0_busy" in options:
         extra["pw0_busy_s"] = float(options["pw0_busy"])
+    if "settle" in options:
+        extra["settle_s"] = float(options["settle"])
     return Smc100Emulator(
         name,
         address=int(options.get("address", 1)),

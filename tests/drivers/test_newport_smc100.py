@@ -524,3 +524,25 @@ def test_wrong_baud_rate_fails_to_connect_quickly():
     with pytest.raises(ConnectionFailed):
         Smc100Axis(port, name="baud", reply_timeout=0.05)
     assert time.monotonic() - t0 < 1.0
+
+
+# --------------------------------------------------------------------------- real hardware
+
+
+@pytest.mark.hardware
+def test_real_controller_identity_and_status():
+    """Opt-in: ``SCATTERLAB_HW_SMC100=/dev/ttyUSB0`` (and ``..._ADDRESS``). Moves nothing."""
+    import os
+
+    port = os.environ.get("SCATTERLAB_HW_SMC100")
+    if not port:
+        pytest.skip("set SCATTERLAB_HW_SMC100 to the controller's port to run")
+    address = int(os.environ.get("SCATTERLAB_HW_SMC100_ADDRESS", "1"))
+    with Smc100Axis(port, name="hw_smc100", address=address, reply_timeout=1.0) as axis:
+        ident = axis.identity
+        assert ident.vendor == "Newport" and ident.firmware
+        status = axis.status()
+        assert status.error is None, status.error
+        low, high = axis.soft_limits
+        assert low <= 0.0 <= high
+        assert axis.velocity > 0 and axis.acceleration > 0

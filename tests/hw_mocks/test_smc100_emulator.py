@@ -166,8 +166,10 @@ def test_absolute_move_follows_the_trapezoid(emu, clock):
         assert tp == pytest.approx(profile.position(t0 + t), abs=1e-6)
         assert float(ask(emu, "1TH")[3:]) == 30.0
     clock.set(t0 + profile.duration + 1e-6)
-    assert ask(emu, "1TS") == "1TS000033"
     assert ask(emu, "1TP") == "1TP30.000000"
+    assert ask(emu, "1TS") == "1TS000028"  # settling into the in-position window
+    clock.set(t0 + profile.duration + emu.settle_s)
+    assert ask(emu, "1TS") == "1TS000033"
 
 
 def test_relative_move_counts_from_the_setpoint(emu, clock):
@@ -291,11 +293,12 @@ def test_configuration_stores_parameters_through_a_flash_write(emu, clock):
 
 def test_url_options_reach_the_emulator():
     port = serial.serial_for_url(
-        "simsmc://lin?address=4&kind=linear&start=-3&seed=9&step=0.001&reset_busy=0.2",
+        "simsmc://lin?address=4&kind=linear&start=-3&seed=9&step=0.001&reset_busy=0.2"
+        "&settle=0.05",
         baudrate=57600, timeout=0.2)
     emu = registry.get("simsmc", "lin")
     assert isinstance(emu, Smc100Emulator)
-    assert (emu.address, emu.kind, emu.reset_busy_s) == (4, "linear", 0.2)
+    assert (emu.address, emu.kind, emu.reset_busy_s, emu.settle_s) == (4, "linear", 0.2, 0.05)
     assert emu.stage.physical_position() == pytest.approx(-3.0)
     port.write(b"4SR?\r\n")
     assert port.read_until(b"\r\n") == b"4SR50.000000\r\n"
