@@ -31,7 +31,7 @@ from hw_mocks.firmware.pm100usb import parse_scpi_number as firmware_parse_numbe
 from hw_mocks.usb import backend_from_url, get_firmware
 
 URL = "simusb://power_meter?serial=P2000000&seed=3&speed=50"
-TIMEOUT_S = 0.15
+TIMEOUT_S = 0.25
 
 
 @pytest.fixture

@@ -31,7 +31,7 @@ from hw_mocks.usb.faults import UsbFaultKind
 
 VID, PID = 0x1313, 0x8072
 IDN = "Thorlabs,PM100USB,P2000000,1.7.0"
-TIMEOUT_S = 0.1
+TIMEOUT_S = 0.15
 
 # Class requests as (bmRequestType, bRequest) pairs (USBTMC 1.0 Table 15).
 INITIATE_CLEAR = (0xA1, 5)
