@@ -129,13 +129,27 @@ class StageMechanics:
         self.velocity = float(velocity)
         self.acceleration = float(acceleration)
         self.travel = (float(travel[0]), float(travel[1]))
-        self.home_velocity = float(home_velocity)
+        self._home_velocity = float(home_velocity)
+        self._homing = False
         self._position = float(start_position)  # physical
         self.counter_offset = float(start_position)  # physical - counter
         self._move: TrapezoidalProfile | None = None
         self._homing = False
         self.homed = False
         self.at_limit: str | None = None  # "forward" | "reverse" | None
+
+    @property
+    def home_velocity(self) -> float:
+        return self._home_velocity
+
+    @home_velocity.setter
+    def home_velocity(self, value: float) -> None:
+        """A new homing speed applies from now on, not retroactively."""
+        self._update()
+        if self._homing:
+            self._home_t0 = self.clock.now()
+            self._home_from = self._position
+        self._home_velocity = float(value)
 
     # queries ------------------------------------------------------------------
     def position(self) -> float:
