@@ -328,6 +328,7 @@ class _SolveResult:
     status: int
     message: str
     nfev: int
+    jac: NDArray[np.float64] | None = None  # residual Jacobian at x, when already known
 
 
 def _lm_solve(
@@ -362,6 +363,7 @@ def _lm_solve(
             return _SolveResult(u, cost, 1, "gradient tolerance reached", nfev)
         af = a[np.ix_(free, free)]
         d = np.maximum(np.diag(af), 1e-300)
+        first_try = True
         while True:
             step = np.zeros_like(u)
             try:
@@ -371,6 +373,14 @@ def _lm_solve(
                 if lam > 1e16:
                     return _SolveResult(u, cost, 0, "singular normal equations", nfev)
                 continue
+            if first_try and lam < 1.0:
+                # Gauss–Newton model reduction −gᵀδ − ½δᵀAδ: when even the (nearly) undamped
+                # step cannot gain ftol·cost, u is the optimum; skip evaluating it.
+                pred = -float(g @ step) - 0.5 * float(step @ a @ step)
+                if pred <= ftol * cost:
+                    return _SolveResult(u, cost, 2, "predicted reduction below tolerance",
+                                        nfev, jac)
+            first_try = False
             u_new = np.clip(u + step, lo, hi)
             r_new = _residuals(u_new, pr)
             nfev += 1
@@ -425,7 +435,10 @@ def _solve(
         max_nfev=max_nfev,
         args=(pr,),
     )
-    return _SolveResult(ls.x, float(ls.cost), int(ls.status), str(ls.message), int(ls.nfev))
+    return _SolveResult(
+        ls.x, float(ls.cost), int(ls.status), str(ls.message), int(ls.nfev),
+        ls.jac if loss == "linear" else None,  # for a robust loss ls.jac is rescaled
+    )
 
 
 def fit_brdf(
@@ -559,7 +572,7 @@ def _finish(
     chi2 = float(r @ r)
     dof = n - k
     s2 = 1.0 if sigma_known else chi2 / dof
-    jac = _jacobian(u, pr)
+    jac = res.jac if res.jac is not None else _jacobian(u, pr)
     cov, rank_def = _covariance(jac, s2, p, pr.log_mask)
     with np.errstate(invalid="ignore"):
         stderr = np.sqrt(np.diag(cov))
