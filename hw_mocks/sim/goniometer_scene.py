@@ -47,6 +47,16 @@ from hw_mocks.sim.world import WorldState
 
 __all__ = ["BrdfFunction", "GoniometerScene", "brdf_from_model", "lambertian_brdf"]
 
+#: The beam is cut where its intensity falls below 1e-16 of the peak (r⊥ > 4.3 w): no
+#: sensor resolves it (a 10 s exposure of the peak's tail there collects < 1e-6 photons),
+#: and it keeps the BRDF evaluation to the lit footprint.
+BEAM_CUTOFF_W2 = 0.5 * math.log(1e16)
+
+
+def _dot3(v: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """v · a over the last axis of ``v`` (shape (..., 3)) with a fixed 3-vector ``a``."""
+    return v[..., 0] * a[0] + v[..., 1] * a[1] + v[..., 2] * a[2]
+
 #: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays.
 BrdfFunction = Callable[[Any, Any, Any, Any], NDArray[np.float64]]
 
@@ -185,9 +195,9 @@ class GoniometerScene:
         if peak == 0.0:
             return np.zeros(points.shape[:-1])
         along = points @ state.pose.source_dir
-        r2 = np.einsum("...k,...k->...", points, points) - along * along
-        w = state.source.beam_radius_mm
-        return peak * np.exp(-2.0 * np.maximum(r2, 0.0) / (w * w))
+        r2 = np.maximum(np.einsum("...k,...k->...", points, points) - along * along, 0.0)
+        w2 = state.source.beam_radius_mm ** 2
+        return np.where(r2 <= BEAM_CUTOFF_W2 * w2, peak * np.exp(-2.0 * r2 / w2), 0.0)
 
     # Scene protocol ------------------------------------------------------------
     def radiance(
@@ -202,38 +212,43 @@ class GoniometerScene:
         n = pose.normal
         dist = float(np.linalg.norm(o))
         observer_dir = o / dist if dist > 0 else pose.detector_dir
-        veil = self.ambient_radiance + self._signature(observer_dir, state) * (
-            state.source.peak_intensity_w_m2()
-        )
+        peak = state.source.peak_intensity_w_m2()
+        veil = self.ambient_radiance + self._signature(observer_dir, state) * peak
         out = np.full(d.shape[:-1], veil, dtype=float)
         brdf = self._active_brdf()
-        on = n @ pose.source_dir > 0.0 and state.source.on
+        cos_i = float(n @ pose.source_dir)
         height = float(o @ n)
-        if brdf is None or not on or height <= 0.0:
+        if brdf is None or cos_i <= 0.0 or peak == 0.0 or height <= 0.0:
             return out  # nothing lit, or we look at the back of the sample
-        dn = d @ n
+        x_s, y_s = pose.sample_axes[0], pose.sample_axes[1]
+        # Ray–plane intersection x = o + t d, written per component (a (..., 3) @ (3,)
+        # product is several times slower in numpy for large ray bundles).
+        dn = _dot3(d, n)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(dn < 0.0, -height / np.where(dn < 0.0, dn, -1.0), -1.0)
-        hit = t > 0.0
-        points = o + t[..., np.newaxis] * d
-        local = pose.to_sample(points)
-        hit &= local[..., 0] ** 2 + local[..., 1] ** 2 <= self.sample_radius_mm**2
-        if not hit.any():
-            return out
-        p_hit = points[hit]
-        irradiance = self._beam_intensity(p_hit, state) * float(n @ pose.source_dir)
-        lit = irradiance > 0.0
+        u = float(o @ x_s) + t * _dot3(d, x_s)
+        v = float(o @ y_s) + t * _dot3(d, y_s)
+        # On the plane, r⊥² = u'² cos²θi + v'² in beam-aligned sample coordinates (u', v').
+        s_loc = pose.to_sample(pose.source_dir)
+        proj = math.hypot(s_loc[0], s_loc[1])
+        eu = (s_loc[0] / proj, s_loc[1] / proj) if proj > 1e-12 else (1.0, 0.0)
+        up = u * eu[0] + v * eu[1]
+        vp = -u * eu[1] + v * eu[0]
+        r_perp2 = up * up * (cos_i * cos_i) + vp * vp
+        w2 = state.source.beam_radius_mm ** 2
+        lit = ((t > 0.0) & (u * u + v * v <= self.sample_radius_mm**2)
+               & (r_perp2 <= BEAM_CUTOFF_W2 * w2))
         if not lit.any():
             return out
-        # Only evaluate the BRDF where light actually falls (the beam tails are cut at
-        # 1e-30 of the peak by underflow, far below any sensor's dark level).
+        irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
         ti, pi = pose.local_angles(pose.source_dir)
-        to_obs = -d[hit][lit]
-        tr, pr = pose.local_angles(to_obs)
+        d_lit = d[lit]
+        # Towards the observer: −d, in the sample frame.
+        lx, ly, lz = -_dot3(d_lit, x_s), -_dot3(d_lit, y_s), -_dot3(d_lit, n)
+        tr = np.arccos(np.clip(lz, -1.0, 1.0))
+        pr = np.arctan2(ly, lx)
         values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
-        lit_radiance = np.zeros(p_hit.shape[0])
-        lit_radiance[lit] = values * irradiance[lit]
-        out[hit] += lit_radiance
+        out[lit] += values * irradiance
         return out
 
     def power_on_aperture(
