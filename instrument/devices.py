@@ -186,13 +186,33 @@ class Bench:
         self.close()
 
 
+def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
+    """The world name and the virtual-bench configuration for an emulated profile.
+
+    What the profile already says is not repeated in ``[simulation]``: each motion role is
+    bound to its device URL, the power-meter head to the ``simusb://`` power meter, and the
+    arm length to the geometry's detector distance, unless the table overrides them.
+    """
+    config = dict(profile.simulation or {})
+    world = str(config.pop("world", "sim"))
+    roles = {role: spec.url for role, spec in profile.axes.items() if spec.is_simulated}
+    roles.update(config.get("roles", {}))
+    config["roles"] = roles
+    config.setdefault("arm_length_mm", profile.geometry.detector_distance_mm)
+    meters = [s.url for s in profile.devices.values() if _scheme(s.url) == "simusb"]
+    if meters:
+        head = dict(config.get("power_meter", {}))
+        head.setdefault("url", meters[0])
+        config["power_meter"] = head
+    return world, config
+
+
 def configure_simulation(profile: BenchProfile) -> None:
-    """Hand the profile's ``[simulation]`` table and device URLs to the virtual bench."""
+    """Create the virtual bench a profile's ``[simulation]`` table describes."""
     if profile.simulation is None:
         return
-    urls = {role: spec.url for role, spec in profile.devices.items()}
-    geometry = dict(vars(profile.geometry))
-    _entry(SIM_WORLD_ENTRY)(dict(profile.simulation), devices=urls, geometry=geometry)
+    world, config = simulation_config(profile)
+    _entry(SIM_WORLD_ENTRY)(world, config)
 
 
 def open_bench(profile: BenchProfile, *, roles: Iterable[str] | None = None) -> Bench:

@@ -1,0 +1,111 @@
+"""Events the run engine publishes to its subscribers.
+
+Subscribers are called **on the engine's worker thread**, in order, and must return
+quickly; a GUI hands each event to its own thread (a Qt signal, or the thread-safe
+:class:`EventQueue` below that a timer drains). A subscriber that raises is dropped from
+nothing and stops nothing: its error is reported once on stderr and the run goes on.
+"""
+
+from __future__ import annotations
+
+import queue
+from dataclasses import dataclass
+
+__all__ = [
+    "Event",
+    "EventQueue",
+    "Fault",
+    "Paused",
+    "PointCompleted",
+    "Progress",
+    "Resumed",
+    "RunFinished",
+    "RunStarted",
+]
+
+
+@dataclass(frozen=True)
+class RunStarted:
+    run_id: str
+    path: str
+    plan_kind: str
+    n_total: int
+    n_done: int          # > 0 when a run is resumed
+    estimated_s: float
+
+
+@dataclass(frozen=True)
+class PointCompleted:
+    """A point is durable on disk. Live values for plots."""
+
+    index: int
+    label: str
+    status: str          # "ok" | "skipped"
+    positions: dict[str, float]
+    angles: tuple[float, float, float, float] | None
+    exposure_us: float
+    power_w: float
+    signal: float
+    retries: int
+
+
+@dataclass(frozen=True)
+class Progress:
+    n_done: int
+    n_total: int
+    elapsed_s: float
+    eta_s: float
+
+
+@dataclass(frozen=True)
+class Fault:
+    device: str
+    cause: str
+    action: str          # "retry 1/3", "rehome", "skip point", "pause", "abort"
+    index: int | None
+
+
+@dataclass(frozen=True)
+class Paused:
+    reason: str
+    index: int | None    # the next point to run
+
+
+@dataclass(frozen=True)
+class Resumed:
+    index: int | None
+
+
+@dataclass(frozen=True)
+class RunFinished:
+    status: str          # "finished" | "aborted" | "paused" | "failed"
+    n_done: int
+    n_total: int
+    n_skipped: int
+    path: str
+    elapsed_s: float
+    message: str
+
+
+Event = RunStarted | PointCompleted | Progress | Fault | Paused | Resumed | RunFinished
+
+
+class EventQueue:
+    """A subscriber that queues events for another thread to :meth:`drain`."""
+
+    def __init__(self, maxsize: int = 0) -> None:
+        self._q: queue.Queue[Event] = queue.Queue(maxsize)
+
+    def __call__(self, event: Event) -> None:
+        self._q.put(event)
+
+    def drain(self) -> list[Event]:
+        out = []
+        while True:
+            try:
+                out.append(self._q.get_nowait())
+            except queue.Empty:
+                return out
+
+    def get(self, timeout: float | None = None) -> Event:
+        return self._q.get(timeout=timeout)

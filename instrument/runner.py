@@ -1,0 +1,170 @@
+"""Starting and resuming runs: plan + bench → run file, catalog row and engine.
+
+The CLI and the GUI both go through here, so a run started either way has the same file
+layout, catalog entry and provenance.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import secrets
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import h5py
+
+from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
+from drivers.errors import DeviceError
+from instrument.catalog import Catalog, RunRow
+from instrument.devices import Bench
+from instrument.engine import RunEngine
+from instrument.events import Event, Paused, RunFinished, RunStarted
+from instrument.kinematics import Angles
+from instrument.plans.build import Plan
+from instrument.plans.commands import ScanPoint
+from instrument.plans.planfile import parse_plan
+from instrument.storage import RunHeader, RunStore, recover
+
+__all__ = ["DEFAULT_RUNS_DIR", "new_run_id", "plan_from_run", "resume_run", "start_run"]
+
+DEFAULT_RUNS_DIR = Path("runs")
+
+
+def software_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"scatterlab {version('scatterlab')}"
+    except PackageNotFoundError:
+        return "scatterlab (not installed)"
+
+
+def new_run_id(kind: str) -> str:
+    """Sortable and unique: ``20260122-061502-brdf_in_plane-3fa2``."""
+    return f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}-{secrets.token_hex(2)}"
+
+
+def _nx_class(device) -> str:
+    if isinstance(device, MotionAxis):
+        return "NXpositioner"
+    if isinstance(device, Camera):
+        return "NXdetector"
+    if isinstance(device, PowerMeter):
+        return "NXmonitor"
+    if isinstance(device, LightSource):
+        return "NXsource"
+    return "NXcollection"
+
+
+def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
+    identities: dict[str, dict[str, str]] = {}
+    for role, dev in bench.devices.items():
+        try:
+            identities[role] = {k: str(v) for k, v in dev.identity.as_dict().items()}
+        except (DeviceError, AttributeError) as err:
+            identities[role] = {"error": str(err)}
+        spec = bench.profile.devices.get(role)
+        if spec is not None:
+            identities[role].update(driver=spec.driver, url=spec.url)
+    pts = plan.points
+    targets = plan.targets_array().tolist()
+    angles = [list(p.angles.as_tuple()) if p.angles else [math.nan] * 4 for p in pts]
+    geometry = {k: v for k, v in vars(bench.profile.geometry).items()
+                if isinstance(v, str | int | float)}
+    geometry["detector_solid_angle_sr"] = bench.profile.geometry.detector_solid_angle_sr
+    return RunHeader(
+        run_id=run_id, plan_kind=plan.kind, plan_name=plan.spec.name,
+        plan_text=plan.spec.source_text, profile_text=bench.profile.source_text,
+        bench_name=bench.profile.name, sample_name=plan.spec.sample_name,
+        sample_description=plan.spec.sample_description, axes=plan.axes,
+        planned_targets=targets, planned_angles=angles,
+        planned_label=[p.label for p in pts], planned_light=[p.light for p in pts],
+        planned_exposure_us=[math.nan if p.exposure_us is None else p.exposure_us
+                             for p in pts],
+        acquisition_policy=plan.spec.acquisition.as_json(),
+        retry_policies=json.dumps({r: d.retry.as_dict()
+                                   for r, d in bench.profile.devices.items()}),
+        identities=identities, device_kinds={r: _nx_class(d) for r, d in bench.devices.items()},
+        geometry=geometry, calibration=dict(plan.spec.calibration),
+        software_version=software_version(), created=time.time())
+
+
+def _track(engine: RunEngine, catalog: Catalog, run_id: str) -> None:
+    """Keep the catalog row's status and point count current (start, pause, end)."""
+
+    def on_event(ev: Event) -> None:
+        if isinstance(ev, RunStarted):
+            catalog.update(run_id, status="running", n_points=ev.n_done)
+        elif isinstance(ev, Paused):
+            catalog.update(run_id, status="paused", n_points=engine.n_done)
+        elif isinstance(ev, RunFinished):
+            catalog.update(run_id, status=ev.status, n_points=ev.n_done, ended=time.time())
+
+    engine.subscribe(on_event)
+
+
+def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_DIR,
+              fsync: bool = True, sync_interval_s: float = 0.25,
+              min_free_bytes: int = 64 << 20, catalog: bool = True,
+              run_id: str | None = None) -> RunEngine:
+    """Create the run file and catalog row; return the (not yet started) engine."""
+    runs_dir = Path(runs_dir)
+    run_id = run_id or new_run_id(plan.kind)
+    header = header_for(plan, bench, run_id)
+    path = runs_dir / f"{run_id}.h5"
+    store = RunStore.create(path, header, fsync=fsync, sync_interval_s=sync_interval_s,
+                            min_free_bytes=min_free_bytes)
+    engine = RunEngine(bench, plan, store)
+    if catalog:
+        cat = Catalog(runs_dir)
+        cat.add(RunRow(run_id, plan.spec.sample_name, plan.kind, plan.spec.name,
+                       bench.profile.name, "created", header.created, None, 0,
+                       len(plan.points), str(path.resolve())))
+        _track(engine, cat, run_id)
+    return engine
+
+
+def plan_from_run(path: str | Path, bench: Bench) -> Plan:
+    """The plan of a run, exactly as stored (points, order, policy), on ``bench``."""
+    with h5py.File(path, "r") as f:
+        p = f["entry/plan"]
+        text = p["plan_text"][()].decode()
+        axes = tuple(a.decode() if isinstance(a, bytes) else a for a in p["axes"][()])
+        targets = p["planned_targets"][()]
+        angles = p["planned_angles"][()]
+        labels = [s.decode() if isinstance(s, bytes) else s for s in p["planned_label"][()]]
+        light = p["planned_light"][()]
+        exposure = p["planned_exposure_us"][()]
+    spec = parse_plan(text, source=f"plan stored in {path}")
+    points = []
+    for k in range(len(labels)):
+        tg = tuple((r, float(targets[k, j])) for j, r in enumerate(axes)
+                   if not math.isnan(targets[k, j]))
+        a = None if math.isnan(angles[k, 0]) else Angles(*map(float, angles[k]))
+        e = None if math.isnan(exposure[k]) else float(exposure[k])
+        points.append(ScanPoint(k, tg, a, labels[k], bool(light[k]), e))
+    return Plan(replace(spec), bench.profile, axes, tuple(points))
+
+
+def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
+               sync_interval_s: float = 0.25, min_free_bytes: int = 64 << 20,
+               catalog: bool = True) -> RunEngine:
+    """Recover the run file from its journal and return an engine for the missing points."""
+    path = Path(path)
+    recover(path)
+    plan = plan_from_run(path, bench)
+    store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
+                                  min_free_bytes=min_free_bytes)
+    store.event({"kind": "resumed", "n_done": len(done)})
+    engine = RunEngine(bench, plan, store, done=done)
+    if catalog:
+        cat = Catalog(path.parent)
+        h = store.header
+        if cat.get(h.run_id) is None:
+            cat.add(RunRow(h.run_id, h.sample_name, h.plan_kind, h.plan_name, h.bench_name,
+                           "paused", h.created, None, len(done), len(plan.points),
+                           str(path.resolve())))
+        _track(engine, cat, h.run_id)
+    return engine
