@@ -41,6 +41,7 @@ millimetres for linear ones); no scaling happens here.
 from __future__ import annotations
 
 import math
+import re
 import threading
 import time
 
@@ -93,6 +94,8 @@ _STATE_LETTERS = frozenset("DEIJKLM")
 _LIMIT_LETTERS = frozenset("GN")
 #: Largest line we accept before declaring the stream garbage.
 _MAX_LINE = 256
+#: Any controller's reply to anything: skipped as stale or foreign, not counted as noise.
+_ANY_REPLY = re.compile(rb"\d{1,2}[A-Z]{2}[\x20-\x7e]*\r\n")
 
 
 class Smc100Axis(MotionAxis):
@@ -259,9 +262,9 @@ class Smc100Axis(MotionAxis):
             try:
                 line = self._read_line(deadline, text)
             except DeviceTimeout as err:
-                if noise:
+                if noise:  # silence after line noise: name the noise as the cause
                     raise ProtocolError(
-                        f"no valid reply; received instead {noise[:3]!r}",
+                        f"no valid reply; received line noise {noise[:3]!r}",
                         device=self.name, command=text,
                     ) from err
                 raise
@@ -272,7 +275,8 @@ class Smc100Axis(MotionAxis):
             if value is not None:
                 return value
             self.skipped_lines += 1
-            noise.append(line)
+            if not _ANY_REPLY.fullmatch(line):
+                noise.append(line)
 
     def _ask(self, command: str, value: str | None = None, parse=str, *,
              attempts: int | None = None, timeout: float | None = None):

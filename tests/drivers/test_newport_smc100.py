@@ -213,6 +213,20 @@ def test_garbled_query_is_retried_but_te_is_not():
     port.assert_complete()
 
 
+def test_silence_after_stale_reply_is_timeout_after_noise_is_protocol_error():
+    steps = [*CONNECT,
+             (b"1ST\r\n", b""), (b"1TE\r\n", b"1TP1.000000\r\n"),   # stale, then silence
+             (b"1ST\r\n", b""), (b"1TE\r\n", b"\x15\x80~\r\n")]     # noise, then silence
+    axis, port = transcript_axis(steps)
+    with pytest.raises(DeviceTimeout) as timeout_info:
+        axis.stop()
+    assert timeout_info.value.command == "1ST"
+    with pytest.raises(ProtocolError) as noise_info:
+        axis.stop()
+    assert "noise" in str(noise_info.value) and noise_info.value.command == "1ST"
+    port.assert_complete()
+
+
 def test_query_gives_up_after_retries_with_typed_error():
     steps = [*CONNECT, *[(b"1TP\r\n", b"")] * 3]
     axis, port = transcript_axis(steps, retries=2)
