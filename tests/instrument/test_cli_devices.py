@@ -1,0 +1,56 @@
+"""`scatterlab devices --bench sim` opens every emulated device through the real drivers."""
+
+from __future__ import annotations
+
+import re
+
+from instrument.cli import main
+from instrument.devices import open_bench, simulation_config
+from instrument.profile import load_profile
+
+
+def test_devices_lists_identity_homed_state_and_position(capsys):
+    assert main(["devices", "--bench", "sim", "--home"]) == 0
+    out = capsys.readouterr().out
+    for role in ("sample_theta", "detector_theta", "camera_z", "camera", "power_meter",
+                 "source"):
+        assert re.search(rf"^\s+{role}\s", out, re.M), out
+    assert "Thorlabs K10CR1" in out and "Newport SMC100" in out and "PM100USB" in out
+    assert out.count("homed, position 0.0000") == 3
+    assert "NOT homed" not in out
+
+
+def test_devices_reports_unhomed_axes_without_home(capsys):
+    assert main(["devices", "--bench", "sim"]) == 0
+    out = capsys.readouterr().out
+    assert "NOT homed" in out
+
+
+def test_bad_profile_is_a_clear_error(tmp_path, capsys):
+    bad = tmp_path / "bench.toml"
+    bad.write_text('[bench]\nname = 3\n[devices.x]\ndriver = "nope"\nurl = "x"\n')
+    assert main(["devices", "--bench", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bench.name" in err and "devices.x.driver" in err
+
+
+def test_simulation_config_binds_roles_and_power_meter():
+    profile = load_profile("sim")
+    world, config = simulation_config(profile)
+    assert world == "sim"
+    assert config["roles"]["sample_theta"].startswith("simapt://sample_theta")
+    assert config["power_meter"]["url"].startswith("simusb://power_meter")
+    assert config["arm_length_mm"] == profile.geometry.detector_distance_mm
+
+
+def test_open_bench_moves_real_stages_and_leaves_safe():
+    profile = load_profile("sim")
+    with open_bench(profile, roles=["sample_theta", "source"]) as bench:
+        axis = bench.axes["sample_theta"]
+        axis.enable()
+        axis.home(timeout=60)
+        axis.move_to(12.5, wait=True, timeout=60)
+        assert abs(axis.position - 12.5) <= axis.position_tolerance
+        bench.source.turn_on()
+        assert bench.source.is_on
+    assert bench.source.closed and axis.closed
