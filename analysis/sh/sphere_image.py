@@ -34,11 +34,20 @@ import numpy as np
 
 from analysis.sh.convention import lmax_from_size
 from analysis.sh.filters import lambertian_filter
-from analysis.sh.transform import SHFit, directions_to_angles, evaluate, fit_scattered
+from analysis.sh.transform import (
+    ScatteredFitOperator,
+    SHFit,
+    directions_to_angles,
+    evaluate,
+    fit_scattered,
+    scattered_fit_operator,
+)
 
 __all__ = [
     "SphereGeometry",
+    "image_fit_operator",
     "image_to_sh",
+    "images_to_sh",
     "irradiance_image",
     "mirror_sphere_lighting",
     "sh_to_image",
@@ -250,3 +259,33 @@ def mirror_sphere_lighting(
     img = np.asarray(image, dtype=float) / reflectance
     return image_to_sh(img, geometry, lmax=lmax, parameterisation="reflected", valid=valid,
                        ridge=ridge)
+
+
+def image_fit_operator(
+    geometry: SphereGeometry,
+    *,
+    lmax: int,
+    parameterisation: Parameterisation = "reflected",
+    ridge: float = 0.0,
+) -> ScatteredFitOperator:
+    """The fit of :func:`image_to_sh` for every observed pixel, precomputed once.
+
+    For stacks of images of one geometry with no per-image invalid pixels
+    (:func:`images_to_sh`).
+    """
+    dirs = geometry.reflected if parameterisation == "reflected" else geometry.normals
+    th, ph = directions_to_angles(dirs[geometry.observed])
+    return scattered_fit_operator(th, ph, lmax=lmax, ridge=ridge)
+
+
+def images_to_sh(images: np.ndarray, operator: ScatteredFitOperator,
+                 geometry: SphereGeometry) -> np.ndarray:
+    """B_lm of a stack of images (K, H, W) → ((L+1)², K) with a shared fit operator.
+
+    Raises if an observed pixel is not finite (use :func:`image_to_sh` per image then).
+    """
+    imgs = np.asarray(images, dtype=float)
+    vals = imgs[:, geometry.observed].T  # (N, K)
+    if not np.all(np.isfinite(vals)):
+        raise ValueError("non-finite observed pixels: fit these images one by one")
+    return operator.apply(vals)

@@ -29,12 +29,14 @@ from analysis.sh.legendre import gauss_legendre, iterate_degrees, legendre_table
 __all__ = [
     "GLGrid",
     "SHFit",
+    "ScatteredFitOperator",
     "analysis",
     "directions_to_angles",
     "evaluate",
     "fit_scattered",
     "gl_grid",
     "real_sh_matrix",
+    "scattered_fit_operator",
     "synthesis",
 ]
 
@@ -418,3 +420,73 @@ def fit_scattered(
         ridge=float(ridge),
         n_samples=n,
     )
+
+
+@dataclass(frozen=True)
+class ScatteredFitOperator:
+    """The linear map samples → coefficients of a fixed scattered-sample geometry.
+
+    Many images of one sphere geometry share the design matrix; this holds its regularised
+    pseudo-inverse so each fit is one matrix product (:func:`scattered_fit_operator`).
+
+    Attributes
+    ----------
+    lmax : int
+    pinv : ndarray of shape ((L+1)², N)
+        Coefficients = pinv @ (√w · values).
+    sqrt_weights : ndarray of shape (N,)
+    rank : int
+    condition : float
+    dof : float
+    ridge : float
+    """
+
+    lmax: int
+    pinv: np.ndarray = field(repr=False)
+    sqrt_weights: np.ndarray = field(repr=False)
+    rank: int
+    condition: float
+    dof: float
+    ridge: float
+
+    def apply(self, values: np.ndarray) -> np.ndarray:
+        """Coefficients for samples of shape (N,) or (N, K) → ((L+1)²,) or ((L+1)², K)."""
+        v = np.asarray(values, dtype=float)
+        sw = self.sqrt_weights if v.ndim == 1 else self.sqrt_weights[:, None]
+        return self.pinv @ (v * sw)
+
+
+def scattered_fit_operator(
+    theta: np.ndarray,
+    phi: np.ndarray,
+    *,
+    lmax: int,
+    weights: np.ndarray | None = None,
+    ridge: float = 0.0,
+) -> ScatteredFitOperator:
+    """Precompute the (Tikhonov-regularised) least-squares fit of :func:`fit_scattered`.
+
+    Parameters
+    ----------
+    theta, phi : ndarray of shape (N,)
+        Sample directions (only the usable samples: no mask here).
+    lmax : int
+    weights : ndarray of shape (N,), optional
+    ridge : float
+    """
+    th = np.asarray(theta, dtype=float).ravel()
+    ph = np.asarray(phi, dtype=float).ravel()
+    w = np.ones_like(th) if weights is None else np.asarray(weights, dtype=float).ravel()
+    if ridge < 0:
+        raise ValueError("ridge must be ≥ 0")
+    sw = np.sqrt(w)
+    a = real_sh_matrix(lmax, th, ph) * sw[:, None]
+    u, sv, vt = np.linalg.svd(a, full_matrices=False)
+    tol = sv.max() * max(a.shape) * np.finfo(float).eps
+    rank = int(np.sum(sv > tol))
+    condition = float(sv.max() / sv.min()) if sv.min() > tol else float("inf")
+    with np.errstate(divide="ignore"):
+        filt = np.where(sv > tol, sv / (sv**2 + ridge), 0.0)
+    pinv = (vt.T * filt) @ u.T
+    dof = float(np.sum(np.where(sv > tol, sv**2 / (sv**2 + ridge), 0.0)))
+    return ScatteredFitOperator(lmax, pinv, sw, rank, condition, dof, float(ridge))

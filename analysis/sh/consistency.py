@@ -1,0 +1,166 @@
+"""Image-consistency checking: identity errors per order against the noise level.
+
+Mahajan, Ramamoorthi & Curless (PAMI 2008, §8) detect tampering by testing an identity
+(e.g. M10 with known lighting, M16, M21) on the images; numerics.md §3.10 insists the
+residual be tested "against the noise level, not against exact zero". Noise, the finite
+view (grazing pixels, the unseen cap behind the sphere) and the departures of a real
+sphere from the ideal radially symmetric convolution all give consistent images non-zero
+identity errors, so the reference is measured: per order l, the distribution of the
+normalised error e_l over consistent data (simulated with the measured noise level, or held
+out), summarised by a robust centre (median) and scale (1.4826·MAD).
+
+The decision statistic is T = Σ_l max(z_l, 0)², z_l = (e_l − median_l)/scale_l: only
+errors larger than consistent data produce count. Its threshold is the empirical
+(1 − α) quantile of T over the calibration cases (the ⌈(n+1)(1−α)⌉-th order statistic,
+the conformal choice, whose false-alarm rate on new consistent data is at most α).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "ConsistencyCalibration",
+    "ConsistencyReport",
+    "calibrate",
+    "check",
+    "statistic",
+]
+
+
+@dataclass(frozen=True)
+class ConsistencyCalibration:
+    """Reference distribution of per-order identity errors on consistent data.
+
+    Attributes
+    ----------
+    orders : ndarray of int, shape (n,)
+    noise_error : ndarray of shape (n,)
+        Median normalised error per order on consistent data: the noise level.
+    noise_scale : ndarray of shape (n,)
+        Robust spread (1.4826·MAD, floored) per order.
+    threshold : float
+        Decision threshold on T.
+    false_alarm : float
+        The target false-alarm rate α.
+    n_cases : int
+        Number of consistent cases the calibration rests on.
+    """
+
+    orders: np.ndarray
+    noise_error: np.ndarray
+    noise_scale: np.ndarray
+    threshold: float
+    false_alarm: float
+    n_cases: int
+
+
+@dataclass(frozen=True)
+class ConsistencyReport:
+    """Outcome of :func:`check`.
+
+    Attributes
+    ----------
+    orders : ndarray of int, shape (n,)
+    error : ndarray of shape (n,)
+        The image's normalised identity error per order.
+    noise_error : ndarray of shape (n,)
+        The calibrated noise level per order.
+    ratio : ndarray of shape (n,)
+        error / noise_error.
+    z : ndarray of shape (n,)
+        (error − noise_error) / noise_scale.
+    statistic : float
+        T = Σ max(z, 0)².
+    threshold : float
+    inconsistent : bool
+        T > threshold.
+    false_alarm : float
+    """
+
+    orders: np.ndarray
+    error: np.ndarray
+    noise_error: np.ndarray
+    ratio: np.ndarray
+    z: np.ndarray
+    statistic: float
+    threshold: float
+    inconsistent: bool
+    false_alarm: float
+
+
+def _z(errors: np.ndarray, centre: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    return (errors - centre) / scale
+
+
+def statistic(z: np.ndarray) -> np.ndarray:
+    """T = Σ_l max(z_l, 0)² along the last axis."""
+    zz = np.maximum(np.asarray(z, dtype=float), 0.0)
+    return np.sum(zz * zz, axis=-1)
+
+
+def calibrate(
+    consistent_errors: np.ndarray,
+    *,
+    orders: np.ndarray | None = None,
+    false_alarm: float = 0.05,
+) -> ConsistencyCalibration:
+    """Calibrate the checker on identity errors of consistent data.
+
+    Parameters
+    ----------
+    consistent_errors : ndarray of shape (n_cases, n_orders)
+        Per-order normalised errors e_l (e.g. ``IdentityError.error``) of consistent cases.
+    orders : ndarray of int, shape (n_orders,), optional
+    false_alarm : float
+        Target false-alarm rate α, 0 < α < 1; needs n_cases ≥ 1/α − 1.
+    """
+    e = np.asarray(consistent_errors, dtype=float)
+    if e.ndim != 2:
+        raise ValueError("consistent_errors must have shape (n_cases, n_orders)")
+    n = e.shape[0]
+    if not 0 < false_alarm < 1:
+        raise ValueError("false_alarm must lie in (0, 1)")
+    rank = int(np.ceil((n + 1) * (1.0 - false_alarm)))
+    if rank > n:
+        raise ValueError(f"{n} cases cannot calibrate α = {false_alarm}: need ≥ {rank}")
+    centre = np.median(e, axis=0)
+    scale = 1.4826 * np.median(np.abs(e - centre), axis=0)
+    # An order with no spread (exact identity, noise-free) must not divide by zero.
+    floor = max(float(np.max(scale)) * 1e-3, np.finfo(float).tiny)
+    scale = np.maximum(scale, floor)
+    t = np.sort(statistic(_z(e, centre, scale)))
+    thr = float(t[rank - 1])
+    ords = np.arange(e.shape[1]) if orders is None else np.asarray(orders)
+    return ConsistencyCalibration(ords, centre, scale, thr, float(false_alarm), n)
+
+
+def check(errors: np.ndarray, calibration: ConsistencyCalibration) -> ConsistencyReport:
+    """Report per-order errors against the calibrated noise level, and the decision.
+
+    Parameters
+    ----------
+    errors : ndarray of shape (n_orders,)
+        The image's normalised identity errors, same orders as the calibration.
+    calibration : ConsistencyCalibration
+    """
+    e = np.asarray(errors, dtype=float)
+    if e.shape != calibration.noise_error.shape:
+        raise ValueError("errors and calibration cover different orders")
+    z = _z(e, calibration.noise_error, calibration.noise_scale)
+    t = float(statistic(z))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(calibration.noise_error > 0, e / calibration.noise_error, np.inf)
+    return ConsistencyReport(
+        orders=calibration.orders,
+        error=e,
+        noise_error=calibration.noise_error,
+        ratio=ratio,
+        z=z,
+        statistic=t,
+        threshold=calibration.threshold,
+        inconsistent=t > calibration.threshold,
+        false_alarm=calibration.false_alarm,
+    )
