@@ -110,6 +110,8 @@ class FitResult:
     rank_deficient : bool
         JᵀJ was singular at the optimum (parameters not all identifiable).
     residual_kind, loss : str
+    noise_model : str
+        The assumed noise model in words (for reports).
     bootstrap : BootstrapResult or None
     """
 
@@ -135,6 +137,7 @@ class FitResult:
     rank_deficient: bool
     residual_kind: str
     loss: str
+    noise_model: str = ""
     bootstrap: BootstrapResult | None = None
 
     @property
@@ -173,6 +176,7 @@ class FitResult:
             "rank_deficient": self.rank_deficient,
             "residual_kind": self.residual_kind,
             "loss": self.loss,
+            "noise_model": self.noise_model,
         }
         if self.bootstrap is not None:
             out["bootstrap_stderr"] = self.bootstrap.stderr.tolist()
@@ -557,6 +561,16 @@ def fit_brdf(
     return fit
 
 
+def _describe_noise(residual: str, sigma_known: bool) -> str:
+    r = {
+        "absolute": "(y − f)/σ" if sigma_known else "y − f",
+        "relative": "(y − f)/σ" if sigma_known else "(y − f)/|y|",
+        "log": "(ln y − ln f)·y/σ" if sigma_known else "ln y − ln f",
+    }[residual]
+    s = "s = 1 (σ given)" if sigma_known else "s estimated from χ²/dof"
+    return f"independent Gaussian: r = {r} ~ N(0, s²), {s}"
+
+
 def _finish(
     model: BRDFModel,
     pr: _Problem,
@@ -606,6 +620,7 @@ def _finish(
         rank_deficient=rank_def,
         residual_kind=pr.residual,
         loss=loss,
+        noise_model=_describe_noise(pr.residual, sigma_known),
     )
 
 
@@ -645,3 +660,38 @@ def _bootstrap(
     else:
         se = lo_ci = hi_ci = np.full(model.n_params, np.nan)
     return BootstrapResult(arr, se, lo_ci, hi_ci, failed)
+
+
+@dataclass(frozen=True)
+class PredictionBand:
+    """Model prediction with its 1σ uncertainty from the parameter covariance.
+
+    Attributes
+    ----------
+    value : ndarray, shape S
+        f(θ; p̂).
+    stderr : ndarray, shape S
+        √(g_θᵀ C g_θ), g_θ = ∂f/∂p (delta method; first order in the parameter errors).
+    """
+
+    value: NDArray[np.float64]
+    stderr: NDArray[np.float64]
+
+
+def prediction_band(
+    model: BRDFModel,
+    fit: FitResult,
+    theta_i: ArrayLike,
+    phi_i: ArrayLike,
+    theta_r: ArrayLike,
+    phi_r: ArrayLike,
+) -> PredictionBand:
+    """Fitted BRDF and its standard uncertainty at new angles (radians), for uncertainty
+    bands in reports. Uses ``fit.covariance`` (NaN where a parameter is unidentifiable)."""
+    if fit.param_names != model.param_names:
+        raise ValueError(f"fit is of {fit.model_name!r}, not of {model.name!r}")
+    g = make_geometry(theta_i, phi_i, theta_r, phi_r)
+    val = model.evaluate_geometry(fit.params, g)
+    jac = model.jacobian_geometry(fit.params, g)
+    var = np.einsum("...i,ij,...j->...", jac, fit.covariance, jac)
+    return PredictionBand(val, np.sqrt(np.maximum(var, 0.0)))

@@ -196,3 +196,22 @@ def test_lm_and_trf_solvers_reach_the_same_optimum(name: str) -> None:
     assert a.chi2 == pytest.approx(b.chi2, rel=1e-9)
     with pytest.raises(ValueError):
         fit_brdf(m, y, *ANGLES, solver="lm", loss="cauchy")
+
+
+def test_prediction_band_matches_parameter_sampling() -> None:
+    from analysis.brdf.fit import prediction_band
+
+    m = get_model("lambert+ggx")
+    angles = scan_angles(15, out_of_plane=False)
+    y, sig, _ = noisy(m, [0.3, 0.5, 0.2], angles, seed=31, rel=0.05)
+    fit = fit_brdf(m, y, *angles, sigma=sig)
+    tr = np.radians(np.linspace(0, 80, 9))
+    band = prediction_band(m, fit, np.radians(30.0), 0.0, tr, np.pi)
+    rng = np.random.default_rng(0)
+    draws = rng.multivariate_normal(fit.params, fit.covariance, 4000)
+    vals = np.array([m.evaluate(d, np.radians(30.0), 0.0, tr, np.pi) for d in draws])
+    np.testing.assert_allclose(band.value, m.evaluate(fit.params, np.radians(30.0), 0, tr, np.pi))
+    np.testing.assert_allclose(band.stderr, vals.std(axis=0), rtol=0.1)
+    assert "N(0, s²)" in fit.noise_model and "σ given" in fit.noise_model
+    with pytest.raises(ValueError):
+        prediction_band(get_model("lambert"), fit, 0.1, 0.0, 0.2, np.pi)
