@@ -171,7 +171,7 @@ MATERIALS: dict[str, FlatlandBRDF] = {
     "brushed_metal": FlatlandBRDF(0.60, np.deg2rad(2.0), 0.08, 0.0, "brushed_metal"),
     "coated_paper_glossy": FlatlandBRDF(0.08, np.deg2rad(3.0), 0.75, 0.0, "coated_paper_glossy"),
     "coated_paper_matte": FlatlandBRDF(0.04, np.deg2rad(6.0), 0.80, 0.0, "coated_paper_matte"),
-    "pearl_paint_glass": FlatlandBRDF(0.045, np.deg2rad(1.0), 0.35, 0.0, "pearl_paint_glass"),
+    "pearl_paint_glass": FlatlandBRDF(0.045, np.deg2rad(1.0), 0.30, 0.0, "pearl_paint_glass"),
 }
 
 

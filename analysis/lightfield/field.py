@@ -12,6 +12,7 @@ v = θ_y in rad on cell-centred grids of their domains (same conventions per axi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -135,7 +136,7 @@ class LightField2D:
     @classmethod
     def from_function(
         cls,
-        func,
+        func: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray],
         y_mm: NDArray[np.float64],
         domain_rad: tuple[float, float],
         n_theta: int,
