@@ -148,10 +148,11 @@ def merge_hdr(
         raise ValueError("darks of shape (N, H, W) need one dark per frame")
 
     def signal(i: int) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
-        raw = stack[i].astype(np.float64)
-        s = raw - (dark_arr[i] if per_bracket_dark else dark_arr)
-        near_sat = raw >= saturation_fraction * sat[i]
-        usable = ~near_sat & (s >= min_signal_dn)
+        d = dark_arr[i] if per_bracket_dark else dark_arr
+        s = np.subtract(stack[i], d, dtype=np.float64)
+        near_sat = stack[i] >= saturation_fraction * sat[i]
+        usable = s >= min_signal_dn
+        usable &= ~near_sat
         return s, near_sat, usable
 
     shape = stack.shape[1:]
@@ -162,9 +163,12 @@ def merge_hdr(
     s_high = saturation_fraction * sat - np.asarray(mean_dark)
 
     def hat(i: int, s: NDArray[np.float64], usable: NDArray[np.bool_]) -> NDArray[np.float64]:
+        w = s - min_signal_dn
+        np.minimum(w, s_high[i] - s, out=w)
         # A small floor keeps a usable bracket's weight positive right at the thresholds.
-        w = np.minimum(s - min_signal_dn, s_high[i] - s)
-        return np.where(usable, np.maximum(w, 1e-3 * max(s_high[i], 1.0)), 0.0)
+        np.maximum(w, 1e-3 * max(s_high[i], 1.0), out=w)
+        w *= usable
+        return w
 
     # Order by effective exposure so the fallbacks can pick the shortest/longest.
     order = np.argsort(t * g)
@@ -175,69 +179,68 @@ def merge_hdr(
     n_used = np.zeros(shape, dtype=np.int64)
     any_unsat = np.zeros(shape, dtype=bool)
     fallback = np.zeros(shape)
-    fallback_set = np.zeros(shape, dtype=bool)
-    shortest_rate = None
+    shortest_rate = np.zeros(shape)
     for rank, i in enumerate(order):
         s, near_sat, usable = signal(i)
-        x = s / (t[i] * g[i])
+        w = hat(i, s, usable)
+        x = s
+        x *= 1.0 / (t[i] * g[i])  # s is not needed any more: reuse its memory
         if rank == 0:
             shortest_rate = x
-        w = hat(i, s, usable)
         num += w * x
         den += w
         n_used += usable
         # Longest unsaturated exposure seen so far (brackets are in increasing order).
         unsat = ~near_sat
-        fallback = np.where(unsat, x, fallback)
-        fallback_set |= unsat
+        np.copyto(fallback, x, where=unsat)
         any_unsat |= unsat
-    assert shortest_rate is not None
     good = n_used > 0
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rate = np.where(good, num / np.where(good, den, 1.0), 0.0)
+    rate = np.divide(num, den, out=np.zeros(shape), where=good)
     saturated = ~any_unsat
     underexposed = ~good & any_unsat
-    rate = np.where(underexposed, fallback, rate)
-    rate = np.where(saturated, shortest_rate, rate)
+    np.copyto(rate, fallback, where=underexposed)
+    np.copyto(rate, shortest_rate, where=saturated)
 
     variance: NDArray[np.float64] | None = None
     if have_model:
         k = float(system_gain_dn_per_e)  # type: ignore[arg-type]
         predicted = np.maximum(rate, 0.0)
-        inv_var_sum = np.zeros(shape)
-        num = np.zeros(shape)
         wsum = np.zeros(shape)
-        w2var = np.zeros(shape)
+        wacc = np.zeros(shape)
         fb_var = np.zeros(shape)
+        if weighting == "inverse_variance":
+            num = np.zeros(shape)
         for i in order:
             s, near_sat, usable = signal(i)
             scale = t[i] * g[i]
             # Noise model at the predicted (not the measured) signal: unbiased weights.
-            var_i = (k * g[i] * predicted * scale + read[i] ** 2) / scale**2
-            var_i = np.maximum(var_i, 1e-300)
-            fb_var = np.where(~near_sat, var_i, fb_var)
+            # var(x_i) = (K g_i · x̂ · t_i g_i + σ²_read) / (t_i g_i)².
+            var_i = predicted * (k * g[i] / scale)
+            var_i += read[i] ** 2 / scale**2
+            np.maximum(var_i, 1e-300, out=var_i)
+            np.copyto(fb_var, var_i, where=~near_sat)
             if weighting == "inverse_variance":
-                w = np.where(usable, 1.0 / var_i, 0.0)
-                num += w * (s / scale)
-                inv_var_sum += w
+                w = np.divide(usable, var_i)
+                s *= 1.0 / scale
+                num += w * s
+                wsum += w
             else:
                 w = hat(i, s, usable)
                 wsum += w
-                w2var += w * w * var_i
+                w *= w
+                w *= var_i
+                wacc += w
         if weighting == "inverse_variance":
-            with np.errstate(invalid="ignore", divide="ignore"):
-                merged = num / np.where(good, inv_var_sum, 1.0)
-                variance = np.where(good, 1.0 / np.where(good, inv_var_sum, 1.0), 0.0)
-            rate = np.where(good, merged, rate)
+            rate = np.where(good, np.divide(num, wsum, out=np.zeros(shape), where=good), rate)
+            variance = np.divide(1.0, wsum, out=np.zeros(shape), where=good)
         else:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                variance = np.where(good, w2var / np.where(good, wsum, 1.0) ** 2, 0.0)
-        variance = np.where(good, variance, fb_var)
+            variance = np.divide(wacc, wsum * wsum, out=np.zeros(shape), where=good)
+        np.copyto(variance, fb_var, where=~good)
         if saturated.any():
             i0 = order[0]
             s0 = t[i0] * g[i0]
             v0 = (k * g[i0] * np.maximum(rate, 0.0) * s0 + read[i0] ** 2) / s0**2
-            variance = np.where(saturated, v0, variance)
+            np.copyto(variance, v0, where=saturated)
     return HdrResult(
         rate=rate,
         variance=variance,
