@@ -308,6 +308,15 @@ class TestContractLinear(MotionAxisContract):
                                  cleanup=servers)
 
 
+class TestContractSteppingClock(MotionAxisContract):
+    """In-process with a stepping clock: simulated time passes only as the driver polls."""
+
+    @pytest.fixture
+    def axis_factory(self):
+        count = iter(range(100))
+        return lambda: Smc100Axis(f"simsmc://step{next(count)}?step=0.005", name="stepper")
+
+
 # --------------------------------------------------------------------------- behaviour
 
 
