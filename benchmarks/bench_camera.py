@@ -46,12 +46,12 @@ def bench_sim_camera(side: int, frames: int) -> tuple[float, float]:
     cam, world = _camera(side)
     cam.acquire(1)  # warm the cache
     t0 = time.perf_counter()
-    cam.acquire(frames)
+    cam.acquire(frames, timeout=600.0)
     still = frames / (time.perf_counter() - t0)
     t0 = time.perf_counter()
     for k in range(frames):
         world.set_role("detector_theta", 55.0 + 0.01 * (k + 1))
-        cam.acquire(1)
+        cam.acquire(1, timeout=600.0)
     moving = frames / (time.perf_counter() - t0)
     cam.close()
     return still, moving

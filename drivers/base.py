@@ -691,7 +691,7 @@ class Camera(Device):
     def acquire(self, n: int = 1, *, timeout: float | None = None) -> list[Frame]:
         """Take ``n`` fresh frames and return them in order.
 
-        ``timeout`` defaults to 2 s plus twice the total exposure time.
+        ``timeout`` (for all ``n`` frames) defaults to ``n`` × (2 s + twice the exposure).
         """
         self._check_open("acquire")
         if int(n) != n or n < 1:
@@ -700,7 +700,7 @@ class Camera(Device):
             raise StateError("camera is streaming", device=self.name, command="acquire",
                              hint="stop_streaming() first, or read from the stream")
         if timeout is None:
-            timeout = 2.0 + 2.0 * int(n) * self._exposure_s_for_timeout()
+            timeout = int(n) * (2.0 + 2.0 * self._exposure_s_for_timeout())
         deadline = time.monotonic() + timeout
         frames = []
         for _ in range(int(n)):
