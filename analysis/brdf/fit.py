@@ -278,6 +278,10 @@ def _internal_bounds(model: BRDFModel) -> tuple[NDArray[np.float64], NDArray[np.
 
 
 def _random_starts(model: BRDFModel, n: int, rng: np.random.Generator) -> list[NDArray]:
+    """Random starts: log-uniform over the bounds for log parameters; uniform between the
+    lower bound and 4× the default start's distance from it for linear ones (scale bounds
+    such as ks ≤ 100 are deliberately wide, while the values that matter lie near the
+    default start)."""
     lo, hi, lm = model.lower, model.upper, model.log_mask
     starts = []
     for _ in range(n):
@@ -288,9 +292,7 @@ def _random_starts(model: BRDFModel, n: int, rng: np.random.Generator) -> list[N
                 b = np.log(hi[j]) if np.isfinite(hi[j]) else a + 10.0
                 p[j] = np.exp(rng.uniform(a, b))
             else:
-                b = hi[j] if np.isfinite(hi[j]) else lo[j] + 10.0 * max(1.0, abs(lo[j]))
-                # sample the lower part of wide linear ranges: scales rarely sit near the top
-                b = min(b, lo[j] + 2.0 * max(abs(model.start[j] - lo[j]), 1e-3) * 2.0)
+                b = min(hi[j], lo[j] + 4.0 * max(abs(model.start[j] - lo[j]), 1e-3))
                 p[j] = rng.uniform(lo[j], b)
         starts.append(p)
     return starts
@@ -508,16 +510,21 @@ def fit_brdf(
         raise ValueError("n_starts must be at least 1")
     if solver not in ("auto", "lm", "trf") or (solver == "lm" and loss != "linear"):
         raise ValueError("solver must be 'auto', 'trf' or 'lm' (lm needs loss='linear')")
-    y = np.asarray(brdf, dtype=float).reshape(-1)
-    g = geometry if geometry is not None else make_geometry(theta_i, phi_i, theta_r, phi_r)
-    if g.shape != y.shape:
-        g = make_geometry(
-            *np.broadcast_arrays(
-                *(np.asarray(a, dtype=float) for a in (theta_i, phi_i, theta_r, phi_r))
-            )
-        )
+    y_in = np.asarray(brdf, dtype=float)
+    y = y_in.reshape(-1)
+    if geometry is None:
+        try:
+            angles = [
+                np.broadcast_to(np.asarray(a, dtype=float), y_in.shape).reshape(-1)
+                for a in (theta_i, phi_i, theta_r, phi_r)
+            ]
+        except ValueError as err:
+            raise ValueError(f"angles do not broadcast to the brdf shape {y_in.shape}") from err
+        g = make_geometry(*angles)
+    else:
+        g = geometry
         if g.shape != y.shape:
-            raise ValueError(f"angles broadcast to {g.shape} but brdf has shape {y.shape}")
+            raise ValueError(f"geometry has shape {g.shape} but brdf has {y.shape} values")
     if not np.all(np.isfinite(y)):
         raise ValueError("brdf contains NaN or inf")
     n = y.size
@@ -525,7 +532,11 @@ def fit_brdf(
     if n <= k:
         raise ValueError(f"need more data points ({n}) than parameters ({k})")
     sigma_known = sigma is not None
-    sig = np.ones(n) if sigma is None else np.broadcast_to(np.asarray(sigma, float), (n,)).copy()
+    sig = (
+        np.ones(n)
+        if sigma is None
+        else np.broadcast_to(np.asarray(sigma, float), y_in.shape).reshape(-1).copy()
+    )
     if np.any(sig <= 0):
         raise ValueError("sigma must be positive")
     if residual == "absolute":

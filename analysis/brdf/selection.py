@@ -221,15 +221,23 @@ def select_model(
     fits: dict[str, FitResult] = {}
     rows: list[ModelScore] = []
     do_cv = run_cv or criterion == "cv"
+    y = np.asarray(brdf, dtype=float).reshape(-1)
+    angles = [
+        np.broadcast_to(np.asarray(a, dtype=float), np.shape(brdf)).reshape(-1)
+        for a in (theta_i, phi_i, theta_r, phi_r)
+    ]
+    if sigma is not None:
+        sigma = np.broadcast_to(np.asarray(sigma, dtype=float), np.shape(brdf)).reshape(-1)
+    geometry = make_geometry(*angles)  # shared by every candidate's full-data fit
     for m in models:
         fit = fit_brdf(
-            m, brdf, theta_i, phi_i, theta_r, phi_r,
-            sigma=sigma, residual=residual, n_starts=n_starts, seed=seed,
+            m, y, *angles, sigma=sigma, residual=residual, n_starts=n_starts, seed=seed,
+            geometry=geometry,
         )
         fits[m.name] = fit
         cv, cv_se = (
             cross_validate(
-                m, brdf, theta_i, phi_i, theta_r, phi_r, sigma=sigma, residual=residual,
+                m, y, *angles, sigma=sigma, residual=residual,
                 n_folds=n_folds, seed=seed, n_starts=n_starts,
             )
             if do_cv

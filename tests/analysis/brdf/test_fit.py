@@ -215,3 +215,15 @@ def test_prediction_band_matches_parameter_sampling() -> None:
     assert "N(0, s²)" in fit.noise_model and "σ given" in fit.noise_model
     with pytest.raises(ValueError):
         prediction_band(get_model("lambert"), fit, 0.1, 0.0, 0.2, np.pi)
+
+
+def test_grid_shaped_data_are_accepted() -> None:
+    m = get_model("lambert+ggx")
+    ti = np.radians([10.0, 30.0, 50.0])[:, None]
+    tr = np.radians(np.linspace(0, 80, 30))[None, :]
+    f = m.evaluate([0.3, 0.5, 0.2], ti, 0.0, tr, np.pi)  # shape (3, 30)
+    fit = fit_brdf(m, f * 1.0, ti, 0.0, tr, np.pi, sigma=0.01 * f)
+    np.testing.assert_allclose(fit.params, [0.3, 0.5, 0.2], rtol=1e-6)
+    assert fit.residuals.shape == (90,)
+    with pytest.raises(ValueError):
+        fit_brdf(m, f, ti[:2], 0.0, tr, np.pi)

@@ -124,9 +124,7 @@ def test_oren_nayar_backscatter_exceeds_forward_at_grazing() -> None:
 ENERGY_ANGLES = np.radians([0.0, 30.0, 60.0, 80.0, 89.0])
 
 
-@pytest.mark.parametrize(
-    "name", [n for n in ALL if get_model(n).energy_bounded and n not in ("ward_aniso",)]
-)
+@pytest.mark.parametrize("name", [n for n in ALL if get_model(n).energy_bounded])
 def test_energy_bound(name: str) -> None:
     m = get_model(name)
     p = PARAMS[name]
