@@ -1,0 +1,52 @@
+"""``scatterlab plan PLAN.toml``: dry run: points, travel, duration, coverage picture."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+
+from instrument.cli._progress import fmt_s
+from instrument.coverage import write_coverage_png
+from instrument.guard import GuardError
+from instrument.plans import build_plan, load_plan
+from instrument.profile import load_profile
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plan", help="dry run of a plan: points, travel, duration, coverage PNG")
+    p.add_argument("plan", help="plan file (TOML)")
+    p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")
+    p.add_argument("--png", default=None,
+                   help="coverage picture path (default: <plan name>_coverage.png here)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    spec = load_plan(args.plan)
+    profile = load_profile(args.bench)
+    try:
+        plan = build_plan(spec, profile)
+    except GuardError as err:
+        print(f"error: {err}")
+        return 2
+    est = plan.estimate()
+    print(f"plan {spec.name!r} ({spec.kind}) on bench {profile.name!r}: "
+          f"{est.n_points} points, order {spec.order}")
+    if plan.dropped_in_beam:
+        print(f"  {plan.dropped_in_beam} point(s) with the detector in the beam left out")
+    for role, dist in est.travel.items():
+        unit = "mm" if role == "camera_z" else "deg"
+        print(f"  travel {role:<15} {dist:10.1f} {unit}")
+    print(f"  estimated duration {fmt_s(est.total_s)} "
+          f"(motion {fmt_s(est.motion_s)}, acquisition {fmt_s(est.acquisition_s)})")
+    if spec.order == "optimised" and plan.axes:
+        raster = build_plan(replace(spec, order="raster"), profile).estimate()
+        if raster.motion_s > 0:
+            print(f"  naive raster order would need motion {fmt_s(raster.motion_s)} "
+                  f"({est.motion_s / raster.motion_s:.0%} of it used here)")
+    print(f"  acquisition: {spec.acquisition.as_json()}")
+    png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
+    write_coverage_png(plan, png)
+    print(f"  coverage picture: {png}")
+    return 0

@@ -1,0 +1,88 @@
+"""``scatterlab run PLAN.toml``: run a plan on a bench and store it in one run file."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from pathlib import Path
+
+from instrument.cli._progress import ConsoleProgress, print_summary
+from instrument.devices import open_bench
+from instrument.engine import EngineState, RunEngine
+from instrument.guard import GuardError
+from instrument.plans import build_plan, load_plan
+from instrument.profile import load_profile
+from instrument.runner import DEFAULT_RUNS_DIR, start_run
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="run a plan (BRDF, light field, calibration) on a bench")
+    p.add_argument("plan", help="plan file (TOML), e.g. examples/brdf_inplane.toml")
+    add_common(p)
+    p.set_defaults(func=run)
+
+
+def add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bench", default=None,
+                   help="bench profile name or path (default: sim, or the run's own for resume)")
+    p.add_argument("--out", default=str(DEFAULT_RUNS_DIR),
+                   help=f"folder for run files and the catalog (default: {DEFAULT_RUNS_DIR})")
+    p.add_argument("--no-fsync", action="store_true",
+                   help="do not force each point to stable storage (still safe against a "
+                   "crash of the program, not of the computer)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def drive(engine: RunEngine, quiet: bool) -> int:
+    """Run the engine in the foreground: progress, Ctrl-C aborts cleanly, summary."""
+    progress = ConsoleProgress()
+    if quiet:
+        progress.stream = open("/dev/null", "w")  # noqa: SIM115 - closed below
+    engine.subscribe(progress)
+    interrupted = threading.Event()
+
+    def on_sigint(signum, frame) -> None:
+        if interrupted.is_set():
+            raise KeyboardInterrupt
+        interrupted.set()
+        print("\ninterrupt: stopping motion, light off, closing the run file "
+              "(Ctrl-C again to force)")
+        engine.abort()
+
+    old = signal.signal(signal.SIGINT, on_sigint) \
+        if threading.current_thread() is threading.main_thread() else None
+    try:
+        engine.start()
+        while engine.wait(0.2) in (EngineState.RUNNING, EngineState.IDLE) \
+                or (engine._thread is not None and engine._thread.is_alive()):
+            if engine.state is EngineState.PAUSED and progress.finished is None:
+                # Nobody at a console can resume an automatic pause: stop here cleanly;
+                # the run continues later with `scatterlab resume`.
+                engine.stop_when_paused()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        if quiet:
+            progress.stream.close()
+    if progress.finished is not None:
+        print_summary(progress.finished, progress.faults)
+        return 0 if progress.finished.status == "finished" else 1
+    return 1
+
+
+def run(args: argparse.Namespace) -> int:
+    spec = load_plan(args.plan)
+    profile = load_profile(args.bench or "sim")
+    try:
+        plan = build_plan(spec, profile)  # validated and guarded before anything opens
+    except GuardError as err:
+        print(f"error: {err}")
+        return 2
+    if plan.dropped_in_beam:
+        print(f"note: {plan.dropped_in_beam} point(s) with the detector in the incident "
+              "beam were left out (skip_beam_points)")
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    with open_bench(profile) as bench:
+        engine = start_run(plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
+        return drive(engine, args.quiet)
