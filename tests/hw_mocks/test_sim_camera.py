@@ -14,7 +14,7 @@ from analysis.photon_transfer import photon_transfer
 from analysis.radiometry import apply_dark_flat, flat_field, master_dark, to_radiance
 from drivers.base import PixelFormat, Roi
 from hw_mocks.sim.camera import SimulatedCamera, open_from_url
-from hw_mocks.sim.goniometer_scene import GoniometerScene
+from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import SensorParams
 from hw_mocks.sim.world import VirtualBench, configure_world, reset_worlds
 from tests.drivers.camera_contract import CameraContract
@@ -142,20 +142,31 @@ def test_spot_footprint_geometry(theta_s, theta_d, ratio):
     assert sy * px_mm == pytest.approx(1.0, rel=0.03)
 
 
-def test_frame_to_radiance_matches_brdf_times_irradiance():
-    """Calibrated units end to end: dark-subtracted DN → L = f·E at the spot centre."""
-    world = lit_bench(20.0, 50.0)
+@pytest.mark.parametrize(
+    "model, params, theta_s, theta_d",
+    [("lambert", [0.5], 20.0, 50.0),
+     ("lambert+ggx", [0.2, 0.5, 0.3], 20.0, 40.0),  # specular: θr = θi, φr = φi + π
+     ("lambert+ggx", [0.2, 0.5, 0.3], 20.0, 75.0)],  # off-specular
+)
+def test_frame_to_radiance_matches_brdf_times_irradiance(model, params, theta_s, theta_d):
+    """Calibrated units end to end: dark-subtracted DN → L = f·E at the spot centre, with
+    the ground-truth BRDF evaluated in the analysis.brdf angle convention."""
+    brdf = brdf_from_model(model, params)
+    world = lit_bench(theta_s, theta_d, scene=GoniometerScene(brdf=brdf))
     cam = SimulatedCamera(world=world, seed=4, sensor=SensorParams(width=256, height=256))
-    cam.exposure_us = 100.0
+    ti, tr = math.radians(theta_s), math.radians(theta_d - theta_s)
+    f_true = float(brdf(ti, math.pi, tr, 0.0))
+    peak_e = 2 * 1e-3 / (math.pi * (2e-3) ** 2)
+    expected = f_true * peak_e * math.cos(ti)
+    # Expose to about half the full well at the spot centre.
+    cam.exposure_us = min(max(0.5 * 100.0 * 12.6 / expected, 10.0), 1e4)
     frames = np.stack([f.data for f in cam.acquire(8)])
     world.update_source(on=False)
     cam.invalidate()
     dark = master_dark(np.stack([f.data for f in cam.acquire(8)]), method="mean")
-    radiance = to_radiance(frames.mean(axis=0), dark=dark, exposure_us=100.0,
+    radiance = to_radiance(frames.mean(axis=0), dark=dark, exposure_us=cam.exposure_us,
                            response=cam.radiometric_response())
-    peak_e = 2 * 1e-3 / (math.pi * (2e-3) ** 2)
-    expected = 0.5 / math.pi * peak_e * math.cos(math.radians(20.0))
-    centre = radiance[124:132, 124:132].mean()
+    centre = radiance[126:130, 126:130].mean()
     assert centre == pytest.approx(expected, rel=0.02)
 
 
