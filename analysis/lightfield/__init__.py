@@ -36,7 +36,7 @@ from .propagate import (
     propagate_4d,
     sample_along_curves,
 )
-from .reconstruct import Reconstruction, reconstruct, solve_curves
+from .reconstruct import CurveSolution, Reconstruction, reconstruct, solve_curves
 from .regularize import RegularizationResult, regularize, truncation_level_mse
 from .scatter import scatter
 from .spectral import (
@@ -50,6 +50,7 @@ from .spectral import (
 
 __all__ = [
     "MATERIALS",
+    "CurveSolution",
     "Detection",
     "Diagnostics",
     "FlatlandBRDF",

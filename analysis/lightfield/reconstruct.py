@@ -49,7 +49,7 @@ from .spectral import (
     synthesize,
 )
 
-__all__ = ["Reconstruction", "reconstruct", "solve_curves"]
+__all__ = ["CurveSolution", "Reconstruction", "reconstruct", "solve_curves"]
 
 Solver = Literal["auto", "closed_form", "general"]
 
@@ -104,6 +104,32 @@ class Reconstruction:
         return propagate(self.incident_field, -float(d1_mm), method=method)  # type: ignore[arg-type]
 
 
+@dataclass(frozen=True)
+class CurveSolution:
+    """Result of :func:`solve_curves` for R sampled curves of N angles.
+
+    Attributes
+    ----------
+    radiance : ndarray (R, N) — O_r(θ_j), object radiance on the curves (0 if unrecoverable)
+    coefficients : ndarray (R, N) complex — Õ_p (weighted basis, fftfreq order)
+    alpha : ndarray (R,) complex — diffuse projection of S2-32 (0 for the general solver)
+    regularization : RegularizationResult
+    diagnostics : Diagnostics
+    solver : str — "closed_form" or "general"
+    recoverable : bool
+    message : str
+    """
+
+    radiance: NDArray[np.float64]
+    coefficients: NDArray[np.complex128]
+    alpha: NDArray[np.complex128]
+    regularization: RegularizationResult
+    diagnostics: Diagnostics
+    solver: str
+    recoverable: bool
+    message: str
+
+
 def _is_separable(brdf: object) -> bool:
     return isinstance(brdf, FlatlandBRDF | SpatiallyVaryingBRDF)
 
@@ -123,12 +149,11 @@ def solve_curves(
     signal_power: ArrayLike | None = None,
     gamma_min: float = 1e-6,
     pool: ArrayLike | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.complex128],
-           RegularizationResult, Diagnostics, str, bool, str]:
+) -> CurveSolution:
     """Solve the per-point problems for curves already sampled, shape (R, N).
 
-    Returns ``(O, Õ, α, regularization, diagnostics, solver, recoverable, message)`` with
-    O of shape (R, N) (the object radiance on the cell-centred θ grid of ``domain_rad``).
+    Returns a :class:`CurveSolution`; its radiance (R, N) lies on the cell-centred θ grid
+    of ``domain_rad``.
     ``noise`` is a :class:`NoiseEstimate`, a white PSD (float, coefficient
     normalisation, σ²/N) or None to estimate it from the high-|p| tail.  ``pool`` (R,)
     marks the points allowed to shape the shared filter (default: all that pass the
@@ -223,7 +248,7 @@ def solve_curves(
     else:
         o_coef = np.zeros_like(o_coef)
         obj = np.zeros((n_r, n))
-    return obj, o_coef, alpha, reg, diag, solver, recoverable, message
+    return CurveSolution(obj, o_coef, alpha, reg, diag, solver, recoverable, message)
 
 
 def _flat_window(brdf: object) -> bool:
@@ -231,7 +256,16 @@ def _flat_window(brdf: object) -> bool:
     return bool(getattr(base, "window_exponent", 1.0) == 0)
 
 
-def _b_matrix(brdf, spec, domain, n, r, tilt, y) -> NDArray[np.complex128]:
+def _b_matrix(
+    brdf: BRDFCallable,
+    spec: object,
+    domain: tuple[float, float],
+    n: int,
+    r: int,
+    tilt: float,
+    y: float | None,
+) -> NDArray[np.complex128]:
+    """B̃ of point r: from the separable spectra when known, else by 2-D quadrature."""
     if spec is not None:
         return spec.matrix(r)
     return brdf_fourier_matrix(brdf, domain, n, weighted=True, normal_angle_rad=tilt,
@@ -278,7 +312,7 @@ def reconstruct(
     """
     c = lf_meas.y_mm if points_mm is None else np.asarray(points_mm, dtype=float)
     curves, valid = sample_along_curves(lf_meas, c, d2_mm, method=interpolation)
-    obj, o_coef, alpha, reg, diag, used, ok, msg = solve_curves(
+    sol = solve_curves(
         curves, brdf, lf_meas.domain_rad, points_mm=c, normal_angle_rad=normal_angle_rad,
         method=method, solver=solver, noise=noise, tau=tau, p_max=p_max, gamma_min=gamma_min,
         pool=valid.all(axis=1),
@@ -286,17 +320,17 @@ def reconstruct(
     a, b = lf_meas.domain_rad
     width = getattr(getattr(brdf, "base", brdf), "specular_width_rad", 0.0)
     margin = min(3.0 * float(width), 0.25 * (b - a))
-    field = LightField2D(obj, c, lf_meas.theta_rad, lf_meas.domain_rad, 0.0)
+    field = LightField2D(sol.radiance, c, lf_meas.theta_rad, lf_meas.domain_rad, 0.0)
     return Reconstruction(
         incident_field=field,
-        coefficients=o_coef,
+        coefficients=sol.coefficients,
         orders=fourier_orders(lf_meas.theta_rad.size),
-        alpha=alpha,
-        regularization=reg,
-        diagnostics=diag,
-        solver=used,
-        recoverable=ok,
-        message=msg,
+        alpha=sol.alpha,
+        regularization=sol.regularization,
+        diagnostics=sol.diagnostics,
+        solver=sol.solver,
+        recoverable=sol.recoverable,
+        message=sol.message,
         valid_fraction=valid.mean(axis=1),
         solvable_domain_rad=(a + margin, b - margin),
     )

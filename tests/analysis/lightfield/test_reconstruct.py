@@ -41,9 +41,9 @@ def test_closed_form_equals_general_solve_on_the_same_model():
     cf = solve_curves(noisy, GLOSSY, DOM, method="truncation", noise=psd, p_max=8)
     ge = solve_curves(noisy, GLOSSY, DOM, method="truncation", noise=psd, solver="general",
                       p_max=16)
-    assert cf[5] == "closed_form" and ge[5] == "general"
+    assert cf.solver == "closed_form" and ge.solver == "general"
     # truncation by |p| vs by singular-value rank (2·8 + 1 = 17 modes, rank index ≤ 16)
-    assert np.allclose(cf[0], ge[0], atol=1e-6 * np.abs(cf[0]).max())
+    assert np.allclose(cf.radiance, ge.radiance, atol=1e-6 * np.abs(cf.radiance).max())
 
 
 def test_general_solver_handles_a_window_and_an_arbitrary_callable():
@@ -53,15 +53,15 @@ def test_general_solver_handles_a_window_and_an_arbitrary_callable():
     th = theta_grid(DOM, N)
     truth = coefficients(np.cos(th) * scene.incident_radiance(pts[:, None], th))
     res = solve_curves(m, windowed, DOM, method="truncation", noise=1e-14, p_max=20)
-    assert res[5] == "general"
+    assert res.solver == "general"
 
     def plain(ti, to):  # same BRDF as a bare callable: the dense 2-D Fourier route
         return windowed(ti, to)
 
     res2 = solve_curves(m, plain, DOM, method="truncation", noise=1e-14, p_max=20)
     low = np.abs(np.rint(np.fft.fftfreq(N) * N)) <= 3
-    err1 = np.linalg.norm(res[1][:, low] - truth[:, low]) / np.linalg.norm(truth[:, low])
-    err2 = np.linalg.norm(res2[1][:, low] - truth[:, low]) / np.linalg.norm(truth[:, low])
+    err1 = np.linalg.norm(res.coefficients[:, low] - truth[:, low]) / np.linalg.norm(truth[:, low])
+    err2 = np.linalg.norm(res2.coefficients[:, low] - truth[:, low]) / np.linalg.norm(truth[:, low])
     assert err1 < 0.05 and err2 < 0.05
 
 
@@ -85,8 +85,8 @@ def test_nearly_diffuse_wall_at_low_snr_is_not_presented_as_an_object():
     _, m = curves(weak, pts, OBJ)
     noisy = m + np.random.default_rng(4).normal(0, 0.05 * m.max(), m.shape)
     res = solve_curves(noisy, weak, DOM, method="wiener")
-    assert res[4].gamma[0] < 0.02
-    assert not res[6] and "no recoverable" in res[7]
+    assert res.diagnostics.gamma[0] < 0.02
+    assert not res.recoverable and "no recoverable" in res.message
 
 
 @pytest.mark.parametrize("method", ["wiener", "truncation", "gcv", "discrepancy"])
@@ -95,7 +95,7 @@ def test_every_method_reports_parameter_filter_dof_and_residual(method):
     _, m = curves(GLOSSY, pts, OBJ)
     sigma = 0.01 * m.max()
     noisy = m + np.random.default_rng(7).normal(0, sigma, m.shape)
-    reg = solve_curves(noisy, GLOSSY, DOM, method=method)[3]
+    reg = solve_curves(noisy, GLOSSY, DOM, method=method).regularization
     assert reg.method == method
     assert np.isfinite(reg.parameter)
     assert reg.filter_factors.shape[-1] == N
@@ -134,11 +134,11 @@ def test_tilted_and_inhomogeneous_walls_reconstruct_the_object():
                         points_mm=pts)
     inner = np.abs(th) < 0.4
     for r in (res, res2):
-        peak_est = r[0][:, inner].max(axis=1)
+        peak_est = r.radiance[:, inner].max(axis=1)
         peak_true = truth[:, inner].max(axis=1)
         # the band limit p = 15 blurs a 4 mm source at 224.5 mm by about a factor 0.6
         assert np.all(peak_est > 0.4 * peak_true)
-        assert np.all(np.abs(th[inner][np.argmax(r[0][:, inner], axis=1)]
+        assert np.all(np.abs(th[inner][np.argmax(r.radiance[:, inner], axis=1)]
                              - th[inner][np.argmax(truth[:, inner], axis=1)]) <= 0.02)
 
 

@@ -66,8 +66,8 @@ def test_delta_p_matches_200_noise_realisations(name):
     psd = sigma**2 / N_THETA  # white noise in coefficient normalisation
     res = solve_curves(noisy, brdf, DOMAIN, method="none", noise=psd)
     ref = solve_curves(clean, brdf, DOMAIN, method="none", noise=psd)
-    o_coef, o_true = res[1], ref[1][0]
-    diag = ref[4]
+    o_coef, o_true = res.coefficients, ref.coefficients[0]
+    diag = ref.diagnostics
     p = np.arange(1, 11)
     empirical = np.std(o_coef[:, p], axis=0) / abs(o_true[0])
     predicted = diag.delta_p[0, p]
@@ -97,14 +97,14 @@ def test_truncation_rule_within_one_of_mse_optimum_and_wiener_not_worse(name):
     p = np.abs(np.rint(np.fft.fftfreq(N_THETA) * N_THETA)).astype(int)
     trunc = solve_curves(noisy, brdf, DOMAIN, method="truncation", noise=psd)
     wien = solve_curves(noisy, brdf, DOMAIN, method="wiener", noise=psd)
-    p_rule = int(trunc[3].parameter)
+    p_rule = int(trunc.regularization.parameter)
     # oracle: the error of every truncation level against the true coefficients
-    naive = solve_curves(noisy, brdf, DOMAIN, method="none", noise=psd)[1]
+    naive = solve_curves(noisy, brdf, DOMAIN, method="none", noise=psd).coefficients
     errs = [np.sum(np.abs(np.where(p <= lv, naive, 0.0) - truth) ** 2) for lv in range(40)]
     p_opt = int(np.argmin(errs))
     assert abs(p_rule - p_opt) <= 1, (p_rule, p_opt)
-    e_trunc = np.sum(np.abs(trunc[1] - truth) ** 2)
-    e_wien = np.sum(np.abs(wien[1] - truth) ** 2)
+    e_trunc = np.sum(np.abs(trunc.coefficients - truth) ** 2)
+    e_wien = np.sum(np.abs(wien.coefficients - truth) ** 2)
     assert e_wien <= e_trunc
     assert spec.s.shape == (1, N_THETA)
 
