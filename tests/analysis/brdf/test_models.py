@@ -258,3 +258,25 @@ def test_flatland_model_structure_and_energy() -> None:
     a = flatland_brdf(0.1, 0.15, rho_d=0.0, ks=1.0, width=0.05, q=0.0)
     b = flatland_brdf(-0.3, -0.25, rho_d=0.0, ks=1.0, width=0.05, q=0.0)
     assert a == pytest.approx(b, rel=1e-12)
+
+
+def test_fitted_dhr_with_uncertainty() -> None:
+    from analysis.brdf.fit import fit_brdf
+    from analysis.brdf.integrate import fitted_dhr
+
+    from .synth import noisy, scan_angles
+
+    angles = scan_angles(15, out_of_plane=False)
+    lam = get_model("lambert")
+    y, sig, _ = noisy(lam, [0.8], angles, seed=3, rel=0.02)
+    fit = fit_brdf(lam, y, *angles, sigma=sig)
+    res = fitted_dhr(lam, fit, np.radians([0.0, 60.0]), n_mu=16, n_phi=16)
+    np.testing.assert_allclose(res.value, fit.params[0], rtol=1e-12)
+    np.testing.assert_allclose(res.stderr, fit.stderr[0], rtol=1e-6)
+    assert not np.any(res.exceeds_one)
+    # a bright original Oren–Nayar fit is flagged near grazing (documented exception)
+    on = get_model("oren_nayar")
+    y, sig, _ = noisy(on, [1.0, 0.3], angles, seed=4, rel=0.002)
+    fit = fit_brdf(on, y, *angles, sigma=sig)
+    res = fitted_dhr(on, fit, np.radians([0.0, 89.0]))
+    assert res.value[1] > 1.0 and res.value[0] < 1.0
