@@ -354,8 +354,11 @@ class VirtualBench:
             return 0.0
         if spec.url is None:
             return spec.value
-        stage = _emulator_for(spec.url).stage
-        return spec.scale * float(stage.physical_position()) + spec.offset
+        emulator = _emulator_for(spec.url)
+        # The stage updates itself when read; the link's thread may be moving it now.
+        with emulator.lock:
+            physical = float(emulator.stage.physical_position())
+        return spec.scale * physical + spec.offset
 
     def positions(self) -> dict[str, float]:
         return {role: self.position(role) for role in ROLES}
