@@ -63,10 +63,10 @@ def test_weak_white_furnace(dist: str, theta_o: float) -> None:
     alpha = 0.5
     mu_o = np.cos(theta_o)
     so = np.sin(theta_o)
-    t, w = np.polynomial.legendre.leggauss(400)
+    t, w = np.polynomial.legendre.leggauss(160)
     th = 0.25 * np.pi * (t + 1)
     wt = 0.25 * np.pi * w
-    ph = np.linspace(0, 2 * np.pi, 512, endpoint=False)
+    ph = np.linspace(0, 2 * np.pi, 256, endpoint=False)
     T, P = np.meshgrid(th, ph, indexing="ij")
     c = np.cos(T)
     dot = np.maximum(so * np.sin(T) * np.cos(P) + mu_o * c, 0.0)
