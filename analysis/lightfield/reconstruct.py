@@ -158,6 +158,11 @@ def solve_curves(
     normalisation, σ²/N) or None to estimate it from the high-|p| tail.  ``pool`` (R,)
     marks the points allowed to shape the shared filter (default: all that pass the
     tail-outlier test).
+
+    For a BRDF that is not a :class:`FlatlandBRDF`/:class:`SpatiallyVaryingBRDF` the
+    diffuse part is not separated: its diagnostics take diag(B̃) as S_pp and D = 0 (so
+    γ = 1); whether anything is recoverable is then decided by the regularisation alone
+    (a rank-one, purely diffuse B̃ leaves only the level-0 singular mode).
     """
     mc = np.atleast_2d(np.asarray(curves, dtype=float))
     n_r, n = mc.shape

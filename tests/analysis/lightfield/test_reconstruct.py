@@ -79,6 +79,20 @@ def test_purely_diffuse_wall_reports_no_recoverable_information():
         assert np.all(np.isfinite(rec.regularization.filter_factors))
 
 
+def test_purely_diffuse_callable_through_the_general_solver_has_no_information():
+    def lambert(ti, to):
+        return np.full(np.broadcast_shapes(np.shape(ti), np.shape(to)), 0.4)
+
+    pts = np.linspace(-60, 60, 61)
+    _, m = curves(FlatlandBRDF(0.0, 0.05, 0.8), pts, OBJ)
+    noisy = m + np.random.default_rng(3).normal(0, 1e-4, m.shape)
+    for method in ("wiener", "truncation", "gcv"):
+        res = solve_curves(noisy, lambert, DOM, method=method)
+        assert res.solver == "general"
+        assert not res.recoverable and "no recoverable" in res.message
+        assert np.all(res.radiance == 0.0)
+
+
 def test_nearly_diffuse_wall_at_low_snr_is_not_presented_as_an_object():
     weak = FlatlandBRDF(0.002, np.deg2rad(3.0), 0.8)
     pts = np.linspace(-60, 60, 61)
