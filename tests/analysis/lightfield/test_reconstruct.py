@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from analysis.lightfield import (
     FlatlandBRDF,
@@ -163,3 +165,28 @@ def test_unobservable_modes_give_zero_not_nan():
         reg = regularize(data, gains, 1e-3, method=method, levels=[0, 1, 1, 2, 2, 3])
         assert np.all(np.isfinite(reg.solution))
         assert np.all(reg.solution[:, gains == 0] == 0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(1, 6),
+    st.integers(2, 12),
+    st.floats(1e-8, 1e2),
+    st.sampled_from(["none", "wiener", "truncation", "gcv", "discrepancy"]),
+    st.integers(0, 2**31 - 1),
+)
+def test_regularize_invariants(n_r, n_k, noise, method, seed):
+    rng = np.random.default_rng(seed)
+    gains = np.abs(rng.normal(size=n_k)) * (rng.random(n_k) > 0.2)
+    data = rng.normal(size=(n_r, n_k)) + 1j * rng.normal(size=(n_r, n_k))
+    levels = np.arange(n_k) // 2
+    reg = regularize(data, gains, noise, method=method, levels=levels)
+    phi = np.broadcast_to(reg.filter_factors, (n_r, n_k))
+    assert np.all(np.isfinite(reg.solution))
+    assert np.all((phi >= 0) & (phi <= 1))
+    assert 0 <= reg.effective_dof <= n_k
+    assert np.all(phi[:, gains == 0] == 0)
+    if method == "truncation":
+        kept = phi[0] > 0
+        # a truncation keeps whole levels from 0 up to p_max (observable modes only)
+        assert np.all(kept == ((levels <= reg.parameter) & (gains > 0)))
