@@ -91,8 +91,9 @@ def direction(theta_deg: float, phi_deg: float) -> np.ndarray:
 def _polar(vec: np.ndarray) -> tuple[float, float]:
     """(θ, φ) in degrees of a sample-frame vector; φ in [0, 360), 0 where θ = 0."""
     v = vec / np.linalg.norm(vec)
-    theta = math.degrees(math.acos(max(-1.0, min(1.0, float(v[2])))))
-    if math.hypot(v[0], v[1]) < _EPS:
+    # atan2 keeps full precision near the pole, where acos(z) loses half the digits.
+    theta = math.degrees(math.atan2(math.hypot(float(v[0]), float(v[1])), float(v[2])))
+    if math.hypot(v[0], v[1]) < 1e-15:
         return theta, 0.0
     phi = math.degrees(math.atan2(float(v[1]), float(v[0]))) % 360.0
     if phi > 360.0 - 1e-9:
@@ -120,8 +121,9 @@ class Angles:
     @property
     def bistatic_deg(self) -> float:
         """Angle 2β between the source and detector directions, degrees."""
-        c = float(np.dot(self.omega_i, self.omega_r))
-        return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+        wi, wr = self.omega_i, self.omega_r
+        return math.degrees(math.atan2(float(np.linalg.norm(np.cross(wi, wr))),
+                                       float(np.dot(wi, wr))))
 
     def reciprocal(self) -> Angles:
         """Source and detector exchanged (Helmholtz reciprocity: f is unchanged)."""
