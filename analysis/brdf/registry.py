@@ -34,6 +34,8 @@ _FACTORIES: dict[str, Callable[[], BRDFModel]] = {
     "lightfield_separable": separable_specular,
 }
 
+_BUILTIN = frozenset(_FACTORIES)
+
 _ALIASES = {
     "lambertian": "lambert",
     "cook_torrance": "ggx",
@@ -51,7 +53,16 @@ def register_model(name: str, factory: Callable[[], BRDFModel]) -> None:
     """Add a base model (e.g. a configured :func:`cook_torrance` with a complex index)."""
     if "+" in name or "," in name or not name:
         raise ValueError("model names must be non-empty and contain no '+' or ','")
+    if name in _BUILTIN or name in _ALIASES:
+        raise ValueError(f"{name!r} is a built-in model name")
     _FACTORIES[name] = factory
+
+
+def unregister_model(name: str) -> None:
+    """Remove a model added with :func:`register_model` (built-in names are protected)."""
+    if name in _BUILTIN:
+        raise ValueError(f"{name!r} is a built-in model")
+    _FACTORIES.pop(name, None)
 
 
 def get_model(name: str) -> BRDFModel:

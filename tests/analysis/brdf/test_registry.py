@@ -5,7 +5,7 @@ import pytest
 
 from analysis.brdf import get_model, parse_model_list, sum_models
 from analysis.brdf.geometry import make_geometry
-from analysis.brdf.registry import register_model
+from analysis.brdf.registry import register_model, unregister_model
 from analysis.brdf.specular import cook_torrance
 
 
@@ -38,10 +38,19 @@ def test_sum_is_sum_of_parts_and_repeated_parts_get_suffix() -> None:
 def test_aliases_and_registration() -> None:
     assert get_model("cook_torrance").name == "ggx"
     register_model("ggx_gold", lambda: cook_torrance(n=0.18 + 3.1j, name="ggx_gold"))
-    m = get_model("lambert+ggx_gold")
-    assert m.n_params == 3
+    try:
+        m = get_model("lambert+ggx_gold")
+        assert m.n_params == 3
+    finally:
+        unregister_model("ggx_gold")
+    with pytest.raises(KeyError):
+        get_model("ggx_gold")
     with pytest.raises(ValueError):
         register_model("a+b", lambda: get_model("lambert"))
+    with pytest.raises(ValueError):
+        register_model("ggx", lambda: get_model("lambert"))
+    with pytest.raises(ValueError):
+        unregister_model("lambert")
 
 
 def test_wrong_parameter_count_raises() -> None:
