@@ -23,16 +23,22 @@ mm, angles in degrees at the interface (radians inside). ``R_a(θ)`` is a right-
 rotation by θ about axis a.
 
 * Direction towards the source: ``ω_s = R_y(source_theta) ẑ``.
-* Sample frame: ``R = R_y(sample_theta) · R_x(sample_tilt) · R_z(sample_phi)`` maps the
-  sample's own axes (x_s, y_s, n) = R (x̂, ŷ, ẑ); the normal n is ẑ at zero. So
-  ``sample_theta`` turns the mount about the lab axis, ``sample_tilt`` tips the normal out of
-  the plane of incidence and ``sample_phi`` spins the sample about its normal.
+* Sample frame: ``R = R_y(sample_theta) · R_z(180°) · R_x(sample_tilt) · R_z(sample_phi)``
+  maps the sample's own axes (x_s, y_s, n) = R (x̂, ŷ, ẑ); the normal n is ẑ at zero, x_s
+  lies in the plane of incidence on the source side (so the source is at φi = 0 for
+  sample_theta > 0) and y_s points down (−ŷ). ``sample_theta`` turns the mount about the
+  lab axis, a positive ``sample_tilt`` raises the normal towards +ŷ (out of the plane of
+  incidence) and ``sample_phi`` spins the sample about its normal (right-handed).
+  This is the convention of :mod:`instrument.kinematics` (its +Z "up" is this ŷ, its
+  horizontal plane this x–z plane) when the profile's ``source_theta_deg`` is 0; a
+  ``source_theta`` role here is a physical source arm, which does not move the other axes'
+  zeros.
 * Detector arm direction: ``ω_d = R_y(detector_theta) ẑ``; the camera (or the power-meter
   head) sits at ``(arm_length_mm + camera_z) · ω_d`` looking at the origin, image "up" = ŷ.
 * The scattering angles follow :mod:`analysis.brdf.geometry`: θ from the normal,
-  φ = atan2(ω·y_s, ω·x_s). With ``sample_theta = θ`` and ``detector_theta = 2θ`` the detector
-  sits in the specular direction (θr = θi, φr = φi + π): the classic θ–2θ geometry. The
-  detector cannot reach ``detector_theta = 0`` without blocking the beam.
+  φ = atan2(ω·y_s, ω·x_s). With ``sample_theta = θ > 0`` and ``detector_theta = 2θ`` the
+  detector sits in the specular direction (θi = θr = θ, φi = 0, φr = π): the classic θ–2θ
+  geometry. The detector cannot reach ``detector_theta = 0`` without blocking the beam.
 """
 
 from __future__ import annotations
@@ -368,8 +374,8 @@ class VirtualBench:
         rad = {k: math.radians(p.get(k, 0.0)) for k in ROLES if k != "camera_z"}
         z = np.array([0.0, 0.0, 1.0])
         source_dir = rotation("y", rad["source_theta"]) @ z
-        r = (rotation("y", rad["sample_theta"]) @ rotation("x", rad["sample_tilt"])
-             @ rotation("z", rad["sample_phi"]))
+        r = (rotation("y", rad["sample_theta"]) @ rotation("z", math.pi)
+             @ rotation("x", rad["sample_tilt"]) @ rotation("z", rad["sample_phi"]))
         detector_dir = rotation("y", rad["detector_theta"]) @ z
         return BenchPose(
             source_dir=source_dir, sample_axes=r.T.copy(), detector_dir=detector_dir,

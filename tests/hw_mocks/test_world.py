@@ -38,6 +38,30 @@ def bench(theta_s=0.0, theta_d=30.0, **kw) -> VirtualBench:
     return world
 
 
+@pytest.mark.parametrize(
+    "positions",
+    [{"sample_theta": 20.0, "detector_theta": 40.0},
+     {"sample_theta": 35.0, "detector_theta": -50.0},
+     {"sample_theta": -10.0, "detector_theta": 120.0, "sample_tilt": 15.0},
+     {"sample_theta": 25.0, "detector_theta": 70.0, "sample_tilt": -20.0, "sample_phi": 30.0}],
+)
+def test_world_angles_agree_with_instrument_kinematics(positions):
+    """The world and the instrument's kinematics must describe the same bench."""
+    from instrument.kinematics import OutOfPlaneKinematics
+
+    angles = OutOfPlaneKinematics(source_theta_deg=0.0).angles(
+        {"sample_theta": 0.0, "detector_theta": 0.0, "sample_tilt": 0.0, "sample_phi": 0.0,
+         **positions})
+    pose = VirtualBench("k", roles=positions).pose()
+    ti, pi = (float(np.degrees(a)) for a in pose.local_angles(pose.source_dir))
+    tr, pr = (float(np.degrees(a)) for a in pose.local_angles(pose.detector_dir))
+    assert ti == pytest.approx(angles.theta_i, abs=1e-9)
+    assert tr == pytest.approx(angles.theta_r, abs=1e-9)
+    for mine, theirs, theta in ((pi, angles.phi_i, ti), (pr, angles.phi_r, tr)):
+        if theta > 1e-6:
+            assert math.cos(math.radians(mine - theirs)) == pytest.approx(1.0, abs=1e-9)
+
+
 def test_kinematics_theta_two_theta_is_specular():
     world = bench(20.0, 40.0)
     pose = world.pose()
