@@ -284,3 +284,22 @@ def test_dark_and_flat_remove_the_fixed_pattern_to_shot_noise():
     # The flat's own noise (1/48 of a frame's variance) and the dark's add ~2 %.
     assert np.std(corrected) == pytest.approx(temporal, rel=0.05)
     assert raw_spatial > 1.5 * temporal
+
+
+def test_camera_z_changes_the_magnification():
+    world = lit_bench(0.0, 30.0)
+    cam = SimulatedCamera(world=world, seed=0, sensor=SensorParams(width=256, height=256))
+    _, sy_near = spot_moments(cam.photon_rate())
+    world.set_role("camera_z", 100.0)  # the camera stage moves the camera back 100 mm
+    _, sy_far = spot_moments(cam.photon_rate())
+    assert sy_near / sy_far == pytest.approx(400.0 / 300.0, rel=0.01)
+
+
+def test_realtime_acquisition_takes_the_exposure_time():
+    import time
+
+    cam = SimulatedCamera(world=lit_bench(), seed=0, sensor=SMALL, realtime=True)
+    cam.exposure_us = 30000.0
+    t0 = time.perf_counter()
+    cam.acquire(2)
+    assert time.perf_counter() - t0 >= 0.06
