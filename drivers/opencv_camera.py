@@ -79,6 +79,10 @@ class OpenCVCamera(Camera):
         If given, ask the backend for this many buffers (``CAP_PROP_BUFFERSIZE``, read back).
     ring_capacity
         Capacity of the streaming ring buffer.
+    capture
+        An already opened ``cv2.VideoCapture`` (or an object with its interface:
+        ``isOpened``, ``getBackendName``, ``set``, ``get``, ``read``, ``grab``, ``release``)
+        to adopt instead of opening ``source``; the camera owns and releases it.
     """
 
     def __init__(
@@ -92,13 +96,14 @@ class OpenCVCamera(Camera):
         nominal_exposure_us: float = math.nan,
         buffer_size: int | None = None,
         ring_capacity: int = 16,
+        capture: Any = None,
     ) -> None:
         super().__init__(name, ring_capacity=ring_capacity)
         self._source = source
         self._lock = threading.RLock()
         self._pending: deque[Frame] = deque()
         self._index = 0
-        cap = cv2.VideoCapture(source, api_preference)
+        cap = capture if capture is not None else cv2.VideoCapture(source, api_preference)
         if not cap.isOpened():
             cap.release()
             raise ConnectionFailed(
@@ -120,6 +125,8 @@ class OpenCVCamera(Camera):
                 cap.get(cv2.CAP_PROP_CONVERT_RGB) == 0
             )
             if buffer_size is not None:
+                if int(buffer_size) != buffer_size or buffer_size < 1:
+                    raise ValueError(f"buffer_size must be a positive integer, got {buffer_size}")
                 self._set_checked(cv2.CAP_PROP_BUFFERSIZE, float(buffer_size), "buffer_size",
                                   tolerance=0.0)
             self._nominal_exposure_us = float(nominal_exposure_us)

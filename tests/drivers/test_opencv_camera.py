@@ -148,3 +148,170 @@ def test_video_frames(grey_video):
 def test_missing_source_fails_to_connect(tmp_path):
     with pytest.raises(ConnectionFailed):
         OpenCVCamera(str(tmp_path / "none_%03d.png"), api_preference=cv2.CAP_IMAGES)
+
+
+# ------------------------------------------------------------------ V4L2 semantics
+class V4l2CaptureEmulator:
+    """Device-side model of a UVC camera as OpenCV's V4L2 backend presents it.
+
+    Behaviour (hardware.md §2a): ``exposure_time_absolute`` in 100 µs integer units
+    (1…5000, out-of-range values clamped with ``set`` still returning True), auto exposure
+    as a menu (1 manual, 3 aperture priority; exposure writes are ignored in auto mode),
+    integer gain 0…100 (clamped), FOURCC ``YUYV``/``GREY`` (8-bit) or ``Y16`` (16-bit),
+    and a queue of ``buffers`` frames filled at capture time, so a frame read after a
+    change was exposed before it. Pixel (0, 0) holds the exposure level at capture.
+    ``manual_locked`` models cameras whose auto-exposure menu will not leave auto.
+    """
+
+    def __init__(self, *, buffers=4, manual_locked=False):
+        self.props = {
+            cv2.CAP_PROP_AUTO_EXPOSURE: 3.0,
+            cv2.CAP_PROP_EXPOSURE: 100.0,
+            cv2.CAP_PROP_GAIN: 0.0,
+            cv2.CAP_PROP_CONVERT_RGB: 1.0,
+            cv2.CAP_PROP_FOURCC: float(cv2.VideoWriter_fourcc(*"YUYV")),
+            cv2.CAP_PROP_BUFFERSIZE: float(buffers),
+            cv2.CAP_PROP_FRAME_WIDTH: 32.0,
+            cv2.CAP_PROP_FRAME_HEIGHT: 24.0,
+        }
+        self.manual_locked = manual_locked
+        self.queue: list[np.ndarray] = []
+        self.released = False
+
+    def isOpened(self):  # the cv2.VideoCapture method names
+        return not self.released
+
+    def getBackendName(self):
+        return "V4L2"
+
+    def get(self, prop):
+        return self.props.get(prop, -1.0)
+
+    def set(self, prop, value):
+        if prop == cv2.CAP_PROP_AUTO_EXPOSURE:
+            if value not in (1.0, 3.0):
+                return False
+            if not self.manual_locked:
+                self.props[prop] = value
+            return True
+        if prop == cv2.CAP_PROP_EXPOSURE:
+            if self.props[cv2.CAP_PROP_AUTO_EXPOSURE] == 1.0:
+                self.props[prop] = float(min(max(round(value), 1), 5000))
+            return True
+        if prop == cv2.CAP_PROP_GAIN:
+            self.props[prop] = float(min(max(round(value), 0), 100))
+            return True
+        if prop == cv2.CAP_PROP_FOURCC:
+            codes = {cv2.VideoWriter_fourcc(*c) for c in ("YUYV", "GREY", "Y16 ")}
+            if int(value) in codes:
+                self.props[prop] = float(value)
+                self.queue.clear()  # a format change restarts streaming
+            return True
+        if prop == cv2.CAP_PROP_BUFFERSIZE:
+            if not 1 <= value <= 32:
+                return False
+            self.props[prop] = float(value)
+            return True
+        if prop == cv2.CAP_PROP_CONVERT_RGB:
+            self.props[prop] = float(value)
+            return True
+        return False
+
+    def _capture(self):
+        level = self.props[cv2.CAP_PROP_EXPOSURE] * (1.0 + self.props[cv2.CAP_PROP_GAIN] / 100)
+        sixteen = int(self.props[cv2.CAP_PROP_FOURCC]) == cv2.VideoWriter_fourcc(*"Y16 ")
+        dtype = np.uint16 if sixteen else np.uint8
+        top = 65535 if sixteen else 255
+        return np.full((24, 32), min(level, top), dtype)
+
+    def _fill(self):
+        while len(self.queue) < int(self.props[cv2.CAP_PROP_BUFFERSIZE]):
+            self.queue.append(self._capture())
+
+    def grab(self):
+        self._fill()
+        self.queue.pop(0)
+        self.queue.append(self._capture())
+        return True
+
+    def read(self):
+        self._fill()
+        frame = self.queue.pop(0)
+        self.queue.append(self._capture())
+        if self.props[cv2.CAP_PROP_CONVERT_RGB] == 1.0 and frame.dtype == np.uint8:
+            return True, cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+        return True, frame
+
+    def release(self):
+        self.released = True
+
+
+def open_v4l2(**kw) -> tuple[OpenCVCamera, V4l2CaptureEmulator]:
+    emulator = V4l2CaptureEmulator(**{k: kw.pop(k) for k in ("manual_locked",) if k in kw})
+    return OpenCVCamera(0, capture=emulator, **kw), emulator
+
+
+def test_v4l2_exposure_in_100_us_units_with_manual_mode_and_stale_discard():
+    cam, emu = open_v4l2()
+    with cam:
+        assert cam.stale_frames == 4  # V4L2 default: the driver's buffer count
+        assert cam.exposure_us == 100.0 * 100.0
+        cam.exposure_us = 2000.0
+        assert emu.props[cv2.CAP_PROP_AUTO_EXPOSURE] == 1.0  # switched to manual first
+        assert emu.props[cv2.CAP_PROP_EXPOSURE] == 20.0
+        frame = cam.acquire(1)[0]
+        assert frame.exposure_us == 2000.0
+        assert frame.data[0, 0] == 20  # exposed after the change: the stale four are gone
+        assert frame.data.ndim == 2  # BGR conversion undone losslessly
+
+
+def test_v4l2_without_discard_returns_frames_exposed_before_the_change():
+    cam, _ = open_v4l2(stale_frames=0)
+    with cam:
+        cam.exposure_us = 2000.0
+        assert cam.acquire(1)[0].data[0, 0] == 100  # the old exposure: why we discard
+
+
+def test_v4l2_clamped_or_ignored_settings_raise():
+    cam, _ = open_v4l2()
+    with cam:
+        with pytest.raises(UnsupportedFeature, match="exposure"):
+            cam.exposure_us = 600_000.0  # 6000 units: the camera clamps to 5000
+        cam.gain = 50.0
+        assert cam.gain == 50.0 and cam.acquire(1)[0].gain == 50.0
+        with pytest.raises(UnsupportedFeature, match="gain"):
+            cam.gain = 150.0  # clamped to 100 by the camera
+    locked, _ = open_v4l2(manual_locked=True)
+    with locked, pytest.raises(UnsupportedFeature, match="manual exposure"):
+        locked.exposure_us = 2000.0
+
+
+def test_v4l2_pixel_format_by_fourcc():
+    cam, emu = open_v4l2()
+    with cam:
+        assert cam.pixel_format is PixelFormat.MONO8
+        cam.pixel_format = PixelFormat.MONO16
+        assert int(emu.props[cv2.CAP_PROP_FOURCC]) == cv2.VideoWriter_fourcc(*"Y16 ")
+        frame = cam.acquire(1)[0]
+        assert frame.data.dtype == np.uint16 and frame.saturation_dn == 65535
+        with pytest.raises(UnsupportedFeature):
+            cam.pixel_format = PixelFormat.MONO12
+    assert emu.released
+
+
+class TestV4l2Contract(CameraContract):
+    @pytest.fixture
+    def camera_factory(self):
+        return lambda: open_v4l2(ring_capacity=4)[0]
+
+
+def test_v4l2_buffer_size_is_set_and_checked():
+    cam, emu = open_v4l2(buffer_size=2)
+    with cam:
+        assert emu.props[cv2.CAP_PROP_BUFFERSIZE] == 2.0
+    refused = V4l2CaptureEmulator()
+    with pytest.raises(UnsupportedFeature):
+        OpenCVCamera(0, capture=refused, buffer_size=64)
+    assert refused.released  # a failed constructor leaves nothing open
+    with pytest.raises(ValueError):
+        OpenCVCamera(0, capture=V4l2CaptureEmulator(), buffer_size=0)
