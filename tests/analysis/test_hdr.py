@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from analysis.hdr import merge_hdr
 
@@ -114,3 +116,27 @@ def test_bad_arguments_raise(kwargs):
     frames = np.zeros((3, 4, 4), dtype=np.uint16)
     with pytest.raises(ValueError):
         merge_hdr(frames, saturation_dn=4000, **kwargs)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    log_rates=st.lists(st.floats(-3.0, 3.0), min_size=1, max_size=16),
+    exposures=st.lists(st.floats(1.0, 1e5), min_size=1, max_size=5, unique=True),
+    gains=st.floats(0.5, 4.0),
+    weighting=st.sampled_from(["hat", "inverse_variance"]),
+)
+def test_noise_free_linear_frames_are_merged_exactly(log_rates, exposures, gains, weighting):
+    """Every bracket of a noise-free linear camera estimates the rate exactly, so any
+    weighted mean of them must return it wherever some bracket is usable."""
+    rate = 10.0 ** np.array(log_rates)[None, :]  # DN/µs at unit gain
+    t = np.array(exposures)
+    g = np.full(t.size, gains)
+    frames = np.stack([np.minimum(rate * ti * gi + 50.0, 4095.0) for ti, gi in zip(t, g,
+                                                                                strict=True)])
+    res = merge_hdr(frames, t, darks=50.0, gains=g, saturation_dn=4095.0, weighting=weighting,
+                    min_signal_dn=1.0, system_gain_dn_per_e=0.5, read_noise_dn=1.0)
+    usable = res.n_used > 0
+    np.testing.assert_allclose(res.rate[usable], rate[usable], rtol=1e-9)
+    assert np.all(np.isfinite(res.rate)) and np.all(np.isfinite(res.variance))
+    # Where no bracket is usable, the flags say why.
+    assert np.all(res.saturated | res.underexposed | usable)
