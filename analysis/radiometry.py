@@ -38,6 +38,7 @@ __all__ = [
     "flat_field",
     "master_dark",
     "pinhole_relative_illumination",
+    "rate_to_radiance",
     "to_radiance",
 ]
 
@@ -271,7 +272,32 @@ def to_radiance(
     """
     if not exposure_us > 0:
         raise ValueError("exposure_us must be > 0")
-    rate = apply_dark_flat(frame, dark=dark, flat=flat) / (exposure_us * 1e-6)
+    rate = apply_dark_flat(frame, dark=dark, flat=flat) / exposure_us
+    return rate_to_radiance(rate, response=response,
+                            relative_illumination=relative_illumination)
+
+
+def rate_to_radiance(
+    rate_dn_per_us: ArrayLike,
+    *,
+    response: CameraResponse,
+    flat: FlatField | ArrayLike | None = None,
+    relative_illumination: ArrayLike | None = None,
+) -> NDArray[np.float64]:
+    """Radiance (W m⁻² sr⁻¹) from a dark-subtracted signal rate in DN/µs, such as
+    :attr:`analysis.hdr.HdrResult.rate` (at relative gain 1, whose K is
+    ``response.system_gain_dn_per_e``).
+
+    Parameters
+    ----------
+    rate_dn_per_us : array_like, shape (H, W)
+    response : CameraResponse
+    flat, relative_illumination : optional
+        As in :func:`to_radiance`.
+    """
+    rate = np.asarray(rate_dn_per_us, dtype=np.float64) * 1e6  # DN/s
+    if flat is not None:
+        rate = rate / (flat.response if isinstance(flat, FlatField) else np.asarray(flat, float))
     radiance = rate * response.radiance_per_dn_rate()
     if relative_illumination is not None:
         radiance = radiance / np.asarray(relative_illumination, dtype=np.float64)

@@ -11,7 +11,13 @@ import pytest
 
 from analysis.hdr import merge_hdr
 from analysis.photon_transfer import photon_transfer
-from analysis.radiometry import apply_dark_flat, flat_field, master_dark, to_radiance
+from analysis.radiometry import (
+    apply_dark_flat,
+    flat_field,
+    master_dark,
+    rate_to_radiance,
+    to_radiance,
+)
 from drivers.base import PixelFormat, Roi
 from hw_mocks.sim.camera import SimulatedCamera, open_from_url
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
@@ -261,6 +267,10 @@ def test_hdr_merge_is_linear_over_1e6_on_the_simulated_bench():
         assert sel.sum() >= 20
         ratio = res.rate[sel].sum() / truth[sel].sum()
         assert ratio == pytest.approx(1.0, abs=0.02), (lo / peak, ratio, sel.sum())
+    # And in calibrated units: the spot centre's radiance is ρ/π · E_peak (normal incidence).
+    radiance = rate_to_radiance(res.rate, response=cam.radiometric_response())
+    expected = 0.5 / math.pi * 2 * 1e-3 / (math.pi * (2e-3) ** 2)
+    assert radiance[126:130, 126:130].mean() == pytest.approx(expected, rel=0.02)
 
 
 def test_dark_and_flat_remove_the_fixed_pattern_to_shot_noise():
