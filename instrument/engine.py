@@ -399,6 +399,10 @@ class RunEngine:
                 return
             except StorageError as err:
                 self._store_broken = True
+                # Close the damaged handle now: while paused the file on disk is closed
+                # and valid (recover() makes it agree with the journal).
+                self._writer.stop()
+                self.store.abandon()
                 self._emit(Fault("storage", str(err), "pause", index))
                 self._enter_pause(f"storage: {err}", index)
                 # Recovered from the journal: the lost point is not in done any more.

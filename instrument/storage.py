@@ -544,6 +544,9 @@ def recover(path: str | Path) -> RecoveryReport:
     try:
         f = h5py.File(path, "r+")
     except (OSError, KeyError) as err:
+        if "lock" in str(err).lower() or "already open" in str(err).lower():
+            raise StorageError(errno.EBUSY, f"{path} is open in another program (a run "
+                               "still going?); close it first") from err
         bad = path.with_suffix(path.suffix + ".corrupt")
         if path.exists():
             os.replace(path, bad)

@@ -1,0 +1,180 @@
+"""The run engine on ideal (zero-latency) devices: events, pause/resume/abort, HDR,
+storage errors, resume without gaps or duplicates."""
+
+from __future__ import annotations
+
+import threading
+
+import h5py
+import numpy as np
+import pytest
+
+from instrument.engine import EngineState
+from instrument.events import (
+    EventQueue,
+    Fault,
+    Paused,
+    PointCompleted,
+    Progress,
+    Resumed,
+    RunFinished,
+    RunStarted,
+)
+from instrument.plans import build_plan, parse_plan
+from instrument.runner import plan_from_run, resume_run, start_run
+from instrument.storage import recover
+from tests.instrument.helpers import ideal_bench, inplane_plan
+
+
+def _run(tmp_path, text=None, bench=None, **kw):
+    bench = bench or ideal_bench()
+    plan = build_plan(parse_plan(text or inplane_plan()), bench.profile)
+    engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False, **kw)
+    q = EventQueue()
+    engine.subscribe(q)
+    return engine, q, plan, bench
+
+
+def _indices(path):
+    with h5py.File(path) as f:
+        return list(f["entry/points/index"][:])
+
+
+def test_run_events_and_file(tmp_path):
+    engine, q, plan, bench = _run(tmp_path)
+    assert engine.run() is EngineState.FINISHED
+    events = q.drain()
+    assert isinstance(events[0], RunStarted) and events[0].n_total == len(plan.points)
+    assert isinstance(events[-1], RunFinished) and events[-1].status == "finished"
+    done = [e for e in events if isinstance(e, PointCompleted)]
+    assert [e.index for e in done] == list(range(len(plan.points)))
+    prog = [e for e in events if isinstance(e, Progress)]
+    assert prog[-1].n_done == prog[-1].n_total and prog[-1].eta_s == 0
+    # Live values: the ideal camera gives (1 DN/us × exposure + 10 DN offset) / exposure.
+    assert done[0].signal == pytest.approx((1000 + 10) / 1000)
+    assert done[0].power_w == pytest.approx(1e-3)
+    assert sorted(_indices(engine.store.path)) == list(range(len(plan.points)))
+    with h5py.File(engine.store.path) as f:
+        pos = f["entry/points/positions"][:]
+        planned = f["entry/plan/planned_targets"][:]
+        idx = f["entry/points/index"][:]
+        assert np.allclose(pos, planned[idx])
+        assert np.allclose(f["entry/points/theta_i"][:], planned[idx, 0])
+        assert f["entry/data/frames"].shape[0] == len(plan.points)
+    assert bench.source.is_on is False  # the light is off after the run
+
+
+def test_pause_resume_at_point_boundary(tmp_path):
+    engine, q, plan, bench = _run(tmp_path)
+    paused = threading.Event()
+
+    def on(ev):
+        if isinstance(ev, PointCompleted) and ev.index == 3:
+            engine.pause("test pause")
+        if isinstance(ev, Paused):
+            assert bench.source._on is False  # safe while paused
+            paused.set()
+
+    engine.subscribe(on)
+    engine.start()
+    assert paused.wait(10)
+    assert engine.state is EngineState.PAUSED and engine.n_done == 4
+    engine.resume()
+    assert engine.wait(10) is EngineState.FINISHED
+    kinds = [type(e).__name__ for e in q.drain()]
+    assert kinds.index("Paused") < kinds.index("Resumed") < kinds.index("RunFinished")
+    assert sorted(_indices(engine.store.path)) == list(range(len(plan.points)))
+
+
+def test_abort_finalises_and_resume_completes(tmp_path):
+    engine, _q, plan, bench = _run(tmp_path)
+    engine.subscribe(lambda ev: engine.abort()
+                     if isinstance(ev, PointCompleted) and ev.index == 5 else None)
+    assert engine.run() is EngineState.ABORTED
+    path = engine.store.path
+    with h5py.File(path) as f:  # finalised: plain h5py opens it
+        assert f["entry"].attrs["status"] == "aborted"
+        n = f["entry/points/index"].shape[0]
+    assert 6 <= n < len(plan.points)
+    assert bench.source._on is False
+    engine2 = resume_run(path, ideal_bench(), fsync=False)
+    assert engine2.n_done == n
+    assert engine2.run() is EngineState.FINISHED
+    idx = _indices(path)
+    assert sorted(idx) == list(range(len(plan.points))) and len(idx) == len(set(idx))
+
+
+def test_auto_exposure_hdr_brackets_and_dark(tmp_path):
+    # Bright scene: 50 DN/us saturates 12 bits at the 1000 us start exposure.
+    bench = ideal_bench(brightness=lambda: 50.0)
+    text = inplane_plan(mode="auto", dark="per_point").replace(
+        'dark = "per_point"', 'dark = "per_point"\nhdr = true\nhdr_factor = 4.0')
+    engine, _q, _plan, bench = _run(tmp_path, text, bench=bench)
+    assert engine.run() is EngineState.FINISHED
+    with h5py.File(engine.store.path) as f:
+        light = f["entry/data/frame_light"][:]
+        exp = f["entry/data/frame_exposure_us"][:]
+        point = f["entry/data/frame_point"][:]
+        sat = f["entry/data/frame_saturated"][:]
+        first = point == f["entry/points/index"][0]
+        # First point: 1000 us saturated (kept as an HDR bracket), then 250, 62.5 us.
+        assert list(exp[first & light]) == [1000.0, 250.0, 62.5]
+        assert list(sat[first & light] > 0) == [True, True, False]
+        assert list(exp[first & ~light]) == [1000.0, 250.0, 62.5]  # a dark per bracket
+        signal = f["entry/points/signal"][0]
+        assert signal == pytest.approx(50.0, rel=1e-3)  # dark (10 DN offset) subtracted
+        assert f["entry/points/exposure_us"][0] == 62.5
+        assert '"hdr": true' in f["entry/plan/acquisition_policy"][()].decode()
+
+
+def test_storage_error_pauses_then_continues_without_gap(tmp_path):
+    engine, q, plan, bench = _run(tmp_path)
+    paused = threading.Event()
+    filled = []
+
+    def on(ev):
+        if isinstance(ev, PointCompleted) and ev.index == 4 and not filled:
+            filled.append(1)
+            engine.store.min_free_bytes = 1 << 62  # the disk fills up
+        if isinstance(ev, Paused):
+            paused.set()
+
+    engine.subscribe(on)
+    engine.start()
+    assert paused.wait(10)
+    events = q.drain()
+    faults = [e for e in events if isinstance(e, Fault)]
+    assert faults and faults[0].device == "storage" and "disk nearly full" in faults[0].cause
+    assert "free space" in faults[0].cause
+    assert bench.source._on is False
+    # The file is closed and valid while paused: it opens and holds the committed points.
+    report = recover(engine.store.path)
+    assert report.done in (set(range(4)), set(range(5)))
+    with h5py.File(engine.store.path) as f:
+        assert sorted(f["entry/points/index"][:]) == sorted(report.done)
+    # Space is freed; on resume the engine reopens (and recovers) the same file.
+    engine.store.min_free_bytes = 1 << 20
+    engine.resume()
+    assert engine.wait(10) is EngineState.FINISHED
+    idx = _indices(engine.store.path)
+    assert sorted(idx) == list(range(len(plan.points))) and len(idx) == len(set(idx))
+    assert any(isinstance(e, Resumed) for e in q.drain())
+
+
+def test_plan_from_run_is_the_stored_plan(tmp_path):
+    engine, _q, plan, bench = _run(tmp_path)
+    engine.run()
+    again = plan_from_run(engine.store.path, bench)
+    assert [p.target_dict() for p in again.points] == [p.target_dict() for p in plan.points]
+    assert [p.angles for p in again.points] == [p.angles for p in plan.points]
+
+
+def test_subscriber_errors_do_not_stop_the_run(tmp_path, capsys):
+    engine, _q, _plan, _bench = _run(tmp_path)
+
+    def broken(ev):
+        raise RuntimeError("GUI bug")
+
+    engine.subscribe(broken)
+    assert engine.run() is EngineState.FINISHED
+    assert "GUI bug" in capsys.readouterr().err
