@@ -313,3 +313,31 @@ def test_realtime_acquisition_takes_the_exposure_time():
     t0 = time.perf_counter()
     cam.acquire(2)
     assert time.perf_counter() - t0 >= 0.06
+
+
+def test_mean_of_frames_is_the_noise_free_expectation():
+    cam = SimulatedCamera(world=lit_bench(), seed=8, sensor=SMALL,
+                          pixel_format=PixelFormat.MONO16)
+    cam.exposure_us = 100.0
+    mean = np.mean([f.data.astype(float) for f in cam.acquire(64)], axis=0)
+    expected = cam.expected_dn()
+    # Per pixel: σ/√64 of shot + read noise, in DN (K = 3.2 DN/e⁻).
+    k = cam.system_gain_dn_per_e
+    sigma = np.sqrt(k * (expected - 640.0) + (k * 2.5) ** 2 + 1 / 12) / 8.0
+    z = (mean - expected) / sigma
+    assert abs(z.mean()) < 0.05 and z.std() == pytest.approx(1.0, rel=0.05)
+
+
+def test_ambient_and_instrument_signature_in_the_image():
+    hv = 6.62607015e-34 * 299792458.0 / 633e-9
+    etendue = math.pi * (6.25e-3) ** 2 * (5.5e-6 / 50e-3) ** 2
+    world = VirtualBench("amb", roles={"detector_theta": 175.0},
+                         scene=GoniometerScene(target="none", ambient_radiance=0.1,
+                                               signature_sr=1e-3, signature_width_deg=5.0))
+    cam = SimulatedCamera(world=world, seed=0, sensor=SMALL)
+    centre = float(cam.photon_rate()[47:49, 63:65].mean())
+    assert centre == pytest.approx(0.1 * etendue / hv, rel=1e-3)  # source off: ambient
+    world.update_source(on=True, power_w=1e-3)
+    veil = 1e-3 / 2.0 * 2 * 1e-3 / (math.pi * (2e-3) ** 2)  # f_sig(5°) · E_peak
+    centre = float(cam.photon_rate()[47:49, 63:65].mean())
+    assert centre == pytest.approx((0.1 + veil) * etendue / hv, rel=1e-3)
