@@ -320,6 +320,20 @@ class VirtualBench:
             world.bind_power_meter()
         return world
 
+    def adopt(self, other: VirtualBench) -> None:
+        """Take over another world's roles, scene, source and geometry (reconfiguration);
+        a power meter bound to ``other`` is re-bound to this world."""
+        with self._lock:
+            self._roles = dict(other._roles)
+            self._scene = other._scene
+            self._source = other._source
+            self.arm_length_mm = other.arm_length_mm
+            self.power_meter = other.power_meter
+            self._version += 1
+            self._power_cache.clear()
+        if self.power_meter.url is not None:
+            self.bind_power_meter()
+
     def set_role(self, role: str, spec: Any) -> None:
         with self._lock:
             self._roles[role] = RoleSpec.parse(spec)
@@ -464,11 +478,19 @@ def get_world(name: str = "sim") -> VirtualBench:
 
 
 def configure_world(name: str, config: Mapping[str, Any] | VirtualBench) -> VirtualBench:
-    """(Re)create the world ``name`` from a ``[simulation]`` dict (or install one)."""
-    world = config if isinstance(config, VirtualBench) else VirtualBench.from_config(name, config)
+    """Configure the world ``name`` from a ``[simulation]`` dict (or install a world).
+
+    A world that exists already is reconfigured in place, so devices that hold it (a
+    camera opened earlier) see the new configuration; a new one is created otherwise.
+    """
+    new = config if isinstance(config, VirtualBench) else VirtualBench.from_config(name, config)
     with _worlds_lock:
-        _worlds[name] = world
-    return world
+        old = _worlds.get(name)
+        if old is None or isinstance(config, VirtualBench):
+            _worlds[name] = new
+            return new
+    old.adopt(new)
+    return old
 
 
 def reset_worlds() -> None:

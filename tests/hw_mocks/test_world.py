@@ -169,6 +169,12 @@ def test_world_registry_and_config():
     omega = math.pi * (4.75e-3) ** 2 / 0.25**2
     expected = 0.8 / math.pi * 2e-3 * math.cos(math.radians(10.0)) * omega
     assert world.optical_power_w(532.0) == pytest.approx(expected, rel=5e-3)
+    # Reconfiguring keeps the object that devices already hold.
+    again = configure_world("sim", {**cfg, "scene": {"brdf": "lambert", "params": [0.4]}})
+    assert again is world
+    assert not world.source.on  # the configured source state (off) applies again
+    world.update_source(on=True)
+    assert world.optical_power_w(532.0) == pytest.approx(expected * 0.4 / 0.8, rel=5e-3)
     with pytest.raises(ValueError):
         configure_world("sim", {"rolls": {}})
     with pytest.raises(ValueError):
