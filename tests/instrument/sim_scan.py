@@ -1,0 +1,210 @@
+"""In-plane BRDF scans rendered on the simulated bench without the motion emulators.
+
+The points come from the real plan builder (``instrument.plans``) on the ``sim`` bench
+profile; each point's axis targets are set as constant role positions of a private
+:class:`hw_mocks.sim.world.VirtualBench`, and the frames are rendered by the same
+:class:`hw_mocks.sim.camera.SimulatedCamera` / :class:`hw_mocks.sim.goniometer_scene.
+GoniometerScene` / EMVA 1288 :class:`hw_mocks.sim.sensor.Sensor` code the emulated bench
+uses — only the stage firmware (which would just put the axes at the same targets) is left
+out, so 50-seed statistics take seconds instead of hours.
+
+Acquisition per point mirrors the engine's ``mode = "auto"`` with ``dark = "per_point"``:
+the exposure fills the brightest pixel to ``fill`` of the full well (noise-free prediction),
+capped at ``max_exposure_us``; ``frames`` exposures are averaged, and a dark frame (light
+off, same exposure, same averaging) follows.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.brdf_reduction import (
+    BRDFPoints,
+    DetectorNoise,
+    absolute_brdf,
+    camera_power_w,
+    camera_signal,
+    solid_angle_sr,
+)
+from analysis.radiometry import FlatField
+from hw_mocks.sim.camera import OpticsParams, SimulatedCamera
+from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
+from hw_mocks.sim.sensor import Sensor, SensorParams
+from hw_mocks.sim.world import SourceState, VirtualBench
+from instrument.plans.build import Plan, build_plan
+from instrument.plans.planfile import parse_plan
+from instrument.profile import load_profile
+
+
+@dataclass(frozen=True)
+class Sample:
+    """Ground truth: a registry model and its parameters."""
+
+    name: str
+    model: str
+    params: tuple[float, ...]
+
+
+#: The three closed-loop samples of issue 5 §5.
+SAMPLES = (
+    Sample("lambert", "lambert", (0.8,)),
+    Sample("glossy", "lambert+ggx", (0.3, 0.5, 0.2)),
+    Sample("rough", "oren_nayar", (0.8, 0.3)),
+)
+#: Candidate models the fits choose from.
+CANDIDATES = ("lambert", "oren_nayar", "lambert+ggx")
+
+
+@dataclass(frozen=True)
+class ScanSetup:
+    """Angles, acquisition and the simulated camera/source."""
+
+    theta_i_deg: tuple[float, ...] = (20.0, 40.0, 60.0)
+    theta_r_start: float = -70.0
+    theta_r_stop: float = 80.0
+    theta_r_step: float = 10.0
+    specular_half_width_deg: float = 4.0
+    specular_step_deg: float = 2.0
+    fill: float = 0.02
+    max_exposure_us: float = 200_000.0
+    min_exposure_us: float = 10.0
+    frames: int = 1
+    power_w: float = 2e-6
+    beam_radius_mm: float = 2.0
+    sensor_px: int = 96
+    focal_length_mm: float = 50.0
+    aperture_mm: float = 12.5
+    distance_mm: float = 300.0
+    sensor: SensorParams = field(default_factory=SensorParams)
+
+    def sensor_params(self) -> SensorParams:
+        # same field of view as the 1024-px default camera, coarser pixels
+        pitch = self.sensor.pixel_pitch_um * self.sensor.width / self.sensor_px
+        from dataclasses import replace
+
+        return replace(self.sensor, width=self.sensor_px, height=self.sensor_px,
+                       pixel_pitch_um=pitch)
+
+    def plan_text(self) -> str:
+        spec = ""
+        if self.specular_half_width_deg > 0:
+            spec = (f"specular = {{ half_width_deg = {self.specular_half_width_deg}, "
+                    f"step_deg = {self.specular_step_deg} }}\n")
+        return (
+            '[plan]\nkind = "brdf_in_plane"\nname = "closed loop"\norder = "optimised"\n'
+            '[sample]\nname = "sim"\n'
+            f"[scan]\ntheta_i = {list(self.theta_i_deg)}\n"
+            f"theta_r = {{ start = {self.theta_r_start}, stop = {self.theta_r_stop}, "
+            f"step = {self.theta_r_step} }}\n{spec}skip_beam_points = true\n"
+            '[acquisition]\nmode = "auto"\n'
+            f"exposure_us = 2000\nmax_exposure_us = {self.max_exposure_us}\n"
+            f'frames = {self.frames}\ndark = "per_point"\ndetectors = ["camera"]\n'
+        )
+
+    def plan(self) -> Plan:
+        return build_plan(parse_plan(self.plan_text()), load_profile("sim"))
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """Noise-free photon rates of every point of a scan."""
+
+    setup: ScanSetup
+    sample: Sample
+    angles_rad: np.ndarray          # (n, 4): θi, φi, θr, φr
+    photon_rate: np.ndarray         # (n, H, W) photons/s per pixel
+    plan: Plan
+
+
+def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None
+           ) -> Rendered:
+    """Render every plan point of ``setup`` for ``sample`` (noise-free); ``scene`` replaces
+    the default scene (the sample alone) e.g. to add an instrument signature."""
+    plan = setup.plan()
+    if scene is None:
+        scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params))
+    world = VirtualBench(
+        f"closed-loop-{sample.name}", scene=scene, arm_length_mm=setup.distance_mm,
+        source=SourceState(on=True, power_w=setup.power_w, max_power_w=1.0,
+                           beam_radius_mm=setup.beam_radius_mm),
+    )
+    cam = SimulatedCamera(
+        "camera", world=world, sensor=setup.sensor_params(),
+        optics=OpticsParams(setup.focal_length_mm, setup.aperture_mm),
+    )
+    rates, angles = [], []
+    for p in plan.points:
+        for role, value in p.targets:
+            world.set_role(role, value)
+        state = world.snapshot()
+        rates.append(np.array(cam.photon_rate(state), dtype=np.float64))
+        a = p.angles
+        angles.append([math.radians(a.theta_i), math.radians(a.phi_i),
+                       math.radians(a.theta_r), math.radians(a.phi_r)])
+    return Rendered(setup, sample, np.array(angles), np.array(rates), plan)
+
+
+def exposures_us(r: Rendered) -> np.ndarray:
+    """Per-point exposure: the brightest pixel at ``fill`` of the full well, capped."""
+    s = r.setup
+    p = s.sensor_params()
+    peak_e_per_s = r.photon_rate.reshape(len(r.photon_rate), -1).max(axis=1) * (
+        p.quantum_efficiency * (1 + 3 * p.prnu))
+    t = s.fill * p.full_well_e / np.maximum(peak_e_per_s, 1e-30) * 1e6
+    return np.clip(t, s.min_exposure_us, s.max_exposure_us)
+
+
+def acquisition_seconds(r: Rendered, *, readout_s: float = 0.0) -> float:
+    """Exposure time of the whole scan: frames × (light + dark) × exposure per point."""
+    return float(np.sum(2 * r.setup.frames * (exposures_us(r) * 1e-6 + readout_s)))
+
+
+def noise_model(setup: ScanSetup) -> DetectorNoise:
+    p = setup.sensor_params()
+    sensor = Sensor(p, seed=0)
+    return DetectorNoise(p.system_gain(0.0, 12), p.read_noise_e,
+                         sensor.saturation_dn(gain_db=0.0, bits=12), p.dark_current_e_per_s)
+
+
+def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0) -> BRDFPoints:
+    """Acquire every point with sensor seed ``seed`` and reduce by the absolute method."""
+    s = r.setup
+    p = s.sensor_params()
+    sensor = Sensor(p, seed=seed)
+    noise = noise_model(s)
+    t = exposures_us(r)
+    n = len(t)
+    roi = (0, 0, p.width, p.height)
+    # a perfect flat-field calibration: the sensor's own PRNU map (mean 1)
+    flat = FlatField(sensor.prnu_map.astype(np.float64), np.ones(sensor.prnu_map.shape, bool),
+                     1.0)
+    rates = np.empty(n)
+    variances = np.empty(n)
+    zero = np.zeros_like(r.photon_rate[0], dtype=np.float32)
+    for k in range(n):
+        light, dark = [], []
+        for j in range(s.frames):
+            light.append(sensor.expose(r.photon_rate[k].astype(np.float32), t[k], gain_db=0.0,
+                                       bits=12, roi=roi, frame_index=4 * k * s.frames + j))
+            dark.append(sensor.expose(zero, t[k], gain_db=0.0, bits=12, roi=roi,
+                                      frame_index=(4 * k + 2) * s.frames + j))
+        lf = np.mean(np.array(light, dtype=np.float64), axis=0)
+        df = np.mean(np.array(dark, dtype=np.float64), axis=0)
+        sig = camera_signal(lf[None], [t[k]], df[None], noise=noise, n_averaged=s.frames,
+                            flat=flat)
+        rates[k], variances[k] = sig.rate_dn_per_us, sig.variance
+    k_gain = noise.system_gain_dn_per_e
+    wl = 633.0
+    power = camera_power_w(rates, system_gain_dn_per_e=k_gain,
+                           quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
+    u_power = camera_power_w(np.sqrt(variances), system_gain_dn_per_e=k_gain,
+                             quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
+    omega, _ = solid_angle_sr(s.aperture_mm, s.distance_mm)
+    a = r.angles_rad
+    sig_t = math.radians(sigma_theta_deg)
+    return absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                         incident_power_w=s.power_w, solid_angle=omega,
+                         sigma_theta_i=sig_t, sigma_theta_r=sig_t)
