@@ -36,8 +36,12 @@ corrupted header           the frame is rejected, the query retried as for a los
 corrupted data bytes       undetectable (APT has no checksum); the next poll corrects it
 unsolicited message        consumed (counted in ``unsolicited_count``)
 link lost                  :class:`ConnectionFailed`; recover by closing and opening anew
+no answer when opening     :class:`ConnectionFailed` (wrong port, baud rate, power),
+                           chained from the timeout or protocol error
 controller error           :class:`ControllerError` (HW_RESPONSE/RICHRESPONSE ``code``, or
-                           the status error bits); disable/enable the axis, re-home
+                           the status error bits); disable/enable the axis, re-home.
+                           ``stop()`` is written before any pending input is read, so
+                           an error event waiting there never blocks a stop
 =========================  ===========================================================
 """
 
@@ -275,8 +279,17 @@ class AptMotor(MotionAxis):
         self._unpacker.clear()
         if dropped:
             log.debug("%s: dropped %d stale bytes on open", self.name, dropped)
-        self.info = self._query(apt.pack_short(MessageId.HW_REQ_INFO), MessageId.HW_GET_INFO,
-                                "HW_REQ_INFO", decode=apt.decode_hw_info)
+        try:
+            self.info = self._read_info()
+        except (DeviceTimeout, ProtocolError) as err:
+            # Nothing (or nothing decodable) answers the first query: the wrong port, a
+            # wrong baud rate, or a controller that is off. Say so rather than "timeout".
+            raise ConnectionFailed(
+                f"no APT controller answers on this port ({err.message})",
+                device=self.name, command="HW_REQ_INFO",
+                hint="check the port, the baud rate (115200), the cable, the controller's "
+                     "power and that no other program (Kinesis) holds the device",
+            ) from err
         self._check_model(self.info)
         self._do_enable()
         self._write_home_params()
@@ -314,29 +327,26 @@ class AptMotor(MotionAxis):
             self.channel, _HOME_REVERSE, _SWITCH_REVERSE,
             self._vel_units(self._home_velocity), self._counts(self._home_offset),
         )
-        self._send(apt.pack_long(MessageId.MOT_SET_HOMEPARAMS, apt.encode_homeparams(params)),
-                   "MOT_SET_HOMEPARAMS")
-        got = self._query(self._req(MessageId.MOT_REQ_HOMEPARAMS),
-                          MessageId.MOT_GET_HOMEPARAMS, "MOT_REQ_HOMEPARAMS",
-                          decode=apt.decode_homeparams)
-        if got != params:
-            raise ControllerError(
-                f"home parameters read back as {got}, written {params}",
-                device=self.name, command="MOT_SET_HOMEPARAMS",
-                hint="the controller rejected the home parameters; check the stage type",
-            )
+        self._write_checked(MessageId.MOT_SET_HOMEPARAMS, apt.encode_homeparams(params),
+                            params, "home", self._read_homeparams)
 
     def _write_velparams(self, velocity: float, acceleration: float) -> None:
         params = apt.VelParams(self.channel, 0, self._acc_units(acceleration),
                                self._vel_units(velocity))
-        self._send(apt.pack_long(MessageId.MOT_SET_VELPARAMS, apt.encode_velparams(params)),
-                   "MOT_SET_VELPARAMS")
-        got = self._read_velparams()
+        self._write_checked(MessageId.MOT_SET_VELPARAMS, apt.encode_velparams(params),
+                            params, "velocity", self._read_velparams)
+
+    def _write_checked(self, set_id: MessageId, data: bytes, params: object, what: str,
+                       read_back: Callable[[], object]) -> None:
+        """Write a parameter set once (SET messages get no reply) and read it back."""
+        command = set_id.name
+        self._send(apt.pack_long(set_id, data), command)
+        got = read_back()
         if got != params:
             raise ControllerError(
-                f"velocity parameters read back as {got}, written {params}",
-                device=self.name, command="MOT_SET_VELPARAMS",
-                hint="the controller rejected the velocity parameters; check the stage type",
+                f"{what} parameters read back as {got}, written {params}",
+                device=self.name, command=command,
+                hint=f"the controller rejected the {what} parameters; check the stage type",
             )
 
     # ------------------------------------------------------------------ units
@@ -358,7 +368,13 @@ class AptMotor(MotionAxis):
 
     def _checked_velocity(self, value: float, what: str) -> float:
         value = float(value)
-        if not (math.isfinite(value) and 0 < value <= self.spec.max_velocity):
+        vmax = self.spec.max_velocity
+        # A velocity read back from the controller is quantised to device units, so
+        # scaling it back up can overshoot the maximum by a rounding error (10.0000014
+        # deg/s on a K10CR1); that is the maximum, not an error.
+        if vmax < value <= vmax * (1.0 + 1e-6):
+            value = vmax
+        if not (math.isfinite(value) and 0 < value <= vmax):
             raise ValueError(f"{self.name}: {what} must be in (0, {self.spec.max_velocity:g}] "
                              f"{self.units}/s for a {self.spec.name}, got {value:g}")
         return value
@@ -419,22 +435,20 @@ class AptMotor(MotionAxis):
     def _receive(self, deadline: float, reply_id: int, command: str) -> None:
         remaining = deadline - time.monotonic()
         if remaining <= 0:
-            raise DeviceTimeout(
-                f"no {apt.message_name(reply_id)} reply within {self.timeout:g} s",
-                device=self.name, command=command,
-                hint="check the cable, the controller's power and that no other "
-                     "program (Kinesis) holds the device",
-            )
+            raise self._no_reply(reply_id, command)
         try:
             data = self._chan.read_exact(1, timeout=remaining, command=command)
         except DeviceTimeout as err:
-            raise DeviceTimeout(
-                f"no {apt.message_name(reply_id)} reply within {self.timeout:g} s",
-                device=self.name, command=command,
-                hint="check the cable, the controller's power and that no other "
-                     "program (Kinesis) holds the device",
-            ) from err
+            raise self._no_reply(reply_id, command) from err
         self._feed(data + self._chan.read_available(command=command), command)
+
+    def _no_reply(self, reply_id: int, command: str) -> DeviceTimeout:
+        return DeviceTimeout(
+            f"no {apt.message_name(reply_id)} reply within {self.timeout:g} s",
+            device=self.name, command=command,
+            hint="check the cable, the controller's power and that no other "
+                 "program (Kinesis) holds the device",
+        )
 
     def _feed(self, data: bytes, command: str) -> None:
         try:
@@ -477,8 +491,7 @@ class AptMotor(MotionAxis):
     def _do_identity(self) -> DeviceIdentity:
         info = self.info
         if info is None:  # not reachable after a successful open; kept for safety
-            info = self._query(apt.pack_short(MessageId.HW_REQ_INFO), MessageId.HW_GET_INFO,
-                               "HW_REQ_INFO", decode=apt.decode_hw_info)
+            info = self._read_info()
         return DeviceIdentity(
             vendor="Thorlabs", model=info.model, serial=str(info.serial),
             firmware=info.firmware_str,
@@ -571,8 +584,23 @@ class AptMotor(MotionAxis):
         self._send(apt.pack_long(MessageId.MOT_MOVE_RELATIVE, data), "MOT_MOVE_RELATIVE")
 
     def _do_stop(self) -> None:
+        # Sent before anything else is read: an error event waiting in the input (which
+        # draining would raise) must never keep a moving stage from being stopped. The
+        # next exchange consumes and reports it.
         self._send(apt.pack_short(MessageId.MOT_MOVE_STOP, self.channel, self._stop_p2),
-                   "MOT_MOVE_STOP")
+                   "MOT_MOVE_STOP", drain=False)
+        # The old target is void: a wait() afterwards reports where the axis came to
+        # rest (no MotionError), and move_by() counts from there.
+        self._target = None
+
+    def _read_info(self) -> apt.HwInfo:
+        return self._query(apt.pack_short(MessageId.HW_REQ_INFO), MessageId.HW_GET_INFO,
+                           "HW_REQ_INFO", decode=apt.decode_hw_info)
+
+    def _read_homeparams(self) -> apt.HomeParams:
+        return self._query(self._req(MessageId.MOT_REQ_HOMEPARAMS),
+                           MessageId.MOT_GET_HOMEPARAMS, "MOT_REQ_HOMEPARAMS",
+                           decode=apt.decode_homeparams)
 
     def _read_velparams(self) -> apt.VelParams:
         return self._query(self._req(MessageId.MOT_REQ_VELPARAMS),

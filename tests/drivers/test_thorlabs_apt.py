@@ -527,7 +527,65 @@ def test_motion_refused_in_error_state_names_the_command():
 def test_failed_open_leaves_the_port_closed():
     port = serial.serial_for_url("simapt://dead?speed=200", baudrate=115200)
     registry.get("simapt", "dead").faults.randomly(FaultKind.DROP, 1.0)
-    with pytest.raises(DeviceTimeout) as info:
+    with pytest.raises(ConnectionFailed) as info:
         AptMotor(port, name="dead", timeout=0.05, retries=0, **FAST)
-    assert info.value.command == "HW_REQ_INFO"
+    assert info.value.command == "HW_REQ_INFO" and info.value.device == "dead"
+    assert isinstance(info.value.__cause__, DeviceTimeout)
     assert not port.is_open
+
+
+def test_wrong_baud_rate_is_connection_failed_naming_the_baud_rate():
+    port = serial.serial_for_url("simapt://baud?speed=200", baudrate=57600)
+    t0 = time.monotonic()
+    with pytest.raises(ConnectionFailed) as info:
+        AptMotor(port, name="baud", timeout=0.05, **FAST)
+    assert time.monotonic() - t0 < 1.0  # 3 attempts of 0.05 s, not a hang
+    err = info.value
+    assert err.device == "baud" and err.command == "HW_REQ_INFO"
+    assert "115200" in str(err) and isinstance(err.__cause__, DeviceTimeout)
+    assert not port.is_open
+    assert registry.get("simapt", "baud").received_log == b""  # nothing got through
+
+
+def test_stop_is_sent_although_an_error_event_is_waiting():
+    """Safety: a pending HW_RICHRESPONSE (raised when the input is drained) must not keep
+    stop() from reaching a moving stage; the error is reported by the next exchange."""
+    motor = open_url(stage="PRM1-Z8")
+    motor.home(timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    motor.velocity = 0.5
+    motor.move_to(10.0)
+    # An error event the controller sent without stopping (the emulator's own error
+    # state would stop the stage, which would hide the bug).
+    emu.send_unsolicited([struct.pack("<HHBB", 0x0081, 68, 0x81, 0x50)
+                          + struct.pack("<HH64s", 0, 0x33, b"event")])
+    time.sleep(0.01)
+    assert emu.stage.is_moving()
+    motor.stop()
+    assert emu.received_log.count(H("65 04 01 02 50 01")) == 1  # MOT_MOVE_STOP, profiled
+    deadline = time.monotonic() + 2.0
+    while emu.stage.is_moving() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert not emu.stage.is_moving()
+    with pytest.raises(ControllerError) as info:
+        motor.status()
+    assert info.value.code == 0x33
+
+
+@pytest.mark.parametrize("stage", ["K10CR1", "MTS25-Z8"])
+def test_after_a_stop_wait_reports_the_rest_position_and_move_by_counts_from_it(stage):
+    motor = open_url(stage=stage)
+    motor.home(timeout=5.0)
+    motor.velocity = motor.velocity / 50.0
+    motor.move_to(8.0)
+    time.sleep(0.02)
+    motor.stop()
+    rest = motor.wait(timeout=5.0)  # no MotionError: the stop voided the target
+    assert 0.0 < rest < 8.0 - motor.position_tolerance
+    assert motor.target is None
+    # Read back in quantised device units and scaled up again, the K10CR1's 10 deg/s
+    # comes out as 10.0000014: still the maximum, not a ValueError.
+    motor.velocity = motor.velocity * 50.0
+    assert motor.velocity == pytest.approx(STAGES[stage].velocity, rel=1e-6)
+    motor.move_by(1.0, wait=True, timeout=5.0)
+    assert motor.position == pytest.approx(rest + 1.0, abs=motor.position_tolerance)
