@@ -13,6 +13,13 @@ The decision statistic is T = Σ_l max(z_l, 0)², z_l = (e_l − median_l)/scale
 errors larger than consistent data produce count. Its threshold is the empirical
 (1 − α) quantile of T over the calibration cases (the ⌈(n+1)(1−α)⌉-th order statistic,
 the conformal choice, whose false-alarm rate on new consistent data is at most α).
+
+With known lighting the same test can be made in the image domain, where the noise is
+white and where pixels that break the ideal model (grazing views, whose lobes the sphere's
+own horizon clips) can be left out: :func:`known_lighting_residual` fits the unknown
+radially symmetric filter A_l of B = Σ_l A_l Σ_m L_lm Y_lm(R) to the chosen pixels (the
+image-domain form of M10) and returns the residual, whose rms joins the per-order errors as
+one more calibrated component.
 """
 
 from __future__ import annotations
@@ -21,11 +28,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.sh.convention import band_slice, lmax_from_size
+from analysis.sh.transform import real_sh_matrix
+
 __all__ = [
     "ConsistencyCalibration",
     "ConsistencyReport",
+    "KnownLightingResidual",
     "calibrate",
     "check",
+    "known_lighting_residual",
     "statistic",
 ]
 
@@ -164,3 +176,52 @@ def check(errors: np.ndarray, calibration: ConsistencyCalibration) -> Consistenc
         inconsistent=t > calibration.threshold,
         false_alarm=calibration.false_alarm,
     )
+
+
+@dataclass(frozen=True)
+class KnownLightingResidual:
+    """Image-domain fit of an unknown radially symmetric BRDF under known lighting.
+
+    Attributes
+    ----------
+    filter : ndarray of shape (L+1,)
+        Fitted A_l.
+    residual : ndarray of shape (N,)
+        Samples minus the fitted image.
+    relative_rms : float
+        rms(residual) / mean(|samples|).
+    """
+
+    filter: np.ndarray
+    residual: np.ndarray
+    relative_rms: float
+
+
+def known_lighting_residual(
+    values: np.ndarray,
+    theta: np.ndarray,
+    phi: np.ndarray,
+    lighting: np.ndarray,
+) -> KnownLightingResidual:
+    """Fit B(R) = Σ_l A_l Σ_m L_lm Y_lm(R) to samples, A_l unknown (M10 in the image domain).
+
+    Parameters
+    ----------
+    values : ndarray of shape (N,)
+        Image samples (radiance), e.g. the interior pixels of a sphere image.
+    theta, phi : ndarray of shape (N,)
+        Their reflected directions.
+    lighting : ndarray of shape ((L+1)²,)
+        Known lighting coefficients; L must exceed the BRDF's band limit, since the image
+        holds every band the filter passes.
+    """
+    v = np.asarray(values, dtype=float)
+    lig = np.asarray(lighting, dtype=float)
+    lmax = lmax_from_size(lig.size)
+    y = real_sh_matrix(lmax, np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
+    basis = np.stack([y[:, band_slice(l)] @ lig[band_slice(l)] for l in range(lmax + 1)], 1)
+    a, *_ = np.linalg.lstsq(basis, v, rcond=None)
+    res = v - basis @ a
+    scale = float(np.mean(np.abs(v)))
+    rel = float(np.sqrt(np.mean(res**2)) / scale) if scale > 0 else 0.0
+    return KnownLightingResidual(a, res, rel)

@@ -348,8 +348,7 @@ def _subpixel_normals(size: int, center: tuple[float, float], radius: float, ss:
     yy, xx = np.mgrid[0:size, 0:size].astype(float)
     xs = xx[..., None, None] + off[None, None, None, :]
     ys = yy[..., None, None] + off[None, None, :, None]
-    u = (xs - center[0]) / radius
-    t = -(ys - center[1]) / radius
+    u, t = np.broadcast_arrays((xs - center[0]) / radius, -(ys - center[1]) / radius)
     rho2 = u * u + t * t
     hit = rho2 < 1.0
     nz = np.sqrt(np.clip(1.0 - rho2, 0.0, None))
@@ -436,27 +435,38 @@ def render_sphere(environment: Environment, brdf: Brdf, **kwargs) -> SphereRende
 
 
 def environment_coefficients(
-    environment: Environment, lmax: int, *, n_theta: int = 160
+    environment: Environment | Sequence[Environment], lmax: int, *, n_theta: int = 160
 ) -> np.ndarray:
     """Ground-truth lighting coefficients L_lm (real, orthonormal, project convention).
 
     Quadrature of L(ω) Y_lm(ω) on the fine grid (exact for the band-limited part of the
     smooth lighting up to degree n_theta − lmax − 1) plus the sharp sources' sub-samples.
 
+    Parameters
+    ----------
+    environment : environment or sequence of K environments
+    lmax : int
+    n_theta : int
+
     Returns
     -------
-    ndarray of shape ((lmax+1)²,)
+    ndarray of shape ((lmax+1)²,) or (K, (lmax+1)²)
     """
     from analysis.sh.transform import directions_to_angles, real_sh_matrix
 
+    single = not isinstance(environment, Sequence)
+    envs = [environment] if single else list(environment)
     dirs, w = _gl_directions(n_theta)
-    vals = environment.smooth_radiance(dirs) * w
-    sd, sw, sv = environment.sharp_samples()
-    dirs = np.concatenate([dirs, sd])
-    vals = np.concatenate([vals, sw * sv])
+    vals = np.stack([env.smooth_radiance(dirs) * w for env in envs], axis=1)  # (Q, K)
     th, ph = directions_to_angles(dirs)
-    out = np.zeros((lmax + 1) ** 2)
-    for p0 in range(0, th.size, 8192):
-        y = real_sh_matrix(lmax, th[p0:p0 + 8192], ph[p0:p0 + 8192])
-        out += vals[p0:p0 + 8192] @ y
-    return out
+    out = np.zeros((len(envs), (lmax + 1) ** 2))
+    step = 4096
+    for p0 in range(0, th.size, step):
+        y = real_sh_matrix(lmax, th[p0:p0 + step], ph[p0:p0 + step])
+        out += vals[p0:p0 + step].T @ y
+    for k, env in enumerate(envs):
+        sd, sw, sv = env.sharp_samples()
+        if sd.shape[0]:
+            sth, sph = directions_to_angles(sd)
+            out[k] += (sw * sv) @ real_sh_matrix(lmax, sth, sph)
+    return out[0] if single else out
