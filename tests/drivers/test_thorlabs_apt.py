@@ -586,6 +586,7 @@ def test_after_a_stop_wait_reports_the_rest_position_and_move_by_counts_from_it(
     # Read back in quantised device units and scaled up again, the K10CR1's 10 deg/s
     # comes out as 10.0000014: still the maximum, not a ValueError.
     motor.velocity = motor.velocity * 50.0
-    assert motor.velocity == pytest.approx(STAGES[stage].velocity, rel=1e-6)
+    # one device unit of 1/50 of it is 3e-5 relative on an MTS25-Z8
+    assert motor.velocity == pytest.approx(STAGES[stage].velocity, rel=1e-4)
     motor.move_by(1.0, wait=True, timeout=5.0)
     assert motor.position == pytest.approx(rest + 1.0, abs=motor.position_tolerance)
