@@ -14,6 +14,8 @@ from dataclasses import replace
 
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from drivers.base import AxisKind
 from drivers.errors import (
@@ -36,6 +38,7 @@ from tests.drivers.motion_contract import MotionAxisContract
 H = bytes.fromhex
 SPEED = 200  # emulated seconds per real second
 FAST = {"rts_settle_s": 0.0, "flush_s": 0.0}
+REQ_POS = H("11 04 01 00 50 01")  # MOT_REQ_POSCOUNTER, channel 1
 
 
 # --------------------------------------------------------------------------- transcripts
@@ -158,6 +161,36 @@ def test_kdc101_prm1_transcript_uses_dc_status_and_relative_moves():
     motor.move_by(-1.0)
     assert motor.velocity == pytest.approx(10.0, rel=1e-5)
     motor.velocity = 5.0
+    port.assert_complete()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.binary(max_size=120))
+def test_driver_arbitrary_reply_is_a_value_or_a_typed_error(reply):
+    """Whatever bytes answer a query, the driver returns a number or raises a typed error
+    naming itself and the command (parser-level fuzzing is in test_apt_protocol.py)."""
+    steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL)
+    steps += [(REQ_POS, reply), (REQ_POS, b"")]  # one retry, answered by silence
+    motor, _port = transcript_motor(steps, retries=1)
+    motor.timeout = 0.005
+    try:
+        value = motor.position
+    except (ProtocolError, DeviceTimeout, ControllerError) as err:
+        assert err.device == "rot" and err.command
+    else:
+        assert isinstance(value, float)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.binary(max_size=80).map(lambda b: b.replace(b"\x50", b"\x51")),
+       st.integers(-2**31, 2**31 - 1))
+def test_driver_decodes_the_reply_after_arbitrary_garbage(garbage, counts):
+    # Garbage without the device address 0x50 cannot pass for a header (see the parser's
+    # resynchronisation property), so the reply behind it must be found and decoded.
+    steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL)
+    steps += [(REQ_POS, garbage + H("12 04 06 00 81 50 01 00") + struct.pack("<i", counts))]
+    motor, port = transcript_motor(steps, retries=0)
+    assert motor.position == counts / (409600 / 3)
     port.assert_complete()
 
 
@@ -384,9 +417,6 @@ def test_identify_blinks():
 
 
 # --------------------------------------------------------------------------- faults
-
-REQ_POS = H("11 04 01 00 50 01")
-
 
 def test_fault_drop_is_recovered_by_retrying_the_query():
     motor = open_url(timeout=0.1)
