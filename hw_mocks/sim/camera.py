@@ -131,6 +131,10 @@ class SimulatedCamera(Camera):
         """(pinhole position mm, forward, right, down) unit vectors in the lab frame."""
         pose = state.pose
         center = pose.detector_dir * pose.detector_distance_mm
+        # a scene may carry the camera elsewhere (the light-field bench's camera_z track)
+        place = getattr(state.scene, "camera_center_mm", None)
+        if place is not None:
+            center = np.asarray(place(state), dtype=float)
         forward = -pose.detector_dir
         right = np.cross(forward, [0.0, 1.0, 0.0])
         right /= np.linalg.norm(right)

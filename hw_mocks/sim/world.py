@@ -297,7 +297,9 @@ class VirtualBench:
         """Build from a plain dict (the bench profile's ``[simulation]`` table).
 
         Keys: ``roles`` (role → URL | number | {url, scale, offset, value}), ``scene``
-        (see :meth:`hw_mocks.sim.goniometer_scene.GoniometerScene.from_config`),
+        (see :meth:`hw_mocks.sim.goniometer_scene.GoniometerScene.from_config`; with
+        ``kind = "lightfield"``
+        :meth:`hw_mocks.sim.lightfield_bench.LightFieldBenchScene.from_config`),
         ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
         ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}).
         With a power-meter ``url`` the PM100USB emulator is created and bound
@@ -307,9 +309,15 @@ class VirtualBench:
         unknown = set(config) - known
         if unknown:
             raise ValueError(f"unknown [simulation] keys {sorted(unknown)}; known {sorted(known)}")
-        from hw_mocks.sim.goniometer_scene import GoniometerScene
+        scene_cfg = dict(config.get("scene", {}))
+        if scene_cfg.get("kind") == "lightfield":
+            from hw_mocks.sim.lightfield_bench import LightFieldBenchScene
 
-        scene = GoniometerScene.from_config(config.get("scene", {}))
+            scene: Scene = LightFieldBenchScene.from_config(scene_cfg)
+        else:
+            from hw_mocks.sim.goniometer_scene import GoniometerScene
+
+            scene = GoniometerScene.from_config(scene_cfg)
         source = SourceState(**dict(config.get("source", {})))
         pm = PowerMeterHead(**dict(config.get("power_meter", {})))
         world = cls(
@@ -459,6 +467,7 @@ class VirtualBench:
             target = usb.get_firmware(name)
         target.optical_power_w = self.optical_power_w
         target.light_wavelength_nm = self._source.wavelength_nm
+        target.bound_world = self.name
         return target
 
 
@@ -466,6 +475,12 @@ class VirtualBench:
 
 _worlds: dict[str, VirtualBench] = {}
 _worlds_lock = threading.Lock()
+
+
+def find_world(name: str) -> VirtualBench | None:
+    """The world called ``name``, or ``None`` if it has not been made."""
+    with _worlds_lock:
+        return _worlds.get(name)
 
 
 def get_world(name: str = "sim") -> VirtualBench:
