@@ -55,7 +55,7 @@ TERMINATOR = b"\r\n"
 ADDRESS_RANGE = (1, 31)
 
 _COMMAND_RE = re.compile(r"[A-Z]{2}")
-_NUMBER_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_NUMBER_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 _HEX6_RE = re.compile(r"[0-9A-Fa-f]{6}")
 #: Decimals sent in numeric arguments: 1e-6 units is below every stage's resolution.
 _DECIMALS = 6

@@ -40,8 +40,9 @@ VENDOR_ID = 0x1313
 PRODUCT_ID = 0x8072
 
 # SCPI <NR1>|<NR2>|<NR3> response data (IEEE 488.2 §8.7): sign, digits, point, exponent.
-_NUMBER = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*")
-_ERROR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*', re.DOTALL)
+# ASCII: SCPI replies are ASCII; Unicode \s would accept separators such as U+001F.
+_NUMBER = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*", re.ASCII)
+_ERROR = re.compile(r'\s*([+-]?\d+)\s*,\s*"(.*)"\s*', re.DOTALL | re.ASCII)
 # SCPI-99 §7.2.1: 9.9E37 is "not a number / overflow" in instrument replies.
 _SCPI_NAN = 9.91e37
 

@@ -88,7 +88,7 @@ ERROR_MESSAGES: dict[int, str] = {
 }
 
 _ERROR_QUEUE_LENGTH = 10
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 
 
 class ScpiError(Exception):

@@ -71,7 +71,23 @@ def backend_from_url(url: str) -> EmulatedUsbtmcBackend:
             )
             _backends[name] = backend
     backend.replug()
+    _bind_to_world(firmware, options.get("world"))
     return backend
+
+
+def _bind_to_world(firmware: Pm100usbFirmware, world_name: str | None) -> None:
+    """Let a meter whose URL names a world (``world=sim``) read its light from that world.
+
+    Needed when the device is (re)created after the world was configured, e.g. after an
+    emulated power cycle; a world that does not exist yet binds the meter when it is made.
+    """
+    if world_name is None or getattr(firmware, "bound_world", None) is not None:
+        return
+    from hw_mocks.sim import world as worlds
+
+    world = worlds.find_world(world_name)
+    if world is not None:
+        world.bind_power_meter(firmware)
 
 
 def get_firmware(name: str) -> Pm100usbFirmware:
