@@ -522,6 +522,68 @@ def test_fault_disconnect_is_connection_failed_and_reconnect_recovers():
     assert again.position == pytest.approx(5.0, abs=again.position_tolerance)
 
 
+@pytest.fixture(params=["url", "pty"])
+def apt_on(request):
+    """Open a PRM1-Z8 axis on either transport: ``(motor, emulator)``."""
+    servers: list[PtyServer] = []
+
+    def make(name: str, **kw) -> tuple[AptMotor, AptEmulator]:
+        if request.param == "url":
+            return open_url(name, stage="PRM1-Z8", **kw), registry.get("simapt", name)
+        emu = AptEmulator(name, model="KDC101", stage="PRM1-Z8", clock=ScaledClock(SPEED))
+        servers.append(PtyServer(emu))
+        return AptMotor(servers[-1].path, name=name, stage="PRM1-Z8", **FAST, **kw), emu
+
+    make.transport = request.param
+    yield make
+    for server in servers:
+        server.close()
+
+
+def test_unplugged_mid_move_is_typed_and_bounded_then_the_move_is_found_finished(apt_on):
+    """In-process the link raises (ConnectionFailed); on a pty the dead device answers
+    nothing (DeviceTimeout after the retries). The controller keeps running the move on
+    its own, as a real one whose USB cable is pulled does; after reconnecting, the
+    driver sees where it ended."""
+    motor, emu = apt_on("mid", timeout=0.1)
+    motor.home(timeout=5.0)
+    motor.velocity = 2.0
+    motor.move_to(6.0)  # 3 s of emulated time: 15 ms at SPEED
+    emu.faults.schedule(FaultKind.DISCONNECT, nth=1)
+    expected = ConnectionFailed if apt_on.transport == "url" else DeviceTimeout
+    t0 = time.monotonic()
+    with pytest.raises(expected) as info:
+        motor.wait(timeout=5.0)
+    assert time.monotonic() - t0 < 1.0
+    assert info.value.device == "mid" and info.value.command == "MOT_REQ_DCSTATUSUPDATE"
+    assert info.value.__cause__ is not None
+    if apt_on.transport == "url":
+        motor.close()
+        motor = open_url("mid", stage="PRM1-Z8", timeout=0.1)  # reopen: stale frames wait
+    else:
+        emu.faults.reconnect()  # the cable is back; the same port works again
+    deadline = time.monotonic() + 5.0
+    while motor.is_moving and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert motor.is_homed
+    assert motor.position == pytest.approx(6.0, abs=motor.position_tolerance)
+    motor.close()
+
+
+def test_lost_replies_on_both_transports_are_retried(apt_on):
+    motor, emu = apt_on("lost", timeout=0.1)
+    for kind, params in [(FaultKind.DROP, {}), (FaultKind.DELAY, {"delay_s": 0.15})]:
+        emu.faults.schedule(kind, nth=1, **params)
+        t0 = time.monotonic()
+        assert motor.velocity == pytest.approx(10.0, rel=1e-5)
+        assert time.monotonic() - t0 < 0.5  # one lost attempt, not all three
+    time.sleep(0.1)  # the late reply arrives and is consumed as stale
+    count = motor.unsolicited_count
+    assert motor.acceleration == pytest.approx(10.0, rel=0.01)
+    assert motor.unsolicited_count == count + 1
+    assert [k for _, k in emu.faults.log] == [FaultKind.DROP, FaultKind.DELAY]
+
+
 def test_fault_error_state_is_a_controller_error_and_reenable_recovers():
     motor = open_url(stage="PRM1-Z8")
     motor.home(timeout=5.0)
