@@ -531,6 +531,36 @@ def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, servers):
     axis.close()
 
 
+def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, servers):
+    """The controller finishes a move on its own while the cable is out; after the
+    reconnect the driver reads where it ended. Bounded either way."""
+    axis = open_axis(transport, "mid", cleanup=servers)
+    axis.home(timeout=10)
+    axis.velocity = 2.0
+    axis.move_to(6.0)  # 3 s of emulated time: 15 ms at SPEED
+    axis.reply_timeout = 0.1
+    emulator = emulator_of(axis)
+    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
+    expected = ConnectionFailed if transport == "url" else DeviceTimeout
+    t0 = time.monotonic()
+    with pytest.raises(expected) as info:
+        axis.wait(10)
+    assert time.monotonic() - t0 < 2.0
+    assert info.value.device == "mid" and info.value.command == "1TS"
+    assert info.value.__cause__ is not None
+    if transport == "url":
+        axis.close()
+        axis = open_axis(transport, "mid", cleanup=servers)
+    else:
+        emulator.faults.reconnect()
+    deadline = time.monotonic() + 5.0
+    while axis.is_moving and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert axis.is_homed
+    assert axis.position == pytest.approx(6.0, abs=1e-6)
+    axis.close()
+
+
 def test_error_state_during_move_raises_controller_error_and_enable_recovers(faulty):
     axis, faults = faulty
     axis.velocity = 1.0
