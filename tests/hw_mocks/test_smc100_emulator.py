@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hw_mocks import registry
 from hw_mocks.clock import ManualClock
@@ -332,3 +334,41 @@ def test_firmware_emulator_imports_nothing_from_drivers():
                 continue
             assert not any(n.split(".")[0] in ("drivers", "instrument", "gui")
                            for n in names), (path, names)
+
+
+# --------------------------------------------------------------------------- fuzzing
+
+_COMMANDS = ["TS", "TE", "TP", "TH", "VE", "ID", "OR", "PA", "PR", "ST", "MM", "RS", "PW",
+             "VA", "AC", "OH", "OT", "SL", "SR", "XX", "pa"]
+_requests = st.one_of(
+    # well-formed-looking requests with arbitrary arguments: they drive the state machine
+    st.builds(lambda a, c, v: f"{a}{c}{v}".encode("ascii", "replace") + b"\r\n",
+              st.sampled_from([1, 1, 1, 2, 0, 99]), st.sampled_from(_COMMANDS),
+              st.one_of(st.just(""), st.just("?"), st.floats(-1e3, 1e3).map("{:g}".format),
+                        st.text(max_size=6))),
+    # and raw line noise, with or without a terminator
+    st.binary(max_size=30),
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(_requests, st.floats(0.0, 5.0)), max_size=25))
+def test_arbitrary_requests_never_crash_and_replies_stay_well_formed(steps):
+    clock = ManualClock()
+    emu = Smc100Emulator("fuzz", clock=clock, kind="linear")
+    for request, dt in steps:
+        for reply in emu.receive(request):
+            assert reply.endswith(b"\r\n") and reply.startswith(b"1")
+            assert all(0x20 <= b < 0x7F for b in reply[:-2]), reply
+        clock.advance(dt)
+        emu.poll()
+    # Whatever happened, TS still answers six hex digits of a documented state, the
+    # stage stays inside its hardware travel, and a fresh line is understood.
+    clock.advance(10.0)  # past any reboot or flash-write window (deaf while busy)
+    emu.receive(b"\r\n")  # end any half-received request
+    line = ask(emu, "1TS")
+    assert line is not None and len(line) == 9
+    assert int(line[-2:], 16) in {0x0A, 0x0B, 0x0C, 0x14, 0x1E, 0x28, 0x32, 0x33, 0x34,
+                                  0x3C, 0x3D}
+    low, high = emu.model.travel
+    assert low - 1e-9 <= emu.stage.physical_position() <= high + 1e-9
