@@ -194,6 +194,37 @@ def test_driver_decodes_the_reply_after_arbitrary_garbage(garbage, counts):
     port.assert_complete()
 
 
+def test_kdc101_mts25_transcript_scales_millimetres_and_writes_the_home_offset():
+    # MTS25-Z8: 34304 counts/mm; KDC101 velocity 1 mm/s = 34304 * 2048/6e6 * 65536
+    # = 767367 (0x0BB587), 2 mm/s = 1534735 (0x176B0F); 1.5 mm/s^2 = 34304 * (2048/6e6)^2
+    # * 65536 = 393 (0x0189). Home offset 12.5 mm = 428800 counts (0x068B00).
+    home = "01 00 02 00 01 00 87 B5 0B 00 00 8B 06 00"
+    vel = "01 00 00 00 00 00 89 01 00 00 0F 6B 17 00"
+
+    def dc(status: str, counts: str) -> tuple[bytes, bytes]:
+        return (H("90 04 01 00 50 01"),
+                H("91 04 0E 00 81 50 01 00") + H(counts) + bytes(4) + H(status))
+
+    homed_idle = "00 25 00 80"
+    steps = open_steps(info_reply(27000789, b"KDC101", stage_id=7), home, vel)
+    steps += [
+        dc(homed_idle, "00 00 00 00"),                       # move_to(10 mm): ready check
+        (H("53 04 06 00 D0 01 01 00 00 3C 05 00"), b""),    # 10 mm = 343040 counts
+        dc(homed_idle, "FE 3B 05 00"),                       # settled 2 counts short
+        (H("11 04 01 00 50 01"), H("12 04 06 00 81 50 01 00 FE 3B 05 00")),  # position
+    ]
+    motor, port = transcript_motor(steps, stage="MTS25-Z8", home_offset=12.5,
+                                   home_velocity=1.0, velocity=2.0, acceleration=1.5)
+    assert motor.kind is AxisKind.LINEAR and motor.units == "mm"
+    # The travel (0..25 mm from the switch) seen from the zero 12.5 mm off the switch.
+    assert motor.soft_limits == (-12.5, 12.5)
+    with pytest.raises(LimitError):
+        motor.move_to(12.6)  # refused before a byte is written
+    motor.move_to(10.0, wait=True, timeout=1.0)
+    assert motor.position == pytest.approx(10.0 - 2 / 34304)
+    port.assert_complete()
+
+
 def test_status_decoding_of_limits_homing_and_errors():
     steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL)
     steps += k10_status("01 02 00 80", "00 00 00 00")        # CW limit, homing
