@@ -83,6 +83,13 @@ def k10_status(status: str, counts: str) -> list[tuple[bytes, bytes]]:
     ]
 
 
+def dc(status: str, counts: str) -> tuple[bytes, bytes]:
+    """MOT_REQ_DCSTATUSUPDATE and its 14-byte reply (chan, position, velocity 0,
+    reserved 0, status)."""
+    return (H("90 04 01 00 50 01"),
+            H("91 04 0E 00 81 50 01 00") + H(counts) + bytes(4) + H(status))
+
+
 def transcript_motor(steps, stage="K10CR1", **kw) -> tuple[AptMotor, TranscriptSerial]:
     port = TranscriptSerial(steps, baudrate=115200)
     motor = AptMotor(port, name="rot", stage=stage, timeout=0.2, **FAST, **kw)
@@ -132,10 +139,6 @@ def test_k10cr1_open_identify_home_move_stop_transcript():
 
 
 def test_kdc101_prm1_transcript_uses_dc_status_and_relative_moves():
-    def dc(status: str, counts: str) -> tuple[bytes, bytes]:
-        return (H("90 04 01 00 50 01"),
-                H("91 04 0E 00 81 50 01 00") + H(counts) + bytes(4) + H(status))
-
     homed_idle = "00 25 00 80"
     steps = open_steps(info_reply(27000456, b"KDC101", stage_id=6), PRM_HOME, PRM_VEL)
     steps += [
@@ -200,10 +203,6 @@ def test_kdc101_mts25_transcript_scales_millimetres_and_writes_the_home_offset()
     # * 65536 = 393 (0x0189). Home offset 12.5 mm = 428800 counts (0x068B00).
     home = "01 00 02 00 01 00 87 B5 0B 00 00 8B 06 00"
     vel = "01 00 00 00 00 00 89 01 00 00 0F 6B 17 00"
-
-    def dc(status: str, counts: str) -> tuple[bytes, bytes]:
-        return (H("90 04 01 00 50 01"),
-                H("91 04 0E 00 81 50 01 00") + H(counts) + bytes(4) + H(status))
 
     homed_idle = "00 25 00 80"
     steps = open_steps(info_reply(27000789, b"KDC101", stage_id=7), home, vel)
