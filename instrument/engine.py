@@ -399,10 +399,19 @@ class RunEngine:
                 return
             except StorageError as err:
                 self._store_broken = True
+                with self._lock:
+                    self._done -= set(self._writer.failed)
                 # Close the damaged handle now: while paused the file on disk is closed
                 # and valid (recover() makes it agree with the journal).
                 self._writer.stop()
-                self.store.abandon()
+                if getattr(err, "clean", False):
+                    # Nothing was written: close the file properly (status "paused").
+                    try:
+                        self.store.close("paused")
+                    except Exception:
+                        self.store.abandon()
+                else:
+                    self.store.abandon()
                 self._emit(Fault("storage", str(err), "pause", index))
                 self._enter_pause(f"storage: {err}", index)
                 # Recovered from the journal: the lost point is not in done any more.
@@ -701,6 +710,7 @@ class _Writer:
         self._cond = threading.Condition()
         self._busy = 0
         self._error: BaseException | None = None
+        self.failed: list[int] = []  # indices of points whose storing failed
         self._thread = threading.Thread(target=self._loop, name="run-writer", daemon=True)
         self._thread.start()
 
@@ -721,7 +731,14 @@ class _Writer:
                     self._cond.notify_all()
 
     def submit(self, rec: PointRecord) -> None:
-        self._put(lambda: self._store.append(rec))
+        def job() -> None:
+            try:
+                self._store.append(rec)
+            except BaseException:
+                self.failed.append(rec.index)
+                raise
+
+        self._put(job)
 
     def _put(self, job) -> None:
         with self._cond:

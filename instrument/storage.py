@@ -41,6 +41,7 @@ import errno
 import json
 import math
 import os
+import re
 import shutil
 import time
 import zlib
@@ -64,11 +65,26 @@ STR_FIELDS = ("label", "note")
 FRAME_FIELDS = ("frame_point", "frame_exposure_us", "frame_light", "frame_timestamp",
                 "frame_saturated")
 STATUS_OK, STATUS_SKIPPED = 0, 1
+#: Disk space reserved per point besides its frames: new chunks of the scalar tables
+#: (1024 rows × 8 B × ~20 datasets) and metadata.
+RESERVE_BYTES = 512 * 1024
 _STR = h5py.string_dtype()
 
 
 class StorageError(OSError):
-    """A run file could not be written (disk full, I/O error) or is not a run file."""
+    """A run file could not be written (disk full, I/O error) or is not a run file.
+
+    ``clean`` is true when the error was detected before anything was written (free-space
+    check, space reservation): the file is then intact and can be closed normally.
+    """
+
+    clean = False
+
+
+def _clean_error(code: int, message: str) -> StorageError:
+    err = StorageError(code, message)
+    err.clean = True
+    return err
 
 
 @dataclass(frozen=True)
@@ -215,6 +231,7 @@ class RunStore:
         """
         nbytes = sum(f.data.nbytes for f in rec.frames)
         _check_free(self.path.parent, self.min_free_bytes, 2 * nbytes + 65536)
+        self._reserve(2 * nbytes + RESERVE_BYTES)
         try:
             frame_start = self.n_frames
             if rec.frames:
@@ -224,27 +241,40 @@ class RunStore:
             if nbytes or time.monotonic() - self._last_sync >= self.sync_interval_s:
                 self._sync_tables(extra=1)
             self._journal.append(entry)
-        except OSError as err:
+        except (OSError, RuntimeError) as err:
+            # h5py reports failed writes/flushes as OSError or RuntimeError (H5Fflush).
             self._pending.clear()
             if isinstance(err, StorageError):
                 raise
-            raise StorageError(err.errno or errno.EIO,
-                               f"writing point {rec.index} to {self.path} failed: {err}"
-                               ) from err
+            raise StorageError(_errno_of(err),
+                               f"writing point {rec.index} to {self.path} failed: "
+                               f"{_first_line(err)}") from err
         self.n_points += 1
         self.n_frames = frame_start + len(entry["frames"])
 
     def event(self, record: dict[str, Any]) -> None:
         """Log an event (fault, pause, resume): journal now, HDF5 at the next sync."""
         rec = {"t": "event", "time": time.time(), **record}
-        self._journal.append(rec)
-        self._pending_events.append(json.dumps(rec))
-        if rec.get("kind") in ("fault", "paused", "aborted"):
-            self._sync_tables()
+        try:
+            self._journal.append(rec)
+            self._pending_events.append(json.dumps(rec))
+            if rec.get("kind") in ("fault", "paused", "aborted"):
+                self._sync_tables()
+        except (OSError, RuntimeError) as err:
+            if isinstance(err, StorageError):
+                raise
+            raise StorageError(_errno_of(err), f"logging an event in {self.path} failed: "
+                               f"{_first_line(err)}") from err
 
     def sync(self) -> None:
         """Write buffered rows to the HDF5 file and flush it (pause, finish)."""
-        self._sync_tables()
+        try:
+            self._sync_tables()
+        except (OSError, RuntimeError) as err:
+            if isinstance(err, StorageError):
+                raise
+            raise StorageError(_errno_of(err), f"syncing {self.path} failed: "
+                               f"{_first_line(err)}") from err
 
     def close(self, status: str) -> None:
         """Finalise: rows written, status and end time set, files closed. Idempotent."""
@@ -274,6 +304,27 @@ class RunStore:
                 closer()
 
     # internals ----------------------------------------------------------------
+    def _reserve(self, nbytes: int) -> None:
+        """Allocate disk blocks for the next write *before* HDF5 makes it.
+
+        A full disk (or a file-size limit) then fails here, with nothing written, instead
+        of in the middle of an HDF5 metadata flush, which would leave a file that HDF5
+        refuses to open ("truncated file"). HDF5 trims the file back to its own end of
+        allocation when it flushes, so the reservation is renewed per point.
+        """
+        try:
+            size = int(self._h5.id.get_filesize())
+            fd = os.open(self.path, os.O_RDWR)
+            try:
+                os.posix_fallocate(fd, 0, size + nbytes)
+            finally:
+                os.close(fd)
+        except OSError as err:
+            raise _clean_error(err.errno or errno.ENOSPC,
+                               f"no room for the next point in {self.path}: "
+                               f"{err.strerror or err}; free space, then `scatterlab resume`"
+                               ) from err
+
     def _write_frames(self, index: int, frames: list[FrameData]) -> None:
         data = self._h5["entry/data"]
         if "frames" not in data:
@@ -325,6 +376,21 @@ class RunStore:
         self._last_sync = time.monotonic()
 
 
+def _errno_of(err: BaseException) -> int:
+    """The errno of an OSError, or the one HDF5 quotes in its message ("errno = 28")."""
+    if isinstance(err, OSError) and err.errno:
+        return err.errno
+    m = re.search(r"errno = (\d+)", str(err))
+    return int(m.group(1)) if m else errno.EIO
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip()
+    m = re.search(r"error message = '([^']*)'", text)
+    head = text.splitlines()[0] if text else type(err).__name__
+    return f"{head.rstrip(' (')}: {m.group(1)}" if m else head
+
+
 def _compression_pays(frame: np.ndarray) -> bool:
     """Compress frames when gzip-1 with byte shuffle saves at least 20 % on the first one."""
     raw = np.ascontiguousarray(frame)
@@ -343,7 +409,7 @@ def _fsync_path(path: Path) -> None:
 def _check_free(folder: Path, min_free: int, needed: int) -> None:
     free = shutil.disk_usage(folder).free
     if free < min_free + needed:
-        raise StorageError(
+        raise _clean_error(
             errno.ENOSPC,
             f"disk nearly full: {free / 2**20:.1f} MiB free in {folder}, the run keeps "
             f"at least {min_free / 2**20:.1f} MiB free (point needs {needed / 2**20:.2f} MiB)"
@@ -541,30 +607,31 @@ def recover(path: str | Path) -> RecoveryReport:
     if len(points) < len(header.planned_label) and status == "finished":
         status = "interrupted"
     rebuilt = False
+    salvaged_lost = 0
     try:
         f = h5py.File(path, "r+")
-    except (OSError, KeyError) as err:
-        if "lock" in str(err).lower() or "already open" in str(err).lower():
+    except (OSError, KeyError, RuntimeError) as err:
+        text = str(err)
+        if "unable to lock" in text.lower() or "already open" in text.lower():
             raise StorageError(errno.EBUSY, f"{path} is open in another program (a run "
                                "still going?); close it first") from err
-        bad = path.with_suffix(path.suffix + ".corrupt")
-        if path.exists():
-            os.replace(path, bad)
-        f = _new_file(path, header)
-        f["entry"].attrs["recovered_from"] = f"{bad.name}: {err}"
-        rebuilt = True
+        f = _open_padded(path, text)
+        if f is None:
+            f, salvaged_lost = _rebuild(path, header, points, err)
+            rebuilt = True
     try:
         try:
             frames_lost, dropped = _reconcile(f, header, points, events, rebuilt)
-        except (KeyError, OSError, ValueError) as err:
-            # The file opened but its structure is damaged: rebuild from the journal.
+        except (KeyError, OSError, ValueError, RuntimeError) as err:
+            # The file opened but its structure is damaged (e.g. metadata whose flush
+            # failed on a full disk): rebuild it from the journal, salvaging frames.
             f.close()
-            bad = path.with_suffix(path.suffix + ".corrupt")
-            os.replace(path, bad)
-            f = _new_file(path, header)
-            f["entry"].attrs["recovered_from"] = f"{bad.name}: {err}"
+            f, salvaged_lost = _rebuild(path, header, points, err)
             rebuilt = True
             frames_lost, dropped = _reconcile(f, header, points, events, rebuilt)
+        frames_lost += salvaged_lost
+        if frames_lost:
+            f["entry"].attrs["frames_lost"] = frames_lost
         f["entry"].attrs["status"] = status
         f["entry"].attrs["n_points"] = len(points)
         f.flush()
@@ -573,6 +640,76 @@ def recover(path: str | Path) -> RecoveryReport:
     n_frames = sum(len(p["frames"]) for p in points)
     return RecoveryReport(header, len(points), n_frames, seen, status, rebuilt, dropped,
                           frames_lost)
+
+
+def _open_padded(path: Path, message: str) -> h5py.File | None:
+    """Reopen a file whose last write failed after HDF5 had recorded its new end.
+
+    HDF5 then refuses the file as "truncated file: eof = A, ..., stored_eof = B". The
+    missing bytes belonged to the write that failed (an uncommitted point); padding the
+    file with zeros to B makes it open again, and the reconciliation that follows keeps
+    only committed rows and checks the newest frames' checksums.
+    """
+    m = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", message)
+    if not m or int(m.group(2)) <= int(m.group(1)):
+        return None
+    try:
+        os.truncate(path, int(m.group(2)))
+        return h5py.File(path, "r+")
+    except (OSError, RuntimeError):
+        return None
+
+
+def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
+             reason: BaseException) -> tuple[h5py.File, int]:
+    """A fresh file from the journal; every committed frame whose checksum still matches
+    is copied from the damaged file (kept next to it as ``*.corrupt``). Returns the new
+    file (open) and the number of frames that could not be salvaged (stored as zeros)."""
+    bad = path.with_suffix(path.suffix + ".corrupt")
+    if path.exists():
+        os.replace(path, bad)
+    f = _new_file(path, header)
+    f["entry"].attrs["recovered_from"] = f"{bad.name}: {_first_line(reason)}"
+    crcs = [fr[4] for p in points for fr in p["frames"]]
+    if not crcs:
+        return f, 0
+    old_frames = None
+    old = None
+    try:
+        old = h5py.File(bad, "r")
+        old_frames = old["entry/data/frames"]
+    except (OSError, KeyError, RuntimeError):
+        old_frames = None
+    lost = 0
+    ds = None
+    try:
+        for k, crc in enumerate(crcs):
+            frame = None
+            try:
+                if old_frames is not None and k < old_frames.shape[0]:
+                    frame = np.ascontiguousarray(old_frames[k])
+                    if zlib.crc32(frame.tobytes()) != crc:
+                        frame = None
+            except (OSError, RuntimeError, ValueError):
+                frame = None
+            if ds is None:
+                if frame is None and old_frames is None:
+                    return f, len(crcs)
+                shape = frame.shape if frame is not None else old_frames.shape[1:]
+                dtype = frame.dtype if frame is not None else old_frames.dtype
+                ds = f["entry/data"].create_dataset(
+                    "frames", shape=(len(crcs), *shape), maxshape=(None, *shape),
+                    chunks=(1, *shape), dtype=dtype, compression="gzip",
+                    compression_opts=1, shuffle=True)
+                ds.attrs["units"] = "DN"
+            if frame is None:
+                lost += 1  # left as zeros; frames_lost says how many
+            else:
+                ds[k] = frame
+    finally:
+        if old is not None:
+            old.close()
+    return f, lost
 
 
 def _reconcile(f: h5py.File, header: RunHeader, points: list[dict[str, Any]],
@@ -606,7 +743,9 @@ def _reconcile(f: h5py.File, header: RunHeader, points: list[dict[str, Any]],
     _put_rows(pts, 0, n, cols, pos)
     nf = len(crcs)
     frames_lost = 0
-    if "frames" in data:
+    if rebuilt:
+        pass  # _rebuild checked every frame already
+    elif "frames" in data:
         ds = data["frames"]
         if ds.shape[0] > nf:
             ds.resize(nf, axis=0)
@@ -618,8 +757,6 @@ def _reconcile(f: h5py.File, header: RunHeader, points: list[dict[str, Any]],
                 frames_lost += 1
     else:
         frames_lost = nf
-    if frames_lost:
-        f["entry"].attrs["frames_lost"] = frames_lost
     for name in FRAME_FIELDS:
         d = data[name]
         d.resize(nf, axis=0)

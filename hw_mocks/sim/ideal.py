@@ -2,9 +2,10 @@
 
 They implement the :mod:`drivers.base` ABCs exactly and do nothing else, so a run on them
 measures the run engine and storage alone (engine-overhead benchmark, soak test). Moves
-complete instantly; the camera returns small deterministic frames whose level is
-``brightness(positions) × exposure`` (DN), clipped at saturation; the power meter reads a
-constant. Imports only :mod:`drivers.base` (ARCHITECTURE.md import rules).
+complete instantly; the camera returns small frames whose level is
+``brightness() × exposure + 10`` DN, clipped at saturation (optionally with seeded Gaussian
+noise); the power meter reads a constant. Imports only :mod:`drivers.base`
+(ARCHITECTURE.md import rules).
 """
 
 from __future__ import annotations
@@ -108,8 +109,11 @@ class IdealCamera(Camera):
 
     def __init__(self, name: str = "camera", *, shape: tuple[int, int] = (8, 8),
                  brightness: Callable[[], float] | None = None,
-                 source: IdealSource | None = None) -> None:
+                 source: IdealSource | None = None, noise_dn: float = 0.0,
+                 seed: int = 0) -> None:
         super().__init__(name)
+        self._noise = float(noise_dn)
+        self._rng = np.random.default_rng(seed)
         self._shape = shape
         self._exp = 1000.0
         self._brightness = brightness or (lambda: 1.0)
@@ -143,7 +147,11 @@ class IdealCamera(Camera):
     def _do_acquire_one(self, timeout: float) -> Frame:
         lit = self._source is None or self._source._on
         level = (self._brightness() if lit else 0.0) * self._exp + 10.0
-        data = np.full(self._shape, min(4095.0, level), dtype=np.uint16)
+        if self._noise > 0:  # Gaussian noise: frames that do not compress
+            noisy = level + self._noise * self._rng.standard_normal(self._shape)
+            data = np.clip(np.rint(noisy), 0, 4095).astype(np.uint16)
+        else:
+            data = np.full(self._shape, min(4095.0, level), dtype=np.uint16)
         self._index += 1
         return Frame(data, self._index, time.time(), self._exp, 0.0, 4095.0, 12,
                      self._do_get_roi())

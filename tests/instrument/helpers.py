@@ -69,14 +69,16 @@ def inplane_plan(step: float = 15.0, mode: str = "fixed", dark: str = "none",
     return INPLANE_PLAN.format(step=step, mode=mode, dark=dark, detectors=detectors)
 
 
-def ideal_bench(profile_text: str = IDEAL_PROFILE, *, shape=(8, 8), brightness=None) -> Bench:
+def ideal_bench(profile_text: str = IDEAL_PROFILE, *, shape=(8, 8), brightness=None,
+                noise_dn: float = 0.0) -> Bench:
     profile = parse_profile(profile_text, source="ideal profile")
     source = IdealSource("source")
     devices = {
         "sample_theta": IdealAxis("sample_theta", soft_limits=(-90, 90)),
         "detector_theta": IdealAxis("detector_theta", soft_limits=(-170, 170)),
         "camera_z": IdealAxis("camera_z", kind=AxisKind.LINEAR, soft_limits=(0, 25)),
-        "camera": IdealCamera("camera", shape=shape, brightness=brightness, source=source),
+        "camera": IdealCamera("camera", shape=shape, brightness=brightness, source=source,
+                              noise_dn=noise_dn),
         "power_meter": IdealPowerMeter("power_meter"),
         "source": source,
     }

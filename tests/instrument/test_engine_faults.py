@@ -146,7 +146,7 @@ def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
     faults.clear()  # the operator fixes the link
     engine.resume()
     assert engine.wait(30) is EngineState.FINISHED
-    idx, status, _, log = _file(engine)
+    idx, _status, _, log = _file(engine)
     assert sorted(idx) == list(range(len(plan.points))) and len(idx) == len(set(idx))
     kinds = [e["kind"] for e in log]
     assert "fault" in kinds and kinds.index("paused") < kinds.index("resumed")
@@ -154,7 +154,7 @@ def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
 
 def test_skip_policy_marks_the_point(tmp_path, make_bench):
     bench = make_bench("skip")
-    engine, q, plan = _start(tmp_path, bench)
+    engine, _q, plan = _start(tmp_path, bench)
     faults = registry.get("simsmc", "detector_theta").faults
     armed = []
 

@@ -201,3 +201,4 @@ def test_catalog_filters(tmp_path):
         cat.update("r1", status="finished", n_points=10, ended=2000.0)
         row = cat.get("r1")
         assert (row.status, row.n_points, row.ended) == ("finished", 10, 2000.0)
+

@@ -1,0 +1,124 @@
+"""``scatterlab fit``: run file → reduction → fits and selection → /entry/analysis + report.
+
+The run files are written by the engine's own :class:`instrument.storage.RunStore` with
+frames rendered by the simulated camera (tests/instrument/sim_scan.py), so reading,
+reduction and writing back are exercised on the real layout in well under a second each.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import h5py
+import numpy as np
+import pytest
+
+from instrument.analysis_io import ReductionOptions, read_run, reduce_run
+from instrument.cli import main
+from instrument.report import analyse
+from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, render, write_run_file
+
+GLOSSY = SAMPLES[1]
+
+
+@pytest.fixture(scope="module")
+def glossy_run(tmp_path_factory):
+    path = tmp_path_factory.mktemp("runs") / "glossy.h5"
+    return write_run_file(render(ScanSetup(), GLOSSY), 3, path)
+
+
+@pytest.fixture(scope="module")
+def reference_run(tmp_path_factory):
+    path = tmp_path_factory.mktemp("runs") / "ptfe.h5"
+    return write_run_file(render(ScanSetup(), Sample("ptfe", "lambert", (0.99,))), 4, path,
+                          kind="reference", run_id="ptfe")
+
+
+def test_read_run_points_and_frames(glossy_run) -> None:
+    run = read_run(glossy_run)
+    rows = run.brdf_rows()
+    assert run.status == "finished" and rows.size == run.n_points == 57
+    light, exp, dark = run.frames_of(int(rows[0]))
+    assert light.shape == dark.shape == (1, 96, 96)
+    assert exp[0] == pytest.approx(run.exposure_us[rows[0]])
+    assert light.mean() > dark.mean()  # light frame first, then its dark
+
+
+def test_cli_fit_writes_analysis_and_report(glossy_run, tmp_path, capsys) -> None:
+    out = tmp_path / "report"
+    assert main(["fit", str(glossy_run), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "chosen model lambert+ggx" in text
+    for name in ("index.html", "inplane.png", "polar.png", "residuals.png", "dhr.png"):
+        assert (out / name).stat().st_size > 1000
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "Model comparison" in page and "Reciprocity" in page and "ggx.alpha" in page
+    with h5py.File(glossy_run, "r") as f:
+        g = f["entry/analysis"]
+        assert g.attrs["NX_class"] == "NXprocess" and g.attrs["method"] == "absolute"
+        assert g["reduced/brdf"].shape == (57,)
+        assert g["chosen"].attrs["model"] == "lambert+ggx"
+        params = g["chosen/params"][()]
+        stderr = g["chosen/stderr"][()]
+        results = json.loads(g["results_json"][()])
+    truth = np.array(GLOSSY.params)
+    assert np.all(np.abs(params - truth) < 3.5 * stderr)
+    assert results["selection"]["chosen"] == "lambert+ggx"
+    assert {r["name"] for r in results["selection"]["table"]} == {
+        "lambert", "oren_nayar", "lambert+ggx"}
+    # fitting again replaces the group, it does not fail or duplicate
+    assert main(["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx",
+                 "--no-cv"]) == 0
+    with h5py.File(glossy_run, "r") as f:
+        res = json.loads(f["entry/analysis/results_json"][()])
+        assert list(res["fits"]) == ["lambert+ggx"]
+
+
+def test_relative_method_agrees_with_absolute(glossy_run, reference_run, tmp_path) -> None:
+    table = tmp_path / "ptfe.csv"
+    table.write_text("theta_i_deg,theta_r_deg,brdf,u_rel\n" + "".join(
+        f"{ti},{tr},{0.99 / math.pi!r},0.0\n" for ti in (0.0, 89.0) for tr in (-89.0, 89.0)))
+    rel = reduce_run(glossy_run, ReductionOptions(
+        method="relative", reference_run=str(reference_run), reference_table=str(table)))
+    ab = reduce_run(glossy_run)
+    assert rel.points.method == "relative" and rel.provenance["reference_run"] == "ptfe"
+    z = (rel.points.brdf - ab.points.brdf) / np.sqrt(rel.points.u_point**2
+                                                    - ab.points.u_point**2)
+    assert abs(np.mean(z)) < 0.5 and np.std(z) < 1.4
+    res = analyse(rel.points, ["lambert+ggx"], run_cv=False)
+    fit = res.chosen_fit
+    assert np.all(np.abs(fit.params - np.array(GLOSSY.params)) < 3.5 * fit.stderr)
+
+
+def test_cosine_corrected_and_checks(glossy_run) -> None:
+    cc = reduce_run(glossy_run, ReductionOptions(cosine_corrected=True))
+    plain = reduce_run(glossy_run)
+    np.testing.assert_allclose(cc.points.brdf, plain.points.brdf * np.cos(plain.points.theta_r),
+                               rtol=1e-12)
+    res = analyse(cc.points, ["lambert", "lambert+ggx"], run_cv=False)
+    assert res.chosen == "lambert+ggx"  # the fit works on f whatever is stored
+    rec = res.reciprocity
+    assert rec.n_pairs >= 2  # e.g. (20° → 40°) and (40° → 20°) on the specular side
+    assert np.all(np.abs(rec.z) < 4.0)
+    # DHR of the fitted glossy model: ρd + specular albedo, below 1, above ρd
+    d = res.dhr["lambert+ggx"]
+    assert np.all((d > 0.3) & (d < 1.0))
+
+
+def test_scale_uncertainty_reaches_the_amplitudes(glossy_run) -> None:
+    red = reduce_run(glossy_run, ReductionOptions(incident_power_w=2e-6,
+                                                  u_incident_power_rel=0.02))
+    assert red.points.u_scale_rel == pytest.approx(0.02)
+    res = analyse(red.points, ["lambert+ggx"], run_cv=False)
+    fit, raw = res.fits["lambert+ggx"], res.selection.fits["lambert+ggx"]
+    np.testing.assert_allclose(fit.stderr[:2] ** 2,
+                               raw.stderr[:2] ** 2 + (0.02 * raw.params[:2]) ** 2, rtol=1e-5)
+    assert fit.stderr[2] == pytest.approx(raw.stderr[2], rel=1e-5)  # α is a shape
+
+
+def test_fit_errors_are_reported(glossy_run, capsys) -> None:
+    assert main(["fit", str(glossy_run), "--method", "relative", "--no-write"]) == 2
+    assert "--reference" in capsys.readouterr().out
+    assert main(["fit", str(glossy_run), "--models", "nonsense", "--no-write"]) == 2
+    assert "unknown BRDF model" in capsys.readouterr().out
