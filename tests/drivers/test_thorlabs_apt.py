@@ -482,6 +482,27 @@ def test_fault_delay_past_timeout_retries_and_discards_the_late_reply():
     assert motor.unsolicited_count > count  # the late reply was consumed, not used
 
 
+def test_motion_commands_are_sent_once_although_the_queries_around_them_are_retried():
+    motor = open_url(timeout=0.1)
+    motor.home(timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    # Lose the first reply of the ready check (MOT_GET_STATUSBITS) and, for the relative
+    # move, also the position read it starts from: both queries are retried, the moves not.
+    emu.faults.schedule(FaultKind.DROP, nth=1)
+    motor.move_to(4.0, wait=True, timeout=5.0)
+    emu.faults.schedule(FaultKind.DROP, nth=1)  # STATUSBITS (ready check); 2: its retry
+    emu.faults.schedule(FaultKind.DROP, nth=4)  # 3: POSCOUNTER (ready check), 4: the move's
+    motor.move_by(-1.0, wait=True, timeout=5.0)
+    log = bytes(emu.received_log)
+    # the position the relative step is computed from was asked twice, the step sent once
+    before_step = log.split(H("48 04 06 00 D0 01"))[0]
+    assert before_step.endswith(REQ_POS * 2)
+    assert log.count(H("53 04 06 00 D0 01 01 00")) == 1  # MOT_MOVE_ABSOLUTE, ch1
+    assert log.count(H("48 04 06 00 D0 01 01 00")) == 1  # MOT_MOVE_RELATIVE, ch1
+    assert [k for _, k in emu.faults.log] == [FaultKind.DROP] * 3
+    assert motor.position == pytest.approx(3.0, abs=motor.position_tolerance)
+
+
 def test_fault_split_reply_is_reassembled():
     motor = open_url()
     registry.get("simapt", "ax").faults.schedule(FaultKind.SPLIT, nth=1, chunks=4,
