@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -208,3 +209,65 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0) -> BRDF
     return absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
                          incident_power_w=s.power_w, solid_angle=omega,
                          sigma_theta_i=sig_t, sigma_theta_r=sig_t)
+
+
+def profile_text(setup: ScanSetup, sample: Sample) -> str:
+    """The ``sim`` bench profile with this setup's camera, source and sample."""
+    text = (Path(__file__).resolve().parents[2] / "instrument" / "profiles" / "sim.toml"
+            ).read_text(encoding="utf-8")
+    p = setup.sensor_params()
+    cam = (f"simcam://camera?world=sim&seed=1&width={p.width}&height={p.height}"
+           f"&pixel_pitch_um={p.pixel_pitch_um!r}&aperture_mm={setup.aperture_mm!r}"
+           f"&focal_length_mm={setup.focal_length_mm!r}")
+    text = text.replace("simcam://camera?world=sim&seed=1", cam)
+    head, _, _ = text.partition("[simulation.scene]")
+    params = ", ".join(repr(v) for v in sample.params)
+    return (head + f'[simulation.scene]\nbrdf = "{sample.model}"\nparams = [{params}]\n\n'
+            f"[simulation.source]\npower_w = {setup.power_w!r}\nwavelength_nm = 633.0\n"
+            f"beam_radius_mm = {setup.beam_radius_mm!r}\nmax_power_w = 1.0\n")
+
+
+def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_plane",
+                   run_id: str = "closed-loop") -> Path:
+    """Acquire every point of ``r`` with sensor ``seed`` and store it as a run file with
+    :class:`instrument.storage.RunStore` (the engine's writer), frames per point: the light
+    frame then its dark frame."""
+    import time as _time
+
+    from instrument.storage import FrameData, PointRecord, RunHeader, RunStore
+
+    s = r.setup
+    p = s.sensor_params()
+    sensor = Sensor(p, seed=seed)
+    t = exposures_us(r)
+    roi = (0, 0, p.width, p.height)
+    plan = r.plan
+    pol = plan.spec.acquisition
+    header = RunHeader(
+        run_id=run_id, plan_kind=kind, plan_name=plan.spec.name, plan_text=s.plan_text(),
+        profile_text=profile_text(s, r.sample), bench_name="sim", sample_name=r.sample.name,
+        sample_description="closed-loop sample", axes=plan.axes,
+        planned_targets=plan.targets_array().tolist(),
+        planned_angles=[list(q.angles.as_tuple()) for q in plan.points],
+        planned_label=[q.label for q in plan.points],
+        planned_light=[q.light for q in plan.points],
+        planned_exposure_us=[math.nan] * len(plan.points),
+        acquisition_policy=pol.as_json(), retry_policies="{}", identities={},
+        device_kinds={}, geometry={"detector_distance_mm": s.distance_mm,
+                                   "detector_aperture_mm": 5.0, "kind": "in_plane"},
+        calibration={}, software_version="test", created=_time.time())
+    store = RunStore.create(path, header, fsync=False, min_free_bytes=0)
+    zero = np.zeros_like(r.photon_rate[0], dtype=np.float32)
+    for k, q in enumerate(plan.points):
+        frames = []
+        for light, rate in ((True, r.photon_rate[k].astype(np.float32)), (False, zero)):
+            data = [sensor.expose(rate, t[k], gain_db=0.0, bits=12, roi=roi,
+                                  frame_index=(4 * k + 2 * (not light)) * s.frames + j)
+                    for j in range(s.frames)]
+            avg = data[0] if s.frames == 1 else np.mean(data, axis=0).astype(np.float32)
+            frames.append(FrameData(avg, float(t[k]), light, _time.time(), 0.0))
+        store.append(PointRecord(q.index, q.label, _time.time(), _time.time(),
+                                 tuple(v for _, v in q.targets), q.angles.as_tuple(),
+                                 float(t[k]), math.nan, math.nan, frames=frames))
+    store.close("finished")
+    return path

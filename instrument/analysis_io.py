@@ -1,0 +1,590 @@
+"""Run files ↔ BRDF reduction: read a run's points and frames, reduce them, write results back.
+
+Reading follows the layout of :mod:`instrument.storage` (``/entry/points``,
+``/entry/data/frames`` with ``frame_point``, ``frame_exposure_us``, ``frame_light``). A
+point's frames are its light brackets followed by one dark frame per bracket at the same
+exposure (the engine's ``dark = "per_point"``); with ``dark = "start"`` the dark-labelled
+points of the run are used as master darks by exposure.
+
+The camera's radiometric calibration (K, η, read noise, saturation, pupil) comes from a
+JSON file given by the operator, or — for a simulated camera (``simcam://`` URL in the
+stored bench profile) — from the simulator itself, reached only by a string import keyed
+on the URL scheme (ARCHITECTURE.md import rules), as a perfect calibration would give it.
+
+Results go into ``/entry/analysis`` (NXprocess) of the same file; writing again replaces it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from analysis.brdf_reduction import (
+    BRDFPoints,
+    DetectorNoise,
+    ReferenceStandard,
+    absolute_brdf,
+    camera_power_w,
+    camera_signal,
+    relative_brdf,
+    solid_angle_sr,
+    subtract_signature,
+)
+
+__all__ = [
+    "CameraCalibration",
+    "ReductionOptions",
+    "RunData",
+    "camera_calibration_for",
+    "load_reference_table",
+    "read_run",
+    "reduce_run",
+    "write_analysis",
+]
+
+_SIM_CAMERA_ENTRY = "hw_mocks.sim.camera:open_from_url"
+
+
+def _s(v: Any) -> str:
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+# ------------------------------------------------------------------------------ reading
+@dataclass(frozen=True)
+class RunData:
+    """The scalar content of a run file (frames stay on disk until asked for).
+
+    Arrays have one row per stored point (completion order); angles in degrees.
+    """
+
+    path: Path
+    run_id: str
+    plan_kind: str
+    plan_name: str
+    sample_name: str
+    status: str
+    index: np.ndarray
+    label: np.ndarray
+    point_status: np.ndarray
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    theta_r: np.ndarray
+    phi_r: np.ndarray
+    exposure_us: np.ndarray
+    power_w: np.ndarray
+    signal: np.ndarray
+    n_frames: np.ndarray
+    frame_start: np.ndarray
+    positions: np.ndarray
+    axes: tuple[str, ...]
+    frame_point: np.ndarray
+    frame_exposure_us: np.ndarray
+    frame_light: np.ndarray
+    acquisition: dict[str, Any]
+    geometry: dict[str, Any]
+    profile_text: str
+    plan_text: str
+    calibration: dict[str, str]
+    identities: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.index.size)
+
+    def position(self, role: str) -> np.ndarray:
+        """Read-back positions of ``role`` per point (NaN if the run did not move it)."""
+        if role not in self.axes:
+            return np.full(self.n_points, np.nan)
+        return self.positions[:, self.axes.index(role)]
+
+    def brdf_rows(self) -> np.ndarray:
+        """Rows that are measured scattering points: status ok, finite angles."""
+        ok = (self.point_status == 0) & np.isfinite(self.theta_i) & np.isfinite(self.theta_r)
+        return np.flatnonzero(ok & np.isin(self.label, ["sample", "reference", "signature"]))
+
+    def profile(self) -> dict[str, Any]:
+        return tomllib.loads(self.profile_text) if self.profile_text else {}
+
+    def frames_of(self, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(light frames (N, H, W), exposures (N,), dark frames (N, H, W) or None) of a row.
+
+        Darks are matched to brackets by exposure: the point's own dark frames first,
+        then dark-labelled points of the run (``dark = "start"``).
+        """
+        n0, n = int(self.frame_start[row]), int(self.n_frames[row])
+        if n == 0:
+            raise ValueError(f"point {self.index[row]} has no frames")
+        with h5py.File(self.path, "r") as f:
+            ds = f["entry/data/frames"]
+            stack = np.asarray(ds[n0:n0 + n], dtype=np.float64)
+            light = self.frame_light[n0:n0 + n].astype(bool)
+            exp = self.frame_exposure_us[n0:n0 + n]
+            lf, le = stack[light], exp[light]
+            darks: list[np.ndarray] = []
+            pool = list(zip(exp[~light], stack[~light], strict=True))
+            for e in le:
+                k = next((j for j, (de, _) in enumerate(pool) if math.isclose(de, e)), None)
+                if k is None:
+                    d = self._run_dark(f, float(e))
+                    if d is None:
+                        return lf, le, None
+                    darks.append(d)
+                else:
+                    darks.append(pool.pop(k)[1])
+        return lf, le, np.array(darks)
+
+    def _run_dark(self, f: h5py.File, exposure_us: float) -> np.ndarray | None:
+        dark_rows = np.flatnonzero(self.label == "dark")
+        for r in dark_rows:
+            n0, n = int(self.frame_start[r]), int(self.n_frames[r])
+            for j in range(n0, n0 + n):
+                if math.isclose(float(self.frame_exposure_us[j]), exposure_us):
+                    return np.asarray(f["entry/data/frames"][j], dtype=np.float64)
+        return None
+
+
+def read_run(path: str | Path) -> RunData:
+    """Read a run file's scalar tables and metadata (plain h5py, read-only)."""
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        e = f["entry"]
+        p = e["points"]
+        d = e["data"]
+        inst = e["instrument"]
+        geometry = {k.split(".", 1)[1]: (v.item() if hasattr(v, "item") else v)
+                    for k, v in inst.attrs.items() if k.startswith("geometry.")}
+        identities = {name: {k: _s(v) for k, v in g.attrs.items()}
+                      for name, g in inst.items() if isinstance(g, h5py.Group)}
+        axes = tuple(_s(a) for a in e["plan/axes"][()])
+        cal = {k: _s(v) for k, v in e["calibration"].attrs.items()}
+
+        def col(name: str, grp: h5py.Group = p) -> np.ndarray:
+            return np.asarray(grp[name][()])
+
+        return RunData(
+            path=path,
+            run_id=_s(e.attrs.get("run_id", path.stem)),
+            plan_kind=_s(e.attrs.get("plan_kind", "")),
+            plan_name=_s(e.attrs.get("plan_name", "")),
+            sample_name=_s(e["sample/name"][()]) if "sample/name" in e else "",
+            status=_s(e.attrs.get("status", "")),
+            index=col("index"),
+            label=np.array([_s(x) for x in p["label"][()]]),
+            point_status=col("status"),
+            theta_i=col("theta_i"), phi_i=col("phi_i"),
+            theta_r=col("theta_r"), phi_r=col("phi_r"),
+            exposure_us=col("exposure_us"), power_w=col("power_w"), signal=col("signal"),
+            n_frames=col("n_frames"), frame_start=col("frame_start"),
+            positions=col("positions"), axes=axes,
+            frame_point=col("frame_point", d), frame_exposure_us=col("frame_exposure_us", d),
+            frame_light=col("frame_light", d),
+            acquisition=json.loads(_s(e["plan/acquisition_policy"][()])),
+            geometry=geometry,
+            profile_text=_s(inst["bench_profile"][()]),
+            plan_text=_s(e["plan/plan_text"][()]),
+            calibration=cal,
+            identities=identities,
+        )
+
+
+# ------------------------------------------------------------------------------ camera
+@dataclass(frozen=True)
+class CameraCalibration:
+    """What the absolute camera method needs (EMVA 1288 constants and the pupil).
+
+    Attributes
+    ----------
+    noise : DetectorNoise
+    quantum_efficiency : float
+    wavelength_nm : float
+    pupil_diameter_mm : float
+        Entrance-pupil diameter (the receiver aperture of the absolute method).
+    u_responsivity_rel : float
+        Relative standard uncertainty of Kη (calibration).
+    source : str
+        Where the numbers came from (reported).
+    """
+
+    noise: DetectorNoise
+    quantum_efficiency: float
+    wavelength_nm: float
+    pupil_diameter_mm: float
+    u_responsivity_rel: float = 0.0
+    source: str = ""
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> CameraCalibration:
+        """Keys: system_gain_dn_per_e, read_noise_e, saturation_dn, dark_current_e_per_s,
+        quantum_efficiency, wavelength_nm, pupil_diameter_mm, u_responsivity_rel."""
+        d = json.loads(Path(path).read_text(encoding="utf-8"))
+        noise = DetectorNoise(float(d["system_gain_dn_per_e"]), float(d["read_noise_e"]),
+                              float(d["saturation_dn"]),
+                              float(d.get("dark_current_e_per_s", 0.0)))
+        return cls(noise, float(d["quantum_efficiency"]), float(d["wavelength_nm"]),
+                   float(d["pupil_diameter_mm"]), float(d.get("u_responsivity_rel", 0.0)),
+                   source=str(path))
+
+
+def _camera_url(run: RunData) -> str | None:
+    devices = run.profile().get("devices", {})
+    for spec in devices.values():
+        url = str(spec.get("url", ""))
+        if spec.get("driver") in ("sim_camera", "opencv_camera") or url.startswith("simcam://"):
+            return url
+    return None
+
+
+def camera_calibration_for(run: RunData, *, calibration_file: str | Path | None = None
+                           ) -> CameraCalibration:
+    """The camera calibration of ``run``: the file if given, else the simulator's truth.
+
+    Raises
+    ------
+    ValueError
+        A real camera without a calibration file.
+    """
+    if calibration_file is not None:
+        return CameraCalibration.from_json(calibration_file)
+    if "camera_calibration" in run.calibration:
+        return CameraCalibration.from_json(run.calibration["camera_calibration"])
+    url = _camera_url(run)
+    if url is None or not url.startswith("simcam://"):
+        raise ValueError("the absolute camera method needs a camera calibration file "
+                         "(--camera-calibration); or use the relative method")
+    module, _, func = _SIM_CAMERA_ENTRY.partition(":")
+    cam = getattr(importlib.import_module(module), func)(url)
+    try:
+        bits = 12
+        fmt = run.identities.get("camera", {}).get("pixel_format")
+        if fmt and fmt.upper().startswith("MONO"):
+            bits = int(fmt.upper()[4:])
+        p = cam.sensor.params
+        gain = float(run.acquisition.get("gain_db", 0.0))
+        noise = DetectorNoise(p.system_gain(gain, bits), p.read_noise_e,
+                              cam.sensor.saturation_dn(gain_db=gain, bits=bits),
+                              p.dark_current_e_per_s)
+        wl = float(run.profile().get("simulation", {}).get("source", {})
+                   .get("wavelength_nm", 633.0))
+        return CameraCalibration(noise, p.quantum_efficiency, wl,
+                                 cam.optics.aperture_diameter_mm, 0.0,
+                                 source=f"simulated camera {url} (exact)")
+    finally:
+        cam.close()
+
+
+# ------------------------------------------------------------------------------ reduce
+@dataclass(frozen=True)
+class ReductionOptions:
+    """How to reduce a run (the ``scatterlab fit`` options).
+
+    Attributes
+    ----------
+    method : {"absolute", "relative"}
+    detector : {"camera", "power_meter"}
+    cosine_corrected : bool
+    incident_power_w, u_incident_power_rel : float or None
+        P_i and its relative uncertainty; default from the run's calibration attribute
+        ``incident_power_w`` or, on a simulated bench, the source power of the profile.
+    receiver_distance_mm : float or None
+        Sample-to-receiver distance; default the profile's detector distance plus the
+        run's ``camera_z`` read-back when the run moved it (the camera rides on it).
+    u_distance_mm, u_aperture_mm : float
+        Uncertainties of the receiver geometry.
+    sigma_theta_deg : float or None
+        Angular standard uncertainty; default the stages' position tolerance.
+    u_power_meter_rel : float
+        Relative noise of one power-meter reading (power-meter detector).
+    camera_calibration : path or None
+    reference_run, signature_run : path or None
+    reference_table : path or None
+        CSV of the standard's BRDF (theta_i_deg, theta_r_deg, brdf, u_rel).
+    """
+
+    method: str = "absolute"
+    detector: str = "camera"
+    cosine_corrected: bool = False
+    incident_power_w: float | None = None
+    u_incident_power_rel: float | None = None
+    receiver_distance_mm: float | None = None
+    u_distance_mm: float = 0.0
+    u_aperture_mm: float = 0.0
+    sigma_theta_deg: float | None = None
+    u_power_meter_rel: float = 0.005
+    camera_calibration: str | None = None
+    reference_run: str | None = None
+    signature_run: str | None = None
+    reference_table: str | None = None
+
+
+@dataclass(frozen=True)
+class Reduced:
+    """A reduced run: BRDF points and where every number came from."""
+
+    points: BRDFPoints
+    rows: np.ndarray            # row of each BRDF point in the run's tables
+    detector_theta: np.ndarray  # read-back arm position per point (deg; NaN if unknown)
+    provenance: dict[str, Any]
+
+
+def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
+             cal: CameraCalibration | None) -> tuple[np.ndarray, np.ndarray]:
+    """Collected power (W) and its σ per row, from the camera or the power meter."""
+    if opts.detector == "power_meter":
+        p = run.power_w[rows].astype(float)
+        if not np.all(np.isfinite(p)):
+            raise ValueError("the run has no power-meter readings at every point")
+        return p, np.abs(p) * opts.u_power_meter_rel
+    assert cal is not None
+    n_avg = int(run.acquisition.get("frames", 1))
+    rate = np.empty(rows.size)
+    sd = np.empty(rows.size)
+    for k, r in enumerate(rows):
+        light, exp, dark = run.frames_of(int(r))
+        if dark is None:
+            raise ValueError(f"point {run.index[r]} has no dark frames at its exposure(s)")
+        s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg)
+        rate[k], sd[k] = s.rate_dn_per_us, s.sigma
+    conv = {"system_gain_dn_per_e": cal.noise.system_gain_dn_per_e,
+            "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
+    return camera_power_w(rate, **conv), camera_power_w(sd, **conv)
+
+
+def _incident_power(run: RunData, opts: ReductionOptions) -> tuple[float, float, str]:
+    if opts.incident_power_w is not None:
+        return float(opts.incident_power_w), float(opts.u_incident_power_rel or 0.0), "option"
+    if "incident_power_w" in run.calibration:
+        return (float(run.calibration["incident_power_w"]),
+                float(run.calibration.get("u_incident_power_rel", opts.u_incident_power_rel
+                                          or 0.0)), "run calibration")
+    sim = run.profile().get("simulation", {})
+    if "power_w" in sim.get("source", {}):
+        return (float(sim["source"]["power_w"]), float(opts.u_incident_power_rel or 0.0),
+                "simulated source power (bench profile)")
+    raise ValueError("the absolute method needs the incident power (--incident-power-w)")
+
+
+def _receiver_distance(run: RunData, rows: np.ndarray, opts: ReductionOptions
+                       ) -> tuple[float, str]:
+    if opts.receiver_distance_mm is not None:
+        return float(opts.receiver_distance_mm), "option"
+    if "receiver_distance_mm" in run.calibration:
+        return float(run.calibration["receiver_distance_mm"]), "run calibration"
+    base = float(run.geometry.get("detector_distance_mm", 300.0))
+    if opts.detector == "camera":
+        z = run.position("camera_z")[rows]
+        if np.all(np.isfinite(z)):
+            # one distance per run: the plan does not move camera_z during a BRDF scan
+            return base + float(np.mean(z)), "profile distance + camera_z read-back"
+        return base, ("profile detector distance; camera_z was not recorded by this run "
+                      "(assumed 0: give --distance-mm if the camera stage is elsewhere)")
+    return base, "profile detector distance"
+
+
+def _sigma_theta_rad(run: RunData, opts: ReductionOptions) -> float:
+    if opts.sigma_theta_deg is not None:
+        return math.radians(opts.sigma_theta_deg)
+    devices = run.profile().get("devices", {})
+    tol = [float(devices.get(r, {}).get("position_tolerance", 0.0))
+           for r in ("sample_theta", "detector_theta")]
+    # a reading within ±tol of the target, uniform: σ = tol/√3 (GUM type B)
+    return math.radians(max(tol) / math.sqrt(3.0))
+
+
+def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Reduced:
+    """Reduce the scattering points of a run to BRDF values (module docstring).
+
+    Raises
+    ------
+    ValueError
+        Missing calibration, reference or dark data (the message says what to give).
+    """
+    opts = options or ReductionOptions()
+    if opts.method not in ("absolute", "relative"):
+        raise ValueError("method must be 'absolute' or 'relative'")
+    if opts.detector not in ("camera", "power_meter"):
+        raise ValueError("detector must be 'camera' or 'power_meter'")
+    run = read_run(path)
+    rows = run.brdf_rows()
+    if rows.size == 0:
+        raise ValueError(f"{path}: no measured scattering points")
+    cal = (camera_calibration_for(run, calibration_file=opts.camera_calibration)
+           if opts.detector == "camera" else None)
+    rad = np.radians
+    ti, pi_ = rad(run.theta_i[rows]), rad(run.phi_i[rows])
+    tr, pr = rad(run.theta_r[rows]), rad(run.phi_r[rows])
+    sig_t = _sigma_theta_rad(run, opts)
+    p_s, u_s = _signals(run, rows, opts, cal)
+    prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
+                            "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
+                            "options": asdict(opts)}
+    if cal is not None:
+        prov["camera_calibration"] = cal.source
+    if opts.method == "absolute":
+        p_i, u_pi_rel, src = _incident_power(run, opts)
+        if opts.detector == "camera":
+            aperture = cal.pupil_diameter_mm if cal is not None else 0.0
+        else:
+            aperture = float(run.geometry.get("detector_aperture_mm", 5.0))
+        distance, dist_src = _receiver_distance(run, rows, opts)
+        omega, u_omega = solid_angle_sr(aperture, distance, u_diameter_mm=opts.u_aperture_mm,
+                                        u_distance_mm=opts.u_distance_mm)
+        pts = absolute_brdf(
+            p_s, u_s, ti, pi_, tr, pr, incident_power_w=p_i,
+            u_incident_power_w=p_i * u_pi_rel, solid_angle=omega, u_solid_angle=u_omega,
+            u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
+            sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected)
+        prov.update(incident_power_w=p_i, incident_power_source=src, solid_angle_sr=omega,
+                    receiver_aperture_mm=aperture, receiver_distance_mm=distance,
+                    receiver_distance_source=dist_src)
+    else:
+        if opts.reference_run is None:
+            raise ValueError("the relative method needs --reference RUN (a reference-standard "
+                             "run at the same geometry)")
+        ref_run = read_run(opts.reference_run)
+        ref_rows = _match_rows(run, rows, ref_run)
+        r_s, r_u = _signals(ref_run, ref_rows, opts,
+                            camera_calibration_for(ref_run,
+                                                   calibration_file=opts.camera_calibration)
+                            if opts.detector == "camera" else None)
+        std = _reference_standard(ref_run, opts)
+        pts = relative_brdf(p_s, u_s, r_s, r_u, ti, pi_, tr, pr, reference=std,
+                            sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                            cosine_corrected=opts.cosine_corrected)
+        prov.update(reference_run=ref_run.run_id, reference_standard=std.name)
+    if opts.signature_run is not None:
+        pts = _subtract_signature(run, rows, pts, opts)
+        prov["signature_run"] = str(opts.signature_run)
+    return Reduced(pts, rows, run.position("detector_theta")[rows], prov)
+
+
+def _match_rows(run: RunData, rows: np.ndarray, other: RunData, *, tol_deg: float = 0.05
+                ) -> np.ndarray:
+    """Rows of ``other`` at the same (θi, φi, θr, φr) as ``rows`` of ``run``."""
+    cand = other.brdf_rows()
+    a = np.stack([other.theta_i, other.phi_i, other.theta_r, other.phi_r], -1)[cand]
+    out = np.empty(rows.size, dtype=int)
+    for k, r in enumerate(rows):
+        want = np.array([run.theta_i[r], run.phi_i[r], run.theta_r[r], run.phi_r[r]])
+        d = np.abs(np.angle(np.exp(1j * np.radians(a - want))))
+        hit = np.flatnonzero(np.all(np.degrees(d) <= tol_deg, axis=1))
+        if hit.size == 0:
+            raise ValueError(f"run {other.run_id} has no point at θi={want[0]:g}°, "
+                             f"θr={want[2]:g}° (φr={want[3]:g}°)")
+        out[k] = cand[hit[0]]
+    return out
+
+
+def _reference_standard(ref_run: RunData, opts: ReductionOptions) -> ReferenceStandard:
+    if opts.reference_table is not None:
+        return load_reference_table(opts.reference_table)
+    scan = tomllib.loads(ref_run.plan_text).get("scan", {}) if ref_run.plan_text else {}
+    if "reflectance" not in scan:
+        raise ValueError("give the standard's BRDF table (--reference-table CSV); the "
+                         "reference run declares no reflectance either")
+    name = str(scan.get("reference_name", "reference"))
+    # a declared reflectance alone: the ideal-diffuser table (state it in the report)
+    return ReferenceStandard.uniform(f"{name} (ideal diffuser, ρ={scan['reflectance']})",
+                                     float(scan["reflectance"]))
+
+
+def load_reference_table(path: str | Path) -> ReferenceStandard:
+    """A reference standard from CSV rows ``theta_i_deg,theta_r_deg,brdf,u_rel`` (header
+    line optional; a rectilinear grid; θr signed as in plan files)."""
+    rows = []
+    for line in Path(path).read_text(encoding="utf-8").splitlines():
+        parts = [x.strip() for x in line.split(",")]
+        if len(parts) < 3 or not parts[0] or parts[0].startswith("#"):
+            continue
+        try:
+            rows.append([float(x) for x in parts[:4]] + ([0.0] if len(parts) < 4 else []))
+        except ValueError:
+            continue  # header
+    arr = np.array(rows)
+    ti, tr = np.unique(arr[:, 0]), np.unique(arr[:, 1])
+    f = np.full((ti.size, tr.size), np.nan)
+    u = np.zeros_like(f)
+    for a, b, v, w in arr:
+        i, j = np.searchsorted(ti, a), np.searchsorted(tr, b)
+        f[i, j], u[i, j] = v, w
+    if np.any(np.isnan(f)):
+        raise ValueError(f"{path}: the table is not a full (θi, θr) grid")
+    return ReferenceStandard(Path(path).stem, ti, tr, f, u)
+
+
+def _subtract_signature(run: RunData, rows: np.ndarray, pts: BRDFPoints,
+                        opts: ReductionOptions) -> BRDFPoints:
+    """Signature run reduced like the sample, interpolated in the detector-arm angle."""
+    assert opts.signature_run is not None
+    sig = reduce_run(opts.signature_run, replace(opts, signature_run=None))
+    arm = run.position("detector_theta")[rows]
+    order = np.argsort(sig.detector_theta)
+    x = sig.detector_theta[order]
+    f = np.interp(arm, x, sig.points.brdf[order])
+    u = np.interp(arm, x, sig.points.u_point[order])
+    return subtract_signature(pts, f, u)
+
+
+# ------------------------------------------------------------------------------ writing
+def _put(g: h5py.Group, name: str, value: Any) -> None:
+    if isinstance(value, str):
+        g.create_dataset(name, data=value, dtype=h5py.string_dtype())
+    else:
+        g.create_dataset(name, data=np.asarray(value))
+
+
+def write_analysis(path: str | Path, reduced: Reduced, results: dict[str, Any]) -> None:
+    """Write ``/entry/analysis`` (replacing an earlier one).
+
+    ``results`` is plain data (``report.AnalysisResult.to_dict()``): stored as JSON text in
+    ``results_json`` and, for the chosen model, as arrays under ``chosen/``.
+    """
+    pts = reduced.points
+    with h5py.File(path, "r+") as f:
+        entry = f["entry"]
+        if "analysis" in entry:
+            del entry["analysis"]
+        g = entry.create_group("analysis")
+        g.attrs["NX_class"] = "NXprocess"
+        g.attrs["program"] = "scatterlab fit"
+        g.attrs["method"] = pts.method
+        g.attrs["cosine_corrected"] = pts.cosine_corrected
+        g.attrs["u_scale_rel"] = pts.u_scale_rel
+        g.attrs["references"] = ("Nicodemus et al. 1977 (NBS Monograph 160); ASTM E2387; "
+                                 "see analysis.brdf_reduction")
+        red = g.create_group("reduced")
+        red.attrs["NX_class"] = "NXdata"
+        red.attrs["signal"] = "brdf"
+        for name in ("theta_i", "phi_i", "theta_r", "phi_r"):
+            red.create_dataset(name, data=np.degrees(getattr(pts, name))).attrs["units"] = "deg"
+        for name in ("brdf", "u_stat", "u_angle", "u_ref"):
+            red.create_dataset(name, data=getattr(pts, name)).attrs["units"] = "1/sr"
+        red.create_dataset("u_total", data=pts.u_total).attrs["units"] = "1/sr"
+        red.create_dataset("point_index", data=reduced.rows)
+        _put(g, "provenance_json", json.dumps(reduced.provenance, default=str))
+        _put(g, "results_json", json.dumps(results, default=_jsonable))
+        chosen = results.get("selection", {}).get("chosen")
+        fits = results.get("fits", {})
+        if chosen in fits:
+            c = g.create_group("chosen")
+            fit = fits[chosen]
+            c.attrs["model"] = chosen
+            for key in ("params", "stderr", "covariance"):
+                c.create_dataset(key, data=np.asarray(fit[key], dtype=float))
+            c.create_dataset("param_names", data=np.array(fit["param_names"], dtype=object),
+                             dtype=h5py.string_dtype())
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    return str(x)

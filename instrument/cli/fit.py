@@ -1,0 +1,89 @@
+"""``scatterlab fit RUN``: reduce a BRDF run, fit and select models, write results and a report.
+
+The results go into the run file (``/entry/analysis``) and the report (PNG figures and
+``index.html``) into ``--out`` (default: ``<run file stem>_report`` next to the run file).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from instrument.analysis_io import ReductionOptions, read_run, reduce_run, write_analysis
+from instrument.report import DEFAULT_MODELS, analyse, write_report
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("fit", help="BRDF of a run: reduce, fit models, select, report")
+    p.add_argument("run", help="run file (.h5) of a brdf_in_plane or brdf_hemisphere plan")
+    p.add_argument("--models", default=",".join(DEFAULT_MODELS),
+                   help="comma-separated candidates, '+' for sums "
+                   f"(default: {','.join(DEFAULT_MODELS)})")
+    p.add_argument("--out", default=None, help="report folder (default: <run>_report)")
+    p.add_argument("--criterion", default="bic", choices=("bic", "aic", "aicc", "cv"),
+                   help="model-selection rule (default: bic)")
+    p.add_argument("--method", default="absolute", choices=("absolute", "relative"))
+    p.add_argument("--detector", default="camera", choices=("camera", "power_meter"))
+    p.add_argument("--reference", default=None,
+                   help="reference-standard run at the same geometry (relative method)")
+    p.add_argument("--reference-table", default=None,
+                   help="CSV theta_i_deg,theta_r_deg,brdf,u_rel of the standard's BRDF")
+    p.add_argument("--signature", default=None, help="instrument-signature run to subtract")
+    p.add_argument("--incident-power-w", type=float, default=None,
+                   help="incident power on the sample (absolute method)")
+    p.add_argument("--incident-power-u", type=float, default=None,
+                   help="relative standard uncertainty of the incident power")
+    p.add_argument("--distance-mm", type=float, default=None,
+                   help="sample-to-receiver distance (default: profile + camera_z read-back)")
+    p.add_argument("--camera-calibration", default=None,
+                   help="JSON with the camera's K, η, read noise, saturation and pupil")
+    p.add_argument("--sigma-theta-deg", type=float, default=None,
+                   help="angular standard uncertainty (default: stage tolerance/√3)")
+    p.add_argument("--cosine-corrected", action="store_true",
+                   help="store f·cosθr (Stover's cosine-corrected BRDF) instead of f")
+    p.add_argument("--no-cv", action="store_true",
+                   help="skip the cross-validation columns of the comparison")
+    p.add_argument("--no-write", action="store_true",
+                   help="leave the run file untouched (report only)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    opts = ReductionOptions(
+        method=args.method, detector=args.detector, cosine_corrected=args.cosine_corrected,
+        incident_power_w=args.incident_power_w, u_incident_power_rel=args.incident_power_u,
+        sigma_theta_deg=args.sigma_theta_deg, receiver_distance_mm=args.distance_mm,
+        camera_calibration=args.camera_calibration,
+        reference_run=args.reference, signature_run=args.signature,
+        reference_table=args.reference_table,
+    )
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    try:
+        reduced = reduce_run(args.run, opts)
+        result = analyse(reduced.points, models, criterion=args.criterion,
+                         run_cv=not args.no_cv)
+    except (ValueError, KeyError) as err:
+        print(f"error: {err}")
+        return 2
+    run_data = read_run(args.run)
+    out = Path(args.out) if args.out else Path(args.run).with_name(
+        Path(args.run).stem + "_report")
+    page = write_report(out, reduced.points, result,
+                        title=f"BRDF of {run_data.sample_name or run_data.run_id} "
+                        f"(run {run_data.run_id})", provenance=reduced.provenance)
+    if not args.no_write:
+        write_analysis(args.run, reduced, result.to_dict())
+    fit = result.chosen_fit
+    print(f"{reduced.points.n} points ({reduced.points.method}); chosen model "
+          f"{result.chosen} ({result.selection.rule})")
+    for name, value, err, unit in fit.table():
+        print(f"  {name:<16} {value:12.6g} ± {err:.3g} {unit}")
+    for row in result.selection.table:
+        print(f"  {row.name:<22} k={row.n_params}  χ²={row.chi2:10.2f}  "
+              f"BIC={row.bic:10.2f}")
+    for note in result.notes:
+        print(f"  note: {note}")
+    print(f"report: {page}")
+    if not args.no_write:
+        print(f"results written to {args.run} (/entry/analysis)")
+    return 0
