@@ -25,6 +25,7 @@ from drivers.errors import (
     LimitError,
     MotionError,
     ProtocolError,
+    StateError,
 )
 from drivers.thorlabs_apt import STAGES, AptMotor
 from hw_mocks import registry
@@ -101,7 +102,9 @@ def test_k10cr1_open_identify_home_move_stop_transcript():
     steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL,
                        stale=H("91 04 0E 00 81 50") + bytes(14))
     steps += [
-        # home: parameters again, then MOT_MOVE_HOME; MOVE_HOMED arrives unsolicited
+        # home: enabled check, parameters again, then MOT_MOVE_HOME; MOVE_HOMED arrives
+        # unsolicited
+        *k10_status("00 01 00 80", "00 00 00 00"),  # enabled | connected, not homed
         (H("40 04 0E 00 D0 01") + H(K10_HOME), b""),
         (H("41 04 01 00 50 01"), H("42 04 0E 00 81 50") + H(K10_HOME)),
         (H("43 04 01 00 50 01"), b""),
@@ -655,6 +658,20 @@ def test_fault_error_state_is_a_controller_error_and_reenable_recovers():
     assert motor.status().error is None
     motor.move_to(10.0, wait=True, timeout=10.0)
     assert motor.position == pytest.approx(10.0, abs=motor.position_tolerance)
+
+
+def test_home_on_a_disabled_channel_is_refused_not_silently_skipped():
+    motor = open_url()
+    motor.home(timeout=5.0)
+    motor.move_to(5.0, wait=True, timeout=5.0)
+    motor.disable()
+    with pytest.raises(StateError) as info:
+        motor.home(timeout=5.0)  # the controller would ignore MOT_MOVE_HOME
+    assert info.value.device == "ax" and info.value.command == "MOT_MOVE_HOME"
+    assert motor.position == pytest.approx(5.0, abs=motor.position_tolerance)
+    motor.enable()
+    motor.home(timeout=5.0)
+    assert motor.is_homed and motor.position == pytest.approx(0.0, abs=1e-9)
 
 
 def test_motion_refused_in_error_state_names_the_command():
