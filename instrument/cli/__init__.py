@@ -16,7 +16,8 @@ from instrument.profile import ProfileError
 __all__ = ["main"]
 
 #: Subcommand modules under instrument.cli, in the order `--help` lists them.
-SUBCOMMANDS = ("devices", "serve_sim", "plan", "run", "resume", "runs", "fit")
+SUBCOMMANDS = ("devices", "serve_sim", "plan", "run", "resume", "runs", "fit", "reconstruct",
+               "locate")
 
 
 def build_parser() -> argparse.ArgumentParser:

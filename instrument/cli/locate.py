@@ -1,0 +1,57 @@
+"""``scatterlab locate RUN``: find the hidden objects of a light-field run.
+
+Uses the reconstruction stored by ``scatterlab reconstruct`` (or makes it, with the same
+options), refocuses it over a (y, z) grid and detects the objects with their theoretical
+resolution (:func:`instrument.lightfield_io.locate_run`). Results go into the run file
+under ``/entry/analysis/lightfield/localisation``; figures ((y, z) map, focal stack,
+z-profiles) to ``<run>.lightfield/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from instrument import lightfield_io as lfio
+from instrument.cli.reconstruct import add_reconstruction_options, figures_dir, options
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("locate", help="locate the hidden objects of a light-field run")
+    p.add_argument("run", help="run file (.h5) of a lightfield plan")
+    p.add_argument("--y-range", type=float, nargs=2, metavar=("Y0", "Y1"), default=None,
+                   help="trial y range in mm (default: the wall points ± 60 mm)")
+    p.add_argument("--z-range", type=float, nargs=2, metavar=("Z0", "Z1"),
+                   default=(-400.0, -60.0), help="trial z range in mm, < 0 (default -400 -60)")
+    p.add_argument("--threshold", type=float, default=0.3,
+                   help="drop detections weaker than this fraction of the strongest")
+    p.add_argument("--again", action="store_true",
+                   help="reconstruct again even if the run file holds a reconstruction")
+    add_reconstruction_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    recon: dict = {}
+    given = (args.geometry, args.brdf, args.domain)
+    if args.again or any(v is not None for v in given) or args.n_theta != 128 \
+            or args.method != "wiener":
+        recon = options(args)
+    try:
+        r = lfio.locate_run(args.run, y_range_mm=args.y_range, z_range_mm=tuple(args.z_range),
+                            threshold_rel=args.threshold, figures_dir=figures_dir(args),
+                            **recon)
+    except (ValueError, OSError, RuntimeError) as err:
+        print(f"error: {err}")
+        return 2
+    print(r.message)
+    det = r.detection
+    for k in range(det.count):
+        y, z = det.positions_mm[k]
+        res = det.resolutions[k]
+        print(f"  object {k}: y = {y:7.2f} mm, z = {z:8.2f} mm  (blur ±{res.transverse_mm:.1f} "
+              f"mm across, ±{res.depth_mm:.1f} mm in depth); brightness RP "
+              f"{det.brightness_rp[k]:.4g}, conventional {det.brightness_conventional[k]:.4g}")
+    if r.figures:
+        print(f"figures: {', '.join(str(p) for p in r.figures)}")
+    print(f"stored in {args.run}:/{lfio.GROUP}/localisation")
+    return 0 if r.recoverable else 1
