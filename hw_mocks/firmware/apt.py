@@ -142,6 +142,21 @@ _K10CR1_CPU = 409600.0 / 3.0  # 409600 microsteps per 3 degrees of the worm driv
 _PRM1_CPU = 1919.6418578623391  # counts per degree, "what it says in the manual"
 _MTS25_CPU = 34304.0  # counts per mm of the Z8 motor stages (34304 = 512 x 67)
 
+def _kdc101(stage: str, *, stage_id: int, counts_per_unit: float,
+            travel: tuple[float, float], start_position: float, velocity: float,
+            acceleration: float) -> AptStageProfile:
+    """A stage on a KDC101 DC servo controller: its velocity and acceleration units
+    follow from the encoder counts and the servo period."""
+    return AptStageProfile(
+        controller="KDC101", stage=stage, serial_prefix=27, stage_id=stage_id,
+        firmware=(2, 0, 4), counts_per_unit=counts_per_unit,
+        velocity_scale=counts_per_unit * _KDC_T * 65536.0,
+        acceleration_scale=counts_per_unit * _KDC_T * _KDC_T * 65536.0,
+        travel=travel, start_position=start_position, velocity=velocity,
+        acceleration=acceleration, stop_short_counts=5, stepper=False,
+    )
+
+
 #: Every (controller, stage) the emulator knows, keyed by ``(model, stage)``.
 PROFILES: dict[tuple[str, str], AptStageProfile] = {
     ("K10CR1", "K10CR1"): AptStageProfile(
@@ -153,21 +168,13 @@ PROFILES: dict[tuple[str, str], AptStageProfile] = {
         travel=(-math.inf, math.inf), start_position=37.0,
         velocity=10.0, acceleration=10.0, stop_short_counts=100, stepper=True,
     ),
-    ("KDC101", "PRM1-Z8"): AptStageProfile(
-        controller="KDC101", stage="PRM1-Z8", serial_prefix=27, stage_id=6,
-        firmware=(2, 0, 4), counts_per_unit=_PRM1_CPU,
-        velocity_scale=_PRM1_CPU * _KDC_T * 65536.0,
-        acceleration_scale=_PRM1_CPU * _KDC_T * _KDC_T * 65536.0,
-        travel=(-math.inf, math.inf), start_position=-21.5,
-        velocity=10.0, acceleration=10.0, stop_short_counts=5, stepper=False,
+    ("KDC101", "PRM1-Z8"): _kdc101(
+        "PRM1-Z8", stage_id=6, counts_per_unit=_PRM1_CPU, travel=(-math.inf, math.inf),
+        start_position=-21.5, velocity=10.0, acceleration=10.0,
     ),
-    ("KDC101", "MTS25-Z8"): AptStageProfile(
-        controller="KDC101", stage="MTS25-Z8", serial_prefix=27, stage_id=7,
-        firmware=(2, 0, 4), counts_per_unit=_MTS25_CPU,
-        velocity_scale=_MTS25_CPU * _KDC_T * 65536.0,
-        acceleration_scale=_MTS25_CPU * _KDC_T * _KDC_T * 65536.0,
-        travel=(0.0, 25.0), start_position=8.0,
-        velocity=2.0, acceleration=1.5, stop_short_counts=5, stepper=False,
+    ("KDC101", "MTS25-Z8"): _kdc101(
+        "MTS25-Z8", stage_id=7, counts_per_unit=_MTS25_CPU, travel=(0.0, 25.0),
+        start_position=8.0, velocity=2.0, acceleration=1.5,
     ),
 }
 
