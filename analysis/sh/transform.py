@@ -44,6 +44,8 @@ __all__ = [
 _BLOCK_BYTES = 1 << 18
 #: Degrees grouped per batched matrix product.
 _K_BUFFER = 16
+#: Largest Legendre table :func:`gl_grid` stores by default (L ≈ 400).
+PLAN_MAX_BYTES = 1 << 27
 
 
 @dataclass(frozen=True)
@@ -59,12 +61,17 @@ class GLGrid:
         Gauss–Legendre weights in cos θ (sum 2).
     phi : ndarray of shape (2*lmax+1,)
         Longitudes 2πk/(2L+1).
+    legendre : tuple of (m0, m1, ndarray of shape (m1−m0, L−m0+1, n_north)), or None
+        Precomputed λ_{m+k}^m on the northern rings by blocks of orders (zero where
+        m + k > L): a plan that turns both transforms into batched matrix products, like
+        SHTOOLS' optional ``plx``. None: recomputed by the recurrence on every call.
     """
 
     lmax: int
     theta: np.ndarray = field(repr=False)
     weights: np.ndarray = field(repr=False)
     phi: np.ndarray = field(repr=False)
+    legendre: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -72,14 +79,51 @@ class GLGrid:
         return self.theta.size, self.phi.size
 
 
-def gl_grid(lmax: int) -> GLGrid:
-    """The Gauss–Legendre grid that is exact for band limit ``lmax``."""
+def gl_grid(lmax: int, *, precompute: bool | None = None) -> GLGrid:
+    """The Gauss–Legendre grid that is exact for band limit ``lmax``.
+
+    Parameters
+    ----------
+    lmax : int
+    precompute : bool, optional
+        Store the Legendre table with the grid (memory ≈ L³/4 · 8 bytes). Default: when it
+        needs at most :data:`PLAN_MAX_BYTES`.
+    """
     if lmax < 0:
         raise ValueError("lmax must be ≥ 0")
     theta, w = gauss_legendre(lmax + 1)
     nphi = 2 * lmax + 1
     phi = 2.0 * np.pi * np.arange(nphi) / nphi
-    return GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi)
+    nh = (lmax + 2) // 2
+    table_bytes = 8 * nh * (lmax + 1) * (lmax + 2) // 2
+    if precompute is None:
+        precompute = table_bytes <= PLAN_MAX_BYTES
+    plan = None
+    if precompute:
+        th = theta[:nh]
+        x, s = np.cos(th), np.sin(th)
+        mant, expo = sectoral_seeds(s, lmax)
+        blocks = []
+        for m0, m1 in _blocks(lmax, nh):
+            table = np.zeros((m1 - m0, lmax - m0 + 1, nh))
+            for k, n, lam in iterate_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
+                table[:n, k] = lam[:n]
+            blocks.append((m0, m1, table))
+        plan = tuple(blocks)
+    return GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi, legendre=plan)
+
+
+def _legendre_chunks(grid: GLGrid, x: np.ndarray, s: np.ndarray):
+    """(m0, m1, k0, buffer) over all orders, from the grid's plan or by the recurrence."""
+    if grid.legendre is not None:
+        for m0, m1, table in grid.legendre:
+            yield m0, m1, 0, table
+        return
+    lmax = grid.lmax
+    mant, expo = sectoral_seeds(s, lmax)
+    for m0, m1 in _blocks(lmax, x.size):
+        for k0, buf in _buffered_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
+            yield m0, m1, k0, buf
 
 
 def _coeffs_to_z(coeffs: np.ndarray, lmax: int) -> np.ndarray:
@@ -161,25 +205,20 @@ def synthesis(coeffs: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     th = grid.theta[:nh]
     x, s = np.cos(th), np.sin(th)
     z = _coeffs_to_z(c, lmax)
-    mant, expo = sectoral_seeds(s, lmax)
-    g_n = np.zeros((lmax + 1, nh), dtype=complex)
-    g_s = np.zeros((lmax + 1, nh), dtype=complex)
-    for m0, m1 in _blocks(lmax, nh):
-        # coefficient rows [Re even, Im even, Re odd, Im odd] for each step k of the block
-        zb = z[m0:m1]
-        coef = np.zeros((m1 - m0, 4, lmax + 1))
-        coef[:, 0, 0::2] = zb.real[:, 0::2]
-        coef[:, 1, 0::2] = zb.imag[:, 0::2]
-        coef[:, 2, 1::2] = zb.real[:, 1::2]
-        coef[:, 3, 1::2] = zb.imag[:, 1::2]
-        acc = np.zeros((m1 - m0, 4, nh))
-        for k0, buf in _buffered_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
-            kb = buf.shape[1]
-            acc += np.matmul(coef[:, :, k0 : k0 + kb], buf)
-        even = acc[:, 0] + 1j * acc[:, 1]
-        odd = acc[:, 2] + 1j * acc[:, 3]
-        g_n[m0:m1] = even + odd
-        g_s[m0:m1] = even - odd
+    # coefficient rows [Re even, Im even, Re odd, Im odd] for each order m and step k
+    coef = np.zeros((lmax + 1, 4, lmax + 1))
+    coef[:, 0, 0::2] = z.real[:, 0::2]
+    coef[:, 1, 0::2] = z.imag[:, 0::2]
+    coef[:, 2, 1::2] = z.real[:, 1::2]
+    coef[:, 3, 1::2] = z.imag[:, 1::2]
+    acc = np.zeros((lmax + 1, 4, nh))
+    for m0, m1, k0, buf in _legendre_chunks(grid, x, s):
+        kb = buf.shape[1]
+        acc[m0:m1] += np.matmul(coef[m0:m1, :, k0 : k0 + kb], buf)
+    even = acc[:, 0] + 1j * acc[:, 1]
+    odd = acc[:, 2] + 1j * acc[:, 3]
+    g_n = even + odd
+    g_s = even - odd
     # Real harmonics of order m > 0 carry √2; irfft divides by nphi and doubles m > 0.
     scale = np.full(lmax + 1, np.sqrt(2.0) * nphi / 2.0)
     scale[0] = nphi
@@ -231,16 +270,13 @@ def analysis(values: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     f_odd = f_odd * scale[:, None]
     # columns [Re even, Im even, Re odd, Im odd] per order and ring
     rhs = np.stack([f_even.real, f_even.imag, f_odd.real, f_odd.imag], axis=-1)
-    mant, expo = sectoral_seeds(s, lmax)
     z = np.zeros((lmax + 1, lmax + 1, 2))
-    for m0, m1 in _blocks(lmax, nh):
-        r = rhs[m0:m1]
-        for k0, buf in _buffered_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
-            kb = buf.shape[1]
-            prod = np.matmul(buf, r)  # (rows, kb, 4)
-            par = (np.arange(k0, k0 + kb) & 1)[None, :]
-            z[m0:m1, k0 : k0 + kb, 0] = np.where(par == 0, prod[..., 0], prod[..., 2])
-            z[m0:m1, k0 : k0 + kb, 1] = np.where(par == 0, prod[..., 1], prod[..., 3])
+    for m0, m1, k0, buf in _legendre_chunks(grid, x, s):
+        kb = buf.shape[1]
+        prod = np.matmul(buf, rhs[m0:m1])  # (rows, kb, 4)
+        even = ((np.arange(k0, k0 + kb) & 1) == 0)[None, :]
+        z[m0:m1, k0 : k0 + kb, 0] = np.where(even, prod[..., 0], prod[..., 2])
+        z[m0:m1, k0 : k0 + kb, 1] = np.where(even, prod[..., 1], prod[..., 3])
     # Entries with m + k > L were computed from stale buffer rows: they are not coefficients.
     m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
     z[m_idx + k_idx > lmax] = 0.0

@@ -162,10 +162,12 @@ def test_convention_conversion_round_trip_and_values() -> None:
         lmax_from_size(15)
 
 
+@pytest.mark.parametrize("precompute", [True, False])
 @pytest.mark.parametrize("lmax", [0, 1, 2, 7, 32, 128])
-def test_round_trip_small(lmax: int) -> None:
+def test_round_trip_small(lmax: int, precompute: bool) -> None:
     rng = np.random.default_rng(lmax)
-    grid = gl_grid(lmax)
+    grid = gl_grid(lmax, precompute=precompute)
+    assert (grid.legendre is not None) == precompute
     c = rng.standard_normal((lmax + 1) ** 2)
     f = synthesis(c, grid=grid)
     assert f.shape == grid.shape

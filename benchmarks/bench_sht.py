@@ -1,0 +1,229 @@
+"""Spherical-harmonic transform benchmark and inverse-rendering validation figures (issue 7 §6, §7).
+
+Forward + inverse transform time and round-trip error of ``analysis.sh.transform`` on its
+Gauss–Legendre grid, in the same run as ducc0 (``ducc0.sht.synthesis_2d``/``analysis_2d``,
+GL grid) and pyshtools (``MakeGridGLQ``/``SHExpandGLQ`` with the Fortran "shtools" backend
+and, where installed, the "ducc" backend), all single-threaded. A band-limited random signal
+(standard-normal coefficients) goes coefficients → grid → coefficients; the error is
+max|c_out − c_in| / max|c_in|; times are the median of several runs. Grid/plan setup is
+timed separately and excluded, as numerics.md §2.1 does.
+
+ducc0 and pyshtools are benchmark-only dependencies (install them in a separate
+environment, e.g. ``/work/benchvenv``); what is not installed is reported as such.
+
+Usage::
+
+    python benchmarks/bench_sht.py [--quick] [--validation]
+
+``--validation`` adds the §6 figures: relighting L1 error, tamper detection rates, the
+Wiener K curve and inverse rendering on simulated spheres.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np
+
+from analysis.sh.convention import PROJECT_CONVENTION, SHConvention, convert
+from analysis.sh.transform import analysis, gl_grid, synthesis
+
+
+def _median_time(fn: Callable[[], object], repeats: int) -> tuple[float, object]:
+    times, out = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def bench_ours(lmax: int, repeats: int) -> dict:
+    rng = np.random.default_rng(lmax)
+    t0 = time.perf_counter()
+    grid = gl_grid(lmax)
+    setup = time.perf_counter() - t0
+    c = rng.standard_normal((lmax + 1) ** 2)
+    t_syn, f = _median_time(lambda: synthesis(c, grid=grid), repeats)
+    t_ana, c2 = _median_time(lambda: analysis(f, grid=grid), repeats)
+    finite = bool(np.all(np.isfinite(f)) and np.all(np.isfinite(c2)))
+    err = float(np.max(np.abs(c2 - c)) / np.max(np.abs(c)))
+    return dict(name="scatterlab GL", setup=setup, syn=t_syn, ana=t_ana, err=err,
+                finite=finite, grid=f"{grid.shape[0]}x{grid.shape[1]}")
+
+
+def bench_ducc(lmax: int, repeats: int) -> dict | None:
+    try:
+        import ducc0
+    except ImportError:
+        return None
+    rng = np.random.default_rng(lmax)
+    nalm = (lmax + 1) * (lmax + 2) // 2
+    alm = rng.standard_normal(nalm) + 1j * rng.standard_normal(nalm)
+    alm[: lmax + 1] = alm[: lmax + 1].real  # m = 0 terms real for a real map
+    alm = alm.reshape(1, -1)
+    kw = dict(spin=0, lmax=lmax, geometry="GL", nthreads=1)
+    nt, nph = lmax + 1, 2 * lmax + 1
+
+    def syn():
+        return ducc0.sht.synthesis_2d(alm=alm, ntheta=nt, nphi=nph, **kw)
+
+    t_syn, m = _median_time(syn, repeats)
+    t_ana, a2 = _median_time(lambda: ducc0.sht.analysis_2d(map=m, **kw), repeats)
+    err = float(np.max(np.abs(a2 - alm)) / np.max(np.abs(alm)))
+    return dict(name=f"ducc0 {ducc0.__version__} GL", setup=0.0, syn=t_syn, ana=t_ana,
+                err=err, finite=bool(np.all(np.isfinite(m))), grid=f"{nt}x{nph}")
+
+
+def bench_pyshtools(lmax: int, repeats: int, backend: str) -> dict | None:
+    try:
+        import pyshtools as pysh
+    except ImportError:
+        return None
+    try:
+        pysh.backends.select_preferred_backend(backend)
+    except Exception as err:  # the backend may not be compiled in
+        return dict(name=f"pyshtools[{backend}]", error=str(err))
+    rng = np.random.default_rng(lmax)
+    t0 = time.perf_counter()
+    zero, w = pysh.expand.SHGLQ(lmax)
+    setup = time.perf_counter() - t0
+    cilm = np.zeros((2, lmax + 1, lmax + 1))
+    lo = np.tril_indices(lmax + 1)
+    cilm[0][lo] = rng.standard_normal(lo[0].size)
+    cilm[1][lo] = rng.standard_normal(lo[0].size)
+    cilm[1, :, 0] = 0.0
+    kw = dict(norm=4, csphase=1)
+    t_syn, g = _median_time(lambda: pysh.expand.MakeGridGLQ(cilm, zero, **kw), repeats)
+    t_ana, c2 = _median_time(lambda: pysh.expand.SHExpandGLQ(g, w, zero, **kw), repeats)
+    err = float(np.max(np.abs(c2 - cilm)) / np.max(np.abs(cilm)))
+    return dict(name=f"pyshtools {pysh.__version__} [{backend}] GLQ", setup=setup, syn=t_syn,
+                ana=t_ana, err=err, finite=bool(np.all(np.isfinite(g))),
+                grid=f"{g.shape[0]}x{g.shape[1]}")
+
+
+def convention_cross_check(lmax: int = 32) -> list[str]:
+    """Our synthesis against ducc0's and pyshtools' on the same GL grid, same function."""
+    lines = []
+    rng = np.random.default_rng(0)
+    c = rng.standard_normal((lmax + 1) ** 2)
+    grid = gl_grid(lmax)
+    ours = synthesis(c, grid=grid)
+    try:
+        import ducc0
+
+        full = convert(c, source=PROJECT_CONVENTION,
+                       target=SHConvention(kind="complex", condon_shortley=True))
+        alm = np.zeros((lmax + 1) * (lmax + 2) // 2, dtype=complex)
+        for m in range(lmax + 1):
+            for l in range(m, lmax + 1):
+                alm[m * (2 * lmax + 1 - m) // 2 + l] = full[l * l + l + m]
+        m = ducc0.sht.synthesis_2d(alm=alm[None], spin=0, lmax=lmax, geometry="GL",
+                                   ntheta=lmax + 1, nphi=2 * lmax + 1, nthreads=1)[0]
+        lines.append(f"ducc0 GL map vs ours (max abs diff): {np.max(np.abs(m - ours)):.1e}")
+    except ImportError:
+        lines.append("ducc0 not installed: no cross-check")
+    try:
+        import pyshtools as pysh
+
+        cilm = np.zeros((2, lmax + 1, lmax + 1))
+        for l in range(lmax + 1):
+            for m in range(l + 1):
+                cilm[0, l, m] = c[l * l + l + m]
+                if m:
+                    cilm[1, l, m] = c[l * l + l - m]
+        zero, _ = pysh.expand.SHGLQ(lmax)
+        g = pysh.expand.MakeGridGLQ(cilm, zero, norm=4, csphase=1)
+        # pyshtools' longitudes start at 0 like ours; its rings run north to south too
+        lines.append(f"pyshtools GLQ map vs ours (max abs diff): {np.max(np.abs(g - ours)):.1e}")
+    except ImportError:
+        lines.append("pyshtools not installed: no cross-check")
+    return lines
+
+
+def run_transforms(quick: bool) -> None:
+    sizes = [16, 64, 256] if quick else [16, 64, 256, 1024]
+    print("| method | L | grid | setup [s] | synthesis [s] | analysis [s] | **syn+ana [s]** "
+          "| round-trip rel. err | finite |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for lmax in sizes:
+        reps = 5 if lmax <= 256 else 3
+        rows = [bench_ours(lmax, reps), bench_ducc(lmax, reps),
+                bench_pyshtools(lmax, reps, "shtools"), bench_pyshtools(lmax, reps, "ducc")]
+        for r in rows:
+            if r is None:
+                continue
+            if "error" in r:
+                print(f"| {r['name']} | {lmax} | — | — | — | — | unavailable: {r['error']} "
+                      "| — | — |")
+                continue
+            print(f"| {r['name']} | {lmax} | {r['grid']} | {r['setup']:.2e} | {r['syn']:.2e} "
+                  f"| {r['ana']:.2e} | **{r['syn'] + r['ana']:.2e}** | {r['err']:.1e} "
+                  f"| {r['finite']} |")
+        sys.stdout.flush()
+    if not quick:
+        r = bench_ours(2048, 1)
+        print(f"| {r['name']} (accuracy) | 2048 | {r['grid']} | {r['setup']:.2e} "
+              f"| {r['syn']:.2e} | {r['ana']:.2e} | **{r['syn'] + r['ana']:.2e}** "
+              f"| {r['err']:.1e} | {r['finite']} |")
+        d = bench_ducc(2048, 1)
+        if d is not None:
+            print(f"| {d['name']} (accuracy) | 2048 | {d['grid']} | — | {d['syn']:.2e} "
+                  f"| {d['ana']:.2e} | **{d['syn'] + d['ana']:.2e}** | {d['err']:.1e} "
+                  f"| {d['finite']} |")
+    print()
+    for line in convention_cross_check():
+        print("- " + line)
+
+
+def run_validation(quick: bool) -> None:
+    """§6 figures on simulated spheres (same scenes as tests/analysis/sh/test_validation)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "analysis" / "sh"))
+    import test_validation as tv
+
+    seeds = range(1, 4) if quick else range(1, 9)
+    rel = [tv._relight_l1(s) for s in seeds]
+    l1 = [r[0] for r in rel]
+    print(f"- relighting B^(2,2), BRDF-transfer route, {len(l1)} scenes: L1 error "
+          f"median {np.median(l1):.3f}, max {np.max(l1):.3f} (target ≤ 0.065)")
+    fit, truth, a = tv._lighting_estimation_case(seed=3)
+    from analysis.sh.convolve import wiener_deconvolve
+
+    sigma = float(np.median(fit.coeff_std))
+    ks = np.logspace(-8, 1, 19)
+    curve = [np.linalg.norm(wiener_deconvolve(fit.coeffs, a, k=k).coeffs - truth)
+             / np.linalg.norm(truth) for k in ks]
+    chosen = wiener_deconvolve(fit.coeffs, a, noise_sigma=sigma)
+    err = np.linalg.norm(chosen.coeffs - truth) / np.linalg.norm(truth)
+    print("- Wiener curve (Phong s=60, L=16, 1 % noise): K → lighting rel. L2 error")
+    print("  " + ", ".join(f"{k:.0e}: {e:.3f}" for k, e in zip(ks, curve, strict=True)))
+    print(f"  per-band K chosen from σ = {sigma:.2e}: K_l ∈ [{np.nanmin(chosen.k):.1e}, "
+          f"{np.nanmax(chosen.k):.1e}], error {err:.3f}, best scalar K {ks[np.argmin(curve)]:.0e} "
+          f"→ {min(curve):.3f}; dof {chosen.dof:.1f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="L ≤ 256 and fewer scenes")
+    ap.add_argument("--validation", action="store_true", help="add the §6 validation figures")
+    args = ap.parse_args()
+    print(f"python {platform.python_version()}, numpy {np.__version__}, "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cpus, 1 thread")
+    run_transforms(args.quick)
+    if args.validation:
+        run_validation(args.quick)
+
+
+if __name__ == "__main__":
+    main()
