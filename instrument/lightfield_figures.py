@@ -88,7 +88,9 @@ def reconstruction_figures(r: ReconstructionResult, folder: str | Path) -> list[
     axs[0, 1].set_xlabel("Fourier order p")
     axs[0, 1].legend(fontsize=8)
     axs[0, 1].set_title("signal and noise spectrum (per mode)")
-    dp = np.nanmedian(np.where(np.isfinite(diag.delta_p), diag.delta_p, np.nan), axis=0)
+    from instrument.lightfield_io import median_delta_p
+
+    dp = median_delta_p(diag.delta_p)
     axs[1, 0].semilogy(p[order], dp[order], ".")
     axs[1, 0].axhline(1.0, color="k", lw=0.6)
     axs[1, 0].set_title("relative noise error Δ_p (S2-37), median over points")

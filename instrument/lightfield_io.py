@@ -449,7 +449,7 @@ class Assembled:
     Attributes
     ----------
     field : LightField2D (N_y, N_θ) at z = d2
-    cell_pixels : (N_θ,) — mean number of pixels averaged per θ cell
+    cell_pixels : (N_θ,) — mean number of pixels per θ cell (cell width / pixel width)
     sigma_rows : float — rms noise of one cell predicted from the sensor-row spread
     """
 
@@ -467,10 +467,12 @@ def assemble(
 ) -> Assembled:
     """Resample the pixel rows onto the regular (y, θ) grid (module doc, item 2).
 
-    θ: each cell-centred cell of the domain averages the pixels whose θ_m falls in it
-    (cells that no pixel reaches are interpolated linearly).  y: uniform grid from the
-    first to the last pinhole position with the median step; rows are interpolated
-    linearly where the read-back positions are not on it.
+    θ: each cell-centred cell of the domain gets the exact average, over the cell, of the
+    piecewise-constant function the pixels define (each pixel covering θ from midway to
+    its neighbours): a box filter matched to the grid, so the pixel noise is averaged
+    rather than aliased, and no first-order bias from the pixels' positions in a cell.
+    y: uniform grid from the first to the last pinhole position with the median step;
+    rows are interpolated linearly where the read-back positions are not on it.
     """
     a, b = default_domain(scan) if domain_rad is None else domain_rad
     th = theta_grid((a, b), n_theta)
@@ -479,18 +481,25 @@ def assemble(
     cells = np.empty((p, n_theta))
     var_cells = np.empty((p, n_theta))
     counts = np.zeros((p, n_theta))
+    edges_cells = a + width * np.arange(n_theta + 1)
     for r in range(p):
-        t = scan.theta_rad[r]
-        k = np.floor((t - a) / width).astype(np.int64)
-        ok = (k >= 0) & (k < n_theta)
-        n = np.bincount(k[ok], minlength=n_theta).astype(float)
-        s = np.bincount(k[ok], weights=scan.radiance[r][ok], minlength=n_theta)
-        v = np.bincount(k[ok], weights=np.nan_to_num(scan.variance[r][ok]), minlength=n_theta)
-        order = np.argsort(t)
-        interp = np.interp(th, t[order], scan.radiance[r][order])
-        cells[r] = np.where(n > 0, s / np.where(n > 0, n, 1.0), interp)
-        var_cells[r] = np.where(n > 0, v / np.where(n > 0, n, 1.0) ** 2, np.nan)
-        counts[r] = n
+        order = np.argsort(scan.theta_rad[r])
+        t = scan.theta_rad[r][order]
+        # each pixel covers θ from midway to its left neighbour to midway to its right one
+        mid = 0.5 * (t[1:] + t[:-1])
+        edges = np.concatenate([[t[0] - (mid[0] - t[0])], mid, [t[-1] + (t[-1] - mid[-1])]])
+        if edges_cells[0] < edges[0] or edges_cells[-1] > edges[-1]:
+            raise ValueError(f"the angle domain [{a:.4f}, {b:.4f}] rad exceeds the pixels of "
+                             f"the point at y = {scan.y_mm[r]:.3f} mm")
+        px = np.diff(edges)
+        # the integral of the piecewise-constant pixel function is piecewise linear: its
+        # differences over the cells are the exact cell averages of that function
+        big_f = np.concatenate([[0.0], np.cumsum(scan.radiance[r][order] * px)])
+        big_v = np.concatenate([[0.0], np.cumsum(np.nan_to_num(scan.variance[r][order]) * px)])
+        cells[r] = np.diff(np.interp(edges_cells, edges, big_f)) / width
+        n_px = width / np.interp(th, t, px)
+        var_cells[r] = np.diff(np.interp(edges_cells, edges, big_v)) / width / n_px
+        counts[r] = n_px
     y = scan.y_mm
     uy, inv = np.unique(np.round(y, 6), return_inverse=True)
     if uy.size < y.size:  # repeated positions: average them
@@ -585,6 +594,19 @@ def reconstruct_run(
     return result
 
 
+def median_delta_p(delta_p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Median over points of Δ_p (R, N) → (N,), ignoring the ``inf`` of unobservable
+    orders; ``inf`` where no point has a finite value."""
+    d = np.asarray(delta_p, dtype=float)
+    fin = np.isfinite(d)
+    out = np.full(d.shape[-1], np.inf)
+    cols = fin.any(axis=0)
+    if np.any(cols):
+        masked = np.where(fin[:, cols], d[:, cols], np.nan)
+        out[cols] = np.nanmedian(masked, axis=0)
+    return out
+
+
 def _replace(group: h5py.Group, name: str, nx_class: str) -> h5py.Group:
     if name in group:
         del group[name]
@@ -647,8 +669,7 @@ def _write_reconstruction(path: str | Path, r: ReconstructionResult) -> None:
         c["noise_power"] = reg.noise_power
         c["gamma"] = diag.gamma
         c["snr_eff"] = diag.snr_eff
-        c["delta_p"] = np.nanmedian(np.where(np.isfinite(diag.delta_p), diag.delta_p, np.nan),
-                                    axis=0)
+        c["delta_p"] = median_delta_p(diag.delta_p)
         c["valid_fraction"] = rec.valid_fraction
         c.attrs.update({
             "signal": "incident_radiance", "method": reg.method,
