@@ -26,6 +26,9 @@ Default behaviour, declared once in :data:`PROFILES` and :class:`AptDefaults`:
     SET message; ``replies_to_set_enable`` makes an emulator that does, to check hosts
     tolerate it).
 
+- Settle (KDC101 servo): after a move's profile the status keeps ACTIVE and lacks
+  SETTLED for ``settle_s`` (the position loop's in-position window), and MOVE_COMPLETED
+  follows only then. The open-loop K10CR1 settles at once.
 - MOVE_COMPLETED (14-byte status form), MOVE_STOPPED (same form) and MOVE_HOMED (short)
   are sent unsolicited when motion ends. HW_START_UPDATEMSGS starts a status stream every
   ``update_period_s`` of emulator time (GET_STATUSUPDATE on the stepper K10CR1,
@@ -136,6 +139,7 @@ class AptStageProfile:
     acceleration: float             # power-up acceleration, unit/s²
     stop_short_counts: int          # a move ends up to this many counts short
     stepper: bool                   # stepper (STATUSUPDATE) or DC servo (DCSTATUSUPDATE)
+    settle_s: float = 0.0           # in-position window after a move's profile, seconds
 
 
 _K10CR1_CPU = 409600.0 / 3.0  # 409600 microsteps per 3 degrees of the worm drive
@@ -154,6 +158,10 @@ def _kdc101(stage: str, *, stage_id: int, counts_per_unit: float,
         acceleration_scale=counts_per_unit * _KDC_T * _KDC_T * 65536.0,
         travel=travel, start_position=start_position, velocity=velocity,
         acceleration=acceleration, stop_short_counts=5, stepper=False,
+        # A servo holds its position loop for a moment after the profile before it calls
+        # itself settled (status bit 0x2000). The length is this emulator's choice, not a
+        # datasheet figure; the stepper K10CR1 runs open loop and has none.
+        settle_s=0.02,
     )
 
 
@@ -286,6 +294,7 @@ class AptEmulator(FirmwareEmulator):
         self.identify_count = 0
         self._next_update = 0.0
         self._motion: str | None = None  # "move" | "home" | "offset" | "stop"
+        self._settled_at = -math.inf  # end of the present move's settle window
         self._direction = 0
         self._pending: list[bytes] = []  # unsolicited frames for the next poll
         self._unsolicited_turn = 0
@@ -311,6 +320,8 @@ class AptEmulator(FirmwareEmulator):
                 v = st.velocity_now()
                 direction = (v > 0) - (v < 0) or self._direction
                 bits |= _ACTIVE | (_MOVING_CW if direction >= 0 else _MOVING_CCW)
+            elif self._settling():
+                bits |= _ACTIVE  # profile done, position loop still settling
             else:
                 bits |= _SETTLED
             if self._motion in ("home", "offset"):
@@ -371,11 +382,17 @@ class AptEmulator(FirmwareEmulator):
             st.homed = True
             self._motion = None
             out.append(_short(_MOT_MOVE_HOMED, 1, 0))
-        elif self._motion in ("move", "stop") and not st.is_moving():
+        elif (self._motion in ("move", "stop") and not st.is_moving()
+              and not self._settling()):
             kind = _MOT_MOVE_COMPLETED if self._motion == "move" else _MOT_MOVE_STOPPED
             self._motion = None
             out.append(_long(kind, self._status_packet()))
         return out
+
+    def _settling(self) -> bool:
+        """A move's profile has ended but its settle window has not."""
+        return (self._motion == "move" and not self.stage.is_moving()
+                and self.clock.now() < self._settled_at)
 
     def poll(self) -> list[bytes]:
         with self.lock:
@@ -568,7 +585,8 @@ class AptEmulator(FirmwareEmulator):
         # The quirk: the stage settles a few counts before the target.
         end = target_counts - direction * short
         self._direction = direction
-        self.stage.move_to(end / self.profile.counts_per_unit)
+        duration = self.stage.move_to(end / self.profile.counts_per_unit)
+        self._settled_at = self.clock.now() + duration + self.profile.settle_s
         self._motion = "move"
 
     def _move_absolute(self, p1, p2, data):

@@ -144,6 +144,27 @@ def test_move_absolute_follows_a_trapezoid_and_stops_short():
     assert emu.stage.physical_position() == pytest.approx(pos / K10_CPU)
 
 
+def test_servo_settles_after_the_profile_before_move_completed():
+    emu, clock = make("KDC101", stop_short_counts=0)
+    settle = PROFILES[("KDC101", "PRM1-Z8")].settle_s
+    assert settle > 0 and PROFILES[("K10CR1", "K10CR1")].settle_s == 0
+    emu.receive(short(0x0210, 1, 1))
+    emu.stage.teleport(0.0)
+    emu.receive(long(0x0453, struct.pack("<Hi", 1, 10000)))
+    duration = TrapezoidalProfile.duration_for(10000 / emu.profile.counts_per_unit,
+                                               10.0, 10.0)
+    clock.advance(duration + settle / 2)
+    bits = status(emu)
+    # profile over, at the target, but not yet settled: still active, no direction bits
+    assert bits & 0x20000000 and not bits & 0x2000 and not bits & 0x30
+    assert position(emu) == 10000
+    assert [f[0] for f in frames(emu.poll())] == []
+    clock.advance(settle)
+    assert [f[0] for f in frames(emu.poll())] == [0x0464]
+    bits = status(emu)
+    assert bits & 0x2000 and not bits & 0x20000000
+
+
 def test_stop_short_can_be_switched_off_and_relative_moves_add():
     emu, clock = make("KDC101", stop_short_counts=0)
     emu.receive(short(0x0210, 1, 1))
