@@ -44,9 +44,11 @@ __all__ = [
     "ReductionOptions",
     "RunData",
     "camera_calibration_for",
+    "camera_url",
     "load_reference_table",
     "read_run",
     "reduce_run",
+    "simulated_camera_calibration",
     "write_analysis",
 ]
 
@@ -211,6 +213,10 @@ class CameraCalibration:
         Relative standard uncertainty of Kη (calibration).
     source : str
         Where the numbers came from (reported).
+    pixel_pitch_um, focal_length_mm : float or None
+        Optics, for planning (the footprint's image size); optional.
+    n_pixels : int or None
+        Pixels summed per point (the frame), for planning; optional.
     """
 
     noise: DetectorNoise
@@ -219,6 +225,9 @@ class CameraCalibration:
     pupil_diameter_mm: float
     u_responsivity_rel: float = 0.0
     source: str = ""
+    pixel_pitch_um: float | None = None
+    focal_length_mm: float | None = None
+    n_pixels: int | None = None
 
     @classmethod
     def from_json(cls, path: str | Path) -> CameraCalibration:
@@ -228,18 +237,39 @@ class CameraCalibration:
         noise = DetectorNoise(float(d["system_gain_dn_per_e"]), float(d["read_noise_e"]),
                               float(d["saturation_dn"]),
                               float(d.get("dark_current_e_per_s", 0.0)))
+        opt = {k: d[k] for k in ("pixel_pitch_um", "focal_length_mm", "n_pixels") if k in d}
         return cls(noise, float(d["quantum_efficiency"]), float(d["wavelength_nm"]),
                    float(d["pupil_diameter_mm"]), float(d.get("u_responsivity_rel", 0.0)),
-                   source=str(path))
+                   source=str(path), **opt)
 
 
-def _camera_url(run: RunData) -> str | None:
-    devices = run.profile().get("devices", {})
-    for spec in devices.values():
+def camera_url(profile: dict[str, Any]) -> str | None:
+    """URL of the camera named in a bench profile (parsed TOML), if any."""
+    for spec in profile.get("devices", {}).values():
         url = str(spec.get("url", ""))
         if spec.get("driver") in ("sim_camera", "opencv_camera") or url.startswith("simcam://"):
             return url
     return None
+
+
+def simulated_camera_calibration(url: str, *, wavelength_nm: float = 633.0,
+                                 gain_db: float = 0.0, bits: int = 12) -> CameraCalibration:
+    """The exact calibration of a ``simcam://`` camera (string import keyed on the scheme)."""
+    module, _, func = _SIM_CAMERA_ENTRY.partition(":")
+    cam = getattr(importlib.import_module(module), func)(url)
+    try:
+        p = cam.sensor.params
+        noise = DetectorNoise(p.system_gain(gain_db, bits), p.read_noise_e,
+                              cam.sensor.saturation_dn(gain_db=gain_db, bits=bits),
+                              p.dark_current_e_per_s)
+        return CameraCalibration(noise, p.quantum_efficiency, wavelength_nm,
+                                 cam.optics.aperture_diameter_mm, 0.0,
+                                 source=f"simulated camera {url} (exact)",
+                                 pixel_pitch_um=p.pixel_pitch_um,
+                                 focal_length_mm=cam.optics.focal_length_mm,
+                                 n_pixels=p.width * p.height)
+    finally:
+        cam.close()
 
 
 def camera_calibration_for(run: RunData, *, calibration_file: str | Path | None = None
@@ -255,29 +285,19 @@ def camera_calibration_for(run: RunData, *, calibration_file: str | Path | None 
         return CameraCalibration.from_json(calibration_file)
     if "camera_calibration" in run.calibration:
         return CameraCalibration.from_json(run.calibration["camera_calibration"])
-    url = _camera_url(run)
+    profile = run.profile()
+    url = camera_url(profile)
     if url is None or not url.startswith("simcam://"):
         raise ValueError("the absolute camera method needs a camera calibration file "
                          "(--camera-calibration); or use the relative method")
-    module, _, func = _SIM_CAMERA_ENTRY.partition(":")
-    cam = getattr(importlib.import_module(module), func)(url)
-    try:
-        bits = 12
-        fmt = run.identities.get("camera", {}).get("pixel_format")
-        if fmt and fmt.upper().startswith("MONO"):
-            bits = int(fmt.upper()[4:])
-        p = cam.sensor.params
-        gain = float(run.acquisition.get("gain_db", 0.0))
-        noise = DetectorNoise(p.system_gain(gain, bits), p.read_noise_e,
-                              cam.sensor.saturation_dn(gain_db=gain, bits=bits),
-                              p.dark_current_e_per_s)
-        wl = float(run.profile().get("simulation", {}).get("source", {})
-                   .get("wavelength_nm", 633.0))
-        return CameraCalibration(noise, p.quantum_efficiency, wl,
-                                 cam.optics.aperture_diameter_mm, 0.0,
-                                 source=f"simulated camera {url} (exact)")
-    finally:
-        cam.close()
+    bits = 12
+    fmt = run.identities.get("camera", {}).get("pixel_format")
+    if fmt and fmt.upper().startswith("MONO"):
+        bits = int(fmt.upper()[4:])
+    wl = float(profile.get("simulation", {}).get("source", {}).get("wavelength_nm", 633.0))
+    return simulated_camera_calibration(url, wavelength_nm=wl,
+                                        gain_db=float(run.acquisition.get("gain_db", 0.0)),
+                                        bits=bits)
 
 
 # ------------------------------------------------------------------------------ reduce

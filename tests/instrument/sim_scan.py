@@ -101,7 +101,8 @@ class ScanSetup:
             f"theta_r = {{ start = {self.theta_r_start}, stop = {self.theta_r_stop}, "
             f"step = {self.theta_r_step} }}\n{spec}skip_beam_points = true\n"
             '[acquisition]\nmode = "auto"\n'
-            f"exposure_us = 2000\nmax_exposure_us = {self.max_exposure_us}\n"
+            f"exposure_us = {min(2000.0, self.max_exposure_us)}\n"
+            f"max_exposure_us = {self.max_exposure_us}\n"
             f'frames = {self.frames}\ndark = "per_point"\ndetectors = ["camera"]\n'
         )
 

@@ -135,3 +135,61 @@ def test_closed_loop_through_the_engine(tmp_path: Path, sample: Sample, seed: in
         params, stderr = g["chosen/params"][()], g["chosen/stderr"][()]
     assert res["selection"]["chosen"] == sample.model
     assert np.all(np.abs(params - np.array(sample.params)) < 3.5 * stderr), (params, stderr)
+
+
+# ------------------------------------------------------------------------ the planner
+def _planner_inputs(setup: ScanSetup, sample: Sample):
+    from dataclasses import replace
+
+    from instrument.plans.planfile import parse_plan
+    from instrument.profile import parse_profile
+    from instrument.tradeoff import setup_from_profile
+
+    spec = parse_plan(setup.plan_text())
+    profile = parse_profile(profile_text(setup, sample))
+    prior, det = setup_from_profile(profile, spec, readout_s=0.02)
+    return spec, profile, prior, replace(det, fill=setup.fill)
+
+
+def test_planner_prediction_matches_the_fit_uncertainty() -> None:
+    from analysis.brdf.fit import fit_brdf
+    from instrument.tradeoff import ScanOption, predict
+
+    setup = ScanSetup(power_w=2e-8, fill=0.5, max_exposure_us=3000.0)
+    sample = SAMPLES[1]
+    spec, profile, prior, det = _planner_inputs(setup, sample)
+    res = predict(spec, profile, ScanOption(10.0, 3000.0, 1), prior=prior, det=det)
+    r = render(setup, sample)
+    a = r.angles_rad
+    pts = reduce_seed(r, 5)
+    fit = fit_brdf(get_model(sample.model), pts.brdf, *a.T, sigma=pts.u_point)
+    predicted = np.array([res.sigma[n] for n in fit.param_names])
+    # Cramér–Rao prediction from the noise model against the fit's own covariance
+    assert np.all(np.abs(predicted / fit.stderr - 1) < 0.3), (predicted, fit.stderr)
+    assert res.n_points == 57 and res.motion_s > 10 and res.acquisition_s > 0
+
+
+def test_planner_finds_the_fastest_scan_reaching_the_target() -> None:
+    from instrument.tradeoff import ScanOption, fastest_for_target, pareto_front, sweep
+
+    setup = ScanSetup(power_w=2e-8, fill=0.5)
+    spec, profile, prior, det = _planner_inputs(setup, SAMPLES[1])
+    options = [ScanOption(s, c, f) for s in (10.0, 20.0) for c in (1e3, 1e4, 1e5)
+               for f in (1, 4)]
+    results = sweep(spec, profile, options, prior=prior, det=det)
+    front = pareto_front(results, "ggx.alpha")
+    durations = [r.duration_s for r in front]
+    sigmas = [r.sigma["ggx.alpha"] for r in front]
+    assert durations == sorted(durations) and sigmas == sorted(sigmas, reverse=True)
+    target = float(np.median([r.sigma["ggx.alpha"] for r in results]))
+    best = fastest_for_target(results, "ggx.alpha", target)
+    assert best is not None and best.sigma["ggx.alpha"] <= target
+    assert all(r.duration_s >= best.duration_s for r in results
+               if r.sigma["ggx.alpha"] <= target)
+    assert best in front
+    assert fastest_for_target(results, "ggx.alpha", 1e-12) is None
+    # more frames and longer caps never predict a larger σ at the same angles
+    by = {(r.option.theta_r_step_deg, r.option.max_exposure_us, r.option.frames): r
+          for r in results}
+    assert by[(10.0, 1e4, 4)].sigma["ggx.alpha"] < by[(10.0, 1e4, 1)].sigma["ggx.alpha"]
+    assert by[(10.0, 1e5, 1)].sigma["ggx.alpha"] <= by[(10.0, 1e3, 1)].sigma["ggx.alpha"]
