@@ -589,23 +589,20 @@ class AptEmulator(FirmwareEmulator):
         self._settled_at = self.clock.now() + duration + self.profile.settle_s
         self._motion = "move"
 
-    def _move_absolute(self, p1, p2, data):
-        refused = self._refuse(_MOT_MOVE_ABSOLUTE)
+    def _move(self, msg_id: int, data: bytes | None, *, relative: bool) -> list[bytes]:
+        refused = self._refuse(msg_id)
         if refused is not None:
             return refused
         cv = self._chan_value(data)
         if cv is not None:
-            self._start_move(cv[1])
+            self._start_move(cv[1] + (self.position_counts() if relative else 0))
         return []
 
+    def _move_absolute(self, p1, p2, data):
+        return self._move(_MOT_MOVE_ABSOLUTE, data, relative=False)
+
     def _move_relative(self, p1, p2, data):
-        refused = self._refuse(_MOT_MOVE_RELATIVE)
-        if refused is not None:
-            return refused
-        cv = self._chan_value(data)
-        if cv is not None:
-            self._start_move(self.position_counts() + cv[1])
-        return []
+        return self._move(_MOT_MOVE_RELATIVE, data, relative=True)
 
     def _move_home(self, p1, p2, data):
         refused = self._refuse(_MOT_MOVE_HOME)
