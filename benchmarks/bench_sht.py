@@ -213,7 +213,7 @@ def run_validation(quick: bool) -> None:
              / np.linalg.norm(truth) for k in ks]
     chosen = wiener_deconvolve(fit.coeffs, a, noise_sigma=sigma)
     err = np.linalg.norm(chosen.coeffs - truth) / np.linalg.norm(truth)
-    print("- Wiener curve (Phong s=60, L=16, 1 % noise): K → lighting rel. L2 error")
+    print("- Wiener curve (Phong s=20, L=20, 1 % noise): K → lighting rel. L2 error")
     print("  " + ", ".join(f"{k:.0e}: {e:.3f}" for k, e in zip(ks, curve, strict=True)))
     print(f"  per-band K chosen from σ = {sigma:.2e}: K_l ∈ [{np.nanmin(chosen.k):.1e}, "
           f"{np.nanmax(chosen.k):.1e}], error {err:.3f}, best scalar K {ks[np.argmin(curve)]:.0e} "

@@ -3,9 +3,9 @@
 Physics.md §5 (Mahajan et al. M4, M5, M7); numerics.md §3.10 and §4.4. The Wiener filter
 A*_l = A_l / (A_l² + K_l) never divides by zero: bands with A_l = 0 exactly (odd l > 1 for a
 Lambertian kernel) are unobservable and are returned as zero with a flag, and K_l > 0 is
-chosen per band from the noise level as K_l = σ² / P_L(l), σ² the noise variance of one
-coefficient and P_L(l) a power law fitted to the lighting power estimated from the data
-(numerics.md §4.4). The effective number of recovered degrees of freedom
+chosen per band from the noise level as K_l = σ² / P_L(l) (numerics.md §4.4), σ² the
+noise variance of one coefficient and P_L(l) a power law, both fitted to the band powers of
+the image, P_B(l) = A_l² P_L(l) + σ². The effective number of recovered degrees of freedom
 Σ_l (2l+1) A_l²/(A_l² + K_l) and the K_l actually used are reported.
 """
 
@@ -120,7 +120,8 @@ class WienerResult:
     dof : float
         Effective recovered degrees of freedom Σ (2l+1) A_l²/(A_l² + K_l).
     noise_sigma : float
-        σ used to choose K (nan when K was given).
+        Noise floor σ used to choose K: the larger of the given or estimated noise level
+        and the floor fitted to the band powers (nan when K was given).
     spectrum_slope : float
         Exponent p of the fitted lighting spectrum P_L(l) ∝ (l+1)^−p (nan when K was given).
     """
@@ -135,25 +136,57 @@ class WienerResult:
 
 
 def _fit_lighting_spectrum(
-    b: np.ndarray, a: np.ndarray, sigma: float, observable: np.ndarray
-) -> tuple[np.ndarray, float]:
-    """Power-law fit of P_L(l) from P_B(l) = A_l² P_L(l) + σ² over bands well above noise."""
+    b: np.ndarray, a: np.ndarray, sigma_min: float, observable: np.ndarray
+) -> tuple[np.ndarray, float, float]:
+    """Fit P_B(l) = A_l² c (l+1)^−p + n² to the band powers of the image.
+
+    The noise floor n² is fitted too (bounded below by ``sigma_min``²): what stops the
+    inverse filter in practice is every error that does not follow the convolution model
+    (noise, and in a real image the departures of the sphere from the ideal kernel), and
+    the band powers show it as the floor they level off to where A_l² P_L is small. The
+    slope is bounded to 0 ≤ p ≤ 8 (lighting power does not grow with l). Least squares
+    on log P_B with weights 2l+1, the number of coefficients per band.
+
+    Returns
+    -------
+    p_l : ndarray of shape (L+1,)
+        Fitted lighting power per band.
+    slope : float
+    floor_sigma : float
+        √n², the noise level used for K.
+    """
+    from scipy.optimize import least_squares
+
     lmax = a.size - 1
     pb = band_power(b)
     l = np.arange(lmax + 1)
-    n_m = 2 * l + 1
-    # A band is informative when its power exceeds the noise by several standard errors.
-    good = observable & (pb > sigma**2 * (1.0 + 3.0 * np.sqrt(2.0 / n_m)))
-    pl = np.where(good, (pb - sigma**2) / np.where(observable, a**2, 1.0), np.nan)
-    if good.sum() >= 2:
-        x = np.log(l[good] + 1.0)
-        y = np.log(pl[good])
-        w = n_m[good]
-        slope, icpt = np.polyfit(x, y, 1, w=np.sqrt(w))
-        model = np.exp(icpt + slope * np.log(l + 1.0))
-        return model, float(-slope)
-    level = np.nanmean(pl) if good.any() else float(np.mean(pb))
-    return np.full(lmax + 1, max(level, np.finfo(float).tiny)), 0.0
+    use = observable & (pb > 0)
+    tiny = np.finfo(float).tiny
+    if use.sum() < 3:
+        level = max(float(np.mean(pb[use])) if use.any() else float(np.mean(pb)), tiny)
+        return np.full(lmax + 1, level), 0.0, max(sigma_min, np.sqrt(tiny))
+    a2 = a[use] ** 2
+    x = np.log(l[use] + 1.0)
+    y = np.log(pb[use])
+    w = np.sqrt(2.0 * l[use] + 1.0)
+    floor_min = max(sigma_min**2, tiny)
+
+    def model(q: np.ndarray) -> np.ndarray:
+        log_c, slope, log_n2 = q
+        return np.logaddexp(np.log(a2) + log_c - slope * x, log_n2)
+
+    start = np.array([
+        float(np.log(max(pb[use][0] / a2[0], tiny))),
+        2.0,
+        float(np.log(max(np.min(pb[use]), floor_min))),
+    ])
+    lo = [-np.inf, 0.0, np.log(floor_min)]
+    hi = [np.inf, 8.0, np.inf]
+    start = np.clip(start, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
+    sol = least_squares(lambda q: w * (model(q) - y), start, bounds=(lo, hi))
+    log_c, slope, log_n2 = sol.x
+    p_l = np.exp(log_c - slope * np.log(l + 1.0))
+    return p_l, float(slope), float(np.sqrt(np.exp(log_n2)))
 
 
 def wiener_deconvolve(
@@ -175,8 +208,9 @@ def wiener_deconvolve(
     filt : ndarray of shape (≥ L+1,)
         A_l of the BRDF (:mod:`analysis.sh.filters`).
     noise_sigma : float, optional
-        Noise σ of one coefficient of B. Estimated with :func:`estimate_coefficient_noise`
-        when neither this nor ``k`` is given.
+        Noise σ of one coefficient of B, a lower bound for the noise floor fitted to the
+        band powers (see ``_fit_lighting_spectrum``). Estimated from signal-free bands with
+        :func:`estimate_coefficient_noise` when neither this nor ``k`` is given.
     k : float or ndarray of shape (L+1,), optional
         Explicit regularisation (scalar or per band), > 0. Overrides the automatic choice.
     null_tol : float
@@ -201,11 +235,13 @@ def wiener_deconvolve(
             raise ValueError("K must be > 0 (K = 0 is the unstable inverse filter)")
     else:
         if noise_sigma is None:
-            noise_sigma, _ = estimate_coefficient_noise(b, a, null_tol=null_tol)
-        sigma_used = float(noise_sigma)
-        if sigma_used <= 0:
-            raise ValueError("noise_sigma must be > 0")
-        p_l, slope = _fit_lighting_spectrum(b, a, sigma_used, observable)
+            try:
+                noise_sigma, _ = estimate_coefficient_noise(b, a, null_tol=null_tol)
+            except ValueError:
+                noise_sigma = 0.0  # the fitted floor alone sets the level
+        if noise_sigma < 0:
+            raise ValueError("noise_sigma must be ≥ 0")
+        p_l, slope, sigma_used = _fit_lighting_spectrum(b, a, float(noise_sigma), observable)
         k_arr = sigma_used**2 / p_l
     gain = np.zeros(lmax + 1)
     gain[observable] = a[observable] / (a[observable] ** 2 + k_arr[observable])

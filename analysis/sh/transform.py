@@ -214,7 +214,8 @@ def synthesis(coeffs: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     acc = np.zeros((lmax + 1, 4, nh))
     for m0, m1, k0, buf in _legendre_chunks(grid, x, s):
         kb = buf.shape[1]
-        acc[m0:m1] += np.matmul(coef[m0:m1, :, k0 : k0 + kb], buf)
+        # a contiguous operand keeps numpy's matmul on the BLAS path
+        acc[m0:m1] += np.matmul(np.ascontiguousarray(coef[m0:m1, :, k0 : k0 + kb]), buf)
     even = acc[:, 0] + 1j * acc[:, 1]
     odd = acc[:, 2] + 1j * acc[:, 3]
     g_n = even + odd

@@ -151,7 +151,7 @@ def test_tamper_detection_splice_and_squash() -> None:
 # --- Wiener curve ---------------------------------------------------------------------
 
 
-def _lighting_estimation_case(seed: int, lmax: int = 16, s: float = 60.0):
+def _lighting_estimation_case(seed: int, lmax: int = 20, s: float = 20.0):
     rng = np.random.default_rng(seed)
     env = random_environment(rng)
     rend = render_spheres([env], Phong(ks=1.0, s=s), size=64, n_theta=128)
@@ -171,11 +171,14 @@ def test_wiener_chosen_k_is_near_the_minimum_of_the_error_curve() -> None:
     chosen = wiener_deconvolve(fit.coeffs, a, noise_sigma=sigma)
     err = np.linalg.norm(chosen.coeffs - truth) / np.linalg.norm(truth)
     assert np.all(np.isfinite(chosen.k[~chosen.unobservable]))
-    # The per-band choice does at least as well as 1.1× the best single K on the curve…
+    # The curve has a real minimum (tiny K amplifies noise, large K over-smooths)…
+    assert curve[0] > 3 * curve.min() and curve[-1] > 1.5 * curve.min()
+    # …the per-band choice does within 10 % as well as the best single K on it…
     assert err <= 1.1 * curve.min()
-    # …and the best scalar K lies inside the range of per-band K it chose.
+    # …and the best scalar K lies within the range of per-band K it chose (± a decade).
     k_best = ks[int(np.argmin(curve))]
-    assert chosen.k.min() / 30 <= k_best <= chosen.k.max() * 30
+    k_obs = chosen.k[~chosen.unobservable]
+    assert k_obs.min() / 10 <= k_best <= k_obs.max() * 10
 
 
 # --- inverse rendering ------------------------------------------------------------------
