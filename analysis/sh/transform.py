@@ -19,6 +19,7 @@ over a block of orders m and all northern rings (:func:`analysis.sh.legendre.ite
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -126,24 +127,31 @@ def _legendre_chunks(grid: GLGrid, x: np.ndarray, s: np.ndarray):
             yield m0, m1, k0, buf
 
 
+@functools.lru_cache(maxsize=16)
+def _z_layout(lmax: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Index maps between the flat layout and Z[m, k]: (m, k, flat +m, flat −m) over m ≤ l."""
+    ar = np.arange(lmax + 1)
+    m, k = np.nonzero(np.add.outer(ar, ar) <= lmax)
+    l = m + k
+    return m, k, lm_index(l, m), lm_index(l, -m)
+
+
 def _coeffs_to_z(coeffs: np.ndarray, lmax: int) -> np.ndarray:
-    """Flat real coefficients → Z[m, k] = c_{m+k,m} − i c_{m+k,−m} (k = l − m)."""
+    """Flat real coefficients → Z[m, k] = c_{m+k,m} − i c_{m+k,−m} (k = l − m; c_{l,−0} ≡ 0)."""
+    m, k, pos, neg = _z_layout(lmax)
     z = np.zeros((lmax + 1, lmax + 1), dtype=complex)
-    for m in range(lmax + 1):
-        l = np.arange(m, lmax + 1)
-        re = coeffs[lm_index(l, m)]
-        z[m, : l.size] = re if m == 0 else re - 1j * coeffs[lm_index(l, -m)]
+    z[m, k] = coeffs[pos] - 1j * np.where(m > 0, coeffs[neg], 0.0)
     return z
 
 
 def _z_to_coeffs(z: np.ndarray, lmax: int) -> np.ndarray:
     """Inverse of :func:`_coeffs_to_z`."""
+    m, k, pos, neg = _z_layout(lmax)
     out = np.zeros(n_coeffs(lmax))
-    for m in range(lmax + 1):
-        l = np.arange(m, lmax + 1)
-        out[lm_index(l, m)] = z[m, : l.size].real
-        if m > 0:
-            out[lm_index(l, -m)] = -z[m, : l.size].imag
+    vals = z[m, k]
+    out[pos] = vals.real
+    has_sin = m > 0
+    out[neg[has_sin]] = -vals.imag[has_sin]
     return out
 
 
