@@ -126,6 +126,9 @@ def spec_for(spec: PlanSpec, option: ScanOption) -> PlanSpec:
     """``spec`` with the option's θr step, exposure cap and frames (angles range kept)."""
     scan = dict(spec.scan)
     tr = scan.get("theta_r")
+    if tr is None:
+        raise ValueError(f"the trade-off search varies theta_r of in-plane plans; "
+                         f"{spec.kind!r} plans have none")
     if isinstance(tr, dict):
         scan["theta_r"] = {**tr, "step": float(option.theta_r_step_deg)}
     else:
