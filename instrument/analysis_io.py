@@ -38,6 +38,7 @@ from analysis.brdf_reduction import (
     solid_angle_sr,
     subtract_signature,
 )
+from analysis.radiometry import FlatField, flat_field
 
 __all__ = [
     "CameraCalibration",
@@ -45,6 +46,7 @@ __all__ = [
     "RunData",
     "camera_calibration_for",
     "camera_url",
+    "flat_from_run",
     "load_reference_table",
     "read_run",
     "reduce_run",
@@ -323,6 +325,8 @@ class ReductionOptions:
     u_power_meter_rel : float
         Relative noise of one power-meter reading (power-meter detector).
     camera_calibration : path or None
+    flat_run : path or None
+        A ``flat_field`` run (uniform radiance); default the run's ``calibration.flat``.
     reference_run, signature_run : path or None
     reference_table : path or None
         CSV of the standard's BRDF (theta_i_deg, theta_r_deg, brdf, u_rel).
@@ -339,6 +343,7 @@ class ReductionOptions:
     sigma_theta_deg: float | None = None
     u_power_meter_rel: float = 0.005
     camera_calibration: str | None = None
+    flat_run: str | None = None
     reference_run: str | None = None
     signature_run: str | None = None
     reference_table: str | None = None
@@ -354,8 +359,41 @@ class Reduced:
     provenance: dict[str, Any]
 
 
+def flat_from_run(path: str | Path) -> FlatField:
+    """Normalised flat field (:func:`analysis.radiometry.flat_field`) from a ``flat_field``
+    run: the light frames of its "flat" points at the exposure with the most frames, less
+    the mean of their dark frames (EMVA 1288 R3.1 §4, PRNU)."""
+    run = read_run(path)
+    groups: dict[float, tuple[list[np.ndarray], list[np.ndarray]]] = {}
+    for r in np.flatnonzero(run.label == "flat"):
+        light, exp, dark = run.frames_of(int(r))
+        if dark is None:
+            raise ValueError(f"flat run {run.run_id}: point {run.index[r]} has no dark frame")
+        for lf, e, df in zip(light, exp, dark, strict=True):
+            g = groups.setdefault(round(float(e), 6), ([], []))
+            g[0].append(lf)
+            g[1].append(df)
+    if not groups:
+        raise ValueError(f"run {run.run_id} holds no flat-field frames")
+    lights, darks = max(groups.values(), key=lambda g: len(g[0]))
+    return flat_field(np.array(lights), np.mean(np.array(darks), axis=0))
+
+
+def _flat_for(run: RunData, opts: ReductionOptions) -> tuple[FlatField | None, str]:
+    src = opts.flat_run or run.calibration.get("flat")
+    if src is None:
+        return None, "none"
+    path = Path(src)
+    if not path.is_absolute() and not path.exists():
+        path = run.path.parent / src  # a run id or a name next to the run file
+        if not path.suffix:
+            path = path.with_suffix(".h5")
+    return flat_from_run(path), str(path)
+
+
 def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
-             cal: CameraCalibration | None) -> tuple[np.ndarray, np.ndarray]:
+             cal: CameraCalibration | None, flat: FlatField | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
     """Collected power (W) and its σ per row, from the camera or the power meter."""
     if opts.detector == "power_meter":
         p = run.power_w[rows].astype(float)
@@ -370,7 +408,7 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
         light, exp, dark = run.frames_of(int(r))
         if dark is None:
             raise ValueError(f"point {run.index[r]} has no dark frames at its exposure(s)")
-        s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg)
+        s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg, flat=flat)
         rate[k], sd[k] = s.rate_dn_per_us, s.sigma
     conv = {"system_gain_dn_per_e": cal.noise.system_gain_dn_per_e,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
@@ -441,12 +479,14 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     ti, pi_ = rad(run.theta_i[rows]), rad(run.phi_i[rows])
     tr, pr = rad(run.theta_r[rows]), rad(run.phi_r[rows])
     sig_t = _sigma_theta_rad(run, opts)
-    p_s, u_s = _signals(run, rows, opts, cal)
+    flat, flat_src = _flat_for(run, opts) if cal is not None else (None, "none")
+    p_s, u_s = _signals(run, rows, opts, cal, flat)
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
                             "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
                             "options": asdict(opts)}
     if cal is not None:
         prov["camera_calibration"] = cal.source
+        prov["flat_field"] = flat_src
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
         if opts.detector == "camera":

@@ -28,6 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="reference-standard run at the same geometry (relative method)")
     p.add_argument("--reference-table", default=None,
                    help="CSV theta_i_deg,theta_r_deg,brdf,u_rel of the standard's BRDF")
+    p.add_argument("--flat", default=None,
+                   help="flat_field run for the PRNU correction (default: calibration.flat)")
     p.add_argument("--signature", default=None, help="instrument-signature run to subtract")
     p.add_argument("--incident-power-w", type=float, default=None,
                    help="incident power on the sample (absolute method)")
@@ -53,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method, detector=args.detector, cosine_corrected=args.cosine_corrected,
         incident_power_w=args.incident_power_w, u_incident_power_rel=args.incident_power_u,
         sigma_theta_deg=args.sigma_theta_deg, receiver_distance_mm=args.distance_mm,
-        camera_calibration=args.camera_calibration,
+        camera_calibration=args.camera_calibration, flat_run=args.flat,
         reference_run=args.reference, signature_run=args.signature,
         reference_table=args.reference_table,
     )

@@ -272,3 +272,38 @@ def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_p
                                  float(t[k]), math.nan, math.nan, frames=frames))
     store.close("finished")
     return path
+
+
+def write_flat_run(setup: ScanSetup, seed: int, path: Path, *, n_frames: int = 8,
+                   electrons: float = 9000.0) -> Path:
+    """A ``flat_field`` run of the same sensor (``seed``: same PRNU): a uniform photon rate
+    filling ``electrons`` per pixel, ``n_frames`` flat points each with its dark frame."""
+    import time as _time
+
+    from instrument.storage import FrameData, PointRecord, RunHeader, RunStore
+
+    p = setup.sensor_params()
+    sensor = Sensor(p, seed=seed)
+    t_us = 10_000.0
+    rate = np.full((p.height, p.width), electrons / (p.quantum_efficiency * t_us * 1e-6),
+                   dtype=np.float32)
+    roi = (0, 0, p.width, p.height)
+    nan4 = [math.nan] * 4
+    header = RunHeader(
+        run_id=path.stem, plan_kind="flat_field", plan_name="flat", plan_text="",
+        profile_text="", bench_name="sim", sample_name="", sample_description="",
+        axes=("camera_z",), planned_targets=[[math.nan] for _ in range(n_frames)],
+        planned_angles=[nan4] * n_frames, planned_label=["flat"] * n_frames,
+        planned_light=[True] * n_frames, planned_exposure_us=[t_us] * n_frames,
+        acquisition_policy="{}", retry_policies="{}", identities={}, device_kinds={},
+        geometry={}, calibration={}, software_version="test", created=_time.time())
+    store = RunStore.create(path, header, fsync=False, min_free_bytes=0)
+    for k in range(n_frames):
+        frames = [FrameData(sensor.expose(r, t_us, gain_db=0.0, bits=12, roi=roi,
+                                          frame_index=10**6 + 2 * k + j), t_us, j == 0,
+                            _time.time(), 0.0)
+                  for j, r in enumerate((rate, np.zeros_like(rate)))]
+        store.append(PointRecord(k, "flat", _time.time(), _time.time(), (math.nan,),
+                                 frames=frames))
+    store.close("finished")
+    return path
