@@ -215,7 +215,8 @@ def run_validation(quick: bool) -> None:
     err = np.linalg.norm(chosen.coeffs - truth) / np.linalg.norm(truth)
     print("- Wiener curve (Phong s=20, L=20, 1 % noise): K → lighting rel. L2 error")
     print("  " + ", ".join(f"{k:.0e}: {e:.3f}" for k, e in zip(ks, curve, strict=True)))
-    print(f"  per-band K chosen from σ = {sigma:.2e}: K_l ∈ [{np.nanmin(chosen.k):.1e}, "
+    print(f"  per-band K from the fit's σ = {sigma:.2e} and the fitted noise floor "
+          f"{chosen.noise_sigma:.2e}: K_l ∈ [{np.nanmin(chosen.k):.1e}, "
           f"{np.nanmax(chosen.k):.1e}], error {err:.3f}, best scalar K {ks[np.argmin(curve)]:.0e} "
           f"→ {min(curve):.3f}; dof {chosen.dof:.1f}")
     inv = tv._inverse_rendering_case()
