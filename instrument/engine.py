@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.base import Camera, Frame, MotionAxis
-from drivers.errors import DeviceError
+from drivers.base import AxisStatus, Camera, Frame, MotionAxis
+from drivers.errors import DeviceError, LimitError, MotionError
 from instrument.devices import Bench
 from instrument.events import (
     Event,
@@ -110,6 +110,9 @@ class RunEngine:
     move_timeout_factor, move_timeout_min_s
         A step may take ``factor × planned time + min`` seconds before it counts as a
         timeout (then the axes are stopped and the device's retry policy applies).
+    poll_s
+        Seconds between status polls of moving axes: the end of a step is noticed on
+        average ``poll_s/2`` late, a cost paid at every point (scan efficiency).
     reopen_store
         Called to reopen the run file after a storage error (default:
         :meth:`RunStore.reopen` on the same path with the same settings).
@@ -118,12 +121,13 @@ class RunEngine:
     def __init__(self, bench: Bench, plan: Plan, store: RunStore, *,
                  done: set[int] | frozenset[int] = frozenset(),
                  move_timeout_factor: float = 3.0, move_timeout_min_s: float = 10.0,
+                 poll_s: float = 0.002,
                  reopen_store: Callable[[], tuple[RunStore, set[int]]] | None = None) -> None:
         self.bench = bench
         self.plan = plan
         self.store = store
-        self._done = set(done)
         self._n_total = len(plan.points)
+        self._done = _DoneSet(self._n_total, done)
         self._n_skipped = 0
         self._subscribers: list[Callable[[Event], None]] = []
         self._lock = threading.Condition()
@@ -135,12 +139,19 @@ class RunEngine:
         self._writer: _Writer | None = None
         self._move_factor = move_timeout_factor
         self._move_min = move_timeout_min_s
+        self._poll_s = poll_s
         self._reopen = reopen_store or (lambda: RunStore.reopen(
             store.path, fsync=store.fsync, sync_interval_s=store.sync_interval_s,
             min_free_bytes=store.min_free_bytes))
         self._dyn = dynamics_of(plan.profile, plan.axes)
         self._kin = kinematics_for(plan.profile.geometry.kind,
                                    source_theta_deg=plan.profile.geometry.source_theta_deg)
+        # The bench's devices do not change during a run: look them up once.
+        self._camera = bench.camera
+        self._pm = bench.power_meter
+        self._source = bench.source
+        self._roles = {id(d): r for r, d in bench.devices.items()}
+        self._policies = {r: self._policy(r) for r in bench.devices}
         self._light: bool | None = None
         self._last_exposure: float | None = None
         self._t0 = 0.0
@@ -276,7 +287,7 @@ class RunEngine:
         while True:
             try:
                 group: list = []
-                for cmd in self.plan.commands(frozenset(self._done)):
+                for cmd in self.plan.commands(self._done.snapshot()):
                     match cmd:
                         case SetLight(on=on):
                             self._set_light(on)
@@ -375,7 +386,7 @@ class RunEngine:
         self.store.abandon()
         self.store, done = self._reopen()
         with self._lock:
-            self._done = set(done)
+            self._done = _DoneSet(self._n_total, done)
         self._writer = _Writer(self.store)
         self._store_broken = False
 
@@ -400,7 +411,7 @@ class RunEngine:
             except StorageError as err:
                 self._store_broken = True
                 with self._lock:
-                    self._done -= set(self._writer.failed)
+                    self._done.discard_all(self._writer.failed)
                 # Close the damaged handle now: while paused the file on disk is closed
                 # and valid (recover() makes it agree with the journal).
                 self._writer.stop()
@@ -428,7 +439,17 @@ class RunEngine:
                           st.exposure_us, st.power_w, st.signal,
                           STATUS_SKIPPED if skipped else STATUS_OK, st.retries,
                           skipped or "", st.frames)
-        self._writer.submit(rec)
+        if st.frames:
+            self._writer.submit(rec)  # frames: written while the next move runs
+        else:
+            # Scalars only: a journal line costs less than a hand-over to the writer
+            # thread; store it here (same durability, same order: the writer is idle).
+            self._commit_wait_or_pause(st.index)
+            try:
+                self._writer.call(lambda: self.store.append(rec), inline=True)
+            except StorageError:
+                self._writer.failed.append(st.index)
+                self._commit_wait_or_pause(st.index)  # pauses; raises _Restart on resume
         with self._lock:
             self._done.add(st.index)
             n = len(self._done)
@@ -518,8 +539,8 @@ class RunEngine:
             return
         timeout = self._move_factor * plan_time + self._move_min
         self._wait_axes(moving, targets, timeout, st)
-        if self.bench.camera is not None:
-            self.bench.camera.invalidate()
+        if self._camera is not None:
+            self._camera.invalidate()
 
     def _rehome(self, axis: MotionAxis) -> None:
         axis.stop()
@@ -543,7 +564,7 @@ class RunEngine:
                     fail = err
                 if s is not None and not s.is_moving and not s.is_homing:
                     del pending[role]
-                    self._finish_axis(role, axis, targets[role], st)
+                    self._finish_axis(role, axis, targets[role], st, s)
                 elif s is None:
                     del pending[role]
                     self._recover_axis(role, axis, targets[role], st, fail)
@@ -555,17 +576,27 @@ class RunEngine:
                                           f"{timeout:.3g} s; stopped", device=role)
                         self._recover_axis(role, axis, targets[role], st, err)
                     return
-                time.sleep(min(a.poll_interval for a in pending.values()))
+                time.sleep(self._poll_s)
 
     def _finish_axis(self, role: str, axis: MotionAxis, target: float,
-                     st: _PointState) -> None:
-        try:
-            pos = axis.wait(timeout=1.0)  # motion has ended: checks arrival and limits
-        except DeviceError as err:
+                     st: _PointState, status: AxisStatus) -> None:
+        """Motion has ended: check limits and arrival from the status just read (the
+        checks of :meth:`MotionAxis.wait`, without another round trip to the device)."""
+        err: DeviceError | None = None
+        if status.error:
+            err = DeviceError(f"controller error: {status.error}", device=role)
+        elif status.at_forward_limit or status.at_reverse_limit:
+            err = LimitError(f"a limit switch stopped the axis at {status.position:.6g}",
+                             device=role, command="move")
+        elif abs(status.position - target) > axis.position_tolerance:
+            err = MotionError(f"stopped at {status.position:.6g}, "
+                              f"{status.position - target:+.3g} from the target {target:.6g}",
+                              device=role, command="move")
+        if err is not None:
             self._recover_axis(role, axis, target, st, err)
             return
-        st.positions[role] = pos
-        self._position_cache[role] = pos
+        st.positions[role] = status.position
+        self._position_cache[role] = status.position
 
     def _recover_axis(self, role: str, axis: MotionAxis, target: float, st: _PointState,
                       err: DeviceError) -> None:
@@ -593,35 +624,35 @@ class RunEngine:
         self._light_wanted = on
         if self._light is on:
             return
-        src = self.bench.source
+        src = self._source
         if src is None:
             self._light = on
             return
-        policy = self._policy(_role_of(self.bench, src))
-        self._retry(_role_of(self.bench, src), policy, "turn on" if on else "turn off",
+        role = self._roles[id(src)]
+        self._retry(role, self._policies[role], "turn on" if on else "turn off",
                     src.turn_on if on else src.turn_off)
         self._light = on
 
     def _acquire(self, acq: Acquire, st: _PointState) -> None:
         policy = acq.policy
-        cam = self.bench.camera if policy.uses_camera else None
-        pm = self.bench.power_meter if policy.uses_power_meter else None
-        if acq.light != self._light and self.bench.source is not None:
+        cam = self._camera if policy.uses_camera else None
+        pm = self._pm if policy.uses_power_meter else None
+        if acq.light != self._light and self._source is not None:
             self._set_light(acq.light)
         if pm is not None:
-            role = _role_of(self.bench, pm)
-            st.power_w = float(self._retry(role, self._policy(role), "read power",
+            role = self._roles[id(pm)]
+            st.power_w = float(self._retry(role, self._policies[role], "read power",
                                            pm.read_power_w, st))
         if cam is None:
             return
-        role = _role_of(self.bench, cam)
+        role = self._roles[id(cam)]
         brackets = self._retry(role, self._policy(role), "acquire",
                                lambda: self._brackets(cam, policy, acq), st)
         st.frames.extend(brackets)
         best = _best_bracket(brackets)
         st.exposure_us = best.exposure_us
         dark_level = 0.0
-        if policy.dark == "per_point" and acq.light and self.bench.source is not None:
+        if policy.dark == "per_point" and acq.light and self._source is not None:
             self._set_light(False)
             for b in list(brackets):
                 dark = self._retry(role, self._policy(role), "dark",
@@ -677,6 +708,39 @@ class RunEngine:
         return kept
 
 
+class _DoneSet:
+    """Which points are done: a fixed bitmap, so memory stays flat on long runs."""
+
+    def __init__(self, n: int, initial=()) -> None:
+        self._bits = np.zeros(max(n, 1), dtype=bool)
+        self._count = 0
+        for i in initial:
+            self.add(i)
+
+    def add(self, i: int) -> None:
+        if not self._bits[i]:
+            self._bits[i] = True
+            self._count += 1
+
+    def discard_all(self, indices) -> None:
+        for i in indices:
+            if self._bits[i]:
+                self._bits[i] = False
+                self._count -= 1
+
+    def __contains__(self, i: int) -> bool:
+        return bool(self._bits[i])
+
+    def __len__(self) -> int:
+        return self._count
+
+    def snapshot(self) -> _DoneSet:
+        copy = _DoneSet(0)
+        copy._bits = self._bits.copy()
+        copy._count = self._count
+        return copy
+
+
 class _Restart(Exception):
     """Internal: the done set changed (storage recovery); iterate the plan again."""
 
@@ -692,13 +756,6 @@ def _best_bracket(brackets: list[FrameData]) -> FrameData:
     """The longest unsaturated exposure (the last bracket taken)."""
     unsat = [b for b in brackets if b.saturated == 0]
     return max(unsat, key=lambda b: b.exposure_us) if unsat else brackets[-1]
-
-
-def _role_of(bench: Bench, device) -> str:
-    for role, d in bench.devices.items():
-        if d is device:
-            return role
-    return getattr(device, "name", "device")
 
 
 class _Writer:
@@ -745,10 +802,23 @@ class _Writer:
             self._busy += 1
         self._q.put(job)
 
-    def call(self, fn) -> None:
-        """Run ``fn`` on the writer thread (it owns the store) and wait for it."""
-        self._put(fn)
-        self.drain()
+    def call(self, fn, *, inline: bool = False) -> None:
+        """Run ``fn`` on the writer thread (it owns the store) and wait for it; with
+        ``inline``, on the calling thread, which is safe only while the writer is idle."""
+        if not inline:
+            self._put(fn)
+            self.drain()
+            return
+        with self._cond:
+            assert self._busy == 0, "inline store call while the writer is busy"
+        if self._error is not None:
+            self.drain()
+        try:
+            fn()
+        except BaseException as err:
+            with self._cond:
+                self._error = err
+            raise
 
     def drain(self) -> None:
         """Wait until every submitted job is done; re-raise a storage error once."""

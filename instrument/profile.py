@@ -19,6 +19,7 @@ Schema (all lengths in mm, angles in degrees)::
     velocity = 10.0                    # motion: units/s (written to the controller)
     acceleration = 20.0                # motion: units/s²
     position_tolerance = 0.01          # motion: arrival tolerance in axis units
+    settle_s = 0.01                    # motion: settling after each move (planning, s)
     options = { ... }                  # driver-specific keyword arguments
 
     [devices.<role>.retry]             # recovery policy for this device (optional)
@@ -126,6 +127,7 @@ class DeviceSpec:
     position_tolerance: float | None = None
     options: dict[str, Any] = field(default_factory=dict)
     retry: RetryPolicy = field(default_factory=RetryPolicy)
+    settle_s: float = 0.0
 
     @property
     def is_axis(self) -> bool:
@@ -266,7 +268,7 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
 
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
-             "position_tolerance", "options", "retry"}
+             "position_tolerance", "options", "retry", "settle_s"}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
     if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
@@ -292,7 +294,8 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
         else:
             limits = (float(raw[0]), float(raw[1]))
     if not is_axis:
-        for key in ("limits", "velocity", "acceleration", "position_tolerance", "stage"):
+        for key in ("limits", "velocity", "acceleration", "position_tolerance", "stage",
+                    "settle_s"):
             if key in t and driver is not None:
                 v.error(f"{path}.{key}", f"only motion devices take {key!r}")
     velocity = v.positive(t, "velocity", path)
@@ -303,10 +306,14 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
         v.error(f"{path}.options", "must be a table")
         options = {}
     retry = _retry(v, t.get("retry", {}), f"{path}.retry")
+    settle = t.get("settle_s", 0.0)
+    if not _is_number(settle) or not 0 <= settle <= 10:
+        v.error(f"{path}.settle_s", "must be a number of seconds from 0 to 10")
+        settle = 0.0
     if driver is None or url is None:
         return None
     return DeviceSpec(role, driver, url, stage, limits, velocity, acceleration, tolerance,
-                      dict(options), retry)
+                      dict(options), retry, float(settle))
 
 
 def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:

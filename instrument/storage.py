@@ -181,6 +181,7 @@ class RunStore:
         self._pending: list[tuple[PointRecord, int, int]] = []
         self._pending_events: list[str] = []
         self._last_sync = time.monotonic()
+        self._last_free_check = -math.inf
         self._compress: bool | None = None
         self._closed = False
 
@@ -230,15 +231,22 @@ class RunStore:
             the point is not committed and :func:`recover` restores a consistent file.
         """
         nbytes = sum(f.data.nbytes for f in rec.frames)
-        _check_free(self.path.parent, self.min_free_bytes, 2 * nbytes + 65536)
-        self._reserve(2 * nbytes + RESERVE_BYTES)
+        now = time.monotonic()
+        writes_hdf5 = bool(nbytes) or now - self._last_sync >= self.sync_interval_s
+        if writes_hdf5 or now - self._last_free_check >= 1.0:
+            # Checked before every HDF5 write, and at least once a second otherwise
+            # (a journal line is ~300 bytes: a statvfs per line would cost more).
+            _check_free(self.path.parent, self.min_free_bytes, 2 * nbytes + 65536)
+            self._last_free_check = now
+        if writes_hdf5:
+            self._reserve(2 * nbytes + RESERVE_BYTES)
         try:
             frame_start = self.n_frames
             if rec.frames:
                 self._write_frames(rec.index, rec.frames)
             entry = _point_json(rec, frame_start)
             self._pending.append((rec, frame_start, len(rec.frames)))
-            if nbytes or time.monotonic() - self._last_sync >= self.sync_interval_s:
+            if writes_hdf5:
                 self._sync_tables(extra=1)
             self._journal.append(entry)
         except (OSError, RuntimeError) as err:

@@ -110,8 +110,9 @@ class IdealCamera(Camera):
     def __init__(self, name: str = "camera", *, shape: tuple[int, int] = (8, 8),
                  brightness: Callable[[], float] | None = None,
                  source: IdealSource | None = None, noise_dn: float = 0.0,
-                 seed: int = 0) -> None:
+                 seed: int = 0, real_time: bool = False) -> None:
         super().__init__(name)
+        self._real_time = real_time  # sleep for the exposure, like a sensor integrating
         self._noise = float(noise_dn)
         self._rng = np.random.default_rng(seed)
         self._shape = shape
@@ -145,6 +146,8 @@ class IdealCamera(Camera):
         return PixelFormat.MONO12
 
     def _do_acquire_one(self, timeout: float) -> Frame:
+        if self._real_time:
+            time.sleep(self._exp * 1e-6)
         lit = self._source is None or self._source._on
         level = (self._brightness() if lit else 0.0) * self._exp + 10.0
         if self._noise > 0:  # Gaussian noise: frames that do not compress

@@ -9,7 +9,7 @@ typed commands the engine runs; it skips points already done (resume).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Container, Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -69,7 +69,7 @@ class Plan:
                 out[p.index, col[r]] = v
         return out
 
-    def commands(self, done: frozenset[int] | set[int] = frozenset()) -> Iterator[Command]:
+    def commands(self, done: Container[int] = frozenset()) -> Iterator[Command]:
         """The typed commands of every point not in ``done``, in execution order."""
         light: bool | None = None
         policy = self.spec.acquisition
@@ -114,7 +114,7 @@ def dynamics_of(profile: BenchProfile, axes) -> dict[str, AxisDynamics]:
         if spec is None or spec.velocity is None or spec.acceleration is None:
             out[r] = DEFAULT_DYNAMICS
         else:
-            out[r] = AxisDynamics(spec.velocity, spec.acceleration)
+            out[r] = AxisDynamics(spec.velocity, spec.acceleration, spec.settle_s)
     return out
 
 
