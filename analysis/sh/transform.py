@@ -24,7 +24,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.sh.convention import degrees_orders, lm_index, lmax_from_size, n_coeffs
+from analysis.sh.convention import (
+    PROJECT_CONVENTION,
+    SHConvention,
+    convert,
+    degrees_orders,
+    lm_index,
+    lmax_from_size,
+    n_coeffs,
+)
 from analysis.sh.legendre import gauss_legendre, iterate_degrees, legendre_table, sectoral_seeds
 
 __all__ = [
@@ -190,21 +198,28 @@ def _buffered_degrees(
                 return
 
 
-def synthesis(coeffs: np.ndarray, *, grid: GLGrid) -> np.ndarray:
+def synthesis(
+    coeffs: np.ndarray, *, grid: GLGrid, convention: SHConvention = PROJECT_CONVENTION
+) -> np.ndarray:
     """Evaluate a real SH expansion on a Gauss–Legendre grid (inverse transform).
 
     Parameters
     ----------
     coeffs : ndarray of shape ((L+1)²,)
-        Real coefficients, ``L == grid.lmax``.
+        Coefficients of a real function, ``L == grid.lmax``, in ``convention``.
     grid : GLGrid
+    convention : SHConvention
+        Convention of ``coeffs`` (converted at the boundary; the project's by default).
 
     Returns
     -------
     ndarray of shape (L+1, 2L+1)
         f(θ_j, φ_k).
     """
-    c = np.asarray(coeffs, dtype=float)
+    c = np.asarray(coeffs)
+    if convention != PROJECT_CONVENTION:
+        c = convert(c, source=convention, target=PROJECT_CONVENTION)
+    c = np.asarray(c, dtype=float)
     lmax = grid.lmax
     if c.shape != (n_coeffs(lmax),):
         raise ValueError(f"expected {(n_coeffs(lmax),)} coefficients, got {c.shape}")
@@ -240,18 +255,22 @@ def synthesis(coeffs: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     return np.fft.irfft(spec, n=nphi, axis=1)
 
 
-def analysis(values: np.ndarray, *, grid: GLGrid) -> np.ndarray:
-    """Real SH coefficients of a map on a Gauss–Legendre grid (forward transform).
+def analysis(
+    values: np.ndarray, *, grid: GLGrid, convention: SHConvention = PROJECT_CONVENTION
+) -> np.ndarray:
+    """SH coefficients of a real map on a Gauss–Legendre grid (forward transform).
 
     Parameters
     ----------
     values : ndarray of shape (L+1, 2L+1)
     grid : GLGrid
+    convention : SHConvention
+        Convention of the returned coefficients (the project's by default).
 
     Returns
     -------
     ndarray of shape ((L+1)²,)
-        Exact for maps band-limited to ``grid.lmax``.
+        Exact for maps band-limited to ``grid.lmax``; complex for a complex convention.
     """
     f = np.asarray(values, dtype=float)
     lmax = grid.lmax
@@ -289,7 +308,10 @@ def analysis(values: np.ndarray, *, grid: GLGrid) -> np.ndarray:
     # Entries with m + k > L were computed from stale buffer rows: they are not coefficients.
     m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
     z[m_idx + k_idx > lmax] = 0.0
-    return _z_to_coeffs(z[..., 0] + 1j * z[..., 1], lmax)
+    out = _z_to_coeffs(z[..., 0] + 1j * z[..., 1], lmax)
+    if convention != PROJECT_CONVENTION:
+        return convert(out, source=PROJECT_CONVENTION, target=convention)
+    return out
 
 
 def directions_to_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -214,3 +214,15 @@ def test_scattered_fit_recovers_band_limited_signal_with_mask() -> None:
     assert abs(fit_n.noise_sigma / sigma - 1) < 0.1
     z = (fit_n.coeffs - c) / fit_n.coeff_std
     assert 0.7 < np.sqrt(np.mean(z**2)) < 1.3
+
+
+def test_transforms_accept_an_explicit_convention() -> None:
+    rng = np.random.default_rng(8)
+    grid = gl_grid(6)
+    c = rng.standard_normal(49)
+    cs_complex = SHConvention(kind="complex", condon_shortley=True)
+    a = analysis(synthesis(c, grid=grid), grid=grid, convention=cs_complex)
+    np.testing.assert_allclose(a, convert(c, source=PROJECT_CONVENTION, target=cs_complex),
+                               atol=1e-13)
+    np.testing.assert_allclose(synthesis(a, grid=grid, convention=cs_complex),
+                               synthesis(c, grid=grid), atol=1e-13)
