@@ -1,0 +1,67 @@
+"""`scatterlab plan / run / runs / resume` end to end on the emulated `sim` bench."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+
+from instrument.cli import main
+
+PLAN = """
+[plan]
+kind = "brdf_in_plane"
+name = "cli test"
+[sample]
+name = "sim-grey"
+[scan]
+theta_i = [30.0]
+theta_r = [10.0, 30.0, 50.0]
+[acquisition]
+mode = "fixed"
+exposure_us = 2000
+dark = "per_point"
+"""
+
+
+def test_plan_dry_run_writes_coverage_png(tmp_path, capsys):
+    plan = tmp_path / "p.toml"
+    plan.write_text(PLAN)
+    png = tmp_path / "cov.png"
+    assert main(["plan", str(plan), "--png", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "3 points" in out and "estimated duration" in out and "travel" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_guard_rejection_is_an_error_not_a_traceback(tmp_path, capsys):
+    plan = tmp_path / "p.toml"
+    plan.write_text(PLAN.replace("[10.0, 30.0, 50.0]", "[-30.0, 10.0]"))
+    assert main(["plan", str(plan)]) == 2
+    out = capsys.readouterr().out
+    assert "rejected before any motion" in out and "incident beam" in out
+
+
+def test_run_on_sim_bench_then_runs_and_resume(tmp_path, capsys):
+    plan = tmp_path / "p.toml"
+    plan.write_text(PLAN)
+    out_dir = tmp_path / "runs"
+    assert main(["run", str(plan), "--out", str(out_dir), "--no-fsync"]) == 0
+    out = capsys.readouterr().out
+    assert "run finished: 3 of 3 points" in out and "run file:" in out
+    path = next(out_dir.glob("*.h5"))
+    with h5py.File(path, "r") as f:
+        e = f["entry"]
+        assert e.attrs["status"] == "finished"
+        assert list(e["points/label"].asstr()[:]) == ["sample"] * 3
+        assert e["data/frames"].shape[0] == 6  # one light + one dark frame per point
+        light = e["data/frame_light"][:]
+        assert light.sum() == 3
+        assert np.all(e["points/signal"][:] > 0)  # the simulated sample scatters light
+        assert np.allclose(sorted(e["points/theta_r"][:]), [10, 30, 50], atol=0.02)
+        ident = e["instrument/sample_theta"].attrs
+        assert ident["vendor"] == "Thorlabs" and ident["driver"] == "thorlabs_apt"
+    assert main(["runs", "--out", str(out_dir)]) == 0
+    listing = capsys.readouterr().out
+    assert "sim-grey" in listing and "finished" in listing and "3/3" in listing
+    assert main(["resume", str(path), "--out", str(out_dir)]) == 0
+    assert "already finished" in capsys.readouterr().out
