@@ -222,9 +222,10 @@ class LightFieldBenchScene:
         src = state.source
         scale = src.power_w / self.reference_power_w if src.on else 0.0
         if scale > 0 and np.any(on_wall):
-            key = np.round(np.stack([y_m[on_wall], theta[on_wall]]), 12)
-            uniq, inverse = np.unique(key, axis=1, return_inverse=True)
-            vals = self.hidden.radiance(uniq[0], uniq[1])
+            ys, ts = y_m[on_wall], theta[on_wall]
+            key = np.round(np.stack([ys, ts]), 12)
+            _, first, inverse = np.unique(key, axis=1, return_index=True, return_inverse=True)
+            vals = self.hidden.radiance(ys[first], ts[first])
             out[on_wall] = scale * vals[np.ravel(inverse)]
         out[on_wall] += self.ambient_radiance
         return out

@@ -230,3 +230,48 @@ def test_analysis_refuses_a_run_that_is_not_a_light_field_scan(tmp_path):
         f.create_group("entry").attrs["plan_kind"] = "brdf_in_plane"
     with pytest.raises(ValueError, match="not a light-field scan"):
         lfio.read_scan(path, _geometry())
+
+
+def test_assembled_rows_are_the_renderers_radiance_times_the_camera_response(scan_run):
+    """Dark, exposure and cos⁴ corrections and the θ mapping together: each row equals
+    the continuous renderer's L(y_m, θ_m) at the pixel rays times the camera's response
+    K·η·étendue/(hν) (DN µs⁻¹ per W m⁻² sr⁻¹), to the sensor noise and the 1 % PRNU."""
+    scene = LightFieldBenchScene.from_config(
+        tomllib.loads(PROFILE.read_text())["simulation"]["scene"])
+    scan = lfio.read_scan(scan_run, lfio.geometry_from_run(scan_run))
+    assert scan.notes == ()
+    p = SensorParams()
+    etendue = math.pi * (0.5e-3 * 1.0) ** 2 * (5.5e-3 / 4.0) ** 2
+    photon_j = 6.62607015e-34 * 299792458.0 / 633e-9
+    response = p.system_gain(0.0, 12) * p.quantum_efficiency * etendue / photon_j * 1e-6
+    rows = [0, 25, 50, 75, 100]
+    truth = scene.hidden.radiance(scan.y_mm[rows, None], scan.theta_rad[rows])
+    meas = scan.radiance[rows]
+    scale = float(np.sum(meas * truth) / np.sum(truth * truth))
+    assert scale == pytest.approx(response, rel=0.01)
+    resid = meas - scale * truth
+    # shot + read noise of an 8-row mean and the PRNU left after averaging 8 rows
+    allowed = np.sqrt(scan.variance[rows] + (0.01 / np.sqrt(8) * meas) ** 2)
+    assert np.sqrt(np.mean((resid / allowed) ** 2)) < 1.5
+
+
+def test_per_point_dark_frames_give_the_same_rows(scan_run, tmp_path):
+    """A scan with a dark frame after every point reproduces the rows of the scan with
+    one dark frame at the start, to the noise of the two."""
+    plan = tmp_path / "lf.toml"
+    plan.write_text(EXAMPLE.read_text().replace('dark = "start"', 'dark = "per_point"')
+                    .replace("step = 1.0", "step = 25.0"))
+    out = tmp_path / "runs"
+    assert main(["run", str(plan), "--bench", "sim-lightfield", "--out", str(out),
+                 "--no-fsync", "--quiet"]) == 0
+    (run,) = sorted(out.glob("*.h5"))
+    g = lfio.geometry_from_run(run)
+    coarse = lfio.read_scan(run, g)
+    fine = lfio.read_scan(scan_run, g)
+    assert coarse.notes == () and coarse.y_mm.size == 5
+    rows = [int(np.argmin(np.abs(fine.y_mm - y))) for y in coarse.y_mm]
+    np.testing.assert_allclose(fine.y_mm[rows], coarse.y_mm, atol=2e-3)
+    diff = coarse.radiance - fine.radiance[rows]
+    sigma = np.sqrt(coarse.variance + fine.variance[rows])
+    assert abs(float(np.mean(diff / sigma))) < 0.2   # no offset from the dark handling
+    assert float(np.std(diff / sigma)) < 1.5
