@@ -230,13 +230,13 @@ class InPlaneKinematics(Kinematics):
 
     @staticmethod
     def _signed(theta: float, phi: float) -> float | None:
-        if abs(theta) < _EPS:
-            return 0.0
         p = phi % 360.0
         if min(p, 360.0 - p) < 1e-6:
             return theta
         if abs(p - 180.0) < 1e-6:
             return -theta
+        if abs(theta) < _EPS:  # at the pole the azimuth does not matter
+            return 0.0
         return None
 
 
