@@ -15,6 +15,7 @@ microseconds, optical power in watts, wavelengths in nanometres.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import math
 import threading
@@ -27,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import (
+    DeviceError,
     DeviceTimeout,
     LimitError,
     MotionError,
@@ -272,8 +274,11 @@ class MotionAxis(Device):
         self._do_disable()
 
     def home(self, *, wait: bool = True, timeout: float = 120.0) -> None:
-        """Find the reference position (the axis's zero)."""
+        """Find the reference position (the axis's zero). The axis must be enabled."""
         self._check_open("home")
+        if not self._do_status().is_enabled:
+            raise StateError("axis is disabled", device=self.name, command="home",
+                             hint="call enable() first")
         self._target = None
         self._do_home()
         if wait:
@@ -336,9 +341,14 @@ class MotionAxis(Device):
         return status.position
 
     def stop(self) -> None:
-        """Stop any motion now. Always allowed, also on a device in error."""
+        """Stop any motion now. Always allowed, also on a device in error.
+
+        The commanded target is forgotten: a later :meth:`wait` checks no arrival, and a
+        :meth:`move_by` counts from where the axis came to rest.
+        """
         if self._closed:
             return
+        self._target = None
         self._do_stop()
 
     @property
@@ -380,7 +390,13 @@ class MotionAxis(Device):
             raise ValueError("timeout must be > 0")
         deadline = time.monotonic() + timeout
         while True:
-            status = self._do_status()
+            try:
+                status = self._do_status()
+            except DeviceError:
+                # Whatever broke the poll, the stage must not keep moving unattended.
+                with contextlib.suppress(DeviceError):
+                    self.stop()
+                raise
             if status.error:
                 self.stop()
                 self._raise_status_error(status, command)

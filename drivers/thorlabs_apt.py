@@ -67,7 +67,6 @@ from drivers.errors import (
     DeviceTimeout,
     LimitError,
     ProtocolError,
-    StateError,
 )
 from drivers.transport import SerialChannel, open_serial
 
@@ -567,11 +566,8 @@ class AptMotor(MotionAxis):
         self._set_enable(False)
 
     def _do_home(self) -> None:
-        # A disabled channel ignores MOT_MOVE_HOME without a word; an axis homed before
-        # would then look homed at once and home() would return having done nothing.
-        if not self._do_status().is_enabled:
-            raise StateError("axis is disabled", device=self.name, command="MOT_MOVE_HOME",
-                             hint="call enable() first")
+        # MotionAxis.home() has checked the channel is enabled: a disabled channel ignores
+        # MOT_MOVE_HOME without a word, and an axis homed before would look done at once.
         # Home parameters again: a controller power-cycled since open is back to zero
         # home velocity, and homing would never end.
         self._write_home_params()

@@ -133,6 +133,22 @@ class MotionAxisContract:
             time.sleep(0.005)
         assert not ready_axis.is_moving
 
+    def test_after_stop_wait_checks_no_target_and_move_by_counts_from_rest(self, ready_axis):
+        ready_axis.velocity = ready_axis.velocity / 100.0
+        ready_axis.move_to(CONTRACT_RANGE[1])
+        ready_axis.stop()
+        rest = ready_axis.wait(self.move_timeout)  # no MotionError: the target is gone
+        assert rest < CONTRACT_RANGE[1] - ready_axis.position_tolerance
+        ready_axis.velocity = ready_axis.velocity * 100.0
+        ready_axis.move_by(-1.0, wait=True, timeout=self.move_timeout)
+        assert ready_axis.position == pytest.approx(rest - 1.0,
+                                                    abs=2 * ready_axis.position_tolerance)
+
+    def test_home_on_a_disabled_axis_is_refused(self, ready_axis):
+        ready_axis.disable()
+        with pytest.raises(StateError):
+            ready_axis.home(timeout=self.move_timeout)
+
     def test_velocity_and_acceleration_round_trip(self, ready_axis):
         v = ready_axis.velocity
         ready_axis.velocity = v / 2.0

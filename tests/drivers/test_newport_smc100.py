@@ -90,6 +90,9 @@ def test_identity_transcript():
 
 def test_home_from_not_referenced_transcript():
     steps = [*CONNECT,
+             # home(): the base class checks the axis is enabled (TS + TP) ...
+             (b"1TS\r\n", b"1TS00000A\r\n"), (b"1TP\r\n", b"1TP3.000000\r\n"),
+             # ... then the driver reads the state to choose OR or RS+OR
              (b"1TS\r\n", b"1TS00000A\r\n"),
              (b"1OR\r\n", b""),
              (b"1TE\r\n", b"1TE@\r\n"),
@@ -177,6 +180,8 @@ def test_velocity_acceleration_and_stop_transcript():
 def test_home_when_referenced_resets_first_and_reapplies_velocity():
     steps = [*CONNECT,
              (b"1VA5\r\n", b""), (b"1TE\r\n", b"1TE@\r\n"),
+             # the base class's enabled check (TS + TP), then the driver's state check
+             READY_TS, (b"1TP\r\n", b"1TP0.000000\r\n"),
              READY_TS,
              (b"1RS\r\n", b""),
              (b"1TS\r\n", b""),  # rebooting: deaf

@@ -102,8 +102,8 @@ def test_k10cr1_open_identify_home_move_stop_transcript():
     steps = open_steps(info_reply(55000123, b"K10CR1"), K10_HOME, K10_VEL,
                        stale=H("91 04 0E 00 81 50") + bytes(14))
     steps += [
-        # home: enabled check, parameters again, then MOT_MOVE_HOME; MOVE_HOMED arrives
-        # unsolicited
+        # home: the base class's enabled check, parameters again, then MOT_MOVE_HOME;
+        # MOVE_HOMED arrives unsolicited
         *k10_status("00 01 00 80", "00 00 00 00"),  # enabled | connected, not homed
         (H("40 04 0E 00 D0 01") + H(K10_HOME), b""),
         (H("41 04 01 00 50 01"), H("42 04 0E 00 81 50") + H(K10_HOME)),
@@ -667,7 +667,7 @@ def test_home_on_a_disabled_channel_is_refused_not_silently_skipped():
     motor.disable()
     with pytest.raises(StateError) as info:
         motor.home(timeout=5.0)  # the controller would ignore MOT_MOVE_HOME
-    assert info.value.device == "ax" and info.value.command == "MOT_MOVE_HOME"
+    assert info.value.device == "ax" and info.value.command == "home"
     assert motor.position == pytest.approx(5.0, abs=motor.position_tolerance)
     motor.enable()
     motor.home(timeout=5.0)
