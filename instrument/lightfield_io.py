@@ -395,6 +395,7 @@ def read_scan(path: str | Path, geometry: LightFieldGeometry) -> MeasuredScan:
         iz = axes.index("camera_z")
         iyaw = axes.index("detector_theta") if "detector_theta" in axes else None
         dark_frames = [k for k in range(len(fpoint)) if not flight[k]]
+        shared_darks: dict[tuple[int, ...], NDArray[np.float64]] = {}
         ys, ths, rads, vars_, exps, idxs = [], [], [], [], [], []
         for row, pidx in enumerate(index):
             if labels[row] != "lightfield" or status[row] != 0:
@@ -413,10 +414,21 @@ def read_scan(path: str | Path, geometry: LightFieldGeometry) -> MeasuredScan:
             if own:
                 dark = np.mean([frames[k].astype(float) for k in own], axis=0)
             elif other:
-                dark = np.mean([frames[k].astype(float) for k in other], axis=0)
+                key = tuple(other)
+                if key not in shared_darks:
+                    shared_darks[key] = np.mean([frames[k].astype(float) for k in other],
+                                                axis=0)
+                dark = shared_darks[key]
+            elif dark_frames:
+                # the black level dominates a dark frame; its dark current (∝ t) is small,
+                # so the nearest exposure is the best stand-in
+                near = min(dark_frames, key=lambda k: abs(fexp[k] - t))
+                dark = frames[near].astype(float)
+                notes.append(f"point {int(pidx)}: no dark frame at {t:g} µs; used the one "
+                             f"at {fexp[near]:g} µs")
             else:
                 dark = np.zeros((h, w))
-                notes.append(f"point {int(pidx)}: no dark frame at {t:g} µs; none subtracted")
+                notes.append(f"point {int(pidx)}: no dark frame at all; none subtracted")
             img = (frames[best].astype(float) - dark) / (t * cos4)
             ys.append(float(geometry.pinhole_y_mm(pos[row, iz])))
             yaw = None if iyaw is None else float(pos[row, iyaw])

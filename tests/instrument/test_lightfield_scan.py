@@ -255,12 +255,20 @@ def test_assembled_rows_are_the_renderers_radiance_times_the_camera_response(sca
     assert np.sqrt(np.mean((resid / allowed) ** 2)) < 1.5
 
 
-def test_per_point_dark_frames_give_the_same_rows(scan_run, tmp_path):
-    """A scan with a dark frame after every point reproduces the rows of the scan with
-    one dark frame at the start, to the noise of the two."""
+@pytest.mark.parametrize("acquisition", [
+    {'dark = "start"': 'dark = "per_point"'},
+    {'mode = "fixed"': 'mode = "auto"\nmax_exposure_us = 20000', "exposure_us = 5000":
+     "exposure_us = 2000"},
+], ids=["per-point-dark", "auto-exposure"])
+def test_other_acquisition_policies_give_the_same_rows(scan_run, tmp_path, acquisition):
+    """A dark frame after every point, or auto-exposure (other exposures than the start
+    dark frame's), reproduce the rows of the fixed-exposure scan to the noise of the two."""
     plan = tmp_path / "lf.toml"
-    plan.write_text(EXAMPLE.read_text().replace('dark = "start"', 'dark = "per_point"')
-                    .replace("step = 1.0", "step = 25.0"))
+    text = EXAMPLE.read_text().replace("step = 1.0", "step = 25.0")
+    for old, new in acquisition.items():
+        assert old in text
+        text = text.replace(old, new)
+    plan.write_text(text)
     out = tmp_path / "runs"
     assert main(["run", str(plan), "--bench", "sim-lightfield", "--out", str(out),
                  "--no-fsync", "--quiet"]) == 0
@@ -268,7 +276,10 @@ def test_per_point_dark_frames_give_the_same_rows(scan_run, tmp_path):
     g = lfio.geometry_from_run(run)
     coarse = lfio.read_scan(run, g)
     fine = lfio.read_scan(scan_run, g)
-    assert coarse.notes == () and coarse.y_mm.size == 5
+    assert coarse.y_mm.size == 5
+    assert all("used the one at" in n for n in coarse.notes)  # auto: nearest dark frame
+    if 'mode = "auto"' in text:  # the auto exposures differ from the start dark frame's
+        assert np.all(coarse.exposure_us != 2000.0) and len(coarse.notes) == 5
     rows = [int(np.argmin(np.abs(fine.y_mm - y))) for y in coarse.y_mm]
     np.testing.assert_allclose(fine.y_mm[rows], coarse.y_mm, atol=2e-3)
     diff = coarse.radiance - fine.radiance[rows]
