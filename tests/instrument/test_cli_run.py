@@ -65,3 +65,18 @@ def test_run_on_sim_bench_then_runs_and_resume(tmp_path, capsys):
     assert "sim-grey" in listing and "finished" in listing and "3/3" in listing
     assert main(["resume", str(path), "--out", str(out_dir)]) == 0
     assert "already finished" in capsys.readouterr().out
+
+
+def test_every_example_plan_dry_runs(tmp_path, capsys):
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    mine = ["brdf_inplane", "brdf_hemisphere", "lightfield", "calibration_dark",
+            "calibration_reference", "calibration_signature", "calibration_flat",
+            "calibration_ptc"]
+    for name in mine:
+        bench = "sim_out_of_plane" if name == "brdf_hemisphere" else "sim"
+        rc = main(["plan", str(examples / f"{name}.toml"), "--bench", bench,
+                   "--png", str(tmp_path / f"{name}.png")])
+        assert rc == 0, capsys.readouterr().out
+        assert (tmp_path / f"{name}.png").exists()
