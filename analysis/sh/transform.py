@@ -33,7 +33,7 @@ from analysis.sh.convention import (
     lmax_from_size,
     n_coeffs,
 )
-from analysis.sh.legendre import gauss_legendre, iterate_degrees, legendre_table, sectoral_seeds
+from analysis.sh.legendre import gauss_legendre, iterate_degrees, sectoral_seeds
 
 __all__ = [
     "GLGrid",
@@ -326,6 +326,21 @@ def directions_to_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return theta, phi
 
 
+def _legendre_all_orders(lmax: int, theta: np.ndarray) -> np.ndarray:
+    """λ_l^m at scattered points, table[l, m] of shape (L+1, L+1, N), all orders at once.
+
+    The vectorised recurrence of the transforms; values below 2^−300 come back as 0, which
+    is harmless in a design matrix (:func:`analysis.sh.legendre.legendre_table` keeps them).
+    """
+    x, s = np.cos(theta), np.sin(theta)
+    mant, expo = sectoral_seeds(s, lmax)
+    table = np.zeros((lmax + 1, lmax + 1, theta.size))
+    m_all = np.arange(lmax + 1)
+    for k, n, lam in iterate_degrees(0, lmax + 1, lmax, x, mant, expo):
+        table[m_all[:n] + k, m_all[:n]] = lam[:n]
+    return table
+
+
 def real_sh_matrix(lmax: int, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """Real orthonormal harmonics at scattered points (the design matrix of a fit).
 
@@ -344,7 +359,7 @@ def real_sh_matrix(lmax: int, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
     ph = np.atleast_1d(np.asarray(phi, dtype=float)).ravel()
     if th.shape != ph.shape:
         raise ValueError("theta and phi must have the same shape")
-    table = legendre_table(lmax, th)
+    table = _legendre_all_orders(lmax, th)
     y = np.empty((th.size, n_coeffs(lmax)))
     l_all, m_all = degrees_orders(lmax)
     for m in range(lmax + 1):

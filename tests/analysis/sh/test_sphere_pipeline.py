@@ -127,3 +127,24 @@ def test_mirror_sphere_gives_the_lighting() -> None:
     with pytest.raises(ValueError):
         mirror_sphere_lighting(rend.radiance, geo, lmax=2, reflectance=0.0)
     assert lambertian_filter(2).values[0] == pytest.approx(np.pi)
+
+
+def test_m12_on_a_rendered_diffuse_plus_specular_sphere() -> None:
+    """M12 recovers K_s·A_l of the specular lobe with K_d unknown, D_lm from the lighting."""
+    from analysis.sh.identities import diffuse_plus_specular
+    from analysis.sh.sphere_image import image_fit_operator, images_to_sh
+
+    env = random_environment(np.random.default_rng(31))
+    size, lmax, s, ks = 48, 24, 40.0, 0.5
+    rend = render_spheres([env], Phong(kd=0.5, ks=ks, s=s, clip_horizon=False), size=size,
+                          n_theta=128)
+    geo = sphere_geometry((size, size), center=rend.center, radius=rend.radius,
+                          max_view_angle_deg=85.0)
+    lig = environment_coefficients(env, 30, n_theta=96)
+    op = image_fit_operator(geo, lmax=lmax)
+    d_img = irradiance_image(lig, geo)  # E(n) per pixel, fitted in the reflected domain
+    b, d = images_to_sh(np.stack([rend.radiance[0], d_img]), op, geo).T
+    res = diffuse_plus_specular(b, lig[: (lmax + 1) ** 2], d)
+    a = phong_filter(lmax, s).values
+    np.testing.assert_allclose(res.estimate[:10], ks * a[1:11], rtol=0.03)
+    assert np.all(res.error[:10] < 0.03)

@@ -50,8 +50,10 @@ def _relight_l1(seed: int, size: int = 64, lmax: int = 20) -> tuple[float, float
     geo = sphere_geometry((size, size), center=r0.center, radius=r0.radius,
                           max_view_angle_deg=85.0)
     truth = {(i, j): renders[j].radiance[i] for i in range(2) for j in range(2)}
-    coeffs = {k: image_to_sh(_noisy(v, geo.observed, rng), geo, lmax=lmax).coeffs
-              for k, v in truth.items()}
+    keys = list(truth)
+    op = image_fit_operator(geo, lmax=lmax)  # one fit operator for the four images
+    stack = np.stack([_noisy(truth[k], geo.observed, rng) for k in keys])
+    coeffs = dict(zip(keys, images_to_sh(stack, op, geo).T, strict=True))
     b22 = render_missing_image(coeffs[0, 0], coeffs[0, 1], coeffs[1, 0], route="brdf")
     pred = sh_to_image(b22, geo)
     m = geo.observed
