@@ -8,7 +8,8 @@ by :class:`hw_mocks.pty_server.PtyServer`), this times
   request/reply round trip through the driver's full stack (formatting, stale-input
   discard, framing, decoding, typed errors);
 - ``status()``: the driver's full status snapshot (SMC100: ``TS`` then ``TP``, two round
-  trips; APT: one status request).
+  trips; APT: K10CR1 status bits then position counter, two round trips; KDC101 one DC
+  status-update request).
 
 Reported per case: operations per second, median and 99th-percentile latency. Timings
 are measurements for comparison, not pass/fail gates.
@@ -34,17 +35,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.base import MotionAxis
 from drivers.newport_smc100 import Smc100Axis
+from drivers.thorlabs_apt import AptMotor
 from drivers.transport import add_url_handler_package
 from hw_mocks.clock import ScaledClock
 from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.pty_server import PtyServer
-
-try:  # the APT driver is another engineer's module; bench it where it exists
-    from drivers.thorlabs_apt import AptMotor
-    from hw_mocks.urlhandler.protocol_simapt import make_emulator as make_apt_emulator
-except ImportError:  # pragma: no cover - depends on the tree
-    AptMotor = None
-    make_apt_emulator = None
+from hw_mocks.urlhandler.protocol_simapt import make_emulator as make_apt_emulator
 
 SPEED = 100.0
 
@@ -115,11 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     seconds = 0.5 if args.quick else args.seconds
     add_url_handler_package("hw_mocks.urlhandler")
 
-    drivers: list[tuple[str, Callable]] = [("SMC100", smc100)]
-    if AptMotor is not None:
-        drivers.append(("APT K10CR1", apt))
-    else:
-        print("drivers.thorlabs_apt not found: benchmarking the SMC100 only")
+    drivers: list[tuple[str, Callable]] = [("SMC100", smc100), ("APT K10CR1", apt)]
 
     print(f"python {platform.python_version()} on {platform.machine()}, "
           f"{seconds:g} s per case")

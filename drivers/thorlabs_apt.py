@@ -261,11 +261,13 @@ class AptMotor(MotionAxis):
             self._chan = SerialChannel(port_obj, device=name)
             self._open_sequence()
         except BaseException:
-            # A failed constructor leaves nothing open.
-            try:
-                port_obj.close()
-            except (serial.SerialException, OSError):
-                log.debug("%s: closing the port after a failed open failed too", name)
+            # A failed constructor leaves nothing open that it opened itself; a port the
+            # caller handed in stays the caller's (ADR 0002).
+            if not isinstance(port, serial.SerialBase):
+                try:
+                    port_obj.close()
+                except (serial.SerialException, OSError):
+                    log.debug("%s: closing the port after a failed open failed too", name)
             raise
 
     # ------------------------------------------------------------------ open

@@ -240,14 +240,14 @@ def test_status_decoding_of_limits_homing_and_errors():
     port.assert_complete()
 
 
-def test_wrong_model_fails_open_and_closes_the_port():
+def test_wrong_model_fails_open_and_leaves_the_callers_port_to_the_caller():
     steps = open_steps(info_reply(27000456, b"KDC101", stage_id=6), K10_HOME, K10_VEL)[:2]
     port = TranscriptSerial(steps, baudrate=115200)
     with pytest.raises(ConnectionFailed) as info:
         AptMotor(port, name="rot", stage="K10CR1", timeout=0.2, **FAST)
     assert info.value.device == "rot" and info.value.command == "HW_REQ_INFO"
     assert "KDC101" in str(info.value)
-    assert not port.is_open
+    assert port.is_open  # handed in by the caller: still the caller's (ADR 0002)
 
 
 def test_rich_response_error_is_a_controller_error_with_code():
@@ -684,14 +684,15 @@ def test_motion_refused_in_error_state_names_the_command():
     assert info.value.code == 7
 
 
-def test_failed_open_leaves_the_port_closed():
+def test_failed_open_is_connection_failed_and_the_handed_in_port_stays_open():
     port = serial.serial_for_url("simapt://dead?speed=200", baudrate=115200)
     registry.get("simapt", "dead").faults.randomly(FaultKind.DROP, 1.0)
     with pytest.raises(ConnectionFailed) as info:
         AptMotor(port, name="dead", timeout=0.05, retries=0, **FAST)
     assert info.value.command == "HW_REQ_INFO" and info.value.device == "dead"
     assert isinstance(info.value.__cause__, DeviceTimeout)
-    assert not port.is_open
+    assert port.is_open  # the caller's port (ADR 0002)
+    port.close()
 
 
 def test_wrong_baud_rate_is_connection_failed_naming_the_baud_rate():
@@ -703,7 +704,7 @@ def test_wrong_baud_rate_is_connection_failed_naming_the_baud_rate():
     err = info.value
     assert err.device == "baud" and err.command == "HW_REQ_INFO"
     assert "115200" in str(err) and isinstance(err.__cause__, DeviceTimeout)
-    assert not port.is_open
+    assert port.is_open  # the caller's port (ADR 0002)
     assert registry.get("simapt", "baud").received_log == b""  # nothing got through
 
 
