@@ -99,7 +99,7 @@ def main() -> None:
     theta_i = [15.0, 45.0] if args.quick else [10.0, 20.0, 30.0, 40.0, 50.0]
     add_url_handler_package("hw_mocks.urlhandler")
     profile = parse_profile(PROFILE)
-    spec = parse_plan(plan_text(theta_i, 100 if not args.quick else 50, "optimised"))
+    spec = parse_plan(plan_text(theta_i, 108 if not args.quick else 50, "optimised"))
     plan = build_plan(spec, profile, start={"sample_theta": 0.0, "detector_theta": 0.0})
     raster = build_plan(replace(spec, order="raster"), profile)
     dyn = dynamics_of(profile, plan.axes)
