@@ -24,7 +24,8 @@ from instrument.events import Event, Paused, RunFinished, RunStarted
 from instrument.kinematics import Angles
 from instrument.plans.build import Plan
 from instrument.plans.commands import ScanPoint
-from instrument.plans.planfile import parse_plan
+from instrument.plans.planfile import PlanError, parse_plan
+from instrument.profile import FieldError
 from instrument.storage import RunHeader, RunStore, recover
 
 __all__ = ["DEFAULT_RUNS_DIR", "new_run_id", "plan_from_run", "resume_run", "start_run"]
@@ -105,11 +106,41 @@ def _track(engine: RunEngine, catalog: Catalog, run_id: str) -> None:
     engine.subscribe(on_event)
 
 
+def check_bench_for_plan(plan: Plan, bench: Bench) -> None:
+    """Refuse, before any file or motion, a plan the bench cannot acquire.
+
+    Raises
+    ------
+    PlanError
+        A detector the policy names is missing, or dark frames are asked for and the bench
+        has no source to turn off.
+    """
+    pol = plan.spec.acquisition
+    errors = []
+    if pol.uses_camera and bench.camera is None:
+        errors.append(FieldError("acquisition.detectors",
+                                 f"bench {bench.profile.name!r} has no camera"))
+    if pol.uses_power_meter and bench.power_meter is None:
+        errors.append(FieldError("acquisition.detectors",
+                                 f"bench {bench.profile.name!r} has no power meter"))
+    needs_dark = pol.dark != "none" or any(not p.light for p in plan.points)
+    if needs_dark and bench.source is None:
+        errors.append(FieldError("acquisition.dark", f"bench {bench.profile.name!r} has no "
+                                 "light source to turn off for dark frames"))
+    missing = [r for r in plan.axes if r not in bench.axes]
+    if missing:
+        errors.append(FieldError("scan", f"bench {bench.profile.name!r} has no axis "
+                                 f"{', '.join(missing)}"))
+    if errors:
+        raise PlanError(f"plan {plan.spec.name!r} on bench {bench.profile.name!r}", errors)
+
+
 def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_DIR,
               fsync: bool = True, sync_interval_s: float = 0.25,
               min_free_bytes: int = 64 << 20, catalog: bool = True,
               run_id: str | None = None) -> RunEngine:
     """Create the run file and catalog row; return the (not yet started) engine."""
+    check_bench_for_plan(plan, bench)
     runs_dir = Path(runs_dir)
     run_id = run_id or new_run_id(plan.kind)
     header = header_for(plan, bench, run_id)
@@ -155,6 +186,7 @@ def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
     path = Path(path)
     recover(path)
     plan = plan_from_run(path, bench)
+    check_bench_for_plan(plan, bench)
     store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
                                   min_free_bytes=min_free_bytes)
     store.event({"kind": "resumed", "n_done": len(done)})

@@ -178,3 +178,18 @@ def test_subscriber_errors_do_not_stop_the_run(tmp_path, capsys):
     engine.subscribe(broken)
     assert engine.run() is EngineState.FINISHED
     assert "GUI bug" in capsys.readouterr().err
+
+
+def test_bench_missing_what_the_plan_needs_is_refused_before_anything(tmp_path):
+    from instrument.plans import PlanError
+
+    bench = ideal_bench()
+    del bench.devices["source"]
+    del bench.devices["power_meter"]
+    plan = build_plan(parse_plan(inplane_plan(dark="per_point")), bench.profile)
+    with pytest.raises(PlanError) as exc:
+        start_run(plan, bench, runs_dir=tmp_path)
+    msg = str(exc.value)
+    assert "no power meter" in msg and "no\n" not in msg and "light source" in msg
+    assert not list(tmp_path.iterdir())  # no run file was created
+    assert all(a.moves == 0 for a in bench.axes.values())
