@@ -158,7 +158,8 @@ def _point_noise(f: np.ndarray, ti: np.ndarray, tr: np.ndarray, option: ScanOpti
     s = rate_e * t_us * 1e-6
     n_pix = cam.n_pixels if cam.n_pixels is not None else 1024 * 1024
     k = cam.noise.system_gain_dn_per_e
-    pix = np.array([cam.noise.difference_noise_dn(float(e), n_averaged=option.frames) / k
+    pix = np.array([cam.noise.difference_noise_dn(float(e), n_averaged=option.frames,
+                                                  n_dark_averaged=option.frames) / k
                     for e in t_us])
     var = s / option.frames + n_pix * pix**2
     return np.sqrt(var) / np.maximum(s, 1e-300), t_us

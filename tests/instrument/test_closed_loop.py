@@ -151,14 +151,15 @@ def _planner_inputs(setup: ScanSetup, sample: Sample):
     return spec, profile, prior, replace(det, fill=setup.fill)
 
 
-def test_planner_prediction_matches_the_fit_uncertainty() -> None:
+@pytest.mark.parametrize("frames", [1, 4])
+def test_planner_prediction_matches_the_fit_uncertainty(frames: int) -> None:
     from analysis.brdf.fit import fit_brdf
     from instrument.tradeoff import ScanOption, predict
 
-    setup = ScanSetup(power_w=2e-8, fill=0.5, max_exposure_us=3000.0)
+    setup = ScanSetup(power_w=2e-8, fill=0.5, max_exposure_us=1000.0, frames=frames)
     sample = SAMPLES[1]
     spec, profile, prior, det = _planner_inputs(setup, sample)
-    res = predict(spec, profile, ScanOption(10.0, 3000.0, 1), prior=prior, det=det)
+    res = predict(spec, profile, ScanOption(10.0, 1000.0, frames), prior=prior, det=det)
     r = render(setup, sample)
     a = r.angles_rad
     pts = reduce_seed(r, 5)

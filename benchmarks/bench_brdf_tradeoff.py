@@ -1,0 +1,169 @@
+"""Speed against accuracy of an in-plane BRDF scan: duration vs σ(α) over scan options.
+
+For every option — θr step (angular density), exposure cap and frames averaged — this
+measures
+
+* the scan duration from the engine's estimator (``Plan.estimate`` motion on the optimised
+  route + ``AcquisitionPolicy.estimated_seconds`` per point, 20 ms readout per frame),
+* the **measured** scatter of the fitted GGX width α over sensor seeds: every point rendered
+  by the simulated camera/scene/sensor (tests/instrument/sim_scan.py, no motion emulators),
+  reduced (analysis.brdf_reduction) and fitted with Lambertian + Cook–Torrance GGX,
+* the planner's **predicted** σ(α) (instrument.tradeoff: Fisher information of the camera
+  noise model),
+
+then draws the Pareto plot (docs/brdf_tradeoff_pareto.png) and answers "the fastest scan
+with σ(α) ≤ X" for a few X. Sample: ρd = 0.3, ks = 0.5, α = 0.2 under a 20 nW beam
+(a neutral-density-filtered source: exposures of milliseconds, so they count).
+
+Run: ``python benchmarks/bench_brdf_tradeoff.py [--quick] [--seeds N] [--png PATH]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from analysis.brdf import get_model  # noqa: E402
+from analysis.brdf.fit import fit_brdf  # noqa: E402
+from instrument.plans.planfile import parse_plan  # noqa: E402
+from instrument.profile import parse_profile  # noqa: E402
+from instrument.tradeoff import (  # noqa: E402
+    ScanOption,
+    fastest_for_target,
+    pareto_front,
+    predict,
+    setup_from_profile,
+)
+from tests.instrument.sim_scan import (  # noqa: E402
+    SAMPLES,
+    ScanSetup,
+    profile_text,
+    reduce_seed,
+    render,
+)
+
+READOUT_S = 0.02
+PARAM = "ggx.alpha"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="8 options, 4 seeds")
+    ap.add_argument("--seeds", type=int, default=None, help="seeds per option (default 16)")
+    ap.add_argument("--png", default=str(ROOT / "docs" / "brdf_tradeoff_pareto.png"))
+    args = ap.parse_args()
+    steps = (10.0, 20.0) if args.quick else (5.0, 10.0, 20.0, 30.0)
+    caps = (1e3, 1e4) if args.quick else (1e3, 1e4, 1e5)
+    frames = (1, 4) if args.quick else (1, 2, 4, 8)
+    n_seeds = args.seeds or (4 if args.quick else 16)
+    sample = SAMPLES[1]
+    model = get_model(sample.model)
+    j = model.param_names.index(PARAM)
+    base = ScanSetup(power_w=2e-8, fill=0.5)
+    profile = parse_profile(profile_text(base, sample))
+    rendered: dict[float, object] = {}
+    rows = []
+    t0 = time.perf_counter()
+    for step in steps:
+        for cap in caps:
+            for nf in frames:
+                setup = replace(base, theta_r_step=step, max_exposure_us=cap, frames=nf)
+                spec = parse_plan(setup.plan_text())
+                prior, det = setup_from_profile(profile, spec, readout_s=READOUT_S)
+                det = replace(det, fill=setup.fill)
+                pred = predict(spec, profile, ScanOption(step, cap, nf), prior=prior, det=det)
+                if step not in rendered:
+                    rendered[step] = render(setup, sample)
+                r = replace(rendered[step], setup=setup)
+                a = r.angles_rad
+                est, rep = [], []
+                for seed in range(n_seeds):
+                    pts = reduce_seed(r, 1000 + seed)
+                    fit = fit_brdf(model, pts.brdf, *a.T, sigma=pts.u_point)
+                    est.append(fit.params[j])
+                    rep.append(fit.stderr[j])
+                rows.append({
+                    "step": step, "cap_us": cap, "frames": nf, "points": pred.n_points,
+                    "duration_s": pred.duration_s, "motion_s": pred.motion_s,
+                    "acq_s": pred.acquisition_s, "pred": pred.sigma[PARAM],
+                    "measured": float(np.std(est, ddof=1)), "reported": float(np.mean(rep)),
+                    "bias": float(np.mean(est) - sample.params[j]), "result": pred,
+                })
+    wall = time.perf_counter() - t0
+    print(f"{len(rows)} options × {n_seeds} seeds in {wall:.1f} s; sample {sample.model} "
+          f"{sample.params}, σ of {PARAM}")
+    print("| θr step | cap (ms) | frames | points | duration (s) | motion (s) "
+          "| exposure+readout (s) "
+          "| σ(α) measured | σ(α) reported | σ(α) predicted | Pareto |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:-:|")
+    results = [r["result"] for r in rows]
+    front = {id(x) for x in pareto_front(results, PARAM)}
+    for r in sorted(rows, key=lambda r: r["duration_s"]):
+        print(f"| {r['step']:g}° | {r['cap_us'] / 1e3:g} | {r['frames']} | {r['points']} | "
+              f"{r['duration_s']:.1f} | {r['motion_s']:.1f} | {r['acq_s']:.1f} | "
+              f"{r['measured']:.2e} | {r['reported']:.2e} | {r['pred']:.2e} | "
+              f"{'◆' if id(r['result']) in front else ''} |")
+    ratio = np.array([r["pred"] / r["measured"] for r in rows])
+    print(f"predicted/measured σ(α): median {np.median(ratio):.2f}, range "
+          f"{ratio.min():.2f}–{ratio.max():.2f} ({n_seeds} seeds: measured σ ±"
+          f"{100 / np.sqrt(2 * (n_seeds - 1)):.0f} %)")
+    for target in (1e-3, 3e-4, 1e-4):
+        best = fastest_for_target(results, PARAM, target)
+        if best is None:
+            print(f"σ(α) ≤ {target:g}: no option reaches it")
+        else:
+            m = next(r for r in rows if r["result"] is best)
+            print(f"σ(α) ≤ {target:g}: {best.option.label()} — {best.duration_s:.1f} s, "
+                  f"predicted {best.sigma[PARAM]:.2e}, measured {m['measured']:.2e}")
+    _plot(rows, front, Path(args.png))
+    print(f"Pareto plot: {args.png}")
+    return 0
+
+
+def _plot(rows: list[dict], front: set[int], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    markers = {1: "o", 2: "s", 4: "^", 8: "D"}
+    steps = sorted({r["step"] for r in rows})
+    colors = dict(zip(steps, plt.cm.viridis(np.linspace(0, 0.9, len(steps))), strict=True))
+    for r in rows:
+        ax.plot(r["duration_s"], r["measured"], markers.get(r["frames"], "o"),
+                color=colors[r["step"]], ms=6)
+        ax.plot(r["duration_s"], r["pred"], markers.get(r["frames"], "o"), mfc="none",
+                color=colors[r["step"]], ms=8, alpha=0.6)
+    fr = sorted((r for r in rows if id(r["result"]) in front), key=lambda r: r["duration_s"])
+    ax.step([r["duration_s"] for r in fr], [r["pred"] for r in fr], where="post", color="k",
+            lw=1.0, label="Pareto front (predicted)")
+    for s in steps:
+        ax.plot([], [], "o", color=colors[s], label=f"θr step {s:g}°")
+    for f, mk in markers.items():
+        if any(r["frames"] == f for r in rows):
+            ax.plot([], [], mk, color="grey", label=f"{f} frame(s)")
+    ax.plot([], [], "o", mfc="none", color="grey", label="open: predicted; filled: measured")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("scan duration (s): engine estimate, motion + exposures + readout")
+    ax.set_ylabel("σ(α) of Lambertian + GGX fit")
+    ax.set_title("In-plane BRDF scan: speed vs accuracy (simulated bench)", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
