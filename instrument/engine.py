@@ -245,26 +245,34 @@ class RunEngine:
             status = "failed"
             self._emit(Fault(getattr(err, "device", None) or "engine", str(err), "abort", None))
         finally:
+            notes = [self._message] if self._message else []
             problems = self.bench.make_safe()
             if problems:
-                self._message += "; could not make safe: " + "; ".join(problems)
+                notes.append("could not make safe: " + "; ".join(problems))
             try:
                 self._writer.drain()
             except StorageError as err:
                 self._store_broken = True
-                self._message += f"; last point not stored: {err}"
+                notes.append(f"last point not stored: {err}")
             self._writer.stop()
-            try:
-                if self._store_broken:
-                    raise StorageError(5, "the run file had a write error")
-                if status == "paused":
-                    self.store.event({"kind": "paused", "reason": "run stopped while paused"})
-                self.store.close(status)
-            except Exception as err:
-                self.store.abandon()
-                if status == "finished":
-                    status = "paused"
-                self._message += f"; file not finalised ({err}); `scatterlab resume` repairs it"
+            if self.store.closed:
+                notes.append("the run file was closed at the storage error; "
+                             "`scatterlab resume` continues it")
+            else:
+                try:
+                    if self._store_broken:
+                        raise StorageError(5, "the run file had a write error")
+                    if status == "paused":
+                        self.store.event({"kind": "paused",
+                                          "reason": "run stopped while paused"})
+                    self.store.close(status)
+                except Exception as err:
+                    self.store.abandon()
+                    if status == "finished":
+                        status = "paused"
+                    notes.append(f"file not finalised ({err}); `scatterlab resume` "
+                                 "repairs it")
+            self._message = "; ".join(notes)
             with self._lock:
                 self._state = {"finished": EngineState.FINISHED, "aborted": EngineState.ABORTED,
                                "paused": EngineState.PAUSED}.get(status, EngineState.FAILED)

@@ -284,6 +284,10 @@ class RunStore:
             raise StorageError(_errno_of(err), f"syncing {self.path} failed: "
                                f"{_first_line(err)}") from err
 
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def close(self, status: str) -> None:
         """Finalise: rows written, status and end time set, files closed. Idempotent."""
         if self._closed:
