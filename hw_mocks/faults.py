@@ -19,7 +19,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Protocol
 
-__all__ = ["Delivery", "FaultInjector", "FaultKind", "FaultRule", "FaultTarget"]
+__all__ = ["Delivery", "FaultInjector", "FaultKind", "FaultRule", "FaultSchedule", "FaultTarget"]
 
 
 class FaultKind(enum.Enum):
@@ -48,7 +48,7 @@ class FaultRule:
     (``None`` = unbounded).
     """
 
-    kind: FaultKind
+    kind: enum.Enum  # a FaultKind, or an injector's own kind (e.g. USB faults)
     nth: int | None = None
     probability: float = 0.0
     times: int | None = 1
@@ -75,19 +75,20 @@ class Delivery:
     data: bytes
 
 
-class FaultInjector:
-    """Applies :class:`FaultRule` s to outgoing frames.
+class FaultSchedule:
+    """Seeded rules that decide, event by event, which faults fire.
 
-    Thread-safe; ``log`` records every fault fired as ``(frame_number, kind)``.
+    Shared by every injector: an *event* is whatever the injector counts (a frame the device
+    sends, a bulk-OUT transfer the host writes). Thread-safe; ``log`` records every firing
+    as ``(event_number, kind)``.
     """
 
     def __init__(self, seed: int = 0) -> None:
         self._rng = random.Random(seed)
         self._rules: list[FaultRule] = []
         self._count = 0
-        self._lock = threading.Lock()
-        self.disconnected = False
-        self.log: list[tuple[int, FaultKind]] = []
+        self._lock = threading.RLock()
+        self.log: list[tuple[int, enum.Enum]] = []
 
     def add(self, rule: FaultRule) -> FaultRule:
         with self._lock:
@@ -95,30 +96,26 @@ class FaultInjector:
             self._rules.append(rule)
         return rule
 
-    def schedule(self, kind: FaultKind, nth: int = 1, **params) -> FaultRule:
-        """Fire ``kind`` on the ``nth`` frame from now."""
+    def schedule(self, kind: enum.Enum, nth: int = 1, **params) -> FaultRule:
+        """Fire ``kind`` on the ``nth`` event from now."""
         return self.add(FaultRule(kind, nth=nth, **params))
 
-    def randomly(self, kind: FaultKind, probability: float, times: int | None = None,
+    def randomly(self, kind: enum.Enum, probability: float, times: int | None = None,
                  **params) -> FaultRule:
-        """Fire ``kind`` on each frame with ``probability``."""
+        """Fire ``kind`` on each event with ``probability``."""
         return self.add(FaultRule(kind, probability=probability, times=times, **params))
 
     def clear(self) -> None:
-        """Remove all rules and reconnect the link."""
+        """Remove all rules."""
         with self._lock:
             self._rules.clear()
-            self.disconnected = False
-
-    def reconnect(self) -> None:
-        self.disconnected = False
 
     @property
-    def frames_seen(self) -> int:
+    def events_seen(self) -> int:
         return self._count
 
-    def process(self, frame: bytes, target: FaultTarget) -> list[Delivery]:
-        """What actually goes on the wire for ``frame``."""
+    def next_event(self) -> list[FaultRule]:
+        """Count one event; return the rules that fire on it, in the order added."""
         with self._lock:
             self._count += 1
             n = self._count
@@ -126,11 +123,8 @@ class FaultInjector:
             for rule in firing:
                 rule.fired += 1
                 self.log.append((n, rule.kind))
-            out = [Delivery(0.0, frame)]
-            for rule in firing:
-                out = self._apply(rule, out, target)
             self._rules = [r for r in self._rules if r.times is None or r.fired < r.times]
-            return out
+            return firing
 
     def _fires(self, rule: FaultRule, n: int) -> bool:
         if rule.times is not None and rule.fired >= rule.times:
@@ -138,6 +132,35 @@ class FaultInjector:
         if rule.nth is not None:
             return n - rule._base == rule.nth
         return self._rng.random() < rule.probability
+
+
+class FaultInjector(FaultSchedule):
+    """Applies :class:`FaultRule` s to the frames a device sends."""
+
+    def __init__(self, seed: int = 0) -> None:
+        super().__init__(seed)
+        self.disconnected = False
+
+    def clear(self) -> None:
+        """Remove all rules and reconnect the link."""
+        with self._lock:
+            super().clear()
+            self.disconnected = False
+
+    def reconnect(self) -> None:
+        self.disconnected = False
+
+    @property
+    def frames_seen(self) -> int:
+        return self.events_seen
+
+    def process(self, frame: bytes, target: FaultTarget) -> list[Delivery]:
+        """What actually goes on the wire for ``frame``."""
+        with self._lock:
+            out = [Delivery(0.0, frame)]
+            for rule in self.next_event():
+                out = self._apply(rule, out, target)
+            return out
 
     def _apply(self, rule: FaultRule, out: list[Delivery], target: FaultTarget
                ) -> list[Delivery]:
