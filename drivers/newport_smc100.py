@@ -168,7 +168,6 @@ class Smc100Axis(MotionAxis):
         self.reply_timeout = float(reply_timeout)
         self.retries = int(retries)
         self.reset_timeout = float(reset_timeout)
-        self._rx = bytearray()
         # One exchange (request and its reply, or a command and its TE) at a time: a
         # stop() from another thread must not read the reply a poll is waiting for.
         self._io_lock = threading.RLock()
@@ -222,36 +221,14 @@ class Smc100Axis(MotionAxis):
         request = format_command(self.address, command, value)
         text = request.decode("ascii").strip()
         channel = self._chan(text)
-        self._rx.clear()
         channel.discard_input()
         channel.write(request, command=text)
         return text
 
     def _read_line(self, deadline: float, text: str) -> bytes:
-        channel = self._chan(text)
-        while True:
-            end = self._rx.find(b"\r\n")
-            if end >= 0:
-                line = bytes(self._rx[: end + 2])
-                del self._rx[: end + 2]
-                return line
-            if len(self._rx) > _MAX_LINE:
-                junk = bytes(self._rx)
-                self._rx.clear()
-                raise ProtocolError(f"{len(junk)} bytes without a line end: {junk[:40]!r}...",
-                                    device=self.name, command=text)
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise DeviceTimeout(
-                    f"no complete reply line in time (got {bytes(self._rx)!r})",
-                    device=self.name, command=text,
-                    hint="check the address, cable, baud rate and power",
-                )
-            try:
-                self._rx += channel.read_exact(1, timeout=remaining, command=text)
-            except DeviceTimeout:
-                continue  # the loop raises with the partial line shown
-            self._rx += channel.read_available(command=text)
+        return self._chan(text).read_line(
+            b"\r\n", timeout=max(deadline - time.monotonic(), 0.0), command=text,
+            max_bytes=_MAX_LINE)
 
     def _read_reply(self, command: str, text: str, timeout: float | None = None) -> str:
         """Read lines until the reply to ``command`` arrives; return its value."""

@@ -19,7 +19,7 @@ import time
 
 import serial
 
-from drivers.errors import ConnectionFailed, DeviceTimeout
+from drivers.errors import ConnectionFailed, DeviceTimeout, ProtocolError
 
 __all__ = ["SerialChannel", "add_url_handler_package", "open_serial"]
 
@@ -87,6 +87,7 @@ class SerialChannel:
         self.device = device
         self.bytes_written = 0
         self.bytes_read = 0
+        self._pending = bytearray()  # read past the end of the last line
         # One short port timeout, set once: changing it per read would reconfigure a real
         # port (a tcsetattr call) every time.
         try:
@@ -111,7 +112,8 @@ class SerialChannel:
     def read_exact(self, n: int, *, timeout: float, command: str) -> bytes:
         """Read exactly ``n`` bytes or raise :class:`DeviceTimeout` after ``timeout`` s."""
         deadline = time.monotonic() + timeout
-        buf = bytearray()
+        buf = bytearray(self._pending[:n])
+        del self._pending[:n]
         while len(buf) < n:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -124,29 +126,52 @@ class SerialChannel:
             buf += self._read(n - len(buf), remaining, command)
         return bytes(buf)
 
-    def read_until(self, terminator: bytes, *, timeout: float, command: str,
-                   max_bytes: int = 4096) -> bytes:
-        """Read through ``terminator`` (included) or raise after ``timeout`` s."""
-        deadline = time.monotonic() + timeout
-        buf = bytearray()
-        while not buf.endswith(terminator):
-            if len(buf) > max_bytes:
-                from drivers.errors import ProtocolError
+    def read_line(self, terminator: bytes, *, timeout: float, command: str,
+                  max_bytes: int = 4096) -> bytes:
+        """Read through ``terminator`` (included) or raise after ``timeout`` s.
 
-                raise ProtocolError(f"no terminator {terminator!r} within {max_bytes} bytes",
+        Bytes that arrived after the terminator are kept for the next call (a reply and an
+        unsolicited line often arrive in one read). :meth:`discard_input` drops them too.
+
+        Raises
+        ------
+        DeviceTimeout
+            No complete line in time; the message shows the partial line.
+        ProtocolError
+            More than ``max_bytes`` without a terminator (line noise, wrong baud rate).
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            end = self._pending.find(terminator)
+            if end >= 0:
+                end += len(terminator)
+                line = bytes(self._pending[:end])
+                del self._pending[:end]
+                return line
+            if len(self._pending) > max_bytes:
+                junk = bytes(self._pending)
+                self._pending.clear()
+                raise ProtocolError(f"{len(junk)} bytes without {terminator!r}: {junk[:40]!r}...",
                                     device=self.device, command=command)
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise DeviceTimeout(
-                    f"no complete reply within {timeout:g} s (got {bytes(buf)!r})",
+                    f"no complete reply line within {timeout:g} s "
+                    f"(got {bytes(self._pending)!r})",
                     device=self.device, command=command,
-                    hint="check the connection, baud rate and device power",
+                    hint="check the address, cable, baud rate and device power",
                 )
-            buf += self._read(1, remaining, command)
-        return bytes(buf)
+            # Block for one byte, then take whatever else has arrived in the same go.
+            self._pending += self._read(1, remaining, command)
+            self._pending += self._read_waiting(command)
 
     def read_available(self, *, command: str = "read") -> bytes:
         """Whatever is buffered now, without waiting."""
+        data = bytes(self._pending) + self._read_waiting(command)
+        self._pending.clear()
+        return data
+
+    def _read_waiting(self, command: str) -> bytes:
         try:
             waiting = self.port.in_waiting
             data = self.port.read(waiting) if waiting else b""
