@@ -7,7 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analysis.sh.consistency import calibrate, check, known_lighting_residual, statistic
+from analysis.sh.consistency import (
+    bootstrap_consistent_errors,
+    calibrate,
+    check,
+    known_lighting_residual,
+    statistic,
+)
 from analysis.sh.convention import PROJECT_CONVENTION, SHConvention, convert
 from analysis.sh.convolve import convolve, per_coefficient
 from analysis.sh.filters import lambertian_filter, phong_filter
@@ -182,3 +188,29 @@ def test_convention_round_trip_property(lmax: int, kind: str, cs: bool, seed: in
                    target=PROJECT_CONVENTION)
     np.testing.assert_allclose(back, c, atol=1e-14)
     assert per_coefficient(np.arange(lmax + 1), lmax).shape == c.shape
+
+
+def test_bootstrap_calibration_detects_an_inconsistent_image() -> None:
+    """Known lighting, M10 in coefficient space, calibrated by a parametric bootstrap."""
+    from analysis.sh.transform import evaluate, scattered_fit_operator
+
+    rng = np.random.default_rng(15)
+    lig = _lighting(16)
+    v = rng.standard_normal((1500, 3))
+    th, ph = directions_to_angles(v / np.linalg.norm(v, axis=1, keepdims=True))
+    clean = evaluate(convolve(lig, A1), th, ph)
+    sigma = 0.01 * np.mean(np.abs(clean))
+
+    op = scattered_fit_operator(th, ph, lmax=LMAX)
+
+    def errors_of(samples: np.ndarray) -> np.ndarray:
+        return known_lighting(op.apply(samples), lig).error
+
+    cal = calibrate(bootstrap_consistent_errors(clean, sigma, errors_of, n_cases=60, rng=rng),
+                    false_alarm=0.05)
+    observed = clean + sigma * rng.standard_normal(clean.shape)
+    assert not check(errors_of(observed), cal).inconsistent
+    other = evaluate(convolve(_lighting(17), A1), th, ph)
+    tampered = np.where(th < np.pi / 2, observed, other)  # one hemisphere from other lighting
+    rep = check(errors_of(tampered), cal)
+    assert rep.inconsistent and np.max(rep.ratio) > 3
