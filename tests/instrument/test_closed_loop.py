@@ -194,3 +194,26 @@ def test_planner_finds_the_fastest_scan_reaching_the_target() -> None:
           for r in results}
     assert by[(10.0, 1e4, 4)].sigma["ggx.alpha"] < by[(10.0, 1e4, 1)].sigma["ggx.alpha"]
     assert by[(10.0, 1e5, 1)].sigma["ggx.alpha"] <= by[(10.0, 1e3, 1)].sigma["ggx.alpha"]
+
+
+def test_plan_target_uncertainty_hook(capsys) -> None:
+    """The function ``scatterlab plan --target-uncertainty`` calls, on the sim bench."""
+    import argparse
+
+    from instrument.plans import load_plan
+    from instrument.profile import load_profile
+    from instrument.tradeoff import add_arguments, run_from_args
+
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    root = Path(__file__).resolve().parents[2]
+    spec = load_plan(root / "examples" / "brdf_inplane.toml")
+    args = p.parse_args(["--target-uncertainty", "5e-5", "--readout-s", "0.02"])
+    assert run_from_args(args, spec, load_profile("sim")) == 0
+    out = capsys.readouterr().out
+    assert "Pareto front" in out and "fastest:" in out and "ggx.alpha" in out
+    args = p.parse_args(["--target-uncertainty", "1e-9"])
+    assert run_from_args(args, spec, load_profile("sim")) == 1
+    assert "no candidate reaches" in capsys.readouterr().out
+    args = p.parse_args(["--target-uncertainty", "1e-3", "--target-param", "nope"])
+    assert run_from_args(args, spec, load_profile("sim")) == 2
