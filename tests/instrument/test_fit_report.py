@@ -144,3 +144,23 @@ def test_flat_field_run_corrects_prnu(glossy_run, tmp_path) -> None:
     res = analyse(red.points, ["lambert+ggx"], run_cv=False)
     fit = res.chosen_fit
     assert np.all(np.abs(fit.params - np.array(GLOSSY.params)) < 3.5 * fit.stderr)
+
+
+def test_signature_run_is_subtracted(tmp_path) -> None:
+    from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
+
+    setup = ScanSetup(theta_i_deg=(30.0,), specular_half_width_deg=0.0, fill=0.05)
+    lam = SAMPLES[0]
+    veil = {"signature_sr": 0.05, "signature_width_deg": 20.0}
+    truth = brdf_from_model(lam.model, lam.params)
+    sample = write_run_file(render(setup, lam, scene=GoniometerScene(brdf=truth, **veil)), 7,
+                            tmp_path / "sample.h5")
+    sig = write_run_file(render(setup, lam, scene=GoniometerScene(brdf=truth, target="none",
+                                                                  **veil)),
+                         8, tmp_path / "signature.h5", kind="signature", run_id="sig")
+    raw = reduce_run(sample)
+    clean = reduce_run(sample, ReductionOptions(signature_run=str(sig)))
+    assert clean.points.method == "absolute-signature"
+    z_raw = (raw.points.brdf - 0.8 / math.pi) / raw.points.u_point
+    z = (clean.points.brdf - 0.8 / math.pi) / clean.points.u_point
+    assert np.mean(z_raw) > 3 and np.all(np.abs(z) < 4)
