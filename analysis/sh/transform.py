@@ -389,8 +389,15 @@ def evaluate(coeffs: np.ndarray, theta: np.ndarray, phi: np.ndarray) -> np.ndarr
     c = np.asarray(coeffs, dtype=float)
     lmax = lmax_from_size(c.shape[0])
     th = np.asarray(theta, dtype=float)
-    y = real_sh_matrix(lmax, th.ravel(), np.asarray(phi, dtype=float).ravel())
-    return (y @ c).reshape(th.shape + c.shape[1:])
+    t_flat = th.ravel()
+    p_flat = np.broadcast_to(np.asarray(phi, dtype=float), th.shape).ravel()
+    out = np.empty((t_flat.size, *c.shape[1:]))
+    # Points in chunks: the design matrix of a large image would not fit in memory.
+    step = max(1, (1 << 21) // (lmax + 1) ** 2)
+    for p0 in range(0, t_flat.size, step):
+        sl = slice(p0, p0 + step)
+        out[sl] = real_sh_matrix(lmax, t_flat[sl], p_flat[sl]) @ c
+    return out.reshape(th.shape + c.shape[1:])
 
 
 @dataclass(frozen=True)

@@ -148,3 +148,23 @@ def test_m12_on_a_rendered_diffuse_plus_specular_sphere() -> None:
     a = phong_filter(lmax, s).values
     np.testing.assert_allclose(res.estimate[:10], ks * a[1:11], rtol=0.03)
     assert np.all(res.error[:10] < 0.03)
+
+
+def test_environment_helpers() -> None:
+    a = random_environment(np.random.default_rng(3))
+    b = random_environment(np.random.default_rng(3))
+    assert a == b  # seeded, reproducible scenes
+    d = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+    sky = EnvironmentMap(zenith=1.0, horizon=0.5, ground=0.2, up=(0.0, 1.0, 0.0))
+    np.testing.assert_allclose(sky.radiance(d), [1.0, 0.2])
+    # equirectangular lookup: row 0 is the +y pole, column 0 starts at +z towards +x
+    img = np.zeros((8, 16))
+    img[:, 4] = 1.0  # azimuth ≈ 90°–112°: the +x side
+    eq = EquirectEnvironment(img)
+    x_dir = np.array([[np.sin(np.deg2rad(101.25)), 0.0, np.cos(np.deg2rad(101.25))]])
+    assert eq.radiance(x_dir)[0] == pytest.approx(1.0)
+    assert eq.radiance(np.array([[0.0, 0.0, -1.0]]))[0] == 0.0
+    sd, sw, sv = a.sharp_samples()
+    caps = [2 * np.pi * (1 - np.cos(s.angular_radius)) for s in a.sharp_sources]
+    assert sw.sum() == pytest.approx(sum(caps))
+    assert np.all(sv > 0) and np.allclose(np.linalg.norm(sd, axis=1), 1.0)
