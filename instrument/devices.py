@@ -201,8 +201,12 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
     config.setdefault("arm_length_mm", profile.geometry.detector_distance_mm)
     meters = [s.url for s in profile.devices.values() if _scheme(s.url) == "simusb"]
     if meters:
+        # The simulated head is the detector the geometry describes: same distance and
+        # limiting aperture, so an absolute BRDF uses the profile's solid angle.
         head = dict(config.get("power_meter", {}))
         head.setdefault("url", meters[0])
+        head.setdefault("distance_mm", profile.geometry.detector_distance_mm)
+        head.setdefault("aperture_diameter_mm", profile.geometry.detector_aperture_mm)
         config["power_meter"] = head
     return world, config
 
