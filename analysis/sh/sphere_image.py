@@ -193,17 +193,39 @@ def image_to_sh(
     lmax: int,
     parameterisation: Parameterisation = "reflected",
     valid: np.ndarray | None = None,
+    variance: np.ndarray | None = None,
     ridge: float = 0.0,
 ) -> SHFit:
     """SH coefficients of a sphere image (B_lm) by a masked least-squares fit.
 
-    Unit weights: each pixel carries equal noise, and (orthographic view, reflected
-    parameterisation) the pixels are uniform in solid angle. ``ridge`` regularises the
-    degrees that the unobserved cap around −v leaves poorly determined.
+    Parameters
+    ----------
+    image : ndarray of shape (H, W)
+        Linear (HDR) radiance.
+    geometry : SphereGeometry
+    lmax : int
+    parameterisation : {"reflected", "normal"}
+    valid : bool ndarray of shape (H, W), optional
+        Usable pixels (e.g. unsaturated in some exposure of the HDR bracket).
+    variance : ndarray of shape (H, W), optional
+        Per-pixel noise variance of an HDR merge; the fit then weights pixels by 1/variance
+        (pixels with variance ≤ 0 or non-finite are dropped). Default: equal weights, which
+        for an orthographic view in the reflected parameterisation are also uniform in
+        solid angle.
+    ridge : float
+        Regularises the degrees that the unobserved cap around −v leaves poorly determined.
     """
     th, ph, vals = sphere_samples(image, geometry, parameterisation=parameterisation,
                                   valid=valid)
-    return fit_scattered(vals, th, ph, lmax=lmax, ridge=ridge)
+    weights = None
+    if variance is not None:
+        var = np.asarray(variance, dtype=float)
+        if var.shape != geometry.on_sphere.shape:
+            raise ValueError("variance must have the image's shape")
+        use = _valid(image, geometry, valid)
+        v = var[use]
+        weights = np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
+    return fit_scattered(vals, th, ph, lmax=lmax, weights=weights, ridge=ridge)
 
 
 def sh_to_image(

@@ -168,3 +168,17 @@ def test_environment_helpers() -> None:
     caps = [2 * np.pi * (1 - np.cos(s.angular_radius)) for s in a.sharp_sources]
     assert sw.sum() == pytest.approx(sum(caps))
     assert np.all(sv > 0) and np.allclose(np.linalg.norm(sd, axis=1), 1.0)
+
+
+def test_hdr_variance_weights_the_fit() -> None:
+    rng = np.random.default_rng(41)
+    geo = sphere_geometry((40, 40), center=(19.5, 19.5), radius=18.0)
+    c = np.zeros(9)
+    c[0], c[3], c[8] = 1.0, 0.3, -0.2
+    clean = sh_to_image(c, geo)
+    # HDR: the top half of the sphere is 100× noisier (short exposure only)
+    sigma = np.where(np.arange(40)[:, None] < 20, 0.1, 0.001) * np.ones((40, 40))
+    noisy = clean + sigma * rng.standard_normal(clean.shape)
+    plain = image_to_sh(noisy, geo, lmax=2).coeffs
+    weighted = image_to_sh(noisy, geo, lmax=2, variance=sigma**2).coeffs
+    assert np.linalg.norm(weighted - c) < 0.5 * np.linalg.norm(plain - c)
