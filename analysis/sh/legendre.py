@@ -142,11 +142,15 @@ def iterate_degrees(
     p1[:n1] = np.sqrt(2.0 * m[:n1] + 3.0)[:, None] * x * p2[:n1]
     yield 1, n1, emit(p1, n1)
     tmp = np.empty_like(p2)
+    # All step coefficients of the block at once (entries with m + k > lmax are unused).
+    ks = np.arange(2, lmax - m0 + 1, dtype=float)[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a_tab, ab_tab = step_coefficients(m[None, :], m[None, :] + ks)
     for k in range(2, lmax - m0 + 1):
         n = min(m1, lmax - k + 1) - m0
         if n <= 0:
             break
-        a, ab = step_coefficients(m[:n], m[:n] + k)
+        a, ab = a_tab[k - 2, :n], ab_tab[k - 2, :n]
         np.multiply(p1[:n], x, out=tmp[:n])
         tmp[:n] *= a[:, None]
         p2[:n] *= ab[:, None]
