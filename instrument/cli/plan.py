@@ -19,12 +19,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")
     p.add_argument("--png", default=None,
                    help="coverage picture path (default: <plan name>_coverage.png here)")
+    tradeoff = _tradeoff()
+    if tradeoff is not None:
+        tradeoff.add_arguments(p)
     p.set_defaults(func=run)
+
+
+def _tradeoff():
+    """The speed/accuracy search (instrument.tradeoff), if it imports."""
+    try:
+        from instrument import tradeoff
+    except ImportError:
+        return None
+    return tradeoff
 
 
 def run(args: argparse.Namespace) -> int:
     spec = load_plan(args.plan)
     profile = load_profile(args.bench)
+    if getattr(args, "target_uncertainty", None) is not None:
+        return _tradeoff().run_from_args(args, spec, profile)
     try:
         plan = build_plan(spec, profile)
     except GuardError as err:
