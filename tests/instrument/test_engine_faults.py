@@ -191,3 +191,39 @@ def test_rehome_policy(tmp_path, make_bench):
     assert "rehome" in actions
     idx, status, _, _ = _file(engine)
     assert sorted(idx) == list(range(len(plan.points))) and set(status) == {0}
+
+
+def test_abort_stops_a_move_in_progress(tmp_path, make_bench):
+    """Abort during a long move: the axis stops where it is (not at the target), the
+    light is off and the file is finalised as aborted."""
+    bench = make_bench("pause")
+    plan = build_plan(parse_plan(inplane_plan(step=30.0)), bench.profile)
+    engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False)
+    det = bench.devices["detector_theta"]
+    # Slow the detector arm so that the first long move lasts seconds.
+    det.enable()
+    det.home()
+    det.velocity = 0.05  # × 400 (emulator clock) = 20 °/s: a 30° step takes 1.5 s
+    moving = threading.Event()
+
+    def on(ev):
+        if isinstance(ev, PointCompleted):
+            moving.set()
+
+    engine.subscribe(on)
+    engine.start()
+    assert moving.wait(20)  # first point done; the next move is long
+    import time
+
+    time.sleep(0.3)
+    engine.abort()
+    assert engine.wait(20) is EngineState.ABORTED
+    s = det.status()
+    assert not s.is_moving
+    assert bench.source._on is False
+    with h5py.File(engine.store.path) as f:
+        assert f["entry"].attrs["status"] == "aborted"
+        n = f["entry/points/index"].shape[0]
+    assert n < len(plan.points)
+    targets = {p.target_dict()["detector_theta"] for p in plan.points}
+    assert all(abs(s.position - t) > 0.01 for t in targets)  # stopped between targets

@@ -278,3 +278,26 @@ def test_fuzzed_profile_files_give_field_errors(text):
 def test_random_text_is_rejected_cleanly(text):
     with pytest.raises(PlanError):
         parse_plan(text)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(mutated(BASE_PLAN))
+def test_fuzzed_plan_through_the_cli_never_opens_or_moves_anything(tmp_path, text):
+    """`scatterlab run` on an invalid plan: exit code 2, field errors, and not one device
+    of the emulated bench opened (so nothing can have moved)."""
+    from hw_mocks import registry
+    from instrument.cli import main
+
+    try:
+        spec = parse_plan(text)
+        build_plan(spec, load_profile("sim"))
+        return  # a valid plan may run; only invalid ones are under test here
+    except (PlanError, GuardError):
+        pass
+    registry.reset()
+    path = tmp_path / "fuzz.toml"
+    path.write_text(text)
+    assert main(["run", str(path), "--out", str(tmp_path / "runs")]) == 2
+    assert registry.all_emulators() == []
+    assert not (tmp_path / "runs").exists()
