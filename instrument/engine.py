@@ -63,7 +63,7 @@ from instrument.storage import (
     StorageError,
 )
 
-__all__ = ["EngineState", "RunEngine"]
+__all__ = ["EngineSnapshot", "EngineState", "RunEngine"]
 
 
 class EngineState(enum.Enum):
@@ -73,6 +73,19 @@ class EngineState(enum.Enum):
     FINISHED = "finished"
     ABORTED = "aborted"
     FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class EngineSnapshot:
+    """What a client polling the engine (a GUI timer) needs, read under the lock."""
+
+    state: EngineState
+    n_done: int
+    n_total: int
+    n_skipped: int
+    elapsed_s: float
+    path: str
+    pause_reason: str | None
 
 
 class _Abort(Exception):
@@ -172,6 +185,15 @@ class RunEngine:
     @property
     def n_done(self) -> int:
         return len(self._done)
+
+    def snapshot(self) -> EngineSnapshot:
+        """State and counts now; safe from any thread."""
+        with self._lock:
+            elapsed = time.monotonic() - self._t0 if self._t0 else 0.0
+            return EngineSnapshot(self._state, len(self._done), self._n_total,
+                                  self._n_skipped, elapsed, str(self.store.path),
+                                  self._pause_requested
+                                  if self._state is EngineState.PAUSED else None)
 
     def start(self) -> None:
         """Start the worker thread; returns at once."""

@@ -79,6 +79,9 @@ def test_pause_resume_at_point_boundary(tmp_path):
     engine.start()
     assert paused.wait(10)
     assert engine.state is EngineState.PAUSED and engine.n_done == 4
+    snap = engine.snapshot()
+    assert (snap.state, snap.n_done, snap.n_total) == (EngineState.PAUSED, 4, len(plan.points))
+    assert snap.pause_reason == "test pause" and snap.path == str(engine.store.path)
     engine.resume()
     assert engine.wait(10) is EngineState.FINISHED
     kinds = [type(e).__name__ for e in q.drain()]
