@@ -27,6 +27,7 @@ from analysis.sh.sphere_image import (
 )
 from analysis.sh.transform import directions_to_angles
 from hw_mocks.sim.sphere_scene import (
+    LambertianMicrofacet,
     Phong,
     environment_coefficients,
     random_environment,
@@ -211,3 +212,24 @@ def test_inverse_rendering_kd_ks_roughness_within_uncertainty() -> None:
                           (fit.s, fit.s_std, true.s)]:
         assert abs(est - ref) <= 3.0 * std, (est, std, ref)
         assert std < 0.1 * ref  # and the uncertainty is informative
+
+
+@pytest.mark.slow
+def test_microfacet_roughness_matches_the_torrance_sparrow_filter() -> None:
+    """Near normal exitance a Beckmann lobe of slope α filters like exp(−α² l(l+1))
+    (numerics.md §3.3), i.e. like Phong with s = 1/(2α²): the Phong fit's σ = 1/√(2s)
+    recovers α from a Lambertian + microfacet sphere (pixels within 40° of the view)."""
+    rng = np.random.default_rng(11)
+    env = random_environment(rng)
+    light = environment_coefficients(env, LMAX_LIGHT, n_theta=128)
+    for alpha in (0.1, 0.2):
+        rend = render_spheres([env], LambertianMicrofacet(kd=0.6, ks=0.35, alpha=alpha),
+                              size=56, n_theta=96)
+        geo = sphere_geometry((56, 56), center=rend.center, radius=rend.radius,
+                              max_view_angle_deg=40.0)
+        use = geo.observed
+        img = _noisy(rend.radiance[0], use, rng)
+        fit = fit_diffuse_phong(img[use], directions_to_angles(geo.normals[use]),
+                                directions_to_angles(geo.reflected[use]), light)
+        assert abs(fit.roughness / alpha - 1) < 0.06, (alpha, fit.roughness)
+        assert abs(fit.kd - 0.6) < 0.03 and abs(fit.ks - 0.35) < 0.03
