@@ -18,9 +18,11 @@ from .diagnostics import (
 from .field import LightField2D, LightField4D, theta_grid, uniform_grid
 from .forward import UnfoldedScene
 from .localize import (
+    QUALITY_FLAGS,
     Detection,
     FocalStack,
     Resolution,
+    depth_interval,
     depth_profile,
     detect_objects,
     effective_p_max,
@@ -50,6 +52,7 @@ from .spectral import (
 
 __all__ = [
     "MATERIALS",
+    "QUALITY_FLAGS",
     "CurveSolution",
     "Detection",
     "Diagnostics",
@@ -67,6 +70,7 @@ __all__ = [
     "brdf_fourier_matrix",
     "coefficients",
     "degree_of_specularity",
+    "depth_interval",
     "depth_profile",
     "detect_objects",
     "effective_p_max",

@@ -8,21 +8,41 @@ z < 0).  A trial point (y, z) collects the rays ``L(y − z tan θ, θ)`` (a she
 * Radiance-preserving (RP) refocusing: the same sum divided by the angular measure of the
   rays through (y, z) that lie inside the solvable domain *and* hit the measured wall, so a
   point source's peak equals its radiance wherever it sits.
-* Depth filter on the mixed (p_y, z) plane: around each object the focal stack is windowed
-  in y (which removes the interference of objects at similar z but different y), Fourier
-  transformed along y, and the normalised z-profiles ``|Î_z(p_y)|/max_z`` of the spatial
-  frequencies p_y that the reconstruction supports are multiplied; the product peaks at the
-  object's depth and is narrower than any single profile.
+* Matched filter (derivation ours, tested in tests/analysis/lightfield): a point source
+  at (y, z) is reconstructed as ``L_m(c, θ) = K(θ − θ*(c))/cos θ`` (:func:`point_response`,
+  K the filtered delta).  Its inner product with the field over the wall samples c is
+  ``Σ_c g(c, θ*(c)) Δc`` (g = L cos θ band-limited, so K acts as a projector), and with
+  ``dc = |z| dθ/cos² θ`` this is ``|z| Σ_j L(y − z tan θ_j, θ_j)/cos θ_j Δθ``: conventional
+  refocusing weighted by ``|z|/cos θ``.  Dividing by the model's norm,
+  ``(|z| Σ_{j available} Δθ/cos² θ_j)^½``, gives the normalised matched filter, the
+  maximum-likelihood statistic of one point source of unknown radiance in white noise:
+  by Cauchy–Schwarz its column peaks at the true depth (no ray-density bias, which the
+  plain conventional stack has — its peak height scales as W/|z|).
+* Depth filter on the mixed (p_y, z) plane: around each object the (matched-filter
+  numerator) stack is windowed in y (which removes the interference of objects at similar
+  z but different y), Fourier transformed along y, and the normalised z-profiles
+  ``|Î_z(p_y)|/max_z`` of the spatial frequencies p_y that the reconstruction supports are
+  multiplied; the product peaks at the object's depth and is narrower than any single
+  profile.  For a point at depth z0 and small angles,
+  ``Î_z(p_y) ∝ sinc(p_y W (1 − z/z0)) · K̂(p_y |z|)``: the aperture term peaks at z0, and
+  the angular transfer function K̂ (flat up to the cut-off ``(P + ½)/(B − A)`` cycles/rad)
+  is unbiased only where it is flat.  A frequency above ``(P + ½)/((B − A)|z0|) = 1/(2 δy)``
+  has signal only at trial depths nearer the wall (where ``p_y |z|`` is below the cut-off),
+  so its profile peaks there: a band reaching 1/δy pulled the product ≈ 0.3 δz (P = 18)
+  to 0.6 δz (P = 5) towards the wall.  The band therefore ends at 1/(2 δy), and the window
+  (half-width 3 δy) keeps the defocused spots of nearby trial depths whole.
 * Theoretical resolution from the highest recovered angular order p̂_max: angular blur
   ``δθ = (b − a)/(2 p̂_max + 1)`` (first zero of the Dirichlet kernel of the truncated
   Fourier series), transverse ``δy = D δθ / cos² θ̄``, depth ``δz = D² δθ / W`` with D the
   distance from the wall and W the wall aperture seen inside the solvable domain
-  (triangulation: two rays with slopes ±W/2D crossing at D).
+  (triangulation: two rays with slopes ±W/2D crossing at D).  Triangulation measures the
+  inverse distance, ``δ(1/D) = δθ/W``, so the compatible depth interval is symmetric in 1/D
+  and has no far end when ``δz ≥ D`` (:func:`depth_interval`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,9 +51,11 @@ from .field import LightField2D, LightField4D
 from .propagate import project_4d, propagate_4d, sample_columns
 
 __all__ = [
+    "QUALITY_FLAGS",
     "Detection",
     "FocalStack",
     "Resolution",
+    "depth_interval",
     "depth_profile",
     "detect_objects",
     "effective_p_max",
@@ -55,6 +77,9 @@ class FocalStack:
     radiance_preserving : (N_z, N_y) — mean over the rays actually available (0 where none)
     measure_rad : (N_z, N_y) — angular measure of the available rays
     solvable_domain_rad : (A, B)
+    matched_filter : (N_z, N_y) — the normalised matched-filter (point-source likelihood)
+        statistic of :func:`refocus` (module doc), in radiance·mm^½; empty (0, 0) when the
+        stack was assembled by hand
     """
 
     y_mm: NDArray[np.float64]
@@ -63,34 +88,27 @@ class FocalStack:
     radiance_preserving: NDArray[np.float64]
     measure_rad: NDArray[np.float64]
     solvable_domain_rad: tuple[float, float]
+    matched_filter: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
 
 
-def refocus(
-    lf_wall: LightField2D,
-    *,
-    y_mm: ArrayLike,
-    z_mm: ArrayLike,
-    solvable_domain_rad: tuple[float, float] | None = None,
-) -> FocalStack:
-    """Conventional and radiance-preserving refocusing of the wall's incident field.
+def _stacks(
+    lf_wall: LightField2D, y: NDArray, zs: NDArray, a: float, b: float
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """One pass over the sheared samples: conventional, RP, measure, MF numerator, MF norm.
 
-    ``lf_wall`` is the reconstructed incident field at z = 0 (rows: wall points c);
-    ``y_mm`` (N_y,), ``z_mm`` (N_z,) the trial grid; the solvable domain defaults to the
-    field's whole angle domain.
+    The matched-filter numerator is ``|z| Σ_j L(y − z tan θ_j, θ_j)/cos θ_j Δθ`` and the
+    squared norm ``|z| Σ_{j available} Δθ/cos² θ_j`` (module doc, matched filter).
     """
-    y = np.asarray(y_mm, dtype=float)
-    zs = np.atleast_1d(np.asarray(z_mm, dtype=float))
-    a, b = lf_wall.domain_rad if solvable_domain_rad is None else solvable_domain_rad
     th = lf_wall.theta_rad
     use = (th >= a) & (th <= b)
     t = np.tan(th[use])
+    inv_cos = 1.0 / np.cos(th[use])
     vals = np.asarray(lf_wall.radiance, dtype=float)[:, use]
     dth = lf_wall.dtheta_rad
     full = max(float(np.count_nonzero(use)) * dth, dth)
     lo, hi = lf_wall.y_mm[0], lf_wall.y_mm[-1]
-    conv = np.empty((zs.size, y.size))
-    rp = np.empty_like(conv)
-    meas = np.empty_like(conv)
+    shape = (zs.size, y.size)
+    conv, rp, meas, num, norm2 = (np.empty(shape) for _ in range(5))
     for i, z in enumerate(zs):
         q = y[:, None] - z * t[None, :]
         s = sample_columns(vals, lo, lf_wall.dy_mm, q, method="linear")
@@ -100,7 +118,30 @@ def refocus(
         conv[i] = total / full
         rp[i] = np.where(m > 0, total / np.where(m > 0, m, 1.0), 0.0)
         meas[i] = m
-    return FocalStack(y, zs, conv, rp, meas, (float(a), float(b)))
+        num[i] = abs(z) * (s @ inv_cos) * dth
+        norm2[i] = abs(z) * (ok @ inv_cos**2) * dth
+    return conv, rp, meas, num, norm2
+
+
+def refocus(
+    lf_wall: LightField2D,
+    *,
+    y_mm: ArrayLike,
+    z_mm: ArrayLike,
+    solvable_domain_rad: tuple[float, float] | None = None,
+) -> FocalStack:
+    """Conventional, radiance-preserving and matched-filter refocusing of the wall's field.
+
+    ``lf_wall`` is the reconstructed incident field at z = 0 (rows: wall points c);
+    ``y_mm`` (N_y,), ``z_mm`` (N_z,) the trial grid; the solvable domain defaults to the
+    field's whole angle domain.
+    """
+    y = np.asarray(y_mm, dtype=float)
+    zs = np.atleast_1d(np.asarray(z_mm, dtype=float))
+    a, b = lf_wall.domain_rad if solvable_domain_rad is None else solvable_domain_rad
+    conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b)
+    mf = np.where(norm2 > 0, num / np.sqrt(np.where(norm2 > 0, norm2, 1.0)), 0.0)
+    return FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), mf)
 
 
 def refocus_4d(
@@ -212,6 +253,33 @@ def depth_profile(
     return np.exp(logp), f[band]
 
 
+def depth_interval(
+    z_mm: float, resolution: Resolution, *, limit_mm: float = -np.inf
+) -> tuple[float, float]:
+    """The depths compatible with an estimate ``z_mm`` within one depth resolution.
+
+    Triangulation measures the inverse distance 1/D (the difference of the ray angles
+    across the aperture W is W/D), with the uncertainty ``δ(1/D) = δθ/W = δz/D²``
+    (module doc); so the interval is symmetric in 1/D and asymmetric in z:
+    ``1/D ∈ [1/D − δz/D², 1/D + δz/D²]``.  Its far end is unbounded when
+    ``δz ≥ D`` (the parallax across the aperture is below one angular blur); it is then
+    clipped to ``limit_mm`` (e.g. the far end of the searched range).
+
+    Returns
+    -------
+    (far, near) : z bounds in mm, ``far ≤ z_mm ≤ near < 0``
+    """
+    d = max(abs(float(z_mm)), 1e-12)
+    k = resolution.depth_mm / (d * d)
+    near = 1.0 / (1.0 / d + k)
+    far = 1.0 / (1.0 / d - k) if 1.0 / d > k else np.inf
+    return float(max(-far, limit_mm)), float(-near)
+
+
+#: Quality flags of a detection's depth (see :func:`detect_objects`).
+QUALITY_FLAGS = ("resolved", "depth_from_refocusing", "unresolved")
+
+
 @dataclass(frozen=True)
 class Detection:
     """Objects found in a reconstructed light field.
@@ -219,12 +287,23 @@ class Detection:
     Attributes
     ----------
     count : int
-    positions_mm : (count, 2) — (y, z) of each object
+    positions_mm : (count, 2) — (y, z) of each object; for a depth flagged "unresolved" z
+        is only the matched filter's best guess, read ``depth_interval_mm`` instead
     brightness_rp : (count,) — RP-refocused radiance at the object
     brightness_conventional : (count,) — conventional refocused value there
     resolutions : tuple of Resolution — the theoretical blur at each object
     stack : FocalStack — the focal stack used
     depth_profiles : (count, N_z) — the depth-filter profile of each object
+    depth_interval_mm : (count, 2) — (far, near) z bounds compatible with the data within
+        one depth resolution (:func:`depth_interval`; an unbounded far end is clipped to
+        the searched range)
+    quality : tuple of str — per object, one of :data:`QUALITY_FLAGS`:
+        "resolved" (the depth filter and the matched-filter peak agree within one depth
+        resolution; z is the depth filter's), "depth_from_refocusing" (they disagree, the
+        matched-filter and RP peaks agree; z is the matched filter's), "unresolved" (no two
+        depth estimates agree, or the interval has no far end)
+    depth_estimates_mm : (count, 3) — z from the depth filter, the matched filter and the
+        RP stack (the evidence behind the flag)
     """
 
     count: int
@@ -234,6 +313,9 @@ class Detection:
     resolutions: tuple[Resolution, ...]
     stack: FocalStack
     depth_profiles: NDArray[np.float64]
+    depth_interval_mm: NDArray[np.float64]
+    quality: tuple[str, ...]
+    depth_estimates_mm: NDArray[np.float64]
 
 
 def _parabolic(v: NDArray, i: int) -> float:
@@ -242,6 +324,12 @@ def _parabolic(v: NDArray, i: int) -> float:
         if den < 0:
             return float(i + 0.5 * (v[i - 1] - v[i + 1]) / den)
     return float(i)
+
+
+def _peak_in(v: NDArray, grid: NDArray, allowed: NDArray[np.bool_]) -> float:
+    """Sub-sample position of the largest ``v`` where ``allowed`` (parabolic refinement)."""
+    j = int(np.argmax(np.where(allowed, v, -np.inf)))
+    return float(np.interp(_parabolic(v, j), np.arange(grid.size), grid))
 
 
 def point_response(
@@ -270,6 +358,32 @@ def point_response(
     return lf_wall.with_radiance(g / np.cos(th)[None, :])
 
 
+@dataclass(frozen=True)
+class _Stacks:
+    """The three stacks the detector works on (all (N_z, N_y), zero outside ``enough``):
+    matched filter (peak picking, subtraction), its numerator (depth filter), RP."""
+
+    mf: NDArray
+    num: NDArray
+    rp: NDArray
+
+    def __sub__(self, other: _Stacks) -> _Stacks:
+        return _Stacks(self.mf - other.mf, self.num - other.num, self.rp - other.rp)
+
+    def scaled(self, k: float) -> _Stacks:
+        return _Stacks(k * self.mf, k * self.num, k * self.rp)
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    y: float
+    z: float
+    quality: str
+    estimates: tuple[float, float, float]
+    profile: NDArray
+    model: _Stacks
+
+
 def detect_objects(
     lf_wall: LightField2D,
     *,
@@ -282,16 +396,32 @@ def detect_objects(
     min_measure_fraction: float = 0.25,
     max_objects: int = 20,
 ) -> Detection:
-    """Detect objects: count, (y, z) and brightness, each with its theoretical resolution.
+    """Detect objects: count, (y, z), brightness, resolution, depth interval and quality.
 
-    CLEAN-style: the strongest peak of the conventional focal stack (inside the region seen
-    through at least ``min_measure_fraction`` of the solvable domain) is refined in depth
-    by :func:`depth_profile` (on the stack weighted by |z|, which cancels the 1/|z| ray
-    density of the conventional sum) and in y by a parabola through the image at that depth;
-    the focal stack of an ideal point source there (:func:`point_response`, scaled to the
-    peak) is subtracted, which removes its side lobes and the ghost crossings of its ray
-    fan with other objects' fans; repeat while the residual peak exceeds
-    ``threshold_rel`` × the first peak.  Brightness is the RP value at each object.
+    CLEAN-style on the matched-filter map (the point-source likelihood statistic of
+    :func:`refocus`, unbiased in depth): the strongest peak (inside the region seen through
+    at least ``min_measure_fraction`` of the solvable domain) gives the matched-filter
+    depth z_MF (parabolic refinement along its column); the depth filter
+    (:func:`depth_profile` on the matched-filter numerator, window half-width 3 δy, the
+    spatial frequencies up to the angular cut-off at that depth, ``(P + ½)/((B − A)|z|)``
+    = 1/(2 δy)) and the RP stack are searched inside the inverse-depth interval of z_MF
+    (:func:`depth_interval`).  The depth reported, and its flag:
+
+    * "resolved" — the depth filter agrees with z_MF within one inverse-depth resolution
+      ``δz/D²``: its depth is reported;
+    * "depth_from_refocusing" — it does not (with few angular orders its windowed spectra
+      carry too little depth information and its own bias wins), but the RP peak agrees
+      with z_MF: z_MF is reported;
+    * "unresolved" — no two estimates agree, or ``δz ≥ D`` (no bounded interval): z_MF
+      is reported only as a best guess; read the interval.
+
+    y comes from a parabola through the matched-filter row at that depth.  The stacks of
+    an ideal point source there (:func:`point_response`, least-squares scaled to the
+    matched filter around the peak) are subtracted, which removes its side lobes and the
+    ghost crossings of its ray fan with other objects' fans; repeat while the residual
+    peak exceeds ``threshold_rel`` × the first peak.  Then every object is refined again
+    with the others subtracted (interference removal), and kept only if its own fitted
+    response still clears the threshold.  Brightness is the RP value at each object.
     ``filter_factors`` (N,) are those of the reconstruction (default: truncation at p_max).
     """
     from .spectral import fourier_orders
@@ -305,89 +435,124 @@ def detect_objects(
     else:
         phi = np.atleast_2d(np.asarray(filter_factors, dtype=float)).mean(axis=0)
     enough = st.measure_rad >= min_measure_fraction * (b - a)
-    data = np.where(enough, st.conventional, 0.0)
-    first = float(data.max())
+    _, _, _, num, _ = _stacks(lf_wall, y, zs, a, b)
+    data = _Stacks(*(np.where(enough, v, 0.0) for v in (st.matched_filter, num,
+                                                          st.radiance_preserving)))
+    first = float(data.mf.max()) if data.mf.size else 0.0
+    z_far_limit = float(zs.min())
 
     def resolution(depth: float) -> Resolution:
         return theoretical_resolution(p_max, domain_rad=lf_wall.domain_rad,
                                       distance_mm=abs(depth), aperture_mm=aperture,
                                       solvable_domain_rad=(a, b))
 
-    def refine(stack_vals: NDArray, y0: float, z0: float) -> tuple[float, float, NDArray]:
-        r_k = resolution(z0)
-        # The conventional stack of a point source carries the ray-density Jacobian
-        # dθ/dc = cos²θ/|z| of the trial point: rays through a point nearer the wall are
-        # denser on the wall, which pulls the depth filter's peak towards the wall (by
-        # 5–7 % of the depth on the sim-lightfield bench, ~0.6 δz).  Weighting each depth
-        # by |z| removes it without the noisy edges of full RP normalisation.
-        fs = FocalStack(y, zs, stack_vals * np.abs(zs)[:, None], st.radiance_preserving,
-                        st.measure_rad, (a, b))
-        prof, _ = depth_profile(fs, y0, window_halfwidth_mm=1.5 * r_k.transverse_mm,
-                                max_frequency_per_mm=1.0 / r_k.transverse_mm,
-                                min_frequency_per_mm=0.1 / r_k.transverse_mm)
-        near = np.abs(zs - z0) <= 2.0 * r_k.depth_mm
-        jz = int(np.argmax(np.where(near, prof, -1.0)))
-        z_ref = float(np.interp(_parabolic(prof, jz), np.arange(zs.size), zs))
-        iz = int(np.argmin(np.abs(zs - z_ref)))
-        row = stack_vals[iz]
-        win = np.abs(y - y0) <= 0.5 * r_k.transverse_mm
-        jy = int(np.argmax(np.where(win, row, -np.inf)))
-        y_ref = float(np.interp(_parabolic(row, jy), np.arange(y.size), y))
-        return y_ref, z_ref, prof
+    def inv_close(z1: float, z2: float, r_k: Resolution, ref: float) -> bool:
+        return abs(1.0 / abs(z1) - 1.0 / abs(z2)) <= r_k.depth_mm / ref**2
 
-    def fitted_model(vals: NDArray, y_ref: float, z_ref: float) -> tuple[float, NDArray]:
-        r_k = resolution(z_ref)
-        model = refocus(point_response(lf_wall, y_ref, z_ref, phi), y_mm=y, z_mm=zs,
-                        solvable_domain_rad=(a, b)).conventional
-        model = np.where(enough, model, 0.0)
-        hood = ((np.abs(y - y_ref) <= r_k.transverse_mm)[None, :]
-                & (np.abs(zs - z_ref) <= r_k.depth_mm)[:, None] & enough)
-        mm = float(np.sum(model[hood] ** 2))
-        scale = float(np.sum(model[hood] * vals[hood])) / mm if mm > 0 else 0.0
-        return scale, scale * model
+    def model_of(y_ref: float, z_ref: float) -> _Stacks:
+        _, rp, _, nm, n2 = _stacks(point_response(lf_wall, y_ref, z_ref, phi), y, zs, a, b)
+        mf = np.where(n2 > 0, nm / np.sqrt(np.where(n2 > 0, n2, 1.0)), 0.0)
+        return _Stacks(*(np.where(enough, v, 0.0) for v in (mf, nm, rp)))
+
+    def refine(own: _Stacks, y0: float, z0: float) -> _Candidate:
+        iy = int(np.argmin(np.abs(y - y0)))
+        col = enough[:, iy]
+        r0 = resolution(z0)
+        far, near = depth_interval(z0, r0, limit_mm=z_far_limit)
+        inside = (zs >= far) & (zs <= near) & col
+        z_mf = _peak_in(own.mf[:, iy], zs, inside | (zs == zs[np.argmin(np.abs(zs - z0))]))
+        r_k = resolution(z_mf)
+        far, near = depth_interval(z_mf, r_k, limit_mm=z_far_limit)
+        inside = (zs >= far) & (zs <= near) & col
+        fs = FocalStack(y, zs, own.num, own.rp, st.measure_rad, (a, b))
+        prof, _ = depth_profile(fs, y0, window_halfwidth_mm=3.0 * r_k.transverse_mm,
+                                max_frequency_per_mm=0.5 / r_k.transverse_mm,
+                                min_frequency_per_mm=0.1 / r_k.transverse_mm)
+        z_odf = _peak_in(prof, zs, inside) if inside.any() else z_mf
+        z_rp = _peak_in(own.rp[:, iy], zs, inside) if inside.any() else z_mf
+        bounded = np.isfinite(depth_interval(z_mf, r_k)[0])
+        if bounded and inv_close(z_odf, z_mf, r_k, z_mf):
+            quality, z_ref = "resolved", z_odf
+        elif bounded and inv_close(z_rp, z_mf, r_k, z_mf):
+            quality, z_ref = "depth_from_refocusing", z_mf
+        else:
+            quality, z_ref = "unresolved", z_mf
+        iz = int(np.argmin(np.abs(zs - z_ref)))
+        r_ref = resolution(z_ref)
+        y_ref = _peak_in(own.mf[iz], y, np.abs(y - y0) <= 0.5 * r_ref.transverse_mm)
+        model = model_of(y_ref, z_ref)
+        far, near = depth_interval(z_ref, r_ref, limit_mm=z_far_limit)
+        hood = ((np.abs(y - y_ref) <= r_ref.transverse_mm)[None, :]
+                & ((zs >= far) & (zs <= near))[:, None] & enough)
+        mm = float(np.sum(model.mf[hood] ** 2))
+        scale = float(np.sum(model.mf[hood] * own.mf[hood])) / mm if mm > 0 else 0.0
+        return _Candidate(y_ref, z_ref, quality, (z_odf, z_mf, z_rp), prof,
+                          model.scaled(scale))
+
+    def cell(y0: float, z0: float, frac: float) -> NDArray[np.bool_]:
+        """The (y, z) samples within ``frac`` resolution cells of (y0, z0) (δy across,
+        δz/D² in inverse depth)."""
+        r_k = resolution(z0)
+        inv = np.abs(1.0 / np.abs(zs) - 1.0 / abs(z0)) <= frac * r_k.depth_mm / z0**2
+        return (np.abs(y - y0) <= frac * r_k.transverse_mm)[None, :] & inv[:, None]
+
+    def unresolvable(c: _Candidate, others: list[_Candidate]) -> bool:
+        """Closer than one resolution cell to a stronger object: not a separate object
+        (what is left there is the stronger one's model mismatch)."""
+        return any(cell(o.y, o.z, 1.0)[int(np.argmin(np.abs(zs - c.z))),
+                                       int(np.argmin(np.abs(y - c.y)))] for o in others)
 
     # pass 1, CLEAN: take the strongest residual peak, subtract its point response
-    residual = data.copy()
-    cands: list[list] = []
+    residual = data
+    cands: list[_Candidate] = []
     while len(cands) < max_objects and first > 0:
-        iz, iy = np.unravel_index(int(np.argmax(residual)), residual.shape)
-        if residual[iz, iy] < threshold_rel * first:
+        iz, iy = np.unravel_index(int(np.argmax(residual.mf)), residual.mf.shape)
+        if residual.mf[iz, iy] < threshold_rel * first:
             break
-        y_ref, z_ref, prof = refine(residual, float(y[iy]), float(zs[iz]))
-        _, model = fitted_model(residual, y_ref, z_ref)
-        residual = residual - model
-        r_k = resolution(z_ref)
+        cand = refine(residual, float(y[iy]), float(zs[iz]))
+        if unresolvable(cand, cands):
+            core = cell(float(y[iy]), float(zs[iz]), 0.5)
+        else:
+            residual = residual - cand.model
+            cands.append(cand)
+            core = cell(cand.y, cand.z, 0.5)
         # clear the core so that the same peak cannot be picked twice
-        core = ((np.abs(y - y_ref) <= 0.5 * r_k.transverse_mm)[None, :]
-                & (np.abs(zs - z_ref) <= 0.5 * r_k.depth_mm)[:, None])
         core[iz, iy] = True
-        residual = np.where(core, np.minimum(residual, 0.0), residual)
-        cands.append([y_ref, z_ref, model, prof])
+        residual = _Stacks(np.where(core, np.minimum(residual.mf, 0.0), residual.mf),
+                           residual.num, residual.rp)
     # pass 2, interference removal: re-refine each object with the others subtracted,
-    # and keep only those whose own fitted response still clears the threshold
+    # and keep only those whose own fitted response still clears the threshold and that
+    # did not move into a stronger object's resolution cell
     for _ in range(2):
         for k, cand in enumerate(cands):
-            others = sum((c[2] for j, c in enumerate(cands) if j != k), np.zeros_like(data))
-            own = data - others
-            y_ref, z_ref, prof = refine(own, cand[0], cand[1])
-            _, model = fitted_model(own, y_ref, z_ref)
-            cands[k] = [y_ref, z_ref, model, prof]
-    cands = [c for c in cands if float(c[2].max()) >= threshold_rel * first]
-    found: list[tuple[float, float]] = []
-    profiles, bright_rp, bright_conv, res = [], [], [], []
-    for y_ref, z_ref, _, prof in cands:
-        row = refocus(lf_wall, y_mm=[y_ref], z_mm=[z_ref], solvable_domain_rad=(a, b))
-        found.append((y_ref, z_ref))
-        profiles.append(prof)
+            own = data
+            for j, other in enumerate(cands):
+                if j != k:
+                    own = own - other.model
+            cands[k] = refine(own, cand.y, cand.z)
+    cands.sort(key=lambda c: -float(c.model.mf.max()))
+    kept: list[_Candidate] = []
+    for c in cands:
+        if float(c.model.mf.max()) >= threshold_rel * first and not unresolvable(c, kept):
+            kept.append(c)
+    cands = kept
+    bright_rp, bright_conv, res, intervals = [], [], [], []
+    for c in cands:
+        row = refocus(lf_wall, y_mm=[c.y], z_mm=[c.z], solvable_domain_rad=(a, b))
         bright_rp.append(float(row.radiance_preserving[0, 0]))
         bright_conv.append(float(row.conventional[0, 0]))
-        res.append(resolution(z_ref))
+        res.append(resolution(c.z))
+        intervals.append(depth_interval(c.z, res[-1], limit_mm=z_far_limit))
+    n = len(cands)
     return Detection(
-        count=len(found),
-        positions_mm=np.asarray(found, dtype=float).reshape(-1, 2),
+        count=n,
+        positions_mm=np.asarray([(c.y, c.z) for c in cands], dtype=float).reshape(n, 2),
         brightness_rp=np.asarray(bright_rp),
         brightness_conventional=np.asarray(bright_conv),
         resolutions=tuple(res),
         stack=st,
-        depth_profiles=np.asarray(profiles, dtype=float).reshape(len(found), zs.size),
+        depth_profiles=np.asarray([c.profile for c in cands], dtype=float).reshape(n, zs.size),
+        depth_interval_mm=np.asarray(intervals, dtype=float).reshape(n, 2),
+        quality=tuple(c.quality for c in cands),
+        depth_estimates_mm=np.asarray([c.estimates for c in cands], dtype=float).reshape(n, 3),
     )
