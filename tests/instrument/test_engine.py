@@ -196,3 +196,33 @@ def test_bench_missing_what_the_plan_needs_is_refused_before_anything(tmp_path):
     assert "no power meter" in msg and "no\n" not in msg and "light source" in msg
     assert not list(tmp_path.iterdir())  # no run file was created
     assert all(a.moves == 0 for a in bench.axes.values())
+
+
+def test_lightfield_plan_with_dark_at_start(tmp_path):
+    text = """
+[plan]
+kind = "lightfield"
+[sample]
+name = "wall"
+[scan]
+camera_z = { start = 0.0, stop = 10.0, step = 2.5 }
+detector_theta = 40.0
+[acquisition]
+exposure_us = 500
+frames = 3
+dark = "start"
+detectors = ["camera"]
+"""
+    engine, _q, plan, _bench = _run(tmp_path, text)
+    assert [p.label for p in plan.points] == ["dark"] + ["lightfield"] * 5
+    assert engine.run() is EngineState.FINISHED
+    with h5py.File(engine.store.path) as f:
+        e = f["entry"]
+        assert list(e["data/frame_light"][:]) == [False] + [True] * 5
+        frames = e["data/frames"]
+        assert frames.dtype == np.float32  # three frames averaged per point
+        assert frames[0].mean() == pytest.approx(10.0)  # dark: the offset only
+        assert frames[1].mean() == pytest.approx(510.0)
+        z = e["points/positions"][:, list(plan.axes).index("camera_z")]
+        assert np.allclose(z[1:], [0.0, 2.5, 5.0, 7.5, 10.0])
+        assert np.all(np.isnan(e["points/theta_i"][:]))  # no scattering geometry

@@ -92,3 +92,25 @@ def test_route_time_slowest_axis_sets_each_step():
     assert steps[1] == pytest.approx(max(ta, tb))
     assert steps[2] == pytest.approx(move_time(2.0, dyn["b"]))
     assert total == pytest.approx(steps.sum())
+
+
+def test_profile_geometry_extensions_validate_fields():
+    from instrument.profile import ProfileError
+
+    bad = IDEAL_PROFILE.replace("velocity = 10.0\n", "velocity = 10.0\nsettle_s = -1\n", 1)
+    bad += """
+[[geometry.collision]]
+axis = "nozzle"
+range = [5.0, 1.0]
+"""
+    with pytest.raises(ProfileError) as exc:
+        parse_profile(bad)
+    paths = {e.path for e in exc.value.errors}
+    assert {"devices.sample_theta.settle_s", "geometry.collision[0].axis",
+            "geometry.collision[0].range"} <= paths
+    ok = parse_profile(IDEAL_PROFILE.replace("velocity = 10.0\n",
+                                             "velocity = 10.0\nsettle_s = 0.02\n", 1)
+                       + COLLISION)
+    assert ok.devices["sample_theta"].settle_s == 0.02
+    assert len(ok.geometry.collisions) == 2
+    assert ok.geometry.collisions[1].relative_to == "sample_theta"
