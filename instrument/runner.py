@@ -141,7 +141,7 @@ def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_D
               run_id: str | None = None) -> RunEngine:
     """Create the run file and catalog row; return the (not yet started) engine."""
     check_bench_for_plan(plan, bench)
-    runs_dir = Path(runs_dir)
+    runs_dir = Path(runs_dir).resolve()  # messages name the file unambiguously
     run_id = run_id or new_run_id(plan.kind)
     header = header_for(plan, bench, run_id)
     path = runs_dir / f"{run_id}.h5"
@@ -183,7 +183,7 @@ def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
                sync_interval_s: float = 0.25, min_free_bytes: int = 64 << 20,
                catalog: bool = True) -> RunEngine:
     """Recover the run file from its journal and return an engine for the missing points."""
-    path = Path(path)
+    path = Path(path).resolve()
     recover(path)
     plan = plan_from_run(path, bench)
     check_bench_for_plan(plan, bench)
