@@ -18,6 +18,7 @@ import numpy as np
 from analysis.sh.convention import band_slice, degrees_orders, lmax_from_size
 
 __all__ = [
+    "NoiseEstimate",
     "WienerResult",
     "band_power",
     "convolve",
@@ -67,13 +68,21 @@ def _unobservable(filt: np.ndarray, tol: float) -> np.ndarray:
     return a <= tol * a.max()
 
 
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """Noise σ of one coefficient and the number of coefficients it rests on."""
+
+    sigma: float
+    n_used: int
+
+
 def estimate_coefficient_noise(
     coeffs: np.ndarray,
     filt: np.ndarray,
     *,
     null_tol: float = 1e-12,
     negligible: float = 1e-3,
-) -> tuple[float, int]:
+) -> NoiseEstimate:
     """Noise σ of one coefficient, estimated from bands that hold no signal.
 
     Bands with A_l = 0 (exact null space, e.g. odd l > 1 for Lambert) contain only noise;
@@ -82,9 +91,7 @@ def estimate_coefficient_noise(
 
     Returns
     -------
-    sigma : float
-    n_used : int
-        Number of coefficients the estimate rests on.
+    NoiseEstimate
 
     Raises
     ------
@@ -100,7 +107,7 @@ def estimate_coefficient_noise(
     if not null.any():
         raise ValueError("no signal-free band to estimate the noise from; pass noise_sigma")
     vals = np.concatenate([c[band_slice(l)] for l in np.nonzero(null)[0]])
-    return float(1.4826 * np.median(np.abs(vals))), int(vals.size)
+    return NoiseEstimate(float(1.4826 * np.median(np.abs(vals))), int(vals.size))
 
 
 @dataclass(frozen=True)
@@ -236,7 +243,7 @@ def wiener_deconvolve(
     else:
         if noise_sigma is None:
             try:
-                noise_sigma, _ = estimate_coefficient_noise(b, a, null_tol=null_tol)
+                noise_sigma = estimate_coefficient_noise(b, a, null_tol=null_tol).sigma
             except ValueError:
                 noise_sigma = 0.0  # the fitted floor alone sets the level
         if noise_sigma < 0:

@@ -23,6 +23,7 @@ from analysis.sh.filters import lambertian_filter
 from analysis.sh.transform import analysis, directions_to_angles, evaluate, gl_grid
 
 __all__ = [
+    "AlbedoRatio",
     "IdentityError",
     "SeparationResult",
     "TransferResult",
@@ -400,9 +401,17 @@ def separate_diffuse_specular(
     return SeparationResult(diffuse, specular, frac, lmax_diffuse)
 
 
+@dataclass(frozen=True)
+class AlbedoRatio:
+    """ρ₂/ρ₁ and its standard error."""
+
+    ratio: float
+    std: float
+
+
 def albedo_ratio(
     diffuse1: np.ndarray, diffuse2: np.ndarray, *, mask: np.ndarray | None = None
-) -> tuple[float, float]:
+) -> AlbedoRatio:
     """Spatial-domain analogue of γ_l for the diffuse part: the albedo ratio ρ₂/ρ₁.
 
     Two diffuse images of the same shape in the same lighting differ by the albedo ratio
@@ -410,9 +419,8 @@ def albedo_ratio(
 
     Returns
     -------
-    ratio : float
-    std : float
-        Standard error of the ratio from the scatter of the residuals.
+    AlbedoRatio
+        The ratio and its standard error from the scatter of the residuals.
     """
     i1 = np.asarray(diffuse1, dtype=float)
     i2 = np.asarray(diffuse2, dtype=float)
@@ -426,4 +434,4 @@ def albedo_ratio(
     ratio = float(x @ y) / den
     resid = y - ratio * x
     std = float(np.sqrt(resid @ resid / (x.size - 1) / den))
-    return ratio, std
+    return AlbedoRatio(ratio, std)

@@ -123,8 +123,8 @@ def test_separation_and_albedo_ratio() -> None:
     rng = np.random.default_rng(10)
     i1 = rng.uniform(0.2, 1.0, (40, 40))
     i2 = 0.45 * i1 + 0.002 * rng.standard_normal(i1.shape)
-    ratio, std = albedo_ratio(i1, i2)
-    assert abs(ratio - 0.45) < 4 * std and std < 1e-3
+    res = albedo_ratio(i1, i2)
+    assert abs(res.ratio - 0.45) < 4 * res.std and res.std < 1e-3
 
 
 def test_irradiance_in_reflected_parameterisation() -> None:
