@@ -32,7 +32,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -868,6 +867,3 @@ class _Writer:
             self._q.put(None)
             self._thread.join(10.0)
 
-
-def default_run_path(runs_dir: Path, run_id: str) -> Path:
-    return Path(runs_dir) / f"{run_id}.h5"
