@@ -36,7 +36,11 @@ class RunStarted:
 
 @dataclass(frozen=True)
 class PointCompleted:
-    """A point is durable on disk. Live values for plots."""
+    """A point has been acquired and handed to storage; live values for plots.
+
+    Its record is committed to the run file before the next point acquires anything
+    (docs/decisions/0010); a kill before that loses this point and no other.
+    """
 
     index: int
     label: str
