@@ -301,3 +301,25 @@ def test_fuzzed_plan_through_the_cli_never_opens_or_moves_anything(tmp_path, tex
     assert main(["run", str(path), "--out", str(tmp_path / "runs")]) == 2
     assert registry.all_emulators() == []
     assert not (tmp_path / "runs").exists()
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(mutated(BASE_PROFILE))
+def test_fuzzed_profile_through_the_cli_never_opens_or_moves_anything(tmp_path, text):
+    from hw_mocks import registry
+    from instrument.cli import main
+
+    try:
+        parse_profile(text)
+        return  # still valid: opening it is allowed
+    except ProfileError:
+        pass
+    registry.reset()
+    bench = tmp_path / "bench.toml"
+    bench.write_text(text)
+    plan = tmp_path / "plan.toml"
+    plan.write_text(inplane_plan(step=15.0))
+    assert main(["run", str(plan), "--bench", str(bench), "--out", str(tmp_path / "r")]) == 2
+    assert registry.all_emulators() == []
+    assert not (tmp_path / "r").exists()
