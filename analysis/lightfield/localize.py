@@ -380,6 +380,7 @@ class _Candidate:
     z: float
     quality: str
     estimates: tuple[float, float, float]
+    interval: tuple[float, float]
     profile: NDArray
     model: _Stacks
 
@@ -439,7 +440,7 @@ def detect_objects(
     data = _Stacks(*(np.where(enough, v, 0.0) for v in (st.matched_filter, num,
                                                           st.radiance_preserving)))
     first = float(data.mf.max()) if data.mf.size else 0.0
-    z_far_limit = float(zs.min())
+    z_far_limit, z_near_limit = float(zs.min()), float(zs.max())
 
     def resolution(depth: float) -> Resolution:
         return theoretical_resolution(p_max, domain_rad=lf_wall.domain_rad,
@@ -460,7 +461,13 @@ def detect_objects(
         r0 = resolution(z0)
         far, near = depth_interval(z0, r0, limit_mm=z_far_limit)
         inside = (zs >= far) & (zs <= near) & col
-        z_mf = _peak_in(own.mf[:, iy], zs, inside | (zs == zs[np.argmin(np.abs(zs - z0))]))
+        allowed = inside | (zs == zs[np.argmin(np.abs(zs - z0))])
+        j = int(np.argmax(np.where(allowed, own.mf[:, iy], -np.inf)))
+        z_mf = _peak_in(own.mf[:, iy], zs, allowed)
+        # a maximum on the border of the searchable region is no localised peak: the
+        # object may lie beyond it (e.g. seen through too little of the domain)
+        open_far = j == 0 or not col[j - 1]
+        open_near = j == zs.size - 1 or not col[j + 1]
         r_k = resolution(z_mf)
         far, near = depth_interval(z_mf, r_k, limit_mm=z_far_limit)
         inside = (zs >= far) & (zs <= near) & col
@@ -470,7 +477,7 @@ def detect_objects(
                                 min_frequency_per_mm=0.1 / r_k.transverse_mm)
         z_odf = _peak_in(prof, zs, inside) if inside.any() else z_mf
         z_rp = _peak_in(own.rp[:, iy], zs, inside) if inside.any() else z_mf
-        bounded = np.isfinite(depth_interval(z_mf, r_k)[0])
+        bounded = np.isfinite(depth_interval(z_mf, r_k)[0]) and not (open_far or open_near)
         if bounded and inv_close(z_odf, z_mf, r_k, z_mf):
             quality, z_ref = "resolved", z_odf
         elif bounded and inv_close(z_rp, z_mf, r_k, z_mf):
@@ -486,7 +493,8 @@ def detect_objects(
                 & ((zs >= far) & (zs <= near))[:, None] & enough)
         mm = float(np.sum(model.mf[hood] ** 2))
         scale = float(np.sum(model.mf[hood] * own.mf[hood])) / mm if mm > 0 else 0.0
-        return _Candidate(y_ref, z_ref, quality, (z_odf, z_mf, z_rp), prof,
+        interval = (z_far_limit if open_far else far, z_near_limit if open_near else near)
+        return _Candidate(y_ref, z_ref, quality, (z_odf, z_mf, z_rp), interval, prof,
                           model.scaled(scale))
 
     def cell(y0: float, z0: float, frac: float) -> NDArray[np.bool_]:
@@ -542,7 +550,7 @@ def detect_objects(
         bright_rp.append(float(row.radiance_preserving[0, 0]))
         bright_conv.append(float(row.conventional[0, 0]))
         res.append(resolution(c.z))
-        intervals.append(depth_interval(c.z, res[-1], limit_mm=z_far_limit))
+        intervals.append(c.interval)
     n = len(cands)
     return Detection(
         count=n,
