@@ -441,6 +441,12 @@ def _receiver_distance(run: RunData, rows: np.ndarray, opts: ReductionOptions
         if np.all(np.isfinite(z)):
             # one distance per run: the plan does not move camera_z during a BRDF scan
             return base + float(np.mean(z)), "profile distance + camera_z read-back"
+        if run.geometry.get("axis_homed.camera_z") == 1:
+            z0 = float(run.geometry["axis_position.camera_z"])
+            return base + z0, "profile distance + camera_z at run start (homed)"
+        if "axis_position.camera_z" in run.geometry:
+            return base, ("profile detector distance; camera_z was not homed, so its position "
+                          "is unknown (assumed 0: give --distance-mm if it is elsewhere)")
         return base, ("profile detector distance; camera_z was not recorded by this run "
                       "(assumed 0: give --distance-mm if the camera stage is elsewhere)")
     return base, "profile detector distance"

@@ -12,6 +12,7 @@ import secrets
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import h5py
 
@@ -59,6 +60,27 @@ def _nx_class(device) -> str:
     return "NXcollection"
 
 
+def static_axis_positions(bench: Bench, moved: tuple[str, ...]) -> dict[str, Any]:
+    """Where the axes the plan does not move stand at the start, and whether homed.
+
+    They set the geometry as much as the moved ones (the camera stage sets the receiver
+    distance), so they are recorded as ``axis_position.<role>`` (axis units) and
+    ``axis_homed.<role>``; an unhomed axis's position is its controller counter, not a
+    physical position, and analysis must not trust it.
+    """
+    out: dict[str, Any] = {}
+    for role, axis in bench.axes.items():
+        if role in moved:
+            continue
+        try:
+            status = axis.status()
+        except DeviceError:
+            continue
+        out[f"axis_position.{role}"] = float(status.position)
+        out[f"axis_homed.{role}"] = int(bool(status.is_homed))
+    return out
+
+
 def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
     identities: dict[str, dict[str, str]] = {}
     for role, dev in bench.devices.items():
@@ -75,6 +97,7 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
     geometry = {k: v for k, v in vars(bench.profile.geometry).items()
                 if isinstance(v, str | int | float)}
     geometry["detector_solid_angle_sr"] = bench.profile.geometry.detector_solid_angle_sr
+    geometry.update(static_axis_positions(bench, plan.axes))
     return RunHeader(
         run_id=run_id, plan_kind=plan.kind, plan_name=plan.spec.name,
         plan_text=plan.spec.source_text, profile_text=bench.profile.source_text,

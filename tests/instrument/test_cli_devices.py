@@ -76,3 +76,20 @@ def test_power_meter_reads_the_world_after_an_emulated_power_cycle():
     # positive reading, the same light before and after the power cycle (noise aside).
     assert lit > 1e-8
     assert again == pytest.approx(lit, rel=0.05)
+
+
+def test_axes_the_plan_does_not_move_are_recorded_with_homed_state():
+    from instrument.runner import static_axis_positions
+
+    profile = load_profile("sim")
+    with open_bench(profile, roles=["sample_theta", "camera_z"]) as bench:
+        before = static_axis_positions(bench, moved=("sample_theta",))
+        cam = bench.axes["camera_z"]
+        cam.enable()
+        cam.home(timeout=60)
+        cam.move_to(4.0, wait=True, timeout=60)
+        after = static_axis_positions(bench, moved=("sample_theta",))
+    assert "axis_position.sample_theta" not in before
+    assert before["axis_homed.camera_z"] == 0
+    assert after["axis_homed.camera_z"] == 1
+    assert after["axis_position.camera_z"] == pytest.approx(4.0, abs=cam.position_tolerance)
