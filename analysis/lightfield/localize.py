@@ -462,14 +462,15 @@ def detect_objects(
         far, near = depth_interval(z0, r0, limit_mm=z_far_limit)
         inside = (zs >= far) & (zs <= near) & col
         allowed = inside | (zs == zs[np.argmin(np.abs(zs - z0))])
-        j = int(np.argmax(np.where(allowed, own.mf[:, iy], -np.inf)))
         z_mf = _peak_in(own.mf[:, iy], zs, allowed)
-        # a maximum on the border of the searchable region is no localised peak: the
-        # object may lie beyond it (e.g. seen through too little of the domain)
-        open_far = j == 0 or not col[j - 1]
-        open_near = j == zs.size - 1 or not col[j + 1]
         r_k = resolution(z_mf)
-        far, near = depth_interval(z_mf, r_k, limit_mm=z_far_limit)
+        # the maximum is a localised depth only if the matched filter was evaluated over
+        # the whole interval compatible with it: where the searchable region (or the grid)
+        # ends inside it, the object may lie beyond, and the maximum is the border's
+        far_u, near = depth_interval(z_mf, r_k)
+        open_far = far_u < zs[0] or not col[(zs >= far_u) & (zs <= z_mf)].all()
+        open_near = near > zs[-1] or not col[(zs >= z_mf) & (zs <= near)].all()
+        far = max(far_u, z_far_limit)
         inside = (zs >= far) & (zs <= near) & col
         fs = FocalStack(y, zs, own.num, own.rp, st.measure_rad, (a, b))
         prof, _ = depth_profile(fs, y0, window_halfwidth_mm=3.0 * r_k.transverse_mm,
@@ -477,7 +478,7 @@ def detect_objects(
                                 min_frequency_per_mm=0.1 / r_k.transverse_mm)
         z_odf = _peak_in(prof, zs, inside) if inside.any() else z_mf
         z_rp = _peak_in(own.rp[:, iy], zs, inside) if inside.any() else z_mf
-        bounded = np.isfinite(depth_interval(z_mf, r_k)[0]) and not (open_far or open_near)
+        bounded = not (open_far or open_near)
         if bounded and inv_close(z_odf, z_mf, r_k, z_mf):
             quality, z_ref = "resolved", z_odf
         elif bounded and inv_close(z_rp, z_mf, r_k, z_mf):
