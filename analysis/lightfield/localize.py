@@ -123,6 +123,11 @@ def _stacks(
     return conv, rp, meas, num, norm2
 
 
+def _normalised(num: NDArray, norm2: NDArray) -> NDArray:
+    """Matched-filter numerator over the model norm (0 where no ray is available)."""
+    return np.where(norm2 > 0, num / np.sqrt(np.where(norm2 > 0, norm2, 1.0)), 0.0)
+
+
 def refocus(
     lf_wall: LightField2D,
     *,
@@ -140,8 +145,7 @@ def refocus(
     zs = np.atleast_1d(np.asarray(z_mm, dtype=float))
     a, b = lf_wall.domain_rad if solvable_domain_rad is None else solvable_domain_rad
     conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b)
-    mf = np.where(norm2 > 0, num / np.sqrt(np.where(norm2 > 0, norm2, 1.0)), 0.0)
-    return FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), mf)
+    return FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), _normalised(num, norm2))
 
 
 def refocus_4d(
@@ -427,16 +431,17 @@ def detect_objects(
     """
     from .spectral import fourier_orders
 
-    st = refocus(lf_wall, y_mm=y_mm, z_mm=z_mm, solvable_domain_rad=solvable_domain_rad)
-    y, zs = st.y_mm, st.z_mm
-    a, b = st.solvable_domain_rad
+    y = np.asarray(y_mm, dtype=float)
+    zs = np.atleast_1d(np.asarray(z_mm, dtype=float))
+    a, b = lf_wall.domain_rad if solvable_domain_rad is None else solvable_domain_rad
+    conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b)
+    st = FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), _normalised(num, norm2))
     aperture = float(lf_wall.y_mm[-1] - lf_wall.y_mm[0])
     if filter_factors is None:
         phi = (np.abs(fourier_orders(lf_wall.theta_rad.size)) <= p_max).astype(float)
     else:
         phi = np.atleast_2d(np.asarray(filter_factors, dtype=float)).mean(axis=0)
     enough = st.measure_rad >= min_measure_fraction * (b - a)
-    _, _, _, num, _ = _stacks(lf_wall, y, zs, a, b)
     data = _Stacks(*(np.where(enough, v, 0.0) for v in (st.matched_filter, num,
                                                           st.radiance_preserving)))
     first = float(data.mf.max()) if data.mf.size else 0.0
@@ -451,9 +456,8 @@ def detect_objects(
         return abs(1.0 / abs(z1) - 1.0 / abs(z2)) <= r_k.depth_mm / ref**2
 
     def model_of(y_ref: float, z_ref: float) -> _Stacks:
-        _, rp, _, nm, n2 = _stacks(point_response(lf_wall, y_ref, z_ref, phi), y, zs, a, b)
-        mf = np.where(n2 > 0, nm / np.sqrt(np.where(n2 > 0, n2, 1.0)), 0.0)
-        return _Stacks(*(np.where(enough, v, 0.0) for v in (mf, nm, rp)))
+        _, rp_m, _, nm, n2 = _stacks(point_response(lf_wall, y_ref, z_ref, phi), y, zs, a, b)
+        return _Stacks(*(np.where(enough, v, 0.0) for v in (_normalised(nm, n2), nm, rp_m)))
 
     def refine(own: _Stacks, y0: float, z0: float) -> _Candidate:
         iy = int(np.argmin(np.abs(y - y0)))
@@ -532,7 +536,7 @@ def detect_objects(
     # pass 2, interference removal: re-refine each object with the others subtracted,
     # and keep only those whose own fitted response still clears the threshold and that
     # did not move into a stronger object's resolution cell
-    for _ in range(2):
+    for _ in range(2 if len(cands) > 1 else 0):  # one object: nothing to remove
         for k, cand in enumerate(cands):
             own = data
             for j, other in enumerate(cands):

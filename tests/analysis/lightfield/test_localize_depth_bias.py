@@ -1,11 +1,17 @@
-"""Depth of a located point source: its bias towards the wall stays below half the blur.
+"""Depth bias of a located point source, and where the old bias came from.
 
 The ideal input of localisation: the true incident field at the wall (cell averages of the
-continuous renderer's ground truth) seen through a truncation at P angular orders, with
-the cosine-weighted basis of the reconstruction (S2-18).  Before the |z| weighting of the
-depth filter (the conventional stack's 1/|z| ray density) the point at −200 mm came out
-at −189 mm (0.55 δz), at −150 mm at −143 mm; the RP peak sat at the true depth.  What is
-left (≈ 0.3 δz) belongs to the depth filter's windowed spectra, not to the ray density.
+continuous renderer's ground truth, a 1.5 mm disc) seen through a truncation at P angular
+orders, with the cosine-weighted basis of the reconstruction (S2-18).
+
+History: the conventional stack's peak sits nearer the wall (its height scales as W/|z|);
+weighting it by |z| (the matched filter, module doc of ``analysis.lightfield.localize``)
+removed most of that, but the depth filter still came out 0.3 δz (P = 18) to 0.6 δz
+(P = 5) towards the wall.  Cause (derived in the module doc): its band of spatial
+frequencies reached 1/δy, twice the angular cut-off ``(P + ½)/((B − A)|z0|) = 1/(2 δy)``
+mapped to the object's depth; the frequencies above the cut-off carry signal only at trial
+depths nearer the wall, so their z-profiles peak there.  Ending the band at 1/(2 δy)
+removes the pull.
 """
 
 from __future__ import annotations
@@ -14,22 +20,27 @@ import numpy as np
 import pytest
 
 from analysis.lightfield import (
+    FocalStack,
     LightField2D,
     coefficients,
+    depth_profile,
     detect_objects,
     fourier_orders,
     material,
+    refocus,
     synthesize,
+    theoretical_resolution,
     theta_grid,
 )
 from hw_mocks.sim.lightfield_scene import HiddenScene, PointObject, Wall
 
 DOMAIN = (-0.6, 0.6)
+SOLVABLE = (-0.5, 0.5)
 N = 128
-P = 18
+Y0 = -8.0
 
 
-def _filtered_truth(y0: float, z0: float) -> LightField2D:
+def _filtered_truth(y0: float, z0: float, p: int) -> LightField2D:
     scene = HiddenScene((PointObject(y0, z0, 1.5, 1.0, "disc"),),
                         Wall(-150.0, 150.0, material("brushed_metal")), d2_mm=30.0)
     c = np.arange(-29.0, 29.01, 1.0)
@@ -37,21 +48,59 @@ def _filtered_truth(y0: float, z0: float) -> LightField2D:
     w = (DOMAIN[1] - DOMAIN[0]) / N
     sub = (np.arange(41) / 40 - 0.5) * w
     truth = np.mean([scene.incident_radiance(c[:, None], th[None, :] + s) for s in sub], axis=0)
-    phi = (np.abs(fourier_orders(N)) <= P).astype(float)
+    phi = (np.abs(fourier_orders(N)) <= p).astype(float)
     g = synthesize(coefficients(truth * np.cos(th)[None, :], axis=-1) * phi, axis=-1).real
     return LightField2D(g / np.cos(th)[None, :], c, th, DOMAIN, 0.0)
 
 
-@pytest.mark.parametrize("z0", [-150.0, -200.0])
-def test_point_depth_bias_below_half_the_depth_blur(z0):
-    lf = _filtered_truth(-8.0, z0)
-    phi = (np.abs(fourier_orders(N)) <= P).astype(float)
-    det = detect_objects(lf, p_max=P, y_mm=np.arange(-80.0, 80.0, 0.5),
-                         z_mm=np.arange(-330.0, -60.0, 1.0), solvable_domain_rad=(-0.5, 0.5),
+@pytest.mark.parametrize(("p", "z0"), [(18, -150.0), (18, -200.0), (18, -260.0), (5, -150.0),
+                                       (5, -260.0)])
+def test_point_depth_bias_below_a_seventh_of_the_depth_blur(p, z0):
+    lf = _filtered_truth(Y0, z0, p)
+    phi = (np.abs(fourier_orders(N)) <= p).astype(float)
+    # the far end of the interval at P = 5, 260 mm is 507 mm: the search must reach it
+    det = detect_objects(lf, p_max=p, y_mm=np.arange(-60.0, 50.0, 0.5),
+                         z_mm=np.arange(-560.0, -80.0, 1.0), solvable_domain_rad=SOLVABLE,
                          filter_factors=phi, min_measure_fraction=0.1)
     assert det.count == 1
+    assert det.quality == ("resolved",)
     (y, z), res = det.positions_mm[0], det.resolutions[0]
-    assert abs(y + 8.0) < 0.1 * res.transverse_mm
-    # with the |z| weighting: 0.36 δz at −150 mm, 0.29 δz at −200 mm (all towards the
-    # wall); without it 0.63 and 0.55 δz
-    assert abs(z - z0) < 0.45 * res.depth_mm
+    assert abs(y - Y0) < 0.1 * res.transverse_mm
+    # measured: |Δz| ≤ 0.08 δz for P = 5 … 18 at 150 … 260 mm (was 0.29 … 0.6 δz)
+    assert abs(z - z0) < 0.15 * res.depth_mm
+    far, near = det.depth_interval_mm[0]
+    assert far < z0 < near
+
+
+@pytest.mark.parametrize("p", [5, 18])
+def test_depth_filter_band_beyond_the_angular_cutoff_pulls_towards_the_wall(p):
+    """The derivation, checked: the same depth filter, band (0.1, 1]/δy against
+    (0.1, ½]/δy, on the |z|-weighted stack of the filtered renderer truth."""
+    z0 = -200.0
+    z = np.arange(-330.0, -60.0, 1.0)
+    st = refocus(_filtered_truth(Y0, z0, p), y_mm=np.arange(-80.0, 80.0, 0.5), z_mm=z,
+                 solvable_domain_rad=SOLVABLE)
+    weighted = FocalStack(st.y_mm, z, st.conventional * np.abs(z)[:, None],
+                          st.radiance_preserving, st.measure_rad, SOLVABLE)
+    res = theoretical_resolution(p, domain_rad=DOMAIN, distance_mm=200.0, aperture_mm=58.0,
+                                 solvable_domain_rad=SOLVABLE)
+
+    def peak(top: float, window: float) -> float:
+        prof, _ = depth_profile(weighted, Y0, window_halfwidth_mm=window * res.transverse_mm,
+                                max_frequency_per_mm=top / res.transverse_mm,
+                                min_frequency_per_mm=0.1 / res.transverse_mm)
+        return float(z[np.argmax(prof)])
+
+    assert (peak(1.0, 1.5) - z0) / res.depth_mm > 0.2  # the old band: towards the wall
+    assert abs(peak(0.5, 3.0) - z0) / res.depth_mm < 0.1
+
+
+def test_matched_filter_column_peaks_at_the_depth_where_the_conventional_does_not():
+    z0 = -200.0
+    z = np.arange(-330.0, -60.0, 1.0)
+    st = refocus(_filtered_truth(Y0, z0, 18), y_mm=np.array([Y0]), z_mm=z,
+                 solvable_domain_rad=SOLVABLE)
+    res = theoretical_resolution(18, domain_rad=DOMAIN, distance_mm=200.0, aperture_mm=58.0,
+                                 solvable_domain_rad=SOLVABLE)
+    assert abs(z[np.argmax(st.matched_filter[:, 0])] - z0) < 0.1 * res.depth_mm
+    assert (z[np.argmax(st.conventional[:, 0])] - z0) > 0.3 * res.depth_mm
