@@ -12,13 +12,18 @@ Markdown table for BENCHMARKS.md.
     (one ray per pixel) and exposed.
 * HDR merge (:func:`analysis.hdr.merge_hdr`) of five 16-bit brackets, hat and
   inverse-variance weighting; throughput in output megapixels per second.
+* PM100USB ``MEAS:POW?`` queries per second through the emulated USB path (the real
+  USBTMC/pyusb stack over the emulated backend), measured by ``bench_power_meter.run_case``;
+  ``bench_power_meter.py`` has the full table.
 """
 
 from __future__ import annotations
 
 import argparse
 import platform
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -28,6 +33,9 @@ from hw_mocks.sim.camera import SimulatedCamera
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import SensorParams
 from hw_mocks.sim.world import VirtualBench
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_power_meter import open_meter, run_case  # sibling benchmark module
 
 
 def _camera(side: int) -> tuple[SimulatedCamera, VirtualBench]:
@@ -96,6 +104,15 @@ def main(argv: list[str] | None = None) -> None:
     for weighting in ("hat", "inverse_variance"):
         mps = bench_hdr(side, repeats, weighting)
         print(f"| {weighting} | {side}×{side} | {mps:.1f} |")
+    print()
+    meter = open_meter("simusb://bench_pm?serial=P2000000")
+    try:
+        pm = run_case(meter.read_power_w, 0.5 if args.quick else 3.0)
+    finally:
+        meter.close()
+    print("| PM100USB over emulated USB | queries/s | median µs |")
+    print("|---|---|---|")
+    print(f"| `read_power_w()` (`MEAS:POW?`) | {pm['ops_per_s']:.0f} | {pm['median_us']:.0f} |")
 
 
 if __name__ == "__main__":
