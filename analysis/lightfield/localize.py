@@ -281,7 +281,7 @@ def depth_interval(
 
 
 #: Quality flags of a detection's depth (see :func:`detect_objects`).
-QUALITY_FLAGS = ("resolved", "depth_from_refocusing", "unresolved")
+QUALITY_FLAGS = ("resolved", "two_estimates_agree", "unresolved")
 
 
 @dataclass(frozen=True)
@@ -291,21 +291,21 @@ class Detection:
     Attributes
     ----------
     count : int
-    positions_mm : (count, 2) — (y, z) of each object; for a depth flagged "unresolved" z
-        is only the matched filter's best guess, read ``depth_interval_mm`` instead
+    positions_mm : (count, 2) — (y, z) of each object; z is the median of the three depth
+        estimates (``depth_estimates_mm``); for a depth flagged "unresolved" it is only a
+        best guess, read ``depth_interval_mm`` instead
     brightness_rp : (count,) — RP-refocused radiance at the object
     brightness_conventional : (count,) — conventional refocused value there
     resolutions : tuple of Resolution — the theoretical blur at each object
     stack : FocalStack — the focal stack used
     depth_profiles : (count, N_z) — the depth-filter profile of each object
-    depth_interval_mm : (count, 2) — (far, near) z bounds compatible with the data within
-        one depth resolution (:func:`depth_interval`; an unbounded far end is clipped to
-        the searched range)
+    depth_interval_mm : (count, 2) — (far, near) z bounds: the depths within one depth
+        resolution (:func:`depth_interval`), widened to hold all three estimates; where
+        the searched region ends inside it, opened to the end of the searched z range
     quality : tuple of str — per object, one of :data:`QUALITY_FLAGS`:
-        "resolved" (the depth filter and the matched-filter peak agree within one depth
-        resolution; z is the depth filter's), "depth_from_refocusing" (they disagree, the
-        matched-filter and RP peaks agree; z is the matched filter's), "unresolved" (no two
-        depth estimates agree, or the interval has no far end)
+        "resolved" (the depth filter, the matched filter and the RP peak agree pairwise
+        within one inverse-depth resolution), "two_estimates_agree" (one of them does not),
+        "unresolved" (no two agree, or the interval runs out of the searched region)
     depth_estimates_mm : (count, 3) — z from the depth filter, the matched filter and the
         RP stack (the evidence behind the flag)
     """
@@ -403,22 +403,29 @@ def detect_objects(
 ) -> Detection:
     """Detect objects: count, (y, z), brightness, resolution, depth interval and quality.
 
-    CLEAN-style on the matched-filter map (the point-source likelihood statistic of
-    :func:`refocus`, unbiased in depth): the strongest peak (inside the region seen through
-    at least ``min_measure_fraction`` of the solvable domain) gives the matched-filter
-    depth z_MF (parabolic refinement along its column); the depth filter
-    (:func:`depth_profile` on the matched-filter numerator, window half-width 3 δy, the
-    spatial frequencies up to the angular cut-off at that depth, ``(P + ½)/((B − A)|z|)``
-    = 1/(2 δy)) and the RP stack are searched inside the inverse-depth interval of z_MF
-    (:func:`depth_interval`).  The depth reported, and its flag:
+    CLEAN-style: the strongest peak of the matched-filter numerator (inside the region
+    seen through at least ``min_measure_fraction`` of the solvable domain; the numerator,
+    not the normalised statistic, so that regions seen through few rays do not amplify
+    reconstruction artefacts) starts a search in its column for three depth estimates:
 
-    * "resolved" — the depth filter agrees with z_MF within one inverse-depth resolution
-      ``δz/D²``: its depth is reported;
-    * "depth_from_refocusing" — it does not (with few angular orders its windowed spectra
-      carry too little depth information and its own bias wins), but the RP peak agrees
-      with z_MF: z_MF is reported;
-    * "unresolved" — no two estimates agree, or ``δz ≥ D`` (no bounded interval): z_MF
-      is reported only as a best guess; read the interval.
+    * z_MF, the maximum of the normalised matched filter (the point-source likelihood
+      statistic of :func:`refocus`, free of the ray-density bias);
+    * z_DF, the depth filter (:func:`depth_profile` on the matched-filter numerator,
+      window half-width 3 δy, spatial frequencies up to the angular cut-off at that depth
+      ``(P + ½)/((B − A)|z|) = 1/(2 δy)``), and z_RP, the RP stack's maximum, both searched
+      inside the inverse-depth interval of z_MF (:func:`depth_interval`).
+
+    The depth reported is their median (robust when one fails: with few angular orders
+    the depth filter's windowed spectra carry little depth information; where the
+    solvable domain, not the wall, limits the aperture the matched filter leans away from
+    the wall, and RP is noisy where few rays are available).  The flag says how far they
+    agree, in units of the inverse-depth resolution ``δz/D²``:
+
+    * "resolved" — all three pairwise within one resolution;
+    * "two_estimates_agree" — one of them is off;
+    * "unresolved" — none agree, or the matched filter's interval is not wholly inside
+      the searched region (the object may lie beyond it, or ``δz ≥ D``): the depth is
+      only a best guess; read the interval.
 
     y comes from a parabola through the matched-filter row at that depth.  The stacks of
     an ideal point source there (:func:`point_response`, least-squares scaled to the
@@ -444,7 +451,7 @@ def detect_objects(
     enough = st.measure_rad >= min_measure_fraction * (b - a)
     data = _Stacks(*(np.where(enough, v, 0.0) for v in (st.matched_filter, num,
                                                           st.radiance_preserving)))
-    first = float(data.mf.max()) if data.mf.size else 0.0
+    first = float(data.num.max()) if data.num.size else 0.0
     z_far_limit, z_near_limit = float(zs.min()), float(zs.max())
 
     def resolution(depth: float) -> Resolution:
@@ -483,12 +490,15 @@ def detect_objects(
         z_odf = _peak_in(prof, zs, inside) if inside.any() else z_mf
         z_rp = _peak_in(own.rp[:, iy], zs, inside) if inside.any() else z_mf
         bounded = not (open_far or open_near)
-        if bounded and inv_close(z_odf, z_mf, r_k, z_mf):
-            quality, z_ref = "resolved", z_odf
-        elif bounded and inv_close(z_rp, z_mf, r_k, z_mf):
-            quality, z_ref = "depth_from_refocusing", z_mf
+        est = (z_odf, z_mf, z_rp)
+        z_ref = float(np.median(est))
+        agree = [inv_close(est[i], est[j], r_k, z_mf) for i, j in ((0, 1), (0, 2), (1, 2))]
+        if bounded and all(agree):
+            quality = "resolved"
+        elif bounded and any(agree):
+            quality = "two_estimates_agree"
         else:
-            quality, z_ref = "unresolved", z_mf
+            quality = "unresolved"
         iz = int(np.argmin(np.abs(zs - z_ref)))
         r_ref = resolution(z_ref)
         y_ref = _peak_in(own.mf[iz], y, np.abs(y - y0) <= 0.5 * r_ref.transverse_mm)
@@ -498,8 +508,10 @@ def detect_objects(
                 & ((zs >= far) & (zs <= near))[:, None] & enough)
         mm = float(np.sum(model.mf[hood] ** 2))
         scale = float(np.sum(model.mf[hood] * own.mf[hood])) / mm if mm > 0 else 0.0
-        interval = (z_far_limit if open_far else far, z_near_limit if open_near else near)
-        return _Candidate(y_ref, z_ref, quality, (z_odf, z_mf, z_rp), interval, prof,
+        # the interval also holds every estimate: their disagreement is uncertainty too
+        interval = (z_far_limit if open_far else min(far, *est),
+                    z_near_limit if open_near else max(near, *est))
+        return _Candidate(y_ref, z_ref, quality, est, interval, prof,
                           model.scaled(scale))
 
     def cell(y0: float, z0: float, frac: float) -> NDArray[np.bool_]:
@@ -519,8 +531,8 @@ def detect_objects(
     residual = data
     cands: list[_Candidate] = []
     while len(cands) < max_objects and first > 0:
-        iz, iy = np.unravel_index(int(np.argmax(residual.mf)), residual.mf.shape)
-        if residual.mf[iz, iy] < threshold_rel * first:
+        iz, iy = np.unravel_index(int(np.argmax(residual.num)), residual.num.shape)
+        if residual.num[iz, iy] < threshold_rel * first:
             break
         cand = refine(residual, float(y[iy]), float(zs[iz]))
         if unresolvable(cand, cands):
@@ -531,8 +543,8 @@ def detect_objects(
             core = cell(cand.y, cand.z, 0.5)
         # clear the core so that the same peak cannot be picked twice
         core[iz, iy] = True
-        residual = _Stacks(np.where(core, np.minimum(residual.mf, 0.0), residual.mf),
-                           residual.num, residual.rp)
+        residual = _Stacks(residual.mf, np.where(core, np.minimum(residual.num, 0.0),
+                                                 residual.num), residual.rp)
     # pass 2, interference removal: re-refine each object with the others subtracted,
     # and keep only those whose own fitted response still clears the threshold and that
     # did not move into a stronger object's resolution cell
@@ -543,10 +555,10 @@ def detect_objects(
                 if j != k:
                     own = own - other.model
             cands[k] = refine(own, cand.y, cand.z)
-    cands.sort(key=lambda c: -float(c.model.mf.max()))
+    cands.sort(key=lambda c: -float(c.model.num.max()))
     kept: list[_Candidate] = []
     for c in cands:
-        if float(c.model.mf.max()) >= threshold_rel * first and not unresolvable(c, kept):
+        if float(c.model.num.max()) >= threshold_rel * first and not unresolvable(c, kept):
             kept.append(c)
     cands = kept
     bright_rp, bright_conv, res, intervals = [], [], [], []

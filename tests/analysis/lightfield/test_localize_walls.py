@@ -7,7 +7,7 @@ go through the full reconstruction (Wiener, noise PSD estimated from the data) b
 localisation — never through the discretised operator.
 
 The honesty rule checked on every detection: a detection flagged "resolved" or
-"depth_from_refocusing" lies within the theoretical blur (δy across, δz in depth) of a
+"two_estimates_agree" lies within the theoretical blur (δy across, δz in depth) of a
 true object; an "unresolved" one has a true object within δy across and inside its
 reported depth interval.  And every true object is found.
 """
