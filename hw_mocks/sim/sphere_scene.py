@@ -41,6 +41,7 @@ __all__ = [
     "random_environment",
     "render_sphere",
     "render_spheres",
+    "shade",
 ]
 
 
@@ -427,6 +428,59 @@ def render_spheres(
     counts = hit.sum(axis=-1)
     radiance = np.where(counts > 0, full.sum(axis=-1) / np.maximum(counts, 1), 0.0)
     return SphereRender(radiance, coverage, c, r)
+
+
+def shade(
+    environment: Environment,
+    brdf: Brdf,
+    normals: np.ndarray,
+    views: np.ndarray,
+    *,
+    n_theta: int = 128,
+    chunk: int = 96,
+) -> np.ndarray:
+    """Outgoing radiance at surface points of given normal and view direction.
+
+    B = ∫ L(ω) f(ω, v) (n·ω)⁺ dω by the same quadrature as :func:`render_spheres`
+    (Gauss–Legendre grid for the smooth lighting, explicit sub-samples of the sharp
+    sources), but for arbitrary per-point normals and views: a perspective camera, or an
+    object turned relative to its lighting (rotate n and v into the lighting's frame).
+
+    Parameters
+    ----------
+    environment : environment
+    brdf : Lambertian | Phong | LambertianMicrofacet | Mirror
+    normals, views : ndarray of shape (P, 3)
+        Unit normals and unit directions towards the viewer, in the environment's frame.
+    n_theta : int
+        Gauss–Legendre rings of the integration grid (see :func:`render_spheres`).
+    chunk : int
+        Points per block of the (points × directions) kernel.
+
+    Returns
+    -------
+    ndarray of shape (P,)
+    """
+    n_all = np.asarray(normals, dtype=float).reshape(-1, 3)
+    v_all = np.asarray(views, dtype=float).reshape(-1, 3)
+    if n_all.shape != v_all.shape:
+        raise ValueError("normals and views must have the same shape (P, 3)")
+    out = np.zeros(n_all.shape[0])
+    if n_all.shape[0] == 0:
+        return out
+    if isinstance(brdf, Mirror):
+        refl = 2.0 * np.sum(n_all * v_all, axis=1, keepdims=True) * n_all - v_all
+        return brdf.reflectance * environment.radiance(refl)
+    dirs, w = _gl_directions(n_theta)
+    wl = w * environment.smooth_radiance(dirs)
+    sd, sw, sv = environment.sharp_samples()
+    step = chunk if not isinstance(brdf, LambertianMicrofacet) else max(chunk // 4, 8)
+    for p0 in range(0, n_all.shape[0], step):
+        sl = slice(p0, p0 + step)
+        out[sl] = _kernel(brdf, n_all[sl], v_all[sl], dirs) @ wl
+        if sd.shape[0]:
+            out[sl] += _kernel(brdf, n_all[sl], v_all[sl], sd) @ (sw * sv)
+    return out
 
 
 def render_sphere(environment: Environment, brdf: Brdf, **kwargs) -> SphereRender:

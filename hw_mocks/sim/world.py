@@ -299,7 +299,8 @@ class VirtualBench:
         Keys: ``roles`` (role → URL | number | {url, scale, offset, value}), ``scene``
         (see :meth:`hw_mocks.sim.goniometer_scene.GoniometerScene.from_config`; with
         ``kind = "lightfield"``
-        :meth:`hw_mocks.sim.lightfield_bench.LightFieldBenchScene.from_config`),
+        :meth:`hw_mocks.sim.lightfield_bench.LightFieldBenchScene.from_config`; with
+        ``kind = "spheres"`` :meth:`hw_mocks.sim.sphere_bench.SphereBenchScene.from_config`),
         ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
         ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}).
         With a power-meter ``url`` the PM100USB emulator is created and bound
@@ -314,6 +315,10 @@ class VirtualBench:
             from hw_mocks.sim.lightfield_bench import LightFieldBenchScene
 
             scene: Scene = LightFieldBenchScene.from_config(scene_cfg)
+        elif scene_cfg.get("kind") == "spheres":
+            from hw_mocks.sim.sphere_bench import SphereBenchScene
+
+            scene = SphereBenchScene.from_config(scene_cfg)
         else:
             from hw_mocks.sim.goniometer_scene import GoniometerScene
 

@@ -177,6 +177,16 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
         fixed = [(r, float(s[r])) for r in ("sample_theta", "detector_theta") if r in s]
         for z in _expand(s["camera_z"]):
             pts.append(ScanPoint(0, (*fixed, ("camera_z", float(z))), None, "lightfield"))
+    elif kind == "sphere_capture":
+        # Objects × lightings: the lighting axis moves least often (its moves are the long
+        # ones on a real goniometer); the changer steps through the objects at each.
+        sel = str(s.get("selector", "sample_phi"))
+        lrole = str(s.get("lighting_role", "source_theta"))
+        for k, theta in enumerate(_expand(s["lighting_deg"])):
+            for o in s["objects"]:
+                pts.append(ScanPoint(0, ((lrole, float(theta)),
+                                         (sel, float(o["station_deg"]))), None, "sphere",
+                                     meta=(("object", str(o["name"])), ("lighting", k))))
     elif kind in ("dark", "flat_field"):
         fixed = tuple((r, float(v)) for r, v in s.get("positions", {}).items())
         lab, light = ("dark", False) if kind == "dark" else ("flat", True)

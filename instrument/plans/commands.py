@@ -24,7 +24,7 @@ __all__ = [
 ]
 
 #: Labels a point may carry (what the frames at that point are).
-LABELS = ("sample", "dark", "reference", "signature", "flat", "ptc", "lightfield")
+LABELS = ("sample", "dark", "reference", "signature", "flat", "ptc", "lightfield", "sphere")
 DARK_POLICIES = ("none", "per_point", "start")
 MODES = ("fixed", "auto")
 DETECTORS = ("camera", "power_meter")

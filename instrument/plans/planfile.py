@@ -47,6 +47,14 @@ explicit list):
   fixed axis positions ``positions = {role = value}``.
 * ``photon_transfer``: ``exposures_us`` (range or list) or ``{start, stop, n, log}``,
   ``pairs`` (frame pairs per exposure, default 2), ``dark = true`` (dark at each exposure).
+* ``sphere_capture``: images of objects × lighting conditions (issue 7 §5). ``objects``
+  (list of ``{name, station_deg, known_brdf}``: the sample-changer position of each sphere
+  and, optionally, a BRDF known beforehand, ``{model = "phong", s, ks}``, ``{model =
+  "lambertian", albedo}`` or ``{model = "mirror", reflectance}``, which lets the analysis
+  estimate the lighting), ``lighting_deg`` (list: positions of the lighting axis, one per
+  lighting condition), optional ``selector`` (the sample-changer axis, default
+  ``sample_phi``) and ``lighting_role`` (default ``source_theta``: the goniometer moves
+  the source/lighting).
 """
 
 from __future__ import annotations
@@ -63,7 +71,11 @@ from instrument.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 __all__ = ["KINDS", "PlanError", "PlanSpec", "load_plan", "parse_plan"]
 
 KINDS = ("brdf_in_plane", "brdf_hemisphere", "lightfield", "dark", "reference", "signature",
-         "flat_field", "photon_transfer")
+         "flat_field", "photon_transfer", "sphere_capture")
+#: Rotary roles a sphere capture may use as the sample changer or the lighting axis.
+SPHERE_ROLES = ("sample_theta", "sample_phi", "sample_tilt", "source_theta")
+#: BRDF models a sphere-capture object may declare as known (lighting estimation).
+KNOWN_BRDF_MODELS = ("phong", "lambertian", "mirror")
 ORDERS = ("optimised", "raster")
 #: The largest point count a plan may expand to (protects against typos like step=1e-6).
 MAX_POINTS = 1_000_000
@@ -293,6 +305,65 @@ def _ptc(v: _Validator, t: dict, path: str) -> None:
     _positions(v, t, path)
 
 
+def _sphere_capture(v: _Validator, t: dict, path: str) -> None:
+    v.unknown(t, path, {"objects", "lighting_deg", "selector", "lighting_role"})
+    roles = {}
+    for key, default in (("selector", "sample_phi"), ("lighting_role", "source_theta")):
+        role = v.string(t, key, path) or default
+        if role not in SPHERE_ROLES:
+            v.error(f"{path}.{key}", f"must be one of {', '.join(SPHERE_ROLES)}")
+        roles[key] = role
+    if roles["selector"] == roles["lighting_role"]:
+        v.error(f"{path}.selector", "must differ from lighting_role")
+    lights = values(v, t, "lighting_deg", path, lo=-360.0, hi=360.0, allow_range=False)
+    if lights is not None and len(set(lights)) != len(lights):
+        v.error(f"{path}.lighting_deg", "lighting positions must be distinct")
+    objs = t.get("objects")
+    where = f"{path}.objects"
+    if not isinstance(objs, list) or not objs:
+        v.error(where, "is required: a non-empty list of {name, station_deg} tables")
+        return
+    names, stations = [], []
+    for k, o in enumerate(objs):
+        w = f"{where}[{k}]"
+        if not isinstance(o, dict):
+            v.error(w, "must be a table {name, station_deg}")
+            continue
+        v.unknown(o, w, {"name", "station_deg", "known_brdf"})
+        name = v.string(o, "name", w, required=True)
+        station = number(v, o, "station_deg", w, lo=-360.0, hi=360.0, required=True)
+        if name is not None:
+            names.append(name)
+        if station is not None:
+            stations.append(station)
+        if "known_brdf" in o:
+            _known_brdf(v, o["known_brdf"], f"{w}.known_brdf")
+    if len(set(names)) != len(names):
+        v.error(where, "object names must be distinct")
+    if len(set(stations)) != len(stations):
+        v.error(where, "station_deg values must be distinct")
+
+
+def _known_brdf(v: _Validator, b: Any, where: str) -> None:
+    if not isinstance(b, dict):
+        v.error(where, "must be a table {model = ...}")
+        return
+    model = v.string(b, "model", where, required=True)
+    if model is not None and model not in KNOWN_BRDF_MODELS:
+        v.error(f"{where}.model", f"must be one of {', '.join(KNOWN_BRDF_MODELS)}")
+        return
+    if model == "phong":
+        v.unknown(b, where, {"model", "s", "ks"})
+        number(v, b, "s", where, lo=0.1, hi=1e5, required=True)
+        number(v, b, "ks", where, lo=0.0, hi=10.0)
+    elif model == "lambertian":
+        v.unknown(b, where, {"model", "albedo"})
+        number(v, b, "albedo", where, lo=0.0, hi=1.0)
+    elif model == "mirror":
+        v.unknown(b, where, {"model", "reflectance"})
+        number(v, b, "reflectance", where, lo=0.0, hi=1.0)
+
+
 _SCAN_CHECKS = {
     "brdf_in_plane": _in_plane,
     "reference": _in_plane,
@@ -302,6 +373,7 @@ _SCAN_CHECKS = {
     "dark": _frames_at,
     "flat_field": _frames_at,
     "photon_transfer": _ptc,
+    "sphere_capture": _sphere_capture,
 }
 
 
