@@ -28,6 +28,8 @@ from collections.abc import Iterator
 import numpy as np
 
 __all__ = [
+    "chunk_scales",
+    "degree_chunks",
     "gauss_legendre",
     "iterate_degrees",
     "legendre_order",
@@ -303,3 +305,137 @@ def gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
         th_all = np.concatenate([theta, np.pi - theta[::-1]])
         w_all = np.concatenate([w, w[::-1]])
     return th_all, w_all
+
+
+def chunk_scales(m0: int, m1: int, lmax: int, chunk: int) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of the locally rescaled l-recurrence run by :func:`degree_chunks`.
+
+    Inside a chunk of ``chunk`` degrees starting at k0 (k = l − m, k0 a multiple of
+    ``chunk``) the values are carried as μ_k = λ_{m+k}^m / A_k with
+    A_k = Π_{j=k0}^{k} r_j, r_0 = 1, r_1 = √(2m+3), r_k = a_lm (k ≥ 2), so that the
+    l-recurrence λ_l = a_lm (x λ_{l−1} − b_lm λ_{l−2}) of the module docstring becomes
+
+        μ_k = x μ_{k−1} − β_k μ_{k−2},   β_k = a_lm b_lm A_{k−2} / A_k,
+
+    (A_{k0−1} = A_{k0−2} = 1). The factor a_lm leaves the inner loop, which then costs two
+    products and one difference per value; A (a product of at most ``chunk`` factors, far
+    inside the double range) is folded into the coefficients of the transform instead. The
+    seeds enter through k = 0 with μ_{−2} = λ_m^m, μ_{−1} = 0 and β_0 = −1.
+
+    Returns
+    -------
+    beta : ndarray of shape (nk, m1−m0, 1)
+    scale : ndarray of shape (m1−m0, nk)
+        A_k for k = 0 … nk−1, nk = lmax − m0 + 1 (rows with m + k > lmax hold finite values
+        of the recurrence continued past lmax).
+    """
+    m = np.arange(m0, m1, dtype=float)[:, None]
+    nk = lmax - m0 + 1
+    k = np.arange(nk, dtype=float)[None, :]
+    l = m + k
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a, ab = step_coefficients(m, l)
+    r = np.where(k >= 2, a, 1.0)
+    r[:, 1:2] = np.sqrt(2.0 * m + 3.0) if nk > 1 else r[:, 1:2]
+    ab = np.where(k >= 2, ab, 0.0)
+    ab[:, 0] = -1.0
+    scale = np.empty_like(r)
+    ratio = np.empty_like(r)  # A_k / A_{k−2}
+    for k0 in range(0, nk, chunk):
+        sl = slice(k0, min(k0 + chunk, nk))
+        scale[:, sl] = np.cumprod(r[:, sl], axis=1)
+        ratio[:, sl] = r[:, sl]
+        ratio[:, k0 + 1 : sl.stop] *= r[:, k0 : sl.stop - 1]
+    beta = (ab / ratio).T[:, :, None].copy()
+    return beta, scale
+
+
+def degree_chunks(
+    m0: int,
+    m1: int,
+    lmax: int,
+    cos_theta: np.ndarray,
+    seed_mant: np.ndarray,
+    seed_exp: np.ndarray,
+    *,
+    chunk: int,
+    coefficients: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Iterator[tuple[int, int, int, np.ndarray, np.ndarray]]:
+    """The l-recurrence for orders m0 ≤ m < m1 in chunks of degrees (the transforms' kernel).
+
+    Same values as :func:`iterate_degrees`, computed as in :func:`chunk_scales` and handed
+    out ``chunk`` degrees at a time so that the sums over l become matrix products. Each
+    degree is a contiguous (orders × points) slab of the buffer: numpy's element-wise loops
+    run several times faster on contiguous operands than on strided ones.
+
+    Yields
+    ------
+    (k0, nc, n, buf, scale)
+        ``buf[2 + i, :n]`` holds μ_{k0+i} for i < nc, rows m0 … m0+n−1 (orders with
+        m + k0 ≤ lmax; rows whose degree passes lmax inside the chunk hold finite values of
+        the continued recurrence), and ``λ_{m+k0+i}^m = scale[:n, i] · buf[2 + i, :n]``.
+        Values whose true magnitude is below 2^−300 (still in scaled form, see the module
+        docstring) are yielded as 0. ``buf`` (shape (chunk+2, m1−m0, N)) is reused by the
+        next chunk.
+
+    Parameters
+    ----------
+    m0, m1, lmax : int
+    cos_theta : ndarray of shape (N,)
+    seed_mant, seed_exp : ndarray of shape (m1−m0, N)
+        Sectoral seeds from :func:`sectoral_seeds`.
+    chunk : int
+        Degrees per chunk (even, ≥ 2). Rescaling is checked once per chunk: the scaled
+        values grow by far less than the 2^700 head-room between the rescale threshold and
+        overflow over 64 steps (each step multiplies by at most a_lm(1 + b_lm) ≲ 2√(2m+3)).
+    coefficients : (beta, scale), optional
+        :func:`chunk_scales` of the same arguments, when the caller caches them.
+    """
+    x = np.asarray(cos_theta, dtype=float)
+    rows, npt = m1 - m0, x.size
+    nk = lmax - m0 + 1
+    beta, scale = coefficients if coefficients is not None else chunk_scales(
+        m0, m1, lmax, chunk
+    )
+    buf = np.empty((chunk + 2, rows, npt))
+    tmp = np.empty((rows, npt))
+    # x repeated over the rows: a full-size operand keeps the multiplication contiguous
+    xs = np.repeat(x[None, :], rows, axis=0)
+    buf[0] = seed_mant
+    buf[1] = 0.0
+    e = np.array(seed_exp, dtype=np.int64, copy=True)
+    # Dead values (e < 0) sit on the polar rings: only the first n_dead columns need care.
+    n_dead = _dead_columns(e)
+    live = (e[:, :n_dead] == 0).astype(float)
+    for k0 in range(0, nk, chunk):
+        nc = min(chunk, nk - k0)
+        n = min(m1, lmax - k0 + 1) - m0
+        t, xn = tmp[:n], xs[:n]
+        for i in range(2, nc + 2):
+            out = buf[i, :n]
+            np.multiply(buf[i - 1, :n], xn, out=t)
+            np.multiply(buf[i - 2, :n], beta[k0 + i - 2, :n], out=out)
+            np.subtract(t, out, out=out)
+        # Restart values for the next chunk: the true (scaled) λ of its two predecessors.
+        if k0 + nc < nk:
+            kl = k0 + nc  # here nc == chunk ≥ 2
+            np.multiply(buf[nc, :n], scale[:n, kl - 2 : kl - 1], out=buf[0, :n])
+            np.multiply(buf[nc + 1, :n], scale[:n, kl - 1 : kl], out=buf[1, :n])
+        if n_dead:
+            d = n_dead
+            buf[2 : nc + 2, :n, :d] *= live[:n, :d]
+            p2, p1 = buf[0, :n, :d], buf[1, :n, :d]
+            big = (e[:n, :d] < 0) & (np.abs(p1) > _UPPER)
+            if big.any():
+                p1[big] *= _SMALL
+                p2[big] *= _SMALL
+                e[:n, :d][big] += 1
+                n_dead = _dead_columns(e[:n, :d])
+                live = (e[:, :n_dead] == 0).astype(float)
+        yield k0, nc, n, buf, scale[:, k0 : k0 + nc]
+
+
+def _dead_columns(e: np.ndarray) -> int:
+    """1 + the last column holding a scaled (e < 0) value, 0 if none."""
+    cols = np.flatnonzero((e < 0).any(axis=0))
+    return int(cols[-1]) + 1 if cols.size else 0

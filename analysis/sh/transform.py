@@ -33,7 +33,13 @@ from analysis.sh.convention import (
     lmax_from_size,
     n_coeffs,
 )
-from analysis.sh.legendre import gauss_legendre, iterate_degrees, sectoral_seeds
+from analysis.sh.legendre import (
+    chunk_scales,
+    degree_chunks,
+    gauss_legendre,
+    iterate_degrees,
+    sectoral_seeds,
+)
 
 __all__ = [
     "GLGrid",
@@ -49,12 +55,37 @@ __all__ = [
     "synthesis",
 ]
 
-#: Target size in bytes of one (orders × northern rings) block of the recurrence.
-_BLOCK_BYTES = 1 << 18
-#: Degrees grouped per batched matrix product.
-_K_BUFFER = 16
+#: Target size in bytes of one (orders × northern rings) slab of the recurrence buffer.
+_BLOCK_BYTES = 1 << 16
+#: Degrees per chunk of the recurrence: the sums over l are matrix products over a chunk.
+_CHUNK = 16
 #: Largest Legendre table :func:`gl_grid` stores by default (L ≈ 400).
 PLAN_MAX_BYTES = 1 << 27
+#: Up to this size the stored table is one dense (orders × rings × degrees) array, so each
+#: transform is a single batched matrix product (L ≲ 64).
+_DENSE_MAX_BYTES = 1 << 22
+
+
+@dataclass(frozen=True)
+class _DensePlan:
+    """λ on all rings, zero-padded: syn[m, j, k] = s_m λ_{m+k}^m(θ_j), ana = w-weighted transpose.
+
+    s_m = n_φ (m = 0) or n_φ/√2 (m > 0) folds the real-harmonic √2 and the 1/n_φ of the
+    inverse FFT into the table; ana[m, k, j] = λ_{m+k}^m(θ_j) · 2π w_j/n_φ · (1 or √2).
+    """
+
+    syn: np.ndarray
+    ana: np.ndarray
+
+
+@dataclass(frozen=True)
+class _ChunkPlan:
+    """Stored output of :func:`analysis.sh.legendre.degree_chunks` on the northern rings.
+
+    chunks: tuple of (m0, k0, nc, n, mu of shape (nc, n, n_north), scale of shape (n, nc)).
+    """
+
+    chunks: tuple
 
 
 @dataclass(frozen=True)
@@ -70,17 +101,18 @@ class GLGrid:
         Gauss–Legendre weights in cos θ (sum 2).
     phi : ndarray of shape (2*lmax+1,)
         Longitudes 2πk/(2L+1).
-    legendre : tuple of (m0, m1, ndarray of shape (m1−m0, L−m0+1, n_north)), or None
-        Precomputed λ_{m+k}^m on the northern rings by blocks of orders (zero where
-        m + k > L): a plan that turns both transforms into batched matrix products, like
-        SHTOOLS' optional ``plx``. None: recomputed by the recurrence on every call.
+    legendre : object or None
+        Precomputed Legendre functions on the rings (a plan that turns both transforms into
+        batched matrix products, like SHTOOLS' optional ``plx``): a dense table for small L,
+        else the recurrence's chunks on the northern rings. None: recomputed by the
+        recurrence on every call. Private layout; test only for None.
     """
 
     lmax: int
     theta: np.ndarray = field(repr=False)
     weights: np.ndarray = field(repr=False)
     phi: np.ndarray = field(repr=False)
-    legendre: tuple | None = field(default=None, repr=False, compare=False)
+    legendre: object | None = field(default=None, repr=False, compare=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -95,8 +127,8 @@ def gl_grid(lmax: int, *, precompute: bool | None = None) -> GLGrid:
     ----------
     lmax : int
     precompute : bool, optional
-        Store the Legendre table with the grid (memory ≈ L³/4 · 8 bytes). Default: when it
-        needs at most :data:`PLAN_MAX_BYTES`.
+        Store the Legendre table with the grid (memory ≈ L³/4 · 8 bytes, twice that for
+        L ≲ 64). Default: when it needs at most :data:`PLAN_MAX_BYTES`.
     """
     if lmax < 0:
         raise ValueError("lmax must be ≥ 0")
@@ -109,93 +141,101 @@ def gl_grid(lmax: int, *, precompute: bool | None = None) -> GLGrid:
         precompute = table_bytes <= PLAN_MAX_BYTES
     plan = None
     if precompute:
-        th = theta[:nh]
-        x, s = np.cos(th), np.sin(th)
-        mant, expo = sectoral_seeds(s, lmax)
-        blocks = []
-        for m0, m1 in _blocks(lmax, nh):
-            table = np.zeros((m1 - m0, lmax - m0 + 1, nh))
-            for k, n, lam in iterate_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
-                table[:n, k] = lam[:n]
-            blocks.append((m0, m1, table))
-        plan = tuple(blocks)
+        grid = GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi)
+        if 8 * (lmax + 1) ** 2 * (lmax + 1) <= _DENSE_MAX_BYTES:
+            plan = _dense_plan(grid)
+        else:
+            plan = _ChunkPlan(
+                tuple(
+                    (m0, k0, nc, n, buf[2 : nc + 2, :n].copy(), sc[:n].copy())
+                    for m0, k0, nc, n, buf, sc in _recurrence_chunks(grid)
+                )
+            )
     return GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi, legendre=plan)
 
 
-def _legendre_chunks(grid: GLGrid, x: np.ndarray, s: np.ndarray):
-    """(m0, m1, k0, buffer) over all orders, from the grid's plan or by the recurrence."""
-    if grid.legendre is not None:
-        for m0, m1, table in grid.legendre:
-            yield m0, m1, 0, table
-        return
+def _dense_plan(grid: GLGrid) -> _DensePlan:
     lmax = grid.lmax
+    nlat, nphi = grid.shape
+    nh = (nlat + 1) // 2
+    north = np.zeros((lmax + 1, nh, lmax + 1))
+    for m0, k0, nc, n, buf, sc in _recurrence_chunks(grid):
+        lam = buf[2 : nc + 2, :n] * sc[:n].T[:, :, None]  # (nc, n, nh)
+        north[m0 : m0 + n, :, k0 : k0 + nc] = lam.transpose(1, 2, 0)
+    m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
+    north[(m_idx + k_idx > lmax)[:, None, :].repeat(nh, axis=1)] = 0.0
+    # λ_l^m(−x) = (−1)^{l+m} λ_l^m(x): the southern rings mirror the northern ones.
+    sign = np.where(np.arange(lmax + 1) % 2 == 0, 1.0, -1.0)
+    full = np.concatenate([north, (north * sign)[:, : nlat - nh][:, ::-1]], axis=1)
+    s_syn = np.full(lmax + 1, nphi / np.sqrt(2.0))
+    s_syn[0] = nphi
+    s_ana = np.full(lmax + 1, np.sqrt(2.0))
+    s_ana[0] = 1.0
+    wq = grid.weights * 2.0 * np.pi / nphi
+    syn = full * s_syn[:, None, None]
+    ana = np.ascontiguousarray((full * wq[None, :, None] * s_ana[:, None, None]).transpose(0, 2, 1))
+    return _DensePlan(syn=syn, ana=ana)
+
+
+@functools.lru_cache(maxsize=2)
+def _recurrence_setup(lmax: int, theta_key: bytes) -> tuple:
+    """Per-grid constants of the recurrence: northern x, seeds and per-block coefficients."""
+    th = np.frombuffer(theta_key, dtype=float)
+    x, s = np.cos(th), np.sin(th)
     mant, expo = sectoral_seeds(s, lmax)
-    for m0, m1 in _blocks(lmax, x.size):
-        for k0, buf in _buffered_degrees(m0, m1, lmax, x, mant[m0:m1], expo[m0:m1]):
-            yield m0, m1, k0, buf
+    rows = max(4, _BLOCK_BYTES // (8 * max(th.size, 1)))
+    blocks = []
+    for m0 in range(0, lmax + 1, rows):
+        m1 = min(m0 + rows, lmax + 1)
+        blocks.append((m0, m1, chunk_scales(m0, m1, lmax, _CHUNK)))
+    return x, mant, expo, tuple(blocks)
+
+
+def _recurrence_chunks(grid: GLGrid):
+    """(m0, k0, nc, n, buf, scale) from :func:`degree_chunks` over all blocks of orders."""
+    lmax = grid.lmax
+    nh = (lmax + 2) // 2
+    x, mant, expo, blocks = _recurrence_setup(lmax, grid.theta[:nh].tobytes())
+    for m0, m1, coef in blocks:
+        for k0, nc, n, buf, sc in degree_chunks(
+            m0, m1, lmax, x, mant[m0:m1], expo[m0:m1], chunk=_CHUNK, coefficients=coef
+        ):
+            yield m0, k0, nc, n, buf, sc
+
+
+def _chunks(grid: GLGrid):
+    """(m0, k0, nc, n, mu of shape (nc, n, n_north), scale (n, nc)), stored or recomputed."""
+    if isinstance(grid.legendre, _ChunkPlan):
+        yield from grid.legendre.chunks
+        return
+    for m0, k0, nc, n, buf, sc in _recurrence_chunks(grid):
+        yield m0, k0, nc, n, buf[2 : nc + 2, :n], sc[:n]
 
 
 @functools.lru_cache(maxsize=16)
-def _z_layout(lmax: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Index maps between the flat layout and Z[m, k]: (m, k, flat +m, flat −m) over m ≤ l."""
-    ar = np.arange(lmax + 1)
-    m, k = np.nonzero(np.add.outer(ar, ar) <= lmax)
-    l = m + k
-    return m, k, lm_index(l, m), lm_index(l, -m)
+def _layout(lmax: int, dense: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat coefficient l² + l + m ↔ entry of the working array Z.
 
-
-def _coeffs_to_z(coeffs: np.ndarray, lmax: int) -> np.ndarray:
-    """Flat real coefficients → Z[m, k] = c_{m+k,m} − i c_{m+k,−m} (k = l − m; c_{l,−0} ≡ 0)."""
-    m, k, pos, neg = _z_layout(lmax)
-    z = np.zeros((lmax + 1, lmax + 1), dtype=complex)
-    z[m, k] = coeffs[pos] - 1j * np.where(m > 0, coeffs[neg], 0.0)
-    return z
-
-
-def _z_to_coeffs(z: np.ndarray, lmax: int) -> np.ndarray:
-    """Inverse of :func:`_coeffs_to_z`."""
-    m, k, pos, neg = _z_layout(lmax)
-    out = np.zeros(n_coeffs(lmax))
-    vals = z[m, k]
-    out[pos] = vals.real
-    has_sin = m > 0
-    out[neg[has_sin]] = -vals.imag[has_sin]
-    return out
-
-
-def _blocks(lmax: int, n_rings: int) -> list[tuple[int, int]]:
-    rows = max(4, _BLOCK_BYTES // (8 * max(n_rings, 1)))
-    return [(m0, min(m0 + rows, lmax + 1)) for m0 in range(0, lmax + 1, rows)]
-
-
-def _buffered_degrees(
-    m0: int,
-    m1: int,
-    lmax: int,
-    x: np.ndarray,
-    seed_mant: np.ndarray,
-    seed_exp: np.ndarray,
-):
-    """Group the recurrence steps of one block in buffers of shape (rows, kb, rings).
-
-    Yields (k0, buffer) with buffer[:, i] = λ_{m+k0+i}^m; rows whose degree would exceed lmax
-    hold finite stale values, to be multiplied by zero coefficients (synthesis) or discarded
-    (analysis). Grouping lets one batched matrix product do the sums over l, which is far
-    cheaper in numpy than one rank-1 update per degree.
+    Z is (m, k, 2) for the dense plan and (m, parity of k, k // 2, 2) otherwise (k = l − m,
+    last axis [Re, Im] of c_{l,m} − i c_{l,−m}). Returns (position of every flat coefficient
+    in Z.ravel(), factor synthesis applies, factor analysis applies); the factors hold the
+    sign of the sine part and, off the dense plan, the real-harmonic √2 and the 1/n_φ of
+    the inverse FFT.
     """
-    rows = m1 - m0
-    nk = lmax - m0 + 1
-    kb_max = min(_K_BUFFER, nk)
-    buf = np.zeros((rows, kb_max, x.size))
-    k0 = 0
-    for k, n, lam in iterate_degrees(m0, m1, lmax, x, seed_mant, seed_exp):
-        buf[:n, k - k0] = lam[:n]
-        if k - k0 + 1 == kb_max or k == nk - 1:
-            yield k0, buf[:, : k - k0 + 1]
-            k0 = k + 1
-            kb_max = min(_K_BUFFER, nk - k0)
-            if kb_max <= 0:
-                return
+    l_all, m_all = degrees_orders(lmax)
+    m = np.abs(m_all)
+    k = l_all - m
+    part = (m_all < 0).astype(np.int64)
+    nphi = 2 * lmax + 1
+    if dense:
+        pos = ((m * (lmax + 1) + k) * 2 + part).astype(np.int64)
+        fac = np.where(m_all < 0, -1.0, 1.0)
+        return pos, fac, fac.copy()
+    nk2 = (lmax + 2) // 2
+    pos = (((m * 2 + (k & 1)) * nk2 + (k >> 1)) * 2 + part).astype(np.int64)
+    sign = np.where(m_all < 0, -1.0, 1.0)
+    root = np.where(m > 0, np.sqrt(2.0), 1.0)
+    return pos, sign * root * nphi / np.where(m > 0, 2.0, 1.0), sign * root
 
 
 def synthesis(
@@ -217,42 +257,44 @@ def synthesis(
         f(θ_j, φ_k).
     """
     c = np.asarray(coeffs)
-    if convention != PROJECT_CONVENTION:
+    if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
         c = convert(c, source=convention, target=PROJECT_CONVENTION)
     c = np.asarray(c, dtype=float)
     lmax = grid.lmax
-    if c.shape != (n_coeffs(lmax),):
+    if c.shape != ((lmax + 1) ** 2,):
         raise ValueError(f"expected {(n_coeffs(lmax),)} coefficients, got {c.shape}")
     nlat, nphi = grid.shape
+    plan = grid.legendre
+    if isinstance(plan, _DensePlan):
+        pos, fac, _ = _layout(lmax, True)
+        z = np.zeros((lmax + 1, lmax + 1, 2))
+        z.ravel()[pos] = c * fac
+        g = np.matmul(plan.syn, z)  # (m, ring, [Re, Im])
+        spec = np.ascontiguousarray(g.transpose(1, 0, 2)).view(complex)[..., 0]
+        return np.fft.irfft(spec, n=nphi, axis=1)
     nh = (nlat + 1) // 2
-    th = grid.theta[:nh]
-    x, s = np.cos(th), np.sin(th)
-    z = _coeffs_to_z(c, lmax)
-    # coefficient rows [Re even, Im even, Re odd, Im odd] for each order m and step k
-    coef = np.zeros((lmax + 1, 4, lmax + 1))
-    coef[:, 0, 0::2] = z.real[:, 0::2]
-    coef[:, 1, 0::2] = z.imag[:, 0::2]
-    coef[:, 2, 1::2] = z.real[:, 1::2]
-    coef[:, 3, 1::2] = z.imag[:, 1::2]
-    acc = np.zeros((lmax + 1, 4, nh))
-    for m0, m1, k0, buf in _legendre_chunks(grid, x, s):
-        kb = buf.shape[1]
-        # a contiguous operand keeps numpy's matmul on the BLAS path
-        acc[m0:m1] += np.matmul(np.ascontiguousarray(coef[m0:m1, :, k0 : k0 + kb]), buf)
-    even = acc[:, 0] + 1j * acc[:, 1]
-    odd = acc[:, 2] + 1j * acc[:, 3]
-    g_n = even + odd
-    g_s = even - odd
-    # Real harmonics of order m > 0 carry √2; irfft divides by nphi and doubles m > 0.
-    scale = np.full(lmax + 1, np.sqrt(2.0) * nphi / 2.0)
-    scale[0] = nphi
-    spec = np.zeros((nlat, nphi // 2 + 1), dtype=complex)
-    spec[:nh, : lmax + 1] = (g_n * scale[:, None]).T
-    south = (g_s * scale[:, None]).T
+    nk2 = (lmax + 2) // 2
+    pos, fac, _ = _layout(lmax, False)
+    z = np.zeros((lmax + 1, 2, nk2, 2))
+    z.ravel()[pos] = c * fac
+    # coefficient rows [Re, Im] per order, parity and half-step: (m, parity, 2, k // 2)
+    zt = z.transpose(0, 1, 3, 2)
+    acc = np.zeros((2, lmax + 1, 2, nh))  # even / odd l − m, order, [Re, Im], ring
+    for m0, k0, nc, n, mu, sc in _chunks(grid):
+        h0 = k0 // 2
+        for p in (0, 1):
+            nq = (nc + 1 - p) // 2
+            if nq == 0:
+                continue
+            cf = zt[m0 : m0 + n, p, :, h0 : h0 + nq] * sc[:, None, p::2]
+            acc[p, m0 : m0 + n] += np.matmul(cf, mu[p::2].transpose(1, 0, 2))
+    g_n = acc[0] + acc[1]
+    g_s = np.subtract(acc[0], acc[1], out=acc[1])
+    spec = np.empty((nlat, lmax + 1, 2))
+    spec[:nh] = g_n.transpose(2, 0, 1)
     # Southern ring j' = nlat−1−j mirrors northern ring j; the equator (odd nlat) is once.
-    n_mirror = nlat - nh
-    spec[nh:, : lmax + 1] = south[:n_mirror][::-1]
-    return np.fft.irfft(spec, n=nphi, axis=1)
+    spec[nh:] = g_s.transpose(2, 0, 1)[: nlat - nh][::-1]
+    return np.fft.irfft(spec.view(complex)[..., 0], n=nphi, axis=1)
 
 
 def analysis(
@@ -277,39 +319,38 @@ def analysis(
     nlat, nphi = grid.shape
     if f.shape != (nlat, nphi):
         raise ValueError(f"expected a map of shape {(nlat, nphi)}, got {f.shape}")
-    nh = (nlat + 1) // 2
-    th = grid.theta[:nh]
-    x, s = np.cos(th), np.sin(th)
-    spec = np.fft.rfft(f, axis=1)[:, : lmax + 1]
-    spec = spec * (grid.weights * 2.0 * np.pi / nphi)[:, None]
-    north = spec[:nh]
-    south = np.zeros_like(north)
-    n_mirror = nlat - nh
-    south[:n_mirror] = spec[nh:][::-1]
-    f_even = (north + south).T  # (m, ring)
-    f_odd = (north - south).T
-    if nlat % 2 == 1:
-        # The equator ring is its own mirror: count it once.
-        f_even[:, nh - 1] = north[nh - 1]
-        f_odd[:, nh - 1] = north[nh - 1]
-    scale = np.full(lmax + 1, np.sqrt(2.0))
-    scale[0] = 1.0
-    f_even = f_even * scale[:, None]
-    f_odd = f_odd * scale[:, None]
-    # columns [Re even, Im even, Re odd, Im odd] per order and ring
-    rhs = np.stack([f_even.real, f_even.imag, f_odd.real, f_odd.imag], axis=-1)
-    z = np.zeros((lmax + 1, lmax + 1, 2))
-    for m0, m1, k0, buf in _legendre_chunks(grid, x, s):
-        kb = buf.shape[1]
-        prod = np.matmul(buf, rhs[m0:m1])  # (rows, kb, 4)
-        even = ((np.arange(k0, k0 + kb) & 1) == 0)[None, :]
-        z[m0:m1, k0 : k0 + kb, 0] = np.where(even, prod[..., 0], prod[..., 2])
-        z[m0:m1, k0 : k0 + kb, 1] = np.where(even, prod[..., 1], prod[..., 3])
-    # Entries with m + k > L were computed from stale buffer rows: they are not coefficients.
-    m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
-    z[m_idx + k_idx > lmax] = 0.0
-    out = _z_to_coeffs(z[..., 0] + 1j * z[..., 1], lmax)
-    if convention != PROJECT_CONVENTION:
+    plan = grid.legendre
+    spec = np.fft.rfft(f, axis=1)  # (ring, m) complex, n_φ // 2 + 1 = L + 1 columns
+    if isinstance(plan, _DensePlan):
+        pos, _, fac = _layout(lmax, True)
+        s = np.ascontiguousarray(spec.T).view(float).reshape(lmax + 1, nlat, 2)
+        z = np.matmul(plan.ana, s)  # (m, k, [Re, Im])
+        out = z.ravel()[pos] * fac
+    else:
+        nh = (nlat + 1) // 2
+        nk2 = (lmax + 2) // 2
+        sv = spec.view(float).reshape(nlat, lmax + 1, 2)
+        south = np.zeros((nh, lmax + 1, 2))
+        south[: nlat - nh] = sv[nh:][::-1]
+        wq = (grid.weights[:nh] * (2.0 * np.pi / nphi))[None, :, None]
+        # (m, ring, [Re, Im]) for even and odd l − m; the equator ring (odd nlat) has no
+        # mirror, so it enters both once.
+        rhs = (
+            np.ascontiguousarray((sv[:nh] + south).transpose(1, 0, 2)) * wq,
+            np.ascontiguousarray((sv[:nh] - south).transpose(1, 0, 2)) * wq,
+        )
+        z = np.zeros((lmax + 1, 2, nk2, 2))
+        for m0, k0, nc, n, mu, sc in _chunks(grid):
+            h0 = k0 // 2
+            for p in (0, 1):
+                nq = (nc + 1 - p) // 2
+                if nq == 0:
+                    continue
+                prod = np.matmul(mu[p::2].transpose(1, 0, 2), rhs[p][m0 : m0 + n])
+                z[m0 : m0 + n, p, h0 : h0 + nq] = prod * sc[:, p::2, None]
+        pos, _, fac = _layout(lmax, False)
+        out = z.ravel()[pos] * fac
+    if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
         return convert(out, source=PROJECT_CONVENTION, target=convention)
     return out
 
