@@ -24,6 +24,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hw_mocks.sim.sphere_bench import (
     SphereBenchScene,
@@ -167,6 +169,52 @@ def test_invalid_sphere_capture_plans_name_the_field(scan, field):
     with pytest.raises(PlanError) as info:
         parse_plan(text)
     assert field in [e.path for e in info.value.errors], info.value.errors
+
+
+_values = st.one_of(st.floats(-400, 400), st.just(math.nan), st.integers(-400, 400),
+                    st.text(max_size=3), st.booleans())
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    stations=st.lists(_values, min_size=0, max_size=4),
+    names=st.lists(st.text(min_size=0, max_size=4), min_size=0, max_size=4),
+    lights=st.lists(_values, min_size=0, max_size=3),
+    selector=st.sampled_from(["sample_phi", "source_theta", "camera_z", "sample_tilt"]),
+)
+def test_fuzzed_sphere_capture_plans_parse_or_fail_with_field_errors(stations, names, lights,
+                                                                     selector):
+    """Any [scan] either validates and expands to objects × lightings points, or is refused
+    with a PlanError naming fields: never another exception."""
+    objs = [{"name": n, "station_deg": s} for n, s in zip(names, stations, strict=False)]
+
+    def toml(x):
+        if isinstance(x, str):
+            return '"' + x.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(x, bool):
+            return "true" if x else "false"
+        if isinstance(x, float) and math.isnan(x):
+            return "nan"
+        return repr(x)
+
+    obj_txt = ", ".join(f"{{ name = {toml(o['name'])}, station_deg = "
+                        f"{toml(o['station_deg'])} }}" for o in objs)
+    text = (f'[plan]\nkind = "sphere_capture"\n[sample]\nname = "s"\n[scan]\n'
+            f'selector = "{selector}"\nobjects = [{obj_txt}]\n'
+            f'lighting_deg = [{", ".join(toml(x) for x in lights)}]\n')
+    try:
+        spec = parse_plan(text)
+    except PlanError as err:
+        assert err.errors and all(e.path for e in err.errors)
+        return
+    assert len(spec.scan["objects"]) == len(objs) >= 1
+    assert selector in ("sample_phi", "sample_tilt")
+    profile = load_profile(PROFILE)
+    try:
+        plan = build_plan(spec, profile)
+    except (PlanError, ValueError):  # e.g. a station outside the turret's soft limits
+        return
+    assert len(plan.points) == len(objs) * len(lights)
 
 
 # ------------------------------------------------------------------ end to end
