@@ -10,14 +10,20 @@ z < 0).  A trial point (y, z) collects the rays ``L(y − z tan θ, θ)`` (a she
   point source's peak equals its radiance wherever it sits.
 * Matched filter (derivation ours, tested in tests/analysis/lightfield): a point source
   at (y, z) is reconstructed as ``L_m(c, θ) = K(θ − θ*(c))/cos θ`` (:func:`point_response`,
-  K the filtered delta).  Its inner product with the field over the wall samples c is
-  ``Σ_c g(c, θ*(c)) Δc`` (g = L cos θ band-limited, so K acts as a projector), and with
-  ``dc = |z| dθ/cos² θ`` this is ``|z| Σ_j L(y − z tan θ_j, θ_j)/cos θ_j Δθ``: conventional
-  refocusing weighted by ``|z|/cos θ``.  Dividing by the model's norm,
-  ``(|z| Σ_{j available} Δθ/cos² θ_j)^½``, gives the normalised matched filter, the
-  maximum-likelihood statistic of one point source of unknown radiance in white noise:
-  by Cauchy–Schwarz its column peaks at the true depth (no ray-density bias, which the
-  plain conventional stack has — its peak height scales as W/|z|).
+  K the filtered delta of the filter factors φ_p).  The data are the rays inside the
+  solvable domain [A, B]; the inner product of their ``g = L cos θ`` with the model is,
+  row by row, ``H(c, θ*(c))`` with ``H(c, ·) = Σ_{θ ∈ [A, B]} g(c, θ) K(θ − ·)`` (the
+  masked row filtered by φ), and the model's squared norm ``k2(θ*) = Σ_{θ ∈ [A, B]}
+  K(θ − θ*)²``.  Summing over the wall rows with ``dc = |z| dθ/cos² θ`` gives
+  ``|z| Σ_j H(y − z tan θ_j, θ_j)/cos² θ_j Δθ`` over ``(|z| Σ_{j available}
+  k2(θ_j)/cos² θ_j Δθ)^½``: the normalised matched filter, the maximum-likelihood
+  statistic of one point source of unknown radiance in white noise.  Every trial point
+  is scored on the same set of rays, so by Cauchy–Schwarz its column peaks at the true
+  depth — also where the solvable domain, not the wall, limits the aperture.  (Without
+  the mask and the kernel overlap — ``K`` taken as a projector, H ≈ g — it reduces to
+  conventional refocusing weighted by ``|z|/cos θ``, what :func:`refocus` returns; that
+  form leans 0.2–0.3 δz away from the wall when the domain limits the aperture.)  The
+  plain conventional stack peaks nearer the wall: its height scales as W/|z|.
 * Depth filter on the mixed (p_y, z) plane: around each object the (matched-filter
   numerator) stack is windowed in y (which removes the interference of objects at similar
   z but different y), Fourier transformed along y, and the normalised z-profiles
@@ -91,35 +97,75 @@ class FocalStack:
     matched_filter: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
 
 
+def _filtered_masked(
+    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray
+) -> tuple[NDArray, NDArray]:
+    """Data and model norms of the exact matched filter (module doc).
+
+    Returns ``H`` (R, N): each row's ``g = L cos θ`` restricted to the solvable domain and
+    filtered by φ (``H(c, θ') = Σ_{θ ∈ [A, B]} g(c, θ) K(θ − θ')``), and ``k2`` (N,): the
+    squared norm of a point's kernel over the same rays, ``Σ_{θ ∈ [A, B]} K(θ − θ')²``.
+    """
+    from .spectral import coefficients, synthesize
+
+    th = lf_wall.theta_rad
+    g = np.asarray(lf_wall.radiance, dtype=float) * np.cos(th)[None, :]
+    h = synthesize(coefficients(np.where(use[None, :], g, 0.0), axis=-1) * phi,
+                   axis=-1).real
+    kernel = synthesize(coefficients(np.eye(th.size), axis=-1) * phi, axis=-1).real
+    k2 = (kernel[use] ** 2).sum(axis=0)
+    return h, k2
+
+
 def _stacks(
-    lf_wall: LightField2D, y: NDArray, zs: NDArray, a: float, b: float
+    lf_wall: LightField2D, y: NDArray, zs: NDArray, a: float, b: float,
+    phi: NDArray | None = None,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """One pass over the sheared samples: conventional, RP, measure, MF numerator, MF norm.
 
-    The matched-filter numerator is ``|z| Σ_j L(y − z tan θ_j, θ_j)/cos θ_j Δθ`` and the
-    squared norm ``|z| Σ_{j available} Δθ/cos² θ_j`` (module doc, matched filter).
+    Without ``phi`` the matched-filter numerator is the line-sample form
+    ``|z| Σ_{j ∈ [A, B]} L(y − z tan θ_j, θ_j)/cos θ_j Δθ`` with the squared norm
+    ``|z| Σ_{j available} Δθ/cos² θ_j``; with the filter factors ``phi`` (N,) it is the
+    exact inner product over the fixed set of rays inside [A, B] (module doc).
     """
     th = lf_wall.theta_rad
     use = (th >= a) & (th <= b)
-    t = np.tan(th[use])
-    inv_cos = 1.0 / np.cos(th[use])
+    n_use = int(np.count_nonzero(use))
     vals = np.asarray(lf_wall.radiance, dtype=float)[:, use]
+    sec2 = 1.0 / np.cos(th) ** 2
+    if phi is None:
+        t = np.tan(th[use])
+        mf_w = sec2[use]
+        k2 = np.ones(n_use)
+        cols = vals
+    else:
+        h, k2 = _filtered_masked(lf_wall, use, phi)
+        # rays whose kernel barely overlaps [A, B] add nothing but cost
+        keep = k2 >= 1e-3 * k2.max()
+        k2 = k2[keep]
+        t = np.concatenate([np.tan(th[use]), np.tan(th[keep])])
+        mf_w = sec2[keep]
+        cols = np.concatenate([vals, h[:, keep]], axis=1)
     dth = lf_wall.dtheta_rad
-    full = max(float(np.count_nonzero(use)) * dth, dth)
+    full = max(n_use * dth, dth)
     lo, hi = lf_wall.y_mm[0], lf_wall.y_mm[-1]
     shape = (zs.size, y.size)
     conv, rp, meas, num, norm2 = (np.empty(shape) for _ in range(5))
     for i, z in enumerate(zs):
         q = y[:, None] - z * t[None, :]
-        s = sample_columns(vals, lo, lf_wall.dy_mm, q, method="linear")
+        s = sample_columns(cols, lo, lf_wall.dy_mm, q, method="linear")
         ok = (q >= lo) & (q <= hi)
-        total = s.sum(axis=1) * dth
-        m = ok.sum(axis=1) * dth
+        total = s[:, :n_use].sum(axis=1) * dth
+        m = ok[:, :n_use].sum(axis=1) * dth
         conv[i] = total / full
         rp[i] = np.where(m > 0, total / np.where(m > 0, m, 1.0), 0.0)
         meas[i] = m
-        num[i] = abs(z) * (s @ inv_cos) * dth
-        norm2[i] = abs(z) * (ok @ inv_cos**2) * dth
+        if phi is None:
+            num[i] = abs(z) * ((s * np.cos(th[use])[None, :]) @ mf_w) * dth
+            norm2[i] = abs(z) * (ok @ (k2 * mf_w)) * dth
+        else:
+            num[i] = abs(z) * (s[:, n_use:] @ mf_w) * dth
+            norm2[i] = abs(z) * (ok[:, n_use:] @ (k2 * mf_w)) * dth
     return conv, rp, meas, num, norm2
 
 
@@ -134,17 +180,22 @@ def refocus(
     y_mm: ArrayLike,
     z_mm: ArrayLike,
     solvable_domain_rad: tuple[float, float] | None = None,
+    filter_factors: ArrayLike | None = None,
 ) -> FocalStack:
     """Conventional, radiance-preserving and matched-filter refocusing of the wall's field.
 
     ``lf_wall`` is the reconstructed incident field at z = 0 (rows: wall points c);
     ``y_mm`` (N_y,), ``z_mm`` (N_z,) the trial grid; the solvable domain defaults to the
-    field's whole angle domain.
+    field's whole angle domain.  With the reconstruction's ``filter_factors`` (N,) (fftfreq
+    order) the matched filter is the exact inner product over the rays in the solvable
+    domain; without, its projector form (module doc).
     """
     y = np.asarray(y_mm, dtype=float)
     zs = np.atleast_1d(np.asarray(z_mm, dtype=float))
     a, b = lf_wall.domain_rad if solvable_domain_rad is None else solvable_domain_rad
-    conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b)
+    phi = (None if filter_factors is None
+           else np.atleast_2d(np.asarray(filter_factors, dtype=float)).mean(axis=0))
+    conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b, phi)
     return FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), _normalised(num, norm2))
 
 
@@ -441,13 +492,13 @@ def detect_objects(
     y = np.asarray(y_mm, dtype=float)
     zs = np.atleast_1d(np.asarray(z_mm, dtype=float))
     a, b = lf_wall.domain_rad if solvable_domain_rad is None else solvable_domain_rad
-    conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b)
-    st = FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), _normalised(num, norm2))
-    aperture = float(lf_wall.y_mm[-1] - lf_wall.y_mm[0])
     if filter_factors is None:
         phi = (np.abs(fourier_orders(lf_wall.theta_rad.size)) <= p_max).astype(float)
     else:
         phi = np.atleast_2d(np.asarray(filter_factors, dtype=float)).mean(axis=0)
+    conv, rp, meas, num, norm2 = _stacks(lf_wall, y, zs, a, b, phi)
+    st = FocalStack(y, zs, conv, rp, meas, (float(a), float(b)), _normalised(num, norm2))
+    aperture = float(lf_wall.y_mm[-1] - lf_wall.y_mm[0])
     enough = st.measure_rad >= min_measure_fraction * (b - a)
     data = _Stacks(*(np.where(enough, v, 0.0) for v in (st.matched_filter, num,
                                                           st.radiance_preserving)))
@@ -463,7 +514,8 @@ def detect_objects(
         return abs(1.0 / abs(z1) - 1.0 / abs(z2)) <= r_k.depth_mm / ref**2
 
     def model_of(y_ref: float, z_ref: float) -> _Stacks:
-        _, rp_m, _, nm, n2 = _stacks(point_response(lf_wall, y_ref, z_ref, phi), y, zs, a, b)
+        _, rp_m, _, nm, n2 = _stacks(point_response(lf_wall, y_ref, z_ref, phi), y, zs, a, b,
+                                     phi)
         return _Stacks(*(np.where(enough, v, 0.0) for v in (_normalised(nm, n2), nm, rp_m)))
 
     def refine(own: _Stacks, y0: float, z0: float) -> _Candidate:
@@ -548,7 +600,7 @@ def detect_objects(
     # pass 2, interference removal: re-refine each object with the others subtracted,
     # and keep only those whose own fitted response still clears the threshold and that
     # did not move into a stronger object's resolution cell
-    for _ in range(2 if len(cands) > 1 else 0):  # one object: nothing to remove
+    for _ in range(1 if len(cands) > 1 else 0):  # one object: nothing to remove
         for k, cand in enumerate(cands):
             own = data
             for j, other in enumerate(cands):

@@ -36,7 +36,7 @@ N_THETA = 128
 
 def _detect(objects, name: str, *, d2: float, wall_points: np.ndarray, y_meas: np.ndarray,
             z_range: tuple[float, float], seed: int, noise_rel: float = 0.01,
-            ) -> tuple[Detection, float, tuple[float, float]]:
+            z_step: float = 2.0) -> tuple[Detection, float, tuple[float, float]]:
     brdf = material(name)
     scene = HiddenScene(tuple(objects), Wall(-150.0, 150.0, brdf), d2_mm=d2)
     lf = scene.measured_field(y_meas, DOMAIN, N_THETA)
@@ -46,7 +46,7 @@ def _detect(objects, name: str, *, d2: float, wall_points: np.ndarray, y_meas: n
     rec = reconstruct(noisy, brdf, d2_mm=d2, points_mm=wall_points, method="wiener")
     p_hat = effective_p_max(rec.regularization.filter_factors, rec.orders)
     det = detect_objects(rec.incident_field, p_max=p_hat, y_mm=np.arange(-120.0, 120.1, 1.0),
-                         z_mm=np.arange(z_range[0], z_range[1] + 0.1, 2.0),
+                         z_mm=np.arange(z_range[0], z_range[1] + 0.1, z_step),
                          solvable_domain_rad=rec.solvable_domain_rad,
                          filter_factors=rec.regularization.filter_factors,
                          min_measure_fraction=0.1)
@@ -147,7 +147,8 @@ def test_object_beyond_the_depth_reach_is_flagged_unresolved_not_misplaced(name)
     "unresolved" with an interval that holds it; the near source stays located."""
     objects = [PointObject(-8.0, -200.0, 1.5, 5.0), PointObject(40.0, -700.0, 3.0, 5.0)]
     det, _, _ = _detect(objects, name, d2=30.0, wall_points=np.arange(-30.0, 29.1, 1.0),
-                        y_meas=np.arange(-50.0, 50.1, 1.0), z_range=(-900.0, -60.0), seed=3)
+                        y_meas=np.arange(-50.0, 50.1, 1.0), z_range=(-900.0, -60.0), seed=3,
+                        z_step=3.0)
     _assert_honest(det, objects)
     far = [k for k in range(det.count) if _explains(det, k, objects[1])]
     assert far and all(det.quality[k] == "unresolved" for k in far)
