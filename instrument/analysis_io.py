@@ -30,10 +30,12 @@ import numpy as np
 from analysis.brdf_reduction import (
     BRDFPoints,
     DetectorNoise,
+    ReceiverGeometry,
     ReferenceStandard,
     absolute_brdf,
     camera_power_w,
     camera_signal,
+    camera_solid_angle_sr,
     relative_brdf,
     solid_angle_sr,
     subtract_signature,
@@ -219,6 +221,11 @@ class CameraCalibration:
         Optics, for planning (the footprint's image size); optional.
     n_pixels : int or None
         Pixels summed per point (the frame), for planning; optional.
+    chief_ray_only : bool
+        True for a camera model that takes each pixel's radiance along its chief ray
+        through the pupil centre (the simulated camera); False for a real lens, which
+        averages the scene over its pupil. Decides whether the receiver model integrates
+        the pupil (:class:`analysis.brdf_reduction.ReceiverGeometry`).
     """
 
     noise: DetectorNoise
@@ -230,16 +237,19 @@ class CameraCalibration:
     pixel_pitch_um: float | None = None
     focal_length_mm: float | None = None
     n_pixels: int | None = None
+    chief_ray_only: bool = False
 
     @classmethod
     def from_json(cls, path: str | Path) -> CameraCalibration:
         """Keys: system_gain_dn_per_e, read_noise_e, saturation_dn, dark_current_e_per_s,
-        quantum_efficiency, wavelength_nm, pupil_diameter_mm, u_responsivity_rel."""
+        quantum_efficiency, wavelength_nm, pupil_diameter_mm, u_responsivity_rel;
+        optional pixel_pitch_um, focal_length_mm, n_pixels, chief_ray_only."""
         d = json.loads(Path(path).read_text(encoding="utf-8"))
         noise = DetectorNoise(float(d["system_gain_dn_per_e"]), float(d["read_noise_e"]),
                               float(d["saturation_dn"]),
                               float(d.get("dark_current_e_per_s", 0.0)))
-        opt = {k: d[k] for k in ("pixel_pitch_um", "focal_length_mm", "n_pixels") if k in d}
+        opt = {k: d[k] for k in ("pixel_pitch_um", "focal_length_mm", "n_pixels",
+                                 "chief_ray_only") if k in d}
         return cls(noise, float(d["quantum_efficiency"]), float(d["wavelength_nm"]),
                    float(d["pupil_diameter_mm"]), float(d.get("u_responsivity_rel", 0.0)),
                    source=str(path), **opt)
@@ -269,7 +279,9 @@ def simulated_camera_calibration(url: str, *, wavelength_nm: float = 633.0,
                                  source=f"simulated camera {url} (exact)",
                                  pixel_pitch_um=p.pixel_pitch_um,
                                  focal_length_mm=cam.optics.focal_length_mm,
-                                 n_pixels=p.width * p.height)
+                                 n_pixels=p.width * p.height,
+                                 # it traces one ray per pixel centre from the pupil centre
+                                 chief_ray_only=True)
     finally:
         cam.close()
 
@@ -330,6 +342,15 @@ class ReductionOptions:
     reference_run, signature_run : path or None
     reference_table : path or None
         CSV of the standard's BRDF (theta_i_deg, theta_r_deg, brdf, u_rel).
+    beam_radius_mm : float or None
+        1/e² radius of the incident beam; default the run's calibration attribute
+        ``beam_radius_mm``, the stored geometry's, or on a simulated bench the profile's
+        source. With it the reduction divides out the receiver factor and records the
+        receiver geometry for instrument-aware fitting
+        (:class:`analysis.brdf_reduction.ReceiverGeometry`); without it (unknown beam)
+        the points are treated as point samples and the provenance says so.
+    receiver_geometry : bool
+        Use the receiver geometry when the beam radius is known (default True).
     """
 
     method: str = "absolute"
@@ -347,6 +368,8 @@ class ReductionOptions:
     reference_run: str | None = None
     signature_run: str | None = None
     reference_table: str | None = None
+    beam_radius_mm: float | None = None
+    receiver_geometry: bool = True
 
 
 @dataclass(frozen=True)
@@ -452,6 +475,55 @@ def _receiver_distance(run: RunData, rows: np.ndarray, opts: ReductionOptions
     return base, "profile detector distance"
 
 
+def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, str]:
+    if opts.beam_radius_mm is not None:
+        return float(opts.beam_radius_mm), "option"
+    if "beam_radius_mm" in run.calibration:
+        return float(run.calibration["beam_radius_mm"]), "run calibration"
+    if "beam_radius_mm" in run.geometry:
+        return float(run.geometry["beam_radius_mm"]), "bench geometry"
+    src = run.profile().get("simulation", {}).get("source", {})
+    if "beam_radius_mm" in src:
+        return float(src["beam_radius_mm"]), "simulated source (bench profile)"
+    return None, "unknown (points treated as point samples: give --beam-radius-mm)"
+
+
+def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
+              cal: CameraCalibration | None) -> tuple[ReceiverGeometry | None, dict[str, Any]]:
+    """What each reading integrated: the camera pupil or the meter aperture (module
+    docstring of :mod:`analysis.brdf_reduction`), with the solid angle the reduction uses.
+
+    Camera: Ω = A_pupil/R², the étendue of its calibration (camera equation); power meter:
+    the aperture's cone solid angle. The receiver factor corrects either to what the
+    receiver integrates.
+    """
+    distance, dist_src = _receiver_distance(run, rows, opts)
+    if opts.detector == "camera":
+        assert cal is not None
+        aperture = cal.pupil_diameter_mm
+        omega, u_omega = camera_solid_angle_sr(aperture, distance,
+                                               u_diameter_mm=opts.u_aperture_mm,
+                                               u_distance_mm=opts.u_distance_mm)
+        sampled = not cal.chief_ray_only
+    else:
+        aperture = float(run.geometry.get("detector_aperture_mm", 5.0))
+        omega, u_omega = solid_angle_sr(aperture, distance, u_diameter_mm=opts.u_aperture_mm,
+                                        u_distance_mm=opts.u_distance_mm)
+        sampled = True
+    w, w_src = _beam_radius(run, opts)
+    info: dict[str, Any] = {"solid_angle_sr": omega, "u_solid_angle_sr": u_omega,
+                            "receiver_aperture_mm": aperture, "receiver_distance_mm": distance,
+                            "receiver_distance_source": dist_src, "beam_radius_mm": w,
+                            "beam_radius_source": w_src}
+    if w is None or not opts.receiver_geometry:
+        info["receiver_model"] = "none (point spot, point receiver)"
+        return None, info
+    rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled)
+    info["receiver_model"] = ("footprint × " + ("aperture (7-point disk rule)" if sampled
+                                                 else "chief ray through the pupil centre"))
+    return rg, info
+
+
 def _sigma_theta_rad(run: RunData, opts: ReductionOptions) -> float:
     if opts.sigma_theta_deg is not None:
         return math.radians(opts.sigma_theta_deg)
@@ -493,23 +565,18 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     if cal is not None:
         prov["camera_calibration"] = cal.source
         prov["flat_field"] = flat_src
+    receiver, rinfo = _receiver(run, rows, opts, cal)
+    prov.update(rinfo)
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
-        if opts.detector == "camera":
-            aperture = cal.pupil_diameter_mm if cal is not None else 0.0
-        else:
-            aperture = float(run.geometry.get("detector_aperture_mm", 5.0))
-        distance, dist_src = _receiver_distance(run, rows, opts)
-        omega, u_omega = solid_angle_sr(aperture, distance, u_diameter_mm=opts.u_aperture_mm,
-                                        u_distance_mm=opts.u_distance_mm)
         pts = absolute_brdf(
             p_s, u_s, ti, pi_, tr, pr, incident_power_w=p_i,
-            u_incident_power_w=p_i * u_pi_rel, solid_angle=omega, u_solid_angle=u_omega,
+            u_incident_power_w=p_i * u_pi_rel, solid_angle=rinfo["solid_angle_sr"],
+            u_solid_angle=rinfo["u_solid_angle_sr"],
             u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
-            sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected)
-        prov.update(incident_power_w=p_i, incident_power_source=src, solid_angle_sr=omega,
-                    receiver_aperture_mm=aperture, receiver_distance_mm=distance,
-                    receiver_distance_source=dist_src)
+            sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected,
+            receiver=receiver)
+        prov.update(incident_power_w=p_i, incident_power_source=src)
     else:
         if opts.reference_run is None:
             raise ValueError("the relative method needs --reference RUN (a reference-standard "
@@ -524,6 +591,9 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         pts = relative_brdf(p_s, u_s, r_s, r_u, ti, pi_, tr, pr, reference=std,
                             sigma_theta_i=sig_t, sigma_theta_r=sig_t,
                             cosine_corrected=opts.cosine_corrected)
+        # the ratio to a diffuse standard read through the same receiver is already the
+        # normalised average of f over it: keep the geometry for the fit
+        pts = replace(pts, receiver=receiver)
         prov.update(reference_run=ref_run.run_id, reference_standard=std.name)
     if opts.signature_run is not None:
         pts = _subtract_signature(run, rows, pts, opts)

@@ -36,6 +36,7 @@ from analysis.brdf.selection import SelectionResult, select_model
 from analysis.brdf_reduction import (
     BRDFPoints,
     ReciprocityCheck,
+    receiver_model,
     reciprocity_check,
     with_scale_uncertainty,
 )
@@ -103,13 +104,26 @@ def analyse(
     run_cv: bool = True,
     n_starts: int = 3,
     seed: int = 0,
+    instrument_aware: bool = True,
 ) -> AnalysisResult:
     """Fit, select and check (module docstring). ``points`` may be cosine-corrected; the
-    fits use the BRDF f either way."""
+    fits use the BRDF f either way.
+
+    With ``instrument_aware`` and a receiver geometry on ``points`` (the reduction records
+    what each reading integrated: beam footprint and receiver aperture), every candidate is
+    fitted as the receiver sees it (:func:`analysis.brdf_reduction.receiver_model`, issue 5
+    §3): near a specular peak a reading is the average of f over the directions from the
+    footprint to the aperture, a few 10⁻⁴ below the peak value on the sim bench — many σ at
+    high signal. The DHR checks use the BRDF itself.
+    """
     f, u = points.plain_brdf()
     if np.any(u <= 0):
         raise ValueError("every point needs a positive uncertainty to be fitted")
-    cands = [get_model(m) for m in models]
+    base = {m: get_model(m) for m in models}
+    if instrument_aware and points.receiver is not None:
+        cands = [receiver_model(b, points.receiver) for b in base.values()]
+    else:
+        cands = list(base.values())
     a = (points.theta_i, points.phi_i, points.theta_r, points.phi_r)
     sel = select_model(cands, f, *a, sigma=u, criterion=criterion, run_cv=run_cv,
                        n_starts=n_starts, seed=seed)
@@ -117,7 +131,7 @@ def analyse(
     fits = {name: with_scale_uncertainty(fit, by_name[name], *a, sigma=u,
                                          scale_rel=points.u_scale_rel)
             for name, fit in sel.fits.items()}
-    dhr_vals = {name: np.asarray(dhr(by_name[name], fit.params, np.radians(_DHR_THETA_DEG),
+    dhr_vals = {name: np.asarray(dhr(get_model(name), fit.params, np.radians(_DHR_THETA_DEG),
                                      n_mu=48, n_phi=96))
                 for name, fit in fits.items()}
     notes = []

@@ -25,10 +25,11 @@ import numpy as np
 from analysis.brdf_reduction import (
     BRDFPoints,
     DetectorNoise,
+    ReceiverGeometry,
     absolute_brdf,
     camera_power_w,
     camera_signal,
-    solid_angle_sr,
+    camera_solid_angle_sr,
 )
 from analysis.radiometry import FlatField
 from hw_mocks.sim.camera import OpticsParams, SimulatedCamera
@@ -171,8 +172,18 @@ def noise_model(setup: ScanSetup) -> DetectorNoise:
                          sensor.saturation_dn(gain_db=0.0, bits=12), p.dark_current_e_per_s)
 
 
-def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0) -> BRDFPoints:
-    """Acquire every point with sensor seed ``seed`` and reduce by the absolute method."""
+def receiver(setup: ScanSetup) -> ReceiverGeometry:
+    """What the simulated camera integrates: the footprint seen along chief rays through its
+    pupil centre, with Ω = A_pupil/R² (what ``instrument.analysis_io`` builds for a run)."""
+    omega, _ = camera_solid_angle_sr(setup.aperture_mm, setup.distance_mm)
+    return ReceiverGeometry(setup.beam_radius_mm, setup.distance_mm, setup.aperture_mm, omega,
+                            sample_aperture=False)
+
+
+def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
+                receiver_geometry: bool = True) -> BRDFPoints:
+    """Acquire every point with sensor seed ``seed`` and reduce by the absolute method
+    (``receiver_geometry``: divide out the receiver factor and keep the geometry)."""
     s = r.setup
     p = s.sensor_params()
     sensor = Sensor(p, seed=seed)
@@ -204,12 +215,13 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0) -> BRDF
                            quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
     u_power = camera_power_w(np.sqrt(variances), system_gain_dn_per_e=k_gain,
                              quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
-    omega, _ = solid_angle_sr(s.aperture_mm, s.distance_mm)
+    rg = receiver(s)
     a = r.angles_rad
     sig_t = math.radians(sigma_theta_deg)
     return absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
-                         incident_power_w=s.power_w, solid_angle=omega,
-                         sigma_theta_i=sig_t, sigma_theta_r=sig_t)
+                         incident_power_w=s.power_w, solid_angle=rg.solid_angle_sr,
+                         sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                         receiver=rg if receiver_geometry else None)
 
 
 def profile_text(setup: ScanSetup, sample: Sample) -> str:

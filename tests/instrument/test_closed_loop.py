@@ -28,12 +28,14 @@ import pytest
 
 from analysis.brdf import get_model
 from analysis.brdf.selection import select_model
+from analysis.brdf_reduction import receiver_model
 from tests.instrument.sim_scan import (
     CANDIDATES,
     SAMPLES,
     Sample,
     ScanSetup,
     profile_text,
+    receiver,
     reduce_seed,
     render,
 )
@@ -54,7 +56,8 @@ def closed_loop(sample: Sample, seeds: range, setup: ScanSetup | None = None) ->
     """Scan, reduce, select and compare with the truth for every seed."""
     setup = setup or ScanSetup()
     r = render(setup, sample)
-    cands = [get_model(c) for c in CANDIDATES]
+    # instrument-aware candidates: each as the camera sees it (footprint through the pupil)
+    cands = [receiver_model(get_model(c), receiver(setup)) for c in CANDIDATES]
     truth = np.array(sample.params)
     a = r.angles_rad
     est, err, right = [], [], []
