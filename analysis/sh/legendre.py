@@ -360,7 +360,7 @@ def degree_chunks(
     *,
     chunk: int,
     coefficients: tuple[np.ndarray, np.ndarray] | None = None,
-) -> Iterator[tuple[int, int, int, np.ndarray, np.ndarray]]:
+) -> Iterator[tuple[int, int, int, int, np.ndarray, np.ndarray]]:
     """The l-recurrence for orders m0 ≤ m < m1 in chunks of degrees (the transforms' kernel).
 
     Same values as :func:`iterate_degrees`, computed as in :func:`chunk_scales` and handed
@@ -370,13 +370,15 @@ def degree_chunks(
 
     Yields
     ------
-    (k0, nc, n, buf, scale)
-        ``buf[2 + i, :n]`` holds μ_{k0+i} for i < nc, rows m0 … m0+n−1 (orders with
+    (k0, nc, n, skip, buf, scale)
+        ``buf[2 + i, :n, skip:]`` holds μ_{k0+i} for i < nc, rows m0 … m0+n−1 (orders with
         m + k0 ≤ lmax; rows whose degree passes lmax inside the chunk hold finite values of
         the continued recurrence), and ``λ_{m+k0+i}^m = scale[:n, i] · buf[2 + i, :n]``.
         Values whose true magnitude is below 2^−300 (still in scaled form, see the module
-        docstring) are yielded as 0. ``buf`` (shape (chunk+2, m1−m0, N)) is reused by the
-        next chunk.
+        docstring) are yielded as 0, and the first ``skip`` points (polar rings where all
+        of them are that small; the points must be ordered by distance from the nearer
+        pole) are not filled in at all: their values are 0. ``buf`` (shape
+        (chunk+2, m1−m0, N)) is reused by the next chunk.
 
     Parameters
     ----------
@@ -421,9 +423,14 @@ def degree_chunks(
             kl = k0 + nc  # here nc == chunk ≥ 2
             np.multiply(buf[nc, :n], scale[:n, kl - 2 : kl - 1], out=buf[0, :n])
             np.multiply(buf[nc + 1, :n], scale[:n, kl - 1 : kl], out=buf[1, :n])
+        skip = 0
         if n_dead:
             d = n_dead
-            buf[2 : nc + 2, :n, :d] *= live[:n, :d]
+            # Leading rings dead for every row are left out (the caller skips them); the
+            # rest of the polar band is masked.
+            all_dead = (e[:n, :d] < 0).all(axis=0)
+            skip = d if all_dead.all() else int(np.argmin(all_dead))
+            buf[2 : nc + 2, :n, skip:d] *= live[:n, skip:d]
             p2, p1 = buf[0, :n, :d], buf[1, :n, :d]
             big = (e[:n, :d] < 0) & (np.abs(p1) > _UPPER)
             if big.any():
@@ -432,7 +439,7 @@ def degree_chunks(
                 e[:n, :d][big] += 1
                 n_dead = _dead_columns(e[:n, :d])
                 live = (e[:, :n_dead] == 0).astype(float)
-        yield k0, nc, n, buf, scale[:, k0 : k0 + nc]
+        yield k0, nc, n, skip, buf, scale[:, k0 : k0 + nc]
 
 
 def _dead_columns(e: np.ndarray) -> int:

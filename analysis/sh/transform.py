@@ -23,6 +23,7 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.fft
 
 from analysis.sh.convention import (
     PROJECT_CONVENTION,
@@ -147,8 +148,8 @@ def gl_grid(lmax: int, *, precompute: bool | None = None) -> GLGrid:
         else:
             plan = _ChunkPlan(
                 tuple(
-                    (m0, k0, nc, n, buf[2 : nc + 2, :n].copy(), sc[:n].copy())
-                    for m0, k0, nc, n, buf, sc in _recurrence_chunks(grid)
+                    (m0, k0, nc, n, skip, buf[2 : nc + 2, :n, skip:].copy(), sc[:n].copy())
+                    for m0, k0, nc, n, skip, buf, sc in _recurrence_chunks(grid)
                 )
             )
     return GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi, legendre=plan)
@@ -159,9 +160,9 @@ def _dense_plan(grid: GLGrid) -> _DensePlan:
     nlat, nphi = grid.shape
     nh = (nlat + 1) // 2
     north = np.zeros((lmax + 1, nh, lmax + 1))
-    for m0, k0, nc, n, buf, sc in _recurrence_chunks(grid):
-        lam = buf[2 : nc + 2, :n] * sc[:n].T[:, :, None]  # (nc, n, nh)
-        north[m0 : m0 + n, :, k0 : k0 + nc] = lam.transpose(1, 2, 0)
+    for m0, k0, nc, n, skip, buf, sc in _recurrence_chunks(grid):
+        lam = buf[2 : nc + 2, :n, skip:] * sc[:n].T[:, :, None]  # (nc, n, nh − skip)
+        north[m0 : m0 + n, skip:, k0 : k0 + nc] = lam.transpose(1, 2, 0)
     m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
     north[(m_idx + k_idx > lmax)[:, None, :].repeat(nh, axis=1)] = 0.0
     # λ_l^m(−x) = (−1)^{l+m} λ_l^m(x): the southern rings mirror the northern ones.
@@ -192,24 +193,27 @@ def _recurrence_setup(lmax: int, theta_key: bytes) -> tuple:
 
 
 def _recurrence_chunks(grid: GLGrid):
-    """(m0, k0, nc, n, buf, scale) from :func:`degree_chunks` over all blocks of orders."""
+    """(m0, k0, nc, n, skip, buf, scale) from :func:`degree_chunks` over all blocks."""
     lmax = grid.lmax
     nh = (lmax + 2) // 2
     x, mant, expo, blocks = _recurrence_setup(lmax, grid.theta[:nh].tobytes())
     for m0, m1, coef in blocks:
-        for k0, nc, n, buf, sc in degree_chunks(
+        for k0, nc, n, skip, buf, sc in degree_chunks(
             m0, m1, lmax, x, mant[m0:m1], expo[m0:m1], chunk=_CHUNK, coefficients=coef
         ):
-            yield m0, k0, nc, n, buf, sc
+            yield m0, k0, nc, n, skip, buf, sc
 
 
 def _chunks(grid: GLGrid):
-    """(m0, k0, nc, n, mu of shape (nc, n, n_north), scale (n, nc)), stored or recomputed."""
+    """(m0, k0, nc, n, skip, mu (nc, n, n_north − skip), scale (n, nc)): stored or recomputed.
+
+    Rings before ``skip`` (polar) hold only values below 2^−300 in this chunk.
+    """
     if isinstance(grid.legendre, _ChunkPlan):
         yield from grid.legendre.chunks
         return
-    for m0, k0, nc, n, buf, sc in _recurrence_chunks(grid):
-        yield m0, k0, nc, n, buf[2 : nc + 2, :n], sc[:n]
+    for m0, k0, nc, n, skip, buf, sc in _recurrence_chunks(grid):
+        yield m0, k0, nc, n, skip, buf[2 : nc + 2, :n, skip:], sc[:n]
 
 
 @functools.lru_cache(maxsize=16)
@@ -271,7 +275,7 @@ def synthesis(
         z.ravel()[pos] = c * fac
         g = np.matmul(plan.syn, z)  # (m, ring, [Re, Im])
         spec = np.ascontiguousarray(g.transpose(1, 0, 2)).view(complex)[..., 0]
-        return np.fft.irfft(spec, n=nphi, axis=1)
+        return scipy.fft.irfft(spec, n=nphi, axis=1, workers=1, overwrite_x=True)
     nh = (nlat + 1) // 2
     nk2 = (lmax + 2) // 2
     pos, fac, _ = _layout(lmax, False)
@@ -280,21 +284,23 @@ def synthesis(
     # coefficient rows [Re, Im] per order, parity and half-step: (m, parity, 2, k // 2)
     zt = z.transpose(0, 1, 3, 2)
     acc = np.zeros((2, lmax + 1, 2, nh))  # even / odd l − m, order, [Re, Im], ring
-    for m0, k0, nc, n, mu, sc in _chunks(grid):
+    for m0, k0, nc, n, skip, mu, sc in _chunks(grid):
         h0 = k0 // 2
         for p in (0, 1):
             nq = (nc + 1 - p) // 2
             if nq == 0:
                 continue
             cf = zt[m0 : m0 + n, p, :, h0 : h0 + nq] * sc[:, None, p::2]
-            acc[p, m0 : m0 + n] += np.matmul(cf, mu[p::2].transpose(1, 0, 2))
+            acc[p, m0 : m0 + n, :, skip:] += np.matmul(cf, mu[p::2].transpose(1, 0, 2))
     g_n = acc[0] + acc[1]
     g_s = np.subtract(acc[0], acc[1], out=acc[1])
     spec = np.empty((nlat, lmax + 1, 2))
     spec[:nh] = g_n.transpose(2, 0, 1)
     # Southern ring j' = nlat−1−j mirrors northern ring j; the equator (odd nlat) is once.
     spec[nh:] = g_s.transpose(2, 0, 1)[: nlat - nh][::-1]
-    return np.fft.irfft(spec.view(complex)[..., 0], n=nphi, axis=1)
+    return scipy.fft.irfft(
+        spec.view(complex)[..., 0], n=nphi, axis=1, workers=1, overwrite_x=True
+    )
 
 
 def analysis(
@@ -320,7 +326,8 @@ def analysis(
     if f.shape != (nlat, nphi):
         raise ValueError(f"expected a map of shape {(nlat, nphi)}, got {f.shape}")
     plan = grid.legendre
-    spec = np.fft.rfft(f, axis=1)  # (ring, m) complex, n_φ // 2 + 1 = L + 1 columns
+    # (ring, m) complex; n_φ // 2 + 1 = L + 1 columns
+    spec = scipy.fft.rfft(f, axis=1, workers=1)
     if isinstance(plan, _DensePlan):
         pos, _, fac = _layout(lmax, True)
         s = np.ascontiguousarray(spec.T).view(float).reshape(lmax + 1, nlat, 2)
@@ -340,13 +347,13 @@ def analysis(
             np.ascontiguousarray((sv[:nh] - south).transpose(1, 0, 2)) * wq,
         )
         z = np.zeros((lmax + 1, 2, nk2, 2))
-        for m0, k0, nc, n, mu, sc in _chunks(grid):
+        for m0, k0, nc, n, skip, mu, sc in _chunks(grid):
             h0 = k0 // 2
             for p in (0, 1):
                 nq = (nc + 1 - p) // 2
                 if nq == 0:
                     continue
-                prod = np.matmul(mu[p::2].transpose(1, 0, 2), rhs[p][m0 : m0 + n])
+                prod = np.matmul(mu[p::2].transpose(1, 0, 2), rhs[p][m0 : m0 + n, skip:])
                 z[m0 : m0 + n, p, h0 : h0 + nq] = prod * sc[:, p::2, None]
         pos, _, fac = _layout(lmax, False)
         out = z.ravel()[pos] * fac
