@@ -243,3 +243,42 @@ def test_vectorised_recurrence_matches_per_order_values_near_the_poles() -> None
                                    atol=1e-12 * np.max(np.abs(ref)))
         assert np.all(np.abs(got[~big]) <= 2.0**-290)
         assert np.all(np.isfinite(got))
+
+
+def test_chunked_recurrence_matches_per_order_values() -> None:
+    """degree_chunks (locally rescaled, skipped polar rings) against legendre_order."""
+    from analysis.sh.legendre import degree_chunks, sectoral_seeds
+
+    lmax = 300
+    # ordered by distance from the pole, as the kernel requires for its ring skipping
+    theta = np.array([1e-3, 0.01, 0.05, 0.3, 0.9, 1.5])
+    x, s = np.cos(theta), np.sin(theta)
+    mant, expo = sectoral_seeds(s, lmax)
+    m0, m1 = 230, 262
+    got = np.zeros((m1 - m0, lmax - m0 + 1, theta.size))
+    skipped = 0
+    for k0, nc, n, skip, buf, sc in degree_chunks(
+        m0, m1, lmax, x, mant[m0:m1], expo[m0:m1], chunk=8
+    ):
+        assert np.all(np.isfinite(buf[2 : nc + 2, :n, skip:]))
+        lam = buf[2 : nc + 2, :n, skip:] * sc[:n].T[:, :, None]
+        got[:n, k0 : k0 + nc, skip:] = lam.transpose(1, 0, 2)
+        skipped += skip
+    assert skipped > 0  # the polar rings were left out somewhere
+    for m in (m0, 245, m1 - 1):
+        ref = legendre_order(m, lmax, theta)
+        row = got[m - m0, : lmax - m + 1]
+        big = np.abs(ref) > 2.0**-290
+        np.testing.assert_allclose(row[big], ref[big], rtol=1e-12)
+        assert np.all(np.abs(row[~big]) <= 2.0**-290)
+
+
+@pytest.mark.parametrize("lmax", [20, 90])
+def test_stored_table_and_recurrence_give_the_same_transforms(lmax: int) -> None:
+    # L = 20 stores a dense table, L = 90 the recurrence's chunks; both against recurrence.
+    rng = np.random.default_rng(lmax + 1)
+    c = rng.standard_normal((lmax + 1) ** 2)
+    stored, plain = gl_grid(lmax, precompute=True), gl_grid(lmax, precompute=False)
+    f = synthesis(c, grid=stored)
+    np.testing.assert_allclose(f, synthesis(c, grid=plain), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(analysis(f, grid=stored), analysis(f, grid=plain), atol=1e-13)
