@@ -69,6 +69,7 @@ __all__ = [
     "camera_power_w",
     "camera_signal",
     "camera_solid_angle_sr",
+    "pixel_response_covariance",
     "receiver_factor",
     "receiver_model",
     "receiver_nodes",
@@ -77,6 +78,7 @@ __all__ = [
     "scale_sensitivity",
     "solid_angle_sr",
     "subtract_signature",
+    "with_correlated_uncertainty",
     "with_scale_uncertainty",
 ]
 
@@ -140,6 +142,11 @@ class CameraSignal:
     saturated_pixels : int
         Pixels saturated in every bracket (their rate is a lower bound).
     n_brackets : int
+    profile : ndarray, shape (H // b, W // b), or None
+        The signal image (negative rates set to 0) summed over b × b blocks, b =
+        ``profile_block``: which pixels carried the signal, for the covariance of the
+        pixel-response error between points (:func:`pixel_response_covariance`).
+    profile_block : int
     """
 
     rate_dn_per_us: float
@@ -147,6 +154,8 @@ class CameraSignal:
     n_pixels: int
     saturated_pixels: int
     n_brackets: int
+    profile: NDArray[np.float64] | None = None
+    profile_block: int = 0
 
     @property
     def sigma(self) -> float:
@@ -163,6 +172,7 @@ def camera_signal(
     n_dark_averaged: int | None = None,
     flat: FlatField | ArrayLike | None = None,
     mask: ArrayLike | None = None,
+    profile_block: int = 0,
 ) -> CameraSignal:
     """Merge one point's brackets and sum the signal rate over the region of interest.
 
@@ -179,6 +189,8 @@ def camera_signal(
         Exposures averaged into each light / dark frame (dark default: same).
     flat : FlatField or array_like (H, W), optional
         Normalised PRNU response; the rate and its σ are divided by it.
+    profile_block : int
+        Keep the signal image summed over blocks of this size (0: not kept).
     mask : array_like of bool (H, W), optional
         Region of interest (default the whole frame). Choose it from the geometry, not from
         the data, or the sum is biased by the selection.
@@ -221,12 +233,20 @@ def camera_signal(
     sel = np.ones(rate.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     if sel.shape != rate.shape:
         raise ValueError(f"mask shape {sel.shape} differs from the frames {rate.shape}")
+    profile = None
+    if profile_block > 0:
+        b = int(profile_block)
+        img = np.where(sel, np.maximum(rate, 0.0), 0.0)
+        h, w = (img.shape[0] // b) * b, (img.shape[1] // b) * b
+        profile = img[:h, :w].reshape(h // b, b, w // b, b).sum(axis=(1, 3))
     return CameraSignal(
         rate_dn_per_us=float(rate[sel].sum()),
         variance=float(var[sel].sum()),
         n_pixels=int(sel.sum()),
         saturated_pixels=int((merged.saturated & sel).sum()),
         n_brackets=int(stack.shape[0]),
+        profile=profile,
+        profile_block=int(profile_block),
     )
 
 
@@ -247,6 +267,48 @@ def camera_power_w(
     if not k_eta > 0:
         raise ValueError("system gain and quantum efficiency must be > 0")
     return np.asarray(rate_dn_per_us, dtype=float) * 1e6 / k_eta * photon_j
+
+
+def pixel_response_covariance(
+    profiles: ArrayLike, *, u_response_rel: float, block: int = 1
+) -> NDArray[np.float64]:
+    """Relative covariance between points of a summed camera signal from the pixel response.
+
+    Each pixel's response is off by an independent error of relative σ u (EMVA 1288 R3.1
+    §4 PRNU without a flat-field correction; the flat's own noise with one). A summed
+    signal S_j = Σ_i s_ji (1 + ε_i) then carries the relative error Σ_i s_ji ε_i / S_j, and
+    two points that image the footprint onto the same pixels share it:
+
+        C_jk = u² Σ_i s_ji s_ki / (S_j S_k).
+
+    With block sums B (b × b pixels) of a smooth image, Σ_i s_ji s_ki ≈ Σ_B B_j B_k / b².
+    On the sim bench (1 % PRNU, ~10⁴ pixels under the spot) C_jj^½ is ~0.3–1·10⁻⁴ and the
+    points are strongly correlated (the spot is imaged onto the same pixels): averaged
+    over points it does not go down like an independent noise, so it is carried as a
+    correlated input (:func:`with_correlated_uncertainty`).
+
+    Parameters
+    ----------
+    profiles : array_like, shape (n, h, w)
+        Per-point signal images (non-negative), e.g. :attr:`CameraSignal.profile`.
+    u_response_rel : float
+        u, relative standard uncertainty of one pixel's response.
+    block : int
+        b, the block size the profiles were summed over.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    prof = np.asarray(profiles, dtype=float)
+    if prof.ndim != 3:
+        raise ValueError("profiles must have shape (n, h, w)")
+    flat = prof.reshape(prof.shape[0], -1)
+    total = flat.sum(axis=1)
+    if np.any(total <= 0):
+        raise ValueError("every profile needs a positive signal")
+    gram = flat @ flat.T / float(block) ** 2
+    return u_response_rel**2 * gram / np.outer(total, total)
 
 
 def solid_angle_sr(
@@ -496,6 +558,10 @@ class BRDFPoints:
         What each reading integrated (beam footprint × receiver aperture); the values are
         then the normalised average of f over it (:func:`receiver_model`), which an
         instrument-aware fit compares them with. ``None``: treated as point samples.
+    cov_corr : ndarray, shape (n, n), or None
+        Covariance (unit of ``brdf`` squared) of errors shared between points, e.g. the
+        camera's pixel response (:func:`pixel_response_covariance`). Like the common scale
+        it is not fitted as noise: :func:`with_correlated_uncertainty` propagates it.
     """
 
     theta_i: NDArray[np.float64]
@@ -510,6 +576,7 @@ class BRDFPoints:
     cosine_corrected: bool
     method: str
     receiver: ReceiverGeometry | None = None
+    cov_corr: NDArray[np.float64] | None = None
 
     @property
     def n(self) -> int:
@@ -522,8 +589,10 @@ class BRDFPoints:
 
     @property
     def u_total(self) -> NDArray[np.float64]:
-        """Combined standard uncertainty of each value, the common scale included."""
-        return np.sqrt(self.u_point**2 + (self.brdf * self.u_scale_rel) ** 2)
+        """Combined standard uncertainty of each value, common and correlated parts
+        included."""
+        corr = np.diag(self.cov_corr) if self.cov_corr is not None else 0.0
+        return np.sqrt(self.u_point**2 + (self.brdf * self.u_scale_rel) ** 2 + corr)
 
     def plain_brdf(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(f, u_point) as the BRDF f whatever ``cosine_corrected`` is."""
@@ -532,6 +601,13 @@ class BRDFPoints:
         c = np.maximum(np.cos(self.theta_r), 1e-12)
         return self.brdf / c, self.u_point / c
 
+    def plain_cov_corr(self) -> NDArray[np.float64] | None:
+        """:attr:`cov_corr` for the BRDF f whatever ``cosine_corrected`` is."""
+        if self.cov_corr is None or not self.cosine_corrected:
+            return self.cov_corr
+        c = np.maximum(np.cos(self.theta_r), 1e-12)
+        return self.cov_corr / np.outer(c, c)
+
     def take(self, index: ArrayLike) -> BRDFPoints:
         """The subset ``index`` (boolean mask or integer indices)."""
         idx = np.asarray(index)
@@ -539,6 +615,8 @@ class BRDFPoints:
             self, theta_i=self.theta_i[idx], phi_i=self.phi_i[idx],
             theta_r=self.theta_r[idx], phi_r=self.phi_r[idx], brdf=self.brdf[idx],
             u_stat=self.u_stat[idx], u_angle=self.u_angle[idx], u_ref=self.u_ref[idx],
+            cov_corr=(None if self.cov_corr is None
+                      else self.cov_corr[np.ix_(*(np.arange(self.n)[idx],) * 2)]),
         )
 
 
@@ -564,6 +642,7 @@ def absolute_brdf(
     sigma_theta_r: float = 0.0,
     cosine_corrected: bool = False,
     receiver: ReceiverGeometry | None = None,
+    cov_power_rel: ArrayLike | None = None,
 ) -> BRDFPoints:
     """BRDF by the absolute method, f = P_s / (P_i Ω cos θr G) (module docstring, step 2).
 
@@ -590,6 +669,9 @@ def absolute_brdf(
         average of f over the footprint and aperture (exact for a Lambertian sample), and
         the geometry is kept on the result for instrument-aware fitting. Without it G = 1:
         a point spot and a point receiver (biased by a few 10⁻⁴ on the sim bench).
+    cov_power_rel : array_like, shape (n, n), optional
+        Relative covariance of the collected powers shared between points (the camera's
+        pixel response, :func:`pixel_response_covariance`); kept as ``cov_corr``.
 
     Returns
     -------
@@ -613,8 +695,14 @@ def absolute_brdf(
                           + (u_solid_angle / solid_angle) ** 2 + u_responsivity_rel**2))
     u_ang = angular_uncertainty(f, ti, tr, sigma_theta_i=sigma_theta_i,
                                 sigma_theta_r=sigma_theta_r, phi_i=pi_, phi_r=pr)
+    cov = None
+    if cov_power_rel is not None:
+        c_rel = np.asarray(cov_power_rel, dtype=float)
+        if c_rel.shape != (f.size, f.size):
+            raise ValueError(f"cov_power_rel must have shape ({f.size}, {f.size})")
+        cov = c_rel * np.outer(f, f)
     return BRDFPoints(ti, pi_, tr, pr, f, u_stat, u_ang, np.zeros_like(f), scale,
-                      bool(cosine_corrected), "absolute", receiver)
+                      bool(cosine_corrected), "absolute", receiver, cov)
 
 
 @dataclass(frozen=True)
@@ -981,3 +1069,39 @@ def with_scale_uncertainty(
         se = np.sqrt(np.diag(cov))
         corr = cov / np.outer(se, se)
     return replace(fit, covariance=cov, stderr=se, correlation=corr)
+
+
+def with_correlated_uncertainty(
+    fit: FitResult,
+    model: BRDFModel,
+    theta_i: ArrayLike,
+    phi_i: ArrayLike,
+    theta_r: ArrayLike,
+    phi_r: ArrayLike,
+    *,
+    sigma: ArrayLike,
+    cov: ArrayLike,
+) -> FitResult:
+    """The fit with errors correlated between points (covariance ``cov``, shape (n, n))
+    added to its parameter covariance.
+
+    The weighted least-squares optimum responds linearly to a data error δy:
+    δp = S δy, S = (JᵀWJ)⁺ JᵀW, W = diag(1/σ²) (the Gauss–Newton step, Nocedal & Wright
+    §10.3), so C' = C + S cov Sᵀ (GUM, JCGM 100:2008 §5.2, correlated inputs). The common
+    scale of :func:`with_scale_uncertainty` is the special case cov = u_s² f fᵀ.
+    """
+    c = np.asarray(cov, dtype=float)
+    if not np.any(c):
+        return fit
+    p = np.asarray(fit.params, dtype=float)
+    g = make_geometry(*_angles(theta_i, phi_i, theta_r, phi_r))
+    jac = model.jacobian_geometry(p, g).reshape(-1, p.size)
+    if c.shape != (jac.shape[0], jac.shape[0]):
+        raise ValueError(f"cov must have shape ({jac.shape[0]}, {jac.shape[0]})")
+    w = 1.0 / np.broadcast_to(np.asarray(sigma, dtype=float).reshape(-1), (jac.shape[0],)) ** 2
+    sens = np.linalg.pinv(jac.T @ (jac * w[:, None]), rcond=1e-12) @ (jac.T * w[None, :])
+    cov_p = fit.covariance + sens @ c @ sens.T
+    with np.errstate(invalid="ignore"):
+        se = np.sqrt(np.diag(cov_p))
+        corr = cov_p / np.outer(se, se)
+    return replace(fit, covariance=cov_p, stderr=se, correlation=corr)

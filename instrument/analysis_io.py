@@ -36,6 +36,7 @@ from analysis.brdf_reduction import (
     camera_power_w,
     camera_signal,
     camera_solid_angle_sr,
+    pixel_response_covariance,
     relative_brdf,
     solid_angle_sr,
     subtract_signature,
@@ -226,6 +227,10 @@ class CameraCalibration:
         through the pupil centre (the simulated camera); False for a real lens, which
         averages the scene over its pupil. Decides whether the receiver model integrates
         the pupil (:class:`analysis.brdf_reduction.ReceiverGeometry`).
+    prnu_rel : float
+        Photo-response non-uniformity (EMVA 1288 R3.1 §4: relative σ of one pixel's
+        response); without a flat-field correction it is an error of the summed signal
+        shared between points (:func:`analysis.brdf_reduction.pixel_response_covariance`).
     """
 
     noise: DetectorNoise
@@ -238,18 +243,19 @@ class CameraCalibration:
     focal_length_mm: float | None = None
     n_pixels: int | None = None
     chief_ray_only: bool = False
+    prnu_rel: float = 0.0
 
     @classmethod
     def from_json(cls, path: str | Path) -> CameraCalibration:
         """Keys: system_gain_dn_per_e, read_noise_e, saturation_dn, dark_current_e_per_s,
         quantum_efficiency, wavelength_nm, pupil_diameter_mm, u_responsivity_rel;
-        optional pixel_pitch_um, focal_length_mm, n_pixels, chief_ray_only."""
+        optional pixel_pitch_um, focal_length_mm, n_pixels, chief_ray_only, prnu_rel."""
         d = json.loads(Path(path).read_text(encoding="utf-8"))
         noise = DetectorNoise(float(d["system_gain_dn_per_e"]), float(d["read_noise_e"]),
                               float(d["saturation_dn"]),
                               float(d.get("dark_current_e_per_s", 0.0)))
         opt = {k: d[k] for k in ("pixel_pitch_um", "focal_length_mm", "n_pixels",
-                                 "chief_ray_only") if k in d}
+                                 "chief_ray_only", "prnu_rel") if k in d}
         return cls(noise, float(d["quantum_efficiency"]), float(d["wavelength_nm"]),
                    float(d["pupil_diameter_mm"]), float(d.get("u_responsivity_rel", 0.0)),
                    source=str(path), **opt)
@@ -281,7 +287,7 @@ def simulated_camera_calibration(url: str, *, wavelength_nm: float = 633.0,
                                  focal_length_mm=cam.optics.focal_length_mm,
                                  n_pixels=p.width * p.height,
                                  # it traces one ray per pixel centre from the pupil centre
-                                 chief_ray_only=True)
+                                 chief_ray_only=True, prnu_rel=p.prnu)
     finally:
         cam.close()
 
@@ -386,6 +392,19 @@ def flat_from_run(path: str | Path) -> FlatField:
     """Normalised flat field (:func:`analysis.radiometry.flat_field`) from a ``flat_field``
     run: the light frames of its "flat" points at the exposure with the most frames, less
     the mean of their dark frames (EMVA 1288 R3.1 §4, PRNU)."""
+    return _flat_and_frames(path)[0]
+
+
+def _flat_residual_rel(flat: FlatField, n_frames: int, cal: CameraCalibration) -> float:
+    """Relative σ of one pixel of a flat averaged from ``n_frames`` frames: its shot noise
+    K·S and the dark noise of the light and the (averaged) dark frame, EMVA 1288 §2.3."""
+    k = cal.noise.system_gain_dn_per_e
+    s = max(flat.mean_signal_dn, 1e-12)
+    read_dn2 = (k * cal.noise.read_noise_e) ** 2 + 1.0 / 12.0
+    return float(math.sqrt((k * s + 2.0 * read_dn2) / n_frames) / s)
+
+
+def _flat_and_frames(path: str | Path) -> tuple[FlatField, int]:
     run = read_run(path)
     groups: dict[float, tuple[list[np.ndarray], list[np.ndarray]]] = {}
     for r in np.flatnonzero(run.label == "flat"):
@@ -399,43 +418,63 @@ def flat_from_run(path: str | Path) -> FlatField:
     if not groups:
         raise ValueError(f"run {run.run_id} holds no flat-field frames")
     lights, darks = max(groups.values(), key=lambda g: len(g[0]))
-    return flat_field(np.array(lights), np.mean(np.array(darks), axis=0))
+    return flat_field(np.array(lights), np.mean(np.array(darks), axis=0)), len(lights)
 
 
-def _flat_for(run: RunData, opts: ReductionOptions) -> tuple[FlatField | None, str]:
+def _flat_for(run: RunData, opts: ReductionOptions
+              ) -> tuple[FlatField | None, str, int]:
     src = opts.flat_run or run.calibration.get("flat")
     if src is None:
-        return None, "none"
+        return None, "none", 0
     path = Path(src)
     if not path.is_absolute() and not path.exists():
         path = run.path.parent / src  # a run id or a name next to the run file
         if not path.suffix:
             path = path.with_suffix(".h5")
-    return flat_from_run(path), str(path)
+    flat, n = _flat_and_frames(path)
+    return flat, str(path), n
+
+
+#: Signal images for the pixel-response covariance are kept summed over blocks so that they
+#: are at most this many blocks wide (a 1024-px frame: 8 × 8 blocks; the footprint's image
+#: is tens of pixels wide there, smooth on that scale; small frames are kept per pixel).
+_PROFILE_SIDE = 128
 
 
 def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
-             cal: CameraCalibration | None, flat: FlatField | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Collected power (W) and its σ per row, from the camera or the power meter."""
+             cal: CameraCalibration | None, flat: FlatField | None = None,
+             *, u_response_rel: float = 0.0
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Collected power (W) and its σ per row, from the camera or the power meter, and the
+    relative covariance of the camera's pixel-response error between rows (``None`` for
+    the power meter or when ``u_response_rel`` is 0)."""
     if opts.detector == "power_meter":
         p = run.power_w[rows].astype(float)
         if not np.all(np.isfinite(p)):
             raise ValueError("the run has no power-meter readings at every point")
-        return p, np.abs(p) * opts.u_power_meter_rel
+        return p, np.abs(p) * opts.u_power_meter_rel, None
     assert cal is not None
     n_avg = int(run.acquisition.get("frames", 1))
     rate = np.empty(rows.size)
     sd = np.empty(rows.size)
+    block = 0
+    profiles = []
     for k, r in enumerate(rows):
         light, exp, dark = run.frames_of(int(r))
         if dark is None:
             raise ValueError(f"point {run.index[r]} has no dark frames at its exposure(s)")
-        s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg, flat=flat)
+        if u_response_rel > 0 and block == 0:
+            block = max(1, max(light.shape[1:]) // _PROFILE_SIDE)
+        s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg, flat=flat,
+                          profile_block=block)
         rate[k], sd[k] = s.rate_dn_per_us, s.sigma
+        if s.profile is not None:
+            profiles.append(s.profile)
     conv = {"system_gain_dn_per_e": cal.noise.system_gain_dn_per_e,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
-    return camera_power_w(rate, **conv), camera_power_w(sd, **conv)
+    cov = (pixel_response_covariance(np.array(profiles), u_response_rel=u_response_rel,
+                                     block=block) if block else None)
+    return camera_power_w(rate, **conv), camera_power_w(sd, **conv), cov
 
 
 def _incident_power(run: RunData, opts: ReductionOptions) -> tuple[float, float, str]:
@@ -557,14 +596,21 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     ti, pi_ = rad(run.theta_i[rows]), rad(run.phi_i[rows])
     tr, pr = rad(run.theta_r[rows]), rad(run.phi_r[rows])
     sig_t = _sigma_theta_rad(run, opts)
-    flat, flat_src = _flat_for(run, opts) if cal is not None else (None, "none")
-    p_s, u_s = _signals(run, rows, opts, cal, flat)
+    flat, flat_src, n_flat = _flat_for(run, opts) if cal is not None else (None, "none", 0)
+    # the pixel-response error left in the summed signal: PRNU without a flat, the flat's
+    # own noise with one (shared between points that image the spot onto the same pixels)
+    u_resp = 0.0
+    if cal is not None:
+        u_resp = (_flat_residual_rel(flat, n_flat, cal) if flat is not None
+                  else cal.prnu_rel)
+    p_s, u_s, cov_rel = _signals(run, rows, opts, cal, flat, u_response_rel=u_resp)
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
                             "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
                             "options": asdict(opts)}
     if cal is not None:
         prov["camera_calibration"] = cal.source
         prov["flat_field"] = flat_src
+        prov["pixel_response_u_rel"] = u_resp
     receiver, rinfo = _receiver(run, rows, opts, cal)
     prov.update(rinfo)
     if opts.method == "absolute":
@@ -575,7 +621,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             u_solid_angle=rinfo["u_solid_angle_sr"],
             u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
             sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected,
-            receiver=receiver)
+            receiver=receiver, cov_power_rel=cov_rel)
         prov.update(incident_power_w=p_i, incident_power_source=src)
     else:
         if opts.reference_run is None:
@@ -583,7 +629,8 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
                              "run at the same geometry)")
         ref_run = read_run(opts.reference_run)
         ref_rows = _match_rows(run, rows, ref_run)
-        r_s, r_u = _signals(ref_run, ref_rows, opts,
+        # same geometry, same pixels: the pixel response cancels in the ratio
+        r_s, r_u, _ = _signals(ref_run, ref_rows, opts,
                             camera_calibration_for(ref_run,
                                                    calibration_file=opts.camera_calibration)
                             if opts.detector == "camera" else None)

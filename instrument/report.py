@@ -4,8 +4,9 @@
 uncertainties (``u_point``) as a known noise scale, chooses the smallest model the data
 support (:func:`analysis.brdf.selection.select_model`: information criterion with the
 comparison table, grouped-by-θi cross-validation scores kept), then adds the run's common
-scale uncertainty to every fit's covariance
-(:func:`analysis.brdf_reduction.with_scale_uncertainty`). Physical checks: Helmholtz
+scale uncertainty and the errors correlated between points (camera pixel response) to
+every fit's covariance (:func:`analysis.brdf_reduction.with_scale_uncertainty`,
+:func:`~analysis.brdf_reduction.with_correlated_uncertainty`). Physical checks: Helmholtz
 reciprocity of the *data* where a geometry was measured both ways, and the
 directional–hemispherical reflectance of each fitted model (≤ 1 where the model promises
 energy conservation; physics.md §1).
@@ -38,6 +39,7 @@ from analysis.brdf_reduction import (
     ReciprocityCheck,
     receiver_model,
     reciprocity_check,
+    with_correlated_uncertainty,
     with_scale_uncertainty,
 )
 
@@ -131,6 +133,11 @@ def analyse(
     fits = {name: with_scale_uncertainty(fit, by_name[name], *a, sigma=u,
                                          scale_rel=points.u_scale_rel)
             for name, fit in sel.fits.items()}
+    cov = points.plain_cov_corr()
+    if cov is not None:
+        # errors shared between points (camera pixel response): propagated, not fitted
+        fits = {name: with_correlated_uncertainty(fit, by_name[name], *a, sigma=u, cov=cov)
+                for name, fit in fits.items()}
     dhr_vals = {name: np.asarray(dhr(get_model(name), fit.params, np.radians(_DHR_THETA_DEG),
                                      n_mu=48, n_phi=96))
                 for name, fit in fits.items()}

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import h5py
 import numpy as np
 import pytest
 
+from analysis.brdf import get_model
 from instrument.analysis_io import ReductionOptions, read_run, reduce_run
 from instrument.cli import main
 from instrument.report import analyse
@@ -110,7 +112,8 @@ def test_scale_uncertainty_reaches_the_amplitudes(glossy_run) -> None:
     red = reduce_run(glossy_run, ReductionOptions(incident_power_w=2e-6,
                                                   u_incident_power_rel=0.02))
     assert red.points.u_scale_rel == pytest.approx(0.02)
-    res = analyse(red.points, ["lambert+ggx"], run_cv=False)
+    # the scale alone (the pixel-response covariance is tested below)
+    res = analyse(replace(red.points, cov_corr=None), ["lambert+ggx"], run_cv=False)
     fit, raw = res.fits["lambert+ggx"], res.selection.fits["lambert+ggx"]
     np.testing.assert_allclose(fit.stderr[:2] ** 2,
                                raw.stderr[:2] ** 2 + (0.02 * raw.params[:2]) ** 2, rtol=1e-5)
@@ -164,3 +167,37 @@ def test_signature_run_is_subtracted(tmp_path) -> None:
     z_raw = (raw.points.brdf - 0.8 / math.pi) / raw.points.u_point
     z = (clean.points.brdf - 0.8 / math.pi) / clean.points.u_point
     assert np.mean(z_raw) > 3 and np.all(np.abs(z) < 4)
+
+
+def test_pixel_response_is_a_correlated_input(glossy_run) -> None:
+    """Without a flat field the camera's 1 % PRNU is an error shared between points (the
+    spot is imaged onto the same pixels): it is carried as a covariance, propagated into
+    the parameters (GUM §5.2), never fitted as independent noise."""
+    red = reduce_run(glossy_run)
+    pts = red.points
+    assert red.provenance["pixel_response_u_rel"] == pytest.approx(0.01)
+    cov = pts.cov_corr
+    assert cov is not None and cov.shape == (pts.n, pts.n)
+    rel_sd = np.sqrt(np.diag(cov)) / pts.brdf
+    # 96 × 96 px of 58.7 µm: 10²–10³ pixels under the spot → 1 %/√N_eff of a few 10⁻⁴
+    assert np.all((rel_sd > 1e-4) & (rel_sd < 2e-3))
+    corr = cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov)))
+    assert np.median(corr) > 0.3  # strongly shared between points
+    with_cov = analyse(pts, ["lambert+ggx"], run_cv=False).fits["lambert+ggx"]
+    without = analyse(replace(pts, cov_corr=None), ["lambert+ggx"],
+                      run_cv=False).fits["lambert+ggx"]
+    np.testing.assert_allclose(with_cov.params, without.params, rtol=1e-9)
+    added = with_cov.covariance - without.covariance
+    assert np.all(np.linalg.eigvalsh(added) > -1e-12 * np.abs(added).max())
+    # the propagated part against refits of data with drawn correlated errors
+    from analysis.brdf.fit import fit_brdf
+    from analysis.brdf_reduction import receiver_model
+
+    model = receiver_model(get_model("lambert+ggx"), pts.receiver)
+    rng = np.random.default_rng(7)
+    draws = rng.multivariate_normal(np.zeros(pts.n), cov, size=200)
+    shifts = np.array([fit_brdf(model, pts.brdf + d, pts.theta_i, pts.phi_i, pts.theta_r,
+                                pts.phi_r, sigma=pts.u_point, start=without.params).params
+                       for d in draws]) - without.params
+    # 200 draws: the std is known to ±5 %
+    np.testing.assert_allclose(shifts.std(axis=0), np.sqrt(np.diag(added)), rtol=0.15)
