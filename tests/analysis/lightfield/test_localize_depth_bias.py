@@ -59,7 +59,7 @@ def test_point_depth_bias_below_a_seventh_of_the_depth_blur(p, z0):
     lf = _filtered_truth(Y0, z0, p)
     phi = (np.abs(fourier_orders(N)) <= p).astype(float)
     # the far end of the interval at P = 5, 260 mm is 507 mm: the search must reach it
-    det = detect_objects(lf, p_max=p, y_mm=np.arange(-60.0, 50.0, 0.5),
+    det = detect_objects(lf, p_max=p, y_mm=np.arange(-40.0, 25.0, 0.5),
                          z_mm=np.arange(-560.0, -80.0, 1.0), solvable_domain_rad=SOLVABLE,
                          filter_factors=phi, min_measure_fraction=0.1)
     assert det.count == 1

@@ -45,7 +45,7 @@ def _detect(objects, name: str, *, d2: float, wall_points: np.ndarray, y_meas: n
                                                       lf.shape))
     rec = reconstruct(noisy, brdf, d2_mm=d2, points_mm=wall_points, method="wiener")
     p_hat = effective_p_max(rec.regularization.filter_factors, rec.orders)
-    det = detect_objects(rec.incident_field, p_max=p_hat, y_mm=np.arange(-120.0, 120.1, 1.0),
+    det = detect_objects(rec.incident_field, p_max=p_hat, y_mm=np.arange(-90.0, 90.1, 1.0),
                          z_mm=np.arange(z_range[0], z_range[1] + 0.1, z_step),
                          solvable_domain_rad=rec.solvable_domain_rad,
                          filter_factors=rec.regularization.filter_factors,
