@@ -147,6 +147,8 @@ class CameraSignal:
         ``profile_block``: which pixels carried the signal, for the covariance of the
         pixel-response error between points (:func:`pixel_response_covariance`).
     profile_block : int
+    profile_sq_sum : float
+        Σ s_i² over the pixels (exact, not from blocks), with the profile.
     """
 
     rate_dn_per_us: float
@@ -156,6 +158,7 @@ class CameraSignal:
     n_brackets: int
     profile: NDArray[np.float64] | None = None
     profile_block: int = 0
+    profile_sq_sum: float = 0.0
 
     @property
     def sigma(self) -> float:
@@ -233,12 +236,13 @@ def camera_signal(
     sel = np.ones(rate.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     if sel.shape != rate.shape:
         raise ValueError(f"mask shape {sel.shape} differs from the frames {rate.shape}")
-    profile = None
+    profile, sq_sum = None, 0.0
     if profile_block > 0:
         b = int(profile_block)
         img = np.where(sel, np.maximum(rate, 0.0), 0.0)
         h, w = (img.shape[0] // b) * b, (img.shape[1] // b) * b
         profile = img[:h, :w].reshape(h // b, b, w // b, b).sum(axis=(1, 3))
+        sq_sum = float(np.sum(img * img))
     return CameraSignal(
         rate_dn_per_us=float(rate[sel].sum()),
         variance=float(var[sel].sum()),
@@ -247,6 +251,7 @@ def camera_signal(
         n_brackets=int(stack.shape[0]),
         profile=profile,
         profile_block=int(profile_block),
+        profile_sq_sum=sq_sum,
     )
 
 
@@ -270,7 +275,8 @@ def camera_power_w(
 
 
 def pixel_response_covariance(
-    profiles: ArrayLike, *, u_response_rel: float, block: int = 1
+    profiles: ArrayLike, *, u_response_rel: float, block: int = 1,
+    sq_sums: ArrayLike | None = None,
 ) -> NDArray[np.float64]:
     """Relative covariance between points of a summed camera signal from the pixel response.
 
@@ -281,7 +287,10 @@ def pixel_response_covariance(
 
         C_jk = u² Σ_i s_ji s_ki / (S_j S_k).
 
-    With block sums B (b × b pixels) of a smooth image, Σ_i s_ji s_ki ≈ Σ_B B_j B_k / b².
+    With block sums B (b × b pixels) of a smooth image, Σ_i s_ji s_ki ≈ Σ_B B_j B_k / b²;
+    an image narrow on the block scale makes that too small (Cauchy–Schwarz), so with the
+    exact Σ_i s_ji² (``sq_sums``) the diagonal is exact and the blocks only give the
+    correlations.
     On the sim bench (1 % PRNU, ~10⁴ pixels under the spot) C_jj^½ is ~0.3–1·10⁻⁴ and the
     points are strongly correlated (the spot is imaged onto the same pixels): averaged
     over points it does not go down like an independent noise, so it is carried as a
@@ -295,6 +304,8 @@ def pixel_response_covariance(
         u, relative standard uncertainty of one pixel's response.
     block : int
         b, the block size the profiles were summed over.
+    sq_sums : array_like, shape (n,), optional
+        Exact Σ_i s_ji² per point (:attr:`CameraSignal.profile_sq_sum`).
 
     Returns
     -------
@@ -308,6 +319,12 @@ def pixel_response_covariance(
     if np.any(total <= 0):
         raise ValueError("every profile needs a positive signal")
     gram = flat @ flat.T / float(block) ** 2
+    if sq_sums is not None:
+        exact = np.asarray(sq_sums, dtype=float).reshape(-1)
+        if exact.shape != total.shape:
+            raise ValueError("sq_sums needs one value per profile")
+        d = np.sqrt(np.diag(gram))
+        gram = gram / np.outer(d, d) * np.sqrt(np.outer(exact, exact))
     return u_response_rel**2 * gram / np.outer(total, total)
 
 

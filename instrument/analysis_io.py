@@ -458,7 +458,7 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
     rate = np.empty(rows.size)
     sd = np.empty(rows.size)
     block = 0
-    profiles = []
+    profiles, sq_sums = [], []
     for k, r in enumerate(rows):
         light, exp, dark = run.frames_of(int(r))
         if dark is None:
@@ -470,10 +470,11 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
         rate[k], sd[k] = s.rate_dn_per_us, s.sigma
         if s.profile is not None:
             profiles.append(s.profile)
+            sq_sums.append(s.profile_sq_sum)
     conv = {"system_gain_dn_per_e": cal.noise.system_gain_dn_per_e,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
     cov = (pixel_response_covariance(np.array(profiles), u_response_rel=u_response_rel,
-                                     block=block) if block else None)
+                                     block=block, sq_sums=sq_sums) if block else None)
     return camera_power_w(rate, **conv), camera_power_w(sd, **conv), cov
 
 

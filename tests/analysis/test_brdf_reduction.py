@@ -19,18 +19,31 @@ from analysis.brdf.fit import fit_brdf
 from analysis.brdf_reduction import (
     BRDFPoints,
     DetectorNoise,
+    ReceiverGeometry,
     ReferenceStandard,
     absolute_brdf,
     angular_uncertainty,
     camera_signal,
+    camera_solid_angle_sr,
+    pixel_response_covariance,
+    receiver_factor,
+    receiver_model,
     reciprocity_check,
     relative_brdf,
     scale_sensitivity,
     solid_angle_sr,
     subtract_signature,
+    with_correlated_uncertainty,
     with_scale_uncertainty,
 )
-from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, reduce_seed, render
+from tests.instrument.sim_scan import (
+    SAMPLES,
+    Sample,
+    ScanSetup,
+    receiver,
+    reduce_seed,
+    render,
+)
 
 LAMBERT = SAMPLES[0]
 
@@ -303,3 +316,122 @@ def test_absolute_scale_budget_and_validation() -> None:
     with pytest.raises(ValueError):
         absolute_brdf([1.0], 0.1, 0.1, 0.0, 0.1, 0.0, incident_power_w=0.0, solid_angle=1.0)
     assert replace(pts, method="x").method == "x"  # frozen dataclass, copied with replace
+
+
+# ------------------------------------------------------------------------ receiver geometry
+def _noise_free(setup: ScanSetup, sample: Sample):
+    """(angles (n, 4), collected power (n,) W) of a noise-free rendering."""
+    r = render(setup, sample)
+    photon_j = 6.62607015e-34 * 299792458.0 / 633e-9
+    power = r.photon_rate.reshape(len(r.photon_rate), -1).sum(axis=1) * photon_j
+    return r.angles_rad, power
+
+
+def test_receiver_model_reproduces_the_simulated_camera() -> None:
+    """Noise-free camera rendering (footprint seen through the pupil centre, pixels
+    integrated over their area) against the receiver model: equal to 10⁻⁷, where the
+    point-sample reduction (cone Ω, G = 1, f at the nominal angles) is off by +3…+4·10⁻⁴
+    on the diffuse side and −4·10⁻⁴ on the specular peak (issue 5: the camera-method bias)."""
+    setup = ScanSetup()
+    sample = SAMPLES[1]
+    a, power = _noise_free(setup, sample)
+    rg = receiver(setup)
+    pts = absolute_brdf(power, 1e-3 * power, *a.T, incident_power_w=setup.power_w,
+                        solid_angle=rg.solid_angle_sr, receiver=rg)
+    model = get_model(sample.model)
+    seen = receiver_model(model, rg).evaluate(np.array(sample.params), *a.T)
+    np.testing.assert_allclose(pts.brdf, seen, rtol=1e-7)
+    assert pts.receiver == rg
+    # the old reduction: exact-cone Ω, no receiver factor, the BRDF at the nominal angles
+    cone, _ = solid_angle_sr(setup.aperture_mm, setup.distance_mm)
+    old = absolute_brdf(power, 1e-3 * power, *a.T, incident_power_w=setup.power_w,
+                        solid_angle=cone).brdf
+    nominal = model.evaluate(np.array(sample.params), *a.T)
+    bias = old / nominal - 1
+    assert np.max(bias) > 3e-4 and np.min(bias) < -3e-4
+
+
+def test_receiver_factor_limits() -> None:
+    """G for a tiny beam: 1 for the pinhole with Ω = A/R² (camera equation); the disk's
+    projected solid angle π sin²a = πρ²/(R² + ρ²) over Ω for an integrated aperture (the
+    tilted-cone identity ∫ cos θ dω = cos θr π sin²a, Nicodemus' projected solid angle)."""
+    ti, tr = np.radians([0.0, 30.0, 60.0]), np.radians([0.0, 45.0, 80.0])
+    zero, pi_ = np.zeros(3), np.full(3, np.pi)
+    om, _ = camera_solid_angle_sr(12.5, 300.0)
+    assert om == pytest.approx(math.pi * 6.25**2 / 300.0**2, rel=1e-12)
+    pin = ReceiverGeometry(1e-4, 300.0, 12.5, om, sample_aperture=False)
+    np.testing.assert_allclose(receiver_factor(ti, zero, tr, pi_, receiver=pin), 1.0,
+                               rtol=1e-9)
+    cone, _ = solid_angle_sr(12.5, 300.0)
+    disk = ReceiverGeometry(1e-4, 300.0, 12.5, cone, sample_aperture=True)
+    proj = math.pi * 6.25**2 / (300.0**2 + 6.25**2)
+    np.testing.assert_allclose(receiver_factor(ti, zero, tr, pi_, receiver=disk) * cone,
+                               proj, rtol=1e-9)
+    # a 2 mm beam: the footprint's 1/r² and obliquities, a few 10⁻⁴ at most here
+    wide = replace(pin, beam_radius_mm=2.0)
+    g = receiver_factor(ti, zero, tr, pi_, receiver=wide)
+    assert np.all(np.abs(g - 1) < 5e-4) and np.any(np.abs(g - 1) > 1e-5)
+    with pytest.raises(ValueError):
+        ReceiverGeometry(0.0, 300.0, 12.5, om)
+
+
+def test_receiver_model_jacobian_and_subsets() -> None:
+    rg = ReceiverGeometry(2.0, 300.0, 12.5, camera_solid_angle_sr(12.5, 300.0)[0],
+                          sample_aperture=True)
+    m = receiver_model(get_model("lambert+ggx"), rg)
+    a = (np.radians([20.0, 40.0, 60.0]), np.zeros(3), np.radians([20.0, 44.0, 10.0]),
+         np.array([np.pi, np.pi, 0.0]))
+    p = np.array([0.3, 0.5, 0.2])
+    from analysis.brdf.geometry import make_geometry
+    from analysis.brdf.model import numeric_jacobian
+
+    g = make_geometry(*a)
+    np.testing.assert_allclose(m.jacobian_geometry(p, g),
+                               numeric_jacobian(m.value_fn, p, g, rel_step=1e-6), rtol=1e-5)
+    # a Lambertian is unchanged by the averaging (normalised weights)
+    lam = receiver_model(get_model("lambert"), rg)
+    np.testing.assert_allclose(lam.evaluate([0.8], *a), 0.8 / np.pi, rtol=1e-12)
+    # subsets of a geometry (cross-validation folds) evaluate the same points
+    full = m.evaluate_geometry(p, g)
+    np.testing.assert_allclose(m.evaluate_geometry(p, g.take(np.array([2, 0]))),
+                               full[[2, 0]], rtol=1e-12)
+
+
+def test_pixel_response_covariance_against_monte_carlo() -> None:
+    """Σ s_j(1 + ε)/Σ s_j over random PRNU maps: the sample covariance of three overlapping
+    spot images against u² Σ s_j s_k/(S_j S_k), per pixel and from 4 × 4 block sums."""
+    rng = np.random.default_rng(11)
+    y, x = np.mgrid[0:64, 0:64]
+
+    def spot(cx, cy, sx, sy):
+        return np.exp(-0.5 * (((x - cx) / sx) ** 2 + ((y - cy) / sy) ** 2))
+
+    imgs = np.array([spot(32, 32, 6, 6), spot(34, 31, 3, 7), spot(20, 40, 5, 4)])
+    u = 0.01
+    want = pixel_response_covariance(imgs, u_response_rel=u)
+    eps = u * rng.standard_normal((4000, 64, 64))
+    err = np.einsum("kij,nij->nk", imgs, eps) / imgs.sum(axis=(1, 2))
+    got = np.cov(err, rowvar=False)
+    # 4000 draws: entries known to about ±2.5 % of the diagonal scale
+    scale = np.sqrt(np.outer(np.diag(want), np.diag(want)))
+    assert np.all(np.abs(got - want) < 0.07 * scale)
+    blocks = imgs.reshape(3, 16, 4, 16, 4).sum(axis=(2, 4))
+    sq = np.sum(imgs**2, axis=(1, 2))
+    approx = pixel_response_covariance(blocks, u_response_rel=u, block=4, sq_sums=sq)
+    np.testing.assert_allclose(np.diag(approx), np.diag(want), rtol=1e-12)
+    # off the diagonal only the correlation comes from the blocks (σ = 3 px spot: 10 %)
+    assert np.all(np.abs(approx - want) < 0.1 * scale)
+
+
+def test_correlated_uncertainty_reduces_to_the_scale_case(lambert_scan) -> None:
+    pts = reduce_seed(lambert_scan, seed=4)
+    model = get_model("lambert")
+    a = (pts.theta_i, pts.phi_i, pts.theta_r, pts.phi_r)
+    fit = fit_brdf(model, pts.brdf, *a, sigma=pts.u_point)
+    s = with_scale_uncertainty(fit, model, *a, sigma=pts.u_point, scale_rel=0.01)
+    fm = model.evaluate(fit.params, *a)  # the scale acts on the model's values
+    c = with_correlated_uncertainty(fit, model, *a, sigma=pts.u_point,
+                                    cov=1e-4 * np.outer(fm, fm))
+    np.testing.assert_allclose(c.covariance, s.covariance, rtol=1e-9)
+    sub = replace(pts, cov_corr=np.outer(pts.brdf, pts.brdf)).take(np.array([3, 1]))
+    np.testing.assert_allclose(sub.cov_corr, np.outer(pts.brdf[[3, 1]], pts.brdf[[3, 1]]))
