@@ -466,11 +466,12 @@ def detect_objects(
       ``(P + ½)/((B − A)|z|) = 1/(2 δy)``), and z_RP, the RP stack's maximum, both searched
       inside the inverse-depth interval of z_MF (:func:`depth_interval`).
 
-    The depth reported is their median (robust when one fails: with few angular orders
-    the depth filter's windowed spectra carry little depth information; where the
-    solvable domain, not the wall, limits the aperture the matched filter leans away from
-    the wall, and RP is noisy where few rays are available).  The flag says how far they
-    agree, in units of the inverse-depth resolution ``δz/D²``:
+    The depth reported is their median, robust when one of them fails (with few angular
+    orders the depth filter's windowed spectra carry little depth information — the old
+    detector placed objects behind the semi-matte paper at a third of their distance —
+    and it leans ≈ 0.15 δz away from the wall where the solvable domain, not the wall,
+    limits the aperture; RP is noisy where few rays are available).  The flag says how
+    far they agree, in units of the inverse-depth resolution ``δz/D²``:
 
     * "resolved" — all three pairwise within one resolution;
     * "two_estimates_agree" — one of them is off;
