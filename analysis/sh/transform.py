@@ -56,10 +56,11 @@ __all__ = [
     "synthesis",
 ]
 
-#: Target size in bytes of one (orders × northern rings) slab of the recurrence buffer.
-_BLOCK_BYTES = 1 << 16
+#: Target size in bytes of one (orders × northern rings) slab of the recurrence buffer
+#: (at most 64 orders); tuned on the 2-core dev box with ``benchmarks/bench_sht.py``.
+_BLOCK_BYTES = 1 << 17
 #: Degrees per chunk of the recurrence: the sums over l are matrix products over a chunk.
-_CHUNK = 16
+_CHUNK = 32
 #: Largest Legendre table :func:`gl_grid` stores by default (L ≈ 400).
 PLAN_MAX_BYTES = 1 << 27
 #: Up to this size the stored table is one dense (orders × rings × degrees) array, so each
@@ -184,7 +185,7 @@ def _recurrence_setup(lmax: int, theta_key: bytes) -> tuple:
     th = np.frombuffer(theta_key, dtype=float)
     x, s = np.cos(th), np.sin(th)
     mant, expo = sectoral_seeds(s, lmax)
-    rows = max(4, _BLOCK_BYTES // (8 * max(th.size, 1)))
+    rows = min(64, max(4, _BLOCK_BYTES // (8 * max(th.size, 1))))
     blocks = []
     for m0 in range(0, lmax + 1, rows):
         m1 = min(m0 + rows, lmax + 1)
