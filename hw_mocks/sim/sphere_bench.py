@@ -30,7 +30,10 @@ Rendering: for each pixel on the sphere, B = ∫ L(ω) f(ω, v) (n·ω)⁺ dω o
 grid of ``n_theta`` rings (2·n_theta longitudes) plus sub-samples of every sharp source
 (:func:`hw_mocks.sim.sphere_scene.shade`), directly from the BRDF in the spatial domain with
 the physical horizon: never with the SH convolution the analysis inverts. ``n_theta`` = 128
-resolves lobes down to Phong s ≈ 400 and far exceeds any analysis order used (L ≤ 30).
+(a grid exact to degree ≈ 255, far above any analysis order used, L ≤ 30) renders a
+Phong s = 80 sphere under ``random_environment`` lighting to 0.6 % (largest pixel error
+relative to the mean radiance; mean error 0.04 %) and s = 400 to 1.1 %, measured against
+``n_theta`` = 384.
 
 Configuration (``[simulation.scene]`` of a bench profile, ``kind = "spheres"``)::
 
