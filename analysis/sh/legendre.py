@@ -413,11 +413,16 @@ def degree_chunks(
         nc = min(chunk, nk - k0)
         n = min(m1, lmax - k0 + 1) - m0
         t, xn = tmp[:n], xs[:n]
-        for i in range(2, nc + 2):
-            out = buf[i, :n]
-            np.multiply(buf[i - 1, :n], xn, out=t)
-            np.multiply(buf[i - 2, :n], beta[k0 + i - 2, :n], out=out)
-            np.subtract(t, out, out=out)
+        # views made once per chunk and positional out arguments: at ~10⁴ values per
+        # operation numpy's per-call overhead is a sizeable share of the time
+        slab = list(buf[: nc + 2, :n])
+        bk = list(beta[k0 : k0 + nc, :n])
+        mul, sub = np.multiply, np.subtract
+        for i in range(nc):
+            out = slab[i + 2]
+            mul(slab[i + 1], xn, t)
+            mul(slab[i], bk[i], out)
+            sub(t, out, out)
         # Restart values for the next chunk: the true (scaled) λ of its two predecessors.
         if k0 + nc < nk:
             kl = k0 + nc  # here nc == chunk ≥ 2
