@@ -387,6 +387,19 @@ def _peak_in(v: NDArray, grid: NDArray, allowed: NDArray[np.bool_]) -> float:
     return float(np.interp(_parabolic(v, j), np.arange(grid.size), grid))
 
 
+def _half_max_span(v: NDArray, grid: NDArray) -> tuple[float, float]:
+    """Grid values bounding the contiguous run around ``argmax(v)`` where v ≥ max/2."""
+    j = int(np.argmax(v))
+    above = v >= 0.5 * v[j]
+    lo = j
+    while lo > 0 and above[lo - 1]:
+        lo -= 1
+    hi = j
+    while hi < v.size - 1 and above[hi + 1]:
+        hi += 1
+    return float(grid[lo]), float(grid[hi])
+
+
 def point_response(
     lf_wall: LightField2D,
     y_mm: float,
@@ -542,16 +555,8 @@ def detect_objects(
                                 min_frequency_per_mm=0.1 / r_k.transverse_mm)
         z_odf = _peak_in(prof, zs, inside) if inside.any() else z_mf
         z_rp = _peak_in(own.rp[:, iy], zs, inside) if inside.any() else z_mf
-        bounded = not (open_far or open_near)
         est = (z_odf, z_mf, z_rp)
         z_ref = float(np.median(est))
-        agree = [inv_close(est[i], est[j], r_k, z_mf) for i, j in ((0, 1), (0, 2), (1, 2))]
-        if bounded and all(agree):
-            quality = "resolved"
-        elif bounded and any(agree):
-            quality = "two_estimates_agree"
-        else:
-            quality = "unresolved"
         iz = int(np.argmin(np.abs(zs - z_ref)))
         r_ref = resolution(z_ref)
         y_ref = _peak_in(own.mf[iz], y, np.abs(y - y0) <= 0.5 * r_ref.transverse_mm)
@@ -561,9 +566,25 @@ def detect_objects(
                 & ((zs >= far) & (zs <= near))[:, None] & enough)
         mm = float(np.sum(model.mf[hood] ** 2))
         scale = float(np.sum(model.mf[hood] * own.mf[hood])) / mm if mm > 0 else 0.0
-        # the interval also holds every estimate: their disagreement is uncertainty too
-        interval = (z_far_limit if open_far else min(far, *est),
-                    z_near_limit if open_near else max(near, *est))
+        # the interval also holds every estimate (their disagreement is uncertainty too)
+        # and the depths where the point response's own column stays above half its peak:
+        # parallax grows linearly across the aperture, so that response is ≈ 2.4 δz/D²
+        # wide (half width at half maximum, in inverse depth) where a transverse one is
+        # ≈ 0.6 δy — the thesis' δz is the resolution of the aperture's edge rays only
+        jy = int(np.argmin(np.abs(y - y_ref)))
+        z_lo, z_hi = _half_max_span(model.mf[:, jy], zs)
+        lo, hi = min(far, z_lo, *est), max(near, z_hi, *est)
+        open_far |= lo <= zs[0] or not enough[(zs >= lo) & (zs <= z_ref), jy].all()
+        open_near |= hi >= zs[-1] or not enough[(zs >= z_ref) & (zs <= hi), jy].all()
+        interval = (z_far_limit if open_far else lo, z_near_limit if open_near else hi)
+        bounded = not (open_far or open_near)
+        agree = [inv_close(est[i], est[j], r_k, z_mf) for i, j in ((0, 1), (0, 2), (1, 2))]
+        if bounded and all(agree):
+            quality = "resolved"
+        elif bounded and any(agree):
+            quality = "two_estimates_agree"
+        else:
+            quality = "unresolved"
         return _Candidate(y_ref, z_ref, quality, est, interval, prof,
                           model.scaled(scale))
 

@@ -103,15 +103,20 @@ def test_depth_interval_is_symmetric_in_inverse_depth_and_opens_beyond_w_over_dt
 # ------------------------------------------------------------------------- the four walls
 @pytest.mark.parametrize("name", list(MATERIALS))
 def test_two_points_behind_a_wide_wall_are_resolved_within_the_blur(name):
-    """200 mm of wall (d2 = 100 mm): depth resolution a few tens of mm, every wall."""
+    """200 mm of wall (d2 = 100 mm): both points located behind every wall; where few
+    orders survive, a depth whose blur runs out of the searched range is flagged."""
     objects = [PointObject(-30.0, -180.0, 1.5, 1.0), PointObject(40.0, -250.0, 1.5, 1.0)]
     det, p_hat, _ = _detect(objects, name, d2=100.0, wall_points=np.arange(-100.0, 100.1, 1.0),
                          y_meas=np.linspace(-180.0, 180.0, 361), z_range=(-400.0, -60.0),
                          seed=1)
     assert p_hat >= 3
     assert det.count == 2
-    assert det.quality == ("resolved", "resolved")
     _assert_honest(det, objects)
+    if p_hat >= 8:
+        assert det.quality == ("resolved", "resolved")
+    else:  # semi-matte paper, p̂_max = 4: the far point's depth blur runs past −400 mm
+        assert name == "coated_paper_matte"
+        assert "unresolved" in det.quality
 
 
 @pytest.mark.parametrize("name", list(MATERIALS))
