@@ -53,7 +53,7 @@ from analysis.sh.consistency import (
     check,
 )
 from analysis.sh.convolve import wiener_deconvolve
-from analysis.sh.filters import lambertian_filter, phong_filter
+from analysis.sh.filters import phong_filter
 from analysis.sh.identities import (
     IdentityError,
     brdf_transfer,
@@ -312,8 +312,7 @@ def _known_filter(brdf: dict[str, Any], lmax: int) -> np.ndarray:
         return float(brdf.get("ks", 1.0)) * phong_filter(lmax, float(brdf["s"])).values
     if model == "mirror":
         return np.full(lmax + 1, float(brdf.get("reflectance", 1.0)))
-    # Lambertian: the clamped-cosine filter in the normal parameterisation, scaled by ρ/π.
-    return float(brdf.get("albedo", 1.0)) / math.pi * lambertian_filter(lmax).values
+    raise ValueError(f"no reflected-parameterisation filter for a {model!r} probe")
 
 
 def _geometry(capture: SphereCapture, center: tuple[float, float], radius: float,

@@ -289,7 +289,9 @@ Brdf = Lambertian | Phong | LambertianMicrofacet | Mirror
 
 def _beckmann_lambda(mu: np.ndarray, alpha: float) -> np.ndarray:
     mu = np.clip(mu, 1e-9, 1.0)
-    a = mu / (alpha * np.sqrt(1.0 - mu * mu) + 1e-300)
+    # At normal incidence a → ∞ and a² overflowed; Λ(a) is below 1e−390 from a = 30 on,
+    # i.e. exactly 0 in double precision, so a is capped there (same values, no overflow).
+    a = np.minimum(mu / (alpha * np.sqrt(1.0 - mu * mu) + 1e-300), 30.0)
     return (erf(a) - 1.0) / 2.0 + np.exp(-a * a) / (2.0 * a * np.sqrt(np.pi))
 
 

@@ -125,6 +125,27 @@ def test_shade_reproduces_the_orthographic_renderer():
                                rtol=1e-12)
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # e.g. overflow at normal incidence
+@pytest.mark.parametrize("brdf", [
+    {"model": "lambertian", "albedo": 0.5},
+    {"model": "phong", "kd": 0.2, "ks": 0.5, "s": 20.0},
+    {"model": "microfacet", "kd": 0.5, "ks": 0.5, "alpha": 0.2},
+    {"model": "mirror", "reflectance": 0.9},
+])
+def test_every_brdf_model_renders_a_lit_sphere(brdf):
+    """Lambertian, Phong, Lambertian + microfacet and mirror spheres: every hit pixel is lit
+    by the sky (positive), bounded by the brightest the environment can give."""
+    scene = SphereBenchScene.from_config({
+        "kind": "spheres", "environment": {"seed": 3}, "n_theta": 32,
+        "sphere_radius_mm": 10.0, "spheres": [{"station_deg": 0.0, "brdf": brdf}]})
+    rad, hit, _ = _view(scene, 0.0, n=11)
+    assert np.all(rad[hit] > 0) and np.all(rad[~hit] == 0)
+    env = scene.environment
+    peak = max([env.zenith, env.horizon] + [s.radiance for s in env.sharp_sources]
+               + [a.radiance + env.zenith for a in env.area_lights])
+    assert rad.max() < peak
+
+
 @pytest.mark.parametrize("bad, msg", [
     ({"selector": "source_theta"}, "different axes"),
     ({"spheres": [{"station_deg": 0.0, "brdf": {"model": "phong", "s": 10}},
