@@ -10,8 +10,8 @@ point has its HDR brackets (the engine's auto-exposure policy) and, with
    axes against the plan stored in the file;
 2. merges the brackets (:func:`analysis.hdr.merge_hdr`, inverse-variance weights from the
    camera's EMVA 1288 constants when known) into a radiance image
-   (:func:`analysis.radiometry.rate_to_radiance`; relative units, DN/µs, when the camera
-   has no calibration);
+   (:func:`analysis.radiometry.rate_to_radiance` with the pinhole's cos⁴α; relative units,
+   DN/µs, when the camera has no calibration; no flat field: PRNU stays in the image);
 3. finds the sphere in the images (centroid and area of the lit disc) and maps pixels to
    normals and reflected directions (:func:`analysis.sh.sphere_image.sphere_geometry`, with
    the camera's pinhole intrinsics when known), fits B_lm of every image with one shared
@@ -45,7 +45,11 @@ import h5py
 import numpy as np
 
 from analysis.hdr import merge_hdr
-from analysis.radiometry import CameraResponse, rate_to_radiance
+from analysis.radiometry import (
+    CameraResponse,
+    pinhole_relative_illumination,
+    rate_to_radiance,
+)
 from analysis.sh.consistency import (
     ConsistencyReport,
     bootstrap_consistent_errors,
@@ -232,7 +236,11 @@ class _Merger:
         if var is None:
             var = np.full(rate.shape, np.nan)
         if self.response is not None:
-            scale = float(rate_to_radiance(np.ones(1), response=self.response)[0])
+            # camera equation inverted per pixel, natural vignetting cos⁴α included
+            f_px = 1e3 * self.camera["focal_length_mm"] / self.camera["pixel_pitch_um"]
+            rel = pinhole_relative_illumination(rate.shape, focal_length_px=f_px)
+            scale = rate_to_radiance(np.ones(rate.shape), response=self.response,
+                                     relative_illumination=rel)
             rate, var = rate * scale, var * scale**2
         return rate, var, ~res.saturated
 
