@@ -14,7 +14,17 @@ synthesis G_m(θ_j) = Σ_l Z_lm λ_l^m(cos θ_j) followed by an inverse real FFT
 analysis by a real FFT per ring followed by the weighted Legendre sums. Rings come in
 mirror pairs (θ, π−θ), and λ_l^m(−x) = (−1)^{l+m} λ_l^m(x), so the Legendre work is done on
 the northern half only, split into even and odd l+m. The l-recurrence runs vectorised
-over a block of orders m and all northern rings (:func:`analysis.sh.legendre.iterate_degrees`).
+over a block of orders m and all northern rings, 32 degrees at a time
+(:func:`analysis.sh.legendre.degree_chunks`), and each chunk's sums over l are two batched
+BLAS products (even and odd l+m), so numpy does ~3 contiguous passes plus one matrix
+product per Legendre value. Polar rings whose values are all below 2^−300 in a chunk
+are left out, as libsharp skips them (Reinecke 2011 §3.1.1).
+
+Cached per grid: the sectoral seeds and recurrence coefficients (:func:`_recurrence_setup`,
+≈ 16·L²·(1/2 + 1) bytes, 67 MB at L = 2048, two grids kept). Stored with the grid on
+request (``gl_grid(precompute=...)``, by default up to L ≈ 400): for L ≲ 64 one dense
+λ table on all rings, so that each transform is one batched product and two FFT calls
+(numpy call overhead dominates there), else the recurrence's chunks on the northern rings.
 """
 
 from __future__ import annotations
@@ -66,18 +76,26 @@ PLAN_MAX_BYTES = 1 << 27
 #: Up to this size the stored table is one dense (orders × rings × degrees) array, so each
 #: transform is a single batched matrix product (L ≲ 64).
 _DENSE_MAX_BYTES = 1 << 22
+#: Up to this L the dense table covers all rings (fewest numpy calls), above it the northern
+#: half split by parity (half the memory traffic); the crossover measured near L = 48.
+_DENSE_ALL_RINGS = 40
 
 
 @dataclass(frozen=True)
 class _DensePlan:
-    """λ on all rings, zero-padded: syn[m, j, k] = s_m λ_{m+k}^m(θ_j), ana = w-weighted transpose.
+    """λ on the rings, zero-padded.
 
-    s_m = n_φ (m = 0) or n_φ/√2 (m > 0) folds the real-harmonic √2 and the 1/n_φ of the
-    inverse FFT into the table; ana[m, k, j] = λ_{m+k}^m(θ_j) · 2π w_j/n_φ · (1 or √2).
+    Up to L = :data:`_DENSE_ALL_RINGS`, on all rings: syn[0][m, j, k] = s_m λ_{m+k}^m(θ_j)
+    with s_m = n_φ (m = 0) or n_φ/√2 (m > 0), which folds the real-harmonic √2 and the
+    1/n_φ of the inverse FFT into the table, and ana[0][m, k, j] = λ_{m+k}^m(θ_j) ·
+    2π w_j/n_φ · (1 or √2): one matrix product per transform. Above, on the northern rings
+    only, by parity p of k = l − m (k = 2i + p): syn[p][m, j, i], ana[p][m, i, j] — half
+    the memory traffic for a few more (small) numpy calls. The equator ring of odd n_θ has
+    no mirror and is counted once.
     """
 
-    syn: np.ndarray
-    ana: np.ndarray
+    syn: tuple[np.ndarray, ...]
+    ana: tuple[np.ndarray, ...]
 
 
 @dataclass(frozen=True)
@@ -166,17 +184,26 @@ def _dense_plan(grid: GLGrid) -> _DensePlan:
         north[m0 : m0 + n, skip:, k0 : k0 + nc] = lam.transpose(1, 2, 0)
     m_idx, k_idx = np.indices((lmax + 1, lmax + 1))
     north[(m_idx + k_idx > lmax)[:, None, :].repeat(nh, axis=1)] = 0.0
-    # λ_l^m(−x) = (−1)^{l+m} λ_l^m(x): the southern rings mirror the northern ones.
-    sign = np.where(np.arange(lmax + 1) % 2 == 0, 1.0, -1.0)
-    full = np.concatenate([north, (north * sign)[:, : nlat - nh][:, ::-1]], axis=1)
     s_syn = np.full(lmax + 1, nphi / np.sqrt(2.0))
     s_syn[0] = nphi
     s_ana = np.full(lmax + 1, np.sqrt(2.0))
     s_ana[0] = 1.0
-    wq = grid.weights * 2.0 * np.pi / nphi
-    syn = full * s_syn[:, None, None]
-    ana = np.ascontiguousarray((full * wq[None, :, None] * s_ana[:, None, None]).transpose(0, 2, 1))
-    return _DensePlan(syn=syn, ana=ana)
+    if lmax <= _DENSE_ALL_RINGS:
+        # λ_l^m(−x) = (−1)^{l+m} λ_l^m(x): the southern rings mirror the northern ones.
+        sign = np.where(np.arange(lmax + 1) % 2 == 0, 1.0, -1.0)
+        full = np.concatenate([north, (north * sign)[:, : nlat - nh][:, ::-1]], axis=1)
+        wq = grid.weights * 2.0 * np.pi / nphi
+        ana = (full * wq[None, :, None] * s_ana[:, None, None]).transpose(0, 2, 1)
+        return _DensePlan(
+            syn=(full * s_syn[:, None, None],), ana=(np.ascontiguousarray(ana),)
+        )
+    wq = grid.weights[:nh] * 2.0 * np.pi / nphi
+    syn = north * s_syn[:, None, None]
+    ana = (north * wq[None, :, None] * s_ana[:, None, None]).transpose(0, 2, 1)
+    return _DensePlan(
+        syn=(np.ascontiguousarray(syn[..., 0::2]), np.ascontiguousarray(syn[..., 1::2])),
+        ana=(np.ascontiguousarray(ana[:, 0::2]), np.ascontiguousarray(ana[:, 1::2])),
+    )
 
 
 @functools.lru_cache(maxsize=2)
@@ -269,15 +296,24 @@ def synthesis(
     if c.shape != ((lmax + 1) ** 2,):
         raise ValueError(f"expected {(n_coeffs(lmax),)} coefficients, got {c.shape}")
     nlat, nphi = grid.shape
+    nh = (nlat + 1) // 2
     plan = grid.legendre
     if isinstance(plan, _DensePlan):
         pos, fac, _ = _layout(lmax, True)
         z = np.zeros((lmax + 1, lmax + 1, 2))
         z.ravel()[pos] = c * fac
-        g = np.matmul(plan.syn, z)  # (m, ring, [Re, Im])
-        spec = np.ascontiguousarray(g.transpose(1, 0, 2)).view(complex)[..., 0]
-        return scipy.fft.irfft(spec, n=nphi, axis=1, workers=1, overwrite_x=True)
-    nh = (nlat + 1) // 2
+        if len(plan.syn) == 1:
+            g = np.matmul(plan.syn[0], z)  # (m, ring, [Re, Im])
+            spec = np.ascontiguousarray(g.transpose(1, 0, 2)).view(complex)[..., 0]
+            return scipy.fft.irfft(spec, n=nphi, axis=1, workers=1, overwrite_x=True)
+        g_e = np.matmul(plan.syn[0], z[:, 0::2])  # (m, northern ring, [Re, Im])
+        g_o = np.matmul(plan.syn[1], z[:, 1::2])
+        spec = np.empty((nlat, lmax + 1, 2))
+        spec[:nh] = (g_e + g_o).transpose(1, 0, 2)
+        spec[nh:] = (g_e - g_o)[:, : nlat - nh][:, ::-1].transpose(1, 0, 2)
+        return scipy.fft.irfft(
+            spec.view(complex)[..., 0], n=nphi, axis=1, workers=1, overwrite_x=True
+        )
     nk2 = (lmax + 2) // 2
     pos, fac, _ = _layout(lmax, False)
     z = np.zeros((lmax + 1, 2, nk2, 2))
@@ -326,16 +362,23 @@ def analysis(
     nlat, nphi = grid.shape
     if f.shape != (nlat, nphi):
         raise ValueError(f"expected a map of shape {(nlat, nphi)}, got {f.shape}")
+    nh = (nlat + 1) // 2
     plan = grid.legendre
     # (ring, m) complex; n_φ // 2 + 1 = L + 1 columns
     spec = scipy.fft.rfft(f, axis=1, workers=1)
     if isinstance(plan, _DensePlan):
         pos, _, fac = _layout(lmax, True)
         s = np.ascontiguousarray(spec.T).view(float).reshape(lmax + 1, nlat, 2)
-        z = np.matmul(plan.ana, s)  # (m, k, [Re, Im])
+        if len(plan.ana) == 1:
+            z = np.matmul(plan.ana[0], s)  # (m, k, [Re, Im])
+        else:
+            south = np.zeros((lmax + 1, nh, 2))
+            south[:, : nlat - nh] = s[:, nh:][:, ::-1]
+            z = np.empty((lmax + 1, lmax + 1, 2))
+            z[:, 0::2] = np.matmul(plan.ana[0], s[:, :nh] + south)
+            z[:, 1::2] = np.matmul(plan.ana[1], s[:, :nh] - south)
         out = z.ravel()[pos] * fac
     else:
-        nh = (nlat + 1) // 2
         nk2 = (lmax + 2) // 2
         sv = spec.view(float).reshape(nlat, lmax + 1, 2)
         south = np.zeros((nh, lmax + 1, 2))

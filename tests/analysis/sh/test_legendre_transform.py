@@ -273,9 +273,10 @@ def test_chunked_recurrence_matches_per_order_values() -> None:
         assert np.all(np.abs(row[~big]) <= 2.0**-290)
 
 
-@pytest.mark.parametrize("lmax", [20, 90])
+@pytest.mark.parametrize("lmax", [20, 58, 59, 90])
 def test_stored_table_and_recurrence_give_the_same_transforms(lmax: int) -> None:
-    # L = 20 stores a dense table, L = 90 the recurrence's chunks; both against recurrence.
+    # L = 20 stores a dense table on all rings, L = 58, 59 one on the northern rings by parity
+    # (odd and even ring counts), L = 90 the recurrence's chunks; all against the recurrence.
     rng = np.random.default_rng(lmax + 1)
     c = rng.standard_normal((lmax + 1) ** 2)
     stored, plain = gl_grid(lmax, precompute=True), gl_grid(lmax, precompute=False)
