@@ -12,8 +12,16 @@ Pure functions on arrays (no I/O). The chain, per measured point:
    the entrance pupil. The camera is then a detector whose aperture is its pupil.
 2. **Absolute method** (Nicodemus et al. 1977, NBS Monograph 160, eq. for f_r = dL_r/dE_i;
    ASTM E2387 practice, hardware.md §5d; physics.md §1): for an under-filled sample
-   ``f = P_s / (P_i · Ω · cos θr)``, with P_i the incident power (power meter in the direct
-   beam) and Ω the receiver solid angle (exact cone 2π(1 − cos a), tan a = (D/2)/R).
+   ``f = P_s / (P_i · Ω · cos θr · G)``, with P_i the incident power (power meter in the
+   direct beam), Ω the receiver solid angle (a meter aperture: the cone 2π(1 − cos a),
+   tan a = (D/2)/R; a camera: A_pupil/R², the étendue of its calibration,
+   :func:`camera_solid_angle_sr`) and G the **receiver factor** (:func:`receiver_factor`):
+   what a constant BRDF would give through the real geometry — the beam's 1/cos θi
+   footprint seen from the receiver (1/r² and obliquities across it) and the aperture's
+   projected solid angle. A value is then the normalised average of f over what the
+   receiver integrated, exact for a Lambertian sample; near a specular peak that average
+   differs from f at the nominal angles (−7·10⁻⁴ on the sim bench's GGX α = 0.2 peak), which
+   instrument-aware fitting accounts for (:func:`receiver_model`; issue 5 §3).
 3. **Relative method** (hardware.md §5d; Li & Torrance 2003): a reference standard measured at
    the same geometry, ``f = (S / S_ref) · f_ref(θi, θr)``, with f_ref from the standard's
    *measured* BRDF table (:class:`ReferenceStandard`), not ρ/π — real diffusers deviate by up
@@ -35,6 +43,10 @@ Uncertainty budget (hardware.md §5f), kept in separate columns of :class:`BRDFP
 * ``u_angle``: positioning — |∂f/∂θi| σθi ⊕ |∂f/∂θr| σθr with the local slope of the
   measured BRDF (:func:`angular_uncertainty`); independent between points.
 * ``u_ref``: the reference table's uncertainty (relative method).
+* ``cov_corr``: errors shared between points with a known covariance — the camera's pixel
+  response (PRNU, or a flat field's own noise) weighted by where each point's footprint
+  is imaged (:func:`pixel_response_covariance`); propagated into fitted parameters by
+  :func:`with_correlated_uncertainty`, not fitted as noise.
 * ``u_scale_rel``: a *relative* uncertainty common to every point of the run — incident
   power, solid angle, camera responsivity Kη (absolute method) or the standard's
   calibration scale (relative method). Being fully correlated it must not be fed to a fit as
