@@ -351,8 +351,10 @@ class Detection:
     stack : FocalStack — the focal stack used
     depth_profiles : (count, N_z) — the depth-filter profile of each object
     depth_interval_mm : (count, 2) — (far, near) z bounds: the depths within one depth
-        resolution (:func:`depth_interval`), widened to hold all three estimates; where
-        the searched region ends inside it, opened to the end of the searched z range
+        resolution (:func:`depth_interval`), widened to hold all three estimates and the
+        span where the fitted point response's matched-filter column stays above half
+        its peak (≈ 2.4 δz/D² either side in inverse depth); where the searched region
+        ends inside it, opened to the end of the searched z range (and flagged)
     quality : tuple of str — per object, one of :data:`QUALITY_FLAGS`:
         "resolved" (the depth filter, the matched filter and the RP peak agree pairwise
         within one inverse-depth resolution), "two_estimates_agree" (one of them does not),
@@ -488,9 +490,9 @@ def detect_objects(
 
     * "resolved" — all three pairwise within one resolution;
     * "two_estimates_agree" — one of them is off;
-    * "unresolved" — none agree, or the matched filter's interval is not wholly inside
-      the searched region (the object may lie beyond it, or ``δz ≥ D``): the depth is
-      only a best guess; read the interval.
+    * "unresolved" — none agree, or the depth interval (``Detection.depth_interval_mm``)
+      is not wholly inside the searched region (the object may lie beyond it, or the
+      depth blur has no far end): the depth is only a best guess; read the interval.
 
     y comes from a parabola through the matched-filter row at that depth.  The stacks of
     an ideal point source there (:func:`point_response`, least-squares scaled to the

@@ -130,7 +130,7 @@ def test_bench_scene_located_or_flagged_behind_every_wall(name):
     objects = [PointObject(-8.0, -200.0, 1.5, 5.0), BarObject(15.0, 30.0, -260.0, 1.5)]
     det, p_hat, solvable = _detect(objects, name, d2=30.0,
                                    wall_points=np.arange(-30.0, 29.1, 1.0),
-                                   y_meas=np.arange(-50.0, 50.1, 1.0), z_range=(-400.0, -60.0),
+                                   y_meas=np.arange(-50.0, 50.1, 1.0), z_range=(-600.0, -60.0),
                                    seed=2)
     _assert_honest(det, objects)
     res = theoretical_resolution(p_hat, domain_rad=DOMAIN, distance_mm=200.0,
