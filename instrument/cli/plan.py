@@ -60,7 +60,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"  naive raster order would need motion {fmt_s(raster.motion_s)} "
                   f"({est.motion_s / raster.motion_s:.0%} of it used here)")
     print(f"  acquisition: {spec.acquisition.as_json()}")
-    png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
-    write_coverage_png(plan, png)
-    print(f"  coverage picture: {png}")
+    if any(p.angles is not None for p in plan.points):
+        png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
+        write_coverage_png(plan, png)
+        print(f"  coverage picture: {png}")
+    else:  # light-field, sphere and calibration plans sample no scattering directions
+        print("  coverage picture: none (this plan samples no scattering directions)")
     return 0
