@@ -71,12 +71,16 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
     from pathlib import Path
 
     examples = Path(__file__).resolve().parents[2] / "examples"
-    mine = ["brdf_inplane", "brdf_hemisphere", "lightfield", "calibration_dark",
-            "calibration_reference", "calibration_signature", "calibration_flat",
-            "calibration_ptc"]
-    for name in mine:
-        bench = "sim_out_of_plane" if name == "brdf_hemisphere" else "sim"
-        rc = main(["plan", str(examples / f"{name}.toml"), "--bench", bench,
-                   "--png", str(tmp_path / f"{name}.png")])
-        assert rc == 0, capsys.readouterr().out
-        assert (tmp_path / f"{name}.png").exists()
+    benches = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
+               "sphere_capture": "sim-spheres"}
+    directional = {"brdf_inplane", "brdf_hemisphere", "calibration_reference",
+                   "calibration_signature"}
+    names = sorted(p.stem for p in examples.glob("*.toml"))
+    assert len(names) >= 10
+    for name in names:
+        rc = main(["plan", str(examples / f"{name}.toml"), "--bench",
+                   benches.get(name, "sim"), "--png", str(tmp_path / f"{name}.png")])
+        out = capsys.readouterr().out
+        assert rc == 0, out
+        # A coverage picture exactly for the plans that sample scattering directions.
+        assert (tmp_path / f"{name}.png").exists() == (name in directional), (name, out)
