@@ -158,3 +158,23 @@ def test_object_beyond_the_depth_reach_is_flagged_unresolved_not_misplaced(name)
     far = [k for k in range(det.count) if _explains(det, k, objects[1])]
     assert far and all(det.quality[k] == "unresolved" for k in far)
     assert all(det.depth_interval_mm[k, 0] == pytest.approx(-900.0) for k in far)
+
+
+@pytest.mark.parametrize("name", ["brushed_metal", "coated_paper_matte"])
+def test_two_points_on_one_line_of_sight_are_separated_or_flagged_as_a_blend(name):
+    """(0, −150) and (0, −260) mm, 200 mm of wall: brushed metal (p̂_max ≈ 15) separates
+    them; behind the semi-matte paper (p̂_max ≈ 5) they blend into one matched-filter
+    plateau, wider than a point's response — reported as one "unresolved" detection
+    whose interval holds both, never as one precise depth."""
+    objects = [PointObject(0.0, -150.0, 1.5, 1.0), PointObject(0.0, -260.0, 1.5, 1.0)]
+    det, p_hat, _ = _detect(objects, name, d2=100.0, wall_points=np.arange(-100.0, 100.1, 1.0),
+                            y_meas=np.linspace(-180.0, 180.0, 361), z_range=(-500.0, -60.0),
+                            seed=1)
+    _assert_honest(det, objects)
+    if name == "brushed_metal":
+        assert det.count == 2 and det.quality == ("resolved", "resolved")
+    else:
+        assert p_hat <= 6
+        assert det.count == 1 and det.quality == ("unresolved",)
+        far, near = det.depth_interval_mm[0]
+        assert far <= -260.0 and near >= -150.0
