@@ -358,7 +358,8 @@ class Detection:
     quality : tuple of str — per object, one of :data:`QUALITY_FLAGS`:
         "resolved" (the depth filter, the matched filter and the RP peak agree pairwise
         within one inverse-depth resolution), "two_estimates_agree" (one of them does not),
-        "unresolved" (no two agree, or the interval runs out of the searched region)
+        "unresolved" (no two agree, the interval runs out of the searched region, or the
+        detection is a blend wider than one point's response)
     depth_estimates_mm : (count, 3) — z from the depth filter, the matched filter and the
         RP stack (the evidence behind the flag)
     """
@@ -504,7 +505,10 @@ def detect_objects(
     * "two_estimates_agree" — one of them is off;
     * "unresolved" — none agree, or the depth interval (``Detection.depth_interval_mm``)
       is not wholly inside the searched region (the object may lie beyond it, or the
-      depth blur has no far end): the depth is only a best guess; read the interval.
+      depth blur has no far end), or the matched-filter column is more than
+      :data:`BLEND_WIDTH_RATIO` times wider than the fitted point response's (a blend of
+      sources along the line of sight, or one extended object): the depth is only a best
+      guess; read the interval.
 
     y comes from a parabola through the matched-filter row at that depth.  The stacks of
     an ideal point source there (:func:`point_response`, least-squares scaled to the
