@@ -57,6 +57,7 @@ from .field import LightField2D, LightField4D
 from .propagate import project_4d, propagate_4d, sample_columns
 
 __all__ = [
+    "BLEND_WIDTH_RATIO",
     "QUALITY_FLAGS",
     "Detection",
     "FocalStack",
