@@ -21,8 +21,9 @@ z < 0).  A trial point (y, z) collects the rays ``L(y − z tan θ, θ)`` (a she
   is scored on the same set of rays, so by Cauchy–Schwarz its column peaks at the true
   depth — also where the solvable domain, not the wall, limits the aperture.  (Without
   the mask and the kernel overlap — ``K`` taken as a projector, H ≈ g — it reduces to
-  conventional refocusing weighted by ``|z|/cos θ``, what :func:`refocus` returns; that
-  form leans 0.2–0.3 δz away from the wall when the domain limits the aperture.)  The
+  conventional refocusing weighted by ``|z|/cos θ``, what :func:`refocus` returns without
+  ``filter_factors``; that form leans 0.2–0.3 δz away from the wall when the domain
+  limits the aperture.)  The
   plain conventional stack peaks nearer the wall: its height scales as W/|z|.
 * Depth filter on the mixed (p_y, z) plane: around each object the (matched-filter
   numerator) stack is windowed in y (which removes the interference of objects at similar
