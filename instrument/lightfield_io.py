@@ -807,6 +807,14 @@ def _write_localisation(path: str | Path, det: Detection, p_hat: float, message:
         loc["transverse_mm"] = np.array([r.transverse_mm for r in det.resolutions])
         loc["depth_mm"] = np.array([r.depth_mm for r in det.resolutions])
         loc["depth_profiles"] = det.depth_profiles
+        # What the depth is worth: the interval the data support, the flag, and the three
+        # estimates behind it (depth filter, matched filter, RP peak).
+        loc["depth_interval_mm"] = det.depth_interval_mm
+        loc["depth_interval_mm"].attrs["columns"] = "far_mm, near_mm"
+        loc["depth_estimates_mm"] = det.depth_estimates_mm
+        loc["depth_estimates_mm"].attrs["columns"] = (
+            "depth_filter_mm, matched_filter_mm, radiance_preserving_mm")
+        loc["quality"] = np.array(det.quality, dtype=h5py.string_dtype())
         loc["stack_y_mm"] = det.stack.y_mm
         loc["stack_z_mm"] = det.stack.z_mm
         loc["stack_conventional"] = det.stack.conventional

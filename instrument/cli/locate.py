@@ -48,9 +48,14 @@ def run(args: argparse.Namespace) -> int:
     for k in range(det.count):
         y, z = det.positions_mm[k]
         res = det.resolutions[k]
-        print(f"  object {k}: y = {y:7.2f} mm, z = {z:8.2f} mm  (blur ±{res.transverse_mm:.1f} "
-              f"mm across, ±{res.depth_mm:.1f} mm in depth); brightness RP "
-              f"{det.brightness_rp[k]:.4g}, conventional {det.brightness_conventional[k]:.4g}")
+        far, near = det.depth_interval_mm[k]
+        quality = det.quality[k]
+        depth = (f"z = {z:8.2f} mm" if quality != "unresolved"
+                 else f"z unresolved, best guess {z:.1f} mm")
+        print(f"  object {k} [{quality}]: y = {y:7.2f} mm, {depth}, z in [{far:.1f}, "
+              f"{near:.1f}] mm  (blur ±{res.transverse_mm:.1f} mm across, ±{res.depth_mm:.1f} "
+              f"mm in depth); brightness RP {det.brightness_rp[k]:.4g}, conventional "
+              f"{det.brightness_conventional[k]:.4g}")
     if r.figures:
         print(f"figures: {', '.join(str(p) for p in r.figures)}")
     print(f"stored in {args.run}:/{lfio.GROUP}/localisation")

@@ -172,10 +172,19 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
         loc = g["localisation"]
         pos = loc["positions_mm"][()]
         dy, dz = loc["transverse_mm"][()], loc["depth_mm"][()]
+        interval = loc["depth_interval_mm"][()]
+        quality = [q.decode() if isinstance(q, bytes) else q for q in loc["quality"][()]]
+        estimates = loc["depth_estimates_mm"][()]
         meas = g["measured/radiance"][()]
         wall_c = rec["points_mm"][()]
         sigma_rows = float(g["measured"].attrs["sigma_rows"])
         noise_sigma = float(rec.attrs["noise_sigma"])
+    # every detection carries its depth interval (far <= z <= near), its flag and evidence
+    assert interval.shape == (len(pos), 2) and estimates.shape == (len(pos), 3)
+    assert np.all(interval[:, 0] <= pos[:, 1] + 1e-9)
+    assert np.all(pos[:, 1] <= interval[:, 1] + 1e-9)
+    assert set(quality) <= {"resolved", "two_estimates_agree", "unresolved"}
+    assert "[resolved]" in out or "[two_estimates_agree]" in out
     # the brushed-metal wall keeps ~18 angular orders at this SNR (≥ the thesis' 10)
     assert 10 <= p_hat <= 30
     # the noise the reconstruction estimated from its high-|p| tail agrees with the
