@@ -11,6 +11,14 @@ JSON file given by the operator, or — for a simulated camera (``simcam://`` UR
 stored bench profile) — from the simulator itself, reached only by a string import keyed
 on the URL scheme (ARCHITECTURE.md import rules), as a perfect calibration would give it.
 
+What each reading integrated is recorded on the reduced points
+(:class:`analysis.brdf_reduction.ReceiverGeometry`: the beam radius from the options, the
+run's calibration or geometry, or a simulated bench's source; the receiver distance and
+aperture): the receiver factor is divided out and the fit compares the data with the
+models as the receiver sees them. The camera's pixel-response error (PRNU from the
+calibration without a flat, the flat's own noise with one) is carried as a covariance
+between points. All of it is listed in the provenance.
+
 Results go into ``/entry/analysis`` (NXprocess) of the same file; writing again replaces it.
 """
 

@@ -3,7 +3,8 @@
 Three samples with known ground truth — Lambertian ρ = 0.8; Lambertian ρ = 0.3 + Cook–
 Torrance GGX (ks = 0.5, α = 0.2); Oren–Nayar ρ = 0.8, σ = 0.3 — are scanned in plane
 (θi = 20°, 40°, 60°; θr from −70° to 80° in 10° steps plus ±4° around specular in 2°
-steps; 57 points), reduced by the absolute method and fitted with model selection among
+steps; 57 points), reduced by the absolute method (receiver factor divided out) and fitted
+as the receiver sees the models (instrument-aware, issue 5 §3) with selection among
 {lambert, oren_nayar, lambert+ggx} (BIC, smallest model within ΔBIC ≤ 2).
 
 * 50 seeds per sample through the simulated camera/scene/sensor code without the motion
