@@ -19,6 +19,12 @@ arXiv:1010.2084 §3.1.1), which extends the range Holmes & Featherstone (2002, J
 ``mantissa · 2^(600·e)`` with integer e ≤ 0; while e < 0 its magnitude is below 2^−300 and it
 is left out of sums, and once the recurrence has grown the mantissa past 2^300 it is rescaled
 and e incremented. No value is ever computed from sin^m θ directly or from factorials.
+
+Two vectorised forms of the l-recurrence serve the transforms: :func:`iterate_degrees`
+(one degree at a time, used for scattered points) and :func:`degree_chunks` (the
+transforms' kernel: chunks of degrees in locally rescaled variables, see
+:func:`chunk_scales`, so that numpy does two products and a difference per value on
+contiguous arrays and the rescaling checks run once per chunk).
 """
 
 from __future__ import annotations
