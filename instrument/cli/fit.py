@@ -41,6 +41,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="JSON with the camera's K, η, read noise, saturation and pupil")
     p.add_argument("--sigma-theta-deg", type=float, default=None,
                    help="angular standard uncertainty (default: stage tolerance/√3)")
+    p.add_argument("--beam-radius-mm", type=float, default=None,
+                   help="1/e² radius of the incident beam (default: the run's calibration or "
+                        "geometry, or the simulated profile's); sets the illuminated footprint")
+    p.add_argument("--point-receiver", action="store_true",
+                   help="treat every point as a point sample: no footprint/aperture receiver "
+                        "model (not recommended near specular)")
     p.add_argument("--cosine-corrected", action="store_true",
                    help="store f·cosθr (Stover's cosine-corrected BRDF) instead of f")
     p.add_argument("--no-cv", action="store_true",
@@ -58,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
         camera_calibration=args.camera_calibration, flat_run=args.flat,
         reference_run=args.reference, signature_run=args.signature,
         reference_table=args.reference_table,
+        beam_radius_mm=args.beam_radius_mm, receiver_geometry=not args.point_receiver,
     )
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     try:

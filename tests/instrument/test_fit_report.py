@@ -217,3 +217,18 @@ def test_run_reduction_records_the_receiver(glossy_run) -> None:
     ratio = red.points.brdf / bare.points.brdf
     # G of a 2 mm beam seen from 300 mm: a few 10⁻⁴, varying with the angles
     assert np.all(np.abs(ratio - 1) < 1e-3) and np.ptp(ratio) > 5e-5
+
+
+def test_cli_fit_receiver_options_reach_the_reduction(glossy_run, tmp_path, capsys) -> None:
+    out = tmp_path / "r"
+    base = ["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx", "--no-cv"]
+    assert main([*base, "--beam-radius-mm", "1.5"]) == 0
+    with h5py.File(glossy_run, "r") as f:
+        prov = json.loads(f["entry/analysis/provenance_json"][()])
+    assert main([*base, "--point-receiver"]) == 0
+    with h5py.File(glossy_run, "r") as f:
+        prov_point = json.loads(f["entry/analysis/provenance_json"][()])
+    capsys.readouterr()
+    text, text_point = json.dumps(prov), json.dumps(prov_point)
+    assert "1.5" in text  # the beam radius given is what the reduction used
+    assert text != text_point
