@@ -533,6 +533,11 @@ class FrameRing:
 
     When full, the oldest frame is dropped (and counted): a slow consumer sees the most
     recent frames, never an unbounded backlog.
+
+    Every :meth:`clear` starts a new *epoch*. A producer reads :attr:`epoch` before it
+    starts an exposure and hands it to :meth:`put`; a frame from an earlier epoch (exposed
+    before the clear, e.g. before a settings change or a move) is discarded, not buffered
+    and not counted as dropped.
     """
 
     def __init__(self, capacity: int) -> None:
@@ -541,6 +546,7 @@ class FrameRing:
         self._frames: deque[Frame] = deque()
         self._capacity = int(capacity)
         self._dropped = 0
+        self._epoch = 0
         self._cond = threading.Condition()
 
     @property
@@ -552,17 +558,28 @@ class FrameRing:
         with self._cond:
             return self._dropped
 
+    @property
+    def epoch(self) -> int:
+        """Number of :meth:`clear` calls so far."""
+        with self._cond:
+            return self._epoch
+
     def __len__(self) -> int:
         with self._cond:
             return len(self._frames)
 
-    def put(self, frame: Frame) -> None:
+    def put(self, frame: Frame, *, epoch: int | None = None) -> bool:
+        """Buffer ``frame``; return False (and keep nothing) if ``epoch`` is given and a
+        :meth:`clear` happened since the producer read it."""
         with self._cond:
+            if epoch is not None and epoch != self._epoch:
+                return False
             if len(self._frames) >= self._capacity:
                 self._frames.popleft()
                 self._dropped += 1
             self._frames.append(frame)
             self._cond.notify_all()
+            return True
 
     def get(self, timeout: float) -> Frame | None:
         """Oldest buffered frame, waiting up to ``timeout`` s; ``None`` if none came."""
@@ -572,10 +589,12 @@ class FrameRing:
             return self._frames.popleft()
 
     def clear(self) -> int:
-        """Discard everything buffered; return how many frames were discarded."""
+        """Discard everything buffered and start a new epoch; return how many frames
+        were discarded (they are not counted as dropped)."""
         with self._cond:
             n = len(self._frames)
             self._frames.clear()
+            self._epoch += 1
             return n
 
 
@@ -736,7 +755,18 @@ class Camera(Device):
 
     @property
     def dropped_frames(self) -> int:
+        """Frames the stream dropped because the consumer fell behind (ring full)."""
         return self._ring.dropped
+
+    @property
+    def ring_capacity(self) -> int:
+        """How many frames the stream buffers before it drops the oldest."""
+        return self._ring.capacity
+
+    @property
+    def buffered_frames(self) -> int:
+        """Frames waiting in the stream buffer now."""
+        return len(self._ring)
 
     def start_streaming(self) -> None:
         """Acquire continuously into the ring buffer on a background thread."""
@@ -775,8 +805,11 @@ class Camera(Device):
     def _stream_loop(self) -> None:
         try:
             while not self._stream_stop.is_set():
+                # Read the epoch before the exposure starts: a frame whose exposure began
+                # before an invalidate() (settings change, move) is stale and discarded.
+                epoch = self._ring.epoch
                 exposure_s = self._exposure_s_for_timeout()
-                self._ring.put(self._do_acquire_one(2.0 + 2.0 * exposure_s))
+                self._ring.put(self._do_acquire_one(2.0 + 2.0 * exposure_s), epoch=epoch)
         except BaseException as err:  # surfaced by next_frame()
             self._stream_error = err
 

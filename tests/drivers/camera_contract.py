@@ -161,6 +161,50 @@ class CameraContract:
             if not self.finite_source:
                 raise  # only a recording may have run out of frames
 
+    def test_streaming_ring_accounts_for_every_frame(self, camera):
+        """Every frame the stream produced was delivered, is still buffered, or was counted
+        as dropped; the buffer never holds more than its capacity."""
+        if self.finite_source:
+            pytest.skip("a recording may end mid-stream; the count needs an endless source")
+        before = camera.acquire(1)[0].index  # stream frames are numbered after this one
+        capacity = camera.ring_capacity
+        camera.start_streaming()
+        try:
+            delivered = [camera.next_frame(timeout=5.0)]
+            deadline = time.monotonic() + 10.0
+            while camera.dropped_frames < 3 * capacity and time.monotonic() < deadline:
+                time.sleep(0.01)
+        finally:
+            camera.stop_streaming()
+        assert camera.buffered_frames <= capacity
+        while camera.buffered_frames:
+            delivered.append(camera.next_frame(timeout=1.0))
+        indices = [f.index for f in delivered]
+        assert indices == sorted(indices) and len(set(indices)) == len(indices)
+        produced = indices[-1] - before
+        assert camera.dropped_frames >= 3 * capacity
+        assert camera.dropped_frames == produced - len(delivered)
+
+    def test_streamed_frames_after_a_settings_change_have_the_new_settings(self, camera):
+        """The stale-frame policy holds while streaming: a frame exposed before a settings
+        change never reaches the consumer after it."""
+        if self.finite_source:
+            pytest.skip("a recording may end mid-stream")
+        height, width = camera.sensor_shape
+        rois = [Roi(0, 0, width, height), Roi(0, 0, max(width // 2, 1), max(height // 2, 1))]
+        try:
+            camera.roi = rois[1]
+        except UnsupportedFeature:
+            pytest.skip("the camera has no ROI to change")
+        camera.start_streaming()
+        try:
+            for k in range(30):
+                camera.roi = rois[k % 2]
+                frame = camera.next_frame(timeout=5.0)
+                assert frame.roi == rois[k % 2], f"stale frame after change {k}"
+        finally:
+            camera.stop_streaming()
+
     def test_next_frame_times_out_when_not_streaming(self, camera):
         with pytest.raises(DeviceTimeout):
             camera.next_frame(timeout=0.05)
