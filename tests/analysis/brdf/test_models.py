@@ -280,3 +280,20 @@ def test_fitted_dhr_with_uncertainty() -> None:
     fit = fit_brdf(on, y, *angles, sigma=sig)
     res = fitted_dhr(on, fit, np.radians([0.0, 89.0]))
     assert res.value[1] > 1.0 and res.value[0] < 1.0
+
+
+def test_flatland_model_agrees_with_the_lightfield_package() -> None:
+    # S2-14 is written twice (here for fitting, in analysis.lightfield for the scene
+    # renderer); until one serves both, they must give the same numbers, window included
+    from analysis.lightfield import FlatlandBRDF
+
+    rng = np.random.default_rng(11)
+    to = rng.uniform(-np.pi / 2, np.pi / 2, 200)
+    tm = rng.uniform(-np.pi / 2, np.pi / 2, 200)
+    to[:2], tm[:2] = np.pi / 2, -np.pi / 2  # grazing ends of the closed range
+    for rho_d, ks, width, q in [(0.3, 0.5, 0.05, 0.0), (0.8, 0.04, 0.1, 2.5)]:
+        lf = FlatlandBRDF(ks, width, rho_d, q)
+        np.testing.assert_allclose(
+            flatland_brdf(to, tm, rho_d=rho_d, ks=ks, width=width, q=q), lf(to, tm),
+            rtol=1e-14, atol=1e-300,
+        )
