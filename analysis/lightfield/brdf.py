@@ -12,7 +12,10 @@ albedo ρ therefore has ``f = ρ/2``.
 The model is the separable diffuse + shift-invariant specular form of eq. (S2-14),
 ``f(θ_o, θ_m) = f_wind(θ_o) f_spec(θ_m − θ_o) + f_diff(θ_o) f_diff(θ_m)``, with a Gaussian
 specular lobe normalised on the real line, ``f_spec(ζ) = ρ_s N(ζ; 0, σ)``, a constant
-``f_diff = √(ρ_d / 2)`` and an optional window ``f_wind(θ) = cos^k θ``.
+``f_diff = √(ρ_d / 2)`` and an optional window ``f_wind(θ) = cos^k θ``.  The component
+functions are those of :mod:`analysis.brdf.lightfield` (one implementation of S2-14); this
+module adds the light-field side: a parameter record, γ on a domain, the inhomogeneous form
+and the four thesis materials.
 """
 
 from __future__ import annotations
@@ -22,6 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.special import erf
+
+from analysis.brdf import lightfield as _s2_14
 
 __all__ = [
     "MATERIALS",
@@ -70,21 +76,15 @@ class FlatlandBRDF:
 
     def f_spec(self, zeta_rad: ArrayLike) -> NDArray[np.float64]:
         """Specular lobe ``ρ_s N(ζ; 0, σ)`` in 1/rad, ζ = θ_out − θ_in."""
-        z = np.asarray(zeta_rad, dtype=float)
-        s = self.specular_width_rad
-        return self.specular_reflectance * np.exp(-0.5 * (z / s) ** 2) / (np.sqrt(2 * np.pi) * s)
+        return _s2_14.f_spec(zeta_rad, self.specular_reflectance, self.specular_width_rad)
 
     def f_diff(self, theta_rad: ArrayLike) -> NDArray[np.float64]:
         """Diffuse factor ``√(ρ_d/2)`` (constant), so that f_diff·f_diff = ρ_d/2."""
-        t = np.asarray(theta_rad, dtype=float)
-        return np.full(t.shape, np.sqrt(self.diffuse_reflectance / 2.0))
+        return _s2_14.f_diff(theta_rad, self.diffuse_reflectance)
 
     def f_wind(self, theta_rad: ArrayLike) -> NDArray[np.float64]:
         """Window on the incident angle, ``cos^k θ`` clipped at 0 beyond ±π/2."""
-        t = np.asarray(theta_rad, dtype=float)
-        if self.window_exponent == 0:
-            return np.ones(t.shape)
-        return np.clip(np.cos(t), 0.0, None) ** self.window_exponent
+        return _s2_14.f_wind(theta_rad, self.window_exponent)
 
     def __call__(
         self,
@@ -94,9 +94,14 @@ class FlatlandBRDF:
         y_mm: ArrayLike | None = None,
     ) -> NDArray[np.float64]:
         """BRDF value f(θ_in, θ_out) in 1/rad (broadcasting; ``y_mm`` is ignored)."""
-        ti = np.asarray(theta_in_rad, dtype=float)
-        to = np.asarray(theta_out_rad, dtype=float)
-        return self.f_wind(ti) * self.f_spec(to - ti) + self.f_diff(ti) * self.f_diff(to)
+        return _s2_14.flatland_brdf(
+            theta_in_rad,
+            theta_out_rad,
+            rho_d=self.diffuse_reflectance,
+            ks=self.specular_reflectance,
+            width=self.specular_width_rad,
+            q=self.window_exponent,
+        )
 
     def degree_of_specularity(self, domain_rad: tuple[float, float]) -> float:
         """γ ≈ 1/(1 + Σ|D_p|²/S_pp) for a flat window (S2-37); here D_p = δ_p0 √(ρ_d(b−a)/2).
@@ -106,8 +111,6 @@ class FlatlandBRDF:
         a, b = domain_rad
         width = b - a
         s = self.specular_width_rad
-        from scipy.special import erf
-
         s00 = self.specular_reflectance * erf(width / 2 / (np.sqrt(2) * s))
         d2 = self.diffuse_reflectance * width / 2
         return float(s00 / (s00 + d2)) if s00 + d2 > 0 else 0.0
