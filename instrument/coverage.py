@@ -73,8 +73,21 @@ def coverage_image(plan: Plan) -> np.ndarray:
 
 
 def write_coverage_png(plan: Plan, path: str | Path) -> Path:
+    """Write the coverage picture of ``plan`` to ``path`` (PNG; parent folders created).
+
+    Raises
+    ------
+    OSError
+        ``path`` does not end in ``.png`` or cannot be written.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), coverage_image(plan)):
-        raise OSError(f"could not write {path}")
+    if path.suffix.lower() != ".png":
+        raise OSError(f"coverage picture {path}: the name must end in .png")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        ok = cv2.imwrite(str(path), coverage_image(plan))
+    except cv2.error as err:
+        raise OSError(f"could not write the coverage picture {path}: {err}") from err
+    if not ok:
+        raise OSError(f"could not write the coverage picture {path} (is the folder writable?)")
     return path

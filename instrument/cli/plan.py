@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -38,7 +39,16 @@ def run(args: argparse.Namespace) -> int:
     spec = load_plan(args.plan)
     profile = load_profile(args.bench)
     if getattr(args, "target_uncertainty", None) is not None:
-        return _tradeoff().run_from_args(args, spec, profile)
+        if not args.target_uncertainty > 0:
+            print(f"error: --target-uncertainty must be a positive standard deviation, "
+                  f"got {args.target_uncertainty}", file=sys.stderr)
+            return 2
+        try:
+            return _tradeoff().run_from_args(args, spec, profile)
+        except (ValueError, KeyError) as err:  # their messages say what to change
+            msg = err.args[0] if isinstance(err, KeyError) and err.args else err
+            print(f"error: --target-uncertainty: {msg}", file=sys.stderr)
+            return 2
     try:
         plan = build_plan(spec, profile)
     except GuardError as err:
@@ -62,7 +72,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"  acquisition: {spec.acquisition.as_json()}")
     if any(p.angles is not None for p in plan.points):
         png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
-        write_coverage_png(plan, png)
+        try:
+            write_coverage_png(plan, png)
+        except OSError as err:
+            print(f"error: --png: {err}", file=sys.stderr)
+            return 2
         print(f"  coverage picture: {png}")
     else:  # light-field, sphere and calibration plans sample no scattering directions
         print("  coverage picture: none (this plan samples no scattering directions)")

@@ -128,13 +128,21 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
                          source_theta_deg=profile.geometry.source_theta_deg)
     limits = {r: d.limits for r, d in profile.axes.items() if d.limits is not None}
     label = {"reference": "reference", "signature": "signature"}.get(kind, "sample")
+    if kind == "brdf_hemisphere" and profile.geometry.kind != "out_of_plane":
+        # One cause, one message: an in-plane goniometer has no sample azimuth or tilt, so
+        # every off-plane direction would otherwise be listed as its own error.
+        raise PlanError(f"plan {spec.name!r}", [FieldError(
+            "plan.kind", f"'brdf_hemisphere' needs an out-of-plane bench (geometry.kind = "
+            f"'out_of_plane'); bench {profile.name!r} is {profile.geometry.kind!r}: "
+            "choose one with --bench (e.g. sim_out_of_plane)")])
     errors: list[FieldError] = []
 
     def geo_point(a: Angles, lab: str = label) -> ScanPoint | None:
         try:
             pos = kin.positions(a, limits=limits)
         except UnreachableError as err:
-            errors.append(FieldError("scan", f"{err} on a {profile.geometry.kind} bench"))
+            errors.append(FieldError("scan", f"{err} (bench geometry "
+                                             f"{profile.geometry.kind!r})"))
             return None
         return ScanPoint(0, tuple((r, float(pos[r])) for r in kin.axes), a, lab)
 

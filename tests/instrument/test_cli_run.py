@@ -84,3 +84,27 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
         assert rc == 0, out
         # A coverage picture exactly for the plans that sample scattering directions.
         assert (tmp_path / f"{name}.png").exists() == (name in directional), (name, out)
+
+
+def test_plan_cli_bad_arguments_are_errors_not_tracebacks(tmp_path, capsys):
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    plan = tmp_path / "p.toml"
+    plan.write_text(PLAN)
+    cases = [
+        # A hemispherical plan on the in-plane default bench: one message naming the fix.
+        (["plan", str(examples / "brdf_hemisphere.toml")], "needs an out-of-plane bench"),
+        (["plan", str(plan), "--png", str(tmp_path / "c.jpg.txt")], "must end in .png"),
+        (["plan", str(plan), "--target-uncertainty", "-1"], "positive standard deviation"),
+        (["plan", str(plan), "--target-uncertainty", "0.01", "--prior", "nosuch:1"],
+         "unknown BRDF model 'nosuch'"),
+        (["plan", str(examples / "brdf_hemisphere.toml"), "--bench", "sim_out_of_plane",
+          "--target-uncertainty", "0.01"], "in-plane plans"),
+    ]
+    for argv, expected in cases:
+        assert main(argv) == 2, argv
+        captured = capsys.readouterr()
+        text = captured.out + captured.err
+        assert expected in text and "Traceback" not in text, (argv, text)
+    assert not list(tmp_path.glob("c.jpg*"))

@@ -154,8 +154,10 @@ reciprocity = true
     kin = OutOfPlaneKinematics()
     for p in plan.points:
         assert same_directions(kin.angles(p.target_dict()), p.angles, tol=1e-7)
-    with pytest.raises(PlanError, match="cannot be reached"):
-        build_plan(parse_plan(text), PROFILE)  # out-of-plane angles on an in-plane bench
+    # Out-of-plane angles on an in-plane bench: one error naming the plan kind and the fix.
+    with pytest.raises(PlanError, match="needs an out-of-plane bench") as info:
+        build_plan(parse_plan(text), PROFILE)
+    assert len(info.value.errors) == 1 and info.value.errors[0].path == "plan.kind"
 
 
 def test_optimised_order_beats_raster():
