@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from analysis.hdr import merge_hdr
-from analysis.photon_transfer import photon_transfer
+from analysis.photon_transfer import pair_statistics, photon_transfer
 from analysis.radiometry import (
     apply_dark_flat,
     flat_field,
@@ -101,6 +102,92 @@ def test_dark_frame_has_black_level_and_dark_current():
     expected = p.black_level_dn + p.system_gain_dn_per_e * p.dark_current_e_per_s * 1.0
     assert frame.data.mean() == pytest.approx(expected, abs=0.05)
     assert frame.metadata["source_on"] is False
+
+
+def test_dark_signal_and_its_shot_noise_grow_linearly_with_exposure():
+    """EMVA 1288 R3.1 §3: μ_y.dark = black + K μ_d t and σ²_y.dark = K² (σ_d² + μ_d t) + 1/12."""
+    world = lit_bench()
+    world.update_source(on=False)
+    cam = SimulatedCamera(world=world, seed=2, sensor=SMALL)
+    p, k = SMALL, SMALL.system_gain_dn_per_e
+    n_px = p.width * p.height
+    for t_s in (1.0, 4.0):
+        cam.exposure_us = t_s * 1e6
+        mean, var = pair_statistics(np.stack([f.data for f in cam.acquire(2)]))
+        dark_e = p.dark_current_e_per_s * t_s
+        expected_var = k * k * (p.read_noise_e**2 + dark_e) + 1.0 / 12.0
+        # σ of the pixel mean: the temporal noise and the DSNU over n_px pixels; ×4.
+        tol = 4.0 * math.sqrt((expected_var + (k * p.dsnu_e) ** 2) / n_px)
+        assert mean == pytest.approx(p.black_level_dn + k * dark_e, abs=tol)
+        # The pair variance has a relative standard error of √(2 / n_px); ×4.
+        assert var == pytest.approx(expected_var, rel=4.0 * math.sqrt(2.0 / n_px))
+
+
+@pytest.mark.parametrize("dsnu_e", [1.5, 4.0])
+def test_dsnu_is_the_fixed_dark_pattern_of_the_set_size(dsnu_e):
+    """EMVA 1288 R3.1 §4: spatial variance of an averaged dark = K² DSNU² + σ²_temporal / N."""
+    world = lit_bench()
+    world.update_source(on=False)
+    sensor = replace(SMALL, dsnu_e=dsnu_e)
+    cam = SimulatedCamera(world=world, seed=5, sensor=sensor)
+    cam.exposure_us = 10.0
+    n = 32
+    stack = np.stack([f.data for f in cam.acquire(n)]).astype(float)
+    temporal = 0.5 * np.var(stack[0] - stack[1])
+    spatial = np.var(stack.mean(axis=0)) - temporal / n
+    estimate = math.sqrt(spatial) / sensor.system_gain_dn_per_e
+    # The DSNU map has 12 288 pixels: its sample σ is within ~1 % of the set value.
+    assert estimate == pytest.approx(dsnu_e, rel=0.05)
+
+
+@pytest.mark.parametrize("prnu", [0.01, 0.03])
+def test_prnu_is_the_fixed_response_pattern_of_the_set_size(prnu):
+    """EMVA 1288 R3.1 §4: the dark-subtracted, frame-averaged flat has a spatial relative σ
+    of PRNU once the averaged temporal noise is removed."""
+    world = flat_bench(radiance=2.0)
+    sensor = replace(SMALL, prnu=prnu)
+    cam = SimulatedCamera(world=world, seed=6, sensor=sensor,
+                          pixel_format=PixelFormat.MONO16)
+    rate_e = float(cam.photon_rate().mean()) * sensor.quantum_efficiency
+    cam.exposure_us = 0.5 * sensor.full_well_e / rate_e * 1e6
+    n = 16
+    flats = np.stack([f.data for f in cam.acquire(n)]).astype(float)
+    world.scene = GoniometerScene(target="none", ambient_radiance=0.0)
+    dark = master_dark(np.stack([f.data for f in cam.acquire(n)]), method="mean")
+    signal = flats.mean(axis=0) - dark
+    temporal = 0.5 * np.var(flats[0] - flats[1])
+    spatial = np.var(signal) - temporal / n
+    assert math.sqrt(spatial) / signal.mean() == pytest.approx(prnu, rel=0.05)
+
+
+def test_adc_bit_depth_scales_k_and_clips_at_the_top_code():
+    """K = K₀ 10^(g/20) 2^(bits − native bits); the ADC clips at 2^bits − 1, below the full
+    well when the gain is high."""
+    world = flat_bench(radiance=2.0)
+    cam = SimulatedCamera(world=world, seed=7, sensor=SMALL)
+    p = SMALL
+    rate_e = float(cam.photon_rate().mean()) * p.quantum_efficiency
+    cam.exposure_us = 0.5 * p.full_well_e / rate_e * 1e6
+    signal = {}
+    for fmt in (PixelFormat.MONO8, PixelFormat.MONO12, PixelFormat.MONO16):
+        cam.pixel_format = fmt
+        frame = cam.acquire(1)[0]
+        assert frame.data.dtype == fmt.dtype and frame.bit_depth == fmt.bit_depth
+        signal[fmt.bit_depth] = frame.data.mean() - p.black_level(fmt.bit_depth)
+    # Shot noise over 12 288 pixels and PRNU leave < 0.1 % on the mean; 8-bit codes of
+    # ~110 DN leave their rounding (≤ 0.5 DN, averaged by the noise) well below 1 %.
+    assert signal[16] / signal[12] == pytest.approx(16.0, rel=0.005)
+    assert signal[8] / signal[12] == pytest.approx(1.0 / 16.0, rel=0.01)
+    cam.pixel_format = PixelFormat.MONO12
+    cam.exposure_us = 4.0 * p.full_well_e / rate_e * 1e6  # 4× the full well
+    at_well = cam.acquire(1)[0]
+    well_dn = p.black_level_dn + p.system_gain_dn_per_e * p.full_well_e
+    assert at_well.data.max() <= well_dn + 4 * p.system_gain_dn_per_e * 2.5 + 1
+    assert at_well.data.max() < 4095  # 0 dB: the full well limits, not the ADC
+    cam.gain = 24.0  # K = 3.2 DN/e⁻: the full well would be 57 000 DN
+    clipped = cam.acquire(1)[0]
+    assert clipped.saturation_dn == 4095
+    assert (clipped.data == 4095).all()
 
 
 def test_signal_is_proportional_to_exposure_and_gain():
