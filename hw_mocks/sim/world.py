@@ -290,6 +290,7 @@ class VirtualBench:
         self.power_meter = power_meter or PowerMeterHead()
         self._version = 0
         self._power_cache: dict[tuple, float] = {}
+        self._bound_meter: Any = None  # the PM100USB firmware reading this world
 
     # configuration --------------------------------------------------------------
     @classmethod
@@ -372,12 +373,18 @@ class VirtualBench:
         return self._source
 
     def update_source(self, **changes: Any) -> SourceState:
-        """Change source fields (``on``, ``power_w``, ...); returns the new state."""
+        """Change source fields (``on``, ``power_w``, ...); returns the new state.
+
+        A bound power meter learns a new wavelength too: its head's responsivity is
+        evaluated at the light's wavelength.
+        """
         with self._lock:
             new = replace(self._source, **changes)
             if not 0.0 <= new.power_w <= new.max_power_w:
                 raise ValueError(f"power {new.power_w:g} W outside [0, {new.max_power_w:g}] W")
             self._source = new
+            if self._bound_meter is not None:
+                self._bound_meter.light_wavelength_nm = new.wavelength_nm
             return new
 
     def position(self, role: str) -> float:
@@ -473,6 +480,7 @@ class VirtualBench:
         target.optical_power_w = self.optical_power_w
         target.light_wavelength_nm = self._source.wavelength_nm
         target.bound_world = self.name
+        self._bound_meter = target
         return target
 
 
