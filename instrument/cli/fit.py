@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from analysis.brdf import get_model
 from instrument.analysis_io import ReductionOptions, read_run, reduce_run, write_analysis
 from instrument.report import DEFAULT_MODELS, analyse, write_report
 
@@ -56,7 +57,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _missing_inputs(args: argparse.Namespace) -> list[str]:
+    """'<option> <path>' for every named input file that does not exist."""
+    named = [("run", args.run), ("--reference", args.reference), ("--flat", args.flat),
+             ("--signature", args.signature), ("--reference-table", args.reference_table),
+             ("--camera-calibration", args.camera_calibration)]
+    return [f"{opt} {path}" for opt, path in named
+            if path is not None and not Path(path).is_file()]
+
+
 def run(args: argparse.Namespace) -> int:
+    missing = _missing_inputs(args)
+    if missing:
+        print(f"error: no such file: {'; '.join(missing)}")
+        return 2
     opts = ReductionOptions(
         method=args.method, detector=args.detector, cosine_corrected=args.cosine_corrected,
         incident_power_w=args.incident_power_w, u_incident_power_rel=args.incident_power_u,
@@ -68,13 +82,24 @@ def run(args: argparse.Namespace) -> int:
     )
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     try:
+        for name in models:  # an unknown name fails here, before the (slow) reduction
+            get_model(name)
         reduced = reduce_run(args.run, opts)
         result = analyse(reduced.points, models, criterion=args.criterion,
                          run_cv=not args.no_cv)
-    except (ValueError, KeyError) as err:
+        run_data = read_run(args.run)
+    except KeyError as err:
+        print(f"error: {err.args[0] if err.args else err}")
+        return 2
+    except ValueError as err:
         print(f"error: {err}")
         return 2
-    run_data = read_run(args.run)
+    except OSError as err:
+        # h5py raises OSError for a file that is not HDF5 (or is locked) and does not
+        # always name it
+        print(f"error: cannot read {args.run} or one of its companion runs as a "
+              f"scatterlab run file (HDF5): {err}")
+        return 2
     out = Path(args.out) if args.out else Path(args.run).with_name(
         Path(args.run).stem + "_report")
     page = write_report(out, reduced.points, result,

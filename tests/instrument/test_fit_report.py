@@ -127,6 +127,21 @@ def test_fit_errors_are_reported(glossy_run, capsys) -> None:
     assert "unknown BRDF model" in capsys.readouterr().out
 
 
+def test_missing_or_foreign_files_are_named_without_a_traceback(glossy_run, tmp_path,
+                                                                capsys) -> None:
+    missing = tmp_path / "nope.h5"
+    assert main(["fit", str(missing), "--no-write"]) == 2
+    assert f"run {missing}" in capsys.readouterr().out
+    assert main(["fit", str(glossy_run), "--method", "relative", "--reference", str(missing),
+                 "--no-write"]) == 2
+    assert f"--reference {missing}" in capsys.readouterr().out
+    text = tmp_path / "notes.h5"
+    text.write_text("not an HDF5 file")
+    assert main(["fit", str(text), "--no-write"]) == 2
+    out = capsys.readouterr().out
+    assert "cannot read" in out and str(text) in out
+
+
 def test_flat_field_run_corrects_prnu(glossy_run, tmp_path) -> None:
     from hw_mocks.sim.sensor import Sensor
     from instrument.analysis_io import flat_from_run
