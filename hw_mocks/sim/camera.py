@@ -325,6 +325,17 @@ class SimulatedCamera(Camera):
             self._cache_rate = None
 
 
+def _option(options: dict[str, Any], key: str, kind: type, default: Any, url: str) -> Any:
+    """``options[key]`` converted to ``kind``; a bad value names the option and the URL."""
+    if key not in options:
+        return default
+    try:
+        return kind(options[key])
+    except (TypeError, ValueError):
+        raise ValueError(f"{url}: option {key}={options[key]!r} is not a valid "
+                         f"{kind.__name__}") from None
+
+
 def open_from_url(url: str, *, name: str | None = None) -> SimulatedCamera:
     """Open ``simcam://<name>?world=sim&seed=1[&width=..&height=..&format=MONO16...]``."""
     scheme, host, options = registry.parse_url(url)
@@ -336,30 +347,30 @@ def open_from_url(url: str, *, name: str | None = None) -> SimulatedCamera:
     unknown = set(opts) - known
     if unknown:
         raise ValueError(f"unknown simcam options {sorted(unknown)}; known {sorted(known)}")
-    sensor = SensorParams()
-    changes: dict[str, Any] = {}
-    for key in ("width", "height"):
-        if key in opts:
-            changes[key] = int(opts[key])
-    if "pixel_pitch_um" in opts:
-        changes["pixel_pitch_um"] = float(opts["pixel_pitch_um"])
-    sensor = replace(sensor, **changes)
+    defaults = SensorParams()
+    sensor = replace(
+        defaults,
+        width=_option(opts, "width", int, defaults.width, url),
+        height=_option(opts, "height", int, defaults.height, url),
+        pixel_pitch_um=_option(opts, "pixel_pitch_um", float, defaults.pixel_pitch_um, url),
+    )
     optics = OpticsParams(
-        focal_length_mm=float(opts.get("focal_length_mm", 50.0)),
-        aperture_diameter_mm=float(opts.get("aperture_mm", 12.5)),
+        focal_length_mm=_option(opts, "focal_length_mm", float, 50.0, url),
+        aperture_diameter_mm=_option(opts, "aperture_mm", float, 12.5, url),
     )
     fmt_name = str(opts.get("format", "MONO12")).upper()
     try:
         fmt = PixelFormat[fmt_name]
     except KeyError:
-        raise ValueError(f"unknown pixel format {fmt_name!r}") from None
+        raise ValueError(f"{url}: unknown pixel format {fmt_name!r}; known "
+                         f"{[f.name for f in PixelFormat]}") from None
     return SimulatedCamera(
         name or host,
         world=get_world(opts.get("world", "sim")),
-        seed=int(opts.get("seed", 0)),
+        seed=_option(opts, "seed", int, 0, url),
         sensor=sensor,
         optics=optics,
         pixel_format=fmt,
-        stale_buffers=int(opts.get("stale", 0)),
+        stale_buffers=_option(opts, "stale", int, 0, url),
         realtime=str(opts.get("realtime", "0")).lower() in ("1", "true", "yes"),
     )

@@ -83,6 +83,28 @@ class SensorParams:
     dsnu_e: float = 1.5
     prnu: float = 0.01
 
+    def __post_init__(self) -> None:
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"sensor size must be >= 1 x 1 px, got {self.width} x {self.height}")
+        positive = {"pixel_pitch_um": self.pixel_pitch_um,
+                    "system_gain_dn_per_e": self.system_gain_dn_per_e,
+                    "full_well_e": self.full_well_e}
+        for key, value in positive.items():
+            if not value > 0:
+                raise ValueError(f"sensor {key} must be > 0, got {value}")
+        if not 0.0 < self.quantum_efficiency <= 1.0:
+            raise ValueError(f"quantum_efficiency must lie in (0, 1], got "
+                             f"{self.quantum_efficiency}")
+        non_negative = {"read_noise_e": self.read_noise_e,
+                        "dark_current_e_per_s": self.dark_current_e_per_s,
+                        "black_level_dn": self.black_level_dn, "dsnu_e": self.dsnu_e,
+                        "prnu": self.prnu}
+        for key, value in non_negative.items():
+            if not value >= 0:
+                raise ValueError(f"sensor {key} must be >= 0, got {value}")
+        if self.native_bits not in (8, 10, 12, 16):
+            raise ValueError(f"native_bits must be 8, 10, 12 or 16, got {self.native_bits}")
+
     def system_gain(self, gain_db: float, bits: int) -> float:
         """K in DN/e⁻ at a gain (dB) and output bit depth."""
         return self.system_gain_dn_per_e * 10.0 ** (gain_db / 20.0) * 2.0 ** (

@@ -69,7 +69,14 @@ def open_from_url(url: str, *, name: str | None = None) -> SimulatedSource:
     if unknown:
         raise ValueError(f"unknown simsource options {sorted(unknown)}; known {sorted(known)}")
     world = get_world(options.get("world", "sim"))
-    changes = {k: float(v) for k, v in options.items() if k != "world"}
+    changes = {}
+    for key, value in options.items():
+        if key == "world":
+            continue
+        try:
+            changes[key] = float(value)
+        except ValueError:
+            raise ValueError(f"{url}: option {key}={value!r} is not a number") from None
     if changes:
         world.update_source(**changes)
     return SimulatedSource(name or host, world=world)

@@ -79,6 +79,13 @@ def test_open_from_url_options():
     for bad in ("simcam://c?colour=1", "simsource://c", "simcam://c?format=RGB8"):
         with pytest.raises(ValueError):
             open_from_url(bad)
+    # A bad value names its option; an impossible sensor is refused.
+    with pytest.raises(ValueError, match="option width='wide'"):
+        open_from_url("simcam://c?width=wide")
+    with pytest.raises(ValueError, match="sensor size"):
+        open_from_url("simcam://c?width=0")
+    with pytest.raises(ValueError, match="quantum_efficiency"):
+        SensorParams(quantum_efficiency=1.5)
 
 
 def test_deterministic_for_a_seed():

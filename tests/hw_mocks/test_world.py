@@ -215,6 +215,8 @@ def test_simulated_source_drives_the_world():
     src.turn_off()  # a no-op on a closed device
     with pytest.raises(ValueError):
         open_source("simsource://laser?colour=red")
+    with pytest.raises(ValueError, match="power_w='bright'"):
+        open_source("simsource://laser?power_w=bright")
 
 
 def test_scene_validation():
