@@ -280,10 +280,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _parse_prior(text: str) -> Prior:
     name, _, values = text.partition(":")
     model = get_model(name.strip())
-    params = tuple(float(v) for v in values.split(",") if v.strip())
+    try:
+        params = tuple(float(v) for v in values.split(",") if v.strip())
+    except ValueError:
+        raise ValueError(f"--prior {text!r}: the values after ':' must be numbers, e.g. "
+                         f"--prior lambert+ggx:0.5,0.2,0.2") from None
     if len(params) != model.n_params:
-        raise ValueError(f"{model.name} takes {model.n_params} parameters "
-                         f"{model.param_names}")
+        raise ValueError(f"--prior: {model.name} takes {model.n_params} parameters "
+                         f"{', '.join(model.param_names)}, got {len(params)}")
     return Prior(model.name, params)
 
 

@@ -249,3 +249,15 @@ def test_plan_target_uncertainty_hook(capsys) -> None:
     assert "no candidate reaches" in capsys.readouterr().out
     args = p.parse_args(["--target-uncertainty", "1e-3", "--target-param", "nope"])
     assert run_from_args(args, spec, load_profile("sim")) == 2
+
+
+@pytest.mark.parametrize(("prior", "says"), [
+    ("lambert:x", "must be numbers"),
+    ("lambert:0.5,0.2", "takes 1 parameters"),
+    ("nosuch:1", "unknown BRDF model"),
+])
+def test_plan_prior_errors_name_the_option(prior: str, says: str) -> None:
+    from instrument.tradeoff import _parse_prior
+
+    with pytest.raises((ValueError, KeyError), match=says):
+        _parse_prior(prior)
