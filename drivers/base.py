@@ -781,11 +781,17 @@ class Camera(Device):
         )
         self._stream_thread.start()
 
-    def stop_streaming(self, timeout: float = 5.0) -> None:
+    def stop_streaming(self, timeout: float | None = None) -> None:
+        """Stop the stream after the exposure in progress; buffered frames stay readable.
+
+        ``timeout`` defaults to the stream's own per-frame limit (2 s + twice the exposure).
+        """
         thread = self._stream_thread
         if thread is None:
             return
         self._stream_stop.set()
+        if timeout is None:
+            timeout = 2.0 + 2.0 * self._exposure_s_for_timeout()
         thread.join(timeout)
         if thread.is_alive():
             raise DeviceTimeout("streaming thread did not stop", device=self.name,
@@ -821,7 +827,7 @@ class Camera(Device):
     def _do_close(self) -> None:
         if self._stream_thread is not None:
             self._stream_stop.set()
-            self._stream_thread.join(5.0)
+            self._stream_thread.join(2.0 + 2.0 * self._exposure_s_for_timeout())
             self._stream_thread = None
         self._do_close_camera()
 
