@@ -12,7 +12,12 @@ from __future__ import annotations
 import argparse
 
 from instrument import lightfield_io as lfio
-from instrument.cli.reconstruct import add_reconstruction_options, figures_dir, options
+from instrument.cli.reconstruct import (
+    add_reconstruction_options,
+    check_run_file,
+    figures_dir,
+    options,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,10 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     recon: dict = {}
     given = (args.geometry, args.brdf, args.domain)
-    if args.again or any(v is not None for v in given) or args.n_theta != 128 \
-            or args.method != "wiener":
-        recon = options(args)
     try:
+        check_run_file(args.run)
+        if args.again or any(v is not None for v in given) or args.n_theta != 128 \
+                or args.method != "wiener":
+            recon = options(args)
         r = lfio.locate_run(args.run, y_range_mm=args.y_range, z_range_mm=tuple(args.z_range),
                             threshold_rel=args.threshold, figures_dir=figures_dir(args),
                             **recon)

@@ -32,7 +32,8 @@ def add_reconstruction_options(p: argparse.ArgumentParser) -> None:
                    "the emulated bench's wall")
     p.add_argument("--domain", type=float, nargs=2, metavar=("A", "B"), default=None,
                    help="angle domain [a, b] in degrees (default: what every pixel row covers)")
-    p.add_argument("--n-theta", type=int, default=128, help="angle samples (default 128)")
+    p.add_argument("--n-theta", type=_n_theta, default=128,
+                   help="angle samples, >= 2 (default 128)")
     p.add_argument("--method", default="wiener",
                    choices=("wiener", "truncation", "gcv", "discrepancy", "none"),
                    help="regularisation (default: wiener, from the pooled signal spectrum)")
@@ -41,18 +42,46 @@ def add_reconstruction_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-figures", action="store_true", help="write no figures")
 
 
+def _n_theta(text: str) -> int:
+    n = int(text)
+    if n < 2:
+        raise argparse.ArgumentTypeError(f"{n} angle samples: need at least 2")
+    return n
+
+
 def options(args: argparse.Namespace) -> dict:
-    """Keyword arguments of :func:`instrument.lightfield_io.reconstruct_run`."""
+    """Keyword arguments of :func:`instrument.lightfield_io.reconstruct_run`.
+
+    Raises ValueError naming the option when ``--domain`` is not inside (−90°, 90°).
+    """
     import math
 
+    domain = None
+    if args.domain is not None:
+        a, b = args.domain
+        if not -90.0 < a < b < 90.0:
+            raise ValueError(f"--domain {a:g} {b:g}: the angle domain in degrees must satisfy "
+                             f"-90 < A < B < 90")
+        domain = (math.radians(a), math.radians(b))
     return {
         "geometry": lfio.load_geometry(args.geometry) if args.geometry else None,
         "brdf": lfio.parse_brdf(args.brdf) if args.brdf else None,
-        "domain_rad": None if args.domain is None else tuple(math.radians(x)
-                                                             for x in args.domain),
+        "domain_rad": domain,
         "n_theta": args.n_theta,
         "method": args.method,
     }
+
+
+def check_run_file(path: str) -> None:
+    """Raise OSError naming the run file when it is missing or not an HDF5 file."""
+    import h5py
+
+    p = Path(path)
+    if not p.is_file():
+        raise OSError(f"run file {path} does not exist")
+    if not h5py.is_hdf5(p):
+        raise OSError(f"{path} is not an HDF5 run file: give the .h5 written by "
+                      f"'scatterlab run' for a lightfield plan")
 
 
 def figures_dir(args: argparse.Namespace) -> Path | None:
@@ -63,6 +92,7 @@ def figures_dir(args: argparse.Namespace) -> Path | None:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        check_run_file(args.run)
         r = lfio.reconstruct_run(args.run, figures_dir=figures_dir(args), **options(args))
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")

@@ -317,3 +317,36 @@ def test_other_thesis_walls_locate_the_point_within_the_resolution(material, tmp
     k = int(np.argmin(np.hypot(pos[:, 0] - TRUTH_POINT[0], pos[:, 1] - TRUTH_POINT[1])))
     assert abs(pos[k, 0] - TRUTH_POINT[0]) < det.resolutions[k].transverse_mm
     assert abs(pos[k, 1] - TRUTH_POINT[1]) < det.resolutions[k].depth_mm
+
+
+def test_cli_bad_input_names_the_file_or_option(scan_run, tmp_path, capsys):
+    """Bad run files and arguments give exit code 2 and a message naming what is wrong."""
+    junk = tmp_path / "junk.h5"
+    junk.write_text("not hdf5")
+    cases = [
+        (["reconstruct", str(tmp_path / "missing.h5")], "missing.h5 does not exist"),
+        (["locate", str(junk)], "junk.h5 is not an HDF5 run file"),
+        (["reconstruct", str(scan_run), "--domain", "50", "-50"], "--domain 50 -50"),
+        (["locate", str(scan_run), "--domain", "-95", "10"], "-90 < A < B < 90"),
+        (["locate", str(scan_run), "--z-range", "-100", "-400"], "z_range_mm"),
+        (["locate", str(scan_run), "--threshold", "2"], "threshold_rel 2"),
+    ]
+    for argv, fragment in cases:
+        assert main([*argv, "--no-figures"]) == 2, argv
+        assert fragment in capsys.readouterr().out, argv
+    with pytest.raises(SystemExit) as exc:
+        main(["reconstruct", str(scan_run), "--n-theta", "1"])
+    assert exc.value.code == 2
+    assert "--n-theta" in capsys.readouterr().err
+
+
+def test_too_coarse_an_angle_grid_is_noted_not_silently_over_smoothed(scan_run):
+    """With 8 angles over ±34° the wall's ~2° specular detail aliases into the
+    high-frequency tail, so the tail 'noise' exceeds the sensor-row prediction by far more
+    than NOISE_DISAGREEMENT_FACTOR; at the default 128 angles the two agree."""
+    coarse = lfio.reconstruct_run(scan_run, n_theta=8, write=False)
+    fine = lfio.reconstruct_run(scan_run, write=False)
+    assert any("raise n_theta" in n for n in coarse.notes)
+    assert not any("raise n_theta" in n for n in fine.notes)
+    ratio = fine.reconstruction.diagnostics.noise.sigma_per_sample / fine.measured.sigma_rows
+    assert 1 / lfio.NOISE_DISAGREEMENT_FACTOR < ratio < lfio.NOISE_DISAGREEMENT_FACTOR
