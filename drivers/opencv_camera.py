@@ -315,6 +315,8 @@ class OpenCVCamera(Camera):
                     f"FOURCC {code!r} accepted but frames arrive as {probe.dtype}",
                     device=self.name, command="set pixel_format",
                 )
+            if probe.shape != self._frame_shape:  # a new mode: the old ROI may not fit
+                self._roi = Roi(0, 0, probe.shape[1], probe.shape[0])
             self._frame_shape = probe.shape
             self._format = fmt
 

@@ -163,7 +163,7 @@ class V4l2CaptureEmulator:
     ``manual_locked`` models cameras whose auto-exposure menu will not leave auto.
     """
 
-    def __init__(self, *, buffers=4, manual_locked=False):
+    def __init__(self, *, buffers=4, manual_locked=False, y16_shape=(24, 32)):
         self.props = {
             cv2.CAP_PROP_AUTO_EXPOSURE: 3.0,
             cv2.CAP_PROP_EXPOSURE: 100.0,
@@ -175,6 +175,7 @@ class V4l2CaptureEmulator:
             cv2.CAP_PROP_FRAME_HEIGHT: 24.0,
         }
         self.manual_locked = manual_locked
+        self.y16_shape = y16_shape  # some cameras offer Y16 only at another resolution
         self.queue: list[np.ndarray] = []
         self.released = False
 
@@ -222,7 +223,7 @@ class V4l2CaptureEmulator:
         sixteen = int(self.props[cv2.CAP_PROP_FOURCC]) == cv2.VideoWriter_fourcc(*"Y16 ")
         dtype = np.uint16 if sixteen else np.uint8
         top = 65535 if sixteen else 255
-        return np.full((24, 32), min(level, top), dtype)
+        return np.full(self.y16_shape if sixteen else (24, 32), min(level, top), dtype)
 
     def _fill(self):
         while len(self.queue) < int(self.props[cv2.CAP_PROP_BUFFERSIZE]):
@@ -247,7 +248,8 @@ class V4l2CaptureEmulator:
 
 
 def open_v4l2(**kw) -> tuple[OpenCVCamera, V4l2CaptureEmulator]:
-    emulator = V4l2CaptureEmulator(**{k: kw.pop(k) for k in ("manual_locked",) if k in kw})
+    emulator = V4l2CaptureEmulator(**{k: kw.pop(k) for k in ("manual_locked", "y16_shape")
+                                      if k in kw})
     return OpenCVCamera(0, capture=emulator, **kw), emulator
 
 
@@ -297,6 +299,16 @@ def test_v4l2_pixel_format_by_fourcc():
         with pytest.raises(UnsupportedFeature):
             cam.pixel_format = PixelFormat.MONO12
     assert emu.released
+
+
+def test_v4l2_format_change_to_another_resolution_resets_the_roi():
+    cam, _ = open_v4l2(y16_shape=(12, 16))
+    with cam:
+        cam.roi = Roi(8, 8, 20, 12)
+        cam.pixel_format = PixelFormat.MONO16
+        assert cam.sensor_shape == (12, 16) and cam.roi == Roi(0, 0, 16, 12)
+        frame = cam.acquire(1)[0]
+        assert frame.data.shape == (12, 16) and frame.roi == cam.roi
 
 
 class TestV4l2Contract(CameraContract):
