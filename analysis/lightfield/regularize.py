@@ -47,8 +47,9 @@ class RegularizationResult:
     Attributes
     ----------
     method : str
-    parameter_name : str — "p_max", "lambda", "signal_spectrum" or "none"
-    parameter : float — the chosen value (p_max as a float; NaN when not applicable)
+    parameter_name : str — "p_max" (truncation), "lambda" (GCV, discrepancy), "noise_psd"
+        (Wiener: the mean noise power σ_k² of the modal data it used) or "none"
+    parameter : float — the chosen value (p_max as a float; NaN for "none")
     filter_factors : ndarray (R|1, K) — φ applied to each mode
     solution : ndarray (R, K) complex — x̂ = φ m/s
     effective_dof : float — mean over points of Σ_k φ_k
@@ -243,8 +244,9 @@ def regularize(
     dof = float(np.broadcast_to(phi, (max(n_r, phi.shape[0]), n_k)).sum(axis=1).mean())
     ac = np.broadcast_to(phi, (phi.shape[0], n_k))[:, lv > 0].sum(axis=1).mean()
     recoverable = bool(ac >= 0.5)
+    chosen_text = "no filter" if name == "none" else f"{name}={param:.4g}"
     msg = (
-        f"{method}: {name}={param:.4g}, effective dof {dof:.2f}, residual/noise "
+        f"{method}: {chosen_text}, effective dof {dof:.2f}, residual/noise "
         f"{resid2 / noise2 if noise2 > 0 else float('inf'):.3g}"
     )
     if not recoverable:

@@ -114,6 +114,9 @@ def test_every_method_reports_parameter_filter_dof_and_residual(method):
     reg = solve_curves(noisy, GLOSSY, DOM, method=method).regularization
     assert reg.method == method
     assert np.isfinite(reg.parameter)
+    expected_name = {"wiener": "noise_psd", "truncation": "p_max"}.get(method, "lambda")
+    assert reg.parameter_name == expected_name
+    assert f"{method}: {expected_name}=" in reg.message
     assert reg.filter_factors.shape[-1] == N
     assert np.all((reg.filter_factors >= 0) & (reg.filter_factors <= 1))
     assert 3 < reg.effective_dof < 60
@@ -165,6 +168,8 @@ def test_unobservable_modes_give_zero_not_nan():
         reg = regularize(data, gains, 1e-3, method=method, levels=[0, 1, 1, 2, 2, 3])
         assert np.all(np.isfinite(reg.solution))
         assert np.all(reg.solution[:, gains == 0] == 0)
+        if method == "none":
+            assert "none: no filter," in reg.message and "nan" not in reg.message
 
 
 @settings(max_examples=40, deadline=None)
