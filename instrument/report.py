@@ -234,6 +234,11 @@ def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
                         label=f"θi = {math.degrees(ti):.0f}°")
         ax.plot(signed[sel], f[sel], "o", ms=3, color=line.get_color())
     ax.set_title(f"{res.chosen}: BRDF (1/sr) vs signed θr", fontsize=9)
+    # on a half-disc the default radial tick labels run together along the bottom edge
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(4))
+    ax.tick_params(axis="y", labelsize=7)
     ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
