@@ -134,7 +134,8 @@ def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328, q: fl
         value_fn=value,
         energy_bounded=False,
         description=f"Rayleigh–Rice smooth-surface scatter, {psd} PSD, λ = {lam} µm, Q = {q}.",
-        validity="σ ≪ λ; first order in (kσ); Q taken constant",
+        validity="σ ≪ λ; first order in (kσ); Q taken constant; not energy bounded (a "
+        "perturbation series: TIS = (4πσ cos θi/λ)² is meaningful only while ≪ 1)",
         reference="Church, Jenkinson & Zavada 1979; Stover, Optical Scattering; numerics.md §3.9",
     )
 

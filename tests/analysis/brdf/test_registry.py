@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from analysis.brdf import get_model, parse_model_list, sum_models
+from analysis.brdf import available_models, get_model, parse_model_list, sum_models
 from analysis.brdf.geometry import make_geometry
 from analysis.brdf.registry import register_model, unregister_model
 from analysis.brdf.specular import cook_torrance
@@ -56,3 +56,14 @@ def test_aliases_and_registration() -> None:
 def test_wrong_parameter_count_raises() -> None:
     with pytest.raises(ValueError, match="takes 3 parameters"):
         get_model("lambert+ggx").evaluate([0.1, 0.2], 0.1, 0.0, 0.2, np.pi)
+
+
+@pytest.mark.parametrize("name", available_models())
+def test_every_model_documents_parameters_units_and_validity(name: str) -> None:
+    m = get_model(name)
+    assert m.description and m.validity and m.reference, name
+    for p in m.params:
+        assert p.unit and p.description, (name, p.name)
+    if not m.energy_bounded:
+        # the documented exception must be stated where users read it (issue 5 §2)
+        assert "energy" in m.validity or "DHR" in m.validity, (name, m.validity)
