@@ -1,20 +1,28 @@
 """The run catalog: one SQLite file listing every run (id, sample, kind, status, ...).
 
-The catalog is an index, not the data: the run files are authoritative and
-:func:`Catalog.refresh` rebuilds a row from its file. Writes are short transactions in
-WAL mode, so a GUI can read while a run writes.
+The catalog is an index, not the data: the run files are authoritative. A run updates
+its row when it starts, pauses and ends, so a process killed mid-run leaves a row saying
+"running"; :meth:`Catalog.refresh` corrects such a row from the run's journal (committed
+points, last status) once no process holds the run file open, marking it "interrupted".
+Writes are short transactions in WAL mode, so a GUI can read while a run writes.
 """
 
 from __future__ import annotations
 
 import sqlite3
-import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+
+import h5py
+
+from instrument.journal import read_journal
 
 __all__ = ["CATALOG_NAME", "Catalog", "RunRow"]
 
 CATALOG_NAME = "catalog.sqlite"
+
+#: Statuses a row holds only while a process drives the run.
+LIVE_STATUSES = ("created", "running", "paused")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS runs (
@@ -94,6 +102,35 @@ class Catalog:
         row = cur.fetchone()
         return RunRow(*row) if row else None
 
+    def refresh(self, row: RunRow) -> RunRow:
+        """``row`` corrected from its run file when the process that ran it is gone.
+
+        A row in a live status (created/running/paused) whose run file no process holds
+        open gets the journal's committed point count and its last recorded status, or
+        "interrupted" when the journal ends without one (the process was killed). Rows of
+        live runs and of ended runs come back unchanged.
+        """
+        if row.status not in LIVE_STATUSES or _held_open(Path(row.path)):
+            return row
+        records, _ = read_journal(Path(row.path + ".journal"))
+        if not records or records[0].get("t") != "header":
+            return row  # not ours to judge: the file is gone or is not a run
+        done = {r["index"] for r in records if r.get("t") == "point"}
+        ends = [r["status"] for r in records if r.get("t") == "status"]
+        status = ends[-1] if ends and ends[-1] not in ("created", "running") else "interrupted"
+        new = replace(row, status=status, n_points=len(done))
+        if new != row:
+            self.update(row.run_id, status=new.status, n_points=new.n_points)
+        return new
+
+    def refresh_live(self) -> None:
+        """:meth:`refresh` every row in a live status (before listing or filtering)."""
+        marks = ",".join("?" * len(LIVE_STATUSES))
+        rows = self._db.execute(f"SELECT * FROM runs WHERE status IN ({marks})",
+                                LIVE_STATUSES).fetchall()
+        for r in rows:
+            self.refresh(RunRow(*r))
+
     def find(self, *, status: str | None = None, sample: str | None = None,
              kind: str | None = None, since: float | None = None,
              limit: int | None = None) -> list[RunRow]:
@@ -120,5 +157,26 @@ class Catalog:
         return [RunRow(*r) for r in self._db.execute(sql, args).fetchall()]
 
 
-def now() -> float:
-    return time.time()
+def _held_open(path: Path) -> bool:
+    """True while a process has the HDF5 run file open for writing.
+
+    This process (a GUI listing runs while its engine writes one) is asked through
+    h5py's open file ids, since HDF5 lets a process reopen its own file; another process
+    is detected by HDF5's file lock refusing the open.
+    """
+    for fid in h5py.h5f.get_obj_ids(types=h5py.h5f.OBJ_FILE):
+        try:
+            same = Path(fid.name.decode()).resolve() == path.resolve()
+        except (OSError, ValueError):
+            continue
+        if same and fid.get_intent() & h5py.h5f.ACC_RDWR:
+            return True
+    try:
+        with h5py.File(path, "r"):
+            return False
+    except FileNotFoundError:
+        return False
+    except OSError as err:
+        text = str(err).lower()
+        return "lock" in text or "already open" in text
+

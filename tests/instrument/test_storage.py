@@ -202,3 +202,41 @@ def test_catalog_filters(tmp_path):
         row = cat.get("r1")
         assert (row.status, row.n_points, row.ended) == ("finished", 10, 2000.0)
 
+
+
+def test_catalog_marks_a_killed_run_interrupted_but_leaves_a_live_one(tmp_path):
+    from instrument.plans import build_plan, parse_plan
+    from instrument.runner import start_run
+    from tests.instrument.helpers import ideal_bench, inplane_plan
+
+    bench = ideal_bench()
+    plan = build_plan(parse_plan(inplane_plan(step=40.0)), bench.profile)
+    engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False)
+    run_id, path = engine.store.header.run_id, engine.store.path
+    with Catalog(tmp_path) as cat:
+        cat.refresh_live()  # the file is held open by this (live) run: row unchanged
+        assert cat.get(run_id).status == "created"
+    engine.run()
+    n = len(plan.points)
+    # A process killed mid-run: its row still says "running" and its journal holds
+    # some points and no final status (drop the status record and the last 2 points).
+    records, _ = read_journal(journal_path(path))
+    kept = [r for r in records if r["t"] != "status"]
+    kept = kept[: [k for k, r in enumerate(kept) if r["t"] == "point"][-2]]
+    journal_path(path).unlink()
+    j = Journal(journal_path(path), fsync=False)
+    for r in kept:
+        j.append(r)
+    j.close()
+    with Catalog(tmp_path) as cat:
+        cat.update(run_id, status="running", n_points=0)
+        cat.refresh_live()
+        row = cat.get(run_id)
+        assert (row.status, row.n_points) == ("interrupted", n - 2)
+        assert [r.run_id for r in cat.find(status="interrupted")] == [run_id]
+        # A run that ended but whose last catalog update was lost takes the journal's word.
+        cat.update(run_id, status="paused")
+        records[-1]["status"] = "aborted"
+        Journal(journal_path(path), fsync=False).append(records[-1])
+        assert cat.refresh(cat.get(run_id)).status == "aborted"
+        assert cat.get(run_id).status == "aborted"
