@@ -163,7 +163,8 @@ class V4l2CaptureEmulator:
     ``manual_locked`` models cameras whose auto-exposure menu will not leave auto.
     """
 
-    def __init__(self, *, buffers=4, manual_locked=False, y16_shape=(24, 32)):
+    def __init__(self, *, buffers=4, manual_locked=False, y16_shape=(24, 32),
+                 fourccs=("YUYV", "GREY", "Y16 ")):
         self.props = {
             cv2.CAP_PROP_AUTO_EXPOSURE: 3.0,
             cv2.CAP_PROP_EXPOSURE: 100.0,
@@ -176,6 +177,7 @@ class V4l2CaptureEmulator:
         }
         self.manual_locked = manual_locked
         self.y16_shape = y16_shape  # some cameras offer Y16 only at another resolution
+        self.fourccs = fourccs  # others ignore a FOURCC they lack, set() still True
         self.queue: list[np.ndarray] = []
         self.released = False
 
@@ -203,7 +205,7 @@ class V4l2CaptureEmulator:
             self.props[prop] = float(min(max(round(value), 0), 100))
             return True
         if prop == cv2.CAP_PROP_FOURCC:
-            codes = {cv2.VideoWriter_fourcc(*c) for c in ("YUYV", "GREY", "Y16 ")}
+            codes = {cv2.VideoWriter_fourcc(*c) for c in self.fourccs}
             if int(value) in codes:
                 self.props[prop] = float(value)
                 self.queue.clear()  # a format change restarts streaming
@@ -248,8 +250,8 @@ class V4l2CaptureEmulator:
 
 
 def open_v4l2(**kw) -> tuple[OpenCVCamera, V4l2CaptureEmulator]:
-    emulator = V4l2CaptureEmulator(**{k: kw.pop(k) for k in ("manual_locked", "y16_shape")
-                                      if k in kw})
+    options = ("manual_locked", "y16_shape", "fourccs")
+    emulator = V4l2CaptureEmulator(**{k: kw.pop(k) for k in options if k in kw})
     return OpenCVCamera(0, capture=emulator, **kw), emulator
 
 
@@ -299,6 +301,15 @@ def test_v4l2_pixel_format_by_fourcc():
         with pytest.raises(UnsupportedFeature):
             cam.pixel_format = PixelFormat.MONO12
     assert emu.released
+
+
+def test_v4l2_ignored_fourcc_raises_and_the_format_stays():
+    cam, _ = open_v4l2(fourccs=("YUYV", "GREY"))
+    with cam:
+        with pytest.raises(UnsupportedFeature, match="pixel format"):
+            cam.pixel_format = PixelFormat.MONO16
+        assert cam.pixel_format is PixelFormat.MONO8
+        assert cam.acquire(1)[0].data.dtype == np.uint8
 
 
 def test_v4l2_format_change_to_another_resolution_resets_the_roi():
