@@ -270,6 +270,32 @@ def test_frame_to_radiance_matches_brdf_times_irradiance(model, params, theta_s,
     assert centre == pytest.approx(expected, rel=0.02)
 
 
+def test_out_of_plane_view_renders_the_brdf_at_the_kinematics_angles():
+    """Sample tilted out of the plane of incidence and spun about its normal: the spot
+    centre's radiance is f(θi, φi, θr, φr) · E with the angles of instrument.kinematics."""
+    from instrument.kinematics import OutOfPlaneKinematics
+
+    positions = {"sample_theta": 25.0, "detector_theta": 60.0, "sample_tilt": -15.0,
+                 "sample_phi": 30.0}
+    angles = OutOfPlaneKinematics(source_theta_deg=0.0).angles(positions)
+    assert abs(math.sin(math.radians(angles.phi_r - angles.phi_i))) > 0.1  # out of plane
+    brdf = brdf_from_model("lambert+ggx", [0.2, 0.5, 0.3])
+    world = VirtualBench("oop", roles=positions, scene=GoniometerScene(brdf=brdf))
+    world.update_source(on=True, power_w=1e-3)
+    cam = SimulatedCamera(world=world, seed=4, sensor=SensorParams(width=256, height=256))
+    ti, pi, tr, pr = (math.radians(a) for a in (angles.theta_i, angles.phi_i,
+                                                angles.theta_r, angles.phi_r))
+    expected = float(brdf(ti, pi, tr, pr)) * 2 * 1e-3 / (math.pi * (2e-3) ** 2) * math.cos(ti)
+    cam.exposure_us = min(max(0.5 * 100.0 * 12.6 / expected, 10.0), 1e4)
+    frames = np.stack([f.data for f in cam.acquire(8)])
+    world.update_source(on=False)
+    cam.invalidate()
+    dark = master_dark(np.stack([f.data for f in cam.acquire(8)]), method="mean")
+    radiance = to_radiance(frames.mean(axis=0), dark=dark, exposure_us=cam.exposure_us,
+                           response=cam.radiometric_response())
+    assert radiance[126:130, 126:130].mean() == pytest.approx(expected, rel=0.02)
+
+
 def test_stale_frames_until_invalidated():
     world = lit_bench(0.0, 30.0)
     cam = SimulatedCamera(world=world, seed=1, sensor=SMALL, stale_buffers=2)
