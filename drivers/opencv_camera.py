@@ -30,6 +30,11 @@ after a move may have been exposed before it. This driver therefore
 
 Opening reads one probe frame to learn the frame size and data type; file sources are
 rewound afterwards (``CAP_PROP_POS_FRAMES = 0``) so no file frame is lost.
+
+Timeouts: ``VideoCapture.read()`` cannot be interrupted from Python. A read that blocks
+returns only when the backend's own wait ends (V4L2 waits on ``select()`` with its own
+limit); :meth:`~drivers.base.Camera.acquire` checks its timeout between frames, and a read
+that fails is a :class:`~drivers.errors.DeviceTimeout`.
 """
 
 from __future__ import annotations
