@@ -309,12 +309,16 @@ def parse_brdf(text: str) -> FlatlandBRDF:
     """A wall BRDF from a material name or ``"ρ_s,σ_deg,ρ_d"`` (flatland, eq. S2-14)."""
     if text in MATERIALS:
         return MATERIALS[text]
+    usage = (f"BRDF {text!r}: a material ({', '.join(sorted(MATERIALS))}) "
+             "or 'rho_s,sigma_deg,rho_d'")
     parts = text.split(",")
     if len(parts) != 3:
-        raise ValueError(f"BRDF {text!r}: a material ({', '.join(sorted(MATERIALS))}) "
-                         "or 'rho_s,sigma_deg,rho_d'")
-    rs, sd, rd = (float(p) for p in parts)
-    return FlatlandBRDF(rs, math.radians(sd), rd, 0.0, "custom")
+        raise ValueError(usage)
+    try:
+        rs, sd, rd = (float(p) for p in parts)
+        return FlatlandBRDF(rs, math.radians(sd), rd, 0.0, "custom")
+    except ValueError as err:
+        raise ValueError(f"{usage}: {err}") from None
 
 
 def brdf_from_run(path: str | Path) -> FlatlandBRDF:

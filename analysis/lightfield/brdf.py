@@ -62,12 +62,23 @@ class FlatlandBRDF:
     name: str = ""
 
     def __post_init__(self) -> None:
+        values = {
+            "specular_reflectance": self.specular_reflectance,
+            "specular_width_rad": self.specular_width_rad,
+            "diffuse_reflectance": self.diffuse_reflectance,
+            "window_exponent": self.window_exponent,
+        }
+        for key, v in values.items():
+            if not np.isfinite(v):
+                raise ValueError(f"{key} = {v} must be finite")
         if self.specular_reflectance < 0 or self.diffuse_reflectance < 0:
-            raise ValueError("reflectances must be non-negative")
+            raise ValueError(f"reflectances must be non-negative (specular_reflectance = "
+                             f"{self.specular_reflectance}, diffuse_reflectance = "
+                             f"{self.diffuse_reflectance})")
         if not self.specular_width_rad > 0:
-            raise ValueError("specular_width_rad must be positive")
+            raise ValueError(f"specular_width_rad = {self.specular_width_rad} must be positive")
         if self.window_exponent < 0:
-            raise ValueError("window_exponent must be non-negative")
+            raise ValueError(f"window_exponent = {self.window_exponent} must be non-negative")
 
     @property
     def homogeneous(self) -> bool:

@@ -350,3 +350,23 @@ def test_too_coarse_an_angle_grid_is_noted_not_silently_over_smoothed(scan_run):
     assert not any("raise n_theta" in n for n in fine.notes)
     ratio = fine.reconstruction.diagnostics.noise.sigma_per_sample / fine.measured.sigma_rows
     assert 1 / lfio.NOISE_DISAGREEMENT_FACTOR < ratio < lfio.NOISE_DISAGREEMENT_FACTOR
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.one_of(
+    st.text(max_size=30),
+    st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                       st.sampled_from(["", "x", "1e400", "-0"])),
+             min_size=1, max_size=4).map(",".join),
+))
+def test_parse_brdf_gives_a_valid_model_or_an_error_naming_the_text(text):
+    """--brdf: either a finite, physical S2-14 model or a ValueError that quotes the input."""
+    try:
+        b = lfio.parse_brdf(text)
+    except ValueError as err:
+        assert str(err).startswith(f"BRDF {text!r}")
+        return
+    params = (b.specular_reflectance, b.specular_width_rad, b.diffuse_reflectance)
+    assert all(math.isfinite(v) for v in params)
+    assert b.specular_reflectance >= 0 and b.diffuse_reflectance >= 0
+    assert b.specular_width_rad > 0
