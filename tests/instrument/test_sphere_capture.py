@@ -302,6 +302,7 @@ def test_relighting_the_fourth_image_and_consistency(capture_run, tmp_path):
     stored = sphere_io.read_sphere_results(capture_run)
     assert stored["relight"]["l1_error"] == pytest.approx(res.relight_l1)
     assert stored["consistency"]["inconsistent"] is False
+    assert stored["consistency"]["limit"] == sphere_io.CONSISTENCY_LIMIT
     with h5py.File(capture_run, "r") as f:
         assert f["entry/analysis/images/radiance"].shape == (2, 2, 72, 72)
         assert f["entry/analysis/sh/coeffs"].shape == (2, 2, 441)
@@ -357,4 +358,6 @@ def test_cli_spheres_reports(capture_run, tmp_path, capsys):
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "L1 error" in out and "consistent" in out
+    # the decision's known limit (false alarms above α on the bench) is stated with it
+    assert sphere_io.CONSISTENCY_LIMIT in out and "2 of 16" in out
     assert main(["spheres", str(tmp_path / "missing.h5")]) == 2
