@@ -22,14 +22,14 @@ from __future__ import annotations
 import html
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from analysis.brdf import get_model
-from analysis.brdf.fit import FitResult
+from analysis.brdf.fit import FitResult, fit_brdf
 from analysis.brdf.geometry import make_geometry
 from analysis.brdf.integrate import dhr
 from analysis.brdf.model import BRDFModel
@@ -107,9 +107,16 @@ def analyse(
     n_starts: int = 3,
     seed: int = 0,
     instrument_aware: bool = True,
+    n_bootstrap: int = 0,
 ) -> AnalysisResult:
     """Fit, select and check (module docstring). ``points`` may be cosine-corrected; the
     fits use the BRDF f either way.
+
+    ``n_bootstrap`` > 0 refits the chosen model to that many case-resampled copies of the
+    points (seeded with ``seed``; :func:`analysis.brdf.fit.fit_brdf`) and attaches the
+    bootstrap σ and 95 % percentile interval to its fit: a check of the covariance σ that
+    does not assume a linear model. It resamples the independent noise only, so it is to be
+    compared with the σ *before* the common scale and pixel-response terms are added.
 
     With ``instrument_aware`` and a receiver geometry on ``points`` (the reduction records
     what each reading integrated: beam footprint and receiver aperture), every candidate is
@@ -138,6 +145,11 @@ def analyse(
         # errors shared between points (camera pixel response): propagated, not fitted
         fits = {name: with_correlated_uncertainty(fit, by_name[name], *a, sigma=u, cov=cov)
                 for name, fit in fits.items()}
+    if n_bootstrap > 0:
+        chosen = sel.chosen
+        boot = fit_brdf(by_name[chosen], f, *a, sigma=u, start=sel.fits[chosen].params,
+                        n_bootstrap=n_bootstrap, seed=seed).bootstrap
+        fits[chosen] = replace(fits[chosen], bootstrap=boot)
     dhr_vals = {name: np.asarray(dhr(get_model(name), fit.params, np.radians(_DHR_THETA_DEG),
                                      n_mu=48, n_phi=96))
                 for name, fit in fits.items()}
@@ -319,10 +331,18 @@ def write_report(
         fn(points, res, out / name)
     _plot_dhr(res, out / "dhr.png")
     fit = res.chosen_fit
-    params = _table(
-        ("parameter", "value", "σ (incl. common scale)", "unit", "at bound"),
-        [(n, float(v), float(e), unit, "yes" if b else "")
-         for (n, v, e, unit), b in zip(fit.table(), fit.at_bound, strict=True)])
+    head = ("parameter", "value", "σ (incl. common scale)", "unit", "at bound")
+    rows = [(n, float(v), float(e), unit, "yes" if b else "")
+            for (n, v, e, unit), b in zip(fit.table(), fit.at_bound, strict=True)]
+    boot = fit.bootstrap
+    if boot is not None:
+        noise_only = res.selection.fits[res.chosen].stderr
+        head = (*head, "σ (noise only)", f"bootstrap σ (B = {boot.samples.shape[0]})",
+                "bootstrap 95 % interval")
+        rows = [(*r, float(sn), float(sb), f"{lo:.6g} … {hi:.6g}")
+                for r, sn, sb, lo, hi in zip(rows, noise_only, boot.stderr, boot.ci_low,
+                                             boot.ci_high, strict=True)]
+    params = _table(head, rows)
     corr = _table(("", *fit.param_names),
                   [(n, *[float(x) for x in row])
                    for n, row in zip(fit.param_names, fit.correlation, strict=True)])

@@ -50,6 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "model (not recommended near specular)")
     p.add_argument("--cosine-corrected", action="store_true",
                    help="store f·cosθr (Stover's cosine-corrected BRDF) instead of f")
+    p.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                   help="also refit the chosen model to N case-resampled copies of the data "
+                        "and report the bootstrap σ and 95 %% interval (default: 0, off)")
     p.add_argument("--no-cv", action="store_true",
                    help="skip the cross-validation columns of the comparison")
     p.add_argument("--no-write", action="store_true",
@@ -67,6 +70,9 @@ def _missing_inputs(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.bootstrap < 0:
+        print(f"error: --bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
+        return 2
     missing = _missing_inputs(args)
     if missing:
         print(f"error: no such file: {'; '.join(missing)}")
@@ -86,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
             get_model(name)
         reduced = reduce_run(args.run, opts)
         result = analyse(reduced.points, models, criterion=args.criterion,
-                         run_cv=not args.no_cv)
+                         run_cv=not args.no_cv, n_bootstrap=args.bootstrap)
         run_data = read_run(args.run)
     except KeyError as err:
         print(f"error: {err.args[0] if err.args else err}")
@@ -112,6 +118,10 @@ def run(args: argparse.Namespace) -> int:
           f"{result.chosen} ({result.selection.rule})")
     for name, value, err, unit in fit.table():
         print(f"  {name:<16} {value:12.6g} ± {err:.3g} {unit}")
+    if fit.bootstrap is not None:
+        b = fit.bootstrap
+        print(f"  bootstrap ({b.samples.shape[0]} resamples, noise only): σ = "
+              + ", ".join(f"{v:.3g}" for v in b.stderr))
     for row in result.selection.table:
         print(f"  {row.name:<22} k={row.n_params}  χ²={row.chi2:10.2f}  "
               f"BIC={row.bic:10.2f}")

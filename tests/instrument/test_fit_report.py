@@ -108,6 +108,25 @@ def test_cosine_corrected_and_checks(glossy_run) -> None:
     assert np.all((d > 0.3) & (d < 1.0))
 
 
+def test_bootstrap_sigma_checks_the_covariance(glossy_run, tmp_path, capsys) -> None:
+    red = reduce_run(glossy_run)
+    res = analyse(red.points, ["lambert+ggx"], run_cv=False, n_bootstrap=60, seed=5)
+    boot = res.chosen_fit.bootstrap
+    assert boot is not None and boot.samples.shape == (60, 3)
+    # case resampling of the independent noise: compare with the noise-only covariance σ;
+    # B = 60 estimates a σ to ±1/√(2B) ≈ 9 % (1σ), so a 35 % band is ≈ 4σ wide
+    noise_only = res.selection.fits["lambert+ggx"].stderr
+    np.testing.assert_allclose(boot.stderr / noise_only, 1.0, atol=0.35)
+    assert np.all((boot.ci_low < res.chosen_fit.params) & (res.chosen_fit.params < boot.ci_high))
+    out = tmp_path / "boot"
+    assert main(["fit", str(glossy_run), "--models", "lambert+ggx", "--no-cv", "--no-write",
+                 "--bootstrap", "10", "--out", str(out)]) == 0
+    assert "bootstrap (10 resamples" in capsys.readouterr().out
+    assert "bootstrap 95 % interval" in (out / "index.html").read_text(encoding="utf-8")
+    assert main(["fit", str(glossy_run), "--bootstrap", "-1", "--no-write"]) == 2
+    assert "--bootstrap" in capsys.readouterr().out
+
+
 def test_scale_uncertainty_reaches_the_amplitudes(glossy_run) -> None:
     red = reduce_run(glossy_run, ReductionOptions(incident_power_w=2e-6,
                                                   u_incident_power_rel=0.02))
