@@ -710,9 +710,11 @@ class Camera(Device):
     # acquisition --------------------------------------------------------------
     def invalidate(self) -> None:
         """Forget buffered frames: the scene or the settings changed."""
-        self._ring.clear()
         if not self._closed:
             self._do_invalidate()
+        # After the backend's discard: a stream frame read from the backend's queue while
+        # it was being emptied carries the old epoch and is dropped by the ring.
+        self._ring.clear()
 
     def trigger(self) -> None:
         """Software trigger: start one exposure now.

@@ -269,6 +269,23 @@ def test_v4l2_exposure_in_100_us_units_with_manual_mode_and_stale_discard():
         assert frame.data.ndim == 2  # BGR conversion undone losslessly
 
 
+def test_v4l2_stream_delivers_no_frame_exposed_before_a_change():
+    """While streaming, the driver's queued buffers and the frame being read during a
+    change are discarded: the next streamed frame was exposed at the new setting."""
+    cam, _ = open_v4l2(ring_capacity=4)
+    with cam:
+        cam.start_streaming()
+        try:
+            for k in range(40):
+                units = 10 + k % 3
+                cam.exposure_us = units * 100.0
+                frame = cam.next_frame(timeout=5.0)
+                assert frame.data[0, 0] == units, f"stale frame after change {k}"
+                assert frame.exposure_us == units * 100.0
+        finally:
+            cam.stop_streaming()
+
+
 def test_v4l2_without_discard_returns_frames_exposed_before_the_change():
     cam, _ = open_v4l2(stale_frames=0)
     with cam:
