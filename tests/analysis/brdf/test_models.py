@@ -120,6 +120,32 @@ def test_oren_nayar_backscatter_exceeds_forward_at_grazing() -> None:
     assert back > 1.3 * fwd
 
 
+def test_anisotropic_ward_with_equal_widths_is_isotropic_ward() -> None:
+    ti, pi_, tr, pr = _grid(9)
+    iso = get_model("ward").evaluate([0.6, 0.15], ti, pi_, tr, pr)
+    aniso = get_model("ward_aniso").evaluate([0.6, 0.15, 0.15], ti, pi_, tr, pr)
+    np.testing.assert_allclose(aniso, iso, rtol=1e-12, atol=1e-300)
+
+
+def test_hapke_tends_to_lommel_seeliger_for_dark_surfaces() -> None:
+    # H(x, w) − 1 ≈ (w/2)·x·ln((1+x)/x) ≤ (w/2)·ln 2 (at x = 1), so the product of the two
+    # H factors departs from 1 by at most ≈ w·ln 2: Hapke → Lommel–Seeliger as w → 0
+    ti, pi_, tr, pr = _grid(9)
+    for w in (1e-2, 1e-4):
+        ratio = get_model("hapke").evaluate([w], ti, pi_, tr, pr) / get_model(
+            "lommel_seeliger").evaluate([w], ti, pi_, tr, pr)
+        np.testing.assert_allclose(ratio, 1.0, atol=1.05 * w * np.log(2.0))
+
+
+@pytest.mark.parametrize("alpha", [0.01, 0.2])
+def test_microfacet_variants_agree_at_normal_mirror(alpha: float) -> None:
+    # at θi = θr = 0 the half vector is the normal: D_GGX = D_Beckmann = 1/(πα²) and both
+    # masking terms are exactly 1, so f = ks/(4πα²) for all four variants (F ≡ 1)
+    vals = [get_model(n).evaluate([1.0, alpha], 0.0, 0.0, 0.0, np.pi)
+            for n in ("ggx", "beckmann", "ggx_vcavity", "beckmann_vcavity")]
+    np.testing.assert_allclose(vals, 1.0 / (4.0 * np.pi * alpha**2), rtol=1e-12)
+
+
 # ------------------------------------------------------------------------ energy bound
 ENERGY_ANGLES = np.radians([0.0, 30.0, 60.0, 80.0, 89.0])
 
