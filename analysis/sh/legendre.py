@@ -255,6 +255,21 @@ def legendre_table(lmax: int, theta: np.ndarray) -> np.ndarray:
     return table
 
 
+def _legendre_and_theta_derivative(n: int, theta: np.ndarray
+                                   ) -> tuple[np.ndarray, np.ndarray]:
+    """P_n(cos θ) by the three-term (Bonnet) recurrence and dP_n/dθ, for n ≥ 1.
+
+    dP_n/dθ = −sin θ P'_n(x) = −n (P_{n−1}(x) − x P_n(x)) / sin θ (A&S 8.5.4 with
+    dx = −sin θ dθ).
+    """
+    x = np.cos(theta)
+    p0 = np.ones_like(x)
+    p1 = x.copy()
+    for k in range(2, n + 1):
+        p0, p1 = p1, ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k
+    return p1, -n * (p0 - x * p1) / np.sin(theta)
+
+
 def gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Legendre nodes as colatitudes θ_j (ascending) and weights w_j, for n points.
 
@@ -277,30 +292,13 @@ def gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
     theta = np.pi * (4.0 * j - 1.0) / (4.0 * n + 2.0)
     theta = theta + (n - 1.0) / (8.0 * n**3) * np.cos(theta) / np.maximum(np.sin(theta), 1e-300)
     for _ in range(100):
-        x = np.cos(theta)
-        s = np.sin(theta)
-        p0 = np.ones_like(x)
-        p1 = x.copy()
-        for k in range(2, n + 1):
-            p0, p1 = p1, ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k
-        if n == 1:
-            p0, p1 = np.ones_like(x), x
-        # dP_n/dθ = −sin θ P'_n = −n (P_{n−1} − x P_n) / sin θ
-        dp = -n * (p0 - x * p1) / s
-        delta = p1 / dp
+        pn, dp = _legendre_and_theta_derivative(n, theta)
+        delta = pn / dp
         theta = theta - delta
         if np.max(np.abs(delta)) < 1e-15:
             break
     # One more evaluation at the converged nodes for the weights.
-    x = np.cos(theta)
-    s = np.sin(theta)
-    p0 = np.ones_like(x)
-    p1 = x.copy()
-    for k in range(2, n + 1):
-        p0, p1 = p1, ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k
-    if n == 1:
-        p0, p1 = np.ones_like(x), x
-    dp = -n * (p0 - x * p1) / s
+    _, dp = _legendre_and_theta_derivative(n, theta)
     w = 2.0 / dp**2
     # Mirror the northern nodes: θ → π − θ; the middle node (odd n) is θ = π/2 exactly.
     if n % 2 == 1:

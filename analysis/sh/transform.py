@@ -527,6 +527,24 @@ class SHFit:
     n_samples: int
 
 
+def _tikhonov_svd(a: np.ndarray, ridge: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, float]:
+    """SVD of the weighted design matrix and the Tikhonov filter factors.
+
+    Returns (U, f, Vᵀ, rank, condition, dof) with f_i = s_i / (s_i² + ridge) (exactly the
+    pseudo-inverse when ridge = 0), singular values below max(s)·max(shape)·ε treated as
+    zero, and the effective degrees of freedom trace(hat) = Σ s_i² / (s_i² + ridge).
+    """
+    u, sv, vt = np.linalg.svd(a, full_matrices=False)
+    tol = sv.max() * max(a.shape) * np.finfo(float).eps
+    rank = int(np.sum(sv > tol))
+    condition = float(sv.max() / sv.min()) if sv.min() > tol else float("inf")
+    with np.errstate(divide="ignore"):
+        filt = np.where(sv > tol, sv / (sv**2 + ridge), 0.0)
+    dof = float(np.sum(np.where(sv > tol, sv**2 / (sv**2 + ridge), 0.0)))
+    return u, filt, vt, rank, condition, dof
+
+
 def fit_scattered(
     values: np.ndarray,
     theta: np.ndarray,
@@ -575,16 +593,8 @@ def fit_scattered(
     sw = np.sqrt(w[use])
     a = y * sw[:, None]
     b = f[use] * sw
-    u, sv, vt = np.linalg.svd(a, full_matrices=False)
-    tol = sv.max() * max(a.shape) * np.finfo(float).eps
-    rank = int(np.sum(sv > tol))
-    condition = float(sv.max() / sv.min()) if sv.min() > tol else float("inf")
-    # Filter factors s/(s² + ridge) of the Tikhonov solution (exactly the pseudo-inverse when 0).
-    with np.errstate(divide="ignore"):
-        filt = np.where(sv > tol, sv / (sv**2 + ridge), 0.0)
+    u, filt, vt, rank, condition, dof = _tikhonov_svd(a, ridge)
     coeffs = vt.T @ (filt * (u.T @ b))
-    hat = np.where(sv > tol, sv**2 / (sv**2 + ridge), 0.0)
-    dof = float(hat.sum())
     resid = b - a @ coeffs
     n = int(use.sum())
     rms = float(np.sqrt(np.mean(resid**2)))
@@ -662,12 +672,6 @@ def scattered_fit_operator(
         raise ValueError("ridge must be ≥ 0")
     sw = np.sqrt(w)
     a = real_sh_matrix(lmax, th, ph) * sw[:, None]
-    u, sv, vt = np.linalg.svd(a, full_matrices=False)
-    tol = sv.max() * max(a.shape) * np.finfo(float).eps
-    rank = int(np.sum(sv > tol))
-    condition = float(sv.max() / sv.min()) if sv.min() > tol else float("inf")
-    with np.errstate(divide="ignore"):
-        filt = np.where(sv > tol, sv / (sv**2 + ridge), 0.0)
+    u, filt, vt, rank, condition, dof = _tikhonov_svd(a, ridge)
     pinv = (vt.T * filt) @ u.T
-    dof = float(np.sum(np.where(sv > tol, sv**2 / (sv**2 + ridge), 0.0)))
     return ScatteredFitOperator(lmax, pinv, sw, rank, condition, dof, float(ridge))
