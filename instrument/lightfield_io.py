@@ -238,20 +238,34 @@ def load_geometry(path: str | Path) -> LightFieldGeometry:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError) as err:
         raise GeometryError(f"cannot read geometry file {p}: {err}") from err
-    cam = dict(data.get("camera", {}))
-    trk = dict(data.get("track", {}))
-    try:
-        intr = CameraIntrinsics(
-            int(cam["width_px"]), int(cam.get("height_px", 1)), float(cam["pixel_pitch_um"]),
-            float(cam["focal_length_mm"]), float(cam.get("principal_x_px", math.nan)),
-            float(cam.get("principal_y_px", math.nan)))
-        return LightFieldGeometry(
-            intr, float(trk["d2_mm"]), float(trk.get("x0_mm", 0.0)),
-            float(trk.get("direction", 1.0)), float(trk.get("stage_scale", 1.0)),
-            float(trk.get("stage_offset_mm", 0.0)), float(trk.get("yaw_deg", 0.0)),
-            f"geometry file {p}")
-    except KeyError as err:
-        raise GeometryError(f"geometry file {p}: missing {err.args[0]!r}") from err
+    _missing = object()
+
+    def num(section: str, key: str, default: Any = _missing, kind: type = float) -> Any:
+        table = data.get(section, {})
+        if not isinstance(table, dict):
+            raise GeometryError(f"geometry file {p}: [{section}] must be a table")
+        if key not in table:
+            if default is _missing:
+                raise GeometryError(f"geometry file {p}: missing [{section}] {key}")
+            return default
+        v = table[key]
+        if isinstance(v, bool) or not isinstance(v, int | float) \
+                or (kind is int and not float(v).is_integer()):
+            raise GeometryError(f"geometry file {p}: [{section}] {key} = {v!r} must be "
+                                f"{'an integer' if kind is int else 'a number'}")
+        if not math.isfinite(v):
+            raise GeometryError(f"geometry file {p}: [{section}] {key} = {v!r} must be finite")
+        return kind(v)
+
+    intr = CameraIntrinsics(
+        num("camera", "width_px", kind=int), num("camera", "height_px", 1, int),
+        num("camera", "pixel_pitch_um"), num("camera", "focal_length_mm"),
+        num("camera", "principal_x_px", math.nan), num("camera", "principal_y_px", math.nan))
+    return LightFieldGeometry(
+        intr, num("track", "d2_mm"), num("track", "x0_mm", 0.0),
+        num("track", "direction", 1.0), num("track", "stage_scale", 1.0),
+        num("track", "stage_offset_mm", 0.0), num("track", "yaw_deg", 0.0),
+        f"geometry file {p}")
 
 
 def _profile(f: h5py.File) -> dict[str, Any]:

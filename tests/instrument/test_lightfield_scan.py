@@ -231,6 +231,20 @@ def test_geometry_file_round_trip_and_errors(tmp_path):
     p.write_text("[camera]\nwidth_px = 640\n[track]\nd2_mm = 55\n")
     with pytest.raises(lfio.GeometryError, match="pixel_pitch_um"):
         lfio.load_geometry(p)
+    good = "[camera]\nwidth_px = 640\npixel_pitch_um = 3.45\nfocal_length_mm = 6\n"
+    for text, fragment in [
+        (good.replace("3.45", '"a"') + "[track]\nd2_mm = 55\n",
+         "[camera] pixel_pitch_um = 'a' must be a number"),
+        (good.replace("640", "640.5") + "[track]\nd2_mm = 55\n",
+         "[camera] width_px = 640.5 must be an integer"),
+        (good + "[track]\nd2_mm = nan\n", "[track] d2_mm = nan must be finite"),
+        (good + "[track]\nd2_mm = 55\nyaw_deg = true\n", "[track] yaw_deg = True"),
+        ("camera = 3\n", "[camera] must be a table"),
+    ]:
+        p.write_text(text)
+        with pytest.raises(lfio.GeometryError) as exc:
+            lfio.load_geometry(p)
+        assert fragment in str(exc.value) and str(p) in str(exc.value)
 
 
 def test_analysis_refuses_a_run_that_is_not_a_light_field_scan(tmp_path):
