@@ -95,6 +95,20 @@ def _collect(name: str, lmin: int, lmax: int, per_l) -> IdentityError:
     return IdentityError(name, orders, err, ok, est)
 
 
+def _product_identity(name: str, left: tuple[np.ndarray, np.ndarray],
+                      right: tuple[np.ndarray, np.ndarray], lmin: int) -> IdentityError:
+    """Per-order normalised error of X_lm Y_lm = U_lm V_lm (the form of M19 and M21)."""
+    x, y, u, v = (np.asarray(a, dtype=float) for a in (*left, *right))
+    lmax = _lmax_of(x, y, u, v)
+
+    def per_l(l: int):
+        s = band_slice(l)
+        e, ok = _normalised(x[s] * y[s], u[s] * v[s])
+        return e, ok, np.nan
+
+    return _collect(name, lmin, lmax, per_l)
+
+
 def known_lighting(image: np.ndarray, lighting: np.ndarray, *, lmin: int = 1) -> IdentityError:
     """Known lighting, unknown radially symmetric BRDF: B_li L_lj − B_lj L_li = 0 (M10).
 
@@ -180,15 +194,8 @@ def one_object_two_lightings(
     lmin: int = 0,
 ) -> IdentityError:
     """One object in two known lightings: B²_lm L¹_lm − B¹_lm L²_lm = 0 (M19)."""
-    lmax = _lmax_of(image1, image2, lighting1, lighting2)
-    b1, b2, l1, l2 = (np.asarray(v, dtype=float) for v in (image1, image2, lighting1, lighting2))
-
-    def per_l(l: int):
-        s = band_slice(l)
-        e, ok = _normalised(b2[s] * l1[s], b1[s] * l2[s])
-        return e, ok, np.nan
-
-    return _collect("M19 one object, two lightings", lmin, lmax, per_l)
+    return _product_identity("M19 one object, two lightings",
+                             (image2, lighting1), (image1, lighting2), lmin)
 
 
 def four_images(
@@ -198,15 +205,7 @@ def four_images(
 
     Superscripts are (lighting, material); the identity needs neither lighting nor BRDF.
     """
-    lmax = _lmax_of(b11, b12, b21, b22)
-    a, b, c, d = (np.asarray(v, dtype=float) for v in (b11, b12, b21, b22))
-
-    def per_l(l: int):
-        s = band_slice(l)
-        e, ok = _normalised(a[s] * d[s], b[s] * c[s])
-        return e, ok, np.nan
-
-    return _collect("M21 two objects x two lightings", lmin, lmax, per_l)
+    return _product_identity("M21 two objects x two lightings", (b11, b22), (b12, b21), lmin)
 
 
 def rank_one(images: np.ndarray, *, lmin: int = 0) -> IdentityError:
