@@ -40,7 +40,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _option_error(args: argparse.Namespace) -> str | None:
+    """The first out-of-range option, named as on the command line, or None."""
+    if args.lmax < 1:
+        return f"--lmax must be ≥ 1 (got {args.lmax})"
+    if not 1 <= args.lmax_check <= args.lmax:
+        return (f"--lmax-check must lie in [1, --lmax = {args.lmax}] "
+                f"(got {args.lmax_check})")
+    if not 0 < args.max_view_angle <= 90:
+        return f"--max-view-angle must lie in (0, 90] deg (got {args.max_view_angle:g})"
+    if not 0 < args.check_view_angle <= args.max_view_angle:
+        return (f"--check-view-angle must lie in (0, --max-view-angle = "
+                f"{args.max_view_angle:g}] deg (got {args.check_view_angle:g})")
+    if not 0 < args.false_alarm < 1:
+        return f"--false-alarm must lie in (0, 1) (got {args.false_alarm:g})"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
+    bad = _option_error(args)
+    if bad is not None:
+        print(f"error: {bad}")
+        return 2
     fig = args.figure
     if fig is None:
         fig = str(Path(args.run).with_suffix("")) + ".spheres.png"
@@ -53,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
             check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
         )
     except (ValueError, OSError, KeyError) as err:
-        print(f"error: {err}")
+        print(f"error: {args.run}: {err} (is it the run file of a sphere_capture plan?)")
         return 2
     r, s = capture.radiance.shape[:2]
     print(f"sphere capture: {s} objects ({', '.join(capture.objects)}) × {r} lightings "

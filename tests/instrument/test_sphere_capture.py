@@ -361,3 +361,24 @@ def test_cli_spheres_reports(capture_run, tmp_path, capsys):
     # the decision's known limit (false alarms above α on the bench) is stated with it
     assert sphere_io.CONSISTENCY_LIMIT in out and "2 of 16" in out
     assert main(["spheres", str(tmp_path / "missing.h5")]) == 2
+
+
+@pytest.mark.parametrize(("args", "flag"), [
+    (["--lmax", "0"], "--lmax must"),
+    (["--lmax-check", "40"], "--lmax-check"),
+    (["--max-view-angle", "95"], "--max-view-angle"),
+    (["--check-view-angle", "88"], "--check-view-angle"),
+    (["--false-alarm", "2"], "--false-alarm"),
+])
+def test_cli_spheres_names_a_bad_option(tmp_path, capsys, args, flag):
+    assert main(["spheres", str(tmp_path / "never-read.h5"), *args]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith("error: ") and flag in out, out
+
+
+def test_cli_spheres_names_an_unreadable_file(tmp_path, capsys):
+    bad = tmp_path / "not-a-run.h5"
+    bad.write_text("not hdf5")
+    assert main(["spheres", str(bad), "--no-write"]) == 2
+    out = capsys.readouterr().out
+    assert str(bad) in out and "sphere_capture" in out, out
