@@ -126,6 +126,8 @@ def open_device(spec: DeviceSpec) -> Device:
                 device.velocity = spec.velocity
             if spec.acceleration is not None:
                 device.acceleration = spec.acceleration
+        for key, value in spec.settings.items():
+            setattr(device, key, value)  # public properties: validated by the device
     except BaseException:
         device.close()
         raise

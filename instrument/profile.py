@@ -128,6 +128,9 @@ class DeviceSpec:
     options: dict[str, Any] = field(default_factory=dict)
     retry: RetryPolicy = field(default_factory=RetryPolicy)
     settle_s: float = 0.0
+    #: Measurement settings applied after opening, through the device's validated public
+    #: properties (e.g. a power meter's ``wavelength_nm``): see :data:`DEVICE_SETTINGS`.
+    settings: dict[str, Any] = field(default_factory=dict)
 
     @property
     def is_axis(self) -> bool:
@@ -268,7 +271,7 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
 
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
-             "position_tolerance", "options", "retry", "settle_s"}
+             "position_tolerance", "options", "retry", "settle_s", "settings"}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
     if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
@@ -310,10 +313,46 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     if not _is_number(settle) or not 0 <= settle <= 10:
         v.error(f"{path}.settle_s", "must be a number of seconds from 0 to 10")
         settle = 0.0
+    settings = _settings(v, t.get("settings", {}), driver, f"{path}.settings")
     if driver is None or url is None:
         return None
     return DeviceSpec(role, driver, url, stage, limits, velocity, acceleration, tolerance,
-                      dict(options), retry, float(settle))
+                      dict(options), retry, float(settle), settings)
+
+
+#: Settings a profile may apply after opening, per driver: name → (type, low, high).
+DEVICE_SETTINGS: dict[str, dict[str, tuple[type, float, float]]] = {
+    "pm100usb": {"wavelength_nm": (float, 100.0, 25000.0), "averaging": (int, 1, 100000),
+                 "auto_range": (bool, 0, 1)},
+    "sim_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0)},
+    "opencv_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 1000.0)},
+    "sim_source": {"power_w": (float, 0.0, 10.0)},
+}
+
+
+def _settings(v: _Validator, t: Any, driver: str | None, path: str) -> dict[str, Any]:
+    if not isinstance(t, dict):
+        v.error(path, "must be a table")
+        return {}
+    allowed = DEVICE_SETTINGS.get(driver or "", {})
+    out: dict[str, Any] = {}
+    for key, value in t.items():
+        if key not in allowed:
+            names = ", ".join(sorted(allowed)) or "none"
+            v.error(f"{path}.{key}", f"not a setting of driver {driver!r} (settings: {names})")
+            continue
+        kind, low, high = allowed[key]
+        if kind is bool:
+            if not isinstance(value, bool):
+                v.error(f"{path}.{key}", "must be true or false")
+                continue
+        elif (not _is_number(value) or (kind is int and not isinstance(value, int))
+              or not low <= value <= high):
+            v.error(f"{path}.{key}", f"must be a{'n integer' if kind is int else ' number'} "
+                    f"from {low:g} to {high:g}")
+            continue
+        out[key] = kind(value)
+    return out
 
 
 def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:

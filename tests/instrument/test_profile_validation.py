@@ -121,3 +121,26 @@ def test_fuzzed_device_tables_give_field_errors_never_tracebacks(table, role):
 def test_arbitrary_text_raises_only_profile_error(text):
     with contextlib.suppress(ProfileError):
         parse_profile(text)
+
+
+def test_device_settings_are_validated_and_applied():
+    text = GOOD + '[devices.pm]\ndriver = "pm100usb"\nurl = "simusb://pm"\n' \
+        'settings = { wavelength_nm = 850.0, averaging = 10 }\n'
+    assert parse_profile(text).device("pm").settings == {"wavelength_nm": 850.0,
+                                                         "averaging": 10}
+    for bad, path in (("wavelength_nm = -1.0", "devices.pm.settings.wavelength_nm"),
+                      ("averaging = 2.5", "devices.pm.settings.averaging"),
+                      ("colour = 3", "devices.pm.settings.colour")):
+        broken = GOOD + f'[devices.pm]\ndriver = "pm100usb"\nurl = "simusb://pm"\n' \
+            f'settings = {{ {bad} }}\n'
+        with pytest.raises(ProfileError) as info:
+            parse_profile(broken)
+        assert path in [e.path for e in info.value.errors]
+
+
+def test_sim_power_meter_is_set_to_the_source_wavelength():
+    from instrument.devices import open_bench
+
+    profile = load_profile("sim")
+    with open_bench(profile, roles=["power_meter"]) as bench:
+        assert bench.power_meter.wavelength_nm == pytest.approx(633.0, abs=0.5)
