@@ -148,6 +148,16 @@ def _object_from_config(o: Mapping[str, Any]) -> PointObject | BarObject:
     raise ValueError(f"unknown object kind {kind!r}; use 'point' or 'bar'")
 
 
+def _object_at(index: int, o: Mapping[str, Any]) -> PointObject | BarObject:
+    """One entry of ``objects``; errors name its index."""
+    try:
+        return _object_from_config(o)
+    except KeyError as err:
+        raise ValueError(f"objects[{index}]: missing key {err.args[0]!r}") from None
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"objects[{index}]: {err}") from None
+
+
 @dataclass(frozen=True)
 class LightFieldBenchScene:
     """The light-field scene as a :class:`hw_mocks.sim.world.Scene` (module docstring).
@@ -173,7 +183,19 @@ class LightFieldBenchScene:
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> LightFieldBenchScene:
-        """From the ``[simulation.scene]`` table (module docstring)."""
+        """From the ``[simulation.scene]`` table (module docstring).
+
+        Raises ValueError prefixed ``[simulation.scene]`` that names the key at fault.
+        """
+        try:
+            return cls._from_config(config)
+        except KeyError as err:
+            raise ValueError(f"[simulation.scene]: missing key {err.args[0]!r}") from None
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"[simulation.scene]: {err}") from None
+
+    @classmethod
+    def _from_config(cls, config: Mapping[str, Any]) -> LightFieldBenchScene:
         cfg = dict(config)
         kind = cfg.pop("kind", "lightfield")
         if kind != "lightfield":
@@ -193,7 +215,7 @@ class LightFieldBenchScene:
                             float(track_cfg.get("z_mm", 30.0)),
                             float(track_cfg.get("direction", 1.0)))
         wall_lo, wall_hi = (float(v) for v in cfg.get("wall", (-150.0, 150.0)))
-        objects = tuple(_object_from_config(o) for o in cfg.get("objects", ()))
+        objects = tuple(_object_at(i, o) for i, o in enumerate(cfg.get("objects", ())))
         hidden = HiddenScene(objects, Wall(wall_lo, wall_hi, brdf), d2_mm=track.z_mm)
         return cls(hidden, track, float(cfg.get("reference_power_w", 1e-3)),
                    float(cfg.get("ambient_radiance", 0.0)))

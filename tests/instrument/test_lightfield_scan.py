@@ -384,3 +384,26 @@ def test_parse_brdf_gives_a_valid_model_or_an_error_naming_the_text(text):
     assert all(math.isfinite(v) for v in params)
     assert b.specular_reflectance >= 0 and b.diffuse_reflectance >= 0
     assert b.specular_width_rad > 0
+
+
+def test_bench_scene_config_errors_name_the_key():
+    """A bad [simulation.scene] gives a ValueError naming the table, entry and key."""
+    prof = tomllib.loads((Path(__file__).parents[2] / "instrument/profiles/"
+                          "sim-lightfield.toml").read_text())
+    scene = prof["simulation"]["scene"]
+    assert LightFieldBenchScene.from_config(scene).hidden.objects
+    point = dict(scene["objects"][0])
+    del point["z_mm"]
+    cases = [
+        ({"objects": [point]}, "[simulation.scene]: objects[0]: missing key 'z_mm'"),
+        ({"objects": [scene["objects"][0], {"kind": "disc"}]},
+         "objects[1]: unknown object kind 'disc'"),
+        ({"objects": [{**scene["objects"][0], "radiance": "x"}]}, "objects[0]: could not"),
+        ({"material": "foo"}, "[simulation.scene]: unknown material 'foo'"),
+        ({"brdf": {"specular_reflectance": 0.5}, "material": None}, "missing key"),
+    ]
+    for change, fragment in cases:
+        cfg = {k: v for k, v in {**scene, **change}.items() if v is not None}
+        with pytest.raises(ValueError) as exc:
+            LightFieldBenchScene.from_config(cfg)
+        assert fragment in str(exc.value), (change, str(exc.value))
