@@ -139,3 +139,16 @@ def test_estimate_noise_needs_signal_free_bands() -> None:
     with pytest.raises(ValueError):
         estimate_coefficient_noise(np.ones(9), np.ones(3))
     assert band_power(np.arange(4.0))[1] == pytest.approx((1 + 4 + 9) / 3)
+
+
+def test_every_filter_reports_its_band_limit() -> None:
+    """Band limit = last l with |A_l| ≥ tol·|A_0|, from the closed forms:
+    Lambertian Â_6/π = 1/64 ≥ 1e-2 > Â_8/π = 1/128; exp(−l(l+1)/(2s)) ≥ 1e-2 ⟺
+    l(l+1) ≤ 2 s ln 100 (s = 50: 460.5 → l = 20); exp(−σ² l(l+1)) likewise with
+    1/σ² = 2s (σ = 0.1 → 20)."""
+    assert lambertian_filter(30).band_limit == 6
+    assert lambertian_filter(30, tol=0.02).band_limit == 4  # Â_6/π = 0.0156 < 0.02
+    assert phong_filter(60, 50.0, exact=False).band_limit == 20
+    assert torrance_sparrow_filter(60, 0.1).band_limit == 20
+    # the exact Phong filter cuts off close to its approximation's limit (numerics.md §3.2)
+    assert abs(phong_filter(60, 50.0).band_limit - 20) <= 1
