@@ -9,8 +9,10 @@ Method
   - ``"absolute"``: r = (y − m)/σ, σ the per-point standard uncertainty (1 if not given);
   - ``"relative"``: r = (y − m)/|y|, divided by σ/|y| instead when σ is given (i.e. the same
     as absolute with σ) — without σ it is the fit of relative errors;
-  - ``"log"``: r = (ln(y+ε) − ln(m+ε))/s with s = σ/(y+ε) when σ is given, else 1; ε =
-    ``log_floor`` keeps zeros finite (numerics.md §4.2, log-relative metrics).
+  - ``"log"``: r = (ln(y⁺+ε) − ln(m⁺+ε))/s with s = σ/(y⁺+ε) when σ is given, else 1; ε =
+    ``log_floor`` keeps zeros finite (numerics.md §4.2, log-relative metrics) and x⁺ =
+    max(x, 0): a reading that noise (dark or signature subtraction) pushed below zero counts
+    as zero instead of making the residual NaN.
 
 * The noise model is explicit: the r_j are independent N(0, s²), with s = 1 when σ is given
   (``sigma`` known) and s estimated as √(χ²/dof) otherwise. The log-likelihood, AIC, AICc and
@@ -229,7 +231,8 @@ def _residuals(u: NDArray, pr: _Problem) -> NDArray:
     p = _to_natural(u, pr.log_mask)
     m = pr.model.value_fn(p, pr.geometry)
     if pr.residual == "log":
-        r = np.log(pr.y + pr.log_floor) - np.log(np.maximum(m, 0.0) + pr.log_floor)
+        r = np.log(np.maximum(pr.y, 0.0) + pr.log_floor) - np.log(
+            np.maximum(m, 0.0) + pr.log_floor)
         return r * pr.inv_scale
     return (pr.y - m) * pr.inv_scale
 

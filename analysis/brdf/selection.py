@@ -165,7 +165,7 @@ def cross_validate(
 def _heldout_score(y: np.ndarray, m: np.ndarray, sig: np.ndarray | None, residual: str) -> float:
     floor = 1e-6
     if residual == "log":
-        r = np.log(y + floor) - np.log(np.maximum(m, 0.0) + floor)
+        r = np.log(np.maximum(y, 0.0) + floor) - np.log(np.maximum(m, 0.0) + floor)
         if sig is not None:
             r = r * (np.maximum(y, 0.0) + floor) / sig
     elif residual == "relative" and sig is None:
