@@ -13,7 +13,8 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
                                 planned_label, planned_light, planned_exposure_us
       calibration/ NXcollection one attribute per calibration reference (run id or path)
       points/      NXcollection per completed point (row = point index order of
-                                completion): index, label, status (0 ok, 1 skipped), note,
+                                completion): index, label, status (0 ok, 1 skipped, 2 frames
+                                lost to a damaged file), note,
                                 t_start, t_end (Unix s), positions (N, A) read back,
                                 theta_i, phi_i, theta_r, phi_r (deg, from the read-back
                                 positions), exposure_us, power_w, signal, n_frames,
@@ -65,6 +66,10 @@ STR_FIELDS = ("label", "note")
 FRAME_FIELDS = ("frame_point", "frame_exposure_us", "frame_light", "frame_timestamp",
                 "frame_saturated")
 STATUS_OK, STATUS_SKIPPED = 0, 1
+#: A committed point whose frames a damaged file no longer holds (stored as zeros):
+#: its scalar values (from the journal) stand, its frames must not be analysed.
+FRAMES_LOST = 2
+FRAMES_LOST_NOTE = "frames lost: the run file was damaged; scalars recovered from the journal"
 #: Disk space reserved per point besides its frames: new chunks of the scalar tables
 #: (1024 rows × 8 B × ~20 datasets) and metadata.
 RESERVE_BYTES = 512 * 1024
@@ -591,6 +596,32 @@ class RecoveryReport:
     rebuilt: bool
     dropped_rows: int
     frames_lost: int
+    #: Points whose frames this recovery found damaged (now marked FRAMES_LOST).
+    points_lost: tuple[int, ...] = ()
+
+
+def _not_a_run(path: Path) -> StorageError:
+    """Why ``path`` (whose journal has no header) cannot be resumed, in words."""
+    jp = journal_path(path)
+    if not path.exists() and not jp.exists():
+        return StorageError(errno.ENOENT, f"{path}: no such run file")
+    if path.is_dir():
+        return StorageError(errno.EISDIR, f"{path} is a folder; give a run file (.h5)")
+    if not jp.exists():
+        try:
+            with h5py.File(path, "r") as f:
+                is_run = "run_id" in f["entry"].attrs
+        except (OSError, KeyError):
+            is_run = False
+        if is_run:
+            return StorageError(errno.EINVAL, (
+                f"{path} is a scatterlab run file but its journal {jp.name} is missing "
+                "(copied without it?): it reads with h5py but cannot be resumed"))
+        return StorageError(errno.EINVAL, f"{path} is not a scatterlab run file (no run "
+                            f"journal {jp.name} next to it)")
+    return StorageError(errno.EINVAL, f"{path}: its journal {jp.name} holds no intact run "
+                        "header (not a scatterlab run, or the journal is damaged at its "
+                        "start): it cannot be resumed")
 
 
 def recover(path: str | Path) -> RecoveryReport:
@@ -602,24 +633,28 @@ def recover(path: str | Path) -> RecoveryReport:
     path = Path(path)
     records, _ = read_journal(journal_path(path))
     if not records or records[0].get("t") != "header":
-        raise StorageError(errno.EINVAL, f"{path}: no run journal; not a scatterlab run file")
+        raise _not_a_run(path)
     header = RunHeader.from_dict(records[0])
     points: list[dict[str, Any]] = []
     seen: set[int] = set()
     events: list[str] = []
+    marked: set[int] = set()
     status = "interrupted"
     for r in records[1:]:
         if r["t"] == "point" and r["index"] not in seen:
             seen.add(r["index"])
             points.append(r)
+        elif r["t"] == "frames_lost":
+            marked.add(r["index"])
         elif r["t"] == "event":
             events.append(json.dumps(r))
         elif r["t"] == "status":
             status = r["status"]
     if len(points) < len(header.planned_label) and status == "finished":
         status = "interrupted"
+    points = [_mark_lost(p) if p["index"] in marked else p for p in points]
     rebuilt = False
-    salvaged_lost = 0
+    salvaged_lost: list[int] = []
     try:
         f = h5py.File(path, "r+")
     except (OSError, KeyError, RuntimeError) as err:
@@ -641,9 +676,12 @@ def recover(path: str | Path) -> RecoveryReport:
             f, salvaged_lost = _rebuild(path, header, points, err)
             rebuilt = True
             frames_lost, dropped = _reconcile(f, header, points, events, rebuilt)
-        frames_lost += salvaged_lost
-        if frames_lost:
-            f["entry"].attrs["frames_lost"] = frames_lost
+        frames_lost = sorted({*frames_lost, *salvaged_lost})
+        newly = _mark_points_lost(path, f, points, frames_lost, marked)
+        gone = marked.union(newly)
+        if gone:  # zeros standing in for frames, counted over every recovery so far
+            f["entry"].attrs["frames_lost"] = sum(len(p["frames"]) for p in points
+                                                  if p["index"] in gone)
         f["entry"].attrs["status"] = status
         f["entry"].attrs["n_points"] = len(points)
         f.flush()
@@ -651,7 +689,38 @@ def recover(path: str | Path) -> RecoveryReport:
         f.close()
     n_frames = sum(len(p["frames"]) for p in points)
     return RecoveryReport(header, len(points), n_frames, seen, status, rebuilt, dropped,
-                          frames_lost)
+                          len(frames_lost), newly)
+
+
+def _mark_lost(point: dict[str, Any]) -> dict[str, Any]:
+    return {**point, "status": FRAMES_LOST, "note": FRAMES_LOST_NOTE}
+
+
+def _mark_points_lost(path: Path, f: h5py.File, points: list[dict[str, Any]],
+                      lost_frames: list[int], marked: set[int]) -> tuple[int, ...]:
+    """Mark the points owning ``lost_frames`` (frame positions) as FRAMES_LOST.
+
+    Their frames are zeros now; the mark goes into the points table (so analysis, which
+    keeps status 0 only, leaves them out) and into the journal (so every later recovery,
+    which rewrites the table from the journal, keeps it). Returns the newly marked point
+    indices.
+    """
+    owner = [p["index"] for p in points for _ in p["frames"]]
+    lost = sorted({owner[k] for k in lost_frames} - marked)
+    if not lost:
+        return ()
+    journal = Journal(journal_path(path), fsync=True)
+    try:
+        for i in lost:
+            journal.append({"t": "frames_lost", "index": i, "time": time.time()})
+    finally:
+        journal.close()
+    rows = f["entry/points"]
+    for k, p in enumerate(points):
+        if p["index"] in lost:
+            rows["status"][k] = FRAMES_LOST
+            rows["note"][k] = FRAMES_LOST_NOTE
+    return tuple(lost)
 
 
 def _open_padded(path: Path, message: str) -> h5py.File | None:
@@ -673,10 +742,11 @@ def _open_padded(path: Path, message: str) -> h5py.File | None:
 
 
 def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
-             reason: BaseException) -> tuple[h5py.File, int]:
+             reason: BaseException) -> tuple[h5py.File, list[int]]:
     """A fresh file from the journal; every committed frame whose checksum still matches
     is copied from the damaged file (kept next to it as ``*.corrupt``). Returns the new
-    file (open) and the number of frames that could not be salvaged (stored as zeros)."""
+    file (open) and the positions of the frames that could not be salvaged (stored as
+    zeros)."""
     bad = path.with_suffix(path.suffix + ".corrupt")
     if path.exists():
         os.replace(path, bad)
@@ -684,7 +754,7 @@ def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
     f["entry"].attrs["recovered_from"] = f"{bad.name}: {_first_line(reason)}"
     crcs = [fr[4] for p in points for fr in p["frames"]]
     if not crcs:
-        return f, 0
+        return f, []
     old_frames = None
     old = None
     try:
@@ -692,7 +762,7 @@ def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
         old_frames = old["entry/data/frames"]
     except (OSError, KeyError, RuntimeError):
         old_frames = None
-    lost = 0
+    lost: list[int] = []
     ds = None
     try:
         for k, crc in enumerate(crcs):
@@ -706,7 +776,7 @@ def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
                 frame = None
             if ds is None:
                 if frame is None and old_frames is None:
-                    return f, len(crcs)
+                    return f, list(range(len(crcs)))
                 shape = frame.shape if frame is not None else old_frames.shape[1:]
                 dtype = frame.dtype if frame is not None else old_frames.dtype
                 ds = f["entry/data"].create_dataset(
@@ -715,7 +785,7 @@ def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
                     compression_opts=1, shuffle=True)
                 ds.attrs["units"] = "DN"
             if frame is None:
-                lost += 1  # left as zeros; frames_lost says how many
+                lost.append(k)  # left as zeros; its point is marked FRAMES_LOST
             else:
                 ds[k] = frame
     finally:
@@ -725,7 +795,7 @@ def _rebuild(path: Path, header: RunHeader, points: list[dict[str, Any]],
 
 
 def _reconcile(f: h5py.File, header: RunHeader, points: list[dict[str, Any]],
-               events: list[str], rebuilt: bool) -> tuple[int, int]:
+               events: list[str], rebuilt: bool) -> tuple[list[int], int]:
     pts = f["entry/points"]
     data = f["entry/data"]
     n = len(points)
@@ -754,21 +824,20 @@ def _reconcile(f: h5py.File, header: RunHeader, points: list[dict[str, Any]],
             crcs.append(fr[4])
     _put_rows(pts, 0, n, cols, pos)
     nf = len(crcs)
-    frames_lost = 0
+    frames_lost: list[int] = []
     if rebuilt:
         pass  # _rebuild checked every frame already
     elif "frames" in data:
         ds = data["frames"]
         if ds.shape[0] > nf:
             ds.resize(nf, axis=0)
-        elif ds.shape[0] < nf:
-            frames_lost = nf - ds.shape[0]
         # The newest committed frames are the ones a crash could have torn: check them.
         for k in range(max(0, min(nf, ds.shape[0]) - 4), min(nf, ds.shape[0])):
             if zlib.crc32(np.ascontiguousarray(ds[k]).tobytes()) != crcs[k]:
-                frames_lost += 1
+                frames_lost.append(k)
+        frames_lost += range(ds.shape[0], nf)
     else:
-        frames_lost = nf
+        frames_lost = list(range(nf))
     for name in FRAME_FIELDS:
         d = data[name]
         d.resize(nf, axis=0)

@@ -36,12 +36,15 @@ def run(args: argparse.Namespace) -> int:
         path = find_run(args.run, args.out)
         report = recover(path)
     except (FileNotFoundError, StorageError) as err:
-        print(f"error: {err}")
+        print(f"error: {err.strerror or err}")  # the message, without "[Errno N]"
         return 2
     if report.status == "finished":
         print(f"run {report.header.run_id} is already finished ({report.n_points} points)")
         return 0
     lost = f", {report.frames_lost} frame(s) lost" if report.frames_lost else ""
+    if report.points_lost:
+        lost += (f"; point(s) {', '.join(map(str, report.points_lost))} marked status 2 "
+                 "(frames lost: kept out of analysis)")
     print(f"run {report.header.run_id}: {report.n_points} of "
           f"{len(report.header.planned_label)} points on disk"
           f" ({'rebuilt from the journal' if report.rebuilt else 'file intact'}{lost})")

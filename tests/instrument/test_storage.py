@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+import zlib
 
 import h5py
 import numpy as np
@@ -182,9 +183,28 @@ def test_disk_full_is_refused_before_writing(tmp_path):
 
 
 def test_not_a_run(tmp_path):
-    with pytest.raises(StorageError, match="not a scatterlab run"):
+    with pytest.raises(StorageError, match="no such run file"):
         recover(tmp_path / "nothing.h5")
     assert not journal_path(tmp_path / "nothing.h5").exists()
+    with pytest.raises(StorageError, match="is a folder"):
+        recover(tmp_path)
+    (tmp_path / "text.h5").write_text("hello")
+    with pytest.raises(StorageError, match="not a scatterlab run file"):
+        recover(tmp_path / "text.h5")
+    with h5py.File(tmp_path / "plain.h5", "w") as f:
+        f["x"] = 1
+    with pytest.raises(StorageError, match="not a scatterlab run file"):
+        recover(tmp_path / "plain.h5")
+    # A run file copied without its journal: named as a run, and why it cannot resume.
+    path = tmp_path / "r1.h5"
+    RunStore.create(path, header(), fsync=False).close("paused")
+    journal_path(path).rename(tmp_path / "elsewhere")
+    with pytest.raises(StorageError, match=r"journal r1\.h5\.journal is missing"):
+        recover(path)
+    (tmp_path / "elsewhere").write_bytes(b"garbage\n")
+    (tmp_path / "elsewhere").rename(journal_path(path))
+    with pytest.raises(StorageError, match="no intact run header"):
+        recover(path)
 
 
 def test_catalog_filters(tmp_path):
@@ -240,3 +260,33 @@ def test_catalog_marks_a_killed_run_interrupted_but_leaves_a_live_one(tmp_path):
         Journal(journal_path(path), fsync=False).append(records[-1])
         assert cat.refresh(cat.get(run_id)).status == "aborted"
         assert cat.get(run_id).status == "aborted"
+
+
+def test_points_whose_frames_a_damaged_file_lost_are_marked_for_good(tmp_path):
+    from instrument.storage import FRAMES_LOST
+
+    path = tmp_path / "r1.h5"
+    store = RunStore.create(path, header(6), fsync=False)
+    for i in range(3):
+        store.append(rec(i, frames=2))
+    store.close("paused")
+    path.write_bytes(b"\0" * 4096)  # the HDF5 file is destroyed: no frame survives
+    report = recover(path)
+    assert report.rebuilt and report.points_lost == (0, 1, 2) and report.frames_lost == 6
+    store, done = RunStore.reopen(path, fsync=False)  # a second recovery, then new points
+    assert done == {0, 1, 2}
+    for i in range(3, 6):
+        store.append(rec(i, frames=2))
+    store.close("finished")
+    report = recover(path)
+    assert report.points_lost == () and report.frames_lost == 0
+    with h5py.File(path) as f:
+        e = f["entry"]
+        status = dict(zip(e["points/index"][:], e["points/status"][:], strict=True))
+        assert status == {0: FRAMES_LOST, 1: FRAMES_LOST, 2: FRAMES_LOST, 3: 0, 4: 0, 5: 0}
+        assert "frames lost" in e["points/note"].asstr()[0]
+        assert e.attrs["frames_lost"] == 6 and e.attrs["status"] == "finished"
+        frames = e["data/frames"][:]
+        assert not frames[:6].any()  # zeros stand in for the lost frames...
+        crc = zlib.crc32(np.ascontiguousarray(frames[6]).tobytes())
+        assert crc == zlib.crc32(rec(3, frames=2).frames[0].data.tobytes())  # ...new intact
