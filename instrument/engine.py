@@ -661,6 +661,10 @@ class RunEngine:
         self._retry(role, self._policies[role], "turn on" if on else "turn off",
                     src.turn_on if on else src.turn_off)
         self._light = on
+        # The scene changed: frames a camera buffered before the switch are of the other
+        # lighting (a dark frame would be lit, or the reverse).
+        if self._camera is not None:
+            self._camera.invalidate()
 
     def _acquire(self, acq: Acquire, st: _PointState) -> None:
         policy = acq.policy
