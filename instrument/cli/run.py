@@ -82,7 +82,12 @@ def run(args: argparse.Namespace) -> int:
     if plan.dropped_in_beam:
         print(f"note: {plan.dropped_in_beam} point(s) with the detector in the incident "
               "beam were left out (skip_beam_points)")
-    Path(args.out).mkdir(parents=True, exist_ok=True)
+    try:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        print(f"error: --out {args.out}: cannot create the folder for run files "
+              f"({err.strerror or err})")
+        return 2
     with open_bench(profile) as bench:
         engine = start_run(plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
         return drive(engine, args.quiet)

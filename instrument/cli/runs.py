@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
-from instrument.catalog import Catalog
+from instrument.catalog import CATALOG_NAME, Catalog
 from instrument.runner import DEFAULT_RUNS_DIR
 
 
@@ -18,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sample", help="substring of the sample name")
     p.add_argument("--kind", help="plan kind, e.g. brdf_in_plane")
     p.add_argument("--since-days", type=float, help="only runs started in the last N days")
-    p.add_argument("--limit", type=int, default=50)
+    p.add_argument("--limit", type=int, default=50, help="at most this many, newest first "
+                   "(default: 50; 0 for all)")
     p.set_defaults(func=run)
 
 
@@ -28,6 +30,10 @@ def _t(t: float | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     since = None if args.since_days is None else time.time() - 86400 * args.since_days
+    if not (Path(args.out) / CATALOG_NAME).is_file():  # listing never creates anything
+        print(f"no runs in {args.out} (no {CATALOG_NAME} there; --out names the folder "
+              "the runs were written to)")
+        return 0
     with Catalog(args.out) as cat:
         cat.refresh_live()  # rows of runs whose process was killed say "interrupted"
         rows = cat.find(status=args.status, sample=args.sample, kind=args.kind, since=since,

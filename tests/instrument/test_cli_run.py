@@ -108,3 +108,16 @@ def test_plan_cli_bad_arguments_are_errors_not_tracebacks(tmp_path, capsys):
         text = captured.out + captured.err
         assert expected in text and "Traceback" not in text, (argv, text)
     assert not list(tmp_path.glob("c.jpg*"))
+
+
+def test_run_and_runs_with_a_bad_out_folder_are_errors(tmp_path, capsys):
+    plan = tmp_path / "p.toml"
+    plan.write_text(PLAN)
+    not_a_folder = tmp_path / "file"
+    not_a_folder.write_text("x")
+    assert main(["run", str(plan), "--out", str(not_a_folder)]) == 2
+    assert "cannot create the folder" in capsys.readouterr().out
+    # Listing an empty place says so and creates nothing.
+    assert main(["runs", "--out", str(tmp_path / "none")]) == 0
+    assert "no runs in" in capsys.readouterr().out
+    assert not (tmp_path / "none").exists()
