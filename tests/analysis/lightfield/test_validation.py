@@ -14,7 +14,6 @@ from analysis.lightfield import (
     coefficients,
     material,
     reconstruct,
-    regularize,
     separable_spectra,
     solve_curves,
     theta_grid,
@@ -180,6 +179,22 @@ def test_rp_refocusing_brightness_equal_where_conventional_is_not():
     assert abs(conv[1] / conv[0] - 1.0) > 0.15
 
 
-def test_regularize_is_importable_here():
-    # guards the public API used above
-    assert callable(regularize)
+@pytest.mark.xfail(strict=True, reason="known defect: between 1.0 and ~1.3 δy (δy from the "
+                   "pair's own p̂_max) the merged peak and two sidelobe shoulders are all "
+                   "reported as 'resolved' objects, the outer two ~1.8× too far out")
+def test_two_objects_just_above_the_resolution_are_two_not_three():
+    sep = 20.0  # 1.26 δy at the pair's p̂_max = 8 (δy = 15.8 mm at 224.5 mm)
+    objs = [PointObject(-sep / 2, -D1, 1.0, 1.0, "gaussian"),
+            PointObject(sep / 2, -D1, 1.0, 1.0, "gaussian")]
+    rec = _reconstructed(objs, GLOSSY, 0.01, 5)
+    p2 = effective_p_max(rec.regularization.filter_factors, rec.orders)
+    res = theoretical_resolution(p2, domain_rad=DOMAIN, distance_mm=D1, aperture_mm=200.0,
+                                 solvable_domain_rad=rec.solvable_domain_rad)
+    assert sep > res.transverse_mm
+    det = detect_objects(rec.incident_field, p_max=p2, y_mm=np.linspace(-60, 60, 481),
+                         z_mm=np.linspace(-330, -120, 211),
+                         solvable_domain_rad=rec.solvable_domain_rad)
+    resolved = [k for k in range(det.count) if det.quality[k] != "unresolved"]
+    assert len(resolved) <= 2
+    ys = np.sort(det.positions_mm[resolved, 0])
+    assert np.allclose(ys, [-sep / 2, sep / 2], atol=0.5 * res.transverse_mm)
