@@ -24,6 +24,7 @@ Events go to subscribers on the worker thread (:mod:`instrument.events`).
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import math
 import queue
@@ -176,6 +177,11 @@ class RunEngine:
         """Call ``callback(event)`` on the worker thread for every event."""
         self._subscribers.append(callback)
 
+    def unsubscribe(self, callback: Callable[[Event], None]) -> None:
+        """Stop calling ``callback`` (a closing GUI window); unknown callbacks are ignored."""
+        with contextlib.suppress(ValueError):
+            self._subscribers.remove(callback)
+
     @property
     def state(self) -> EngineState:
         with self._lock:
@@ -246,7 +252,7 @@ class RunEngine:
                 cb(event)
             except Exception as err:  # a broken subscriber must not stop the hardware
                 print(f"scatterlab: event subscriber {cb!r} failed: {err!r}", file=sys.stderr)
-                self._subscribers.remove(cb)
+                self.unsubscribe(cb)
 
     def _main(self) -> None:
         status = "failed"

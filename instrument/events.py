@@ -2,8 +2,8 @@
 
 Subscribers are called **on the engine's worker thread**, in order, and must return
 quickly; a GUI hands each event to its own thread (a Qt signal, or the thread-safe
-:class:`EventQueue` below that a timer drains). A subscriber that raises is dropped from
-nothing and stops nothing: its error is reported once on stderr and the run goes on.
+:class:`EventQueue` below that a timer drains). A subscriber that raises stops nothing:
+it is unsubscribed, its error is reported once on stderr, and the run goes on.
 """
 
 from __future__ import annotations
@@ -95,12 +95,25 @@ Event = RunStarted | PointCompleted | Progress | Fault | Paused | Resumed | RunF
 
 
 class EventQueue:
-    """A subscriber that queues events for another thread to :meth:`drain`."""
+    """A subscriber that queues events for another thread to :meth:`drain`.
+
+    It never blocks the worker thread (which drives the hardware). ``maxsize`` > 0 bounds
+    the backlog a slow client can build up: while ``maxsize`` or more events wait,
+    *live-value* events (:class:`Progress`, :class:`PointCompleted`: each is superseded
+    by the next) are counted in ``dropped`` instead of queued. Lifecycle events (started,
+    fault, paused, resumed, finished) are always queued.
+    """
 
     def __init__(self, maxsize: int = 0) -> None:
-        self._q: queue.Queue[Event] = queue.Queue(maxsize)
+        self._q: queue.Queue[Event] = queue.Queue()
+        self.maxsize = int(maxsize)
+        self.dropped = 0
 
     def __call__(self, event: Event) -> None:
+        if (self.maxsize > 0 and isinstance(event, (Progress, PointCompleted))
+                and self._q.qsize() >= self.maxsize):
+            self.dropped += 1
+            return
         self._q.put(event)
 
     def drain(self) -> list[Event]:

@@ -226,3 +226,28 @@ detectors = ["camera"]
         z = e["points/positions"][:, list(plan.axes).index("camera_z")]
         assert np.allclose(z[1:], [0.0, 2.5, 5.0, 7.5, 10.0])
         assert np.all(np.isnan(e["points/theta_i"][:]))  # no scattering geometry
+
+
+def test_a_slow_gui_client_never_blocks_the_worker_and_gets_every_lifecycle_event(tmp_path):
+    import threading
+
+    from instrument.events import Progress, RunFinished, RunStarted
+
+    engine, _q, plan, _bench = _run(tmp_path)
+    slow = EventQueue(maxsize=2)  # a client that reads nothing until the run ends
+    engine.subscribe(slow)
+    gone = EventQueue()
+    engine.subscribe(gone)
+    engine.unsubscribe(gone)  # a window closed before the run: it hears nothing
+    engine.unsubscribe(gone)  # twice is harmless
+    seen_on: set[str] = set()
+    engine.subscribe(lambda ev: seen_on.add(threading.current_thread().name))
+    assert engine.run() is EngineState.FINISHED  # would hang if the queue blocked
+    events = slow.drain()
+    assert isinstance(events[0], RunStarted) and isinstance(events[-1], RunFinished)
+    live = [e for e in events if isinstance(e, (Progress, PointCompleted))]
+    # RunStarted took one of the two places; every later live event beyond the second
+    # place was dropped (there is at least one Progress per point).
+    assert len(live) == 1 and slow.dropped >= len(plan.points)
+    assert gone.drain() == []
+    assert seen_on == {"run-engine"}  # subscribers run on the worker thread
