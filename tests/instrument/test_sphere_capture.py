@@ -283,9 +283,17 @@ def test_merged_hdr_radiance_is_the_scene_radiance(capture_run):
     assert np.all(capture.radiance[0, 0][truth == 0] < 1e-3 * truth.max())
 
 
-def test_relighting_the_fourth_image_and_consistency(capture_run, tmp_path):
-    fig = tmp_path / "relight.png"
+@pytest.fixture(scope="module")
+def analysed(capture_run, tmp_path_factory):
+    """The capture analysed once (written into the run file, figure drawn) for the tests
+    that read its results."""
+    fig = tmp_path_factory.mktemp("spheres-figure") / "relight.png"
     capture, res = sphere_io.analyse_run(capture_run, figure=fig)
+    return capture, res, fig
+
+
+def test_relighting_the_fourth_image_and_consistency(capture_run, analysed):
+    capture, res, fig = analysed
     assert capture.objects == ("glossy", "satin")
     assert capture.lighting_deg == (0.0, 90.0)
     assert capture.units == "W m-2 sr-1"
@@ -324,13 +332,13 @@ def _turned(env: EnvironmentMap, theta_deg: float) -> EnvironmentMap:
                             for x in env.sharp_sources))
 
 
-def test_lighting_estimates_match_the_scene_turned_by_the_source_arm(capture_run):
+def test_lighting_estimates_match_the_scene_turned_by_the_source_arm(analysed):
     """The Wiener lighting from the glossy sphere against the true environment coefficients
     (bands l ≤ 8, which the s = 80 lobe passes well), for each source_theta: the second
     lighting is the environment turned by +90° about lab ŷ, not the first one again."""
     from hw_mocks.sim.sphere_scene import environment_coefficients
 
-    _capture, res = sphere_io.analyse_run(capture_run, write=False)
+    _capture, res, _fig = analysed
     prof = tomllib.loads(PROFILE.read_text())
     env = environment_from_config(prof["simulation"]["scene"]["environment"])
     # radiance_scale = 1 W m⁻² sr⁻¹ per environment unit at the reference power
