@@ -325,3 +325,41 @@ def test_fuzzed_profile_through_the_cli_never_opens_or_moves_anything(tmp_path, 
     assert main(["run", str(plan), "--bench", str(bench), "--out", str(tmp_path / "r")]) == 2
     assert registry.all_emulators() == []
     assert not (tmp_path / "r").exists()
+
+
+_EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[2] / "examples"
+#: Every example plan with the bench it is written for (fuzzed below, each kind).
+_EXAMPLE_BENCH = {p.stem: {"brdf_hemisphere": "sim_out_of_plane",
+                           "lightfield_scan": "sim-lightfield", "lightfield": "sim-lightfield",
+                           "sphere_capture": "sim-spheres"}.get(p.stem, "sim")
+                  for p in sorted(_EXAMPLES.glob("*.toml"))}
+
+
+@st.composite
+def mutated_example(draw):
+    name = draw(st.sampled_from(sorted(_EXAMPLE_BENCH)))
+    base = tomllib.loads((_EXAMPLES / f"{name}.toml").read_text())
+    return name, draw(mutated(base))
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated_example())
+def test_fuzzed_example_plans_of_every_kind_dry_run_or_give_field_errors(case):
+    """Every plan kind, mutated: field errors, or a plan whose dry run (estimate and
+    coverage picture) works; nothing else escapes."""
+    from instrument.coverage import coverage_image
+
+    name, text = case
+    try:
+        plan = build_plan(parse_plan(text, source="fuzz.toml"),
+                          load_profile(_EXAMPLE_BENCH[name]))
+    except PlanError as err:
+        assert err.errors and all(e.path and e.message for e in err.errors)
+        return
+    except GuardError as err:
+        assert err.violations
+        return
+    est = plan.estimate()
+    assert est.n_points == len(plan.points) >= 1
+    assert math.isfinite(est.total_s) and est.total_s >= 0
+    assert coverage_image(plan).shape[2] == 3
