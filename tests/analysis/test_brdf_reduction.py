@@ -241,6 +241,23 @@ def test_angular_uncertainty_from_local_slope() -> None:
     assert np.all(angular_uncertainty(f, ti, tr) == 0.0)
 
 
+def test_angular_uncertainty_out_of_plane_with_read_back_jitter() -> None:
+    # a hemisphere scan: two receiver rings (θr = 50°, 60°) at one incidence, stage
+    # read-backs jittering by ~10⁻⁵ rad. The θr slope is 0.5 /rad at every azimuth; there is
+    # no θi slope to measure (one incidence). Differencing across azimuths or over the jitter
+    # would give |Δf|/10⁻⁵ rad ≈ 10⁴ /rad instead.
+    rng = np.random.default_rng(21)
+    phr = np.radians(np.arange(100.0, 261.0, 20.0))
+    tr = np.radians(np.repeat([50.0, 60.0], phr.size))
+    pr = np.tile(phr, 2)
+    ti = np.full(tr.size, np.radians(30.0))
+    ti, tr = ti + 1e-5 * rng.standard_normal(ti.size), tr + 1e-5 * rng.standard_normal(tr.size)
+    f = 0.1 + 0.5 * tr + 0.2 * np.cos(pr)
+    u = angular_uncertainty(f, ti, tr, sigma_theta_i=0.01, sigma_theta_r=0.01,
+                            phi_i=np.zeros_like(ti), phi_r=pr)
+    np.testing.assert_allclose(u, 0.5 * 0.01, rtol=1e-3)
+
+
 def test_reciprocity_pairs_and_z() -> None:
     deg = np.radians
     # in-plane, specular side (φr = φi + π): (20→40) and (40→20) are reciprocal
