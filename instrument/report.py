@@ -188,13 +188,31 @@ def _curve(theta_i: float, phi_i: float, s_deg: np.ndarray) -> tuple[np.ndarray,
             np.where(s >= 0, phi_i + np.pi, phi_i))
 
 
+#: Incidence read-backs jitter by ~0.001–0.01° around the set angle (and φi by a full turn,
+#: 0° vs 360°): angles within this step share one panel.
+_GROUP_STEP_DEG = 0.1
+#: A receiver direction within this angle of the plane of incidence counts as in-plane.
+_PLANE_TOL_DEG = 0.5
+
+
 def _groups(points: BRDFPoints) -> list[tuple[float, float, np.ndarray]]:
-    keys = np.round(np.degrees(points.theta_i), 4), np.round(np.degrees(points.phi_i), 2)
+    """(θi, φi, indices) per incidence direction, angles snapped to _GROUP_STEP_DEG."""
+    step = _GROUP_STEP_DEG
+    ti_k = np.round(np.degrees(points.theta_i) / step) * step
+    pi_k = np.mod(np.round(np.mod(np.degrees(points.phi_i), 360.0) / step) * step, 360.0)
+    keys = np.round(ti_k, 6), np.round(pi_k, 6)
     out = []
     for ti, pi_ in sorted(set(zip(*keys, strict=True))):
         sel = np.flatnonzero((keys[0] == ti) & (keys[1] == pi_))
         out.append((math.radians(ti), math.radians(pi_), sel))
     return out
+
+
+def _in_plane(points: BRDFPoints) -> np.ndarray:
+    """True where the receiver lies within _PLANE_TOL_DEG of the plane of incidence: its
+    angular distance from that plane is arcsin|sin θr sin(φr − φi)|."""
+    off = np.abs(np.sin(points.theta_r) * np.sin(points.phi_r - points.phi_i))
+    return np.degrees(np.arcsin(np.minimum(off, 1.0))) <= _PLANE_TOL_DEG
 
 
 def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
@@ -203,9 +221,14 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
     f, u = points.plain_brdf()
     signed = _signed_deg(points)
     groups = _groups(points)
+    plane = _in_plane(points)
     fig, axes = plt.subplots(len(groups), 1, figsize=(7.5, 3.0 * len(groups)), squeeze=False)
     s_grid = np.linspace(-89.0, 89.0, 357)
-    for ax, (ti, pi_, sel) in zip(axes[:, 0], groups, strict=True):
+    for ax, (ti, pi_, group) in zip(axes[:, 0], groups, strict=True):
+        # the curves are the plane of incidence: out-of-plane points are left to the
+        # residual plot instead of being drawn against the wrong curve
+        sel = group[plane[group]]
+        n_off = group.size - sel.size
         ax.errorbar(signed[sel], f[sel], yerr=u[sel], fmt="o", ms=3, color="k",
                     label="measured ±1σ", zorder=3)
         for name, fit in res.fits.items():
@@ -217,7 +240,8 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
                 ax.fill_between(s_grid, val - sd, val + sd, color=line.get_color(), alpha=0.3,
                                 label="chosen ±1σ")
         ax.set_yscale("log")
-        ax.set_title(f"θi = {math.degrees(ti):.1f}°, φi = {math.degrees(pi_):.0f}°")
+        ax.set_title(f"θi = {math.degrees(ti):.1f}°, φi = {math.degrees(pi_):.0f}°"
+                     + (f" ({n_off} out-of-plane points not shown)" if n_off else ""))
         ax.set_xlabel("signed θr (deg; > 0 specular side)")
         ax.set_ylabel("BRDF (1/sr)")
         ax.grid(True, which="both", alpha=0.3)
@@ -240,7 +264,9 @@ def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
     ax.set_thetamax(90)
     s_grid = np.linspace(-89.0, 89.0, 357)
     model, fit = res.models[res.chosen], res.chosen_fit
-    for ti, pi_, sel in _groups(points):
+    plane = _in_plane(points)
+    for ti, pi_, group in _groups(points):
+        sel = group[plane[group]]
         val = model.evaluate_geometry(fit.params, make_geometry(*_curve(ti, pi_, s_grid)))
         line, = ax.plot(np.radians(s_grid), val, lw=1.2,
                         label=f"θi = {math.degrees(ti):.0f}°")
@@ -262,9 +288,17 @@ def _plot_residuals(points: BRDFPoints, res: AnalysisResult, path: Path) -> None
 
     signed = _signed_deg(points)
     r = res.selection.fits[res.chosen].residuals
+    plane = _in_plane(points)
     fig, ax = plt.subplots(figsize=(7.5, 3.2))
-    for ti, _pi, sel in _groups(points):
-        ax.plot(signed[sel], r[sel], "o", ms=3, label=f"θi = {math.degrees(ti):.0f}°")
+    for ti, pi_, group in _groups(points):
+        sel = group[plane[group]]
+        line, = ax.plot(signed[sel], r[sel], "o", ms=3,
+                        label=f"θi = {math.degrees(ti):.0f}°, φi = {math.degrees(pi_):.0f}°")
+        off = group[~plane[group]]
+        if off.size:
+            # out of plane: x is ±θr (sign from the side of the plane of incidence)
+            ax.plot(signed[off], r[off], "x", ms=4, color=line.get_color(),
+                    label=f"θi = {math.degrees(ti):.0f}°, out of plane")
     ax.axhline(0.0, color="k", lw=0.8)
     for k in (-2, 2):
         ax.axhline(k, color="grey", lw=0.6, ls="--")

@@ -266,3 +266,22 @@ def test_cli_fit_receiver_options_reach_the_reduction(glossy_run, tmp_path, caps
     text, text_point = json.dumps(prov), json.dumps(prov_point)
     assert "1.5" in text  # the beam radius given is what the reduction used
     assert text != text_point
+
+
+def test_report_panels_merge_jittered_incidence_and_keep_out_of_plane_points_off() -> None:
+    from types import SimpleNamespace
+
+    from instrument.report import _groups, _in_plane
+
+    r = np.radians
+    pts = SimpleNamespace(
+        theta_i=r(np.array([30.0, 29.999, 30.0005, 30.0, 45.0])),
+        phi_i=r(np.array([0.0, 359.9995, 0.001, 0.0, 0.0])),
+        theta_r=r(np.array([40.0, 50.0, 20.0, 50.0, 10.0])),
+        phi_r=r(np.array([180.0, 0.0, 180.0, 117.0, 180.0])),
+    )
+    groups = _groups(pts)
+    assert [(round(math.degrees(t), 3), round(math.degrees(p), 3)) for t, p, _ in groups] == [
+        (30.0, 0.0), (45.0, 0.0)]
+    assert groups[0][2].tolist() == [0, 1, 2, 3]
+    assert _in_plane(pts).tolist() == [True, True, True, False, True]
