@@ -19,7 +19,7 @@ from typing import Any
 from drivers.base import AxisKind, Camera, Device, LightSource, MotionAxis, PowerMeter
 from drivers.errors import ConnectionFailed, DeviceError
 from drivers.transport import add_url_handler_package
-from instrument.profile import BenchProfile, DeviceSpec
+from instrument.profile import BenchProfile, DeviceSpec, FieldError, ProfileError
 
 __all__ = ["DRIVERS", "Bench", "open_bench", "open_device"]
 
@@ -218,7 +218,12 @@ def configure_simulation(profile: BenchProfile) -> None:
     if profile.simulation is None:
         return
     world, config = simulation_config(profile)
-    _entry(SIM_WORLD_ENTRY)(world, config)
+    try:
+        _entry(SIM_WORLD_ENTRY)(world, config)
+    except (ValueError, TypeError, KeyError) as err:
+        # The virtual bench validates its own tables; report it as the profile field it is.
+        raise ProfileError(f"bench profile {profile.name!r}",
+                           [FieldError("simulation", str(err))]) from err
 
 
 def open_bench(profile: BenchProfile, *, roles: Iterable[str] | None = None) -> Bench:

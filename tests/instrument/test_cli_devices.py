@@ -93,3 +93,13 @@ def test_axes_the_plan_does_not_move_are_recorded_with_homed_state():
     assert before["axis_homed.camera_z"] == 0
     assert after["axis_homed.camera_z"] == 1
     assert after["axis_position.camera_z"] == pytest.approx(4.0, abs=cam.position_tolerance)
+
+
+def test_bad_simulation_table_is_a_field_error_not_a_traceback(tmp_path, capsys):
+    text = load_profile("sim").source_text.replace(
+        'brdf = "lambert+ggx"', 'brdf = "lambert+ggx"\nglitter = 3')
+    bench = tmp_path / "bad.toml"
+    bench.write_text(text)
+    assert main(["devices", "--bench", str(bench)]) == 2
+    err = capsys.readouterr().err
+    assert "simulation" in err and "glitter" in err and "Traceback" not in err
