@@ -103,10 +103,17 @@ class SelectionResult:
         }
 
 
-def incidence_groups(theta_i: ArrayLike, *, decimals: int = 6) -> np.ndarray:
-    """Integer group label per point: equal θi (rounded to ``decimals`` radians) share one."""
-    t = np.round(np.asarray(theta_i, dtype=float).reshape(-1), decimals)
-    _, labels = np.unique(t, return_inverse=True)
+def incidence_groups(theta_i: ArrayLike, *, tol_rad: float = 1e-3) -> np.ndarray:
+    """Integer group label per point, one per set incidence angle.
+
+    Sorted θi closer than ``tol_rad`` to their neighbour share a label (default 10⁻³ rad ≈
+    0.06°: stage read-backs jitter by ~10⁻⁵ rad around the set angle, scan steps are
+    degrees), so a fold never splits one incidence angle into "seen" and "unseen" parts.
+    """
+    t = np.asarray(theta_i, dtype=float).reshape(-1)
+    order = np.argsort(t, kind="stable")
+    labels = np.empty(t.size, dtype=np.int64)
+    labels[order] = np.concatenate([[0], np.cumsum(np.diff(t[order]) > tol_rad)])
     return labels
 
 

@@ -70,6 +70,19 @@ def test_folds_never_split_an_incidence_angle() -> None:
         assert set(np.unique(ti[test])).isdisjoint(np.unique(ti[~test]))
 
 
+def test_read_back_jitter_does_not_split_an_incidence_angle() -> None:
+    # a hemisphere run at one set θi: read-backs scatter by ~10⁻⁵ rad around it
+    rng = np.random.default_rng(4)
+    ti = np.radians(30.0) + 1e-5 * rng.standard_normal(40)
+    assert np.unique(incidence_groups(ti)).size == 1
+    tr = np.radians(np.linspace(0, 80, 40))
+    m = get_model("lambert")
+    cv, _ = cross_validate(m, m.evaluate([0.5], ti, 0.0, tr, np.pi), ti, 0.0, tr, np.pi)
+    assert np.isnan(cv)  # one incidence angle: nothing to cross-validate over
+    two = np.concatenate([ti, ti + np.radians(20.0)])
+    assert np.unique(incidence_groups(two)).size == 2
+
+
 def test_cv_needs_two_incidence_angles() -> None:
     tr = np.radians(np.linspace(0, 80, 20))
     m = get_model("lambert")
