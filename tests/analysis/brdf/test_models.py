@@ -309,8 +309,8 @@ def test_fitted_dhr_with_uncertainty() -> None:
 
 
 def test_flatland_model_agrees_with_the_lightfield_package() -> None:
-    # S2-14 is written twice (here for fitting, in analysis.lightfield for the scene
-    # renderer); until one serves both, they must give the same numbers, window included
+    # one implementation of S2-14: analysis.lightfield's FlatlandBRDF (the scene renderer)
+    # evaluates this module's functions; the numbers must stay identical, window included
     from analysis.lightfield import FlatlandBRDF
 
     rng = np.random.default_rng(11)
