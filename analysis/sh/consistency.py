@@ -20,12 +20,20 @@ own horizon clips) can be left out: :func:`known_lighting_residual` fits the unk
 radially symmetric filter A_l of B = Σ_l A_l Σ_m L_lm Y_lm(R) to the chosen pixels (the
 image-domain form of M10) and returns the residual, whose rms joins the per-order errors as
 one more calibrated component.
+
+Where the cases a calibration can simulate miss a departure that real consistent data
+share (a noise-only bootstrap of sphere captures misses the sphere's horizon), the decision
+can be recalibrated one level up: :func:`threshold_factor` takes u = T / threshold of
+≳ 1/α consistent captures of the same instrument, each judged against its own calibration,
+and returns the conformal (1 − α) quantile q of u; testing T > q · threshold
+(:func:`scale_threshold`) then has false-alarm rate ≤ α on new captures exchangeable with
+those.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,7 +48,9 @@ __all__ = [
     "calibrate",
     "check",
     "known_lighting_residual",
+    "scale_threshold",
     "statistic",
+    "threshold_factor",
 ]
 
 
@@ -134,12 +144,7 @@ def calibrate(
     e = np.asarray(consistent_errors, dtype=float)
     if e.ndim != 2:
         raise ValueError("consistent_errors must have shape (n_cases, n_orders)")
-    n = e.shape[0]
-    if not 0 < false_alarm < 1:
-        raise ValueError("false_alarm must lie in (0, 1)")
-    rank = int(np.ceil((n + 1) * (1.0 - false_alarm)))
-    if rank > n:
-        raise ValueError(f"{n} cases cannot calibrate α = {false_alarm}: need ≥ {rank}")
+    rank = _conformal_rank(e.shape[0], false_alarm)
     centre = np.median(e, axis=0)
     scale = 1.4826 * np.median(np.abs(e - centre), axis=0)
     # An order with no spread (exact identity, noise-free) must not divide by zero.
@@ -148,7 +153,49 @@ def calibrate(
     t = np.sort(statistic(_z(e, centre, scale)))
     thr = float(t[rank - 1])
     ords = np.arange(e.shape[1]) if orders is None else np.asarray(orders)
-    return ConsistencyCalibration(ords, centre, scale, thr, float(false_alarm), n)
+    return ConsistencyCalibration(ords, centre, scale, thr, float(false_alarm), e.shape[0])
+
+
+def _conformal_rank(n: int, false_alarm: float) -> int:
+    """⌈(n + 1)(1 − α)⌉, the order statistic of n cases that bounds the false alarms by α."""
+    if not 0 < false_alarm < 1:
+        raise ValueError("false_alarm must lie in (0, 1)")
+    rank = int(np.ceil((n + 1) * (1.0 - false_alarm)))
+    if rank > n:
+        raise ValueError(f"{n} cases cannot calibrate α = {false_alarm}: need ≥ {rank}")
+    return rank
+
+
+def threshold_factor(normalised_statistics: np.ndarray, *, false_alarm: float) -> float:
+    """Conformal factor q on u = T / threshold over consistent captures (module docstring).
+
+    Parameters
+    ----------
+    normalised_statistics : ndarray of shape (n,)
+        u = T / threshold of n consistent captures, each against its own calibration.
+    false_alarm : float
+        Target α of the recalibrated decision T > q · threshold; needs n ≥ 1/α − 1.
+
+    Returns
+    -------
+    float
+        The ⌈(n + 1)(1 − α)⌉-th smallest u.
+    """
+    u = np.sort(np.asarray(normalised_statistics, dtype=float).ravel())
+    if u.size == 0 or not np.all(np.isfinite(u)) or np.any(u < 0):
+        raise ValueError("normalised_statistics must be finite, ≥ 0 and not empty")
+    return float(u[_conformal_rank(u.size, false_alarm) - 1])
+
+
+def scale_threshold(calibration: ConsistencyCalibration, factor: float,
+                    *, false_alarm: float | None = None) -> ConsistencyCalibration:
+    """The calibration with its threshold multiplied by ``factor`` (> 0), e.g. the
+    :func:`threshold_factor` of the instrument, and the α that factor was calibrated for."""
+    if not factor > 0:
+        raise ValueError("factor must be > 0")
+    alpha = calibration.false_alarm if false_alarm is None else float(false_alarm)
+    return replace(calibration, threshold=calibration.threshold * float(factor),
+                   false_alarm=alpha)
 
 
 def bootstrap_consistent_errors(

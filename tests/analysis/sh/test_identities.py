@@ -12,7 +12,9 @@ from analysis.sh.consistency import (
     calibrate,
     check,
     known_lighting_residual,
+    scale_threshold,
     statistic,
+    threshold_factor,
 )
 from analysis.sh.convention import PROJECT_CONVENTION, SHConvention, convert
 from analysis.sh.convolve import convolve, per_coefficient
@@ -214,3 +216,29 @@ def test_bootstrap_calibration_detects_an_inconsistent_image() -> None:
     tampered = np.where(th < np.pi / 2, observed, other)  # one hemisphere from other lighting
     rep = check(errors_of(tampered), cal)
     assert rep.inconsistent and np.max(rep.ratio) > 3
+
+
+def test_threshold_factor_recalibrates_a_decision_that_misses_a_shared_departure() -> None:
+    """Consistent cases carry a departure (+0.03 on every order) that the noise-only
+    calibration does not know: its false alarms exceed α; the conformal factor on
+    u = T/threshold over 200 such cases brings new ones back to ≤ α (binomial spread)."""
+    rng = np.random.default_rng(21)
+    n_orders = 8
+    scale = np.full(n_orders, 0.01)
+
+    def draw(n: int, shift: float = 0.0) -> np.ndarray:
+        return 0.02 + shift + scale * rng.standard_normal((n, n_orders))
+
+    cal = calibrate(draw(400), false_alarm=0.01)
+    departed = draw(2000, 0.01)
+    u = np.array([check(e, cal).statistic for e in departed]) / cal.threshold
+    assert np.mean(u > 1) > 0.05  # the noise-only decision is not calibrated here
+    q = threshold_factor(u[:200], false_alarm=0.01)
+    cal_q = scale_threshold(cal, q)
+    assert cal_q.threshold == pytest.approx(q * cal.threshold) and q > 1
+    fa = np.mean([check(e, cal_q).inconsistent for e in departed[200:]])
+    assert fa <= 0.01 + 3 * np.sqrt(0.01 * 0.99 / 200), fa  # conformal coverage spread
+    with pytest.raises(ValueError):
+        threshold_factor(u[:50], false_alarm=0.01)  # 50 cases cannot calibrate α = 0.01
+    with pytest.raises(ValueError):
+        scale_threshold(cal, 0.0)
