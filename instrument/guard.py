@@ -52,6 +52,9 @@ class GuardError(ValueError):
         lines = [f"  - {v}" for v in violations[:MAX_LISTED]]
         if len(violations) > MAX_LISTED:
             lines.append(f"  ... and {len(violations) - MAX_LISTED} more")
+        if n_points > 1 and len(bad) == n_points:
+            lines.append("  every point is rejected: is the bench (--bench) the one this "
+                         "plan is written for?")
         super().__init__(
             f"{len(bad)} of {n_points} point(s) rejected before any motion:\n"
             + "\n".join(lines)

@@ -59,6 +59,9 @@ def test_guard_lists_every_offending_point_and_why():
     assert "4 of 5 point(s) rejected" in msg
     assert "point 2 (" in msg and "incident beam" in msg and "source housing" in msg
     assert "θi=" in msg  # points are described by their angles
+    assert "every point is rejected" not in msg  # only when the bench looks wrong
+    with pytest.raises(GuardError, match=r"every point is rejected: is the bench"):
+        enforce(pts[1:], prof)
 
 
 def test_guard_rejects_unknown_axis_and_dark_points_may_sit_in_beam():
