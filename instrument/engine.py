@@ -220,6 +220,11 @@ class RunEngine:
             self._thread.join(timeout)
         return self.state
 
+    @property
+    def alive(self) -> bool:
+        """True from :meth:`start` until the worker thread has ended (paused counts)."""
+        return self._thread is not None and self._thread.is_alive()
+
     def pause(self, reason: str = "paused by the operator") -> None:
         """Pause at the next point boundary."""
         with self._lock:

@@ -54,8 +54,7 @@ def drive(engine: RunEngine, quiet: bool) -> int:
         if threading.current_thread() is threading.main_thread() else None
     try:
         engine.start()
-        while engine.wait(0.2) in (EngineState.RUNNING, EngineState.IDLE) \
-                or (engine._thread is not None and engine._thread.is_alive()):
+        while engine.wait(0.2) in (EngineState.RUNNING, EngineState.IDLE) or engine.alive:
             if engine.state is EngineState.PAUSED and progress.finished is None:
                 # Nobody at a console can resume an automatic pause: stop here cleanly;
                 # the run continues later with `scatterlab resume`.
