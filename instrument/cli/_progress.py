@@ -22,6 +22,8 @@ from instrument.storage import read_summary
 
 def fmt_s(seconds: float) -> str:
     seconds = max(0.0, float(seconds))
+    if seconds < 10:  # short acquisitions would otherwise all read "0s"
+        return f"{seconds:.2g}s" if seconds >= 0.01 or seconds == 0 else "<0.01s"
     if seconds < 60:
         return f"{seconds:.0f}s"
     if seconds < 3600:
