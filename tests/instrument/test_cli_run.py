@@ -121,3 +121,30 @@ def test_run_and_runs_with_a_bad_out_folder_are_errors(tmp_path, capsys):
     assert main(["runs", "--out", str(tmp_path / "none")]) == 0
     assert "no runs in" in capsys.readouterr().out
     assert not (tmp_path / "none").exists()
+
+
+def test_runs_filters_from_the_command_line(tmp_path, capsys):
+    import time
+
+    from instrument.catalog import Catalog, RunRow
+
+    now = time.time()
+    with Catalog(tmp_path) as cat:
+        for run_id, sample, kind, status, age_days in [
+                ("a-old", "grey", "brdf_in_plane", "finished", 10),
+                ("b-dark", "grey", "dark", "finished", 1),
+                ("c-white", "white", "brdf_in_plane", "aborted", 0.5)]:
+            cat.add(RunRow(run_id, sample, kind, "p", "sim", status, now - 86400 * age_days,
+                           None, 3, 3, str(tmp_path / f"{run_id}.h5")))
+
+    def listed(*argv):
+        assert main(["runs", "--out", str(tmp_path), *argv]) == 0
+        out = capsys.readouterr().out
+        return [r for r in ("a-old", "b-dark", "c-white") if r in out]
+
+    assert listed() == ["a-old", "b-dark", "c-white"]
+    assert listed("--sample", "gre") == ["a-old", "b-dark"]
+    assert listed("--kind", "brdf_in_plane", "--status", "finished") == ["a-old"]
+    assert listed("--since-days", "2") == ["b-dark", "c-white"]
+    assert listed("--limit", "1") == ["c-white"]  # newest first
+    assert listed("--status", "paused") == []
