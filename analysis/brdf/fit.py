@@ -627,7 +627,9 @@ def _finish(
         aicc=aicc,
         bic=bic,
         residuals=r,
-        converged=res.status > 0,
+        # a non-finite residual (model NaN somewhere) leaves the solver where it started:
+        # never report that as converged
+        converged=res.status > 0 and bool(np.isfinite(chi2)),
         message=res.message,
         nfev=res.nfev,
         at_bound=at_bound,

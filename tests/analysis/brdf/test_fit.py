@@ -152,6 +152,22 @@ def test_information_criteria_formulae() -> None:
     assert ll2 == pytest.approx(-0.5 * n * (np.log(2 * np.pi * chi2 / n) + 1))
 
 
+def test_a_model_that_returns_nan_is_never_reported_converged() -> None:
+    from analysis.brdf.model import BRDFModel, ParamSpec
+
+    def value(p: np.ndarray, g) -> np.ndarray:
+        out = np.full(g.shape, p[0] / np.pi)
+        out[0] = np.nan  # e.g. a user model undefined at one geometry
+        return out
+
+    m = BRDFModel(name="nan_somewhere", params=(ParamSpec("rho", "1", 0.0, 1.0, 0.5),),
+                  value_fn=value)
+    tr = np.radians(np.linspace(0.0, 80.0, 20))
+    with np.errstate(invalid="ignore"):
+        fit = fit_brdf(m, np.full(20, 0.25), 0.3, 0.0, tr, np.pi)
+    assert not fit.converged and not np.isfinite(fit.chi2)
+
+
 def test_inputs_not_mutated_and_validation() -> None:
     m = get_model("lambert")
     y, sig, _ = noisy(m, [0.5], ANGLES, seed=1)
