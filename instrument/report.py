@@ -137,14 +137,20 @@ def analyse(
     sel = select_model(cands, f, *a, sigma=u, criterion=criterion, run_cv=run_cv,
                        n_starts=n_starts, seed=seed)
     by_name = {m.name: m for m in cands}
-    fits = {name: with_scale_uncertainty(fit, by_name[name], *a, sigma=u,
-                                         scale_rel=points.u_scale_rel)
-            for name, fit in sel.fits.items()}
     cov = points.plain_cov_corr()
-    if cov is not None:
-        # errors shared between points (camera pixel response): propagated, not fitted
-        fits = {name: with_correlated_uncertainty(fit, by_name[name], *a, sigma=u, cov=cov)
-                for name, fit in fits.items()}
+    fits = {}
+    for name, fit in sel.fits.items():
+        if not fit.converged:
+            # nothing to propagate through a failed fit (its Jacobian may be NaN): it is
+            # kept as it is and flagged in the notes
+            fits[name] = fit
+            continue
+        fit = with_scale_uncertainty(fit, by_name[name], *a, sigma=u,
+                                     scale_rel=points.u_scale_rel)
+        if cov is not None:
+            # errors shared between points (camera pixel response): propagated, not fitted
+            fit = with_correlated_uncertainty(fit, by_name[name], *a, sigma=u, cov=cov)
+        fits[name] = fit
     if n_bootstrap > 0:
         chosen = sel.chosen
         boot = fit_brdf(by_name[chosen], f, *a, sigma=u, start=sel.fits[chosen].params,
@@ -155,11 +161,15 @@ def analyse(
                 for name, fit in fits.items()}
     notes = []
     for name, vals in dhr_vals.items():
-        if by_name[name].energy_bounded and np.nanmax(vals) > 1.0 + 1e-3:
-            notes.append(f"{name}: fitted DHR reaches {np.nanmax(vals):.3f} > 1 "
+        finite = vals[np.isfinite(vals)]
+        if by_name[name].energy_bounded and finite.size and finite.max() > 1.0 + 1e-3:
+            notes.append(f"{name}: fitted DHR reaches {finite.max():.3f} > 1 "
                          "(energy not conserved by these parameters)")
         if fits[name].rank_deficient:
             notes.append(f"{name}: parameters not all identifiable from these data")
+        if not fits[name].converged:
+            notes.append(f"{name}: the fit did not converge ({fits[name].message}); its "
+                         "parameters and scores are not reliable")
     return AnalysisResult(sel, fits, by_name, _DHR_THETA_DEG.copy(), dhr_vals,
                           reciprocity_check(points), tuple(notes))
 

@@ -18,7 +18,7 @@ import pytest
 from analysis.brdf import get_model
 from instrument.analysis_io import ReductionOptions, read_run, reduce_run
 from instrument.cli import main
-from instrument.report import analyse
+from instrument.report import analyse, write_report
 from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, render, write_run_file
 
 GLOSSY = SAMPLES[1]
@@ -285,3 +285,26 @@ def test_report_panels_merge_jittered_incidence_and_keep_out_of_plane_points_off
         (30.0, 0.0), (45.0, 0.0)]
     assert groups[0][2].tolist() == [0, 1, 2, 3]
     assert _in_plane(pts).tolist() == [True, True, True, False, True]
+
+
+def test_a_fit_that_did_not_converge_is_noted(glossy_run, tmp_path) -> None:
+    from analysis.brdf.model import BRDFModel, ParamSpec
+    from analysis.brdf.registry import register_model, unregister_model
+
+    def value(p: np.ndarray, g) -> np.ndarray:
+        out = np.full(g.shape, p[0] / np.pi)
+        out.reshape(-1)[0] = np.nan
+        return out
+
+    register_model("nan_lambert", lambda: BRDFModel(
+        name="nan_lambert", params=(ParamSpec("rho", "1", 0.0, 1.0, 0.5),), value_fn=value))
+    try:
+        pts = reduce_run(glossy_run).points
+        with np.errstate(invalid="ignore"):
+            res = analyse(pts, ["lambert+ggx", "nan_lambert"], run_cv=False)
+            page = write_report(tmp_path / "rep", pts, res, title="t")
+    finally:
+        unregister_model("nan_lambert")
+    assert res.chosen == "lambert+ggx"
+    assert any(n.startswith("nan_lambert: the fit did not converge") for n in res.notes)
+    assert "did not converge" in page.read_text(encoding="utf-8")
