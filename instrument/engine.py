@@ -65,6 +65,11 @@ from instrument.storage import (
 
 __all__ = ["EngineSnapshot", "EngineState", "RunEngine"]
 
+#: Seconds a point's write may take before the engine turns the light off and reports a
+#: storage fault while it goes on waiting (a stalled disk or network share: an HDF5 write
+#: in flight cannot be abandoned safely, but the sample need not stay lit meanwhile).
+STORAGE_STALL_S = 30.0
+
 
 class EngineState(enum.Enum):
     IDLE = "idle"
@@ -446,7 +451,8 @@ class RunEngine:
         """
         while True:
             try:
-                self._writer.drain()
+                self._writer.drain(stall_s=STORAGE_STALL_S,
+                                   on_stall=lambda: self._storage_stalled(index))
                 return
             except StorageError as err:
                 self._store_broken = True
@@ -467,6 +473,18 @@ class RunEngine:
                 self._enter_pause(f"storage: {err}", index)
                 # Recovered from the journal: the lost point is not in done any more.
                 raise _Restart from err
+
+    def _storage_stalled(self, index: int | None) -> None:
+        """The previous point's write is taking too long: make the bench safe (the axes
+        are at rest here), say so, and let the next acquisition restore the light."""
+        problems = self.bench.make_safe()
+        self._light = None  # the next Acquire turns the light back to what it needs
+        action = "light off, waiting for the write"
+        if problems:
+            action += "; could not make safe: " + "; ".join(problems)
+        self._emit(Fault("storage", f"writing the previous point to {self.store.path} has "
+                         f"taken over {STORAGE_STALL_S:g} s (disk or network share "
+                         "stalled?)", action, index))
 
     def _submit(self, st: _PointState, skipped: str | None = None) -> None:
         axes = self.plan.axes
@@ -864,12 +882,23 @@ class _Writer:
                 self._error = err
             raise
 
-    def drain(self) -> None:
-        """Wait until every submitted job is done; re-raise a storage error once."""
-        with self._cond:
-            while self._busy:
-                self._cond.wait()
-            err = self._error  # sticky: this writer's store is broken until replaced
+    def drain(self, *, stall_s: float = math.inf, on_stall=None) -> None:
+        """Wait until every submitted job is done; re-raise a storage error once.
+
+        An HDF5 write in flight cannot be abandoned, so this waits for it however long it
+        takes; ``on_stall()`` is called once (outside the lock) if it takes longer than
+        ``stall_s`` seconds.
+        """
+        deadline = time.monotonic() + stall_s if on_stall is not None else math.inf
+        while True:
+            with self._cond:
+                while self._busy and time.monotonic() < deadline:
+                    self._cond.wait(min(deadline - time.monotonic(), 3600.0))
+                if not self._busy:
+                    err = self._error  # sticky: this store is broken until replaced
+                    break
+            on_stall()
+            deadline = math.inf
         if err is not None:
             if isinstance(err, StorageError):
                 raise err

@@ -251,3 +251,44 @@ def test_a_slow_gui_client_never_blocks_the_worker_and_gets_every_lifecycle_even
     assert len(live) == 1 and slow.dropped >= len(plan.points)
     assert gone.drain() == []
     assert seen_on == {"run-engine"}  # subscribers run on the worker thread
+
+
+def test_a_stalled_write_turns_the_light_off_reports_and_the_run_goes_on(tmp_path,
+                                                                          monkeypatch):
+    import threading
+
+    from instrument import engine as engine_mod
+    from instrument.events import Fault
+
+    monkeypatch.setattr(engine_mod, "STORAGE_STALL_S", 0.05)
+    engine, q, plan, bench = _run(tmp_path)
+    store = engine.store
+    real_append = store.append
+    release = threading.Event()
+
+    def stalling_append(rec):  # the disk stops answering while point 1 is written
+        if rec.index == 1:
+            assert release.wait(10)
+        real_append(rec)
+
+    monkeypatch.setattr(store, "append", stalling_append)
+    light_during_stall = []
+
+    def on(ev):
+        if isinstance(ev, Fault) and ev.device == "storage":
+            light_during_stall.append(bench.source._on)
+            release.set()
+
+    engine.subscribe(on)
+    assert engine.run() is EngineState.FINISHED
+    faults = [e for e in q.drain() if isinstance(e, Fault)]
+    assert len(faults) == 1 and "taken over 0.05 s" in faults[0].cause
+    assert faults[0].action == "light off, waiting for the write"
+    assert light_during_stall == [False]
+    with h5py.File(engine.store.path) as f:
+        e = f["entry"]
+        idx = list(e["points/index"][:])
+        assert sorted(idx) == list(range(len(plan.points)))
+        # The light came back for the next point: its frames are lit (dark level 10 DN).
+        after = next(k for k, i in enumerate(idx) if i == faults[0].index)
+        assert e["points/signal"][after] > 0.5
