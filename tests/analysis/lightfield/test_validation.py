@@ -179,11 +179,17 @@ def test_rp_refocusing_brightness_equal_where_conventional_is_not():
     assert abs(conv[1] / conv[0] - 1.0) > 0.15
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: between 1.0 and ~1.3 δy (δy from the "
-                   "pair's own p̂_max) the merged peak and two sidelobe shoulders are all "
-                   "reported as 'resolved' objects, the outer two ~1.8× too far out")
-def test_two_objects_just_above_the_resolution_are_two_not_three():
-    sep = 20.0  # 1.26 δy at the pair's p̂_max = 8 (δy = 15.8 mm at 224.5 mm)
+# 18 and 20 mm were the failing separations; the rest of the sweep is slow-marked
+@pytest.mark.parametrize("sep", [pytest.param(16.0, marks=pytest.mark.slow), 18.0, 20.0,
+                                 pytest.param(22.0, marks=pytest.mark.slow),
+                                 pytest.param(24.0, marks=pytest.mark.slow)])
+def test_two_objects_just_above_the_resolution_are_two_not_three(sep):
+    """1.0–1.5 δy apart (δy = 14–16 mm at the pair's p̂_max = 8–9): never three objects.
+
+    Greedy subtraction alone reported the merged peak plus two shoulders ≈ 1.8× too far
+    out at 18–20 mm, all "resolved"; the joint refit must leave the pair (or, within
+    ≈ 1.1 δy, one merged detection between the two).
+    """
     objs = [PointObject(-sep / 2, -D1, 1.0, 1.0, "gaussian"),
             PointObject(sep / 2, -D1, 1.0, 1.0, "gaussian")]
     rec = _reconstructed(objs, GLOSSY, 0.01, 5)
@@ -194,7 +200,14 @@ def test_two_objects_just_above_the_resolution_are_two_not_three():
     det = detect_objects(rec.incident_field, p_max=p2, y_mm=np.linspace(-60, 60, 481),
                          z_mm=np.linspace(-330, -120, 211),
                          solvable_domain_rad=rec.solvable_domain_rad)
-    resolved = [k for k in range(det.count) if det.quality[k] != "unresolved"]
-    assert len(resolved) <= 2
-    ys = np.sort(det.positions_mm[resolved, 0])
-    assert np.allclose(ys, [-sep / 2, sep / 2], atol=0.5 * res.transverse_mm)
+    assert det.count in (1, 2)
+    if det.count == 1:
+        # merging is acceptable only at the resolution limit, and then between the two
+        assert sep < 1.1 * res.transverse_mm
+        assert abs(det.positions_mm[0, 0]) < 0.25 * res.transverse_mm
+    else:
+        ys = np.sort(det.positions_mm[:, 0])
+        # the joint fit puts them where they are, not at the shoulders (±0.9 δy·1.8)
+        assert np.allclose(ys, [-sep / 2, sep / 2], atol=0.1 * res.transverse_mm)
+        assert np.allclose(det.positions_mm[:, 1], -D1, atol=res.depth_mm)
+        assert all(q == "resolved" for q in det.quality)
