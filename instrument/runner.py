@@ -21,7 +21,7 @@ from drivers.errors import DeviceError
 from instrument.catalog import Catalog, RunRow
 from instrument.devices import Bench
 from instrument.engine import RunEngine
-from instrument.events import Event, Paused, RunFinished, RunStarted
+from instrument.events import Event, Paused, Progress, RunFinished, RunStarted
 from instrument.kinematics import Angles
 from instrument.plans.build import Plan
 from instrument.plans.commands import ScanPoint
@@ -115,11 +115,24 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
         software_version=software_version(), created=time.time())
 
 
+#: Seconds between catalog updates of a running run's point count (a short SQLite write
+#: on the worker thread; more often would cost per-point time for no reader's benefit).
+CATALOG_PROGRESS_S = 2.0
+
+
 def _track(engine: RunEngine, catalog: Catalog, run_id: str) -> None:
-    """Keep the catalog row's status and point count current (start, pause, end)."""
+    """Keep the catalog row's status and point count current (start, progress every
+    ``CATALOG_PROGRESS_S``, pause, end)."""
+    last = [0.0]
 
     def on_event(ev: Event) -> None:
-        if isinstance(ev, RunStarted):
+        if isinstance(ev, Progress):
+            now = time.monotonic()
+            if now - last[0] >= CATALOG_PROGRESS_S:
+                last[0] = now
+                catalog.update(run_id, n_points=ev.n_done)
+        elif isinstance(ev, RunStarted):
+            last[0] = time.monotonic()
             catalog.update(run_id, status="running", n_points=ev.n_done)
         elif isinstance(ev, Paused):
             catalog.update(run_id, status="paused", n_points=engine.n_done)

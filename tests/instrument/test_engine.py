@@ -292,3 +292,28 @@ def test_a_stalled_write_turns_the_light_off_reports_and_the_run_goes_on(tmp_pat
         # The light came back for the next point: its frames are lit (dark level 10 DN).
         after = next(k for k, i in enumerate(idx) if i == faults[0].index)
         assert e["points/signal"][after] > 0.5
+
+
+def test_catalog_row_follows_a_running_run(tmp_path, monkeypatch):
+    from instrument import runner
+    from instrument.catalog import Catalog
+    from instrument.events import Progress
+
+    monkeypatch.setattr(runner, "CATALOG_PROGRESS_S", 0.0)
+    bench = ideal_bench()
+    plan = build_plan(parse_plan(inplane_plan()), bench.profile)
+    engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False)  # catalog on
+    run_id = engine.store.header.run_id
+    seen = []
+    reader = Catalog(tmp_path)  # another connection, as `scatterlab runs` would open
+
+    def on(ev):
+        if isinstance(ev, Progress):
+            row = reader.get(run_id)
+            seen.append((row.status, row.n_points, ev.n_done))
+
+    engine.subscribe(on)
+    assert engine.run() is EngineState.FINISHED
+    reader.close()
+    assert len(seen) >= len(plan.points)
+    assert all(status == "running" and n == done for status, n, done in seen)
