@@ -11,6 +11,13 @@ lighting).
 
     python benchmarks/bench_sphere_capture.py            # environments 1..8
     python benchmarks/bench_sphere_capture.py --quick    # environment 1 only
+    python benchmarks/bench_sphere_capture.py --seeds 1-16
+    python benchmarks/bench_sphere_capture.py --calibrate 17-116   # the bench's factor q
+
+``--calibrate`` captures consistent (untampered) environments only and prints the conformal
+factor q on T/threshold (:func:`analysis.sh.consistency.threshold_factor`, α = 0.01), the
+value behind :data:`instrument.sphere_io.SIM_SPHERES_THRESHOLD_SCALE`; the table's last
+columns judge the (held-out) environments at that factor.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from analysis.sh.consistency import threshold_factor  # noqa: E402
 from hw_mocks import registry  # noqa: E402
 from hw_mocks.sim.world import reset_worlds  # noqa: E402
 from instrument import sphere_io  # noqa: E402
@@ -35,7 +43,8 @@ PROFILE = ROOT / "instrument" / "profiles" / "sim-spheres.toml"
 PLAN = ROOT / "examples" / "sphere_capture.toml"
 
 
-def one(seed: int, folder: Path) -> dict[str, float]:
+def capture(seed: int, folder: Path) -> tuple[Path, float]:
+    """Run the example plan on the profile with environment ``seed``: (run file, seconds)."""
     text = re.sub(r"environment = \{ seed = \d+ \}", f"environment = {{ seed = {seed} }}",
                   PROFILE.read_text())
     prof = folder / f"sim-spheres-{seed}.toml"
@@ -50,13 +59,18 @@ def one(seed: int, folder: Path) -> dict[str, float]:
     if rc != 0:
         raise RuntimeError(f"scatterlab run failed ({rc}) for environment {seed}")
     (path,) = out.glob("*.h5")
+    return path, t_run
+
+
+def one(seed: int, folder: Path) -> dict[str, float]:
+    path, t_run = capture(seed, folder)
     t0 = time.perf_counter()
-    capture, res = sphere_io.analyse_run(path, write=False)
+    cap, res = sphere_io.analyse_run(path, write=False)
     t_ana = time.perf_counter() - t0
-    rad = capture.radiance.copy()
+    rad = cap.radiance.copy()
     half = rad.shape[2] // 2
     rad[-1, -1, :half] = rad[0, -1, :half]
-    tam = sphere_io.analyse_capture(dataclasses.replace(capture, radiance=rad))
+    tam = sphere_io.analyse_capture(dataclasses.replace(cap, radiance=rad))
     return {
         "seed": seed, "l1": res.relight_l1, "t": res.consistency.statistic,
         "thr": res.consistency.threshold, "flag": res.consistency.inconsistent,
@@ -69,8 +83,14 @@ def one(seed: int, folder: Path) -> dict[str, float]:
 def run(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="environment 1 only")
+    ap.add_argument("--seeds", default="1-8", help="environments A-B (default 1-8)")
+    ap.add_argument("--calibrate", metavar="A-B", default=None,
+                    help="consistent captures of environments A-B → the factor q")
     args = ap.parse_args(argv)
-    seeds = [1] if args.quick else list(range(1, 9))
+    if args.calibrate:
+        return calibrate(_seed_range(args.calibrate))
+    seeds = [1] if args.quick else _seed_range(args.seeds)
+    q = sphere_io.SIM_SPHERES_THRESHOLD_SCALE
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
@@ -87,6 +107,30 @@ def run(argv: list[str] | None = None) -> int:
           f"over {len(rows)} environment(s); untampered flagged "
           f"{sum(r['flag'] for r in rows)}/{len(rows)}, spliced flagged "
           f"{sum(r['flag_tam'] for r in rows)}/{len(rows)}")
+    fa = sum(r["t"] > q * r["thr"] for r in rows)
+    det = sum(r["t_tam"] > q * r["thr_tam"] for r in rows)
+    print(f"at the bench's threshold scale q = {q:g}: untampered flagged {fa}/{len(rows)}, "
+          f"spliced flagged {det}/{len(rows)}")
+    return 0
+
+
+def _seed_range(text: str) -> list[int]:
+    a, _, b = text.partition("-")
+    return list(range(int(a), int(b or a) + 1))
+
+
+def calibrate(seeds: list[int], false_alarm: float = 0.01) -> int:
+    """Print u = T/threshold of consistent captures and the conformal factor q."""
+    u = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for s in seeds:
+            path, _ = capture(s, Path(tmp))
+            rep = sphere_io.analyse_run(path, write=False)[1].consistency
+            u.append(rep.statistic / rep.threshold)
+            print(f"environment {s}: T/threshold = {u[-1]:.3f}", flush=True)
+    q = threshold_factor(u, false_alarm=false_alarm)
+    print(f"\n{len(u)} consistent captures: u > 1 in {sum(x > 1 for x in u)}; "
+          f"largest {max(u):.3f}; conformal factor q at α = {false_alarm:g}: {q:.3f}")
     return 0
 
 

@@ -33,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="grazing cut-off of the consistency check (deg, default 80)")
     p.add_argument("--false-alarm", type=float, default=0.01,
                    help="false-alarm rate of the consistency check (default 0.01)")
+    p.add_argument("--threshold-scale", type=float, default=1.0,
+                   help="multiply the bootstrap threshold by the bench's calibrated factor "
+                        "(BENCHMARKS.md sphere_capture; default 1: noise-only threshold)")
     p.add_argument("--figure", default=None,
                    help="figure path (default <run>.spheres.png; 'none' for no figure)")
     p.add_argument("--no-write", action="store_true",
@@ -54,6 +57,8 @@ def _option_error(args: argparse.Namespace) -> str | None:
                 f"{args.max_view_angle:g}] deg (got {args.check_view_angle:g})")
     if not 0 < args.false_alarm < 1:
         return f"--false-alarm must lie in (0, 1) (got {args.false_alarm:g})"
+    if not args.threshold_scale > 0:
+        return f"--threshold-scale must be > 0 (got {args.threshold_scale:g})"
     return None
 
 
@@ -72,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
             args.run, write=not args.no_write, figure=fig, lmax=args.lmax,
             lmax_check=args.lmax_check, max_view_angle_deg=args.max_view_angle,
             check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
+            threshold_scale=args.threshold_scale,
         )
     except (ValueError, OSError, KeyError) as err:
         print(f"error: {args.run}: {err} (is it the run file of a sphere_capture plan?)")
@@ -98,7 +104,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"  consistency (M21, orders 0..{int(rep.orders[-1])} against the noise level): "
           f"T = {rep.statistic:.3g}, threshold {rep.threshold:.3g} at α = "
           f"{rep.false_alarm:g}: {verdict}")
-    print(f"  note: {sphere_io.CONSISTENCY_LIMIT}")
+    if res.threshold_scale == 1.0:
+        print(f"  note: {sphere_io.CONSISTENCY_LIMIT}")
+    else:
+        print(f"  threshold = {res.threshold_scale:g} × the bootstrap's (--threshold-scale, "
+              "calibrated on consistent captures of the bench)")
     if fig is not None:
         print(f"figure: {fig}")
     if not args.no_write:

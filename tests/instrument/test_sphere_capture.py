@@ -351,13 +351,22 @@ def test_lighting_estimates_match_the_scene_turned_by_the_source_arm(analysed):
     assert wrong > 0.3
 
 
-def test_a_spliced_capture_is_flagged(capture_run):
+def test_a_spliced_capture_is_flagged_at_the_benchs_calibrated_threshold(capture_run,
+                                                                         analysed):
     capture = sphere_io.read_capture(capture_run)
     rad = capture.radiance.copy()
     rad[1, 1, :36] = rad[0, 1, :36]  # top half of the last image from the other lighting
-    res = sphere_io.analyse_capture(dataclasses.replace(capture, radiance=rad))
-    assert res.consistency.inconsistent
+    q = sphere_io.SIM_SPHERES_THRESHOLD_SCALE
+    assert q > 1  # the noise-only bootstrap threshold is too low for this bench
+    res = sphere_io.analyse_capture(dataclasses.replace(capture, radiance=rad),
+                                    threshold_scale=q)
+    assert res.consistency.inconsistent and res.threshold_scale == q
     assert res.relight_l1 > 0.1
+    stored = sphere_io.summary(capture, res)["consistency"]
+    assert stored["threshold_scale"] == q and stored["limit"] is None
+    # the untampered capture stays consistent at the calibrated threshold
+    _cap, clean, _fig = analysed
+    assert clean.consistency.statistic <= q * clean.consistency.threshold
 
 
 def test_cli_spheres_reports(capture_run, tmp_path, capsys):
@@ -377,6 +386,7 @@ def test_cli_spheres_reports(capture_run, tmp_path, capsys):
     (["--max-view-angle", "95"], "--max-view-angle"),
     (["--check-view-angle", "88"], "--check-view-angle"),
     (["--false-alarm", "2"], "--false-alarm"),
+    (["--threshold-scale", "0"], "--threshold-scale"),
 ])
 def test_cli_spheres_names_a_bad_option(tmp_path, capsys, args, flag):
     assert main(["spheres", str(tmp_path / "never-read.h5"), *args]) == 2
