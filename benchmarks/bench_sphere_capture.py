@@ -30,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -121,6 +123,10 @@ def _seed_range(text: str) -> list[int]:
 
 def calibrate(seeds: list[int], false_alarm: float = 0.01) -> int:
     """Print u = T/threshold of consistent captures and the conformal factor q."""
+    need = int(np.ceil(1.0 / false_alarm)) - 1
+    if len(seeds) < need:
+        raise SystemExit(f"--calibrate needs ≥ {need} environments for α = {false_alarm:g} "
+                         f"(got {len(seeds)})")
     u = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
