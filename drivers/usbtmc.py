@@ -626,7 +626,7 @@ class UsbtmcDevice:
         except ConnectionFailed:
             raise
         except DeviceError:
-            pass
+            pass   # the abort itself failed; the caller reports the original problem
 
     # -- errors -------------------------------------------------------------------------
     @staticmethod
