@@ -152,20 +152,26 @@ def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
     assert "fault" in kinds and kinds.index("paused") < kinds.index("resumed")
 
 
+def _unplug_after_point(index: int, faults, *, reconnect_on: str):
+    """Subscriber: pull the cable once point ``index`` is done; plug it back in when the
+    engine reports the recovery action ``reconnect_on``."""
+    armed = []
+
+    def on(ev):
+        if isinstance(ev, PointCompleted) and ev.index == index and not armed:
+            armed.append(1)
+            faults.schedule(FaultKind.DISCONNECT, nth=1)
+        if isinstance(ev, Fault) and ev.action == reconnect_on:
+            faults.clear()
+
+    return on
+
+
 def test_skip_policy_marks_the_point(tmp_path, make_bench):
     bench = make_bench("skip")
     engine, _q, plan = _start(tmp_path, bench)
     faults = registry.get("simsmc", "detector_theta").faults
-    armed = []
-
-    def on(ev):
-        if isinstance(ev, PointCompleted) and ev.index == 3 and not armed:
-            armed.append(1)
-            faults.schedule(FaultKind.DISCONNECT, nth=1)
-        if isinstance(ev, Fault) and ev.action == "skip point":
-            faults.clear()
-
-    engine.subscribe(on)
+    engine.subscribe(_unplug_after_point(3, faults, reconnect_on="skip point"))
     assert engine.run() is EngineState.FINISHED
     idx, status, _, _ = _file(engine)
     assert sorted(idx) == list(range(len(plan.points)))
@@ -176,16 +182,7 @@ def test_rehome_policy(tmp_path, make_bench):
     bench = make_bench("rehome")
     engine, q, plan = _start(tmp_path, bench)
     faults = registry.get("simapt", "sample_theta").faults
-    armed = []
-
-    def on(ev):
-        if isinstance(ev, PointCompleted) and ev.index == 2 and not armed:
-            armed.append(1)
-            faults.schedule(FaultKind.DISCONNECT, nth=1)
-        if isinstance(ev, Fault) and ev.action == "rehome":
-            faults.clear()
-
-    engine.subscribe(on)
+    engine.subscribe(_unplug_after_point(2, faults, reconnect_on="rehome"))
     assert engine.run() is EngineState.FINISHED
     actions = [e.action for e in q.drain() if isinstance(e, Fault)]
     assert "rehome" in actions
