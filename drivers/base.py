@@ -22,6 +22,7 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,6 +44,8 @@ __all__ = [
     "Camera",
     "Device",
     "DeviceIdentity",
+    "FilterSpec",
+    "FilterWheel",
     "Frame",
     "FrameRing",
     "LightSource",
@@ -50,6 +53,10 @@ __all__ = [
     "PixelFormat",
     "PowerMeter",
     "Roi",
+    "Shutter",
+    "ShutterState",
+    "WheelSpeed",
+    "parse_filters",
 ]
 
 
@@ -944,6 +951,283 @@ class LightSource(Device):
 
     def _do_set_power_w(self, value: float) -> None:
         raise UnsupportedFeature("no power setpoint", device=self.name, command="set power_w")
+
+
+# --------------------------------------------------------------------------- shutter
+
+
+class ShutterState(enum.Enum):
+    """Where a shutter's blade is, as the controller reports it."""
+
+    OPEN = "open"
+    CLOSED = "closed"
+
+
+class Shutter(LightSource):
+    """A shutter in front of a source: light reaches the sample while it is open.
+
+    As a :class:`LightSource`, :meth:`turn_on` opens the shutter and :meth:`turn_off`
+    closes it (always allowed; a no-op on a closed device), and ``is_on`` is "the blade is
+    open". :meth:`open_shutter`/:meth:`close_shutter` say the same in a shutter's words
+    (``close`` is taken: it releases the device).
+    """
+
+    def open_shutter(self) -> None:
+        self.turn_on()
+
+    def close_shutter(self) -> None:
+        """Close the shutter. Always allowed; a no-op on a closed device."""
+        self.turn_off()
+
+    @property
+    def shutter_state(self) -> ShutterState:
+        self._check_open("shutter_state")
+        return self._do_shutter_state()
+
+    def _do_set_on(self, on: bool) -> None:
+        if on:
+            self._do_open_shutter()
+        else:
+            self._do_close_shutter()
+
+    def _do_is_on(self) -> bool:
+        return self._do_shutter_state() is ShutterState.OPEN
+
+    @abstractmethod
+    def _do_shutter_state(self) -> ShutterState: ...
+
+    @abstractmethod
+    def _do_open_shutter(self) -> None: ...
+
+    @abstractmethod
+    def _do_close_shutter(self) -> None: ...
+
+
+# --------------------------------------------------------------------------- filter wheel
+
+
+class WheelSpeed(enum.Enum):
+    """Move profile of a filter wheel."""
+
+    NORMAL = "normal"
+    HIGH = "high"
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """What sits in one filter-wheel slot, as the bench configuration describes it.
+
+    A band-pass filter has a centre wavelength and a full width at half maximum, both in
+    nm; a slot with neither is empty (clear aperture, passes everything).
+    """
+
+    center_nm: float | None = None
+    bandwidth_nm: float | None = None
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        if (self.center_nm is None) != (self.bandwidth_nm is None):
+            raise ValueError("a filter needs both center_nm and bandwidth_nm (or neither, "
+                             f"for an empty slot), got {self}")
+        if self.center_nm is not None:
+            for what, value in (("center_nm", self.center_nm),
+                                ("bandwidth_nm", self.bandwidth_nm)):
+                if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                    raise ValueError(f"filter {what} must be a finite number > 0, got {value!r}")
+
+    @property
+    def is_empty(self) -> bool:
+        return self.center_nm is None
+
+    @classmethod
+    def parse(cls, spec: FilterSpec | Mapping[str, Any] | None) -> FilterSpec:
+        """A spec from its configuration form: a table ``{center_nm, bandwidth_nm, label}``."""
+        if spec is None:
+            return cls()
+        if isinstance(spec, FilterSpec):
+            return spec
+        if not isinstance(spec, Mapping):
+            raise TypeError(f"a filter is a table {{center_nm, bandwidth_nm, label}}, "
+                            f"got {spec!r}")
+        unknown = set(spec) - {"center_nm", "bandwidth_nm", "label"}
+        if unknown:
+            raise ValueError(f"unknown filter keys {sorted(unknown)}; "
+                             "known: center_nm, bandwidth_nm, label")
+        return cls(center_nm=spec.get("center_nm"), bandwidth_nm=spec.get("bandwidth_nm"),
+                   label=str(spec.get("label", "")))
+
+
+def parse_filters(filters: Mapping[Any, Any] | None) -> dict[int, FilterSpec]:
+    """Slot number (1-based; TOML gives string keys) → :class:`FilterSpec`."""
+    out: dict[int, FilterSpec] = {}
+    for key, spec in (filters or {}).items():
+        try:
+            slot = int(key)
+        except (TypeError, ValueError):
+            raise ValueError(f"filter slots are numbered from 1, got {key!r}") from None
+        if slot < 1 or str(slot) != str(key).strip():
+            raise ValueError(f"filter slots are numbered from 1, got {key!r}")
+        out[slot] = FilterSpec.parse(spec)
+    return out
+
+
+class FilterWheel(Device):
+    """A motorised filter wheel with numbered slots.
+
+    Positions are 1-based, as the wheel counts them, and checked against the wheel's slot
+    count before anything moves (:class:`~drivers.errors.LimitError`). :meth:`move_to`
+    blocks until the wheel stands at the slot, for at most ``timeout`` seconds (default:
+    ``move_timeout_factor`` × the estimated move time + ``move_timeout_margin_s``), then
+    reads the position back: a wheel that stopped elsewhere raises
+    :class:`~drivers.errors.MotionError`.
+
+    Parameters
+    ----------
+    name
+        Role name (e.g. ``"filter_wheel"``).
+    filters
+        Slot → :class:`FilterSpec` (or its table form) from the bench configuration;
+        slots not given are empty. Checked against the slot count when the driver knows it.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        filters: Mapping[Any, Any] | None = None,
+        move_timeout_factor: float = 3.0,
+        move_timeout_margin_s: float = 2.0,
+    ) -> None:
+        super().__init__(name)
+        self._filters = parse_filters(filters)
+        self.move_timeout_factor = _positive(move_timeout_factor, "move_timeout_factor")
+        self.move_timeout_margin_s = float(move_timeout_margin_s)
+        if not (math.isfinite(self.move_timeout_margin_s) and self.move_timeout_margin_s >= 0):
+            raise ValueError("move_timeout_margin_s must be finite and >= 0")
+
+    # configuration ------------------------------------------------------------
+    @property
+    def filters(self) -> dict[int, FilterSpec]:
+        """The configured filters by slot (a copy)."""
+        return dict(self._filters)
+
+    def filter_at(self, position: int) -> FilterSpec:
+        """The filter in slot ``position`` (an empty spec where none is configured)."""
+        position = self.check_position(position, "filter_at")
+        return self._filters.get(position, FilterSpec())
+
+    def _check_filters(self, count: int) -> None:
+        """Drivers call this once they know the slot count."""
+        outside = sorted(slot for slot in self._filters if not 1 <= slot <= count)
+        if outside:
+            raise ValueError(f"{self.name}: filters configured for slots {outside}, but the "
+                             f"wheel has slots 1..{count}")
+
+    # state ----------------------------------------------------------------------
+    @property
+    def position_count(self) -> int:
+        """Number of slots on the wheel."""
+        self._check_open("position_count")
+        return self._do_position_count()
+
+    @property
+    def position(self) -> int:
+        """The slot in the beam (1-based), as the wheel reports it."""
+        self._check_open("position")
+        return self._do_get_position()
+
+    @property
+    def current_filter(self) -> FilterSpec:
+        return self.filter_at(self.position)
+
+    def check_position(self, position: int, command: str = "move_to") -> int:
+        """Return ``position`` as int, or raise if it is no slot of this wheel."""
+        if isinstance(position, bool) or not isinstance(position, int | np.integer):
+            raise TypeError(f"{self.name}: a slot number is an int, got {position!r}")
+        count = self._do_position_count()
+        if not 1 <= position <= count:
+            raise LimitError(f"slot {position} does not exist (the wheel has slots 1..{count})",
+                             device=self.name, command=command,
+                             hint="choose a slot from 1 to the slot count")
+        return int(position)
+
+    @property
+    def speed(self) -> WheelSpeed:
+        self._check_open("speed")
+        return self._do_get_speed()
+
+    @speed.setter
+    def speed(self, value: WheelSpeed | str) -> None:
+        self._check_open("set speed")
+        if isinstance(value, str):
+            try:
+                value = WheelSpeed(value.lower())
+            except ValueError:
+                raise ValueError(f"{self.name}: speed must be 'normal' or 'high', "
+                                 f"got {value!r}") from None
+        if not isinstance(value, WheelSpeed):
+            raise TypeError(f"{self.name}: speed must be a WheelSpeed, got {value!r}")
+        self._do_set_speed(value)
+
+    # motion -------------------------------------------------------------------
+    def estimated_move_s(self, target: int) -> float:
+        """Seconds a move from the present slot to ``target`` should take."""
+        self._check_open("estimated_move_s")
+        target = self.check_position(target, "estimated_move_s")
+        return self._do_estimate_move_s(self._do_get_position(), target)
+
+    def move_to(self, position: int, *, timeout: float | None = None) -> int:
+        """Put slot ``position`` in the beam; return when it is there.
+
+        Raises
+        ------
+        LimitError
+            No such slot (raised before anything moves).
+        DeviceTimeout
+            The wheel did not arrive within ``timeout`` s.
+        MotionError
+            It stopped at another slot.
+        """
+        self._check_open("move_to")
+        position = self.check_position(position, "move_to")
+        if timeout is None:
+            estimate = self._do_estimate_move_s(self._do_get_position(), position)
+            timeout = self.move_timeout_factor * estimate + self.move_timeout_margin_s
+        if not (math.isfinite(timeout) and timeout > 0):
+            raise ValueError(f"{self.name}: timeout must be a finite number > 0, got {timeout}")
+        self._do_move_to(position, float(timeout))
+        actual = self._do_get_position()
+        if actual != position:
+            raise self._missed_error(actual, position)
+        return actual
+
+    def _missed_error(self, actual: int, target: int) -> MotionError:
+        """The error for a move that ended at slot ``actual``; drivers may refine it."""
+        return MotionError(
+            f"the wheel stopped at slot {actual}, not at slot {target}",
+            device=self.name, command="move_to",
+            hint="check the wheel for an obstruction, then move again",
+        )
+
+    # hooks --------------------------------------------------------------------
+    @abstractmethod
+    def _do_position_count(self) -> int: ...
+
+    @abstractmethod
+    def _do_get_position(self) -> int: ...
+
+    @abstractmethod
+    def _do_move_to(self, position: int, timeout: float) -> None:
+        """Move to the validated ``position``; return once it is there (or raise)."""
+
+    @abstractmethod
+    def _do_estimate_move_s(self, start: int, target: int) -> float: ...
+
+    @abstractmethod
+    def _do_get_speed(self) -> WheelSpeed: ...
+
+    @abstractmethod
+    def _do_set_speed(self, value: WheelSpeed) -> None: ...
 
 
 # --------------------------------------------------------------------------- power meter

@@ -8,6 +8,12 @@ A :class:`VirtualBench` holds
   ``camera_z``), so a move commanded through a real driver moves the world;
 * the **source** state (on/off, power, wavelength, beam radius), changed by
   :class:`hw_mocks.sim.source.SimulatedSource`;
+* the **light path** between source and sample: an optional shutter (the SC10 emulator)
+  and an optional filter wheel (the FW102C emulator) with the filters in its slots, both
+  read live from the emulators. :meth:`VirtualBench.light_at_sample` is the light as it
+  reaches the sample (source on *and* shutter open, spectrum through the selected
+  filter); every snapshot's ``source`` is that light, so the camera and the power meter
+  follow the shutter and the filter;
 * a **scene** (this module knows only its protocol; :mod:`hw_mocks.sim.goniometer_scene`
   implements the goniometer scene).
 
@@ -47,16 +53,18 @@ import importlib
 import math
 import threading
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hw_mocks import registry
+from hw_mocks.sim.filters import FilterBand, parse_bands, transmit
 
 __all__ = [
     "BenchPose",
+    "LightPath",
     "PowerMeterHead",
     "RoleSpec",
     "Scene",
@@ -87,13 +95,18 @@ def rotation(axis: str, angle_rad: float) -> NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class SourceState:
-    """The light source: collimated Gaussian beam of 1/e² radius ``beam_radius_mm``."""
+    """The light source: collimated Gaussian beam of 1/e² radius ``beam_radius_mm``.
+
+    Its spectrum is a line at ``wavelength_nm`` (``bandwidth_nm`` 0, a laser) or a flat band
+    of full width ``bandwidth_nm`` around it (see :mod:`hw_mocks.sim.filters`).
+    """
 
     on: bool = False
     power_w: float = 1e-3
     wavelength_nm: float = 633.0
     beam_radius_mm: float = 2.0
     max_power_w: float = 5e-3
+    bandwidth_nm: float = 0.0
 
     def peak_intensity_w_m2(self) -> float:
         """On-axis intensity 2P/(π w²) of the Gaussian beam, perpendicular to it (W/m²)."""
@@ -151,7 +164,11 @@ class BenchPose:
 
 @dataclass(frozen=True)
 class WorldState:
-    """A consistent snapshot: positions, pose, source, scene and a hashable cache key."""
+    """A consistent snapshot: positions, pose, light, scene and a hashable cache key.
+
+    ``source`` is the light as it reaches the sample (:meth:`VirtualBench.light_at_sample`):
+    off while a shutter is shut, filtered by the filter-wheel slot in the beam.
+    """
 
     positions: Mapping[str, float]
     pose: BenchPose
@@ -168,6 +185,44 @@ class PowerMeterHead:
     aperture_diameter_mm: float = 9.5
     #: ``simusb://`` URL of the PM100USB emulator bound to this head, if any.
     url: str | None = None
+
+
+@dataclass(frozen=True)
+class LightPath:
+    """What stands between the source and the sample, by emulator URL.
+
+    ``shutter`` is an SC10 emulator (``simsc10://name``): the light passes while its blade
+    is open. ``filter_wheel`` is an FW102C emulator (``simfw102c://name``) whose slots hold
+    ``filters`` (slot → :class:`~hw_mocks.sim.filters.FilterBand`; slots not listed are
+    clear); while it turns, or stands jammed between slots, the beam is blocked.
+    """
+
+    shutter: str | None = None
+    filter_wheel: str | None = None
+    filters: Mapping[int, FilterBand] = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, shutter: Any = None, filter_wheel: Any = None) -> LightPath:
+        """From ``[simulation]``'s ``shutter = URL`` and ``filter_wheel = {url, filters}``."""
+        if shutter is not None:
+            registry.parse_url(str(shutter))
+        wheel_url, filters = None, {}
+        if filter_wheel is not None:
+            if isinstance(filter_wheel, str):
+                filter_wheel = {"url": filter_wheel}
+            if not isinstance(filter_wheel, Mapping):
+                raise TypeError(f"filter_wheel is a table {{url, filters}}, got {filter_wheel!r}")
+            unknown = set(filter_wheel) - {"url", "filters"}
+            if unknown:
+                raise ValueError(f"unknown filter_wheel keys {sorted(unknown)}; known: url, "
+                                 "filters")
+            wheel_url = filter_wheel.get("url")
+            if wheel_url is not None:
+                registry.parse_url(str(wheel_url))
+            filters = parse_bands(filter_wheel.get("filters"))
+        return cls(shutter=None if shutter is None else str(shutter),
+                   filter_wheel=None if wheel_url is None else str(wheel_url),
+                   filters=filters)
 
 
 class Scene(Protocol):
@@ -261,6 +316,8 @@ class VirtualBench:
         Distance from the sample centre to the camera pinhole at ``camera_z = 0``.
     power_meter
         Geometry of the power-meter head on the detector arm.
+    light_path
+        Shutter and filter wheel between the source and the sample (default: none).
     """
 
     def __init__(
@@ -272,6 +329,7 @@ class VirtualBench:
         source: SourceState | None = None,
         arm_length_mm: float = 300.0,
         power_meter: PowerMeterHead | None = None,
+        light_path: LightPath | None = None,
     ) -> None:
         self.name = name
         self._lock = threading.RLock()
@@ -288,6 +346,7 @@ class VirtualBench:
             raise ValueError("arm_length_mm must be > 0")
         self.arm_length_mm = float(arm_length_mm)
         self.power_meter = power_meter or PowerMeterHead()
+        self._light_path = light_path or LightPath()
         self._version = 0
         self._power_cache: dict[tuple, float] = {}
         self._bound_meter: Any = None  # the PM100USB firmware reading this world
@@ -303,11 +362,13 @@ class VirtualBench:
         :meth:`hw_mocks.sim.lightfield_bench.LightFieldBenchScene.from_config`; with
         ``kind = "spheres"`` :meth:`hw_mocks.sim.sphere_bench.SphereBenchScene.from_config`),
         ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
-        ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}).
-        With a power-meter ``url`` the PM100USB emulator is created and bound
-        (:meth:`bind_power_meter`).
+        ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}),
+        ``shutter`` (a ``simsc10://`` URL) and ``filter_wheel`` ({url, filters}; see
+        :class:`LightPath`). With a power-meter ``url`` the PM100USB emulator is created and
+        bound (:meth:`bind_power_meter`).
         """
-        known = {"roles", "scene", "source", "arm_length_mm", "power_meter"}
+        known = {"roles", "scene", "source", "arm_length_mm", "power_meter", "shutter",
+                 "filter_wheel"}
         unknown = set(config) - known
         if unknown:
             raise ValueError(f"unknown [simulation] keys {sorted(unknown)}; known {sorted(known)}")
@@ -326,9 +387,11 @@ class VirtualBench:
             scene = GoniometerScene.from_config(scene_cfg)
         source = SourceState(**dict(config.get("source", {})))
         pm = PowerMeterHead(**dict(config.get("power_meter", {})))
+        light_path = LightPath.from_config(config.get("shutter"), config.get("filter_wheel"))
         world = cls(
             name, roles=config.get("roles"), scene=scene, source=source,
             arm_length_mm=float(config.get("arm_length_mm", 300.0)), power_meter=pm,
+            light_path=light_path,
         )
         if pm.url is not None:
             world.bind_power_meter()
@@ -343,6 +406,7 @@ class VirtualBench:
             self._source = other._source
             self.arm_length_mm = other.arm_length_mm
             self.power_meter = other.power_meter
+            self._light_path = other._light_path
             self._version += 1
             self._power_cache.clear()
         if self.power_meter.url is not None:
@@ -420,7 +484,7 @@ class VirtualBench:
         """Everything a device needs to render the world now, with a cache key."""
         with self._lock:
             positions = self.positions()
-            source, scene, version = self._source, self._scene, self._version
+            source, scene, version = self.light_at_sample(), self._scene, self._version
         key = (
             self.name, version, id(scene),
             tuple(round(positions[k], 9) for k in ROLES),
@@ -428,6 +492,51 @@ class VirtualBench:
         )
         return WorldState(positions=positions, pose=self.pose(positions), source=source,
                           scene=scene, key=key)
+
+    # light path ---------------------------------------------------------------------
+    @property
+    def light_path(self) -> LightPath:
+        return self._light_path
+
+    def bind_shutter(self, target: Any) -> None:
+        """Put a shutter in the beam: an SC10 emulator or its ``simsc10://`` URL
+        (``None`` takes it out)."""
+        url = None if target is None else _url_of(target)
+        with self._lock:
+            self._light_path = replace(self._light_path, shutter=url)
+            self._version += 1
+
+    def bind_filter_wheel(self, target: Any, filters: Mapping[Any, Any] | None = None) -> None:
+        """Put a filter wheel in the beam: an FW102C emulator or its ``simfw102c://`` URL
+        (``None`` takes it out). ``filters`` (slot → band table) replaces the slots' filters;
+        ``None`` keeps those configured."""
+        url = None if target is None else _url_of(target)
+        with self._lock:
+            changes: dict[str, Any] = {"filter_wheel": url}
+            if filters is not None:
+                changes["filters"] = parse_bands(filters)
+            self._light_path = replace(self._light_path, **changes)
+            self._version += 1
+
+    def light_at_sample(self) -> SourceState:
+        """The light as it reaches the sample now.
+
+        Off unless the source is on, the shutter (if any) is open and the filter wheel (if
+        any) stands at a slot; its power, centre wavelength and bandwidth are those passed
+        by the filter in that slot (:func:`hw_mocks.sim.filters.transmit`).
+        """
+        with self._lock:
+            source, path = self._source, self._light_path
+        if path.shutter is not None:
+            shutter = _emulator_for(path.shutter)
+            if not shutter.light_passes():
+                return replace(source, on=False)
+        if path.filter_wheel is not None:
+            slot = _emulator_for(path.filter_wheel).slot_at_beam()
+            if slot is None:  # turning or stuck: the beam falls between the apertures
+                return replace(source, on=False)
+            source = transmit(source, path.filters.get(slot))
+        return source
 
     # devices ------------------------------------------------------------------------
     def optical_power_w(self, wavelength_nm: float | None = None) -> float:
@@ -482,6 +591,17 @@ class VirtualBench:
         target.bound_world = self.name
         self._bound_meter = target
         return target
+
+
+def _url_of(target: Any) -> str:
+    """``scheme://name`` of an emulator, or a URL string as given (validated)."""
+    if isinstance(target, str):
+        registry.parse_url(target)
+        return target
+    scheme, name = getattr(target, "scheme", ""), getattr(target, "name", "")
+    if not scheme or not name:
+        raise TypeError(f"expected an emulator or a URL, got {target!r}")
+    return f"{scheme}://{name}"
 
 
 # ------------------------------------------------------------------------ registry
