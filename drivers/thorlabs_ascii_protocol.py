@@ -60,7 +60,7 @@ COMMAND_ERRORS: dict[str, str] = {
 _KEYWORD_RE = re.compile(r"\*?[a-z][a-z0-9]*")
 #: Any plausible complete answer: printable echo, CR, printable lines, prompt.
 _ANY_REPLY_RE = re.compile(rb"[\x20-\x7e]*\r[\x20-\x7e\r\n]*> ")
-_INT_RE = re.compile(r"[+-]?\d{1,9}")
+_INT_RE = re.compile(r"[+-]?\d{1,9}", re.ASCII)
 
 
 def format_request(keyword: str, value: int | None = None, *, query: bool = False) -> bytes:

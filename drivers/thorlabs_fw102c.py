@@ -34,11 +34,14 @@ From secondary sources (**unconfirmed** against the manual):
   :class:`WheelJammed`. Either error names the wheel and says what to do.
 
 While a move runs the unit answers nothing (it is still inside ``pos=``), so this driver
-never sends anything else until the prompt arrives or the timeout passes.
+never sends anything else until the prompt arrives or the timeout passes. After a timeout
+it asks ``pos?`` once: a wheel that answers and stands at the slot has arrived (only the
+prompt was lost); otherwise :class:`WheelMoveTimeout`. ``pos=`` itself is never repeated.
 """
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Mapping
 from typing import Any
@@ -208,6 +211,12 @@ class Fw102cWheel(FilterWheel):
         try:
             link.command("pos", position, timeout=timeout)
         except DeviceTimeout as err:
+            # Only the prompt may have been lost: a wheel that answers and stands at the
+            # slot has arrived. A jammed one is still inside pos= and answers nothing.
+            with contextlib.suppress(DeviceTimeout, ProtocolError):
+                if link.query("pos", lambda t: parse_int(t, 1, self._count),
+                              attempts=1) == position:
+                    return
             raise WheelMoveTimeout(
                 f"the wheel did not reach slot {position} within {timeout:g} s; it may be "
                 "jammed between slots (it answers nothing while a move is unfinished)",

@@ -40,7 +40,8 @@ against the manual):
 The ``ens`` trap: ``ens`` toggles, so sending it blindly can *open* a shutter that was
 meant to close (if someone pressed the front-panel button, or a previous toggle's answer
 was lost). This driver never sends ``ens`` without reading ``ens?`` first, never retries
-it, and reads the state back afterwards (``ens?`` and ``closed?``), within a timeout.
+it (a lost answer to ``ens`` is not an error by itself: the state read afterwards says
+whether it toggled), and reads the state back (``ens?`` and ``closed?``) within a timeout.
 
 Connection: a bare CR ends any half-typed line; ``id?`` must name an SC10. If the unit is
 not in manual mode, the driver disables it first (blade closed) and then sets
@@ -209,14 +210,14 @@ class Sc10Shutter(Shutter):
         if link.query("interlock", parse_flag):
             raise self._interlock_error("open_shutter")
         if not link.query("ens", parse_flag):
-            link.command("ens")
+            self._toggle_enable(link)
         self._settle(open_=True, command="open_shutter")
 
     def _do_close_shutter(self) -> None:
         link = self._io("close_shutter")
         try:
             if link.query("ens", parse_flag):
-                link.command("ens")
+                self._toggle_enable(link)
             self._settle(open_=False, command="close_shutter")
         except (DeviceTimeout, ProtocolError, ConnectionFailed) as err:
             # The blade's state is unknown: say so, in the words that keep people safe.
@@ -242,6 +243,13 @@ class Sc10Shutter(Shutter):
         if self._link is None:
             raise StateError("device is closed", device=self.name, command=command)
         return self._link
+
+    @staticmethod
+    def _toggle_enable(link: PromptLink) -> None:
+        """Send ``ens`` once. A lost or garbled answer is not fatal and never retried:
+        the state read afterwards (:meth:`_settle`) tells whether it toggled."""
+        with contextlib.suppress(DeviceTimeout, ProtocolError):
+            link.command("ens")
 
     def _settle(self, *, open_: bool, command: str) -> None:
         """Read ``ens?`` and ``closed?`` until they show the wanted state, or raise."""
