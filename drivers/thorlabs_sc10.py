@@ -53,6 +53,7 @@ effort) unless ``close_on_exit=False``: a released shutter must not leave the sa
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 
 import serial
@@ -140,6 +141,9 @@ class Sc10Shutter(Shutter):
         #: Operating mode found at connect (before the driver set manual mode).
         self.mode_at_connect: int | None = None
         self._id_text = ""
+        # A read-then-toggle sequence is atomic: a turn_off() from another thread must not
+        # read the enable between a turn_on()'s ens? and its ens (a double toggle).
+        self._sequence_lock = threading.RLock()
         raw = open_serial(port, device=name, baudrate=baudrate)
         self._link: PromptLink | None = None
         try:
@@ -207,18 +211,20 @@ class Sc10Shutter(Shutter):
 
     def _do_open_shutter(self) -> None:
         link = self._io("open_shutter")
-        if link.query("interlock", parse_flag):
-            raise self._interlock_error("open_shutter")
-        if not link.query("ens", parse_flag):
-            self._toggle_enable(link)
-        self._settle(open_=True, command="open_shutter")
+        with self._sequence_lock:
+            if link.query("interlock", parse_flag):
+                raise self._interlock_error("open_shutter")
+            if not link.query("ens", parse_flag):
+                self._toggle_enable(link)
+            self._settle(open_=True, command="open_shutter")
 
     def _do_close_shutter(self) -> None:
         link = self._io("close_shutter")
         try:
-            if link.query("ens", parse_flag):
-                self._toggle_enable(link)
-            self._settle(open_=False, command="close_shutter")
+            with self._sequence_lock:
+                if link.query("ens", parse_flag):
+                    self._toggle_enable(link)
+                self._settle(open_=False, command="close_shutter")
         except (DeviceTimeout, ProtocolError, ConnectionFailed) as err:
             # The blade's state is unknown: say so, in the words that keep people safe.
             raise type(err)(

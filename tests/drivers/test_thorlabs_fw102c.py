@@ -168,6 +168,15 @@ def test_connect_failures_are_connection_failed(steps, message):
     assert message in str(info.value)
 
 
+def test_jam_errors_pickle_with_their_types():
+    import pickle
+
+    err = WheelMoveTimeout("stuck", device="wheel", command="pos=2", hint="power-cycle")
+    back = pickle.loads(pickle.dumps(err))
+    assert isinstance(back, WheelMoveTimeout) and isinstance(back, DeviceTimeout)
+    assert (back.device, back.command, back.hint) == ("wheel", "pos=2", "power-cycle")
+
+
 def test_arguments_are_validated_before_opening():
     with pytest.raises(ValueError):
         Fw102cWheel("simfw102c://x", name="w", baudrate=57600)

@@ -303,6 +303,36 @@ def test_unit_left_in_auto_mode_is_put_in_manual_mode_closed(transport, servers)
     shutter.close()
 
 
+def test_concurrent_open_and_close_never_interleave_their_read_and_toggle(shutter):
+    """An abort's turn_off() from another thread while turn_on() runs: each call reads the
+    enable and toggles as one sequence, so both succeed and the state is consistent.
+
+    Without the sequence lock, over a pty about one pair in three interleaves (one call's
+    settle then sees the other's toggle and raises); with it, none does."""
+    import threading
+
+    emulator = emulator_of(shutter)
+    errors: list[BaseException] = []
+
+    def run(operation):
+        try:
+            operation()
+        except BaseException as err:  # pragma: no cover - reported below
+            errors.append(err)
+
+    for _ in range(10):
+        threads = [threading.Thread(target=run, args=(shutter.turn_on,)),
+                   threading.Thread(target=run, args=(shutter.turn_off,))]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(10.0)
+        assert not errors, errors
+        assert shutter.is_on == emulator.light_passes()
+    shutter.turn_off()
+    assert not emulator.light_passes()
+
+
 def test_close_on_exit_closes_the_shutter_and_can_be_turned_off(transport, servers):
     shutter = open_shutter(transport, "exit", cleanup=servers)
     emulator = emulator_of(shutter)
