@@ -12,11 +12,13 @@ answer (see :mod:`drivers.thorlabs_ascii_protocol`), with a deadline on every re
 - A ``Command error`` answer becomes :class:`CommandRejected` (a
   :class:`~drivers.errors.ControllerError` whose ``code`` is the unit's error code).
 - :meth:`PromptLink.resync` ends a half-typed line on the unit's side with a bare CR and
-  drops whatever comes back, so a connection starts on a clean line.
+  drops whatever comes back, so a connection starts on a clean line;
+  :meth:`PromptLink.identify` does that and checks that the unit is the model expected.
 """
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -24,7 +26,13 @@ from typing import TypeVar
 
 import serial
 
-from drivers.errors import ControllerError, DeviceTimeout, ProtocolError, StateError
+from drivers.errors import (
+    ConnectionFailed,
+    ControllerError,
+    DeviceTimeout,
+    ProtocolError,
+    StateError,
+)
 from drivers.thorlabs_ascii_protocol import (
     PROMPT,
     TERMINATOR,
@@ -33,7 +41,7 @@ from drivers.thorlabs_ascii_protocol import (
     looks_like_reply,
     split_reply,
 )
-from drivers.transport import SerialChannel
+from drivers.transport import SerialChannel, open_serial
 
 __all__ = ["CommandRejected", "PromptLink"]
 
@@ -61,10 +69,12 @@ class PromptLink:
         Seconds to wait for one complete answer (through the prompt).
     retries
         Extra attempts for a query after a timeout or a garbled answer.
+    owns_port
+        Whether the link opened ``port`` itself (see :meth:`abandon`).
     """
 
     def __init__(self, port: serial.SerialBase, *, device: str, reply_timeout: float,
-                 retries: int) -> None:
+                 retries: int, owns_port: bool = False) -> None:
         if not reply_timeout > 0:
             raise ValueError("reply_timeout must be > 0")
         if int(retries) != retries or retries < 0:
@@ -72,12 +82,65 @@ class PromptLink:
         self.device = device
         self.reply_timeout = float(reply_timeout)
         self.retries = int(retries)
+        self._owns_port = bool(owns_port)
         self._channel: SerialChannel | None = SerialChannel(port, device=device)
         # One exchange at a time: a turn_off() from another thread must not read the
         # answer a poll is waiting for.
         self._lock = threading.RLock()
         #: Answers skipped while waiting for ours (stale, foreign or noise), for diagnosis.
         self.skipped = 0
+
+    @classmethod
+    def open(cls, port: str | serial.SerialBase, *, device: str, baudrate: int,
+             reply_timeout: float, retries: int) -> PromptLink:
+        """Open ``port`` (a path or URL; an open ``SerialBase`` is adopted) as a link.
+
+        Raises
+        ------
+        ConnectionFailed
+            The port cannot be opened.
+        """
+        raw = open_serial(port, device=device, baudrate=baudrate)
+        owns = not isinstance(port, serial.SerialBase)
+        try:
+            return cls(raw, device=device, reply_timeout=reply_timeout, retries=retries,
+                       owns_port=owns)
+        except BaseException:
+            if owns:
+                raw.close()
+            raise
+
+    def abandon(self) -> None:
+        """Give up after a failed connection: close the port only if the link opened it
+        (a port handed in stays the caller's)."""
+        if self._channel is not None and self._owns_port:
+            self._channel.close()
+        self._channel = None
+
+    def identify(self, keyword: str, model: str, pattern: str, *, baudrate: int) -> str:
+        """Start on a clean line, ask ``keyword?`` and check the answer names ``model``
+        (``pattern``, a regular expression, searched case-insensitively); return the answer.
+
+        Raises
+        ------
+        ConnectionFailed
+            Nothing answers, or the unit is another model.
+        """
+        self.resync()
+        command = f"{keyword}?"
+        try:
+            answer = self.query(keyword)
+        except (DeviceTimeout, ProtocolError, CommandRejected) as err:
+            raise ConnectionFailed(
+                f"no {model} answers", device=self.device, command=command,
+                hint=f"check the cable, the baud rate ({baudrate} unless changed) and the "
+                "power",
+            ) from err
+        if not re.search(pattern, answer, re.IGNORECASE):
+            raise ConnectionFailed(f"the unit is not an {model} (it says {answer!r})",
+                                   device=self.device, command=command,
+                                   hint="check the port name in the bench profile")
+        return answer
 
     # public -------------------------------------------------------------------
     def query(self, keyword: str, parse: Callable[[str], T] = str, *,

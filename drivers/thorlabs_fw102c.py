@@ -58,7 +58,6 @@ from drivers.errors import (
 )
 from drivers.thorlabs_ascii_link import CommandRejected, PromptLink
 from drivers.thorlabs_ascii_protocol import parse_int
-from drivers.transport import open_serial
 
 __all__ = ["CommandRejected", "Fw102cWheel", "WheelJammed", "WheelMoveTimeout"]
 
@@ -131,35 +130,22 @@ class Fw102cWheel(FilterWheel):
         self._idn = ""
         self._count = 0
         self._speed_code: int | None = None
-        raw = open_serial(port, device=name, baudrate=baudrate)
-        self._link: PromptLink | None = None
+        self._link: PromptLink | None = PromptLink.open(
+            port, device=name, baudrate=baudrate, reply_timeout=reply_timeout, retries=retries)
         try:
-            self._link = PromptLink(raw, device=name, reply_timeout=reply_timeout,
-                                    retries=retries)
-            self._connect()
+            self._connect(baudrate)
             if speed is not None:
                 self.speed = speed
         except BaseException:
+            # A failed constructor leaves nothing open that it opened itself.
+            self._link.abandon()
             self._link = None
-            if not isinstance(port, serial.SerialBase):
-                raw.close()
             raise
 
     # connection ---------------------------------------------------------------
-    def _connect(self) -> None:
+    def _connect(self, baudrate: int) -> None:
         link = self._io("open")
-        link.resync()
-        try:
-            self._idn = link.query("*idn")
-        except (DeviceTimeout, ProtocolError, CommandRejected) as err:
-            raise ConnectionFailed(
-                "no FW102C answers", device=self.name, command="*idn?",
-                hint="check the cable, the baud rate (115200 unless changed) and the power",
-            ) from err
-        if not re.search(r"FW(102|212)C", self._idn.upper()):
-            raise ConnectionFailed(f"the unit is not an FW102C/FW212C (it says {self._idn!r})",
-                                   device=self.name, command="*idn?",
-                                   hint="check the port name in the bench profile")
+        self._idn = link.identify("*idn", "FW102C/FW212C", r"FW(102|212)C", baudrate=baudrate)
         count = link.query("pcount", lambda t: parse_int(t, 1, 12))
         if count not in (6, 12):
             raise ConnectionFailed(f"the wheel reports {count} slots (6 or 12 expected)",

@@ -69,7 +69,6 @@ from drivers.errors import (
 )
 from drivers.thorlabs_ascii_link import CommandRejected, PromptLink
 from drivers.thorlabs_ascii_protocol import parse_flag, parse_int
-from drivers.transport import open_serial
 
 __all__ = ["CommandRejected", "InterlockTripped", "Sc10Shutter"]
 
@@ -144,34 +143,20 @@ class Sc10Shutter(Shutter):
         # A read-then-toggle sequence is atomic: a turn_off() from another thread must not
         # read the enable between a turn_on()'s ens? and its ens (a double toggle).
         self._sequence_lock = threading.RLock()
-        raw = open_serial(port, device=name, baudrate=baudrate)
-        self._link: PromptLink | None = None
+        self._link: PromptLink | None = PromptLink.open(
+            port, device=name, baudrate=baudrate, reply_timeout=reply_timeout, retries=retries)
         try:
-            self._link = PromptLink(raw, device=name, reply_timeout=reply_timeout,
-                                    retries=retries)
-            self._connect()
+            self._connect(baudrate)
         except BaseException:
             # A failed constructor leaves nothing open that it opened itself.
+            self._link.abandon()
             self._link = None
-            if not isinstance(port, serial.SerialBase):
-                raw.close()
             raise
 
     # connection ---------------------------------------------------------------
-    def _connect(self) -> None:
+    def _connect(self, baudrate: int) -> None:
         link = self._io("open")
-        link.resync()
-        try:
-            self._id_text = link.query("id")
-        except (DeviceTimeout, ProtocolError, CommandRejected) as err:
-            raise ConnectionFailed(
-                "no SC10 answers", device=self.name, command="id?",
-                hint="check the cable, the baud rate (9600 unless changed) and the power",
-            ) from err
-        if "SC10" not in self._id_text.upper():
-            raise ConnectionFailed(f"the unit is not an SC10 (it says {self._id_text!r})",
-                                   device=self.name, command="id?",
-                                   hint="check the port name in the bench profile")
+        self._id_text = link.identify("id", "SC10", r"SC10", baudrate=baudrate)
         self.mode_at_connect = link.query("mode", lambda t: parse_int(t, 1, 5))
         if self.mode_at_connect != MANUAL_MODE:
             # In a timed mode the enable starts a sequence: stop it (blade closed) first.

@@ -78,7 +78,8 @@ class PtyServer:
 
 
 def serve_url(url: str) -> PtyServer:
-    """Serve the emulator named by a ``simapt://``/``simsmc://`` URL on a new pty."""
+    """Serve the emulator named by a serial emulator URL (``simapt://``, ``simsmc://``,
+    ``simsc10://``, ``simfw102c://``) on a new pty."""
     import importlib
 
     from hw_mocks import registry

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.errors import DeviceTimeout, ProtocolError, StateError
+from drivers.errors import ConnectionFailed, DeviceTimeout, ProtocolError, StateError
 from drivers.thorlabs_ascii_link import CommandRejected, PromptLink
 from drivers.thorlabs_ascii_protocol import (
     COMMAND_ERRORS,
@@ -241,3 +241,28 @@ def test_link_arguments_are_validated():
         PromptLink(port, device="w", reply_timeout=0.0, retries=1)
     with pytest.raises(ValueError):
         PromptLink(port, device="w", reply_timeout=0.1, retries=-1)
+
+
+def test_abandon_closes_only_a_port_the_link_opened():
+    handed = TranscriptSerial([], baudrate=9600)
+    link = PromptLink.open(handed, device="s", baudrate=9600, reply_timeout=0.05, retries=0)
+    link.abandon()
+    assert handed.is_open  # the caller's port stays the caller's
+    link = PromptLink.open("simsc10://abandon", device="s", baudrate=9600,
+                           reply_timeout=0.05, retries=0)
+    port = link._chan("test").port
+    link.abandon()
+    assert not port.is_open
+
+
+def test_identify_names_what_answered():
+    link, port = link_over([(b"\r", b"\r> "), q_step("*idn", "ACME WHEEL 1.0")])
+    with pytest.raises(ConnectionFailed) as info:
+        link.identify("*idn", "FW102C/FW212C", r"FW(102|212)C", baudrate=115200)
+    assert "ACME WHEEL" in str(info.value) and info.value.command == "*idn?"
+    port.assert_complete()
+
+
+def q_step(keyword: str, value: str) -> tuple[bytes, bytes]:
+    request = f"{keyword}?\r".encode()
+    return request, request + value.encode() + b"\r> "

@@ -34,6 +34,7 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.fw102c import Fw102cEmulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.answer_faults import assert_query_rides_out, retryable_faults
 from tests.drivers.filter_wheel_contract import FilterWheelContract
 
 SPEED = 50.0
@@ -157,7 +158,7 @@ def test_garbled_position_is_retried():
 
 
 @pytest.mark.parametrize("steps, message", [
-    ([(b"\r", b""), *[(b"*idn?\r", b"")] * 3], "no FW102C answers"),
+    ([(b"\r", b""), *[(b"*idn?\r", b"")] * 3], "no FW102C/FW212C answers"),
     ([RESYNC, (b"*idn?\r", b"*idn?\rTHORLABS SC10 VERSION 1.07\r> ")], "not an FW102C"),
     ([*CONNECT[:2], q("pcount", "8")], "8 slots"),
 ])
@@ -304,22 +305,10 @@ def test_error_state_fault_jams_the_next_move(wheel):
         wheel.move_to(3)
 
 
-@pytest.mark.parametrize("kind, params", [
-    (FaultKind.DROP, {}),
-    (FaultKind.DELAY, {"delay_s": 0.15}),
-    (FaultKind.SPLIT, {"chunks": 3, "gap_s": 0.01}),
-    (FaultKind.GARBAGE, {"nbytes": 4}),
-    (FaultKind.UNSOLICITED, {}),
-])
+@retryable_faults
 def test_query_faults_recover_by_retry(wheel, kind, params):
     wheel._link.reply_timeout = 0.1
-    faults = emulator_of(wheel).faults
-    for _ in range(4):
-        faults.schedule(kind, nth=1, **params)
-        t0 = time.monotonic()
-        assert wheel.position == 1
-        assert time.monotonic() - t0 < 2.0
-    assert [k for _, k in faults.log] == [kind] * 4
+    assert_query_rides_out(lambda: wheel.position, 1, emulator_of(wheel).faults, kind, params)
 
 
 def test_lost_prompt_after_a_real_move_is_recovered(wheel):

@@ -30,6 +30,7 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.sc10 import Sc10Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.answer_faults import assert_query_rides_out, retryable_faults
 from tests.drivers.shutter_contract import ShutterContract
 
 RESYNC = (b"\r", b"\rCommand error CMD_NOT_DEFINED\n\r> ")
@@ -350,22 +351,11 @@ def test_close_on_exit_closes_the_shutter_and_can_be_turned_off(transport, serve
 # --------------------------------------------------------------------------- faults
 
 
-@pytest.mark.parametrize("kind, params", [
-    (FaultKind.DROP, {}),
-    (FaultKind.DELAY, {"delay_s": 0.15}),
-    (FaultKind.SPLIT, {"chunks": 4, "gap_s": 0.01}),
-    (FaultKind.GARBAGE, {"nbytes": 5}),
-    (FaultKind.UNSOLICITED, {}),
-])
+@retryable_faults
 def test_answer_faults_on_queries_recover_by_retry(shutter, kind, params):
     shutter._link.reply_timeout = 0.1
-    faults = emulator_of(shutter).faults
-    for _ in range(4):
-        faults.schedule(kind, nth=1, **params)
-        t0 = time.monotonic()
-        assert shutter.shutter_state is ShutterState.CLOSED
-        assert time.monotonic() - t0 < 2.0
-    assert [k for _, k in faults.log] == [kind] * 4
+    assert_query_rides_out(lambda: shutter.shutter_state, ShutterState.CLOSED,
+                           emulator_of(shutter).faults, kind, params)
 
 
 @pytest.mark.parametrize("nth", [1, 2, 3, 4, 5])
