@@ -1,15 +1,16 @@
 """Command round trips per second through the real drivers, on emulated controllers.
 
-For each driver (Newport SMC100 ``Smc100Axis``, Thorlabs APT ``AptMotor`` with a K10CR1)
-and each transport (the in-process pyserial URL link, and a real pseudo-terminal served
-by :class:`hw_mocks.pty_server.PtyServer`), this times
+For each driver (Newport SMC100 ``Smc100Axis``, Thorlabs APT ``AptMotor`` with a K10CR1,
+Zaber ``ZaberAxis`` with message ids, without and with checksums) and each transport (the
+in-process pyserial URL link, and a real pseudo-terminal served by
+:class:`hw_mocks.pty_server.PtyServer`), this times
 
-- ``position``: one position query (SMC100 ``TP``; APT ``MOT_REQ_POSCOUNTER``), i.e. one
-  request/reply round trip through the driver's full stack (formatting, stale-input
-  discard, framing, decoding, typed errors);
+- ``position``: one position query (SMC100 ``TP``; APT ``MOT_REQ_POSCOUNTER``; Zaber
+  ``get pos``), i.e. one request/reply round trip through the driver's full stack
+  (formatting, stale-input discard, framing, decoding, typed errors);
 - ``status()``: the driver's full status snapshot (SMC100: ``TS`` then ``TP``, two round
   trips; APT: K10CR1 status bits then position counter, two round trips; KDC101 one DC
-  status-update request).
+  status-update request; Zaber: ``get pos`` then ``warnings``, two round trips).
 
 Reported per case: operations per second, median and 99th-percentile latency. Timings
 are measurements for comparison, not pass/fail gates.
@@ -18,6 +19,7 @@ Usage::
 
     python benchmarks/bench_protocol.py            # 3 s per case
     python benchmarks/bench_protocol.py --quick    # 0.5 s per case
+    python benchmarks/bench_protocol.py --only Zaber
 """
 
 from __future__ import annotations
@@ -37,8 +39,10 @@ from drivers.base import MotionAxis
 from drivers.newport_smc100 import Smc100Axis
 from drivers.thorlabs_apt import AptMotor
 from drivers.transport import add_url_handler_package
+from drivers.zaber_ascii import ZaberAxis
 from hw_mocks.clock import ScaledClock
 from hw_mocks.firmware.smc100 import Smc100Emulator
+from hw_mocks.firmware.zaber import ZaberEmulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.urlhandler.protocol_simapt import make_emulator as make_apt_emulator
 
@@ -82,6 +86,26 @@ def apt(transport: str, name: str) -> Iterator[MotionAxis]:
             axis.close()
 
 
+def zaber(*, checksum: bool):
+    @contextlib.contextmanager
+    def opener(transport: str, name: str) -> Iterator[MotionAxis]:
+        kw = {"microstep_size": 0.000234375, "flush_s": 0.0, "checksum": checksum}
+        if transport == "url":
+            axis = ZaberAxis(f"simzaber://{name}?speed={SPEED:g}", name=name, **kw)
+            try:
+                yield axis
+            finally:
+                axis.close()
+            return
+        with PtyServer(ZaberEmulator(name, clock=ScaledClock(SPEED))) as server:
+            axis = ZaberAxis(server.path, name=name, **kw)
+            try:
+                yield axis
+            finally:
+                axis.close()
+    return opener
+
+
 def time_op(op: Callable[[], object], seconds: float) -> dict[str, float]:
     for _ in range(20):  # warm-up
         op()
@@ -107,11 +131,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="0.5 s per case")
     parser.add_argument("--seconds", type=float, default=3.0, help="time per case")
+    parser.add_argument("--only", default="", help="run the drivers whose label starts so")
     args = parser.parse_args(argv)
     seconds = 0.5 if args.quick else args.seconds
     add_url_handler_package("hw_mocks.urlhandler")
 
-    drivers: list[tuple[str, Callable]] = [("SMC100", smc100), ("APT K10CR1", apt)]
+    drivers: list[tuple[str, Callable]] = [
+        ("SMC100", smc100), ("APT K10CR1", apt), ("Zaber", zaber(checksum=False)),
+        ("Zaber+csum", zaber(checksum=True))]
+    drivers = [(label, opener) for label, opener in drivers if label.startswith(args.only)]
 
     print(f"python {platform.python_version()} on {platform.machine()}, "
           f"{seconds:g} s per case")
@@ -121,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     print("-" * len(header))
     for label, opener in drivers:
         for transport in ("url", "pty"):
-            with opener(transport, f"bench_{label[:3].lower()}_{transport}") as axis:
+            tag = label.lower().replace(" ", "_").replace("+", "_")
+            with opener(transport, f"bench_{tag}_{transport}") as axis:
                 for op_name, op in (("position", lambda a=axis: a.position),
                                     ("status()", axis.status)):
                     r = time_op(op, seconds)
