@@ -41,6 +41,7 @@ from drivers.thorlabs_apt import AptMotor
 from drivers.transport import add_url_handler_package
 from drivers.zaber_ascii import ZaberAxis
 from hw_mocks.clock import ScaledClock
+from hw_mocks.emulator import FirmwareEmulator
 from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.firmware.zaber import ZaberEmulator
 from hw_mocks.pty_server import PtyServer
@@ -50,59 +51,36 @@ SPEED = 100.0
 
 
 @contextlib.contextmanager
-def smc100(transport: str, name: str) -> Iterator[MotionAxis]:
-    if transport == "url":
-        axis = Smc100Axis(f"simsmc://{name}?speed={SPEED:g}", name=name)
-        try:
-            yield axis
-        finally:
-            axis.close()
-        return
-    with PtyServer(Smc100Emulator(name, clock=ScaledClock(SPEED))) as server:
-        axis = Smc100Axis(server.path, name=name)
-        try:
-            yield axis
-        finally:
-            axis.close()
+def serve(transport: str, url: str, emulator: Callable[[], FirmwareEmulator],
+          open_axis: Callable[[str], MotionAxis]) -> Iterator[MotionAxis]:
+    """``open_axis(url)`` in-process, or ``open_axis(path)`` of ``emulator()`` on a pty."""
+    with contextlib.ExitStack() as stack:
+        port = url if transport == "url" else stack.enter_context(PtyServer(emulator())).path
+        axis = open_axis(port)
+        stack.callback(axis.close)
+        yield axis
 
 
-@contextlib.contextmanager
-def apt(transport: str, name: str) -> Iterator[MotionAxis]:
-    fast_open = {"rts_settle_s": 0.0, "flush_s": 0.0}
-    if transport == "url":
-        axis = AptMotor(f"simapt://{name}?model=K10CR1&speed={SPEED:g}", name=name,
-                        stage="K10CR1", **fast_open)
-        try:
-            yield axis
-        finally:
-            axis.close()
-        return
-    emulator = make_apt_emulator(name, {"model": "K10CR1", "speed": f"{SPEED:g}"})
-    with PtyServer(emulator) as server:
-        axis = AptMotor(server.path, name=name, stage="K10CR1", **fast_open)
-        try:
-            yield axis
-        finally:
-            axis.close()
+def smc100(transport: str, name: str):
+    return serve(transport, f"simsmc://{name}?speed={SPEED:g}",
+                 lambda: Smc100Emulator(name, clock=ScaledClock(SPEED)),
+                 lambda port: Smc100Axis(port, name=name))
+
+
+def apt(transport: str, name: str):
+    options = {"model": "K10CR1", "speed": f"{SPEED:g}"}
+    return serve(transport, f"simapt://{name}?model=K10CR1&speed={SPEED:g}",
+                 lambda: make_apt_emulator(name, options),
+                 lambda port: AptMotor(port, name=name, stage="K10CR1", rts_settle_s=0.0,
+                                       flush_s=0.0))
 
 
 def zaber(*, checksum: bool):
-    @contextlib.contextmanager
-    def opener(transport: str, name: str) -> Iterator[MotionAxis]:
-        kw = {"microstep_size": 0.000234375, "flush_s": 0.0, "checksum": checksum}
-        if transport == "url":
-            axis = ZaberAxis(f"simzaber://{name}?speed={SPEED:g}", name=name, **kw)
-            try:
-                yield axis
-            finally:
-                axis.close()
-            return
-        with PtyServer(ZaberEmulator(name, clock=ScaledClock(SPEED))) as server:
-            axis = ZaberAxis(server.path, name=name, **kw)
-            try:
-                yield axis
-            finally:
-                axis.close()
+    def opener(transport: str, name: str):
+        return serve(transport, f"simzaber://{name}?speed={SPEED:g}",
+                     lambda: ZaberEmulator(name, clock=ScaledClock(SPEED)),
+                     lambda port: ZaberAxis(port, name=name, microstep_size=0.000234375,
+                                            flush_s=0.0, checksum=checksum))
     return opener
 
 

@@ -18,7 +18,6 @@ from drivers.base import AxisKind
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
-    DeviceError,
     DeviceTimeout,
     LimitError,
     NotHomedError,
@@ -45,6 +44,13 @@ from hw_mocks.firmware.zaber import ZaberEmulator
 from hw_mocks.pty_server import PtyServer, serve_url
 from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.motion_contract import MotionAxisContract
+from tests.drivers.serial_faults import (
+    QUERY_FAULTS,
+    query_survives,
+    random_fault_session,
+    unplug_during_move,
+    unplug_during_query,
+)
 
 SPEED = 200.0
 MS = 0.000234375          # deg per microstep (rotary)
@@ -590,24 +596,11 @@ def faulty(homed):
     return homed, emulator_of(homed).faults
 
 
-@pytest.mark.parametrize("kind, params", [
-    (FaultKind.DROP, {}),
-    # longer than one reply timeout (0.1 s), shorter than all three attempts
-    (FaultKind.DELAY, {"delay_s": 0.15}),
-    (FaultKind.SPLIT, {"chunks": 4, "gap_s": 0.01}),
-    (FaultKind.GARBAGE, {"nbytes": 5}),
-    (FaultKind.UNSOLICITED, {}),
-])
+@pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
-    expected = round(4.0 / MS)
-    for _ in range(5):
-        faults.schedule(kind, nth=1, **params)
-        t0 = time.monotonic()
-        assert axis.position_usteps == expected
-        assert time.monotonic() - t0 < 2.0
-    assert [k for _, k in faults.log] == [kind] * 5
+    query_survives(faults, kind, params, lambda: axis.position_usteps, round(4.0 / MS))
     if kind is FaultKind.UNSOLICITED:
         assert len(axis.alerts) >= 5
 
@@ -661,23 +654,7 @@ def test_lost_reply_of_a_relative_move_is_typed_and_never_resent(faulty):
 
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
-    axis, faults = faulty
-    for kind in (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT,
-                 FaultKind.UNSOLICITED, FaultKind.DELAY):
-        faults.randomly(kind, 0.05, gap_s=0.002, nbytes=3, delay_s=0.15)
-    ok = typed = 0
-    t0 = time.monotonic()
-    for i in range(30):
-        try:
-            axis.move_to((i % 5) - 2.0, wait=True, timeout=5)
-            ok += 1
-        except DeviceError as err:
-            assert err.device == "beh" and err.command
-            typed += 1
-            time.sleep(0.2)  # let a late reply or a started move finish
-    assert time.monotonic() - t0 < 60
-    assert ok + typed == 30 and ok >= 15
-    assert len(faults.log) >= 5
+    random_fault_session(*faulty)
 
 
 def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, cleanup):
@@ -688,20 +665,11 @@ def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, cleanup):
     axis.home(timeout=10)
     axis.move_to(2.0, wait=True, timeout=10)
     axis.reply_timeout = 0.1
-    emulator = emulator_of(axis)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        axis.position  # noqa: B018
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == "dc" and info.value.command == "/1 1 get pos"
-    if transport == "url":
-        axis.close()
-        axis = open_axis(transport, "dc", cleanup=cleanup, flush_s=0.05)
-        assert axis.skipped_lines == 0  # the stale lines were flushed, never read
-    else:
-        emulator.faults.reconnect()  # the cable is back; the same port works again
+    axis = unplug_during_query(
+        axis, emulator_of(axis), transport,
+        lambda: open_axis(transport, "dc", cleanup=cleanup, flush_s=0.05),
+        command="/1 1 get pos")
+    assert axis.skipped_lines == 0  # in-process: the stale lines were flushed, never read
     assert axis.is_homed and axis.position == pytest.approx(2.0, abs=MS)
 
 
@@ -711,22 +679,9 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, c
     axis.velocity = 2.0
     axis.move_to(6.0)  # 3 s of emulated time: 15 ms at SPEED
     axis.reply_timeout = 0.1
-    emulator = emulator_of(axis)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        axis.wait(10)
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == "mid" and info.value.__cause__ is not None
-    if transport == "url":
-        axis.close()
-        axis = open_axis(transport, "mid", cleanup=cleanup)
-    else:
-        emulator.faults.reconnect()
-    deadline = time.monotonic() + 5.0
-    while axis.is_moving and time.monotonic() < deadline:
-        time.sleep(0.005)
+    axis = unplug_during_move(axis, emulator_of(axis), transport,
+                              lambda: open_axis(transport, "mid", cleanup=cleanup),
+                              command="/1 1 get pos")
     assert axis.is_homed and axis.position == pytest.approx(6.0, abs=MS)
 
 

@@ -7,7 +7,6 @@ independent reading.
 
 from __future__ import annotations
 
-import ast
 import math
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from hw_mocks import registry
 from hw_mocks.clock import ManualClock
 from hw_mocks.firmware.zaber import STAGE_MODELS, ZaberEmulator
 from hw_mocks.motion import TrapezoidalProfile
+from tests.hw_mocks.purity import assert_imports_nothing_forbidden
 
 MS = STAGE_MODELS["rotary"].microstep_size
 
@@ -332,17 +332,8 @@ def test_models_are_consistent():
 
 def test_firmware_emulator_imports_nothing_from_drivers():
     root = Path(__file__).resolve().parents[2] / "hw_mocks"
-    for path in (root / "firmware" / "zaber.py", root / "urlhandler" / "protocol_simzaber.py"):
-        tree = ast.parse(path.read_text())
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):
-                names = [node.module or ""]
-            else:
-                continue
-            assert not any(n.split(".")[0] in ("drivers", "instrument", "gui")
-                           for n in names), (path, names)
+    assert_imports_nothing_forbidden(root / "firmware" / "zaber.py",
+                                     root / "urlhandler" / "protocol_simzaber.py")
 
 
 # --------------------------------------------------------------------------- fuzzing
