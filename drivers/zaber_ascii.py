@@ -36,7 +36,7 @@ How this driver deals with the protocol
   (1..9); device-wide settings go to axis 0. Every axis of one chain shares the port:
   axes opened with the same port string (or the same port object) share one link, one
   exchange at a time, with message ids unique on the link. The port closes with the last
-  axis that uses it.
+  axis that uses it (ADR 0007).
 * Units: positions are integer microsteps, converted with ``microstep_size`` (degrees or
   millimetres per microstep, from the product's specification). ``get resolution`` is read
   on open; when ``resolution`` (the microsteps per step that ``microstep_size`` belongs to)
