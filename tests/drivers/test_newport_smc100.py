@@ -18,7 +18,6 @@ from drivers.base import AxisKind
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
-    DeviceError,
     DeviceTimeout,
     LimitError,
     NotHomedError,
@@ -38,6 +37,13 @@ from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.motion_contract import MotionAxisContract
+from tests.drivers.serial_faults import (
+    QUERY_FAULTS,
+    query_survives,
+    random_fault_session,
+    unplug_during_move,
+    unplug_during_query,
+)
 
 SPEED = 200.0
 
@@ -424,23 +430,11 @@ def faulty(homed):
     return homed, emulator_of(homed).faults
 
 
-@pytest.mark.parametrize("kind, params", [
-    (FaultKind.DROP, {}),
-    # longer than one reply timeout (0.1 s), shorter than all three attempts
-    (FaultKind.DELAY, {"delay_s": 0.15}),
-    (FaultKind.SPLIT, {"chunks": 4, "gap_s": 0.01}),
-    (FaultKind.GARBAGE, {"nbytes": 5}),
-    (FaultKind.UNSOLICITED, {}),
-])
+@pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover_by_retry(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
-    for _ in range(5):
-        faults.schedule(kind, nth=1, **params)
-        t0 = time.monotonic()
-        assert axis.position == pytest.approx(4.0, abs=1e-6)
-        assert time.monotonic() - t0 < 2.0
-    assert [k for _, k in faults.log] == [kind] * 5
+    query_survives(faults, kind, params, lambda: round(axis.position, 6), 4.0)
 
 
 def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
@@ -493,23 +487,7 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
 
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
-    axis, faults = faulty
-    for kind in (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT,
-                 FaultKind.UNSOLICITED, FaultKind.DELAY):
-        faults.randomly(kind, 0.05, gap_s=0.002, nbytes=3, delay_s=0.15)
-    ok = typed = 0
-    t0 = time.monotonic()
-    for i in range(30):
-        try:
-            axis.move_to((i % 5) - 2.0, wait=True, timeout=5)
-            ok += 1
-        except DeviceError as err:
-            assert err.device == "beh" and err.command
-            typed += 1
-            time.sleep(0.2)  # let a late reply or a started move finish
-    assert time.monotonic() - t0 < 60
-    assert ok + typed == 30 and ok >= 15
-    assert len(faults.log) >= 5
+    random_fault_session(*faulty)
 
 
 def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, servers):
@@ -519,19 +497,9 @@ def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, servers):
     axis.home(timeout=10)
     axis.move_to(2.0, wait=True, timeout=10)
     axis.reply_timeout = 0.1
-    emulator = emulator_of(axis)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        axis.position  # noqa: B018
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == "dc" and info.value.command == "1TP"
-    if transport == "url":
-        axis.close()
-        axis = open_axis(transport, "dc", cleanup=servers)
-    else:
-        emulator.faults.reconnect()  # the cable is back; the same port works again
+    axis = unplug_during_query(axis, emulator_of(axis), transport,
+                               lambda: open_axis(transport, "dc", cleanup=servers),
+                               command="1TP")
     assert axis.is_homed and axis.position == pytest.approx(2.0, abs=1e-6)
     axis.close()
 
@@ -544,23 +512,9 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, s
     axis.velocity = 2.0
     axis.move_to(6.0)  # 3 s of emulated time: 15 ms at SPEED
     axis.reply_timeout = 0.1
-    emulator = emulator_of(axis)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        axis.wait(10)
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == "mid" and info.value.command == "1TS"
-    assert info.value.__cause__ is not None
-    if transport == "url":
-        axis.close()
-        axis = open_axis(transport, "mid", cleanup=servers)
-    else:
-        emulator.faults.reconnect()
-    deadline = time.monotonic() + 5.0
-    while axis.is_moving and time.monotonic() < deadline:
-        time.sleep(0.005)
+    axis = unplug_during_move(axis, emulator_of(axis), transport,
+                              lambda: open_axis(transport, "mid", cleanup=servers),
+                              command="1TS")
     assert axis.is_homed
     assert axis.position == pytest.approx(6.0, abs=1e-6)
     axis.close()
