@@ -1101,10 +1101,20 @@ class LockIn(Device):
     overloads the chosen one. Values outside a table raise ``ValueError`` before anything is
     sent.
 
-    Settling (:meth:`settle`) waits a number of time constants; by default the number for
-    99 % of a step with the present filter slope (:data:`SETTLE_TIME_CONSTANTS`, from the
-    SR830 manual's noise-measurement table, which agrees with the cascaded single-pole step
-    response ``1 − e^{−t/τ} Σ_{k<n} (t/τ)^k/k!``: 4.6, 6.6, 8.4 and 10.0 τ for 1–4 poles).
+    Settling (:meth:`settle`) waits a number of time constants; by default the "wait time
+    to reach 99 % of its final value" of the present filter slope (:data:`SETTLE_TIME_CONSTANTS`,
+    the table of the SR830 manual, Rev. 2.5, p. 3-25, "Noise measurements")::
+
+        slope (dB/oct)   poles   ENBW        wait    step reached (cascaded poles)
+        6                1       1/(4τ)      5 τ     99.33 %
+        12               2       1/(8τ)      7 τ     99.27 %
+        18               3       3/(32τ)     9 τ     99.38 %
+        24               4       5/(64τ)    10 τ     98.97 %
+
+    The last column is the step response of n identical single poles,
+    ``1 − e^{−t/τ} Σ_{k<n} (t/τ)^k/k!``; exactly 99 % takes 4.61, 6.64, 8.41 and 10.05 τ, so
+    the manual's 24 dB/oct entry is rounded (a 24 dB/oct filter does not settle in 5 τ:
+    it has reached only 73 % then).
 
     Parameters
     ----------

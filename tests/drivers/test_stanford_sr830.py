@@ -19,7 +19,6 @@ from drivers.base import ReferenceSource
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
-    DeviceError,
     DeviceTimeout,
     ProtocolError,
     StateError,
@@ -32,6 +31,11 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.sr830 import Sr830Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.fault_checks import (
+    corrupted_reads,
+    random_fault_session,
+    unplug_and_replug,
+)
 from tests.drivers.lockin_contract import LockInContract
 
 SPEED = 20.0
@@ -337,23 +341,13 @@ def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
     decoded as a (wrong) number: counted, not hidden.
     """
     lockin, faults = faulty
-    right = wrong = failed = 0
     t0 = time.monotonic()
-    for _ in range(20):
-        faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
-        try:
-            value = lockin.snapshot().r_v
-        except (ProtocolError, DeviceTimeout) as err:
-            assert err.device == "beh" and err.command == "SNAP? 1,2,3,4"
-            failed += 1
-            continue
-        if value == pytest.approx(2e-3, rel=0.01):
-            right += 1
-        else:
-            wrong += 1
+    got = corrupted_reads(lambda: lockin.snapshot().r_v,
+                          lambda v: v == pytest.approx(2e-3, rel=0.01), faults, n=20,
+                          device="beh", command="SNAP? 1,2,3,4")
     assert time.monotonic() - t0 < 30.0
-    assert failed == 0  # one corrupted reply never exhausts the retries
-    assert right >= 10 and right + wrong == 20
+    assert got.failed == 0  # one corrupted reply never exhausts the retries
+    assert got.right >= 10 and got.right + got.wrong == 20
 
 
 @pytest.mark.parametrize("kind, params", [
@@ -397,21 +391,15 @@ def test_error_state_is_reported_at_the_next_setting(faulty):
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
     lockin, faults = faulty
-    for kind in (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT,
-                 FaultKind.UNSOLICITED, FaultKind.DELAY):
-        faults.randomly(kind, 0.05, gap_s=0.002, nbytes=3, delay_s=0.15)
-    ok = typed = 0
+
+    def operation(i: int) -> None:
+        lockin.sensitivity_v = (5e-3, 10e-3)[i % 2]
+        assert lockin.snapshot().r_v == pytest.approx(2e-3, rel=0.05)
+
     t0 = time.monotonic()
-    for i in range(30):
-        try:
-            lockin.sensitivity_v = (5e-3, 10e-3)[i % 2]
-            assert lockin.snapshot().r_v == pytest.approx(2e-3, rel=0.05)
-            ok += 1
-        except DeviceError as err:
-            assert err.device == "beh" and err.command
-            typed += 1
+    got = random_fault_session(operation, faults, n=30, device="beh")
     assert time.monotonic() - t0 < 90
-    assert ok + typed == 30 and ok >= 15
+    assert got.right + got.failed == 30 and got.right >= 15
     assert len(faults.log) >= 3
 
 
@@ -421,19 +409,9 @@ def test_disconnect_is_typed_and_reconnect_finds_same_settings(transport, server
     lockin = open_lockin(transport, "dc", cleanup=servers)
     lockin.sensitivity_v = 0.2
     lockin.reply_timeout = 0.1
-    emulator = emulator_of(lockin)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        lockin.sensitivity_v  # noqa: B018
-    assert time.monotonic() - t0 < 3.0
-    assert info.value.device == "dc" and info.value.command == "SENS?"
-    if transport == "url":
-        lockin.close()
-        lockin = open_lockin(transport, "dc", cleanup=servers)
-    else:
-        emulator.faults.reconnect()  # the cable is back; the same port works again
+    lockin = unplug_and_replug(
+        lockin, emulator_of(lockin).faults, transport, lambda: lockin.sensitivity_v,
+        lambda: open_lockin(transport, "dc", cleanup=servers), command="SENS?", limit_s=3.0)
     assert lockin.sensitivity_v == pytest.approx(0.2)
     lockin.close()
 
