@@ -1,5 +1,7 @@
 """Fault scenarios shared by the tests of the serial motion drivers (SMC100, Zaber).
 
+Built on the device-agnostic loops of :mod:`tests.drivers.fault_checks`.
+
 Each helper drives one scenario through a driver on an emulator with a seeded fault
 injector and asserts what every serial motion driver owes its user: recovery or a typed
 error naming the device and the command, within a bounded time, and the same device state
@@ -12,12 +14,10 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-import pytest
-
 from drivers.base import MotionAxis
-from drivers.errors import ConnectionFailed, DeviceError, DeviceTimeout
 from hw_mocks.emulator import FirmwareEmulator
 from hw_mocks.faults import FaultInjector, FaultKind
+from tests.drivers.fault_checks import random_fault_session, unplug_and_replug
 
 #: Faults a retried query must survive, with parameters for a 0.1 s reply timeout: the
 #: delay is longer than one reply timeout and shorter than all three attempts.
@@ -41,39 +41,15 @@ def query_survives(faults: FaultInjector, kind: FaultKind, params: dict,
     assert [k for _, k in faults.log] == [kind] * times
 
 
-def random_fault_session(axis: MotionAxis, faults: FaultInjector, *, moves: int = 30) -> None:
+def motion_fault_session(axis: MotionAxis, faults: FaultInjector, *, moves: int = 30) -> None:
     """Random faults: each move succeeds or raises a typed error naming its command."""
-    for kind in (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT,
-                 FaultKind.UNSOLICITED, FaultKind.DELAY):
-        faults.randomly(kind, 0.05, gap_s=0.002, nbytes=3, delay_s=0.15)
-    ok = typed = 0
     t0 = time.monotonic()
-    for i in range(moves):
-        try:
-            axis.move_to((i % 5) - 2.0, wait=True, timeout=5)
-            ok += 1
-        except DeviceError as err:
-            assert err.device == axis.name and err.command
-            typed += 1
-            time.sleep(0.2)  # let a late reply or a started move finish
+    got = random_fault_session(
+        lambda i: axis.move_to((i % 5) - 2.0, wait=True, timeout=5), faults, n=moves,
+        device=axis.name, after_failure=lambda: time.sleep(0.2))  # late replies, moves end
     assert time.monotonic() - t0 < 60
-    assert ok + typed == moves and ok >= moves // 2
+    assert got.right + got.failed == moves and got.right >= moves // 2
     assert len(faults.log) >= 5
-
-
-def _unplugged_error(transport: str) -> type[DeviceError]:
-    # In-process the link raises; a pty stays open but the dead device answers nothing.
-    return ConnectionFailed if transport == "url" else DeviceTimeout
-
-
-def replug(axis: MotionAxis, emulator: FirmwareEmulator, transport: str,
-           reopen: Callable[[], MotionAxis]) -> MotionAxis:
-    """The cable is back: in-process close and open anew; on a pty the same port works."""
-    if transport == "url":
-        axis.close()
-        return reopen()
-    emulator.faults.reconnect()
-    return axis
 
 
 def unplug_during_query(axis: MotionAxis, emulator: FirmwareEmulator, transport: str,
@@ -82,13 +58,8 @@ def unplug_during_query(axis: MotionAxis, emulator: FirmwareEmulator, transport:
 
     Returns the axis to use after the replug.
     """
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    t0 = time.monotonic()
-    with pytest.raises(_unplugged_error(transport)) as info:
-        axis.position  # noqa: B018
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == axis.name and info.value.command == command
-    return replug(axis, emulator, transport, reopen)
+    return unplug_and_replug(axis, emulator.faults, transport, lambda: axis.position, reopen,
+                             command=command, limit_s=2.0)
 
 
 def unplug_during_move(axis: MotionAxis, emulator: FirmwareEmulator, transport: str,
@@ -99,15 +70,8 @@ def unplug_during_move(axis: MotionAxis, emulator: FirmwareEmulator, transport: 
     The controller finishes the move on its own; the axis returned (after the replug) has
     come to rest, so the caller can check where.
     """
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    t0 = time.monotonic()
-    with pytest.raises(_unplugged_error(transport)) as info:
-        axis.wait(10)
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == axis.name and info.value.__cause__ is not None
-    if command is not None:
-        assert info.value.command == command
-    axis = replug(axis, emulator, transport, reopen)
+    axis = unplug_and_replug(axis, emulator.faults, transport, lambda: axis.wait(10), reopen,
+                             command=command, limit_s=2.0)
     deadline = time.monotonic() + 5.0
     while axis.is_moving and time.monotonic() < deadline:
         time.sleep(0.005)

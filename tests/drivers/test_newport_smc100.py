@@ -36,11 +36,12 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.fault_checks import corrupted_reads
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    motion_fault_session,
     query_survives,
-    random_fault_session,
     unplug_during_move,
     unplug_during_query,
 )
@@ -445,23 +446,12 @@ def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
     """
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
-    right = wrong = failed = 0
     t0 = time.monotonic()
-    for _ in range(30):
-        faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
-        try:
-            value = axis.position
-        except (ProtocolError, DeviceTimeout) as err:
-            assert err.device == "beh" and err.command == "1TP"
-            failed += 1
-            continue
-        if value == pytest.approx(4.0, abs=1e-6):
-            right += 1
-        else:
-            wrong += 1
+    got = corrupted_reads(lambda: axis.position, lambda v: v == pytest.approx(4.0, abs=1e-6),
+                          faults, n=30, device="beh", command="1TP")
     assert time.monotonic() - t0 < 15.0
-    assert failed == 0  # one corrupted reply never exhausts the retries
-    assert right >= 15 and right + wrong == 30
+    assert got.failed == 0  # one corrupted reply never exhausts the retries
+    assert got.right >= 15 and got.right + got.wrong == 30
 
 
 @pytest.mark.parametrize("kind, params", [
@@ -487,7 +477,7 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
 
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
-    random_fault_session(*faulty)
+    motion_fault_session(*faulty)
 
 
 def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, servers):

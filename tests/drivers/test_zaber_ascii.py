@@ -46,8 +46,8 @@ from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    motion_fault_session,
     query_survives,
-    random_fault_session,
     unplug_during_move,
     unplug_during_query,
 )
@@ -654,7 +654,7 @@ def test_lost_reply_of_a_relative_move_is_typed_and_never_resent(faulty):
 
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
-    random_fault_session(*faulty)
+    motion_fault_session(*faulty)
 
 
 def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, cleanup):
