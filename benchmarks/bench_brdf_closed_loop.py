@@ -3,9 +3,9 @@ and the camera method's geometric systematics at high signal.
 
 1. Three ground-truth samples scanned on the simulated bench (camera/scene/sensor code
    without the motion emulators), reduced by the absolute method and fitted as the receiver
-   sees them (:func:`analysis.brdf_reduction.receiver_model`) with BIC selection among
-   lambert, oren_nayar and lambert+ggx; tests/instrument/test_closed_loop.py asserts the
-   same numbers.
+   sees them (:func:`analysis.brdf.reduction.receiver_model`) with BIC selection among
+   lambert, oren_nayar and lambert+ggx; tests/instrument/pipelines/brdf/test_closed_loop.py
+   asserts the same numbers.
 2. Noise-free, full resolution (1024² px): the reduced values against the BRDF at the
    nominal angles (the old point-sample reduction and the new one) and against the receiver
    model.
@@ -28,11 +28,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from analysis.brdf import get_model
 from analysis.brdf.fit import fit_brdf
-from analysis.brdf_reduction import absolute_brdf, receiver_model, solid_angle_sr
+from analysis.brdf.reduction import absolute_brdf, receiver_model, solid_angle_sr
+from tests.instrument.pipelines.brdf.test_closed_loop import closed_loop
 from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, receiver, reduce_seed, render
-from tests.instrument.test_closed_loop import closed_loop
 
-#: The sim bench's own sample (instrument/profiles/sim.toml [simulation.scene]).
+#: The sim bench's own sample (instrument/bench/profiles/sim.toml [simulation.scene]).
 EXAMPLE = Sample("example", "lambert+ggx", (0.5, 0.2, 0.2))
 PHOTON_J = 6.62607015e-34 * 299792458.0 / 633e-9
 

@@ -7,8 +7,8 @@ measures
   route + ``AcquisitionPolicy.estimated_seconds`` per point, 20 ms readout per frame),
 * the **measured** scatter of the fitted GGX width α over sensor seeds: every point rendered
   by the simulated camera/scene/sensor (tests/instrument/sim_scan.py, no motion emulators),
-  reduced (analysis.brdf_reduction) and fitted with Lambertian + Cook–Torrance GGX,
-* the planner's **predicted** σ(α) (instrument.tradeoff: Fisher information of the camera
+  reduced (analysis.brdf.reduction) and fitted with Lambertian + Cook–Torrance GGX,
+* the planner's **predicted** σ(α) (instrument.plans.tradeoff: Fisher information of the camera
   noise model),
 
 then draws the Pareto plot (docs/brdf_tradeoff_pareto.png) and answers "the fastest scan
@@ -33,9 +33,9 @@ sys.path.insert(0, str(ROOT))
 
 from analysis.brdf import get_model  # noqa: E402
 from analysis.brdf.fit import fit_brdf  # noqa: E402
+from instrument.bench.profile import parse_profile  # noqa: E402
 from instrument.plans.planfile import parse_plan  # noqa: E402
-from instrument.profile import parse_profile  # noqa: E402
-from instrument.tradeoff import (  # noqa: E402
+from instrument.plans.tradeoff import (  # noqa: E402
     ScanOption,
     fastest_for_target,
     pareto_front,

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from instrument.plans import build_plan, parse_plan  # noqa: E402
-from instrument.runner import start_run  # noqa: E402
+from instrument.run.runner import start_run  # noqa: E402
 from tests.instrument.helpers import ideal_bench  # noqa: E402
 
 BLUESKY = r"""

@@ -4,8 +4,8 @@ For each sensor seed the built-in ``sim-lightfield`` bench (SMC100 firmware emul
 the real driver, simulated camera through the EMVA 1288 sensor, continuous-geometry
 renderer of a brushed-metal wall with a hidden disc at (y, z) = (−8, −200) mm and a bar)
 runs ``examples/lightfield_scan.toml`` through the engine; the run is then reconstructed
-and located with :mod:`instrument.lightfield_io`.  Reported per seed: wall-clock times of
-the scan, the reconstruction and the localisation; p̂_max; the point object's position
+and located with :mod:`instrument.pipelines.lightfield`.  Reported per seed: wall-clock
+times of the scan, the reconstruction and the localisation; p̂_max; the point object's position
 error against the theoretical resolution; the number of detections; and, for comparison,
 the number of "objects" simple peak picking finds (local maxima of the conventional focal
 stack above the same 0.3 relative threshold, in the same search region, one per
@@ -34,11 +34,12 @@ from scipy import ndimage
 from drivers.transport import add_url_handler_package
 from hw_mocks import registry
 from hw_mocks.sim.world import reset_worlds
-from instrument import lightfield_io as lfio
 from instrument.cli import main
+from instrument.pipelines.lightfield.locate import locate_run
+from instrument.pipelines.lightfield.reconstruct import reconstruct_run
 
 ROOT = Path(__file__).resolve().parents[1]
-PROFILE = ROOT / "instrument" / "profiles" / "sim-lightfield.toml"
+PROFILE = ROOT / "instrument" / "bench" / "profiles" / "sim-lightfield.toml"
 PLAN = ROOT / "examples" / "lightfield_scan.toml"
 TRUTH = (-8.0, -200.0)
 
@@ -69,10 +70,10 @@ def one(seed: int, folder: Path, material: str = "brushed_metal") -> dict:
         raise RuntimeError(f"scan failed (seed {seed})")
     (run,) = sorted(out.glob("*.h5"))
     t0 = time.perf_counter()
-    rec = lfio.reconstruct_run(run)
+    rec = reconstruct_run(run)
     t_rec = time.perf_counter() - t0
     t0 = time.perf_counter()
-    loc = lfio.locate_run(run)
+    loc = locate_run(run)
     t_loc = time.perf_counter() - t0
     det = loc.detection
     pos = det.positions_mm

@@ -29,12 +29,12 @@ sys.path.insert(0, str(ROOT))
 
 from drivers.transport import add_url_handler_package  # noqa: E402
 from hw_mocks.sim.ideal import IdealCamera, IdealPowerMeter, IdealSource  # noqa: E402
-from instrument.devices import Bench, open_device  # noqa: E402
-from instrument.motion import route_time  # noqa: E402
+from instrument.bench.devices import Bench, open_device  # noqa: E402
+from instrument.bench.dynamics import route_time  # noqa: E402
+from instrument.bench.profile import parse_profile  # noqa: E402
 from instrument.plans import build_plan, parse_plan  # noqa: E402
 from instrument.plans.build import dynamics_of  # noqa: E402
-from instrument.profile import parse_profile  # noqa: E402
-from instrument.runner import start_run  # noqa: E402
+from instrument.run.runner import start_run  # noqa: E402
 
 EXPOSURE_US = 10000.0
 

@@ -4,7 +4,8 @@ For each procedural environment (``[simulation.scene] environment = { seed = n }
 sim-spheres profile) the example plan ``examples/sphere_capture.toml`` runs through
 ``scatterlab run`` (firmware emulators under the real drivers, simulated camera with its
 EMVA 1288 sensor, auto-exposure HDR brackets and darks), then the analysis of
-:mod:`instrument.sphere_io`: the L1 error of the fourth image rendered from the other three
+:mod:`instrument.pipelines.spheres`: the L1 error of the fourth image rendered from the
+other three
 (BRDF transfer), the consistency statistic of the untampered capture against its
 threshold, and the same for a spliced capture (top half of the last image from the other
 lighting).
@@ -16,7 +17,8 @@ lighting).
 
 ``--calibrate`` captures consistent (untampered) environments only and prints the conformal
 factor q on T/threshold (:func:`analysis.sh.consistency.threshold_factor`, α = 0.01), the
-value behind :data:`instrument.sphere_io.SIM_SPHERES_THRESHOLD_SCALE`; the table's last
+value behind :data:`instrument.pipelines.spheres.analyse.SIM_SPHERES_THRESHOLD_SCALE`;
+the table's last
 columns judge the (held-out) environments at that factor.
 """
 
@@ -38,10 +40,11 @@ sys.path.insert(0, str(ROOT))
 from analysis.sh.consistency import threshold_factor  # noqa: E402
 from hw_mocks import registry  # noqa: E402
 from hw_mocks.sim.world import reset_worlds  # noqa: E402
-from instrument import sphere_io  # noqa: E402
 from instrument.cli import main  # noqa: E402
+from instrument.pipelines.spheres.analyse import SIM_SPHERES_THRESHOLD_SCALE, analyse_capture  # noqa: E402
+from instrument.pipelines.spheres.pipeline import analyse_run  # noqa: E402
 
-PROFILE = ROOT / "instrument" / "profiles" / "sim-spheres.toml"
+PROFILE = ROOT / "instrument" / "bench" / "profiles" / "sim-spheres.toml"
 PLAN = ROOT / "examples" / "sphere_capture.toml"
 
 
@@ -67,12 +70,12 @@ def capture(seed: int, folder: Path) -> tuple[Path, float]:
 def one(seed: int, folder: Path) -> dict[str, float]:
     path, t_run = capture(seed, folder)
     t0 = time.perf_counter()
-    cap, res = sphere_io.analyse_run(path, write=False)
+    cap, res = analyse_run(path, write=False)
     t_ana = time.perf_counter() - t0
     rad = cap.radiance.copy()
     half = rad.shape[2] // 2
     rad[-1, -1, :half] = rad[0, -1, :half]
-    tam = sphere_io.analyse_capture(dataclasses.replace(cap, radiance=rad))
+    tam = analyse_capture(dataclasses.replace(cap, radiance=rad))
     return {
         "seed": seed, "l1": res.relight_l1, "t": res.consistency.statistic,
         "thr": res.consistency.threshold, "flag": res.consistency.inconsistent,
@@ -92,7 +95,7 @@ def run(argv: list[str] | None = None) -> int:
     if args.calibrate:
         return calibrate(_seed_range(args.calibrate))
     seeds = [1] if args.quick else _seed_range(args.seeds)
-    q = sphere_io.SIM_SPHERES_THRESHOLD_SCALE
+    q = SIM_SPHERES_THRESHOLD_SCALE
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
@@ -131,7 +134,7 @@ def calibrate(seeds: list[int], false_alarm: float = 0.01) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for s in seeds:
             path, _ = capture(s, Path(tmp))
-            rep = sphere_io.analyse_run(path, write=False)[1].consistency
+            rep = analyse_run(path, write=False)[1].consistency
             u.append(rep.statistic / rep.threshold)
             print(f"environment {s}: T/threshold = {u[-1]:.3f}", flush=True)
     q = threshold_factor(u, false_alarm=false_alarm)

@@ -78,8 +78,9 @@ class PtyServer:
 
 
 def serve_url(url: str) -> PtyServer:
-    """Serve the emulator named by a serial emulator URL (``simapt://``, ``simsmc://``,
-    ``simsc10://``, ``simfw102c://``) on a new pty."""
+    """Serve the emulator named by a ``simapt://``, ``simsmc://``, ``simzaber://``,
+    ``simsr830://``, ``simsc10://`` or ``simfw102c://`` URL (any scheme with a handler in
+    :mod:`hw_mocks.urlhandler`) on a new pty."""
     import importlib
 
     from hw_mocks import registry

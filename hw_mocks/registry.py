@@ -10,14 +10,20 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 from hw_mocks.emulator import FirmwareEmulator
 
-__all__ = ["all_emulators", "get", "get_or_create", "parse_url", "remove", "reset"]
+__all__ = ["all_emulators", "find_world", "get", "get_or_create", "parse_url",
+           "register_world_lookup", "remove", "reset"]
 
 _lock = threading.Lock()
 _instances: dict[tuple[str, str], FirmwareEmulator] = {}
+#: How a device finds the virtual bench its URL names (``world=sim``); installed by
+#: :mod:`hw_mocks.sim.world` when it is imported, so devices need not import the world (and
+#: no world can exist before that module is).
+_world_lookup: Callable[[str], Any] | None = None
 
 
 def parse_url(url: str) -> tuple[str, str, dict[str, str]]:
@@ -67,3 +73,14 @@ def reset() -> None:
     """Forget every instance (power-cycle the whole emulated bench)."""
     with _lock:
         _instances.clear()
+
+
+def register_world_lookup(lookup: Callable[[str], Any]) -> None:
+    """Install the function that finds a virtual bench by name (see ``_world_lookup``)."""
+    global _world_lookup
+    _world_lookup = lookup
+
+
+def find_world(name: str) -> Any:
+    """The virtual bench called ``name``, or ``None`` if none has been made."""
+    return None if _world_lookup is None else _world_lookup(name)

@@ -216,6 +216,12 @@ def _check_polar(theta: NDArray[np.float64], name: str) -> None:
         raise ValueError(f"{name} must lie in [0, pi/2] radians (upper hemisphere)")
 
 
+def flat_angles(*arrays: ArrayLike) -> list[NDArray[np.float64]]:
+    """The angle arrays as 1-D float64 copies broadcast to one length (per-point tables)."""
+    out = np.broadcast_arrays(*(np.asarray(a, dtype=float).reshape(-1) for a in arrays))
+    return [np.array(a, dtype=float) for a in out]
+
+
 def make_geometry(
     theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike, phi_r: ArrayLike
 ) -> Geometry:

@@ -17,12 +17,21 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol, TypeVar
 
-if TYPE_CHECKING:  # world.py imports this module
-    from hw_mocks.sim.world import SourceState
+__all__ = ["FilterBand", "Light", "parse_bands", "transmit"]
 
-__all__ = ["FilterBand", "parse_bands", "transmit"]
+
+class Light(Protocol):
+    """What :func:`transmit` needs of the light (a frozen dataclass such as
+    :class:`hw_mocks.sim.state.SourceState`)."""
+
+    power_w: float
+    wavelength_nm: float
+    bandwidth_nm: float
+
+
+L = TypeVar("L", bound=Light)
 
 
 @dataclass(frozen=True)
@@ -48,7 +57,7 @@ class FilterBand:
         return self.center_nm - half, self.center_nm + half
 
 
-def transmit(source: SourceState, band: FilterBand | None) -> SourceState:
+def transmit(source: L, band: FilterBand | None) -> L:
     """The light after ``band`` (``None``: an empty slot, everything passes)."""
     if band is None:
         return source

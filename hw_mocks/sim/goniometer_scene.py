@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from hw_mocks.sim.world import WorldState
+from hw_mocks.sim.state import WorldState
 
 __all__ = ["BrdfFunction", "GoniometerScene", "brdf_from_model", "lambertian_brdf"]
 

@@ -26,9 +26,7 @@ def bind_to_world(emulator: FirmwareEmulator, world_name: str | None, part: str)
         raise ValueError(f"part must be 'shutter' or 'filter_wheel', got {part!r}")
     if not world_name:
         return
-    from hw_mocks.sim import world as worlds
-
-    world = worlds.find_world(world_name)
+    world = registry.find_world(world_name)
     if world is None:
         return
     if part == "shutter":

@@ -83,9 +83,7 @@ def _bind_to_world(firmware: Pm100usbFirmware, world_name: str | None) -> None:
     """
     if world_name is None or getattr(firmware, "bound_world", None) is not None:
         return
-    from hw_mocks.sim import world as worlds
-
-    world = worlds.find_world(world_name)
+    world = registry.find_world(world_name)
     if world is not None:
         world.bind_power_meter(firmware)
 

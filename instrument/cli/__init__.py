@@ -11,7 +11,8 @@ import importlib
 import sys
 
 from drivers.errors import DeviceError
-from instrument.profile import ProfileError
+from instrument.bench.profile import ProfileError
+from instrument.version import package_version
 
 __all__ = ["main"]
 
@@ -25,21 +26,12 @@ def build_parser() -> argparse.ArgumentParser:
         prog="scatterlab",
         description="Lab software for optical scattering: goniometer scans, storage, analysis.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in SUBCOMMANDS:
         importlib.import_module(f"instrument.cli.{name}").register(sub)
     return parser
-
-
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("scatterlab")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def main(argv: list[str] | None = None) -> int:

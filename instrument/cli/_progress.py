@@ -5,9 +5,7 @@ from __future__ import annotations
 import sys
 import time
 
-import h5py
-
-from instrument.events import (
+from instrument.run.events import (
     Event,
     Fault,
     Paused,
@@ -17,7 +15,7 @@ from instrument.events import (
     RunFinished,
     RunStarted,
 )
-from instrument.storage import read_summary
+from instrument.run.runfile import read_summary
 
 
 def fmt_s(seconds: float) -> str:
@@ -109,10 +107,7 @@ def print_summary(ev: RunFinished, faults: int, stream=None) -> None:
     print(f"run file: {ev.path}", file=out)
     try:
         s = read_summary(ev.path)
-        with h5py.File(ev.path, "r") as f:
-            e = f["entry"]
-            sample = e["sample/name"][()].decode()
-            axes = ", ".join(a.decode() for a in e["plan/axes"][()])
+        sample, axes = s.sample_name, ", ".join(s.axes)
         frames = (f"{s.n_frames} frames of {s.frame_shape[1]}x{s.frame_shape[0]} px"
                   if s.frame_shape else "no frames")
         print(f"  holds: sample {sample!r}, {s.n_points} points ({axes}; angles, exposures, "

@@ -6,8 +6,8 @@ import argparse
 
 from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
 from drivers.errors import DeviceError
-from instrument.devices import open_bench
-from instrument.profile import load_profile
+from instrument.bench.devices import open_bench
+from instrument.bench.profile import load_profile
 
 
 def register(sub: argparse._SubParsersAction) -> None:

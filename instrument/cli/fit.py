@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from analysis.brdf import get_model
-from instrument.analysis_io import ReductionOptions, read_run, reduce_run, write_analysis
-from instrument.report import DEFAULT_MODELS, analyse, write_report
+from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+from instrument.pipelines.brdf.pipeline import fit_run
+from instrument.pipelines.brdf.reduce import ReductionOptions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -88,12 +88,9 @@ def run(args: argparse.Namespace) -> int:
     )
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     try:
-        for name in models:  # an unknown name fails here, before the (slow) reduction
-            get_model(name)
-        reduced = reduce_run(args.run, opts)
-        result = analyse(reduced.points, models, criterion=args.criterion,
-                         run_cv=not args.no_cv, n_bootstrap=args.bootstrap)
-        run_data = read_run(args.run)
+        done = fit_run(args.run, opts, models, criterion=args.criterion, run_cv=not args.no_cv,
+                       n_bootstrap=args.bootstrap, report_dir=args.out,
+                       write=not args.no_write)
     except KeyError as err:
         print(f"error: {err.args[0] if err.args else err}")
         return 2
@@ -106,13 +103,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: cannot read {args.run} or one of its companion runs as a "
               f"scatterlab run file (HDF5): {err}")
         return 2
-    out = Path(args.out) if args.out else Path(args.run).with_name(
-        Path(args.run).stem + "_report")
-    page = write_report(out, reduced.points, result,
-                        title=f"BRDF of {run_data.sample_name or run_data.run_id} "
-                        f"(run {run_data.run_id})", provenance=reduced.provenance)
-    if not args.no_write:
-        write_analysis(args.run, reduced, result.to_dict())
+    reduced, result, page = done.reduced, done.result, done.report
     fit = result.chosen_fit
     print(f"{reduced.points.n} points ({reduced.points.method}); chosen model "
           f"{result.chosen} ({result.selection.rule})")

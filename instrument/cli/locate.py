@@ -2,8 +2,8 @@
 
 Uses the reconstruction stored by ``scatterlab reconstruct`` (or makes it, with the same
 options), refocuses it over a (y, z) grid and detects the objects with their theoretical
-resolution (:func:`instrument.lightfield_io.locate_run`). Results go into the run file
-under ``/entry/analysis/lightfield/localisation``; figures ((y, z) map, focal stack,
+resolution (:func:`instrument.pipelines.lightfield.locate.locate_run`). Results go into
+the run file under ``/entry/analysis/lightfield/localisation``; figures ((y, z) map, focal stack,
 z-profiles) to ``<run>.lightfield/``.
 """
 
@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import argparse
 
-from instrument import lightfield_io as lfio
 from instrument.cli.reconstruct import (
     add_reconstruction_options,
     check_run_file,
     figures_dir,
     options,
 )
+from instrument.pipelines.lightfield.locate import locate_run
+from instrument.pipelines.lightfield.results import GROUP
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         if args.again or any(v is not None for v in given) or args.n_theta != 128 \
                 or args.method != "wiener":
             recon = options(args)
-        r = lfio.locate_run(args.run, y_range_mm=args.y_range, z_range_mm=tuple(args.z_range),
+        r = locate_run(args.run, y_range_mm=args.y_range, z_range_mm=tuple(args.z_range),
                             threshold_rel=args.threshold, figures_dir=figures_dir(args),
                             **recon)
     except (ValueError, OSError, RuntimeError) as err:
@@ -64,5 +65,5 @@ def run(args: argparse.Namespace) -> int:
               f"{det.brightness_conventional[k]:.4g}")
     if r.figures:
         print(f"figures: {', '.join(str(p) for p in r.figures)}")
-    print(f"stored in {args.run}:/{lfio.GROUP}/localisation")
+    print(f"stored in {args.run}:/{GROUP}/localisation")
     return 0 if r.recoverable else 1

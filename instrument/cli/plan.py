@@ -7,11 +7,12 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from instrument.bench.guard import GuardError
+from instrument.bench.profile import load_profile
+from instrument.cli import _planner
 from instrument.cli._progress import fmt_s
-from instrument.coverage import write_coverage_png
-from instrument.guard import GuardError
 from instrument.plans import build_plan, load_plan
-from instrument.profile import load_profile
+from instrument.plans.coverage import write_coverage_png
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,19 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")
     p.add_argument("--png", default=None,
                    help="coverage picture path (default: <plan name>_coverage.png here)")
-    tradeoff = _tradeoff()
-    if tradeoff is not None:
-        tradeoff.add_arguments(p)
+    _planner.add_arguments(p)
     p.set_defaults(func=run)
-
-
-def _tradeoff():
-    """The speed/accuracy search (instrument.tradeoff), if it imports."""
-    try:
-        from instrument import tradeoff
-    except ImportError:
-        return None
-    return tradeoff
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
                   f"got {args.target_uncertainty}", file=sys.stderr)
             return 2
         try:
-            return _tradeoff().run_from_args(args, spec, profile)
+            return _planner.run_from_args(args, spec, profile)
         except (ValueError, KeyError) as err:  # their messages say what to change
             msg = err.args[0] if isinstance(err, KeyError) and err.args else err
             print(f"error: --target-uncertainty: {msg}", file=sys.stderr)

@@ -1,7 +1,8 @@
 """``scatterlab reconstruct RUN``: the hidden object's light field from a light-field run.
 
 Assembles the measured light field from the run's frames, reconstructs the object light
-field at the wall (:mod:`instrument.lightfield_io`), stores both in the run file under
+field at the wall (:mod:`instrument.pipelines.lightfield.reconstruct`), stores both in the
+run file under
 ``/entry/analysis/lightfield`` and writes the figures (measured and reconstructed light
 fields, diagnostics) to ``<run>.lightfield/``.
 """
@@ -11,7 +12,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from instrument import lightfield_io as lfio
+from instrument.pipelines.lightfield.geometry import load_geometry, parse_brdf
+from instrument.pipelines.lightfield.reconstruct import reconstruct_run
+from instrument.pipelines.lightfield.results import GROUP
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -50,7 +53,7 @@ def _n_theta(text: str) -> int:
 
 
 def options(args: argparse.Namespace) -> dict:
-    """Keyword arguments of :func:`instrument.lightfield_io.reconstruct_run`.
+    """Keyword arguments of :func:`instrument.pipelines.lightfield.reconstruct.reconstruct_run`.
 
     Raises ValueError naming the option when ``--domain`` is not inside (−90°, 90°).
     """
@@ -64,8 +67,8 @@ def options(args: argparse.Namespace) -> dict:
                              f"-90 < A < B < 90")
         domain = (math.radians(a), math.radians(b))
     return {
-        "geometry": lfio.load_geometry(args.geometry) if args.geometry else None,
-        "brdf": lfio.parse_brdf(args.brdf) if args.brdf else None,
+        "geometry": load_geometry(args.geometry) if args.geometry else None,
+        "brdf": parse_brdf(args.brdf) if args.brdf else None,
         "domain_rad": domain,
         "n_theta": args.n_theta,
         "method": args.method,
@@ -93,7 +96,7 @@ def figures_dir(args: argparse.Namespace) -> Path | None:
 def run(args: argparse.Namespace) -> int:
     try:
         check_run_file(args.run)
-        r = lfio.reconstruct_run(args.run, figures_dir=figures_dir(args), **options(args))
+        r = reconstruct_run(args.run, figures_dir=figures_dir(args), **options(args))
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2
@@ -112,5 +115,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if r.figures:
         print(f"figures: {', '.join(str(p) for p in r.figures)}")
-    print(f"stored in {args.run}:/{lfio.GROUP}")
+    print(f"stored in {args.run}:/{GROUP}")
     return 0 if rec.recoverable else 1

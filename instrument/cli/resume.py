@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from instrument.catalog import Catalog
+from instrument.bench.devices import open_bench
+from instrument.bench.profile import load_profile, parse_profile
 from instrument.cli.run import add_common, drive
-from instrument.devices import open_bench
-from instrument.profile import load_profile, parse_profile
-from instrument.runner import resume_run
-from instrument.storage import StorageError, recover
+from instrument.run.catalog import Catalog
+from instrument.run.runner import resume_run
+from instrument.run.storage import StorageError, recover
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -7,13 +7,13 @@ import signal
 import threading
 from pathlib import Path
 
+from instrument.bench.devices import open_bench
+from instrument.bench.guard import GuardError
+from instrument.bench.profile import load_profile
 from instrument.cli._progress import ConsoleProgress, print_summary
-from instrument.devices import open_bench
-from instrument.engine import EngineState, RunEngine
-from instrument.guard import GuardError
 from instrument.plans import build_plan, load_plan
-from instrument.profile import load_profile
-from instrument.runner import DEFAULT_RUNS_DIR, start_run
+from instrument.run.engine import EngineState, RunEngine
+from instrument.run.runner import DEFAULT_RUNS_DIR, start_run
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -6,8 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
-from instrument.catalog import CATALOG_NAME, Catalog
-from instrument.runner import DEFAULT_RUNS_DIR
+from instrument.run.catalog import CATALOG_NAME, Catalog
+from instrument.run.runner import DEFAULT_RUNS_DIR
 
 
 def register(sub: argparse._SubParsersAction) -> None:

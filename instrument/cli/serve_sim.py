@@ -10,7 +10,7 @@ import argparse
 import importlib
 import time
 
-from instrument.profile import load_profile
+from instrument.bench.profile import load_profile
 
 PTY_ENTRY = ("hw_mocks.pty_server", "serve_url")
 

@@ -3,12 +3,12 @@
 Merges each point's HDR brackets into a radiance image, fits spherical harmonics, tests the
 identities of physics.md §5 (M10/M16/M19/M21/M25), renders the last image from the other
 three corner images by BRDF transfer and checks the capture's consistency against the noise
-level (:mod:`instrument.sphere_io`). Results go into ``/entry/analysis`` of the run file;
+level (:mod:`instrument.pipelines.spheres`). Results go into ``/entry/analysis`` of the run file;
 the figure to ``<run>.spheres.png`` (or ``--figure``).
 
 Exit status: 0 consistent, 1 the consistency check flags the capture, 2 on errors.
 The check's α is calibrated against noise only; on the simulated bench its false-alarm
-rate is above α (``sphere_io.CONSISTENCY_LIMIT``, printed with the verdict).
+rate is above α (``CONSISTENCY_LIMIT``, printed with the verdict).
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from instrument import sphere_io
+from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT
+from instrument.pipelines.spheres.pipeline import analyse_run
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     elif fig.lower() == "none":
         fig = None
     try:
-        capture, res = sphere_io.analyse_run(
+        capture, res = analyse_run(
             args.run, write=not args.no_write, figure=fig, lmax=args.lmax,
             lmax_check=args.lmax_check, max_view_angle_deg=args.max_view_angle,
             check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
@@ -105,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
           f"T = {rep.statistic:.3g}, threshold {rep.threshold:.3g} at α = "
           f"{rep.false_alarm:g}: {verdict}")
     if res.threshold_scale == 1.0:
-        print(f"  note: {sphere_io.CONSISTENCY_LIMIT}")
+        print(f"  note: {CONSISTENCY_LIMIT}")
     else:
         print(f"  threshold = {res.threshold_scale:g} × the bootstrap's (--threshold-scale, "
               "calibrated on consistent captures of the bench)")

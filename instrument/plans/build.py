@@ -1,7 +1,7 @@
 """From a validated plan spec and a bench profile to an ordered, guarded :class:`Plan`.
 
 The plan's points are generated in a natural (raster) order, turned into axis targets by
-the bench's kinematics, checked by :mod:`instrument.guard` (nothing moves if any point is
+the bench's kinematics, checked by :mod:`instrument.bench.guard` (nothing moves if any point is
 rejected), then ordered for short motion time. :meth:`Plan.commands` is the generator of
 typed commands the engine runs; it skips points already done (resume).
 """
@@ -14,9 +14,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from instrument import guard
-from instrument.kinematics import Angles, UnreachableError, kinematics_for
-from instrument.motion import AxisDynamics, route_time
+from instrument.bench import guard
+from instrument.bench.dynamics import AxisDynamics, route_time
+from instrument.bench.kinematics import Angles, UnreachableError, kinematics_for
+from instrument.bench.profile import BenchProfile, FieldError
 from instrument.plans.commands import (
     Acquire,
     Command,
@@ -28,7 +29,6 @@ from instrument.plans.commands import (
 from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, specular_cone
 from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
-from instrument.profile import BenchProfile, FieldError
 
 __all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of"]
 

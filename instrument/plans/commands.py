@@ -11,7 +11,7 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from instrument.kinematics import Angles
+from instrument.bench.kinematics import Angles
 
 __all__ = [
     "Acquire",

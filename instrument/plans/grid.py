@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from instrument.kinematics import Angles, direction
+from instrument.bench.kinematics import Angles, direction
 
 __all__ = ["dedupe_reciprocal", "equal_solid_angle_grid", "specular_cone"]
 

@@ -1,7 +1,7 @@
 """Point order: minimise total motion time instead of running a naive raster.
 
 Cost of a step = the slowest axis's trapezoidal move (axes start together,
-:mod:`instrument.motion`). Candidates: the generated (raster) order, a serpentine of it
+:mod:`instrument.bench.dynamics`). Candidates: the generated (raster) order, a serpentine of it
 (alternate the fastest-varying axis's direction per row), and greedy nearest neighbour
 from the start; the best is then improved by 2-opt segment reversals until no reversal
 helps or ``max_passes`` passes ran. Deterministic: the same points always give the
@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from instrument.motion import AxisDynamics, move_times, route_time
+from instrument.bench.dynamics import AxisDynamics, move_times, route_time
 
 __all__ = ["optimise_order", "serpentine"]
 

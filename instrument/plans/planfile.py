@@ -1,7 +1,7 @@
 """Plan files (TOML): parsing and field-level validation.
 
 Like bench profiles, plan files are untrusted: :func:`parse_plan` reports *every* problem
-as a :class:`~instrument.profile.FieldError` (``scan.theta_i[2]: ...``) inside a
+as a :class:`~instrument.bench.profile.FieldError` (``scan.theta_i[2]: ...``) inside a
 :class:`PlanError` and never raises anything else for bad input. Schema::
 
     [plan]
@@ -65,8 +65,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from instrument.bench.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
-from instrument.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 
 __all__ = ["KINDS", "PlanError", "PlanSpec", "load_plan", "parse_plan"]
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from instrument.devices import configure_simulation, open_device
-from instrument.profile import load_profile
+from instrument.bench.devices import configure_simulation, open_device
+from instrument.bench.profile import load_profile
 from tests.drivers.light_source_contract import LightSourceContract
 from tests.drivers.power_meter_contract import PowerMeterContract
 

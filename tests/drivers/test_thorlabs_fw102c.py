@@ -16,11 +16,9 @@ import pytest
 from drivers.base import FilterSpec, WheelSpeed
 from drivers.errors import (
     ConnectionFailed,
-    DeviceError,
     DeviceTimeout,
     LimitError,
     MotionError,
-    ProtocolError,
 )
 from drivers.thorlabs_fw102c import (
     CommandRejected,
@@ -34,8 +32,9 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.fw102c import Fw102cEmulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
-from tests.drivers.answer_faults import assert_query_rides_out, retryable_faults
+from tests.drivers.fault_checks import corrupted_reads, random_fault_session
 from tests.drivers.filter_wheel_contract import FilterWheelContract
+from tests.drivers.serial_faults import QUERY_FAULTS, query_survives
 
 SPEED = 50.0
 IDN = b"THORLABS FW102C/FW212C Filter Wheel version 1.07"
@@ -305,10 +304,10 @@ def test_error_state_fault_jams_the_next_move(wheel):
         wheel.move_to(3)
 
 
-@retryable_faults
+@pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover_by_retry(wheel, kind, params):
     wheel._link.reply_timeout = 0.1
-    assert_query_rides_out(lambda: wheel.position, 1, emulator_of(wheel).faults, kind, params)
+    query_survives(emulator_of(wheel).faults, kind, params, lambda: wheel.position, 1)
 
 
 def test_lost_prompt_after_a_real_move_is_recovered(wheel):
@@ -320,21 +319,12 @@ def test_lost_prompt_after_a_real_move_is_recovered(wheel):
 
 def test_random_faults_never_hang(wheel):
     wheel._link.reply_timeout = 0.1
-    faults = emulator_of(wheel).faults
-    for kind in (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT, FaultKind.UNSOLICITED):
-        faults.randomly(kind, 0.05, gap_s=0.002, nbytes=3)
-    ok = typed = 0
     t0 = time.monotonic()
-    for i in range(20):
-        try:
-            wheel.move_to(i % 6 + 1, timeout=1.0)
-            ok += 1
-        except DeviceError as err:
-            assert err.device == "beh" and err.command
-            typed += 1
-            time.sleep(0.1)
+    got = random_fault_session(lambda i: wheel.move_to(i % 6 + 1, timeout=1.0),
+                               emulator_of(wheel).faults, n=20, device="beh",
+                               after_failure=lambda: time.sleep(0.2))  # late prompts arrive
     assert time.monotonic() - t0 < 60
-    assert ok + typed == 20 and ok >= 12
+    assert got.right + got.failed == 20 and got.right >= 12
 
 
 def test_wheel_that_does_not_answer_is_typed_and_bounded(wheel):
@@ -350,17 +340,10 @@ def test_wheel_that_does_not_answer_is_typed_and_bounded(wheel):
 
 def test_corrupted_answers_are_retried_or_typed(wheel):
     wheel._link.reply_timeout = 0.1
-    faults = emulator_of(wheel).faults
-    right = typed = 0
-    for _ in range(20):
-        faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
-        try:
-            right += wheel.position == 1
-        except (ProtocolError, DeviceTimeout) as err:
-            assert err.device == "beh"
-            typed += 1
+    got = corrupted_reads(lambda: wheel.position, lambda slot: slot == 1,
+                          emulator_of(wheel).faults, n=20, device="beh", command="pos?")
     # No checksum: a flip of "1" into another digit 1..6 would read as that slot; count it.
-    assert typed == 0 and right >= 15
+    assert got.failed == 0 and got.right >= 15
 
 
 # --------------------------------------------------------------------------- real hardware

@@ -272,8 +272,8 @@ def test_frame_to_radiance_matches_brdf_times_irradiance(model, params, theta_s,
 
 def test_out_of_plane_view_renders_the_brdf_at_the_kinematics_angles():
     """Sample tilted out of the plane of incidence and spun about its normal: the spot
-    centre's radiance is f(θi, φi, θr, φr) · E with the angles of instrument.kinematics."""
-    from instrument.kinematics import OutOfPlaneKinematics
+    centre's radiance is f(θi, φi, θr, φr) · E with the angles of instrument.bench.kinematics."""
+    from instrument.bench.kinematics import OutOfPlaneKinematics
 
     positions = {"sample_theta": 25.0, "detector_theta": 60.0, "sample_tilt": -15.0,
                  "sample_phi": 30.0}

@@ -7,7 +7,6 @@ without the drivers, so that the driver tests test against an independent readin
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import pytest
@@ -19,6 +18,7 @@ from hw_mocks import registry
 from hw_mocks.clock import ManualClock
 from hw_mocks.firmware.fw102c import SETTLE_S, Fw102cEmulator
 from hw_mocks.firmware.sc10 import Sc10Emulator
+from tests.hw_mocks.purity import assert_imports_nothing_forbidden
 
 NOT_DEFINED = b"Command error CMD_NOT_DEFINED\n\r> "
 ARG_INVALID = b"Command error CMD_ARG_INVALID\n\r> "
@@ -293,19 +293,10 @@ def test_wrong_baud_rate_gets_no_answer(url, baud):
 
 def test_emulators_import_nothing_from_drivers():
     root = Path(__file__).resolve().parents[2] / "hw_mocks"
-    paths = [root / "firmware" / name for name in ("sc10.py", "fw102c.py", "thorlabs_prompt.py")]
-    paths += [root / "urlhandler" / name for name in
-              ("protocol_simsc10.py", "protocol_simfw102c.py", "world_binding.py")]
-    for path in paths:
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):
-                names = [node.module or ""]
-            else:
-                continue
-            assert not any(n.split(".")[0] in ("drivers", "instrument", "gui")
-                           for n in names), (path, names)
+    assert_imports_nothing_forbidden(
+        *(root / "firmware" / name for name in ("sc10.py", "fw102c.py", "thorlabs_prompt.py")),
+        *(root / "urlhandler" / name for name in
+          ("protocol_simsc10.py", "protocol_simfw102c.py", "world_binding.py")))
 
 
 # --------------------------------------------------------------------------- fuzzing

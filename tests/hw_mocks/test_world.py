@@ -47,7 +47,7 @@ def bench(theta_s=0.0, theta_d=30.0, **kw) -> VirtualBench:
 )
 def test_world_angles_agree_with_instrument_kinematics(positions):
     """The world and the instrument's kinematics must describe the same bench."""
-    from instrument.kinematics import OutOfPlaneKinematics
+    from instrument.bench.kinematics import OutOfPlaneKinematics
 
     angles = OutOfPlaneKinematics(source_theta_deg=0.0).angles(
         {"sample_theta": 0.0, "detector_theta": 0.0, "sample_tilt": 0.0, "sample_phi": 0.0,

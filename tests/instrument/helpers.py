@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from drivers.base import AxisKind
 from hw_mocks.sim.ideal import IdealAxis, IdealCamera, IdealPowerMeter, IdealSource
-from instrument.devices import Bench
-from instrument.profile import parse_profile
+from instrument.bench.devices import Bench
+from instrument.bench.profile import parse_profile
 
 IDEAL_PROFILE = """
 [bench]

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.brdf_reduction import (
+from analysis.brdf.reduction import (
     BRDFPoints,
     DetectorNoise,
     ReceiverGeometry,
@@ -36,9 +36,9 @@ from hw_mocks.sim.camera import OpticsParams, SimulatedCamera
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import Sensor, SensorParams
 from hw_mocks.sim.world import SourceState, VirtualBench
+from instrument.bench.profile import load_profile
 from instrument.plans.build import Plan, build_plan
 from instrument.plans.planfile import parse_plan
-from instrument.profile import load_profile
 
 
 @dataclass(frozen=True)
@@ -189,7 +189,8 @@ def noise_model(setup: ScanSetup) -> DetectorNoise:
 
 def receiver(setup: ScanSetup) -> ReceiverGeometry:
     """What the simulated camera integrates: the footprint seen along chief rays through its
-    pupil centre, with Ω = A_pupil/R² (what ``instrument.analysis_io`` builds for a run)."""
+    pupil centre, with Ω = A_pupil/R² (what ``instrument.pipelines.brdf.reduce`` builds for a
+    run)."""
     omega, _ = camera_solid_angle_sr(setup.aperture_mm, setup.distance_mm)
     return ReceiverGeometry(setup.beam_radius_mm, setup.distance_mm, setup.aperture_mm, omega,
                             sample_aperture=False)
@@ -241,7 +242,7 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
 
 def profile_text(setup: ScanSetup, sample: Sample) -> str:
     """The ``sim`` bench profile with this setup's camera, source and sample."""
-    text = (Path(__file__).resolve().parents[2] / "instrument" / "profiles" / "sim.toml"
+    text = (Path(__file__).resolve().parents[2] / "instrument" / "bench" / "profiles" / "sim.toml"
             ).read_text(encoding="utf-8")
     p = setup.sensor_params()
     cam = (f"simcam://camera?world=sim&seed=1&width={p.width}&height={p.height}"
@@ -258,11 +259,11 @@ def profile_text(setup: ScanSetup, sample: Sample) -> str:
 def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_plane",
                    run_id: str = "closed-loop") -> Path:
     """Acquire every point of ``r`` with sensor ``seed`` and store it as a run file with
-    :class:`instrument.storage.RunStore` (the engine's writer), frames per point: the light
+    :class:`instrument.run.storage.RunStore` (the engine's writer), frames per point: the light
     frame then its dark frame."""
     import time as _time
 
-    from instrument.storage import FrameData, PointRecord, RunHeader, RunStore
+    from instrument.run.storage import FrameData, PointRecord, RunHeader, RunStore
 
     s = r.setup
     p = s.sensor_params()
@@ -307,7 +308,7 @@ def write_flat_run(setup: ScanSetup, seed: int, path: Path, *, n_frames: int = 8
     filling ``electrons`` per pixel, ``n_frames`` flat points each with its dark frame."""
     import time as _time
 
-    from instrument.storage import FrameData, PointRecord, RunHeader, RunStore
+    from instrument.run.storage import FrameData, PointRecord, RunHeader, RunStore
 
     p = setup.sensor_params()
     sensor = Sensor(p, seed=seed)

@@ -1,0 +1,481 @@
+"""Bench profiles: which devices a bench has, where they are, and what they may do.
+
+A profile is a TOML file. It is untrusted input: :func:`load_profile` validates every
+field and reports *all* problems at once in a :class:`ProfileError`, each naming the
+field path (``devices.sample_theta.limits``) and what to do. Nothing is opened or moved
+before a profile has validated.
+
+Schema (all lengths in mm, angles in degrees)::
+
+    [bench]
+    name = "sim"                       # required
+    description = "..."
+
+    [devices.<role>]                   # one table per device; the key is its role
+    driver = "thorlabs_apt"            # see instrument.bench.devices.DRIVERS
+    url = "simapt://sample_theta?model=K10CR1"   # device path or pyserial/sim URL
+    stage = "K10CR1"                   # motion drivers: stage model
+    limits = [-90.0, 90.0]             # motion: soft limits in axis units
+    velocity = 10.0                    # motion: units/s (written to the controller)
+    acceleration = 20.0                # motion: units/s²
+    position_tolerance = 0.01          # motion: arrival tolerance in axis units
+    settle_s = 0.01                    # motion: settling after each move (planning, s)
+    options = { ... }                  # driver-specific keyword arguments
+
+    [devices.<role>.retry]             # recovery policy for this device (optional)
+    attempts = 3                       # tries of an idempotent operation
+    backoff_s = 0.1                    # first back-off, doubled each try
+    on_failure = "pause"               # "pause" | "skip" | "rehome" | "abort"
+
+    [geometry]                         # goniometer geometry
+    kind = "in_plane"                  # "in_plane" | "out_of_plane"
+    detector_distance_mm = 300.0       # sample centre to detector aperture
+    detector_aperture_mm = 5.0         # diameter of the detector's limiting aperture
+    min_bistatic_deg = 6.0             # detector must stay this far from the beam
+    source_theta_deg = 0.0             # fixed source direction in the lab frame
+
+    [[geometry.collision]]             # arm-collision zones (any number; optional)
+    axis = "detector_theta"            # an axis role
+    range = [150.0, 180.0]             # forbidden interval of that axis (or of the difference)
+    relative_to = "sample_theta"       # optional: the zone applies to axis − relative_to
+    reason = "arm hits the sample holder"
+
+    [simulation]                       # only for emulated benches; passed to hw_mocks
+    world = "sim"
+    ...
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "AXIS_ROLES",
+    "BenchProfile",
+    "CollisionZone",
+    "DeviceSpec",
+    "FieldError",
+    "GeometrySpec",
+    "ProfileError",
+    "RetryPolicy",
+    "load_profile",
+    "parse_profile",
+]
+
+#: Roles of motion axes the kinematics and plans know about.
+AXIS_ROLES = (
+    "sample_theta",
+    "sample_phi",
+    "sample_tilt",
+    "detector_theta",
+    "detector_phi",
+    "source_theta",
+    "camera_z",
+)
+#: Motion drivers and the kind of axis they drive by default.
+MOTION_DRIVERS = ("thorlabs_apt", "newport_smc100")
+OTHER_DRIVERS = ("pm100usb", "opencv_camera", "sim_camera", "sim_source")
+ON_FAILURE = ("pause", "skip", "rehome", "abort")
+
+
+@dataclass(frozen=True)
+class FieldError:
+    path: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.message}"
+
+
+class ProfileError(ValueError):
+    """A profile or plan failed validation; ``errors`` lists every offending field."""
+
+    def __init__(self, source: str, errors: list[FieldError]) -> None:
+        self.source = source
+        self.errors = list(errors)
+        lines = "\n".join(f"  - {e}" for e in self.errors)
+        super().__init__(f"{source} is not valid ({len(self.errors)} problem(s)):\n{lines}")
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    """What the engine does when an operation on this device fails."""
+
+    attempts: int = 3
+    backoff_s: float = 0.1
+    on_failure: str = "pause"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"attempts": self.attempts, "backoff_s": self.backoff_s,
+                "on_failure": self.on_failure}
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    role: str
+    driver: str
+    url: str
+    stage: str | None = None
+    limits: tuple[float, float] | None = None
+    velocity: float | None = None
+    acceleration: float | None = None
+    position_tolerance: float | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+    retry: RetryPolicy = field(default_factory=RetryPolicy)
+    settle_s: float = 0.0
+    #: Measurement settings applied after opening, through the device's validated public
+    #: properties (e.g. a power meter's ``wavelength_nm``): see :data:`DEVICE_SETTINGS`.
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_axis(self) -> bool:
+        return self.driver in MOTION_DRIVERS
+
+    @property
+    def is_simulated(self) -> bool:
+        return self.url.startswith("sim")
+
+
+@dataclass(frozen=True)
+class CollisionZone:
+    """A forbidden interval of one axis (or of ``axis − relative_to``), in axis units."""
+
+    axis: str
+    low: float
+    high: float
+    relative_to: str | None = None
+    reason: str = "arm collision"
+
+    def hit(self, positions: dict[str, float]) -> bool:
+        if self.axis not in positions:
+            return False
+        value = positions[self.axis]
+        if self.relative_to is not None:
+            if self.relative_to not in positions:
+                return False
+            value -= positions[self.relative_to]
+        return self.low <= value <= self.high
+
+    def describe(self) -> str:
+        what = self.axis if self.relative_to is None else f"{self.axis} - {self.relative_to}"
+        return f"{what} in [{self.low:g}, {self.high:g}] ({self.reason})"
+
+
+@dataclass(frozen=True)
+class GeometrySpec:
+    kind: str = "in_plane"
+    detector_distance_mm: float = 300.0
+    detector_aperture_mm: float = 5.0
+    min_bistatic_deg: float = 6.0
+    source_theta_deg: float = 0.0
+    collisions: tuple[CollisionZone, ...] = ()
+
+    @property
+    def detector_solid_angle_sr(self) -> float:
+        """Solid angle of the circular detector aperture seen from the sample centre.
+
+        Exact cone form Ω = 2π(1 − cos α) with tan α = (D/2)/R, not the small-angle A/R².
+        """
+        half = math.atan2(self.detector_aperture_mm / 2.0, self.detector_distance_mm)
+        return 2.0 * math.pi * (1.0 - math.cos(half))
+
+
+@dataclass(frozen=True)
+class BenchProfile:
+    name: str
+    description: str
+    devices: dict[str, DeviceSpec]
+    geometry: GeometrySpec
+    simulation: dict[str, Any] | None
+    source_text: str  # the TOML as read, stored with every run for provenance
+
+    @property
+    def axes(self) -> dict[str, DeviceSpec]:
+        return {role: d for role, d in self.devices.items() if d.is_axis}
+
+    def device(self, role: str) -> DeviceSpec:
+        try:
+            return self.devices[role]
+        except KeyError:
+            raise KeyError(f"bench {self.name!r} has no device with role {role!r}; "
+                           f"it has {sorted(self.devices)}") from None
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def builtin_profiles() -> list[str]:
+    """Names of the profiles shipped with scatterlab (``sim``...)."""
+    folder = resources.files("instrument.bench") / "profiles"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_profile(name_or_path: str | Path) -> BenchProfile:
+    """Load a built-in profile by name, or a profile file by path."""
+    text_path = Path(name_or_path)
+    if text_path.suffix == ".toml" or text_path.exists():
+        try:
+            text = text_path.read_text(encoding="utf-8")
+        except OSError as err:
+            raise ProfileError(str(text_path), [FieldError("file", f"cannot read: {err}")]
+                               ) from err
+        return parse_profile(text, source=str(text_path))
+    name = str(name_or_path)
+    if name not in builtin_profiles():
+        raise ProfileError(name, [FieldError(
+            "bench", f"no built-in profile {name!r} and no such file; built-in profiles: "
+            f"{', '.join(builtin_profiles())}")])
+    text = (resources.files("instrument.bench") / "profiles" / f"{name}.toml").read_text("utf-8")
+    return parse_profile(text, source=f"built-in profile {name!r}")
+
+
+def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
+    """Validate TOML ``text`` into a :class:`BenchProfile` or raise :class:`ProfileError`."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ProfileError(source, [FieldError("toml", f"not valid TOML: {err}")]) from err
+    v = _Validator()
+    bench = v.table(data, "bench", required=True)
+    name = v.string(bench, "name", "bench", required=True) or ""
+    description = v.string(bench, "description", "bench") or ""
+    v.unknown(bench, "bench", {"name", "description"})
+
+    devices: dict[str, DeviceSpec] = {}
+    device_tables = v.table(data, "devices", required=True)
+    if not device_tables and "devices" in data:
+        v.error("devices", "at least one device is needed")
+    for role, table in device_tables.items():
+        path = f"devices.{role}"
+        if not isinstance(table, dict):
+            v.error(path, "must be a table")
+            continue
+        spec = _device(v, role, table, path)
+        if spec is not None:
+            devices[role] = spec
+    geometry = _geometry(v, v.table(data, "geometry"), "geometry")
+    simulation = data.get("simulation")
+    if simulation is not None and not isinstance(simulation, dict):
+        v.error("simulation", "must be a table")
+        simulation = None
+    v.unknown(data, "", {"bench", "devices", "geometry", "simulation"})
+    if v.errors:
+        raise ProfileError(source, v.errors)
+    return BenchProfile(name, description, devices, geometry, simulation, text)
+
+
+def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
+    known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
+             "position_tolerance", "options", "retry", "settle_s", "settings"}
+    v.unknown(t, path, known)
+    driver = v.string(t, "driver", path, required=True)
+    if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
+        v.error(f"{path}.driver", f"unknown driver {driver!r}; use one of "
+                f"{', '.join(MOTION_DRIVERS + OTHER_DRIVERS)}")
+        driver = None
+    url = v.string(t, "url", path, required=True)
+    if url is not None and not url.strip():
+        v.error(f"{path}.url", "must not be empty")
+    is_axis = driver in MOTION_DRIVERS
+    if is_axis and role not in AXIS_ROLES:
+        v.error(path, f"motion driver on unknown role {role!r}; axis roles are "
+                f"{', '.join(AXIS_ROLES)}")
+    stage = v.string(t, "stage", path)
+    limits = None
+    if "limits" in t:
+        raw = t["limits"]
+        if (not isinstance(raw, list) or len(raw) != 2
+                or not all(_is_number(x) for x in raw)):
+            v.error(f"{path}.limits", "must be [low, high], two numbers")
+        elif not (math.isfinite(raw[0]) and math.isfinite(raw[1]) and raw[0] < raw[1]):
+            v.error(f"{path}.limits", f"need finite low < high, got {raw}")
+        else:
+            limits = (float(raw[0]), float(raw[1]))
+    if not is_axis:
+        for key in ("limits", "velocity", "acceleration", "position_tolerance", "stage",
+                    "settle_s"):
+            if key in t and driver is not None:
+                v.error(f"{path}.{key}", f"only motion devices take {key!r}")
+    velocity = v.positive(t, "velocity", path)
+    acceleration = v.positive(t, "acceleration", path)
+    tolerance = v.positive(t, "position_tolerance", path)
+    options = t.get("options", {})
+    if not isinstance(options, dict):
+        v.error(f"{path}.options", "must be a table")
+        options = {}
+    retry = _retry(v, t.get("retry", {}), f"{path}.retry")
+    settle = t.get("settle_s", 0.0)
+    if not _is_number(settle) or not 0 <= settle <= 10:
+        v.error(f"{path}.settle_s", "must be a number of seconds from 0 to 10")
+        settle = 0.0
+    settings = _settings(v, t.get("settings", {}), driver, f"{path}.settings")
+    if driver is None or url is None:
+        return None
+    return DeviceSpec(role, driver, url, stage, limits, velocity, acceleration, tolerance,
+                      dict(options), retry, float(settle), settings)
+
+
+#: Settings a profile may apply after opening, per driver: name → (type, low, high).
+DEVICE_SETTINGS: dict[str, dict[str, tuple[type, float, float]]] = {
+    "pm100usb": {"wavelength_nm": (float, 100.0, 25000.0), "averaging": (int, 1, 100000),
+                 "auto_range": (bool, 0, 1)},
+    "sim_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0)},
+    "opencv_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 1000.0)},
+    "sim_source": {"power_w": (float, 0.0, 10.0)},
+}
+
+
+def _settings(v: _Validator, t: Any, driver: str | None, path: str) -> dict[str, Any]:
+    if not isinstance(t, dict):
+        v.error(path, "must be a table")
+        return {}
+    allowed = DEVICE_SETTINGS.get(driver or "", {})
+    out: dict[str, Any] = {}
+    for key, value in t.items():
+        if key not in allowed:
+            names = ", ".join(sorted(allowed)) or "none"
+            v.error(f"{path}.{key}", f"not a setting of driver {driver!r} (settings: {names})")
+            continue
+        kind, low, high = allowed[key]
+        if kind is bool:
+            if not isinstance(value, bool):
+                v.error(f"{path}.{key}", "must be true or false")
+                continue
+        elif (not _is_number(value) or (kind is int and not isinstance(value, int))
+              or not low <= value <= high):
+            v.error(f"{path}.{key}", f"must be a{'n integer' if kind is int else ' number'} "
+                    f"from {low:g} to {high:g}")
+            continue
+        out[key] = kind(value)
+    return out
+
+
+def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:
+    if not isinstance(t, dict):
+        v.error(path, "must be a table")
+        return RetryPolicy()
+    v.unknown(t, path, {"attempts", "backoff_s", "on_failure"})
+    attempts = t.get("attempts", 3)
+    if not isinstance(attempts, int) or isinstance(attempts, bool) or not 1 <= attempts <= 20:
+        v.error(f"{path}.attempts", "must be an integer from 1 to 20")
+        attempts = 3
+    backoff = t.get("backoff_s", 0.1)
+    if not _is_number(backoff) or not 0 <= backoff <= 60:
+        v.error(f"{path}.backoff_s", "must be a number of seconds from 0 to 60")
+        backoff = 0.1
+    on_failure = t.get("on_failure", "pause")
+    if on_failure not in ON_FAILURE:
+        v.error(f"{path}.on_failure", f"must be one of {', '.join(ON_FAILURE)}")
+        on_failure = "pause"
+    return RetryPolicy(int(attempts), float(backoff), str(on_failure))
+
+
+def _geometry(v: _Validator, t: dict, path: str) -> GeometrySpec:
+    v.unknown(t, path, {"kind", "detector_distance_mm", "detector_aperture_mm",
+                        "min_bistatic_deg", "source_theta_deg", "collision"})
+    default = GeometrySpec()
+    kind = v.string(t, "kind", path) or default.kind
+    if kind not in ("in_plane", "out_of_plane"):
+        v.error(f"{path}.kind", "must be 'in_plane' or 'out_of_plane'")
+        kind = default.kind
+    distance = v.positive(t, "detector_distance_mm", path) or default.detector_distance_mm
+    aperture = v.positive(t, "detector_aperture_mm", path) or default.detector_aperture_mm
+    if aperture >= 2 * distance:
+        v.error(f"{path}.detector_aperture_mm", "must be smaller than twice the distance")
+    bistatic = t.get("min_bistatic_deg", default.min_bistatic_deg)
+    if not _is_number(bistatic) or not 0 <= bistatic < 90:
+        v.error(f"{path}.min_bistatic_deg", "must be a number of degrees in [0, 90)")
+        bistatic = default.min_bistatic_deg
+    source = t.get("source_theta_deg", default.source_theta_deg)
+    if not _is_number(source) or not -180 <= source <= 180:
+        v.error(f"{path}.source_theta_deg", "must be a number of degrees in [-180, 180]")
+        source = default.source_theta_deg
+    collisions = _collisions(v, t.get("collision", []), f"{path}.collision")
+    return GeometrySpec(kind, float(distance), float(aperture), float(bistatic), float(source),
+                        collisions)
+
+
+def _collisions(v: _Validator, raw: Any, path: str) -> tuple[CollisionZone, ...]:
+    if not isinstance(raw, list):
+        v.error(path, "must be an array of tables ([[geometry.collision]])")
+        return ()
+    zones = []
+    for i, t in enumerate(raw):
+        where = f"{path}[{i}]"
+        if not isinstance(t, dict):
+            v.error(where, "must be a table")
+            continue
+        v.unknown(t, where, {"axis", "range", "relative_to", "reason"})
+        axis = v.string(t, "axis", where, required=True)
+        if axis is not None and axis not in AXIS_ROLES:
+            v.error(f"{where}.axis", f"must be an axis role: {', '.join(AXIS_ROLES)}")
+            axis = None
+        rel = v.string(t, "relative_to", where)
+        if rel is not None and rel not in AXIS_ROLES:
+            v.error(f"{where}.relative_to", f"must be an axis role: {', '.join(AXIS_ROLES)}")
+            rel = None
+        reason = v.string(t, "reason", where) or "arm collision"
+        rng = t.get("range")
+        if (not isinstance(rng, list) or len(rng) != 2
+                or not all(_is_number(x) for x in rng) or not rng[0] < rng[1]):
+            v.error(f"{where}.range", "must be [low, high], two finite numbers with low < high")
+            continue
+        if axis is not None:
+            zones.append(CollisionZone(axis, float(rng[0]), float(rng[1]), rel, reason))
+    return tuple(zones)
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+class _Validator:
+    """Collects field errors instead of stopping at the first."""
+
+    def __init__(self) -> None:
+        self.errors: list[FieldError] = []
+
+    def error(self, path: str, message: str) -> None:
+        self.errors.append(FieldError(path or "(top level)", message))
+
+    def table(self, data: dict, key: str, *, required: bool = False) -> dict:
+        if key not in data:
+            if required:
+                self.error(key, "missing table")
+            return {}
+        value = data[key]
+        if not isinstance(value, dict):
+            self.error(key, "must be a table")
+            return {}
+        return value
+
+    def string(self, t: dict, key: str, path: str, *, required: bool = False) -> str | None:
+        if key not in t:
+            if required:
+                self.error(f"{path}.{key}", "is required")
+            return None
+        value = t[key]
+        if not isinstance(value, str):
+            self.error(f"{path}.{key}", f"must be a string, got {type(value).__name__}")
+            return None
+        return value
+
+    def positive(self, t: dict, key: str, path: str) -> float | None:
+        if key not in t:
+            return None
+        value = t[key]
+        if not _is_number(value) or value <= 0:
+            self.error(f"{path}.{key}", f"must be a finite number > 0, got {value!r}")
+            return None
+        return float(value)
+
+    def unknown(self, t: dict, path: str, known: set[str]) -> None:
+        for key in t:
+            if key not in known:
+                where = f"{path}.{key}" if path else key
+                self.error(where, f"unknown field; expected one of {', '.join(sorted(known))}")

@@ -1,0 +1,437 @@
+"""Reduce a BRDF run: the run's points and frames → BRDF values with their uncertainty budget.
+
+The run is read through :mod:`instrument.run.runfile` (each point's light brackets with
+their darks); the camera's radiometric calibration (K, η, read noise, saturation, pupil)
+comes from :mod:`instrument.bench.camera_calibration`.
+
+What each reading integrated is recorded on the reduced points
+(:class:`analysis.brdf.reduction.ReceiverGeometry`: the beam radius from the options, the
+run's calibration or geometry, or a simulated bench's source; the receiver distance and
+aperture): the receiver factor is divided out and the fit compares the data with the
+models as the receiver sees them. The camera's pixel-response error (PRNU from the
+calibration without a flat, the flat's own noise with one) is carried as a covariance
+between points. All of it is listed in the provenance.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.brdf.reduction import (
+    BRDFPoints,
+    ReceiverGeometry,
+    ReferenceStandard,
+    absolute_brdf,
+    camera_power_w,
+    camera_signal,
+    camera_solid_angle_sr,
+    pixel_response_covariance,
+    relative_brdf,
+    solid_angle_sr,
+    subtract_signature,
+)
+from analysis.radiometry import FlatField, flat_field
+from instrument.bench.camera_calibration import CameraCalibration
+from instrument.run.runfile import RunData, read_run
+
+__all__ = ["Reduced", "ReductionOptions", "flat_from_run", "load_reference_table", "reduce_run"]
+
+
+@dataclass(frozen=True)
+class ReductionOptions:
+    """How to reduce a run (the ``scatterlab fit`` options).
+
+    Attributes
+    ----------
+    method : {"absolute", "relative"}
+    detector : {"camera", "power_meter"}
+    cosine_corrected : bool
+    incident_power_w, u_incident_power_rel : float or None
+        P_i and its relative uncertainty; default from the run's calibration attribute
+        ``incident_power_w`` or, on a simulated bench, the source power of the profile.
+    receiver_distance_mm : float or None
+        Sample-to-receiver distance; default the profile's detector distance plus the
+        run's ``camera_z`` read-back when the run moved it (the camera rides on it).
+    u_distance_mm, u_aperture_mm : float
+        Uncertainties of the receiver geometry.
+    sigma_theta_deg : float or None
+        Angular standard uncertainty; default the stages' position tolerance.
+    u_power_meter_rel : float
+        Relative noise of one power-meter reading (power-meter detector).
+    camera_calibration : path or None
+    flat_run : path or None
+        A ``flat_field`` run (uniform radiance); default the run's ``calibration.flat``.
+    reference_run, signature_run : path or None
+    reference_table : path or None
+        CSV of the standard's BRDF (theta_i_deg, theta_r_deg, brdf, u_rel).
+    beam_radius_mm : float or None
+        1/e² radius of the incident beam; default the run's calibration attribute
+        ``beam_radius_mm``, the stored geometry's, or on a simulated bench the profile's
+        source. With it the reduction divides out the receiver factor and records the
+        receiver geometry for instrument-aware fitting
+        (:class:`analysis.brdf.reduction.ReceiverGeometry`); without it (unknown beam)
+        the points are treated as point samples and the provenance says so.
+    receiver_geometry : bool
+        Use the receiver geometry when the beam radius is known (default True).
+    """
+
+    method: str = "absolute"
+    detector: str = "camera"
+    cosine_corrected: bool = False
+    incident_power_w: float | None = None
+    u_incident_power_rel: float | None = None
+    receiver_distance_mm: float | None = None
+    u_distance_mm: float = 0.0
+    u_aperture_mm: float = 0.0
+    sigma_theta_deg: float | None = None
+    u_power_meter_rel: float = 0.005
+    camera_calibration: str | None = None
+    flat_run: str | None = None
+    reference_run: str | None = None
+    signature_run: str | None = None
+    reference_table: str | None = None
+    beam_radius_mm: float | None = None
+    receiver_geometry: bool = True
+
+
+@dataclass(frozen=True)
+class Reduced:
+    """A reduced run: BRDF points and where every number came from."""
+
+    points: BRDFPoints
+    rows: np.ndarray            # row of each BRDF point in the run's tables
+    detector_theta: np.ndarray  # read-back arm position per point (deg; NaN if unknown)
+    provenance: dict[str, Any]
+
+
+def flat_from_run(path: str | Path) -> FlatField:
+    """Normalised flat field (:func:`analysis.radiometry.flat_field`) from a ``flat_field``
+    run: the light frames of its "flat" points at the exposure with the most frames, less
+    the mean of their dark frames (EMVA 1288 R3.1 §4, PRNU)."""
+    return _flat_and_frames(path)[0]
+
+
+def _flat_residual_rel(flat: FlatField, n_frames: int, cal: CameraCalibration) -> float:
+    """Relative σ of one pixel of a flat averaged from ``n_frames`` frames: its shot noise
+    K·S and the dark noise of the light and the (averaged) dark frame, EMVA 1288 §2.3."""
+    k = cal.noise.system_gain_dn_per_e
+    s = max(flat.mean_signal_dn, 1e-12)
+    read_dn2 = (k * cal.noise.read_noise_e) ** 2 + 1.0 / 12.0
+    return float(math.sqrt((k * s + 2.0 * read_dn2) / n_frames) / s)
+
+
+def _flat_and_frames(path: str | Path) -> tuple[FlatField, int]:
+    run = read_run(path)
+    groups: dict[float, tuple[list[np.ndarray], list[np.ndarray]]] = {}
+    for r in np.flatnonzero(run.label == "flat"):
+        light, exp, dark = run.frames_of(int(r))
+        if dark is None:
+            raise ValueError(f"flat run {run.run_id}: point {run.index[r]} has no dark frame")
+        for lf, e, df in zip(light, exp, dark, strict=True):
+            g = groups.setdefault(round(float(e), 6), ([], []))
+            g[0].append(lf)
+            g[1].append(df)
+    if not groups:
+        raise ValueError(f"run {run.run_id} holds no flat-field frames")
+    lights, darks = max(groups.values(), key=lambda g: len(g[0]))
+    return flat_field(np.array(lights), np.mean(np.array(darks), axis=0)), len(lights)
+
+
+def _flat_for(run: RunData, opts: ReductionOptions
+              ) -> tuple[FlatField | None, str, int]:
+    src = opts.flat_run or run.calibration.get("flat")
+    if src is None:
+        return None, "none", 0
+    path = Path(src)
+    if not path.is_absolute() and not path.exists():
+        path = run.path.parent / src  # a run id or a name next to the run file
+        if not path.suffix:
+            path = path.with_suffix(".h5")
+    flat, n = _flat_and_frames(path)
+    return flat, str(path), n
+
+
+#: Signal images for the pixel-response covariance are kept summed over blocks so that they
+#: are at most this many blocks wide (a 1024-px frame: 8 × 8 blocks; the footprint's image
+#: is tens of pixels wide there, smooth on that scale; small frames are kept per pixel).
+_PROFILE_SIDE = 128
+
+
+def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
+             cal: CameraCalibration | None, flat: FlatField | None = None,
+             *, u_response_rel: float = 0.0
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Collected power (W) and its σ per row, from the camera or the power meter, and the
+    relative covariance of the camera's pixel-response error between rows (``None`` for
+    the power meter or when ``u_response_rel`` is 0)."""
+    if opts.detector == "power_meter":
+        p = run.power_w[rows].astype(float)
+        if not np.all(np.isfinite(p)):
+            raise ValueError("the run has no power-meter readings at every point")
+        return p, np.abs(p) * opts.u_power_meter_rel, None
+    assert cal is not None
+    n_avg = int(run.acquisition.get("frames", 1))
+    rate = np.empty(rows.size)
+    sd = np.empty(rows.size)
+    block = 0
+    profiles, sq_sums = [], []
+    for k, r in enumerate(rows):
+        light, exp, dark = run.frames_of(int(r))
+        if dark is None:
+            raise ValueError(f"point {run.index[r]} has no dark frames at its exposure(s)")
+        if u_response_rel > 0 and block == 0:
+            block = max(1, max(light.shape[1:]) // _PROFILE_SIDE)
+        s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg, flat=flat,
+                          profile_block=block)
+        rate[k], sd[k] = s.rate_dn_per_us, s.sigma
+        if s.profile is not None:
+            profiles.append(s.profile)
+            sq_sums.append(s.profile_sq_sum)
+    conv = {"system_gain_dn_per_e": cal.noise.system_gain_dn_per_e,
+            "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
+    cov = (pixel_response_covariance(np.array(profiles), u_response_rel=u_response_rel,
+                                     block=block, sq_sums=sq_sums) if block else None)
+    return camera_power_w(rate, **conv), camera_power_w(sd, **conv), cov
+
+
+def _incident_power(run: RunData, opts: ReductionOptions) -> tuple[float, float, str]:
+    if opts.incident_power_w is not None:
+        return float(opts.incident_power_w), float(opts.u_incident_power_rel or 0.0), "option"
+    if "incident_power_w" in run.calibration:
+        return (float(run.calibration["incident_power_w"]),
+                float(run.calibration.get("u_incident_power_rel", opts.u_incident_power_rel
+                                          or 0.0)), "run calibration")
+    sim = run.profile().get("simulation", {})
+    if "power_w" in sim.get("source", {}):
+        return (float(sim["source"]["power_w"]), float(opts.u_incident_power_rel or 0.0),
+                "simulated source power (bench profile)")
+    raise ValueError("the absolute method needs the incident power (--incident-power-w)")
+
+
+def _receiver_distance(run: RunData, rows: np.ndarray, opts: ReductionOptions
+                       ) -> tuple[float, str]:
+    if opts.receiver_distance_mm is not None:
+        return float(opts.receiver_distance_mm), "option"
+    if "receiver_distance_mm" in run.calibration:
+        return float(run.calibration["receiver_distance_mm"]), "run calibration"
+    base = float(run.geometry.get("detector_distance_mm", 300.0))
+    if opts.detector == "camera":
+        z = run.position("camera_z")[rows]
+        if np.all(np.isfinite(z)):
+            # one distance per run: the plan does not move camera_z during a BRDF scan
+            return base + float(np.mean(z)), "profile distance + camera_z read-back"
+        if run.geometry.get("axis_homed.camera_z") == 1:
+            z0 = float(run.geometry["axis_position.camera_z"])
+            return base + z0, "profile distance + camera_z at run start (homed)"
+        if "axis_position.camera_z" in run.geometry:
+            return base, ("profile detector distance; camera_z was not homed, so its position "
+                          "is unknown (assumed 0: give --distance-mm if it is elsewhere)")
+        return base, ("profile detector distance; camera_z was not recorded by this run "
+                      "(assumed 0: give --distance-mm if the camera stage is elsewhere)")
+    return base, "profile detector distance"
+
+
+def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, str]:
+    if opts.beam_radius_mm is not None:
+        return float(opts.beam_radius_mm), "option"
+    if "beam_radius_mm" in run.calibration:
+        return float(run.calibration["beam_radius_mm"]), "run calibration"
+    if "beam_radius_mm" in run.geometry:
+        return float(run.geometry["beam_radius_mm"]), "bench geometry"
+    src = run.profile().get("simulation", {}).get("source", {})
+    if "beam_radius_mm" in src:
+        return float(src["beam_radius_mm"]), "simulated source (bench profile)"
+    return None, "unknown (points treated as point samples: give --beam-radius-mm)"
+
+
+def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
+              cal: CameraCalibration | None) -> tuple[ReceiverGeometry | None, dict[str, Any]]:
+    """What each reading integrated: the camera pupil or the meter aperture (module
+    docstring of :mod:`analysis.brdf.reduction`), with the solid angle the reduction uses.
+
+    Camera: Ω = A_pupil/R², the étendue of its calibration (camera equation); power meter:
+    the aperture's cone solid angle. The receiver factor corrects either to what the
+    receiver integrates.
+    """
+    distance, dist_src = _receiver_distance(run, rows, opts)
+    if opts.detector == "camera":
+        assert cal is not None
+        aperture = cal.pupil_diameter_mm
+        omega, u_omega = camera_solid_angle_sr(aperture, distance,
+                                               u_diameter_mm=opts.u_aperture_mm,
+                                               u_distance_mm=opts.u_distance_mm)
+        sampled = not cal.chief_ray_only
+    else:
+        aperture = float(run.geometry.get("detector_aperture_mm", 5.0))
+        omega, u_omega = solid_angle_sr(aperture, distance, u_diameter_mm=opts.u_aperture_mm,
+                                        u_distance_mm=opts.u_distance_mm)
+        sampled = True
+    w, w_src = _beam_radius(run, opts)
+    info: dict[str, Any] = {"solid_angle_sr": omega, "u_solid_angle_sr": u_omega,
+                            "receiver_aperture_mm": aperture, "receiver_distance_mm": distance,
+                            "receiver_distance_source": dist_src, "beam_radius_mm": w,
+                            "beam_radius_source": w_src}
+    if w is None or not opts.receiver_geometry:
+        info["receiver_model"] = "none (point spot, point receiver)"
+        return None, info
+    rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled)
+    info["receiver_model"] = ("footprint × " + ("aperture (7-point disk rule)" if sampled
+                                                 else "chief ray through the pupil centre"))
+    return rg, info
+
+
+def _sigma_theta_rad(run: RunData, opts: ReductionOptions) -> float:
+    if opts.sigma_theta_deg is not None:
+        return math.radians(opts.sigma_theta_deg)
+    devices = run.profile().get("devices", {})
+    tol = [float(devices.get(r, {}).get("position_tolerance", 0.0))
+           for r in ("sample_theta", "detector_theta")]
+    # a reading within ±tol of the target, uniform: σ = tol/√3 (GUM type B)
+    return math.radians(max(tol) / math.sqrt(3.0))
+
+
+def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Reduced:
+    """Reduce the scattering points of a run to BRDF values (module docstring).
+
+    Raises
+    ------
+    ValueError
+        Missing calibration, reference or dark data (the message says what to give).
+    """
+    opts = options or ReductionOptions()
+    if opts.method not in ("absolute", "relative"):
+        raise ValueError("method must be 'absolute' or 'relative'")
+    if opts.detector not in ("camera", "power_meter"):
+        raise ValueError("detector must be 'camera' or 'power_meter'")
+    run = read_run(path)
+    rows = run.brdf_rows()
+    if rows.size == 0:
+        raise ValueError(f"{path}: no measured scattering points")
+    cal = (run.camera_calibration(opts.camera_calibration)
+           if opts.detector == "camera" else None)
+    rad = np.radians
+    ti, pi_ = rad(run.theta_i[rows]), rad(run.phi_i[rows])
+    tr, pr = rad(run.theta_r[rows]), rad(run.phi_r[rows])
+    sig_t = _sigma_theta_rad(run, opts)
+    flat, flat_src, n_flat = _flat_for(run, opts) if cal is not None else (None, "none", 0)
+    # the pixel-response error left in the summed signal: PRNU without a flat, the flat's
+    # own noise with one (shared between points that image the spot onto the same pixels)
+    u_resp = 0.0
+    if cal is not None:
+        u_resp = (_flat_residual_rel(flat, n_flat, cal) if flat is not None
+                  else cal.prnu_rel)
+    p_s, u_s, cov_rel = _signals(run, rows, opts, cal, flat, u_response_rel=u_resp)
+    prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
+                            "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
+                            "options": asdict(opts)}
+    if cal is not None:
+        prov["camera_calibration"] = cal.source
+        prov["flat_field"] = flat_src
+        prov["pixel_response_u_rel"] = u_resp
+    receiver, rinfo = _receiver(run, rows, opts, cal)
+    prov.update(rinfo)
+    if opts.method == "absolute":
+        p_i, u_pi_rel, src = _incident_power(run, opts)
+        pts = absolute_brdf(
+            p_s, u_s, ti, pi_, tr, pr, incident_power_w=p_i,
+            u_incident_power_w=p_i * u_pi_rel, solid_angle=rinfo["solid_angle_sr"],
+            u_solid_angle=rinfo["u_solid_angle_sr"],
+            u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
+            sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected,
+            receiver=receiver, cov_power_rel=cov_rel)
+        prov.update(incident_power_w=p_i, incident_power_source=src)
+    else:
+        if opts.reference_run is None:
+            raise ValueError("the relative method needs --reference RUN (a reference-standard "
+                             "run at the same geometry)")
+        ref_run = read_run(opts.reference_run)
+        ref_rows = _match_rows(run, rows, ref_run)
+        # same geometry, same pixels: the pixel response cancels in the ratio
+        r_s, r_u, _ = _signals(ref_run, ref_rows, opts,
+                            ref_run.camera_calibration(opts.camera_calibration)
+                            if opts.detector == "camera" else None)
+        std = _reference_standard(ref_run, opts)
+        pts = relative_brdf(p_s, u_s, r_s, r_u, ti, pi_, tr, pr, reference=std,
+                            sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                            cosine_corrected=opts.cosine_corrected)
+        # the ratio to a diffuse standard read through the same receiver is already the
+        # normalised average of f over it: keep the geometry for the fit
+        pts = replace(pts, receiver=receiver)
+        prov.update(reference_run=ref_run.run_id, reference_standard=std.name)
+    if opts.signature_run is not None:
+        pts = _subtract_signature(run, rows, pts, opts)
+        prov["signature_run"] = str(opts.signature_run)
+    return Reduced(pts, rows, run.position("detector_theta")[rows], prov)
+
+
+def _match_rows(run: RunData, rows: np.ndarray, other: RunData, *, tol_deg: float = 0.05
+                ) -> np.ndarray:
+    """Rows of ``other`` at the same (θi, φi, θr, φr) as ``rows`` of ``run``."""
+    cand = other.brdf_rows()
+    a = np.stack([other.theta_i, other.phi_i, other.theta_r, other.phi_r], -1)[cand]
+    out = np.empty(rows.size, dtype=int)
+    for k, r in enumerate(rows):
+        want = np.array([run.theta_i[r], run.phi_i[r], run.theta_r[r], run.phi_r[r]])
+        d = np.abs(np.angle(np.exp(1j * np.radians(a - want))))
+        hit = np.flatnonzero(np.all(np.degrees(d) <= tol_deg, axis=1))
+        if hit.size == 0:
+            raise ValueError(f"run {other.run_id} has no point at θi={want[0]:g}°, "
+                             f"θr={want[2]:g}° (φr={want[3]:g}°)")
+        out[k] = cand[hit[0]]
+    return out
+
+
+def _reference_standard(ref_run: RunData, opts: ReductionOptions) -> ReferenceStandard:
+    if opts.reference_table is not None:
+        return load_reference_table(opts.reference_table)
+    scan = tomllib.loads(ref_run.plan_text).get("scan", {}) if ref_run.plan_text else {}
+    if "reflectance" not in scan:
+        raise ValueError("give the standard's BRDF table (--reference-table CSV); the "
+                         "reference run declares no reflectance either")
+    name = str(scan.get("reference_name", "reference"))
+    # a declared reflectance alone: the ideal-diffuser table (state it in the report)
+    return ReferenceStandard.uniform(f"{name} (ideal diffuser, ρ={scan['reflectance']})",
+                                     float(scan["reflectance"]))
+
+
+def load_reference_table(path: str | Path) -> ReferenceStandard:
+    """A reference standard from CSV rows ``theta_i_deg,theta_r_deg,brdf,u_rel`` (header
+    line optional; a rectilinear grid; θr signed as in plan files)."""
+    rows = []
+    for line in Path(path).read_text(encoding="utf-8").splitlines():
+        parts = [x.strip() for x in line.split(",")]
+        if len(parts) < 3 or not parts[0] or parts[0].startswith("#"):
+            continue
+        try:
+            rows.append([float(x) for x in parts[:4]] + ([0.0] if len(parts) < 4 else []))
+        except ValueError:
+            continue  # header
+    arr = np.array(rows)
+    ti, tr = np.unique(arr[:, 0]), np.unique(arr[:, 1])
+    f = np.full((ti.size, tr.size), np.nan)
+    u = np.zeros_like(f)
+    for a, b, v, w in arr:
+        i, j = np.searchsorted(ti, a), np.searchsorted(tr, b)
+        f[i, j], u[i, j] = v, w
+    if np.any(np.isnan(f)):
+        raise ValueError(f"{path}: the table is not a full (θi, θr) grid")
+    return ReferenceStandard(Path(path).stem, ti, tr, f, u)
+
+
+def _subtract_signature(run: RunData, rows: np.ndarray, pts: BRDFPoints,
+                        opts: ReductionOptions) -> BRDFPoints:
+    """Signature run reduced like the sample, interpolated in the detector-arm angle."""
+    assert opts.signature_run is not None
+    sig = reduce_run(opts.signature_run, replace(opts, signature_run=None))
+    arm = run.position("detector_theta")[rows]
+    order = np.argsort(sig.detector_theta)
+    x = sig.detector_theta[order]
+    f = np.interp(arm, x, sig.points.brdf[order])
+    u = np.interp(arm, x, sig.points.u_point[order])
+    return subtract_signature(pts, f, u)

@@ -1,0 +1,275 @@
+"""The BRDF fit report: PNG figures and an HTML page of one analysed run.
+
+:func:`write_report` renders with matplotlib (Agg backend, no display) and writes an
+``index.html`` that links the figures: in-plane BRDF per θi with the fits and the chosen
+model's ±1σ band (:func:`instrument.pipelines.brdf.analyse.model_band`), a polar plot,
+normalised residuals, the parameter table, the model comparison and the physical checks.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.brdf.geometry import make_geometry
+from analysis.brdf.reduction import BRDFPoints
+from instrument.pipelines.brdf.analyse import AnalysisResult, model_band
+
+__all__ = ["write_report"]
+
+
+def _signed_deg(points: BRDFPoints) -> np.ndarray:
+    """Signed viewing angle (deg): > 0 on the far side of the normal from the source."""
+    far = np.abs(np.angle(np.exp(1j * (points.phi_r - points.phi_i)))) > np.pi / 2
+    return np.degrees(np.where(far, points.theta_r, -points.theta_r))
+
+
+def _curve(theta_i: float, phi_i: float, s_deg: np.ndarray) -> tuple[np.ndarray, ...]:
+    s = np.radians(s_deg)
+    return (np.full(s.shape, theta_i), np.full(s.shape, phi_i), np.abs(s),
+            np.where(s >= 0, phi_i + np.pi, phi_i))
+
+
+#: Incidence read-backs jitter by ~0.001–0.01° around the set angle (and φi by a full turn,
+#: 0° vs 360°): angles within this step share one panel.
+_GROUP_STEP_DEG = 0.1
+#: A receiver direction within this angle of the plane of incidence counts as in-plane.
+_PLANE_TOL_DEG = 0.5
+
+
+def _groups(points: BRDFPoints) -> list[tuple[float, float, np.ndarray]]:
+    """(θi, φi, indices) per incidence direction, angles snapped to _GROUP_STEP_DEG."""
+    step = _GROUP_STEP_DEG
+    ti_k = np.round(np.degrees(points.theta_i) / step) * step
+    pi_k = np.mod(np.round(np.mod(np.degrees(points.phi_i), 360.0) / step) * step, 360.0)
+    keys = np.round(ti_k, 6), np.round(pi_k, 6)
+    out = []
+    for ti, pi_ in sorted(set(zip(*keys, strict=True))):
+        sel = np.flatnonzero((keys[0] == ti) & (keys[1] == pi_))
+        out.append((math.radians(ti), math.radians(pi_), sel))
+    return out
+
+
+def _in_plane(points: BRDFPoints) -> np.ndarray:
+    """True where the receiver lies within _PLANE_TOL_DEG of the plane of incidence: its
+    angular distance from that plane is arcsin|sin θr sin(φr − φi)|."""
+    off = np.abs(np.sin(points.theta_r) * np.sin(points.phi_r - points.phi_i))
+    return np.degrees(np.arcsin(np.minimum(off, 1.0))) <= _PLANE_TOL_DEG
+
+
+def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    f, u = points.plain_brdf()
+    signed = _signed_deg(points)
+    groups = _groups(points)
+    plane = _in_plane(points)
+    fig, axes = plt.subplots(len(groups), 1, figsize=(7.5, 3.0 * len(groups)), squeeze=False)
+    s_grid = np.linspace(-89.0, 89.0, 357)
+    for ax, (ti, pi_, group) in zip(axes[:, 0], groups, strict=True):
+        # the curves are the plane of incidence: out-of-plane points are left to the
+        # residual plot instead of being drawn against the wrong curve
+        sel = group[plane[group]]
+        n_off = group.size - sel.size
+        ax.errorbar(signed[sel], f[sel], yerr=u[sel], fmt="o", ms=3, color="k",
+                    label="measured ±1σ", zorder=3)
+        for name, fit in res.fits.items():
+            val, sd = model_band(res.models[name], fit, *_curve(ti, pi_, s_grid))
+            chosen = name == res.chosen
+            line, = ax.plot(s_grid, val, lw=2.0 if chosen else 0.9,
+                            label=f"{name}{' (chosen)' if chosen else ''}")
+            if chosen:
+                ax.fill_between(s_grid, val - sd, val + sd, color=line.get_color(), alpha=0.3,
+                                label="chosen ±1σ")
+        ax.set_yscale("log")
+        ax.set_title(f"θi = {math.degrees(ti):.1f}°, φi = {math.degrees(pi_):.0f}°"
+                     + (f" ({n_off} out-of-plane points not shown)" if n_off else ""))
+        ax.set_xlabel("signed θr (deg; > 0 specular side)")
+        ax.set_ylabel("BRDF (1/sr)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    f, _ = points.plain_brdf()
+    signed = np.radians(_signed_deg(points))
+    fig = plt.figure(figsize=(6.5, 5.0))
+    ax = fig.add_subplot(projection="polar")
+    ax.set_theta_zero_location("N")
+    ax.set_theta_direction(-1)  # specular side (signed θr > 0) on the right
+    ax.set_thetamin(-90)
+    ax.set_thetamax(90)
+    s_grid = np.linspace(-89.0, 89.0, 357)
+    model, fit = res.models[res.chosen], res.chosen_fit
+    plane = _in_plane(points)
+    for ti, pi_, group in _groups(points):
+        sel = group[plane[group]]
+        val = model.evaluate_geometry(fit.params, make_geometry(*_curve(ti, pi_, s_grid)))
+        line, = ax.plot(np.radians(s_grid), val, lw=1.2,
+                        label=f"θi = {math.degrees(ti):.0f}°")
+        ax.plot(signed[sel], f[sel], "o", ms=3, color=line.get_color())
+    ax.set_title(f"{res.chosen}: BRDF (1/sr) vs signed θr", fontsize=9)
+    # on a half-disc the default radial tick labels run together along the bottom edge
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(4))
+    ax.tick_params(axis="y", labelsize=7)
+    ax.legend(fontsize=7, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_residuals(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    signed = _signed_deg(points)
+    r = res.selection.fits[res.chosen].residuals
+    plane = _in_plane(points)
+    fig, ax = plt.subplots(figsize=(7.5, 3.2))
+    for ti, pi_, group in _groups(points):
+        sel = group[plane[group]]
+        line, = ax.plot(signed[sel], r[sel], "o", ms=3,
+                        label=f"θi = {math.degrees(ti):.0f}°, φi = {math.degrees(pi_):.0f}°")
+        off = group[~plane[group]]
+        if off.size:
+            # out of plane: x is ±θr (sign from the side of the plane of incidence)
+            ax.plot(signed[off], r[off], "x", ms=4, color=line.get_color(),
+                    label=f"θi = {math.degrees(ti):.0f}°, out of plane")
+    ax.axhline(0.0, color="k", lw=0.8)
+    for k in (-2, 2):
+        ax.axhline(k, color="grey", lw=0.6, ls="--")
+    ax.set_xlabel("signed θr (deg)")
+    ax.set_ylabel("(data − model)/σ")
+    ax.set_title(f"normalised residuals of {res.chosen} (χ²/dof = "
+                 f"{res.selection.fits[res.chosen].reduced_chi2:.2f})", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_dhr(res: AnalysisResult, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 3.2))
+    for name, vals in res.dhr.items():
+        ax.plot(res.dhr_theta_deg, vals, lw=2.0 if name == res.chosen else 0.9, label=name)
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("θi (deg)")
+    ax.set_ylabel("DHR of the fitted model")
+    ax.legend(fontsize=7)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------ html
+def _table(head: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    def cell(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:.5g}"
+        return html.escape(str(v))
+
+    h = "".join(f"<th>{html.escape(x)}</th>" for x in head)
+    body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
+    return f"<table><tr>{h}</tr>{body}</table>"
+
+
+def write_report(
+    out_dir: str | Path,
+    points: BRDFPoints,
+    res: AnalysisResult,
+    *,
+    title: str,
+    provenance: dict[str, Any] | None = None,
+) -> Path:
+    """Write the PNG figures and ``index.html`` into ``out_dir``; returns the HTML path."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    figures = {
+        "inplane.png": ("In-plane BRDF per θi with fits (chosen model ±1σ band)",
+                        _plot_inplane),
+        "polar.png": ("Polar plot of the chosen model and the data", _plot_polar),
+        "residuals.png": ("Normalised residuals of the chosen model", _plot_residuals),
+    }
+    for name, (_, fn) in figures.items():
+        fn(points, res, out / name)
+    _plot_dhr(res, out / "dhr.png")
+    fit = res.chosen_fit
+    head = ("parameter", "value", "σ (incl. common scale)", "unit", "at bound")
+    rows = [(n, float(v), float(e), unit, "yes" if b else "")
+            for (n, v, e, unit), b in zip(fit.table(), fit.at_bound, strict=True)]
+    boot = fit.bootstrap
+    if boot is not None:
+        noise_only = res.selection.fits[res.chosen].stderr
+        head = (*head, "σ (noise only)", f"bootstrap σ (B = {boot.samples.shape[0]})",
+                "bootstrap 95 % interval")
+        rows = [(*r, float(sn), float(sb), f"{lo:.6g} … {hi:.6g}")
+                for r, sn, sb, lo, hi in zip(rows, noise_only, boot.stderr, boot.ci_low,
+                                             boot.ci_high, strict=True)]
+    params = _table(head, rows)
+    corr = _table(("", *fit.param_names),
+                  [(n, *[float(x) for x in row])
+                   for n, row in zip(fit.param_names, fit.correlation, strict=True)])
+    comp = _table(("model", "k", "χ²", "AIC", "AICc", "BIC", "CV score", "CV σ", "converged"),
+                  [(r.name, r.n_params, r.chi2, r.aic, r.aicc, r.bic, r.cv_score, r.cv_stderr,
+                    r.converged) for r in res.selection.table])
+    rec = res.reciprocity
+    if rec.n_pairs:
+        rec_html = (f"<p>{rec.n_pairs} pair(s) measured both ways; "
+                    f"{rec.fraction_within_2sigma:.0%} agree within 2σ.</p>" + _table(
+                        ("point a", "point b", "f(a)/f(b)", "z"),
+                        [(int(a), int(b), float(q), float(z)) for (a, b), q, z
+                         in zip(rec.pairs, rec.ratio, rec.z, strict=True)]))
+    else:
+        rec_html = "<p>No geometry was measured both ways (no reciprocity pairs).</p>"
+    dhr_rows = [(float(t), *[float(res.dhr[m][k]) for m in res.dhr])
+                for k, t in enumerate(res.dhr_theta_deg)]
+    dhr_html = _table(("θi (deg)", *res.dhr), dhr_rows)
+    prov = _table(("item", "value"), sorted((k, v) for k, v in (provenance or {}).items()
+                                            if k != "options"))
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in res.notes) or "<li>none</li>"
+    figs = "".join(f'<h3>{html.escape(cap)}</h3><img src="{name}" alt="{html.escape(cap)}">'
+                   for name, (cap, _) in figures.items())
+    kind = "cosine-corrected BRDF f·cosθr" if points.cosine_corrected else "BRDF f"
+    page = f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;max-width:960px;margin:auto}}
+table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #bbb;padding:2px 6px;
+font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
+<h1>{html.escape(title)}</h1>
+<p>{points.n} points, {html.escape(points.method)} method, stored as the {kind}.
+Common (correlated) relative scale uncertainty {points.u_scale_rel:.3%}, added to the
+parameter uncertainties below. Chosen model: <b>{html.escape(res.chosen)}</b>
+({html.escape(res.selection.rule)}).</p>
+<h2>Parameters of {html.escape(res.chosen)}</h2>{params}
+<h3>Correlations</h3>{corr}
+<h2>Model comparison</h2>{comp}
+<h2>Figures</h2>{figs}
+<h2>Physical checks</h2>
+<h3>Reciprocity of the data</h3>{rec_html}
+<h3>Directional–hemispherical reflectance of the fitted models</h3>
+<img src="dhr.png" alt="DHR">{dhr_html}
+<h3>Notes</h3><ul>{notes}</ul>
+<h2>Provenance</h2>{prov}
+</body></html>
+"""
+    path = out / "index.html"
+    path.write_text(page, encoding="utf-8")
+    return path

@@ -1,0 +1,167 @@
+"""Figures of a light-field analysis (PNG, matplotlib with the Agg backend).
+
+Reconstruction: the measured light field L_meas(y_m, θ_m), the reconstructed incident
+field at the wall L_obj(c, θ), and the diagnostics (shared filter factors, pooled signal
+spectrum against the noise power, the relative noise error Δ_p of eq. S2-37, and γ /
+SNR_eff along the wall).  Localisation: the (y, z) map (RP refocusing) with the detected
+objects and their theoretical blur, a focal stack (conventional refocusing at the
+detected depths and a few others), and the depth-filter z-profiles.
+
+matplotlib is imported here only, when figures are asked for.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from analysis.lightfield import Detection
+from instrument.pipelines.lightfield.results import ReconstructionResult, median_delta_p
+
+__all__ = ["localisation_figures", "reconstruction_figures"]
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError as err:  # pragma: no cover - depends on the installation
+        raise RuntimeError("figures need matplotlib (pip install matplotlib)") from err
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _field_image(ax, values, y, theta, title: str, ylabel: str) -> None:
+    extent = (float(np.degrees(theta[0])), float(np.degrees(theta[-1])), float(y[0]),
+              float(y[-1]))
+    im = ax.imshow(values, origin="lower", aspect="auto", extent=extent, cmap="magma")
+    ax.set_xlabel("θ (deg)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.figure.colorbar(im, ax=ax, shrink=0.85)
+
+
+def reconstruction_figures(r: ReconstructionResult, folder: str | Path) -> list[Path]:
+    """Write measured.png, reconstructed.png and diagnostics.png; return their paths."""
+    plt = _pyplot()
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    lf = r.measured.field
+    rec = r.reconstruction
+    paths = []
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    _field_image(ax, lf.radiance, lf.y_mm, lf.theta_rad,
+                 f"measured light field (d2 = {lf.z_mm:g} mm)", "y_m (mm)")
+    paths.append(out / "measured.png")
+    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    f = rec.incident_field
+    _field_image(ax, f.radiance, f.y_mm, f.theta_rad,
+                 f"reconstructed incident field at the wall ({rec.regularization.method})",
+                 "wall point c (mm)")
+    a, b = rec.solvable_domain_rad
+    for t in (a, b):
+        ax.axvline(np.degrees(t), color="c", lw=0.8, ls="--")
+    paths.append(out / "reconstructed.png")
+    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    reg = rec.regularization
+    diag = rec.diagnostics
+    p = rec.orders
+    order = np.argsort(p)
+    fig, axs = plt.subplots(2, 2, figsize=(10, 7))
+    phi = np.atleast_2d(reg.filter_factors).mean(axis=0)
+    axs[0, 0].plot(p[order], phi[order], ".-")
+    axs[0, 0].set_title(f"filter factors (p̂_max = {r.p_hat:g}, dof {reg.effective_dof:.1f})")
+    axs[0, 0].set_xlabel("Fourier order p")
+    sp = np.where(reg.signal_power > 0, reg.signal_power, np.nan)
+    axs[0, 1].semilogy(p[order], sp[order], ".", label="pooled signal power")
+    axs[0, 1].semilogy(p[order], reg.noise_power[order], "-", label="noise power σ²/|S|²")
+    axs[0, 1].set_xlabel("Fourier order p")
+    axs[0, 1].legend(fontsize=8)
+    axs[0, 1].set_title("signal and noise spectrum (per mode)")
+    dp = median_delta_p(diag.delta_p)
+    axs[1, 0].semilogy(p[order], dp[order], ".")
+    axs[1, 0].axhline(1.0, color="k", lw=0.6)
+    axs[1, 0].set_title("relative noise error Δ_p (S2-37), median over points")
+    axs[1, 0].set_xlabel("Fourier order p")
+    c = rec.incident_field.y_mm
+    axs[1, 1].plot(c, diag.gamma, label="γ")
+    ax2 = axs[1, 1].twinx()
+    ax2.plot(c, diag.snr_eff, "r", label="SNR_eff")
+    axs[1, 1].set_xlabel("wall point c (mm)")
+    axs[1, 1].set_ylabel("γ")
+    ax2.set_ylabel("SNR_eff", color="r")
+    axs[1, 1].set_title("degree of specularity and effective SNR")
+    fig.suptitle(rec.message, fontsize=8)
+    fig.tight_layout()
+    paths.append(out / "diagnostics.png")
+    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return paths
+
+
+def localisation_figures(det: Detection, p_hat: float, folder: str | Path) -> list[Path]:
+    """Write yz_map.png, focal_stack.png and z_profiles.png; return their paths."""
+    plt = _pyplot()
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    st = det.stack
+    paths = []
+    extent = (float(st.y_mm[0]), float(st.y_mm[-1]), float(st.z_mm[0]), float(st.z_mm[-1]))
+
+    fig, axs = plt.subplots(1, 2, figsize=(11, 5), sharey=True)
+    for ax, img, title in ((axs[0], st.conventional, "conventional refocusing"),
+                           (axs[1], st.radiance_preserving, "radiance-preserving (RP)")):
+        im = ax.imshow(img, origin="lower", aspect="auto", extent=extent, cmap="viridis")
+        fig.colorbar(im, ax=ax, shrink=0.85)
+        ax.set_xlabel("y (mm)")
+        ax.set_title(title)
+        for (y, z), res in zip(det.positions_mm, det.resolutions, strict=True):
+            ax.plot(y, z, "r+", ms=10)
+            ax.add_patch(plt.matplotlib.patches.Ellipse(
+                (y, z), res.transverse_mm, res.depth_mm, fill=False, color="r", lw=0.8))
+    axs[0].set_ylabel("z (mm, unfolded; wall at 0)")
+    fig.suptitle(f"(y, z) map: {det.count} object(s), p̂_max = {p_hat:g}; "
+                 "ellipses: theoretical blur")
+    paths.append(out / "yz_map.png")
+    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    depths = sorted({float(z) for z in det.positions_mm[:, 1]})
+    extra = np.linspace(st.z_mm[0], st.z_mm[-1], 6)[1:-1]
+    depths = sorted(set(depths) | {float(z) for z in extra})[:8]
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for z in depths:
+        k = int(np.argmin(np.abs(st.z_mm - z)))
+        ax.plot(st.y_mm, st.conventional[k], label=f"z = {st.z_mm[k]:.0f} mm")
+    for y, _ in det.positions_mm:
+        ax.axvline(y, color="k", lw=0.5, ls=":")
+    ax.set_xlabel("y (mm)")
+    ax.set_ylabel("refocused radiance (conventional)")
+    ax.set_title("focal stack")
+    ax.legend(fontsize=8)
+    paths.append(out / "focal_stack.png")
+    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for k in range(det.count):
+        y, z = det.positions_mm[k]
+        ax.plot(st.z_mm, det.depth_profiles[k], label=f"object {k}: y = {y:.1f}, z = {z:.1f}")
+        ax.axvline(z, color="k", lw=0.5, ls=":")
+    ax.set_xlabel("z (mm)")
+    ax.set_ylabel("depth-filter profile (product over p_y)")
+    ax.set_title("z-profiles")
+    if det.count:
+        ax.legend(fontsize=8)
+    paths.append(out / "z_profiles.png")
+    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return paths

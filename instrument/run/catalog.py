@@ -1,0 +1,182 @@
+"""The run catalog: one SQLite file listing every run (id, sample, kind, status, ...).
+
+The catalog is an index, not the data: the run files are authoritative. A run updates
+its row when it starts, pauses and ends, so a process killed mid-run leaves a row saying
+"running"; :meth:`Catalog.refresh` corrects such a row from the run's journal (committed
+points, last status) once no process holds the run file open, marking it "interrupted".
+Writes are short transactions in WAL mode, so a GUI can read while a run writes.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import h5py
+
+from instrument.run.journal import read_journal
+
+__all__ = ["CATALOG_NAME", "Catalog", "RunRow"]
+
+CATALOG_NAME = "catalog.sqlite"
+
+#: Statuses a row holds only while a process drives the run.
+LIVE_STATUSES = ("created", "running", "paused")
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS runs (
+    run_id    TEXT PRIMARY KEY,
+    sample    TEXT NOT NULL,
+    plan_kind TEXT NOT NULL,
+    plan_name TEXT NOT NULL,
+    bench     TEXT NOT NULL,
+    status    TEXT NOT NULL,
+    started   REAL NOT NULL,
+    ended     REAL,
+    n_points  INTEGER NOT NULL,
+    n_planned INTEGER NOT NULL,
+    path      TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS runs_started ON runs(started);
+"""
+
+
+@dataclass(frozen=True)
+class RunRow:
+    run_id: str
+    sample: str
+    plan_kind: str
+    plan_name: str
+    bench: str
+    status: str
+    started: float
+    ended: float | None
+    n_points: int
+    n_planned: int
+    path: str
+
+
+class Catalog:
+    """Open (creating if needed) the catalog in ``folder``."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.path = Path(folder) / CATALOG_NAME
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = sqlite3.connect(self.path, timeout=10.0, check_same_thread=False)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.executescript(_SCHEMA)
+        self._db.commit()
+
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> Catalog:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def add(self, row: RunRow) -> None:
+        with self._db:
+            self._db.execute(
+                "INSERT OR REPLACE INTO runs VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                (row.run_id, row.sample, row.plan_kind, row.plan_name, row.bench, row.status,
+                 row.started, row.ended, row.n_points, row.n_planned, row.path))
+
+    def update(self, run_id: str, *, status: str | None = None, n_points: int | None = None,
+               ended: float | None = None) -> None:
+        sets, args = [], []
+        for col, val in (("status", status), ("n_points", n_points), ("ended", ended)):
+            if val is not None:
+                sets.append(f"{col} = ?")
+                args.append(val)
+        if not sets:
+            return
+        with self._db:
+            self._db.execute(f"UPDATE runs SET {', '.join(sets)} WHERE run_id = ?",
+                             (*args, run_id))
+
+    def get(self, run_id: str) -> RunRow | None:
+        cur = self._db.execute("SELECT * FROM runs WHERE run_id = ?", (run_id,))
+        row = cur.fetchone()
+        return RunRow(*row) if row else None
+
+    def refresh(self, row: RunRow) -> RunRow:
+        """``row`` corrected from its run file when the process that ran it is gone.
+
+        A row in a live status (created/running/paused) whose run file no process holds
+        open gets the journal's committed point count and its last recorded status, or
+        "interrupted" when the journal ends without one (the process was killed). Rows of
+        live runs and of ended runs come back unchanged.
+        """
+        if row.status not in LIVE_STATUSES or _held_open(Path(row.path)):
+            return row
+        records, _ = read_journal(Path(row.path + ".journal"))
+        if not records or records[0].get("t") != "header":
+            return row  # not ours to judge: the file is gone or is not a run
+        done = {r["index"] for r in records if r.get("t") == "point"}
+        ends = [r["status"] for r in records if r.get("t") == "status"]
+        status = ends[-1] if ends and ends[-1] not in ("created", "running") else "interrupted"
+        new = replace(row, status=status, n_points=len(done))
+        if new != row:
+            self.update(row.run_id, status=new.status, n_points=new.n_points)
+        return new
+
+    def refresh_live(self) -> None:
+        """:meth:`refresh` every row in a live status (before listing or filtering)."""
+        marks = ",".join("?" * len(LIVE_STATUSES))
+        rows = self._db.execute(f"SELECT * FROM runs WHERE status IN ({marks})",
+                                LIVE_STATUSES).fetchall()
+        for r in rows:
+            self.refresh(RunRow(*r))
+
+    def find(self, *, status: str | None = None, sample: str | None = None,
+             kind: str | None = None, since: float | None = None,
+             limit: int | None = None) -> list[RunRow]:
+        """Runs matching every filter given (``sample`` is a substring), newest first."""
+        where, args = [], []
+        if status:
+            where.append("status = ?")
+            args.append(status)
+        if sample:
+            where.append("sample LIKE ?")
+            args.append(f"%{sample}%")
+        if kind:
+            where.append("plan_kind = ?")
+            args.append(kind)
+        if since is not None:
+            where.append("started >= ?")
+            args.append(since)
+        sql = "SELECT * FROM runs"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY started DESC"
+        if limit:
+            sql += f" LIMIT {int(limit)}"
+        return [RunRow(*r) for r in self._db.execute(sql, args).fetchall()]
+
+
+def _held_open(path: Path) -> bool:
+    """True while a process has the HDF5 run file open for writing.
+
+    This process (a GUI listing runs while its engine writes one) is asked through
+    h5py's open file ids, since HDF5 lets a process reopen its own file; another process
+    is detected by HDF5's file lock refusing the open.
+    """
+    for fid in h5py.h5f.get_obj_ids(types=h5py.h5f.OBJ_FILE):
+        try:
+            same = Path(fid.name.decode()).resolve() == path.resolve()
+        except (OSError, ValueError):
+            continue
+        if same and fid.get_intent() & h5py.h5f.ACC_RDWR:
+            return True
+    try:
+        with h5py.File(path, "r"):
+            return False
+    except FileNotFoundError:
+        return False
+    except OSError as err:
+        text = str(err).lower()
+        return "lock" in text or "already open" in text
+

@@ -1,0 +1,913 @@
+"""The run engine: one worker thread executes a plan's commands; one writer thread stores.
+
+Per point (plan commands ``Move → Acquire → PointDone``):
+
+1. **Move**: every axis of the step is started, then all are waited for together (the
+   slowest sets the step time), polling their status so that an abort can stop them.
+2. **Acquire**: first the previous point must be durable (the writer thread has committed
+   it: see docs/decisions/0010), so at most one point's data is ever at risk; then frames
+   (fixed or auto-exposure with HDR brackets, averaging, dark frames) and a power reading.
+3. **PointDone**: the record goes to the writer thread, and the worker starts the next
+   move while the writer writes.
+
+Pause takes effect at the next point boundary; abort stops motion at once, turns the light
+off and finalises the file. Failures are handled per device by the profile's
+:class:`~instrument.bench.profile.RetryPolicy`: ``attempts`` tries of the (idempotent) operation
+with doubling back-off, then ``on_failure``: ``rehome`` (home the axis and try once more),
+``skip`` (mark the point skipped and go on), ``pause`` (make the bench safe, report, wait
+for :meth:`RunEngine.resume`) or ``abort``. Every retry and action is an event and is
+logged in the run file. A storage error (disk full) pauses the run; on resume the file is
+recovered from its journal and the uncommitted point is taken again.
+
+Events go to subscribers on the worker thread (:mod:`instrument.run.events`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import math
+import queue
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from drivers.base import AxisStatus, Camera, Frame, MotionAxis
+from drivers.errors import DeviceError, LimitError, MotionError
+from instrument.bench.devices import Bench
+from instrument.bench.dynamics import move_time
+from instrument.bench.kinematics import kinematics_for
+from instrument.bench.profile import RetryPolicy
+from instrument.plans.build import Plan, dynamics_of
+from instrument.plans.commands import Acquire, AcquisitionPolicy, Move, PointDone, SetLight
+from instrument.run.events import (
+    Event,
+    Fault,
+    Paused,
+    PointCompleted,
+    Progress,
+    Resumed,
+    RunFinished,
+    RunStarted,
+)
+from instrument.run.storage import (
+    STATUS_OK,
+    STATUS_SKIPPED,
+    FrameData,
+    PointRecord,
+    RunStore,
+    StorageError,
+)
+
+__all__ = ["EngineSnapshot", "EngineState", "RunEngine"]
+
+#: Seconds a point's write may take before the engine turns the light off and reports a
+#: storage fault while it goes on waiting (a stalled disk or network share: an HDF5 write
+#: in flight cannot be abandoned safely, but the sample need not stay lit meanwhile).
+STORAGE_STALL_S = 30.0
+
+
+class EngineState(enum.Enum):
+    IDLE = "idle"
+    RUNNING = "running"
+    PAUSED = "paused"
+    FINISHED = "finished"
+    ABORTED = "aborted"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class EngineSnapshot:
+    """What a client polling the engine (a GUI timer) needs, read under the lock."""
+
+    state: EngineState
+    n_done: int
+    n_total: int
+    n_skipped: int
+    elapsed_s: float
+    path: str
+    pause_reason: str | None
+
+
+class _Abort(Exception):
+    """Internal: leave the run now."""
+
+
+class _PointFailed(Exception):
+    def __init__(self, action: str, device: str, cause: str) -> None:
+        super().__init__(cause)
+        self.action = action
+        self.device = device
+        self.cause = cause
+
+
+@dataclass
+class _PointState:
+    index: int
+    label: str = "sample"
+    t_start: float = 0.0
+    positions: dict[str, float] = field(default_factory=dict)
+    frames: list[FrameData] = field(default_factory=list)
+    exposure_us: float = math.nan
+    power_w: float = math.nan
+    signal: float = math.nan
+    retries: int = 0
+
+
+class RunEngine:
+    """Run ``plan`` on ``bench`` into ``store``.
+
+    Parameters
+    ----------
+    done
+        Indices already in the run file (resume): they are not run again.
+    move_timeout_factor, move_timeout_min_s
+        A step may take ``factor × planned time + min`` seconds before it counts as a
+        timeout (then the axes are stopped and the device's retry policy applies).
+    poll_s
+        Seconds between status polls of moving axes: the end of a step is noticed on
+        average ``poll_s/2`` late, a cost paid at every point (scan efficiency).
+    reopen_store
+        Called to reopen the run file after a storage error (default:
+        :meth:`RunStore.reopen` on the same path with the same settings).
+    """
+
+    def __init__(self, bench: Bench, plan: Plan, store: RunStore, *,
+                 done: set[int] | frozenset[int] = frozenset(),
+                 move_timeout_factor: float = 3.0, move_timeout_min_s: float = 10.0,
+                 poll_s: float = 0.002,
+                 reopen_store: Callable[[], tuple[RunStore, set[int]]] | None = None) -> None:
+        self.bench = bench
+        self.plan = plan
+        self.store = store
+        self._n_total = len(plan.points)
+        self._done = _DoneSet(self._n_total, done)
+        self._n_skipped = 0
+        self._subscribers: list[Callable[[Event], None]] = []
+        self._lock = threading.Condition()
+        self._state = EngineState.IDLE
+        self._pause_requested: str | None = None
+        self._abort_requested = False
+        self._resume_requested = False
+        self._thread: threading.Thread | None = None
+        self._writer: _Writer | None = None
+        self._move_factor = move_timeout_factor
+        self._move_min = move_timeout_min_s
+        self._poll_s = poll_s
+        self._reopen = reopen_store or (lambda: RunStore.reopen(
+            store.path, fsync=store.fsync, sync_interval_s=store.sync_interval_s,
+            min_free_bytes=store.min_free_bytes))
+        self._dyn = dynamics_of(plan.profile, plan.axes)
+        self._kin = kinematics_for(plan.profile.geometry.kind,
+                                   source_theta_deg=plan.profile.geometry.source_theta_deg)
+        # The bench's devices do not change during a run: look them up once.
+        self._camera = bench.camera
+        self._pm = bench.power_meter
+        self._source = bench.source
+        self._roles = {id(d): r for r, d in bench.devices.items()}
+        self._policies = {r: self._policy(r) for r in bench.devices}
+        self._light: bool | None = None
+        self._last_exposure: float | None = None
+        self._t0 = 0.0
+        self._point_dt: float | None = None
+        self._message = ""
+        self._position_cache: dict[str, float] = {}
+
+    # public API (any thread) ----------------------------------------------------
+    def subscribe(self, callback: Callable[[Event], None]) -> None:
+        """Call ``callback(event)`` on the worker thread for every event."""
+        self._subscribers.append(callback)
+
+    def unsubscribe(self, callback: Callable[[Event], None]) -> None:
+        """Stop calling ``callback`` (a closing GUI window); unknown callbacks are ignored."""
+        with contextlib.suppress(ValueError):
+            self._subscribers.remove(callback)
+
+    @property
+    def state(self) -> EngineState:
+        with self._lock:
+            return self._state
+
+    @property
+    def n_done(self) -> int:
+        return len(self._done)
+
+    def snapshot(self) -> EngineSnapshot:
+        """State and counts now; safe from any thread."""
+        with self._lock:
+            elapsed = time.monotonic() - self._t0 if self._t0 else 0.0
+            return EngineSnapshot(self._state, len(self._done), self._n_total,
+                                  self._n_skipped, elapsed, str(self.store.path),
+                                  self._pause_requested
+                                  if self._state is EngineState.PAUSED else None)
+
+    def start(self) -> None:
+        """Start the worker thread; returns at once."""
+        with self._lock:
+            if self._thread is not None:
+                raise RuntimeError("the engine runs a plan once; make a new engine")
+            self._state = EngineState.RUNNING
+        self._thread = threading.Thread(target=self._main, name="run-engine", daemon=True)
+        self._thread.start()
+
+    def run(self) -> EngineState:
+        """Start and wait for the end (scripts, tests)."""
+        self.start()
+        return self.wait()
+
+    def wait(self, timeout: float | None = None) -> EngineState:
+        """Block until the worker ends (finished, aborted, failed, or paused and stopped)."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+        return self.state
+
+    @property
+    def alive(self) -> bool:
+        """True from :meth:`start` until the worker thread has ended (paused counts)."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def pause(self, reason: str = "paused by the operator") -> None:
+        """Pause at the next point boundary."""
+        with self._lock:
+            self._pause_requested = reason
+            self._lock.notify_all()
+
+    def resume(self) -> None:
+        with self._lock:
+            self._pause_requested = None
+            self._resume_requested = True
+            self._lock.notify_all()
+
+    def abort(self) -> None:
+        """Stop motion now, turn the light off, finalise the file."""
+        with self._lock:
+            self._abort_requested = True
+            self._lock.notify_all()
+
+    def stop_when_paused(self) -> None:
+        """Make a paused engine end its thread with status ``paused`` (resumable later)."""
+        with self._lock:
+            self._abort_requested = True
+            self._stop_paused = True
+            self._lock.notify_all()
+
+    # worker ---------------------------------------------------------------------
+    def _emit(self, event: Event) -> None:
+        for cb in list(self._subscribers):
+            try:
+                cb(event)
+            except Exception as err:  # a broken subscriber must not stop the hardware
+                print(f"scatterlab: event subscriber {cb!r} failed: {err!r}", file=sys.stderr)
+                self.unsubscribe(cb)
+
+    def _main(self) -> None:
+        status = "failed"
+        self._t0 = time.monotonic()
+        self._writer = _Writer(self.store)
+        try:
+            est = self.plan.estimate()
+            self._emit(RunStarted(self.store.header.run_id, str(self.store.path),
+                                  self.plan.kind, self._n_total, len(self._done),
+                                  est.total_s * (1 - len(self._done) / max(1, self._n_total))))
+            self._prepare()
+            status = self._loop()
+        except _Abort:
+            status = "paused" if getattr(self, "_stop_paused", False) else "aborted"
+        except Exception as err:
+            self._message = f"{type(err).__name__}: {err}"
+            status = "failed"
+            self._emit(Fault(getattr(err, "device", None) or "engine", str(err), "abort", None))
+        finally:
+            notes = [self._message] if self._message else []
+            problems = self.bench.make_safe()
+            if problems:
+                notes.append("could not make safe: " + "; ".join(problems))
+            try:
+                self._writer.drain()
+            except StorageError as err:
+                self._store_broken = True
+                notes.append(f"last point not stored: {err}")
+            self._writer.stop()
+            if self.store.closed:
+                notes.append("the run file was closed at the storage error; "
+                             "`scatterlab resume` continues it")
+            else:
+                try:
+                    if self._store_broken:
+                        raise StorageError(5, "the run file had a write error")
+                    if status == "paused":
+                        self.store.event({"kind": "paused",
+                                          "reason": "run stopped while paused"})
+                    self.store.close(status)
+                except Exception as err:
+                    self.store.abandon()
+                    if status == "finished":
+                        status = "paused"
+                    notes.append(f"file not finalised ({err}); `scatterlab resume` "
+                                 "repairs it")
+            self._message = "; ".join(notes)
+            with self._lock:
+                self._state = {"finished": EngineState.FINISHED, "aborted": EngineState.ABORTED,
+                               "paused": EngineState.PAUSED}.get(status, EngineState.FAILED)
+            self._emit(RunFinished(status, len(self._done), self._n_total, self._n_skipped,
+                                   str(self.store.path), time.monotonic() - self._t0,
+                                   self._message))
+
+    def _prepare(self) -> None:
+        """Enable and home every axis the plan moves (homing is skipped when homed)."""
+        for role in self.plan.axes:
+            axis = self._axis(role)
+            policy = self._policy(role)
+            status = self._retry(role, policy, "status", axis.status)
+            if not status.is_enabled:
+                self._retry(role, policy, "enable", axis.enable)
+            if not status.is_homed:
+                self._retry(role, policy, "home", lambda a=axis: a.home(timeout=300.0))
+
+    def _loop(self) -> str:
+        while True:
+            try:
+                group: list = []
+                for cmd in self.plan.commands(self._done.snapshot()):
+                    match cmd:
+                        case SetLight(on=on):
+                            self._set_light(on)
+                        case Move():
+                            group = [cmd]
+                        case Acquire():
+                            group.append(cmd)
+                        case PointDone():
+                            group.append(cmd)
+                            self._run_point(group)
+                            group = []
+                self._commit_wait_or_pause(None)
+                break
+            except _Restart:
+                # The run file was recovered from its journal after a storage error:
+                # start the plan again from the first point it does not hold.
+                continue
+        with self._lock:
+            n = len(self._done)
+        return "finished" if n >= self._n_total else "paused"
+
+    # points -----------------------------------------------------------------------
+    def _run_point(self, group: list) -> None:
+        move: Move = group[0]
+        acq: Acquire = group[1]
+        while True:
+            self._boundary(move.index)
+            try:
+                st = self._execute(move, acq)
+            except _PointFailed as fail:
+                self._emit(Fault(fail.device, fail.cause, fail.action, move.index))
+                self.store_event("fault", device=fail.device, cause=fail.cause,
+                                 action=fail.action, index=move.index)
+                if fail.action == "skip point":
+                    self._submit(_PointState(move.index, acq.label, time.time()),
+                                 skipped=fail.cause)
+                    return
+                if fail.action == "abort":
+                    self._message = f"{fail.device}: {fail.cause}"
+                    raise _Abort from fail
+                self._enter_pause(f"{fail.device}: {fail.cause}", move.index)
+                continue
+            self._submit(st)
+            return
+
+    def _execute(self, move: Move, acq: Acquire) -> _PointState:
+        st = _PointState(move.index, acq.label, time.time())
+        self._move(move, st)
+        # Durability: the previous point is on disk before this one acquires anything.
+        self._commit_wait_or_pause(move.index)
+        self._acquire(acq, st)
+        return st
+
+    def _boundary(self, index: int) -> None:
+        with self._lock:
+            if self._abort_requested:
+                raise _Abort
+            reason = self._pause_requested
+        if reason is not None:
+            self._enter_pause(reason, index)
+
+    def _enter_pause(self, reason: str, index: int | None) -> None:
+        self.bench.make_safe()
+        self._light = None  # re-applied on resume
+        if not self._store_broken:
+            try:
+                self._writer.call(self.store.sync)
+            except StorageError:
+                self._store_broken = True
+        self.store_event("paused", reason=reason, index=index)
+        with self._lock:
+            self._state = EngineState.PAUSED
+            self._pause_requested = reason
+            self._resume_requested = False
+        self._emit(Paused(reason, index))
+        with self._lock:
+            while not (self._resume_requested or self._abort_requested):
+                self._lock.wait()
+            if self._abort_requested:
+                raise _Abort
+            self._state = EngineState.RUNNING
+            self._resume_requested = False
+        if self._store_broken:
+            self._reopen_store()
+        self.store_event("resumed", index=index)
+        self._emit(Resumed(index))
+        want = self._light_wanted
+        if want is not None:
+            self._set_light(want)
+
+    _store_broken = False
+    _light_wanted: bool | None = None
+
+    def _reopen_store(self) -> None:
+        self._writer.stop()
+        self.store.abandon()
+        self.store, done = self._reopen()
+        with self._lock:
+            self._done = _DoneSet(self._n_total, done)
+        self._writer = _Writer(self.store)
+        self._store_broken = False
+
+    def store_event(self, kind: str, **fields) -> None:
+        if self._store_broken:
+            return
+        try:
+            self._writer.call(lambda: self.store.event({"kind": kind, **fields}))
+        except StorageError:
+            self._store_broken = True
+
+    def _commit_wait_or_pause(self, index: int | None) -> None:
+        """Wait until the writer has committed the previous point; pause on a storage error.
+
+        After a pause for a storage error the run file is recovered from its journal and
+        the uncommitted point is run again, so nothing is missing or duplicated.
+        """
+        while True:
+            try:
+                self._writer.drain(stall_s=STORAGE_STALL_S,
+                                   on_stall=lambda: self._storage_stalled(index))
+                return
+            except StorageError as err:
+                self._store_broken = True
+                with self._lock:
+                    self._done.discard_all(self._writer.failed)
+                # Close the damaged handle now: while paused the file on disk is closed
+                # and valid (recover() makes it agree with the journal).
+                self._writer.stop()
+                if getattr(err, "clean", False):
+                    # Nothing was written: close the file properly (status "paused").
+                    try:
+                        self.store.close("paused")
+                    except Exception:
+                        self.store.abandon()
+                else:
+                    self.store.abandon()
+                self._emit(Fault("storage", str(err), "pause", index))
+                self._enter_pause(f"storage: {err}", index)
+                # Recovered from the journal: the lost point is not in done any more.
+                raise _Restart from err
+
+    def _storage_stalled(self, index: int | None) -> None:
+        """The previous point's write is taking too long: make the bench safe (the axes
+        are at rest here), say so, and let the next acquisition restore the light."""
+        problems = self.bench.make_safe()
+        self._light = None  # the next Acquire turns the light back to what it needs
+        action = "light off, waiting for the write"
+        if problems:
+            action += "; could not make safe: " + "; ".join(problems)
+        self._emit(Fault("storage", f"writing the previous point to {self.store.path} has "
+                         f"taken over {STORAGE_STALL_S:g} s (disk or network share "
+                         "stalled?)", action, index))
+
+    def _submit(self, st: _PointState, skipped: str | None = None) -> None:
+        axes = self.plan.axes
+        positions = tuple(st.positions.get(r, math.nan) for r in axes)
+        angles = (math.nan,) * 4
+        point = self.plan.points[st.index]
+        if point.angles is not None and all(r in st.positions for r in self._kin.axes):
+            angles = self._kin.angles(st.positions).as_tuple()
+        rec = PointRecord(st.index, st.label, st.t_start, time.time(), positions, angles,
+                          st.exposure_us, st.power_w, st.signal,
+                          STATUS_SKIPPED if skipped else STATUS_OK, st.retries,
+                          skipped or "", st.frames)
+        if st.frames:
+            self._writer.submit(rec)  # frames: written while the next move runs
+        else:
+            # Scalars only: a journal line costs less than a hand-over to the writer
+            # thread; store it here (same durability, same order: the writer is idle).
+            self._commit_wait_or_pause(st.index)
+            try:
+                self._writer.call(lambda: self.store.append(rec), inline=True)
+            except StorageError:
+                self._writer.failed.append(st.index)
+                self._commit_wait_or_pause(st.index)  # pauses; raises _Restart on resume
+        with self._lock:
+            self._done.add(st.index)
+            n = len(self._done)
+        if skipped:
+            self._n_skipped += 1
+        now = time.monotonic()
+        dt = now - getattr(self, "_last_point_t", self._t0)
+        self._last_point_t = now
+        self._point_dt = dt if self._point_dt is None else 0.9 * self._point_dt + 0.1 * dt
+        self._emit(PointCompleted(st.index, st.label, "skipped" if skipped else "ok",
+                                  dict(st.positions),
+                                  None if math.isnan(angles[0]) else angles,
+                                  st.exposure_us, st.power_w, st.signal, st.retries))
+        self._emit(Progress(n, self._n_total, now - self._t0,
+                            (self._n_total - n) * (self._point_dt or 0.0)))
+
+    # devices ------------------------------------------------------------------------
+    def _axis(self, role: str) -> MotionAxis:
+        dev = self.bench.devices.get(role)
+        if not isinstance(dev, MotionAxis):
+            raise _PointFailed("abort", role, f"the bench has no axis {role!r}")
+        return dev
+
+    def _policy(self, role: str) -> RetryPolicy:
+        spec = self.plan.profile.devices.get(role)
+        return spec.retry if spec is not None else RetryPolicy()
+
+    def _retry(self, role: str, policy: RetryPolicy, what: str, fn, st: _PointState | None = None,
+               *, on_exhausted: Callable[[], object] | None = None):
+        """Run ``fn`` up to ``policy.attempts`` times with doubling back-off."""
+        delay = policy.backoff_s
+        last: DeviceError | None = None
+        for attempt in range(1, policy.attempts + 1):
+            with self._lock:
+                if self._abort_requested:
+                    raise _Abort
+            try:
+                return fn()
+            except DeviceError as err:
+                last = err
+                if st is not None:
+                    st.retries += 1
+                if attempt < policy.attempts:
+                    action = f"retry {attempt}/{policy.attempts - 1}"
+                    self._emit(Fault(role, f"{what}: {err}", action,
+                                     None if st is None else st.index))
+                    self.store_event("fault", device=role, cause=f"{what}: {err}",
+                                     action=action, index=None if st is None else st.index)
+                    time.sleep(delay)
+                    delay *= 2
+        assert last is not None
+        cause = f"{what} failed {policy.attempts} time(s): {last}"
+        if policy.on_failure == "rehome" and on_exhausted is not None:
+            self._emit(Fault(role, cause, "rehome", None if st is None else st.index))
+            self.store_event("fault", device=role, cause=cause, action="rehome",
+                             index=None if st is None else st.index)
+            try:
+                on_exhausted()
+                return fn()
+            except DeviceError as err:
+                raise _PointFailed("pause", role, f"{what} failed after re-homing: {err}"
+                                   ) from err
+        action = {"skip": "skip point", "abort": "abort", "pause": "pause",
+                  "rehome": "pause"}[policy.on_failure]
+        raise _PointFailed(action, role, cause) from last
+
+    def _move(self, move: Move, st: _PointState) -> None:
+        targets = dict(move.targets)
+        moving: dict[str, MotionAxis] = {}
+        plan_time = 0.0
+        for role, target in targets.items():
+            axis = self._axis(role)
+            here = self._position_cache.get(role)
+            if here is not None and abs(here - target) <= axis.position_tolerance / 2:
+                st.positions[role] = here
+                continue  # already there: no command, no wait
+            plan_time = max(plan_time, move_time(target - (here or 0.0), self._dyn[role]))
+            self._position_cache.pop(role, None)
+
+            def start(a=axis, t=target) -> None:
+                a.move_to(t)
+
+            self._retry(role, self._policy(role), f"move to {target:g}", start, st,
+                        on_exhausted=lambda a=axis: self._rehome(a))
+            moving[role] = axis
+        if not moving:
+            return
+        timeout = self._move_factor * plan_time + self._move_min
+        self._wait_axes(moving, targets, timeout, st)
+        if self._camera is not None:
+            self._camera.invalidate()
+
+    def _rehome(self, axis: MotionAxis) -> None:
+        axis.stop()
+        axis.home(timeout=300.0)
+
+    def _wait_axes(self, moving: dict[str, MotionAxis], targets: dict[str, float],
+                   timeout: float, st: _PointState) -> None:
+        deadline = time.monotonic() + timeout
+        pending = dict(moving)
+        while pending:
+            with self._lock:
+                if self._abort_requested:
+                    for a in moving.values():
+                        a.stop()
+                    raise _Abort
+            for role, axis in list(pending.items()):
+                try:
+                    s = axis.status()
+                except DeviceError as err:
+                    s = None
+                    fail = err
+                if s is not None and not s.is_moving and not s.is_homing:
+                    del pending[role]
+                    self._finish_axis(role, axis, targets[role], st, s)
+                elif s is None:
+                    del pending[role]
+                    self._recover_axis(role, axis, targets[role], st, fail)
+            if pending:
+                if time.monotonic() > deadline:
+                    for role, axis in pending.items():
+                        axis.stop()
+                        err = DeviceError(f"move to {targets[role]:g} not done after "
+                                          f"{timeout:.3g} s; stopped", device=role)
+                        self._recover_axis(role, axis, targets[role], st, err)
+                    return
+                time.sleep(self._poll_s)
+
+    def _finish_axis(self, role: str, axis: MotionAxis, target: float,
+                     st: _PointState, status: AxisStatus) -> None:
+        """Motion has ended: check limits and arrival from the status just read (the
+        checks of :meth:`MotionAxis.wait`, without another round trip to the device)."""
+        err: DeviceError | None = None
+        if status.error:
+            err = DeviceError(f"controller error: {status.error}", device=role)
+        elif status.at_forward_limit or status.at_reverse_limit:
+            err = LimitError(f"a limit switch stopped the axis at {status.position:.6g}",
+                             device=role, command="move")
+        elif abs(status.position - target) > axis.position_tolerance:
+            err = MotionError(f"stopped at {status.position:.6g}, "
+                              f"{status.position - target:+.3g} from the target {target:.6g}",
+                              device=role, command="move")
+        if err is not None:
+            self._recover_axis(role, axis, target, st, err)
+            return
+        st.positions[role] = status.position
+        self._position_cache[role] = status.position
+
+    def _recover_axis(self, role: str, axis: MotionAxis, target: float, st: _PointState,
+                      err: DeviceError) -> None:
+        """A move failed: report, then retry the (absolute, idempotent) move per policy."""
+        policy = self._policy(role)
+        st.retries += 1
+        self._position_cache.pop(role, None)
+        self._emit(Fault(role, f"move to {target:g}: {err}", "retry", st.index))
+        self.store_event("fault", device=role, cause=f"move to {target:g}: {err}",
+                         action="retry", index=st.index)
+
+        def again() -> float:
+            axis.stop()
+            axis.move_to(target, wait=True, timeout=self._move_min + 60.0)
+            return axis.position
+
+        retry_policy = RetryPolicy(max(1, policy.attempts - 1), policy.backoff_s,
+                                   policy.on_failure)
+        pos = self._retry(role, retry_policy, f"move to {target:g}", again, st,
+                          on_exhausted=lambda: self._rehome(axis))
+        st.positions[role] = float(pos)
+        self._position_cache[role] = float(pos)
+
+    def _set_light(self, on: bool) -> None:
+        self._light_wanted = on
+        if self._light is on:
+            return
+        src = self._source
+        if src is None:
+            self._light = on
+            return
+        role = self._roles[id(src)]
+        self._retry(role, self._policies[role], "turn on" if on else "turn off",
+                    src.turn_on if on else src.turn_off)
+        self._light = on
+        # The scene changed: frames a camera buffered before the switch are of the other
+        # lighting (a dark frame would be lit, or the reverse).
+        if self._camera is not None:
+            self._camera.invalidate()
+
+    def _acquire(self, acq: Acquire, st: _PointState) -> None:
+        policy = acq.policy
+        cam = self._camera if policy.uses_camera else None
+        pm = self._pm if policy.uses_power_meter else None
+        if acq.light != self._light and self._source is not None:
+            self._set_light(acq.light)
+        if pm is not None:
+            role = self._roles[id(pm)]
+            st.power_w = float(self._retry(role, self._policies[role], "read power",
+                                           pm.read_power_w, st))
+        if cam is None:
+            return
+        role = self._roles[id(cam)]
+        brackets = self._retry(role, self._policy(role), "acquire",
+                               lambda: self._brackets(cam, policy, acq), st)
+        st.frames.extend(brackets)
+        best = _best_bracket(brackets)
+        st.exposure_us = best.exposure_us
+        dark_level = 0.0
+        if policy.dark == "per_point" and acq.light and self._source is not None:
+            self._set_light(False)
+            for b in list(brackets):
+                dark = self._retry(role, self._policy(role), "dark",
+                                   lambda e=b.exposure_us: self._frame(cam, e, policy.frames,
+                                                                       False), st)
+                st.frames.append(dark)
+                if b is best:
+                    dark_level = float(dark.data.mean())
+            self._set_light(True)
+        st.signal = (float(best.data.mean()) - dark_level) / best.exposure_us
+
+    def _frame(self, cam: Camera, exposure_us: float, n: int, light: bool) -> FrameData:
+        if cam.exposure_us != exposure_us:
+            cam.exposure_us = exposure_us
+        frames: list[Frame] = cam.acquire(n)
+        if n == 1:
+            data = frames[0].data
+        else:
+            data = np.mean([f.data for f in frames], axis=0, dtype=np.float64).astype(np.float32)
+        sat = frames[0].saturation_dn
+        saturated = float(np.mean(np.max([f.data for f in frames], axis=0) >= sat))
+        return FrameData(data, float(exposure_us), light, frames[-1].timestamp, saturated)
+
+    def _brackets(self, cam: Camera, policy: AcquisitionPolicy, acq: Acquire
+                  ) -> list[FrameData]:
+        """Fixed exposure, or auto-exposure with HDR bracketing (see AcquisitionPolicy)."""
+        lo, hi = cam.exposure_range_us
+        emin, emax = max(lo, policy.min_exposure_us), min(hi, policy.max_exposure_us)
+        if acq.exposure_us is not None or policy.mode == "fixed":
+            e = acq.exposure_us if acq.exposure_us is not None else policy.exposure_us
+            return [self._frame(cam, min(max(e, lo), hi), policy.frames, acq.light)]
+        e = self._last_exposure or policy.exposure_us
+        e = min(max(e, emin), emax)
+        kept: list[FrameData] = []
+        for _ in range(max(policy.max_brackets, 1) + 4):
+            fr = self._frame(cam, e, policy.frames, acq.light)
+            peak = float(np.max(fr.data))
+            sat_level = float(2 ** _bit_depth(cam) - 1)
+            if fr.saturated > 0 and e > emin:
+                if policy.hdr and len(kept) < policy.max_brackets - 1:
+                    kept.append(fr)
+                e = max(emin, e / policy.hdr_factor)
+                continue
+            if (not kept and peak < policy.target_fraction * sat_level / policy.hdr_factor
+                    and e < emax):
+                e = min(emax, e * policy.hdr_factor)
+                continue
+            kept.append(fr)
+            break
+        else:
+            kept.append(fr)
+        self._last_exposure = kept[-1].exposure_us if not policy.hdr else kept[0].exposure_us
+        return kept
+
+
+class _DoneSet:
+    """Which points are done: a fixed bitmap, so memory stays flat on long runs."""
+
+    def __init__(self, n: int, initial=()) -> None:
+        self._bits = np.zeros(max(n, 1), dtype=bool)
+        self._count = 0
+        for i in initial:
+            self.add(i)
+
+    def add(self, i: int) -> None:
+        if not self._bits[i]:
+            self._bits[i] = True
+            self._count += 1
+
+    def discard_all(self, indices) -> None:
+        for i in indices:
+            if self._bits[i]:
+                self._bits[i] = False
+                self._count -= 1
+
+    def __contains__(self, i: int) -> bool:
+        return bool(self._bits[i])
+
+    def __len__(self) -> int:
+        return self._count
+
+    def snapshot(self) -> _DoneSet:
+        copy = _DoneSet(0)
+        copy._bits = self._bits.copy()
+        copy._count = self._count
+        return copy
+
+
+class _Restart(Exception):
+    """Internal: the done set changed (storage recovery); iterate the plan again."""
+
+
+def _bit_depth(cam: Camera) -> int:
+    try:
+        return cam.bit_depth
+    except DeviceError:
+        return 16
+
+
+def _best_bracket(brackets: list[FrameData]) -> FrameData:
+    """The longest unsaturated exposure (the last bracket taken)."""
+    unsat = [b for b in brackets if b.saturated == 0]
+    return max(unsat, key=lambda b: b.exposure_us) if unsat else brackets[-1]
+
+
+class _Writer:
+    """The writer thread: stores one point while the worker moves to the next."""
+
+    def __init__(self, store: RunStore) -> None:
+        self._store = store
+        self._q: queue.Queue = queue.Queue(maxsize=1)
+        self._cond = threading.Condition()
+        self._busy = 0
+        self._error: BaseException | None = None
+        self.failed: list[int] = []  # indices of points whose storing failed
+        self._thread = threading.Thread(target=self._loop, name="run-writer", daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while True:
+            job = self._q.get()
+            if job is None:
+                return
+            try:
+                if self._error is None:
+                    job()
+            except BaseException as err:
+                with self._cond:
+                    self._error = err
+            finally:
+                with self._cond:
+                    self._busy -= 1
+                    self._cond.notify_all()
+
+    def submit(self, rec: PointRecord) -> None:
+        def job() -> None:
+            try:
+                self._store.append(rec)
+            except BaseException:
+                self.failed.append(rec.index)
+                raise
+
+        self._put(job)
+
+    def _put(self, job) -> None:
+        with self._cond:
+            self._busy += 1
+        self._q.put(job)
+
+    def call(self, fn, *, inline: bool = False) -> None:
+        """Run ``fn`` on the writer thread (it owns the store) and wait for it; with
+        ``inline``, on the calling thread, which is safe only while the writer is idle."""
+        if not inline:
+            self._put(fn)
+            self.drain()
+            return
+        with self._cond:
+            assert self._busy == 0, "inline store call while the writer is busy"
+        if self._error is not None:
+            self.drain()
+        try:
+            fn()
+        except BaseException as err:
+            with self._cond:
+                self._error = err
+            raise
+
+    def drain(self, *, stall_s: float = math.inf, on_stall=None) -> None:
+        """Wait until every submitted job is done; re-raise a storage error once.
+
+        An HDF5 write in flight cannot be abandoned, so this waits for it however long it
+        takes; ``on_stall()`` is called once (outside the lock) if it takes longer than
+        ``stall_s`` seconds.
+        """
+        deadline = time.monotonic() + stall_s if on_stall is not None else math.inf
+        while True:
+            with self._cond:
+                while self._busy and time.monotonic() < deadline:
+                    self._cond.wait(min(deadline - time.monotonic(), 3600.0))
+                if not self._busy:
+                    err = self._error  # sticky: this store is broken until replaced
+                    break
+            on_stall()
+            deadline = math.inf
+        if err is not None:
+            if isinstance(err, StorageError):
+                raise err
+            if isinstance(err, OSError):
+                raise StorageError(err.errno or 5, str(err)) from err
+            raise err
+
+    def stop(self) -> None:
+        if self._thread.is_alive():
+            self._q.put(None)
+            self._thread.join(10.0)
+

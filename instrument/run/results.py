@@ -1,0 +1,198 @@
+"""Where analysis results go, and how they are written (ADR 0013).
+
+Every output of an analysis of ``DIR/RUN.h5`` goes under ``DIR/RUN/<pipeline>/``
+(:func:`results_dir`): its figures, its report and ``results.h5`` (:func:`results_path`), a
+NeXus-style file whose ``/entry`` names the run, the program and a fingerprint of the
+options (:func:`options_fingerprint`), and holds the analysis groups under
+``/entry/analysis``. :func:`write_results_file` writes it atomically (temporary file, fsync,
+rename), so a killed analysis leaves the previous results or none; :func:`already_done`
+tells whether a run was analysed with the same options. The raw run file is written only
+when the user asks (:func:`open_for_results`).
+
+The group helpers are the one way the pipelines build their groups: a group is replaced
+whole (writing again supersedes an earlier analysis), text goes in as variable-length
+UTF-8 strings, and plain-data results as JSON that any HDF5 reader can parse.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from instrument.run.runfile import as_text
+from instrument.version import software_version
+
+__all__ = [
+    "PIPELINES",
+    "RESULTS_NAME",
+    "RunStillRunning",
+    "already_done",
+    "analysis_group",
+    "jsonable",
+    "open_for_results",
+    "options_fingerprint",
+    "put",
+    "put_json",
+    "read_results_attrs",
+    "replace_group",
+    "results_dir",
+    "results_path",
+    "write_results_file",
+]
+
+#: The pipelines, by the name of their folder next to the run.
+PIPELINES = ("fit", "lightfield", "spheres")
+#: The results file in each pipeline's folder.
+RESULTS_NAME = "results.h5"
+
+
+class RunStillRunning(RuntimeError):
+    """The run file is still being written by a run; analyse it when the run ends."""
+
+
+def replace_group(parent: h5py.Group, name: str, nx_class: str) -> h5py.Group:
+    """A new, empty group ``name`` of NeXus class ``nx_class`` (an existing one is deleted)."""
+    if name in parent:
+        del parent[name]
+    g = parent.create_group(name)
+    g.attrs["NX_class"] = nx_class
+    return g
+
+
+def analysis_group(f: h5py.File, name: str | None = None) -> h5py.Group:
+    """``/entry/analysis`` (created if missing), or its sub-group ``name`` (an NXprocess,
+    created if missing, kept if present)."""
+    entry = f["entry"]
+    if "analysis" not in entry:
+        entry.create_group("analysis").attrs["NX_class"] = "NXcollection"
+    g = entry["analysis"]
+    if name is None:
+        return g
+    if name not in g:
+        g.create_group(name).attrs["NX_class"] = "NXprocess"
+    return g[name]
+
+
+@contextlib.contextmanager
+def open_for_results(path: str | Path) -> Iterator[h5py.File]:
+    """The run file open for writing results; refused while a run is still writing it."""
+    with h5py.File(path, "r+") as f:
+        if as_text(f["entry"].attrs.get("status", "")) == "running":
+            raise RunStillRunning(f"{path} is still being written; analyse it when the run "
+                                  "ends")
+        yield f
+
+
+def jsonable(x: Any) -> Any:
+    """``json.dumps`` default for numpy values (anything else becomes its ``str``)."""
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    return str(x)
+
+
+def put(g: h5py.Group, name: str, value: Any) -> h5py.Dataset:
+    """A dataset ``name``: text as a UTF-8 string, anything else as an array."""
+    if isinstance(value, str):
+        return g.create_dataset(name, data=value, dtype=h5py.string_dtype())
+    return g.create_dataset(name, data=np.asarray(value))
+
+
+def put_json(g: h5py.Group, name: str, value: Any) -> h5py.Dataset:
+    """``value`` (plain data, numpy allowed) as JSON text in dataset ``name``."""
+    return put(g, name, json.dumps(value, default=jsonable))
+
+
+# ------------------------------------------------------------------------------ where
+def results_dir(run_path: str | Path, pipeline: str) -> Path:
+    """``DIR/RUN/<pipeline>/`` for the run file ``DIR/RUN.h5`` (not created here)."""
+    if pipeline not in PIPELINES:
+        raise ValueError(f"unknown pipeline {pipeline!r}; one of {', '.join(PIPELINES)}")
+    p = Path(run_path)
+    return p.parent / p.stem / pipeline
+
+
+def results_path(run_path: str | Path, pipeline: str) -> Path:
+    """``DIR/RUN/<pipeline>/results.h5``."""
+    return results_dir(run_path, pipeline) / RESULTS_NAME
+
+
+def options_fingerprint(options: Mapping[str, Any]) -> str:
+    """SHA-256 of the options as canonical JSON (sorted keys; paths and numpy values as
+    text and lists): equal options give equal fingerprints, across processes and machines."""
+    text = json.dumps(dict(options), sort_keys=True, default=jsonable, separators=(",", ":"))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+@contextlib.contextmanager
+def write_results_file(run_path: str | Path, pipeline: str, *, run_id: str, program: str,
+                       options: Mapping[str, Any]) -> Iterator[h5py.Group]:
+    """Write ``results.h5`` of ``pipeline`` for a run; yields its ``/entry/analysis`` group.
+
+    The file is built under a temporary name in the same folder, flushed to disk and
+    renamed over the old one only when the block ends without an exception, so readers see
+    the previous results or the new ones, never a mixture.
+    """
+    final = results_path(run_path, pipeline)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["default"] = "entry"
+            f.attrs["creator"] = "scatterlab"
+            entry = f.create_group("entry")
+            entry.attrs["NX_class"] = "NXentry"
+            entry.attrs["run_id"] = run_id
+            entry.attrs["run_file"] = os.path.relpath(Path(run_path).resolve(),
+                                                      final.parent.resolve())
+            entry.attrs["program"] = program
+            entry.attrs["software_version"] = software_version()
+            entry.attrs["date"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+            entry.attrs["options_json"] = json.dumps(dict(options), sort_keys=True,
+                                                     default=jsonable)
+            entry.attrs["options_sha256"] = options_fingerprint(options)
+            yield analysis_group(f)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, final)
+        with contextlib.suppress(OSError):  # the rename itself durable (POSIX folders)
+            fd = os.open(final.parent, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
+def read_results_attrs(run_path: str | Path, pipeline: str) -> dict[str, Any] | None:
+    """The ``/entry`` attributes of a run's results file, or ``None`` if it has none."""
+    path = results_path(run_path, pipeline)
+    if not path.is_file():
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            return {k: (as_text(v) if isinstance(v, bytes | str) else v)
+                    for k, v in f["entry"].attrs.items()}
+    except (OSError, KeyError):
+        return None  # unreadable or foreign: not a result to rely on
+
+
+def already_done(run_path: str | Path, pipeline: str, *, run_id: str,
+                 options: Mapping[str, Any]) -> bool:
+    """True when the run's ``results.h5`` of ``pipeline`` names ``run_id`` and was made with
+    the same options (ADR 0013: a rerun skips it unless forced)."""
+    attrs = read_results_attrs(run_path, pipeline)
+    return (attrs is not None and attrs.get("run_id") == run_id
+            and attrs.get("options_sha256") == options_fingerprint(options))

@@ -1,0 +1,299 @@
+"""The one reader of run files: points, frames, header, bench profile and plan.
+
+A run file is written by :mod:`instrument.run.storage` (NeXus-style layout, ADR 0010):
+``/entry/points`` (one row per completed point, completion order), ``/entry/data/frames``
+with the per-frame tables ``frame_point``, ``frame_exposure_us``, ``frame_light``,
+``frame_saturated``, ``/entry/plan`` (plan text, axes, the planned points),
+``/entry/instrument`` (bench profile, device identities, geometry) and
+``/entry/calibration``. Everything that reads a run — the analysis pipelines, ``resume``,
+the CLI's summaries — reads it through this module, with plain h5py and read-only.
+
+Angles are in degrees, as stored. A point's frames are its light brackets followed by one
+dark frame per bracket at the same exposure (``dark = "per_point"``); with
+``dark = "start"`` the dark-labelled points of the run are the master darks, matched by
+exposure (:meth:`RunData.frames_of`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import tomllib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from instrument.bench.camera_calibration import CameraCalibration, camera_calibration_for
+from instrument.plans.planfile import PlanSpec, parse_plan
+from instrument.run.storage import STATUS_SKIPPED
+
+__all__ = ["PlannedPoints", "RunData", "RunFileError", "RunSummary", "as_text", "read_plan_kind",
+           "read_planned", "read_run", "read_summary"]
+
+
+class RunFileError(ValueError):
+    """A file that is not a complete scatterlab run file (the message names what is missing)."""
+
+
+def as_text(value: Any) -> str:
+    """An HDF5 string attribute or dataset value as ``str`` (h5py gives bytes or str)."""
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+# ------------------------------------------------------------------------------ points
+@dataclass(frozen=True)
+class RunData:
+    """The scalar content of a run file (frames stay on disk until asked for).
+
+    Arrays have one row per stored point (completion order); angles in degrees. The
+    ``frame_*`` arrays have one entry per stored frame.
+    """
+
+    path: Path
+    run_id: str
+    plan_kind: str
+    plan_name: str
+    sample_name: str
+    status: str
+    index: np.ndarray
+    label: np.ndarray
+    point_status: np.ndarray
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    theta_r: np.ndarray
+    phi_r: np.ndarray
+    exposure_us: np.ndarray
+    power_w: np.ndarray
+    signal: np.ndarray
+    n_frames: np.ndarray
+    frame_start: np.ndarray
+    positions: np.ndarray
+    axes: tuple[str, ...]
+    frame_point: np.ndarray
+    frame_exposure_us: np.ndarray
+    frame_light: np.ndarray
+    acquisition: dict[str, Any]
+    geometry: dict[str, Any]
+    profile_text: str
+    plan_text: str
+    calibration: dict[str, str]
+    identities: dict[str, dict[str, str]] = field(default_factory=dict)
+    frame_saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    frame_shape: tuple[int, ...] | None = None
+
+    @property
+    def n_points(self) -> int:
+        return int(self.index.size)
+
+    def position(self, role: str) -> np.ndarray:
+        """Read-back positions of ``role`` per point (NaN if the run did not move it)."""
+        if role not in self.axes:
+            return np.full(self.n_points, np.nan)
+        return self.positions[:, self.axes.index(role)]
+
+    def brdf_rows(self) -> np.ndarray:
+        """Rows that are measured scattering points: status ok, finite angles."""
+        ok = (self.point_status == 0) & np.isfinite(self.theta_i) & np.isfinite(self.theta_r)
+        return np.flatnonzero(ok & np.isin(self.label, ["sample", "reference", "signature"]))
+
+    def profile(self) -> dict[str, Any]:
+        """The bench profile stored with the run (parsed TOML; empty if none)."""
+        return tomllib.loads(self.profile_text) if self.profile_text else {}
+
+    def plan(self) -> PlanSpec:
+        """The plan stored with the run, validated as a plan file is."""
+        return parse_plan(self.plan_text, source=f"plan stored in {self.path}")
+
+    def camera_calibration(self, calibration_file: str | Path | None = None
+                           ) -> CameraCalibration:
+        """The camera's radiometric calibration for this run
+        (:func:`instrument.bench.camera_calibration.camera_calibration_for`)."""
+        return camera_calibration_for(
+            self.profile(), calibration_file=calibration_file,
+            stored_file=self.calibration.get("camera_calibration"),
+            gain_db=float(self.acquisition.get("gain_db", 0.0)),
+            pixel_format=self.identities.get("camera", {}).get("pixel_format"))
+
+    @contextlib.contextmanager
+    def frames(self) -> Iterator[h5py.Dataset]:
+        """The frame stack ``(n_frames, H, W)`` on disk, open for reading while in the block."""
+        with h5py.File(self.path, "r") as f:
+            yield f["entry/data/frames"]
+
+    def frames_of(self, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(light frames (N, H, W), exposures (N,), dark frames (N, H, W) or None) of a row.
+
+        Darks are matched to brackets by exposure: the point's own dark frames first,
+        then dark-labelled points of the run (``dark = "start"``).
+        """
+        n0, n = int(self.frame_start[row]), int(self.n_frames[row])
+        if n == 0:
+            raise ValueError(f"point {self.index[row]} has no frames")
+        with self.frames() as ds:
+            stack = np.asarray(ds[n0:n0 + n], dtype=np.float64)
+            light = self.frame_light[n0:n0 + n].astype(bool)
+            exp = self.frame_exposure_us[n0:n0 + n]
+            lf, le = stack[light], exp[light]
+            darks: list[np.ndarray] = []
+            pool = list(zip(exp[~light], stack[~light], strict=True))
+            for e in le:
+                k = next((j for j, (de, _) in enumerate(pool) if math.isclose(de, e)), None)
+                if k is None:
+                    d = self._run_dark(ds, float(e))
+                    if d is None:
+                        return lf, le, None
+                    darks.append(d)
+                else:
+                    darks.append(pool.pop(k)[1])
+        return lf, le, np.array(darks)
+
+    def _run_dark(self, frames: h5py.Dataset, exposure_us: float) -> np.ndarray | None:
+        for r in np.flatnonzero(self.label == "dark"):
+            n0, n = int(self.frame_start[r]), int(self.n_frames[r])
+            for j in range(n0, n0 + n):
+                if math.isclose(float(self.frame_exposure_us[j]), exposure_us):
+                    return np.asarray(frames[j], dtype=np.float64)
+        return None
+
+
+def read_plan_kind(path: str | Path) -> str:
+    """The plan kind a run file records (``brdf_in_plane``, ``lightfield`` …), read alone so
+    that an analysis can refuse a run of another kind before it reads anything else."""
+    with h5py.File(path, "r") as f:
+        if "entry" not in f:
+            raise RunFileError(f"{path} is not a scatterlab run file (no /entry group)")
+        return as_text(f["entry"].attrs.get("plan_kind", ""))
+
+
+def read_run(path: str | Path) -> RunData:
+    """Read a run file's scalar tables and metadata (plain h5py, read-only).
+
+    Raises
+    ------
+    RunFileError
+        A group or table of the layout is missing (it names which).
+    """
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        try:
+            return _read_run(path, f)
+        except KeyError as err:
+            raise RunFileError(f"{path} is not a complete scatterlab run file: "
+                               f"{err.args[0] if err.args else err}") from None
+
+
+def _read_run(path: Path, f: h5py.File) -> RunData:
+    e = f["entry"]
+    p = e["points"]
+    d = e["data"]
+    inst = e["instrument"]
+    geometry = {k.split(".", 1)[1]: (v.item() if hasattr(v, "item") else v)
+                for k, v in inst.attrs.items() if k.startswith("geometry.")}
+    identities = {name: {k: as_text(v) for k, v in g.attrs.items()}
+                  for name, g in inst.items() if isinstance(g, h5py.Group)}
+    axes = tuple(as_text(a) for a in e["plan/axes"][()])
+    cal = {k: as_text(v) for k, v in e["calibration"].attrs.items() if k != "NX_class"}
+    frames = d.get("frames")
+
+    def col(name: str, grp: h5py.Group = p) -> np.ndarray:
+        return np.asarray(grp[name][()])
+
+    return RunData(
+        path=path,
+        run_id=as_text(e.attrs.get("run_id", path.stem)),
+        plan_kind=as_text(e.attrs.get("plan_kind", "")),
+        plan_name=as_text(e.attrs.get("plan_name", "")),
+        sample_name=as_text(e["sample/name"][()]) if "sample/name" in e else "",
+        status=as_text(e.attrs.get("status", "")),
+        index=col("index"),
+        label=np.array([as_text(x) for x in p["label"][()]]),
+        point_status=col("status"),
+        theta_i=col("theta_i"), phi_i=col("phi_i"),
+        theta_r=col("theta_r"), phi_r=col("phi_r"),
+        exposure_us=col("exposure_us"), power_w=col("power_w"), signal=col("signal"),
+        n_frames=col("n_frames"), frame_start=col("frame_start"),
+        positions=col("positions"), axes=axes,
+        frame_point=col("frame_point", d), frame_exposure_us=col("frame_exposure_us", d),
+        frame_light=col("frame_light", d),
+        acquisition=json.loads(as_text(e["plan/acquisition_policy"][()])),
+        geometry=geometry,
+        profile_text=as_text(inst["bench_profile"][()]),
+        plan_text=as_text(e["plan/plan_text"][()]),
+        calibration=cal,
+        identities=identities,
+        frame_saturated=col("frame_saturated", d),
+        frame_shape=None if frames is None else tuple(frames.shape[1:]),
+    )
+
+
+# ------------------------------------------------------------------------------ plan
+@dataclass(frozen=True)
+class PlannedPoints:
+    """The plan's points as the run stored them at creation (every planned point, in order).
+
+    ``targets`` (n, len(axes)) and ``angles`` (n, 4: θi, φi, θr, φr) hold NaN where a point
+    has no target on an axis or no scattering geometry; ``exposure_us`` NaN where the
+    policy chooses the exposure.
+    """
+
+    plan_text: str
+    axes: tuple[str, ...]
+    targets: np.ndarray
+    angles: np.ndarray
+    label: tuple[str, ...]
+    light: np.ndarray
+    exposure_us: np.ndarray
+
+
+def read_planned(path: str | Path) -> PlannedPoints:
+    """The planned points stored in a run file (what ``resume`` continues)."""
+    with h5py.File(path, "r") as f:
+        p = f["entry/plan"]
+        return PlannedPoints(
+            as_text(p["plan_text"][()]),
+            tuple(as_text(a) for a in p["axes"][()]),
+            p["planned_targets"][()], p["planned_angles"][()],
+            tuple(as_text(s) for s in p["planned_label"][()]),
+            p["planned_light"][()], p["planned_exposure_us"][()])
+
+
+# ------------------------------------------------------------------------------ summary
+@dataclass(frozen=True)
+class RunSummary:
+    """What a run file holds, in a few numbers (read without loading any table)."""
+
+    path: Path
+    run_id: str
+    plan_kind: str
+    status: str
+    n_points: int
+    n_planned: int
+    n_frames: int
+    n_skipped: int
+    frame_shape: tuple[int, ...] | None
+    size_bytes: int
+    sample_name: str = ""
+    axes: tuple[str, ...] = ()
+
+
+def read_summary(path: str | Path) -> RunSummary:
+    """What a (closed) run file holds, read with plain h5py."""
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        e = f["entry"]
+        frames = e["data"].get("frames")
+        status = e["points/status"][:]
+        return RunSummary(path, as_text(e.attrs["run_id"]), as_text(e.attrs["plan_kind"]),
+                          as_text(e.attrs["status"]), int(e["points/index"].shape[0]),
+                          int(e.attrs["n_planned"]),
+                          0 if frames is None else int(frames.shape[0]),
+                          int((status == STATUS_SKIPPED).sum()),
+                          None if frames is None else tuple(frames.shape[1:]),
+                          path.stat().st_size,
+                          as_text(e["sample/name"][()]) if "sample/name" in e else "",
+                          tuple(as_text(a) for a in e["plan/axes"][()]))

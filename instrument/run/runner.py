@@ -1,0 +1,221 @@
+"""Starting and resuming runs: plan + bench → run file, catalog row and engine.
+
+The CLI and the GUI both go through here, so a run started either way has the same file
+layout, catalog entry and provenance.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import secrets
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
+from drivers.errors import DeviceError
+from instrument.bench.devices import Bench
+from instrument.bench.kinematics import Angles
+from instrument.bench.profile import FieldError
+from instrument.plans.build import Plan
+from instrument.plans.commands import ScanPoint
+from instrument.plans.planfile import PlanError, parse_plan
+from instrument.run.catalog import Catalog, RunRow
+from instrument.run.engine import RunEngine
+from instrument.run.events import Event, Paused, Progress, RunFinished, RunStarted
+from instrument.run.runfile import read_planned
+from instrument.run.storage import RunHeader, RunStore, recover
+from instrument.version import software_version
+
+__all__ = ["DEFAULT_RUNS_DIR", "new_run_id", "plan_from_run", "resume_run", "start_run"]
+
+DEFAULT_RUNS_DIR = Path("runs")
+
+
+def new_run_id(kind: str) -> str:
+    """Sortable and unique: ``20260122-061502-brdf_in_plane-3fa2``."""
+    return f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}-{secrets.token_hex(2)}"
+
+
+def _nx_class(device) -> str:
+    if isinstance(device, MotionAxis):
+        return "NXpositioner"
+    if isinstance(device, Camera):
+        return "NXdetector"
+    if isinstance(device, PowerMeter):
+        return "NXmonitor"
+    if isinstance(device, LightSource):
+        return "NXsource"
+    return "NXcollection"
+
+
+def static_axis_positions(bench: Bench, moved: tuple[str, ...]) -> dict[str, Any]:
+    """Where the axes the plan does not move stand at the start, and whether homed.
+
+    They set the geometry as much as the moved ones (the camera stage sets the receiver
+    distance), so they are recorded as ``axis_position.<role>`` (axis units) and
+    ``axis_homed.<role>``; an unhomed axis's position is its controller counter, not a
+    physical position, and analysis must not trust it.
+    """
+    out: dict[str, Any] = {}
+    for role, axis in bench.axes.items():
+        if role in moved:
+            continue
+        try:
+            status = axis.status()
+        except DeviceError:
+            continue
+        out[f"axis_position.{role}"] = float(status.position)
+        out[f"axis_homed.{role}"] = int(bool(status.is_homed))
+    return out
+
+
+def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
+    identities: dict[str, dict[str, str]] = {}
+    for role, dev in bench.devices.items():
+        try:
+            identities[role] = {k: str(v) for k, v in dev.identity.as_dict().items()}
+        except (DeviceError, AttributeError) as err:
+            identities[role] = {"error": str(err)}
+        spec = bench.profile.devices.get(role)
+        if spec is not None:
+            identities[role].update(driver=spec.driver, url=spec.url)
+    pts = plan.points
+    targets = plan.targets_array().tolist()
+    angles = [list(p.angles.as_tuple()) if p.angles else [math.nan] * 4 for p in pts]
+    geometry = {k: v for k, v in vars(bench.profile.geometry).items()
+                if isinstance(v, str | int | float)}
+    geometry["detector_solid_angle_sr"] = bench.profile.geometry.detector_solid_angle_sr
+    geometry.update(static_axis_positions(bench, plan.axes))
+    return RunHeader(
+        run_id=run_id, plan_kind=plan.kind, plan_name=plan.spec.name,
+        plan_text=plan.spec.source_text, profile_text=bench.profile.source_text,
+        bench_name=bench.profile.name, sample_name=plan.spec.sample_name,
+        sample_description=plan.spec.sample_description, axes=plan.axes,
+        planned_targets=targets, planned_angles=angles,
+        planned_label=[p.label for p in pts], planned_light=[p.light for p in pts],
+        planned_exposure_us=[math.nan if p.exposure_us is None else p.exposure_us
+                             for p in pts],
+        acquisition_policy=plan.spec.acquisition.as_json(),
+        retry_policies=json.dumps({r: d.retry.as_dict()
+                                   for r, d in bench.profile.devices.items()}),
+        identities=identities, device_kinds={r: _nx_class(d) for r, d in bench.devices.items()},
+        geometry=geometry, calibration=dict(plan.spec.calibration),
+        software_version=software_version(), created=time.time())
+
+
+#: Seconds between catalog updates of a running run's point count (a short SQLite write
+#: on the worker thread; more often would cost per-point time for no reader's benefit).
+CATALOG_PROGRESS_S = 2.0
+
+
+def _track(engine: RunEngine, catalog: Catalog, run_id: str) -> None:
+    """Keep the catalog row's status and point count current (start, progress every
+    ``CATALOG_PROGRESS_S``, pause, end)."""
+    last = [0.0]
+
+    def on_event(ev: Event) -> None:
+        if isinstance(ev, Progress):
+            now = time.monotonic()
+            if now - last[0] >= CATALOG_PROGRESS_S:
+                last[0] = now
+                catalog.update(run_id, n_points=ev.n_done)
+        elif isinstance(ev, RunStarted):
+            last[0] = time.monotonic()
+            catalog.update(run_id, status="running", n_points=ev.n_done)
+        elif isinstance(ev, Paused):
+            catalog.update(run_id, status="paused", n_points=engine.n_done)
+        elif isinstance(ev, RunFinished):
+            catalog.update(run_id, status=ev.status, n_points=ev.n_done, ended=time.time())
+
+    engine.subscribe(on_event)
+
+
+def check_bench_for_plan(plan: Plan, bench: Bench) -> None:
+    """Refuse, before any file or motion, a plan the bench cannot acquire.
+
+    Raises
+    ------
+    PlanError
+        A detector the policy names is missing, or dark frames are asked for and the bench
+        has no source to turn off.
+    """
+    pol = plan.spec.acquisition
+    errors = []
+    if pol.uses_camera and bench.camera is None:
+        errors.append(FieldError("acquisition.detectors",
+                                 f"bench {bench.profile.name!r} has no camera"))
+    if pol.uses_power_meter and bench.power_meter is None:
+        errors.append(FieldError("acquisition.detectors",
+                                 f"bench {bench.profile.name!r} has no power meter"))
+    needs_dark = pol.dark != "none" or any(not p.light for p in plan.points)
+    if needs_dark and bench.source is None:
+        errors.append(FieldError("acquisition.dark", f"bench {bench.profile.name!r} has no "
+                                 "light source to turn off for dark frames"))
+    missing = [r for r in plan.axes if r not in bench.axes]
+    if missing:
+        errors.append(FieldError("scan", f"bench {bench.profile.name!r} has no axis "
+                                 f"{', '.join(missing)}"))
+    if errors:
+        raise PlanError(f"plan {plan.spec.name!r} on bench {bench.profile.name!r}", errors)
+
+
+def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_DIR,
+              fsync: bool = True, sync_interval_s: float = 0.25,
+              min_free_bytes: int = 64 << 20, catalog: bool = True,
+              run_id: str | None = None) -> RunEngine:
+    """Create the run file and catalog row; return the (not yet started) engine."""
+    check_bench_for_plan(plan, bench)
+    runs_dir = Path(runs_dir).resolve()  # messages name the file unambiguously
+    run_id = run_id or new_run_id(plan.kind)
+    header = header_for(plan, bench, run_id)
+    path = runs_dir / f"{run_id}.h5"
+    store = RunStore.create(path, header, fsync=fsync, sync_interval_s=sync_interval_s,
+                            min_free_bytes=min_free_bytes)
+    engine = RunEngine(bench, plan, store)
+    if catalog:
+        cat = Catalog(runs_dir)
+        cat.add(RunRow(run_id, plan.spec.sample_name, plan.kind, plan.spec.name,
+                       bench.profile.name, "created", header.created, None, 0,
+                       len(plan.points), str(path.resolve())))
+        _track(engine, cat, run_id)
+    return engine
+
+
+def plan_from_run(path: str | Path, bench: Bench) -> Plan:
+    """The plan of a run, exactly as stored (points, order, policy), on ``bench``."""
+    stored = read_planned(path)
+    spec = parse_plan(stored.plan_text, source=f"plan stored in {path}")
+    points = []
+    for k, label in enumerate(stored.label):
+        tg = tuple((r, float(stored.targets[k, j])) for j, r in enumerate(stored.axes)
+                   if not math.isnan(stored.targets[k, j]))
+        a = None if math.isnan(stored.angles[k, 0]) else Angles(*map(float, stored.angles[k]))
+        e = None if math.isnan(stored.exposure_us[k]) else float(stored.exposure_us[k])
+        points.append(ScanPoint(k, tg, a, label, bool(stored.light[k]), e))
+    return Plan(replace(spec), bench.profile, stored.axes, tuple(points))
+
+
+def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
+               sync_interval_s: float = 0.25, min_free_bytes: int = 64 << 20,
+               catalog: bool = True) -> RunEngine:
+    """Recover the run file from its journal and return an engine for the missing points."""
+    path = Path(path).resolve()
+    recover(path)
+    plan = plan_from_run(path, bench)
+    check_bench_for_plan(plan, bench)
+    store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
+                                  min_free_bytes=min_free_bytes)
+    store.event({"kind": "resumed", "n_done": len(done)})
+    engine = RunEngine(bench, plan, store, done=done)
+    if catalog:
+        cat = Catalog(path.parent)
+        h = store.header
+        if cat.get(h.run_id) is None:
+            cat.add(RunRow(h.run_id, h.sample_name, h.plan_kind, h.plan_name, h.bench_name,
+                           "paused", h.created, None, len(done), len(plan.points),
+                           str(path.resolve())))
+        _track(engine, cat, h.run_id)
+    return engine

@@ -1,0 +1,263 @@
+"""Closed-loop validation on the simulated bench (issue 5 §5).
+
+Three samples with known ground truth — Lambertian ρ = 0.8; Lambertian ρ = 0.3 + Cook–
+Torrance GGX (ks = 0.5, α = 0.2); Oren–Nayar ρ = 0.8, σ = 0.3 — are scanned in plane
+(θi = 20°, 40°, 60°; θr from −70° to 80° in 10° steps plus ±4° around specular in 2°
+steps; 57 points), reduced by the absolute method (receiver factor divided out) and fitted
+as the receiver sees the models (instrument-aware, issue 5 §3) with selection among
+{lambert, oren_nayar, lambert+ggx} (BIC, smallest model within ΔBIC ≤ 2).
+
+* 50 seeds per sample through the simulated camera/scene/sensor code without the motion
+  emulators (tests/instrument/sim_scan.py): each true parameter inside the reported 2σ in
+  ≥ 90 % of the fits, the right model chosen in ≥ 90 %, and the reported σ predicting the
+  scatter of the estimates over seeds. Slow-marked (about 30 s on the 2-core box).
+* A few scans through the real engine on the fully emulated bench (firmware emulators,
+  real drivers, run file, ``scatterlab fit``): slow-marked end-to-end test.
+
+Figures: BENCHMARKS.md, section brdf_closed_loop.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from analysis.brdf import get_model
+from analysis.brdf.reduction import receiver_model
+from analysis.brdf.selection import select_model
+from tests.instrument.sim_scan import (
+    CANDIDATES,
+    SAMPLES,
+    Sample,
+    ScanSetup,
+    profile_text,
+    receiver,
+    reduce_seed,
+    render,
+)
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    sample: str
+    n_seeds: int
+    coverage_2sigma: np.ndarray   # per parameter
+    joint_coverage: float
+    right_model: float
+    z_std: np.ndarray             # std over seeds of (estimate − truth)/σ, per parameter
+    spread_over_sigma: np.ndarray  # std of the estimates / mean reported σ
+
+
+def closed_loop(sample: Sample, seeds: range, setup: ScanSetup | None = None) -> LoopStats:
+    """Scan, reduce, select and compare with the truth for every seed."""
+    setup = setup or ScanSetup()
+    r = render(setup, sample)
+    # instrument-aware candidates: each as the camera sees it (footprint through the pupil)
+    cands = [receiver_model(get_model(c), receiver(setup)) for c in CANDIDATES]
+    truth = np.array(sample.params)
+    a = r.angles_rad
+    est, err, right = [], [], []
+    for seed in seeds:
+        pts = reduce_seed(r, seed)
+        sel = select_model(cands, pts.brdf, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                           sigma=pts.u_point, criterion="bic", run_cv=False, n_starts=3,
+                           seed=seed)
+        right.append(sel.chosen == sample.model)
+        fit = sel.fits[sample.model]
+        est.append(fit.params)
+        err.append(fit.stderr)
+    est, err = np.array(est), np.array(err)
+    z = (est - truth) / err
+    inside = np.abs(z) <= 2.0
+    return LoopStats(sample.name, len(seeds), inside.mean(axis=0),
+                     float(np.all(inside, axis=1).mean()), float(np.mean(right)),
+                     z.std(axis=0), est.std(axis=0, ddof=1) / err.mean(axis=0))
+
+
+def test_closed_loop_quick_glossy() -> None:
+    """Default-run sanity check: 6 seeds of the glossy sample."""
+    st = closed_loop(SAMPLES[1], range(100, 106))
+    assert st.right_model == 1.0
+    assert np.all(st.coverage_2sigma >= 4 / 6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sample", SAMPLES, ids=[s.name for s in SAMPLES])
+def test_closed_loop_50_seeds(sample: Sample) -> None:
+    st = closed_loop(sample, range(50))
+    # nominal 2σ coverage is 95.4 % per parameter; ≥ 90 % asked (45 of 50)
+    assert np.all(st.coverage_2sigma >= 0.9), st
+    # all k parameters at once: nominal 0.954^k for independent errors (0.87 for k = 3)
+    assert st.joint_coverage >= 0.85, st
+    assert st.right_model >= 0.9, st
+    # the reported σ predicts the scatter over seeds (50 seeds: std known to ±10 %)
+    assert np.all((st.spread_over_sigma > 0.7) & (st.spread_over_sigma < 1.3)), st
+
+
+@pytest.mark.slow
+def test_high_snr_truth_inside_reported_2sigma() -> None:
+    """Issue 5 at high signal: the full-resolution camera (1024² px) with 80 %-full-well
+    exposures averaged over 4 frames gives σ(ρd) ≈ 8·10⁻⁶ — 5× below the geometric
+    biases of a point-sample reduction (the cone solid angle, +3.3·10⁻⁴; the footprint's
+    1/r² and obliquities, ±2·10⁻⁴; the specular peak averaged over the footprint seen from
+    the camera, −7·10⁻⁴). With the receiver factor divided out and the models fitted as
+    the receiver sees them, the truth lies inside the reported 2σ; the same data fitted
+    with the BRDF at the nominal angles put α many σ off (the test can fail). About 40 s."""
+    from analysis.brdf.fit import fit_brdf
+
+    setup = ScanSetup(sensor_px=1024, power_w=1e-3, fill=0.8, frames=4)
+    sample = Sample("example", "lambert+ggx", (0.5, 0.2, 0.2))  # the sim bench's sample
+    r = render(setup, sample)
+    a = r.angles_rad
+    truth = np.array(sample.params)
+    pts = reduce_seed(r, 0)
+    seen = receiver_model(get_model(sample.model), receiver(setup))
+    fit = fit_brdf(seen, pts.brdf, *a.T, sigma=pts.u_point)
+    z = (fit.params - truth) / fit.stderr
+    assert np.all(fit.stderr / truth < 4e-5), fit.stderr
+    assert np.all(np.abs(z) <= 2.0), z
+    dof = pts.n - truth.size
+    assert abs(fit.chi2 - dof) < 4 * np.sqrt(2 * dof), fit.chi2
+    naive = fit_brdf(get_model(sample.model), pts.brdf, *a.T, sigma=pts.u_point)
+    assert abs(naive.params[2] - truth[2]) > 4 * naive.stderr[2]
+
+
+# ------------------------------------------------------------------------ through the engine
+def _engine_scan(tmp_path: Path, sample: Sample, seed: int, setup: ScanSetup) -> Path:
+    from instrument.bench.devices import open_bench
+    from instrument.bench.profile import parse_profile
+    from instrument.plans import build_plan, parse_plan
+    from instrument.run.runner import start_run
+
+    text = profile_text(setup, sample)
+    # fast stage clocks, the camera stage at 0 mm (receiver distance = profile distance),
+    # one sensor seed per scan
+    text = (text.replace("speed=20", "speed=400")
+            .replace("stage=MTS25-Z8&speed=400", "stage=MTS25-Z8&speed=400&start=0")
+            .replace("simcam://camera?world=sim&seed=1", f"simcam://camera?world=sim&seed={seed}"))
+    profile = parse_profile(text, source="closed-loop profile")
+    plan = build_plan(parse_plan(setup.plan_text()), profile)
+    with open_bench(profile) as bench:
+        engine = start_run(plan, bench, runs_dir=tmp_path / f"{sample.name}-{seed}",
+                           fsync=False, catalog=False)
+        engine.run()
+        return Path(engine.store.path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("sample", "seed"), [(SAMPLES[1], 1), (SAMPLES[1], 2),
+                                              (SAMPLES[2], 3)],
+                         ids=["glossy-1", "glossy-2", "rough-3"])
+def test_closed_loop_through_the_engine(tmp_path: Path, sample: Sample, seed: int) -> None:
+    from instrument.cli import main
+
+    path = _engine_scan(tmp_path, sample, seed, ScanSetup())
+    with h5py.File(path, "r") as f:
+        assert f["entry"].attrs["status"] == "finished"
+        assert f["entry/points/index"].shape[0] == 57
+    assert main(["fit", str(path), "--out", str(tmp_path / "report"), "--no-cv"]) == 0
+    with h5py.File(path, "r") as f:
+        g = f["entry/analysis"]
+        res = json.loads(g["results_json"][()])
+        params, stderr = g["chosen/params"][()], g["chosen/stderr"][()]
+    assert res["selection"]["chosen"] == sample.model
+    assert np.all(np.abs(params - np.array(sample.params)) < 3.5 * stderr), (params, stderr)
+
+
+# ------------------------------------------------------------------------ the planner
+def _planner_inputs(setup: ScanSetup, sample: Sample):
+    from dataclasses import replace
+
+    from instrument.bench.profile import parse_profile
+    from instrument.plans.planfile import parse_plan
+    from instrument.plans.tradeoff import setup_from_profile
+
+    spec = parse_plan(setup.plan_text())
+    profile = parse_profile(profile_text(setup, sample))
+    prior, det = setup_from_profile(profile, spec, readout_s=0.02)
+    return spec, profile, prior, replace(det, fill=setup.fill)
+
+
+@pytest.mark.parametrize("frames", [1, 4])
+def test_planner_prediction_matches_the_fit_uncertainty(frames: int) -> None:
+    from analysis.brdf.fit import fit_brdf
+    from instrument.plans.tradeoff import ScanOption, predict
+
+    setup = ScanSetup(power_w=2e-8, fill=0.5, max_exposure_us=1000.0, frames=frames)
+    sample = SAMPLES[1]
+    spec, profile, prior, det = _planner_inputs(setup, sample)
+    res = predict(spec, profile, ScanOption(10.0, 1000.0, frames), prior=prior, det=det)
+    r = render(setup, sample)
+    a = r.angles_rad
+    pts = reduce_seed(r, 5)
+    fit = fit_brdf(get_model(sample.model), pts.brdf, *a.T, sigma=pts.u_point)
+    predicted = np.array([res.sigma[n] for n in fit.param_names])
+    # Cramér–Rao prediction from the noise model against the fit's own covariance
+    assert np.all(np.abs(predicted / fit.stderr - 1) < 0.3), (predicted, fit.stderr)
+    assert res.n_points == 57 and res.motion_s > 10 and res.acquisition_s > 0
+
+
+def test_planner_finds_the_fastest_scan_reaching_the_target() -> None:
+    from instrument.plans.tradeoff import ScanOption, fastest_for_target, pareto_front, sweep
+
+    setup = ScanSetup(power_w=2e-8, fill=0.5)
+    spec, profile, prior, det = _planner_inputs(setup, SAMPLES[1])
+    options = [ScanOption(s, c, f) for s in (10.0, 20.0) for c in (1e3, 1e4, 1e5)
+               for f in (1, 4)]
+    results = sweep(spec, profile, options, prior=prior, det=det)
+    front = pareto_front(results, "ggx.alpha")
+    durations = [r.duration_s for r in front]
+    sigmas = [r.sigma["ggx.alpha"] for r in front]
+    assert durations == sorted(durations) and sigmas == sorted(sigmas, reverse=True)
+    target = float(np.median([r.sigma["ggx.alpha"] for r in results]))
+    best = fastest_for_target(results, "ggx.alpha", target)
+    assert best is not None and best.sigma["ggx.alpha"] <= target
+    assert all(r.duration_s >= best.duration_s for r in results
+               if r.sigma["ggx.alpha"] <= target)
+    assert best in front
+    assert fastest_for_target(results, "ggx.alpha", 1e-12) is None
+    # more frames and longer caps never predict a larger σ at the same angles
+    by = {(r.option.theta_r_step_deg, r.option.max_exposure_us, r.option.frames): r
+          for r in results}
+    assert by[(10.0, 1e4, 4)].sigma["ggx.alpha"] < by[(10.0, 1e4, 1)].sigma["ggx.alpha"]
+    assert by[(10.0, 1e5, 1)].sigma["ggx.alpha"] <= by[(10.0, 1e3, 1)].sigma["ggx.alpha"]
+
+
+def test_plan_target_uncertainty_hook(capsys) -> None:
+    """The function ``scatterlab plan --target-uncertainty`` calls, on the sim bench."""
+    import argparse
+
+    from instrument.bench.profile import load_profile
+    from instrument.cli._planner import add_arguments, run_from_args
+    from instrument.plans import load_plan
+
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    root = Path(__file__).resolve().parents[4]
+    spec = load_plan(root / "examples" / "brdf_inplane.toml")
+    args = p.parse_args(["--target-uncertainty", "5e-5", "--readout-s", "0.02"])
+    assert run_from_args(args, spec, load_profile("sim")) == 0
+    out = capsys.readouterr().out
+    assert "Pareto front" in out and "fastest:" in out and "ggx.alpha" in out
+    args = p.parse_args(["--target-uncertainty", "1e-9"])
+    assert run_from_args(args, spec, load_profile("sim")) == 1
+    assert "no candidate reaches" in capsys.readouterr().out
+    args = p.parse_args(["--target-uncertainty", "1e-3", "--target-param", "nope"])
+    assert run_from_args(args, spec, load_profile("sim")) == 2
+
+
+@pytest.mark.parametrize(("prior", "says"), [
+    ("lambert:x", "must be numbers"),
+    ("lambert:0.5,0.2", "takes 1 parameters"),
+    ("nosuch:1", "unknown BRDF model"),
+])
+def test_plan_prior_errors_name_the_option(prior: str, says: str) -> None:
+    from instrument.cli._planner import _parse_prior
+
+    with pytest.raises((ValueError, KeyError), match=says):
+        _parse_prior(prior)
