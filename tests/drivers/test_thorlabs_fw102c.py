@@ -191,19 +191,6 @@ def test_arguments_are_validated_before_opening():
 # --------------------------------------------------------------------------- contract
 
 
-@pytest.fixture(params=["url", "pty"])
-def transport(request):
-    return request.param
-
-
-@pytest.fixture
-def servers():
-    started: list[PtyServer] = []
-    yield started
-    for server in started:
-        server.close()
-
-
 def open_wheel(transport: str, name: str, *, cleanup: list, slots: int = 6,
                **kw) -> Fw102cWheel:
     if transport == "url":

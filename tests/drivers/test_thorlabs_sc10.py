@@ -208,19 +208,6 @@ def test_errors_pickle():
 # --------------------------------------------------------------------------- contract
 
 
-@pytest.fixture(params=["url", "pty"])
-def transport(request):
-    return request.param
-
-
-@pytest.fixture
-def servers():
-    started: list[PtyServer] = []
-    yield started
-    for server in started:
-        server.close()
-
-
 def open_shutter(transport: str, name: str, *, cleanup: list, options: str = "",
                  **kw) -> Sc10Shutter:
     if transport == "url":
