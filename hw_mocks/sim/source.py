@@ -1,8 +1,10 @@
 """The simulated light source (laser with a shutter) on the virtual bench.
 
 Turning it on or off, or changing its power, changes the world that the simulated camera
-and the power meter see. ``is_on`` means light reaches the sample (source on and shutter
-open), as in :class:`drivers.base.LightSource`.
+and the power meter see. ``is_on`` means light reaches the sample (source on and its own
+shutter open), as in :class:`drivers.base.LightSource`. A separate shutter or filter wheel
+in the world's light path (an SC10 or FW102C emulator; see
+:meth:`hw_mocks.sim.world.VirtualBench.light_at_sample`) can still block the light after it.
 
 URL: ``simsource://<name>?world=sim`` with optional ``power_w``, ``wavelength_nm``,
 ``beam_radius_mm`` and ``max_power_w``, applied to the world's source when the device opens.
