@@ -80,6 +80,7 @@ class ScanSetup:
     focal_length_mm: float = 50.0
     aperture_mm: float = 12.5
     distance_mm: float = 300.0
+    sample_radius_mm: float = 12.5
     sensor: SensorParams = field(default_factory=SensorParams)
     #: Rays per pixel side: a pixel integrates the irradiance over its area, the simulated
     #: camera samples its centre. Coarse pixels (2 mm on the sample at θr = 80° for 96 px)
@@ -135,7 +136,8 @@ def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = 
     the default scene (the sample alone) e.g. to add an instrument signature."""
     plan = setup.plan()
     if scene is None:
-        scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params))
+        scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params),
+                                sample_radius_mm=setup.sample_radius_mm)
     world = VirtualBench(
         f"closed-loop-{sample.name}", scene=scene, arm_length_mm=setup.distance_mm,
         source=SourceState(on=True, power_w=setup.power_w, max_power_w=1.0,
@@ -188,12 +190,12 @@ def noise_model(setup: ScanSetup) -> DetectorNoise:
 
 
 def receiver(setup: ScanSetup) -> ReceiverGeometry:
-    """What the simulated camera integrates: the footprint seen along chief rays through its
-    pupil centre, with Ω = A_pupil/R² (what ``instrument.pipelines.brdf.reduce`` builds for a
-    run)."""
+    """What the simulated camera integrates: the footprint seen through its whole entrance
+    pupil, on the scene's sample disk, with Ω = A_pupil/R² (what
+    ``instrument.pipelines.brdf.reduce`` builds for a run)."""
     omega, _ = camera_solid_angle_sr(setup.aperture_mm, setup.distance_mm)
     return ReceiverGeometry(setup.beam_radius_mm, setup.distance_mm, setup.aperture_mm, omega,
-                            sample_aperture=False)
+                            sample_aperture=True, sample_radius_mm=setup.sample_radius_mm)
 
 
 def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,

@@ -72,7 +72,16 @@ from analysis.brdf.reduction.detector import (
     pixel_response_covariance,
     solid_angle_sr,
 )
+from analysis.brdf.reduction.forward import (
+    ForwardFit,
+    fit_forward,
+    forward_model,
+    forward_slopes,
+)
 from analysis.brdf.reduction.receiver import (
+    LEVELS,
+    NodeSet,
+    QuadratureLevel,
     ReceiverGeometry,
     receiver_factor,
     receiver_model,
@@ -96,9 +105,13 @@ from analysis.brdf.reduction.values import (
 )
 
 __all__ = [
+    "LEVELS",
     "BRDFPoints",
     "CameraSignal",
     "DetectorNoise",
+    "ForwardFit",
+    "NodeSet",
+    "QuadratureLevel",
     "ReceiverGeometry",
     "ReciprocityCheck",
     "ReferenceStandard",
@@ -107,6 +120,9 @@ __all__ = [
     "camera_power_w",
     "camera_signal",
     "camera_solid_angle_sr",
+    "fit_forward",
+    "forward_model",
+    "forward_slopes",
     "pixel_response_covariance",
     "receiver_factor",
     "receiver_model",
