@@ -40,6 +40,8 @@ from analysis.brdf.reduction.receiver import LEVELS, ReceiverGeometry, _AtLevels
 
 __all__ = ["ForwardFit", "fit_forward", "forward_model", "forward_slopes", "point_keys"]
 
+#: The quadrature level of a fitted forward model at geometries it was not fitted on.
+_DISPLAY_LEVEL = 2
 #: Finite-difference step of the model slopes (radians): far below any lobe this instrument
 #: resolves (its kernel is ~10⁻² rad), far above rounding.
 _SLOPE_STEP = 1e-4
@@ -79,7 +81,15 @@ def _evaluate(model: BRDFModel, receiver: ReceiverGeometry, p: NDArray, g: Geome
 
 
 def _shifted(g: Geometry, d_theta_i: float, d_theta_r: float) -> Geometry:
-    """``g`` with every polar angle moved by the given amounts (clipped to [0, π/2])."""
+    """``g`` with every polar angle moved by the given amounts (clipped to [0, π/2]),
+    cached on ``g`` (so are the shifted geometry's quadrature nodes)."""
+    key = ("shifted", d_theta_i, d_theta_r)
+    if key not in g.cache:
+        g.cache[key] = _shift(g, d_theta_i, d_theta_r)
+    return g.cache[key]
+
+
+def _shift(g: Geometry, d_theta_i: float, d_theta_r: float) -> Geometry:
     ti = np.arccos(np.clip(g.mu_i, -1.0, 1.0)).reshape(-1)
     tr = np.arccos(np.clip(g.mu_r, -1.0, 1.0)).reshape(-1)
     pi_ = np.arctan2(g.yi, g.xi).reshape(-1)
@@ -112,7 +122,8 @@ class ForwardFit:
     fit : FitResult
         The fit at the final levels and noise (its σ-scaled residuals, χ², criteria).
     model : BRDFModel
-        The forward model at the final levels (for predictions and cross-validation).
+        The forward model at the final levels (for predictions and cross-validation);
+        at level 2 on geometries it was not fitted on.
     levels : dict
         Quadrature level per point key (points at 0 are left out).
     sigma : ndarray, shape (n,)
@@ -153,6 +164,7 @@ def fit_forward(
     levels: dict[tuple[float, ...], int] | None = None,
     geometry: Geometry | None = None,
     max_rounds: int = 8,
+    effective_variance: bool = True,
 ) -> ForwardFit:
     """Fit ``model`` as the instrument sees it (module docstring).
 
@@ -176,6 +188,9 @@ def fit_forward(
         Starting levels (e.g. from a fit of a similar model).
     geometry : Geometry, optional
         Prebuilt geometry of the points.
+    effective_variance : bool
+        Add the set-point scatter from the model's slopes (False: ``sigma`` is used as it
+        is, e.g. when it already holds an angular term taken from the data).
 
     Returns
     -------
@@ -189,6 +204,8 @@ def fit_forward(
     table = {k: v for k, v in (levels or {}).items() if v > 0}
     top = len(LEVELS) - 1
     sti, str_ = receiver.sigma_theta_i_rad, receiver.sigma_theta_r_rad
+    if not effective_variance:
+        sti = str_ = 0.0
     sig = sig0.copy()
     p0 = None if start is None else np.asarray(start, dtype=float)
     fit: FitResult | None = None
@@ -220,6 +237,10 @@ def fit_forward(
         for j in np.flatnonzero(move):
             table[keys[j]] = int(lev[j]) + 1
     assert fit is not None
+    # the model to report: every fitted point at its level, other geometries (plots,
+    # predictions) at a level accurate for all but the sharpest grazing lobes
+    full = {k: table.get(k, 0) for k in keys}
+    fm = forward_model(model, receiver, full, default_level=_DISPLAY_LEVEL)
     converged = bool(np.all(err <= tau * sig))
     notes = () if converged else (
         f"{model.name}: the instrument-function quadrature did not reach {tau:g}σ at "

@@ -53,6 +53,7 @@ the two is a check of both (tests/analysis/brdf/test_forward_model.py).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -317,24 +318,25 @@ def _level_nodes(wi: NDArray, wr: NDArray, receiver: ReceiverGeometry,
         ws = np.broadcast_to(w_gh, (n, nv, nu))
     else:
         # chord of the sample disk at each v, in s units. Gauss–Hermite where the edge is
-        # beyond the Gaussian's reach (s > 4.5: a tail of erfc(4.5)/2 = 1e-10); else
+        # beyond the Gaussian's reach (s > 3.8: a tail of erfc(3.8)/2 < 1e-8, lost from G
+        # and the model alike); else
         # Gauss–Legendre over the chord with the Gaussian in the weights (≥ 16 nodes: a
         # chord to s = 4.4 needs 24 for 1e-10 of e^{−s²} alone)
         rs = receiver.sample_radius_mm
         chord = np.sqrt(np.maximum(rs * rs - v * v, 0.0))  # (nv,) mm
         s_edge = chord[None, :] * cos_i[:, None] * np.sqrt(2.0) / w_beam  # (n, nv)
-        if np.all(s_edge > 4.5):
+        if np.all(s_edge > 3.8):
             s = np.broadcast_to(s_gh, (n, nv, nu))
             ws = np.broadcast_to(w_gh, (n, nv, nu))
         else:
             # e^{−s²} on [−a, a] to 1e-9 takes about 4.5a + 4 Gauss–Legendre nodes (24 at
             # a = 4.4, 13 at a = 2); the BRDF's variation asks for 2·nu + 2 at least
-            a_max = float(np.max(np.where(s_edge > 4.5, 0.0, s_edge)))
+            a_max = float(np.max(np.where(s_edge > 3.8, 0.0, s_edge)))
             n_gl = max(int(np.ceil(4.5 * a_max + 4.0)), 2 * nu + 2)
             x, wl = _legendre(n_gl)
             s_gl = s_edge[..., None] * x
             w_gl = s_edge[..., None] * wl * np.exp(-s_gl * s_gl) / np.sqrt(np.pi)
-            use_gh = (s_edge > 4.5)[..., None]
+            use_gh = (s_edge > 3.8)[..., None]
             pad = np.zeros(n_gl - nu)  # one node count per call: GH padded with zeros
             s = np.where(use_gh, np.concatenate([s_gh, pad]), s_gl)
             ws = np.where(use_gh, np.concatenate([w_gh, pad]), w_gl)
@@ -491,6 +493,9 @@ def receiver_model(model: BRDFModel, receiver: ReceiverGeometry, *, level: int =
                      f"level {level}").as_model()
 
 
+_TOKENS = itertools.count()
+
+
 class _AtLevels:
     """A model averaged over receiver nodes, with the level of each point from
     ``levels_for(g)`` (a callable of the number of points or of the geometry)."""
@@ -499,11 +504,15 @@ class _AtLevels:
                  label: str, *, by_geometry: bool = False) -> None:
         self.model, self.receiver, self.label = model, receiver, label
         self._levels_for, self._by_geometry = levels_for, by_geometry
+        self._token = next(_TOKENS)  # this instance's level table, in geometry caches
 
     def _nodes(self, g: Geometry) -> NodeSet:
-        n = int(np.prod(g.shape))
-        lev = self._levels_for(g) if self._by_geometry else self._levels_for(n)
-        return prepared_nodes(g, self.receiver, np.asarray(lev, dtype=np.intp))
+        key = ("levels", self._token)
+        if key not in g.cache:
+            n = int(np.prod(g.shape))
+            lev = self._levels_for(g) if self._by_geometry else self._levels_for(n)
+            g.cache[key] = prepared_nodes(g, self.receiver, np.asarray(lev, dtype=np.intp))
+        return g.cache[key]
 
     def value(self, p: NDArray[np.float64], g: Geometry) -> NDArray[np.float64]:
         nodes = self._nodes(g)

@@ -79,6 +79,10 @@ class ReductionOptions:
         the points are treated as point samples and the provenance says so.
     receiver_geometry : bool
         Use the receiver geometry when the beam radius is known (default True).
+    beam_divergence_mrad, sample_radius_mm : float or None
+        The beam's 1/e² divergence half-angle and the sample's radius; default the run's
+        calibration or stored bench geometry, or on a simulated bench its source
+        (collimated) and scene.
     """
 
     method: str = "absolute"
@@ -98,6 +102,8 @@ class ReductionOptions:
     reference_table: str | None = None
     beam_radius_mm: float | None = None
     receiver_geometry: bool = True
+    beam_divergence_mrad: float | None = None
+    sample_radius_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -166,19 +172,21 @@ _PROFILE_SIDE = 128
 def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
              cal: CameraCalibration | None, flat: FlatField | None = None,
              *, u_response_rel: float = 0.0
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Collected power (W) and its σ per row, from the camera or the power meter, and the
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+    """Collected power (W) and its σ per row, from the camera or the power meter, the
     relative covariance of the camera's pixel-response error between rows (``None`` for
-    the power meter or when ``u_response_rel`` is 0)."""
+    the power meter or when ``u_response_rel`` is 0), and the pixels clipped in each
+    row's shortest exposure (0 for the power meter)."""
     if opts.detector == "power_meter":
         p = run.power_w[rows].astype(float)
         if not np.all(np.isfinite(p)):
             raise ValueError("the run has no power-meter readings at every point")
-        return p, np.abs(p) * opts.u_power_meter_rel, None
+        return p, np.abs(p) * opts.u_power_meter_rel, None, np.zeros(rows.size, dtype=int)
     assert cal is not None
     n_avg = int(run.acquisition.get("frames", 1))
     rate = np.empty(rows.size)
     sd = np.empty(rows.size)
+    clipped = np.zeros(rows.size, dtype=int)
     block = 0
     profiles, sq_sums = [], []
     for k, r in enumerate(rows):
@@ -189,7 +197,7 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
             block = max(1, max(light.shape[1:]) // _PROFILE_SIDE)
         s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg, flat=flat,
                           profile_block=block)
-        rate[k], sd[k] = s.rate_dn_per_us, s.sigma
+        rate[k], sd[k], clipped[k] = s.rate_dn_per_us, s.sigma, s.clipped_pixels
         if s.profile is not None:
             profiles.append(s.profile)
             sq_sums.append(s.profile_sq_sum)
@@ -197,7 +205,7 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
     cov = (pixel_response_covariance(np.array(profiles), u_response_rel=u_response_rel,
                                      block=block, sq_sums=sq_sums) if block else None)
-    return camera_power_w(rate, **conv), camera_power_w(sd, **conv), cov
+    return camera_power_w(rate, **conv), camera_power_w(sd, **conv), cov, clipped
 
 
 def _incident_power(run: RunData, opts: ReductionOptions) -> tuple[float, float, str]:
@@ -250,10 +258,36 @@ def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, st
     return None, "unknown (points treated as point samples: give --beam-radius-mm)"
 
 
+def _beam_divergence_rad(run: RunData, opts: ReductionOptions) -> tuple[float, str]:
+    if opts.beam_divergence_mrad is not None:
+        return 1e-3 * float(opts.beam_divergence_mrad), "option"
+    for table, where in ((run.calibration, "run calibration"), (run.geometry, "bench geometry")):
+        if "beam_divergence_mrad" in table:
+            return 1e-3 * float(table["beam_divergence_mrad"]), where
+    if "source" in run.profile().get("simulation", {}):
+        return 0.0, "simulated source (collimated)"
+    return 0.0, "not declared (taken as collimated: set geometry.beam_divergence_mrad)"
+
+
+def _sample_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, str]:
+    if opts.sample_radius_mm is not None:
+        return float(opts.sample_radius_mm), "option"
+    if "sample_radius_mm" in run.geometry:
+        return float(run.geometry["sample_radius_mm"]), "bench geometry"
+    scene = run.profile().get("simulation", {}).get("scene")
+    if isinstance(scene, dict) and scene.get("kind", "goniometer") == "goniometer":
+        # the simulated goniometer scene's sample disk (hw_mocks GoniometerScene default)
+        return float(scene.get("sample_radius_mm", 12.5)), "simulated scene (bench profile)"
+    return None, ("not declared (the sample is taken as larger than the footprint: set "
+                  "geometry.sample_radius_mm)")
+
+
 def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
               cal: CameraCalibration | None) -> tuple[ReceiverGeometry | None, dict[str, Any]]:
     """What each reading integrated: the camera pupil or the meter aperture (module
-    docstring of :mod:`analysis.brdf.reduction`), with the solid angle the reduction uses.
+    docstring of :mod:`analysis.brdf.reduction`), with the solid angle the reduction uses,
+    and the rest of the instrument function from the run's stored profile: the beam's
+    radius and divergence, the sample's radius and the axes' set-point uncertainty.
 
     Camera: Ω = A_pupil/R², the étendue of its calibration (camera equation); power meter:
     the aperture's cone solid angle. The receiver factor corrects either to what the
@@ -273,16 +307,28 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
                                         u_distance_mm=opts.u_distance_mm)
         sampled = True
     w, w_src = _beam_radius(run, opts)
+    div, div_src = _beam_divergence_rad(run, opts)
+    radius, radius_src = _sample_radius(run, opts)
+    sig_t = _sigma_theta_rad(run, opts)
     info: dict[str, Any] = {"solid_angle_sr": omega, "u_solid_angle_sr": u_omega,
                             "receiver_aperture_mm": aperture, "receiver_distance_mm": distance,
                             "receiver_distance_source": dist_src, "beam_radius_mm": w,
-                            "beam_radius_source": w_src}
+                            "beam_radius_source": w_src, "beam_divergence_mrad": 1e3 * div,
+                            "beam_divergence_source": div_src, "sample_radius_mm": radius,
+                            "sample_radius_source": radius_src}
     if w is None or not opts.receiver_geometry:
         info["receiver_model"] = "none (point spot, point receiver)"
         return None, info
-    rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled)
-    info["receiver_model"] = ("footprint × " + ("aperture (7-point disk rule)" if sampled
-                                                 else "chief ray through the pupil centre"))
+    rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled,
+                          beam_divergence_rad=div, sample_radius_mm=radius,
+                          sigma_theta_i_rad=sig_t, sigma_theta_r_rad=sig_t)
+    info["receiver_model"] = (
+        "instrument function: Gaussian footprint"
+        + (" clipped by the sample's edge" if radius is not None else "")
+        + (" × aperture integrated" if sampled else " × chief ray through the pupil centre")
+        + (f" × beam divergence {1e3 * div:g} mrad" if div > 0 else "")
+        + f" × set-point spread σθ = {math.degrees(sig_t):.3g}°"
+        + "; quadrature refined per point until below 0.1σ")
     return rg, info
 
 
@@ -326,7 +372,8 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     if cal is not None:
         u_resp = (_flat_residual_rel(flat, n_flat, cal) if flat is not None
                   else cal.prnu_rel)
-    p_s, u_s, cov_rel = _signals(run, rows, opts, cal, flat, u_response_rel=u_resp)
+    p_s, u_s, cov_rel, n_clipped = _signals(run, rows, opts, cal, flat,
+                                            u_response_rel=u_resp)
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
                             "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
                             "options": asdict(opts)}
@@ -353,7 +400,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         ref_run = read_run(opts.reference_run)
         ref_rows = _match_rows(run, rows, ref_run)
         # same geometry, same pixels: the pixel response cancels in the ratio
-        r_s, r_u, _ = _signals(ref_run, ref_rows, opts,
+        r_s, r_u, _, ref_clipped = _signals(ref_run, ref_rows, opts,
                             ref_run.camera_calibration(opts.camera_calibration)
                             if opts.detector == "camera" else None)
         std = _reference_standard(ref_run, opts)
@@ -364,9 +411,17 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         # normalised average of f over it: keep the geometry for the fit
         pts = replace(pts, receiver=receiver)
         prov.update(reference_run=ref_run.run_id, reference_standard=std.name)
+        n_clipped = n_clipped + ref_clipped
     if opts.signature_run is not None:
         pts = _subtract_signature(run, rows, pts, opts)
         prov["signature_run"] = str(opts.signature_run)
+    clipped = n_clipped > 0
+    pts = replace(pts, clipped=clipped)
+    if clipped.any():
+        prov["clipped_points"] = [
+            f"point {int(run.index[r])} (θi={run.theta_i[r]:.1f}°, θr={run.theta_r[r]:.1f}°): "
+            f"{int(c)} pixels saturated even in its shortest exposure"
+            for r, c in zip(rows[clipped], n_clipped[clipped], strict=True)]
     return Reduced(pts, rows, run.position("detector_theta")[rows], prov)
 
 

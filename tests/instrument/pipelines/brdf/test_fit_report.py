@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from analysis.brdf import get_model
+from analysis.brdf.registry import default_candidates
 from instrument.cli import main
 from instrument.pipelines.brdf.analyse import analyse
 from instrument.pipelines.brdf.reduce import ReductionOptions, read_run, reduce_run
@@ -68,8 +69,8 @@ def test_cli_fit_writes_analysis_and_report(glossy_run, tmp_path, capsys) -> Non
     truth = np.array(GLOSSY.params)
     assert np.all(np.abs(params - truth) < 3.5 * stderr)
     assert results["selection"]["chosen"] == "lambert+ggx"
-    assert {r["name"] for r in results["selection"]["table"]} == {
-        "lambert", "oren_nayar", "lambert+ggx"}
+    assert {r["name"] for r in results["selection"]["table"]} == set(default_candidates())
+    assert results["model_adequate"] is True and "describes the data" in results["verdict"]
     # fitting again replaces the group, it does not fail or duplicate
     assert main(["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx",
                  "--no-cv"]) == 0
@@ -245,8 +246,9 @@ def test_run_reduction_records_the_receiver(glossy_run) -> None:
     prov = red.provenance
     assert prov["solid_angle_sr"] == pytest.approx(math.pi * 6.25**2 / 300.0**2, rel=1e-12)
     assert prov["beam_radius_mm"] == pytest.approx(2.0)
-    assert "chief ray" in prov["receiver_model"]
-    assert red.points.receiver is not None and not red.points.receiver.sample_aperture
+    assert "aperture integrated" in prov["receiver_model"]
+    assert prov["sample_radius_mm"] == pytest.approx(12.5)
+    assert red.points.receiver is not None and red.points.receiver.sample_aperture
     bare = reduce_run(glossy_run, ReductionOptions(receiver_geometry=False))
     assert bare.points.receiver is None and bare.provenance["receiver_model"].startswith("none")
     ratio = red.points.brdf / bare.points.brdf
