@@ -114,11 +114,10 @@ def run(args: argparse.Namespace) -> int:
     flag = "" if factor == 1.0 else f"  (σ inflated ×{factor:.3g}: model rejected)"
     for name, value, err, unit in fit.table():
         print(f"  {name:<16} {value:12.6g} ± {err:.3g} {unit}{flag}")
-    for k, r in result.disagreeing_points()[:10]:
+    for k, r in (result.disagreeing_points()[:10] if not result.adequate else []):
         p = reduced.points
-        print(f"  disagrees: point {int(done.run.index[reduced.rows[k]])} "
-              f"(θi={math.degrees(p.theta_i[k]):.1f}°, θr={math.degrees(p.theta_r[k]):.1f}°) "
-              f"r = {r:+.1f}σ")
+        print(f"  disagrees: {reduced.point_label(k)} (θi={math.degrees(p.theta_i[k]):.1f}°, "
+              f"θr={math.degrees(p.theta_r[k]):.1f}°) r = {r:+.1f}σ")
     if fit.bootstrap is not None:
         b = fit.bootstrap
         print(f"  bootstrap ({b.samples.shape[0]} resamples, noise only): σ = "

@@ -17,7 +17,7 @@ off, same exposure, same averaging) follows.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -93,7 +93,6 @@ class ScanSetup:
     def sensor_params(self) -> SensorParams:
         # same field of view as the 1024-px default camera, coarser pixels
         pitch = self.sensor.pixel_pitch_um * self.sensor.width / self.sensor_px
-        from dataclasses import replace
 
         return replace(self.sensor, width=self.sensor_px, height=self.sensor_px,
                        pixel_pitch_um=pitch)
@@ -130,11 +129,13 @@ class Rendered:
     plan: Plan
 
 
-def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None
-           ) -> Rendered:
-    """Render every plan point of ``setup`` for ``sample`` (noise-free); ``scene`` replaces
-    the default scene (the sample alone) e.g. to add an instrument signature."""
-    plan = setup.plan()
+def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None,
+           plan: Plan | None = None, cache: dict | None = None) -> Rendered:
+    """Render every plan point of ``setup`` (or of ``plan``) for ``sample`` (noise-free);
+    ``scene`` replaces the default scene (the sample alone) e.g. to add an instrument
+    signature. ``cache`` (a dict kept by the caller) reuses the frames of axis targets
+    rendered before for the same sample and setup."""
+    plan = plan if plan is not None else setup.plan()
     if scene is None:
         scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params),
                                 sample_radius_mm=setup.sample_radius_mm)
@@ -145,7 +146,6 @@ def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = 
     )
     ss = setup.rays_per_pixel_side()
     coarse = setup.sensor_params()
-    from dataclasses import replace
 
     fine = replace(coarse, width=coarse.width * ss, height=coarse.height * ss,
                    pixel_pitch_um=coarse.pixel_pitch_um / ss)
@@ -155,12 +155,18 @@ def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = 
     )
     rates, angles = [], []
     for p in plan.points:
-        for role, value in p.targets:
-            world.set_role(role, value)
-        state = world.snapshot()
-        rate = np.array(cam.photon_rate(state), dtype=np.float64)
-        # each pixel sums its ss × ss sub-pixels (area integration)
-        rates.append(rate.reshape(coarse.height, ss, coarse.width, ss).sum(axis=(1, 3)))
+        key = (sample, setup, tuple((r, round(v, 9)) for r, v in p.targets))
+        if cache is not None and key in cache:
+            rates.append(cache[key])
+        else:
+            for role, value in p.targets:
+                world.set_role(role, value)
+            state = world.snapshot()
+            rate = np.array(cam.photon_rate(state), dtype=np.float64)
+            # each pixel sums its ss × ss sub-pixels (area integration)
+            rates.append(rate.reshape(coarse.height, ss, coarse.width, ss).sum(axis=(1, 3)))
+            if cache is not None:
+                cache[key] = rates[-1]
         a = p.angles
         angles.append([math.radians(a.theta_i), math.radians(a.phi_i),
                        math.radians(a.theta_r), math.radians(a.phi_r)])
@@ -214,6 +220,7 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
                      1.0)
     rates = np.empty(n)
     variances = np.empty(n)
+    clipped = np.zeros(n, dtype=bool)
     zero = np.zeros_like(r.photon_rate[0], dtype=np.float32)
     for k in range(n):
         light, dark = [], []
@@ -227,6 +234,7 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
         sig = camera_signal(lf[None], [t[k]], df[None], noise=noise, n_averaged=s.frames,
                             flat=flat)
         rates[k], variances[k] = sig.rate_dn_per_us, sig.variance
+        clipped[k] = sig.clipped_pixels > 0
     k_gain = noise.system_gain_dn_per_e
     wl = 633.0
     power = camera_power_w(rates, system_gain_dn_per_e=k_gain,
@@ -236,10 +244,12 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
     rg = receiver(s)
     a = r.angles_rad
     sig_t = math.radians(sigma_theta_deg)
-    return absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
-                         incident_power_w=s.power_w, solid_angle=rg.solid_angle_sr,
-                         sigma_theta_i=sig_t, sigma_theta_r=sig_t,
-                         receiver=rg if receiver_geometry else None)
+    pts = absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                        incident_power_w=s.power_w, solid_angle=rg.solid_angle_sr,
+                        sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                        receiver=rg if receiver_geometry else None)
+    # readings clipped even at the shortest exposure are lower bounds, as in a run
+    return replace(pts, clipped=clipped)
 
 
 def profile_text(setup: ScanSetup, sample: Sample) -> str:

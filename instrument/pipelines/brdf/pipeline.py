@@ -73,7 +73,8 @@ def fit_run(
         page = write_report(report_dir or default_report_dir(path), reduced.points, result,
                             title=f"BRDF of {run.sample_name or run.run_id} "
                             f"(run {run.run_id})", provenance=reduced.provenance,
-                            point_index=run.index[reduced.rows])
+                            point_labels=[reduced.point_label(k)
+                                          for k in range(reduced.points.n)])
     if write:
         write_analysis(path, reduced, result.to_dict())
     return FitRun(run, reduced, result, page)

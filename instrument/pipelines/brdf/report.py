@@ -192,7 +192,7 @@ def _plot_dhr(res: AnalysisResult, path: Path) -> None:
 
 # ------------------------------------------------------------------------------ html
 def _verdict_html(points: BRDFPoints, res: AnalysisResult,
-                  point_index: np.ndarray | None) -> str:
+                  point_labels: Sequence[str] | None) -> str:
     """The goodness-of-fit gate at the top of the page (ADR 0051): the verdict, χ²/dof
     with its expected spread, the uncertainty rule and the points that disagree."""
     gof = res.chosen_goodness
@@ -208,10 +208,14 @@ def _verdict_html(points: BRDFPoints, res: AnalysisResult,
     if pts:
         deg = np.degrees
         f, u = points.plain_brdf()
-        table = "<p>Points that disagree with the model (|r| > 3, largest first):</p>" + _table(
+        caption = ("Points that disagree with the model (|r| > 3, largest first):"
+                   if not gof.adequate else
+                   f"Points with |r| > 3 (about {0.0027 * gof.dof:.1g} expected by chance "
+                   "for a correct model):")
+        table = f"<p>{caption}</p>" + _table(
             ("point", "θi (deg)", "φi (deg)", "θr (deg)", "φr (deg)", "BRDF (1/sr)", "σ",
              "(data − model)/σ"),
-            [(int(point_index[k]) if point_index is not None else k,
+            [(point_labels[k] if point_labels is not None else f"point {k}",
               float(deg(points.theta_i[k])), float(deg(points.phi_i[k])),
               float(deg(points.theta_r[k])), float(deg(points.phi_r[k])), float(f[k]),
               float(u[k]), float(r)) for k, r in pts[:25]])
@@ -237,11 +241,11 @@ def write_report(
     *,
     title: str,
     provenance: dict[str, Any] | None = None,
-    point_index: np.ndarray | None = None,
+    point_labels: Sequence[str] | None = None,
 ) -> Path:
     """Write the PNG figures and ``index.html`` into ``out_dir``; returns the HTML path.
-    ``point_index`` (the run's index of each reduced point) names disagreeing points by
-    their run index (default: their position in ``points``)."""
+    ``point_labels`` (e.g. "point 12" per reduced point) names the disagreeing points
+    (default: their position in ``points``)."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -281,7 +285,7 @@ def write_report(
                     res.goodness[r.name].p_value, r.aic, r.aicc, r.bic, r.cv_score,
                     r.cv_stderr, "yes" if r.name in res.plausible else "", r.converged)
                    for r in res.selection.table])
-    verdict = _verdict_html(points, res, point_index)
+    verdict = _verdict_html(points, res, point_labels)
     rec = res.reciprocity
     if rec.n_pairs:
         rec_html = (f"<p>{rec.n_pairs} pair(s) measured both ways; "

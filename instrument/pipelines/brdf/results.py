@@ -48,6 +48,10 @@ def write_analysis(path: str | Path, reduced: Reduced, results: dict[str, Any]) 
         red.create_dataset("u_total", data=pts.u_total).attrs["units"] = "1/sr"
         red.create_dataset("point_index", data=reduced.rows)
         red.create_dataset("clipped", data=~pts.valid)
+        if len(reduced.sources) > 1:  # a two-pass lobe run, reduced with its first pass
+            red.create_dataset("source_run", data=np.array(
+                [reduced.sources[k] for k in reduced.source], dtype=object),
+                dtype=h5py.string_dtype())
         put(g, "provenance_json", json.dumps(reduced.provenance, default=str))
         put_json(g, "results_json", results)
         chosen = results.get("selection", {}).get("chosen")

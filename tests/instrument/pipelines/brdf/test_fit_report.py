@@ -311,3 +311,31 @@ def test_a_fit_that_did_not_converge_is_noted(glossy_run, tmp_path) -> None:
     assert res.chosen == "lambert+ggx"
     assert any(n.startswith("nan_lambert: the fit did not converge") for n in res.notes)
     assert "did not converge" in page.read_text(encoding="utf-8")
+
+
+def test_a_model_the_data_reject_is_flagged_everywhere(glossy_run, tmp_path, capsys) -> None:
+    """Issue 13 / ADR 0051: the glossy sample offered only diffuse models. The chosen one
+    does not describe the data: the console, the report and the results file say so, the
+    σ are inflated by the Birge ratio and flagged, and the specular points are named."""
+    out = tmp_path / "rejected"
+    assert main(["fit", str(glossy_run), "--out", str(out), "--models", "lambert,oren_nayar",
+                 "--no-cv"]) == 0
+    text = capsys.readouterr().out
+    assert "the model does not describe the data" in text
+    assert "σ inflated ×" in text and "disagrees: point" in text
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "the model does not describe the data" in page and "INFLATED" in page
+    with h5py.File(glossy_run, "r") as f:
+        c = f["entry/analysis/chosen"]
+        assert not c.attrs["model_adequate"] and c.attrs["p_value"] < 1e-3
+        factor = float(c.attrs["stderr_inflation"])
+        disagreeing = c["disagreeing_points"][()]
+        res = json.loads(f["entry/analysis/results_json"][()])
+    assert factor == pytest.approx(np.sqrt(c_chi2 := res["goodness"][res["selection"]["chosen"]]
+                                           ["reduced_chi2"]), rel=1e-9) and c_chi2 > 10
+    red = reduce_run(glossy_run)
+    worst = disagreeing[0]
+    # the worst point sits at the specular peak the diffuse models cannot follow
+    assert abs(red.points.theta_r[worst] - red.points.theta_i[worst]) <= math.radians(4.5)
+    nominal = res["fits"][res["selection"]["chosen"]]["stderr"]
+    assert all(s > 0 for s in nominal)
