@@ -59,6 +59,21 @@ SAMPLES = (
 #: Candidate models the fits choose from.
 CANDIDATES = ("lambert", "oren_nayar", "lambert+ggx")
 
+#: The closed-loop validation matrix of issue 13 §5: one sample per family of the library,
+#: from diffuse to a sharp specular lobe (GGX α = 0.02), scanned at θi = 20°, 50°, 80°.
+MATRIX = (
+    Sample("lambert", "lambert", (0.8,)),
+    Sample("oren-nayar", "oren_nayar", (0.8, 0.3)),
+    Sample("hapke", "hapke", (0.6,)),
+    Sample("rough-beckmann", "lambert+beckmann", (0.4, 0.4, 0.3)),
+    Sample("smooth-rayleigh-rice", "lambert+rayleigh_rice_gauss", (0.3, 5.0, 4.0)),
+    Sample("glossy-ggx", "lambert+ggx", (0.3, 0.5, 0.2)),
+    Sample("glossy-phong", "lambert+phong", (0.3, 0.5, 300.0)),
+    Sample("sharp-ggx-0.05", "lambert+ggx", (0.3, 0.5, 0.05)),
+    Sample("sharp-ggx-0.02", "lambert+ggx", (0.3, 0.5, 0.02)),
+    Sample("metal-beckmann-kirchhoff", "beckmann_kirchhoff", (0.9, 0.2)),
+)
+
 
 @dataclass(frozen=True)
 class ScanSetup:

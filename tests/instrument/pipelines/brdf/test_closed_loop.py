@@ -79,6 +79,60 @@ def closed_loop(sample: Sample, seeds: range, setup: ScanSetup | None = None) ->
                      z.std(axis=0), est.std(axis=0, ddof=1) / err.mean(axis=0))
 
 
+@dataclass(frozen=True)
+class MatrixStats:
+    """Issue 13 §5, one sample of the validation matrix over seeds (default candidates,
+    instrument-aware fits, the goodness-of-fit gate)."""
+
+    sample: str
+    n_seeds: int
+    right_model: float          # chosen == truth
+    right_or_twin: float        # … or indistinguishable from it (same k, ΔBIC ≤ 2)
+    flagged: float              # chosen model rejected (p < 0.001)
+    coverage_2sigma: np.ndarray  # truth inside the reported 2σ of the true model's fit
+    chi2_dof: np.ndarray        # χ²/dof of the chosen fit, per seed
+    clipped: float              # mean clipped readings left out per scan
+    seconds_per_fit: float
+    chosen: tuple[str, ...]     # per seed
+
+
+def matrix_stats(sample: Sample, seeds: range, setup: ScanSetup | None = None,
+                 models: tuple[str, ...] | None = None) -> MatrixStats:
+    """Scan, reduce, analyse with the default candidates (as ``scatterlab fit``) and compare
+    with the truth for every seed."""
+    import time
+
+    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS, analyse
+
+    setup = setup or ScanSetup(theta_i_deg=(20.0, 50.0, 80.0))
+    models = models or DEFAULT_MODELS
+    r = render(setup, sample)
+    truth = np.array(sample.params)
+    right, twin, flagged, inside, chi, clipped, chosen = [], [], [], [], [], [], []
+    seconds = 0.0
+    for seed in seeds:
+        pts = reduce_seed(r, seed)
+        t0 = time.perf_counter()
+        res = analyse(pts, models, seed=seed)
+        seconds += time.perf_counter() - t0
+        rows = {row.name: row for row in res.selection.table}
+        right.append(res.chosen == sample.model)
+        twin.append(right[-1] or (
+            sample.model in res.plausible
+            and rows[sample.model].n_params == rows[res.chosen].n_params
+            and abs(rows[sample.model].bic - rows[res.chosen].bic) <= 2.0))
+        flagged.append(not res.adequate)
+        fit = res.fits[sample.model]
+        inside.append(np.abs(fit.params - truth) <= 2.0 * fit.stderr)
+        chi.append(res.chosen_goodness.reduced_chi2)
+        clipped.append(int(res.excluded_index.size))
+        chosen.append(res.chosen)
+    n = len(seeds)
+    return MatrixStats(sample.name, n, float(np.mean(right)), float(np.mean(twin)),
+                       float(np.mean(flagged)), np.mean(inside, axis=0), np.array(chi),
+                       float(np.mean(clipped)), seconds / n, tuple(chosen))
+
+
 def test_closed_loop_quick_glossy() -> None:
     """Default-run sanity check: 6 seeds of the glossy sample."""
     st = closed_loop(SAMPLES[1], range(100, 106))
