@@ -74,7 +74,7 @@ def second_pass_plan(first_run: str | Path, spec: PlanSpec, profile: BenchProfil
         frames_per_point=pol.frames * (2 if pol.dark == "per_point" else 1),
         move_s=pass_move_seconds(profile, lobe.step_deg),
         sigma_theta_rad=0.0 if receiver is None else receiver.sigma_theta_r_rad,
-        min_separation_deg=0.5 * lobe.step_deg)
+        min_separation_deg=0.5 * lobe.step_deg, target=lobe.target)
     text = second_pass_text(spec.source_text, placement.pairs, Path(first_run).name)
     spec2 = parse_plan(text, source=f"second pass of {first_run}")
     return SecondPass(build_plan(replace(spec2, source_text=text), profile), placement,

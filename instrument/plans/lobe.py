@@ -15,10 +15,14 @@ in two passes:
    the greedy D-optimal design on the Fisher information of the speed/accuracy planner
    (:mod:`instrument.plans.tradeoff`: C = (JᵀWJ)⁻¹, W = 1/σ² with σ from the camera noise
    model at the exposure each point will get), seeded with the information of the first
-   pass. A point's gain is the increase of log det(JᵀWJ), log(1 + w jᵀ I⁻¹ j) by the matrix
-   determinant lemma (Atkinson, Donev & Tobias, *Optimum Experimental Designs*, 2007,
-   §9.2 and §11.2 on sequential D-optimum construction), divided by its acquisition and
-   move time. J is the Jacobian of the *forward model* (what the instrument sees: the
+   pass. By default a point's gain is the decrease of the variance of the target
+   parameter t (``target``; default the model's last parameter — its lobe width, e.g.
+   ``ggx.alpha``, as in the planner's ``--target-param``), by Sherman–Morrison
+   w (e_tᵀ C j)² / (1 + w jᵀ C j) (c-optimality); ``target = "all"`` uses the increase
+   of log det(JᵀWJ), log(1 + w jᵀ C j) by the matrix determinant lemma (D-optimality);
+   Atkinson, Donev & Tobias, *Optimum Experimental Designs*, 2007, §10.1–10.3 and §11.2 on
+   sequential construction. Either gain is divided by the point's acquisition and move
+   time. J is the Jacobian of the *forward model* (what the instrument sees: the
    lobe averaged over beam and pupil), and σ includes the set-point scatter |∂F/∂θ|σθ, so
    points gather where the measured lobe curves, not on flanks steeper than the axes can
    hold. Each direction is used once (and none the first pass measured): the points
@@ -60,6 +64,7 @@ class LobeSpec:
     search_half_width_deg: float = 5.0
     search_step_deg: float = 1.0
     prior: str | None = None
+    target: str | None = None
 
 
 def lobe_of(spec: PlanSpec) -> LobeSpec | None:
@@ -69,7 +74,7 @@ def lobe_of(spec: PlanSpec) -> LobeSpec | None:
         return None
     return LobeSpec(int(lb["points"]), float(lb.get("step_deg", 0.25)),
                     float(lb.get("search_half_width_deg", 5.0)),
-                    float(lb.get("search_step_deg", 1.0)), lb.get("prior"))
+                    float(lb.get("search_step_deg", 1.0)), lb.get("prior"), lb.get("target"))
 
 
 def candidate_pairs(spec: PlanSpec, profile: BenchProfile, step_deg: float
@@ -175,6 +180,7 @@ def place_points(
     move_s: float,
     sigma_theta_rad: float = 0.0,
     min_separation_deg: float = 0.1,
+    target: str | None = None,
 ) -> Placement:
     """Greedy D-optimal placement per unit time (module docstring).
 
@@ -200,6 +206,9 @@ def place_points(
         Set-point uncertainty of the axes (adds |∂F/∂θr|σθ to each candidate's σ).
     min_separation_deg : float
         Candidates closer than this in θr (same θi) to a first-pass point are left out.
+    target : str or None
+        The parameter whose variance the points should reduce (default the model's last);
+        ``"all"``: D-optimal over every parameter.
     """
     p = np.asarray(params, dtype=float)
     cand = _angles_rad(candidates)
@@ -234,9 +243,15 @@ def place_points(
     for ti, tr in _signed(np.degrees(np.asarray(first_angles_rad, dtype=float))):
         free &= ~((np.abs(c_ti - ti) < 0.05) & (np.abs(c_tr - tr) < min_separation_deg))
     chosen: list[int] = []
+    names = model.param_names
+    t = None if target == "all" else names.index(target or names[-1])
     for _ in range(min(int(n_points), int(free.sum()))):
         q = np.einsum("ij,jk,ik->i", jac, inv, jac)
-        gain = np.where(free, np.log1p(np.maximum(q, 0.0)) / cost, -np.inf)
+        if t is None:
+            value = np.log1p(np.maximum(q, 0.0))
+        else:
+            value = (jac @ inv[:, t]) ** 2 / (1.0 + np.maximum(q, 0.0))
+        gain = np.where(free, value / cost, -np.inf)
         k = int(np.argmax(gain))
         free[k] = False
         chosen.append(k)

@@ -36,7 +36,7 @@ explicit list):
   specular direction, ``reciprocity = true`` to drop reciprocity-equivalent points;
   or ``points = [[θi, θr], ...]`` (explicit signed pairs) instead of ``theta_i`` and
   ``theta_r``. ``lobe = {points = N, step_deg = 0.25, search_half_width_deg = 5,
-  search_step_deg = 1, prior = "MODEL"}`` samples the lobe in two passes
+  search_step_deg = 1, prior = "MODEL", target = "PARAM"}`` samples the lobe in two passes
   (:mod:`instrument.plans.lobe`): the plan itself is the coarse first pass (the θr grid and
   a search around the mirror direction); ``scatterlab run`` then fits it and runs a second
   plan of N points placed by Fisher information, which names its first pass in
@@ -291,12 +291,13 @@ def _lobe(v: _Validator, t: dict, path: str) -> None:
         v.error(where, "must be a table {points = N, ...}")
         return
     v.unknown(lb, where, {"points", "step_deg", "search_half_width_deg", "search_step_deg",
-                          "prior"})
+                          "prior", "target"})
     number(v, lb, "points", where, lo=1, hi=10000, integer=True, required=True)
     number(v, lb, "step_deg", where, lo=0.01, hi=10.0)
     number(v, lb, "search_half_width_deg", where, lo=0.5, hi=45.0)
     number(v, lb, "search_step_deg", where, lo=0.05, hi=10.0)
     v.string(lb, "prior", where)
+    v.string(lb, "target", where)
     if "specular" in t:
         v.error(f"{path}.specular", "is replaced by lobe.search_half_width_deg and "
                 "lobe.search_step_deg in a two-pass lobe plan")

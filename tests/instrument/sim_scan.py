@@ -284,10 +284,11 @@ def profile_text(setup: ScanSetup, sample: Sample) -> str:
 
 
 def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_plane",
-                   run_id: str = "closed-loop") -> Path:
+                   run_id: str = "closed-loop", plan_text: str | None = None) -> Path:
     """Acquire every point of ``r`` with sensor ``seed`` and store it as a run file with
     :class:`instrument.run.storage.RunStore` (the engine's writer), frames per point: the light
-    frame then its dark frame."""
+    frame then its dark frame. ``plan_text`` is stored as the run's plan (default the
+    setup's)."""
     import time as _time
 
     from instrument.run.storage import FrameData, PointRecord, RunHeader, RunStore
@@ -300,7 +301,8 @@ def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_p
     plan = r.plan
     pol = plan.spec.acquisition
     header = RunHeader(
-        run_id=run_id, plan_kind=kind, plan_name=plan.spec.name, plan_text=s.plan_text(),
+        run_id=run_id, plan_kind=kind, plan_name=plan.spec.name,
+        plan_text=plan_text if plan_text is not None else s.plan_text(),
         profile_text=profile_text(s, r.sample), bench_name="sim", sample_name=r.sample.name,
         sample_description="closed-loop sample", axes=plan.axes,
         planned_targets=plan.targets_array().tolist(),

@@ -67,6 +67,12 @@ UNCERTAINTY_RULE = ("when the model does not describe the data (χ² p < 0.001),
                     "standard errors are multiplied by the Birge ratio √(χ²/dof) and "
                     "flagged as inflated: they make the residuals consistent, they do not "
                     "make the model right")
+#: The information-criterion margin by which a larger candidate must beat a smaller one
+#: ("strong" evidence on Kass & Raftery's 1995 scale, ΔBIC 6–10). With 23 candidates of
+#: different shapes, some fit a correct smaller model's noise better by 2–6 by chance: at
+#: the "positive" margin of 2 a Lambertian sample came back as a larger model in 25 % of
+#: closed-loop scans (benchmarks/bench_brdf_closed_loop.py --matrix).
+SELECTION_DELTA = 6.0
 _DHR_THETA_DEG = np.arange(0.0, 86.0, 5.0)
 
 
@@ -186,6 +192,7 @@ def analyse(
     n_bootstrap: int = 0,
     alpha: float = DEFAULT_ALPHA,
     wavelength_nm: float | None = None,
+    delta: float = SELECTION_DELTA,
 ) -> AnalysisResult:
     """Fit, select, gate and check (module docstring). ``points`` may be cosine-corrected;
     the fits use the BRDF f either way.
@@ -197,7 +204,9 @@ def analyse(
     compared with the σ *before* the common scale and pixel-response terms are added.
 
     ``alpha`` is the p-value below which a model is rejected; ``wavelength_nm`` sets the
-    wavelength of the models that depend on it (Rayleigh–Rice).
+    wavelength of the models that depend on it (Rayleigh–Rice); ``delta`` is the
+    information-criterion margin a larger model must beat a smaller one by
+    (:data:`SELECTION_DELTA`).
     """
     f_all, u_all = points.plain_brdf()
     use = points.valid
@@ -220,7 +229,7 @@ def analyse(
         # the plausible models are refitted with the angular scatter from their own slopes
         fs = select_forward(list(base.values()), f, *a, sigma=u_all[idx], receiver=receiver,
                             sigma_indep=points.plain_u_indep()[idx], criterion=criterion,
-                            run_cv=run_cv, seed=seed, n_starts=n_starts)
+                            delta=delta, run_cv=run_cv, seed=seed, n_starts=n_starts)
         sel = fs.selection
         by_name = {n: ff.model for n, ff in fs.forward.items()}
         sigma_of = {n: ff.sigma for n, ff in fs.forward.items()}
@@ -229,7 +238,7 @@ def analyse(
     else:
         u = u_all[idx]
         sel = select_model(list(base.values()), f, *a, sigma=u, criterion=criterion,
-                           run_cv=run_cv, n_starts=n_starts, seed=seed)
+                           delta=delta, run_cv=run_cv, n_starts=n_starts, seed=seed)
         by_name = dict(base)
         sigma_of = {n: u for n in base}
         plausible = tuple(base)
