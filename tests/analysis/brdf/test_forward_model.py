@@ -141,7 +141,7 @@ def test_effective_variance_uses_the_model_slopes() -> None:
     pr = np.where(tr >= 0, np.pi, 0.0)
     tr = np.abs(tr)
     g = make_geometry(ti, pi_, tr, pr)
-    d_i, d_r = forward_slopes(model, rg, p, g, np.full(tr.size, 2))
+    _, d_r = forward_slopes(model, rg, p, g, np.full(tr.size, 2))
     fm = forward_model(model, rg, default_level=2)
     h = 1e-4
     by_hand = (fm.evaluate(p, ti, pi_, tr + h, pr) - fm.evaluate(p, ti, pi_, tr - h, pr)) / (2 * h)

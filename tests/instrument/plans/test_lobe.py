@@ -114,7 +114,7 @@ def sharp_first_pass():
 
 
 def test_fisher_placement_gathers_where_the_lobe_curves(sharp_first_pass) -> None:
-    setup, sample, profile, spec, _, pts, res = sharp_first_pass
+    _, _, profile, spec, _, pts, res = sharp_first_pass
     fit = res.chosen_fit
     _, det = setup_from_profile(profile, spec, prior=Prior("lambert+ggx", tuple(fit.params)))
     angles = np.stack([pts.theta_i, pts.phi_i, pts.theta_r, pts.phi_r], -1)
