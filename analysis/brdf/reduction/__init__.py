@@ -1,9 +1,12 @@
 """BRDF reduction: detector signals → BRDF values with an uncertainty budget.
 
 Pure functions on arrays (no I/O), one module per job: :mod:`.detector` (signals, noise,
-solid angles), :mod:`.receiver` (footprint and aperture), :mod:`.values` (absolute and
-relative BRDF, signature), :mod:`.angular` (positioning uncertainty), :mod:`.reciprocity`
-(a check of the data) and :mod:`.uncertainty` (shared and correlated errors in fits).
+solid angles), :mod:`.receiver` (the instrument function: beam footprint and divergence,
+receiver aperture, set-point spread), :mod:`.values` (absolute and relative BRDF,
+signature), :mod:`.angular` (positioning uncertainty), :mod:`.reciprocity` (a check of the
+data), :mod:`.uncertainty` (shared and correlated errors in fits), :mod:`.forward` (the
+forward model a fit compares the data with, its quadrature refined against the noise) and
+:mod:`.candidates` (model selection among forward fits).
 The chain, per measured point:
 
 1. **Camera frames → collected power.** Light brackets and their dark frames are merged with

@@ -60,6 +60,11 @@ from analysis.brdf.selection import (
 __all__ = ["ForwardSelection", "select_forward"]
 
 _CRITERIA = ("bic", "aic", "aicc", "cv")
+#: The LM tolerance of the first pass: χ² to ~10⁻⁶ is enough to rank the candidates; the
+#: plausible ones are refitted to full precision.
+_SCREEN_FTOL = 1e-7
+#: LM iterations of a cross-validation fold (it starts at the full-data optimum).
+_CV_STEPS = 6
 #: Candidates within this score of the best (or whose fit failed) are refitted from their
 #: other starts: a local optimum there could change the choice; far above, it cannot.
 _RESTART_DELTA = 50.0
@@ -104,7 +109,7 @@ def _fit_candidate(model: BRDFModel, y, angles, *, sigma, receiver, geometry, fi
     return fit_forward(model, y, *angles, sigma=sigma, receiver=receiver,
                        start=_starts(model, fitted)[0], seed=seed, tau=tau,
                        levels=_levels_from_parts(model, fitted), geometry=geometry,
-                       effective_variance=False)
+                       effective_variance=False, ftol=_SCREEN_FTOL)
 
 
 def _restart(ff: ForwardFit, model: BRDFModel, y, angles, *, sigma, receiver, geometry,
@@ -117,14 +122,14 @@ def _restart(ff: ForwardFit, model: BRDFModel, y, angles, *, sigma, receiver, ge
     starts += _random_starts(model, max(n_starts - 1 - len(starts), 0), rng)
     if not starts:
         return ff
-    trials = [fit_brdf(ff.model, y, *angles, sigma=ff.sigma, start=s, geometry=geometry)
-              for s in starts]
+    trials = [fit_brdf(ff.model, y, *angles, sigma=ff.sigma, start=s, geometry=geometry,
+                       ftol=_SCREEN_FTOL) for s in starts]
     best = min(trials, key=lambda f: f.chi2 if np.isfinite(f.chi2) else np.inf)
     if not best.chi2 < ff.fit.chi2 - 1e-6 * max(ff.fit.chi2, 1.0):
         return ff
     return fit_forward(model, y, *angles, sigma=sigma, receiver=receiver, start=best.params,
                        seed=seed, tau=tau, levels=ff.levels, geometry=geometry,
-                       effective_variance=False)
+                       effective_variance=False, ftol=_SCREEN_FTOL)
 
 
 def select_forward(
@@ -207,14 +212,17 @@ def select_forward(
     best = float(np.min(scores[ok]))
     plausible = [n for n, sc, good in zip(names, scores, ok, strict=True)
                  if good and sc <= best + plausible_delta]
-    if sigma_indep is not None and (receiver.sigma_theta_i_rad > 0
-                                    or receiver.sigma_theta_r_rad > 0):
-        s_ind = np.broadcast_to(np.asarray(sigma_indep, dtype=float), y.shape)
-        for n in plausible:
-            ff = fitted[n]
-            fitted[n] = fit_forward(by_name[n], y, *angles, sigma=s_ind, receiver=receiver,
-                                    start=ff.fit.params, seed=seed, tau=tau,
-                                    levels=ff.levels, geometry=g)
+    # the plausible set to full precision, and with the set-point scatter from each
+    # model's own slopes where the axes have one
+    angular = sigma_indep is not None and (receiver.sigma_theta_i_rad > 0
+                                           or receiver.sigma_theta_r_rad > 0)
+    s_fin = (np.broadcast_to(np.asarray(sigma_indep, dtype=float), y.shape) if angular
+             else sig)
+    for n in plausible:
+        ff = fitted[n]
+        fitted[n] = fit_forward(by_name[n], y, *angles, sigma=s_fin, receiver=receiver,
+                                start=ff.fit.params, seed=seed, tau=tau, levels=ff.levels,
+                                geometry=g, effective_variance=angular)
     cv: dict[str, np.ndarray] = {}
     folds = grouped_folds(incidence_groups(angles[0]), n_folds, seed=seed)
     if (run_cv or criterion == "cv") and folds:
@@ -253,8 +261,10 @@ def _cross_validate(ff: ForwardFit, y, angles, folds) -> np.ndarray:
     scores = []
     for test in folds:
         train = ~test
+        # from the full-data optimum the fold's optimum is a few LM steps away
         fit = fit_brdf(ff.model, y[train], *(a[train] for a in angles), sigma=ff.sigma[train],
-                       start=ff.fit.params, geometry=g.take(train))
+                       start=ff.fit.params, geometry=g.take(train), ftol=_SCREEN_FTOL,
+                       max_nfev=_CV_STEPS)
         pred = ff.model.evaluate_geometry(fit.params, g.take(test))
         scores.append(_heldout_score(y[test], pred, ff.sigma[test], "absolute"))
     return np.array(scores)

@@ -165,6 +165,7 @@ def fit_forward(
     geometry: Geometry | None = None,
     max_rounds: int = 8,
     effective_variance: bool = True,
+    ftol: float = 1e-10,
 ) -> ForwardFit:
     """Fit ``model`` as the instrument sees it (module docstring).
 
@@ -191,6 +192,8 @@ def fit_forward(
     effective_variance : bool
         Add the set-point scatter from the model's slopes (False: ``sigma`` is used as it
         is, e.g. when it already holds an angular term taken from the data).
+    ftol : float
+        The LM solver's relative cost tolerance (:func:`~analysis.brdf.fit.fit_brdf`).
 
     Returns
     -------
@@ -215,7 +218,8 @@ def fit_forward(
     for rounds in range(1, max_rounds + 1):
         fm = forward_model(model, receiver, table)
         fit = fit_brdf(fm, y, theta_i, phi_i, theta_r, phi_r, sigma=sig, start=p0,
-                       n_starts=n_starts if rounds == 1 else 1, seed=seed, geometry=g)
+                       n_starts=n_starts if rounds == 1 else 1, seed=seed, geometry=g,
+                       ftol=ftol)
         p0 = fit.params
         if not np.all(np.isfinite(fit.params)):
             break

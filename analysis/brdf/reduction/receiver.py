@@ -294,10 +294,35 @@ def _rotate(v: NDArray, axis: NDArray, angle: NDArray) -> NDArray:
     return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=-1)[..., None] * (1 - c)
 
 
+def _chord_nodes(wi: NDArray, receiver: ReceiverGeometry, level: QuadratureLevel
+                 ) -> NDArray[np.intp]:
+    """Gauss–Legendre nodes along the footprint of each point (N,) where the sample's edge
+    cuts it (0 where Gauss–Hermite serves): e^{−s²} on [−a, a] to 1e-9 takes about
+    4.5a + 4 nodes (24 at a = 4.4, 13 at a = 2), a the edge at v = 0 in s units; the
+    BRDF's variation asks for 2·nu + 2 at least. Per point, so that a point gets the same
+    nodes whatever other points it is evaluated with (a cross-validation fold)."""
+    n = wi.shape[0]
+    if receiver.sample_radius_mm is None:
+        return np.zeros(n, dtype=np.intp)
+    a = (receiver.sample_radius_mm * np.maximum(wi[:, 2], 1e-9) * np.sqrt(2.0)
+         / receiver.beam_radius_mm)
+    need = np.maximum(np.ceil(4.5 * a + 4.0), 2 * level.footprint[0] + 2).astype(np.intp)
+    return np.where(a > _GH_EDGE, 0, need)
+
+
+#: Where the sample's edge lies beyond this many s units the footprint is integrated by
+#: Gauss–Hermite as if unbounded (a tail of erfc(3.8)/2 < 1e-8, lost from G and the model
+#: alike).
+_GH_EDGE = 3.8
+
+
 def _level_nodes(wi: NDArray, wr: NDArray, receiver: ReceiverGeometry,
-                 level: QuadratureLevel, aspect: int = 1) -> tuple[NDArray, NDArray, NDArray]:
-    """Nodes of the points (wi, wr) (N, 3) at one level and aspect (:func:`_aspect`):
-    incident and receiver directions (N, K, 3) and weights (N, K)."""
+                 level: QuadratureLevel, aspect: int = 1, n_gl: int = 0
+                 ) -> tuple[NDArray, NDArray, NDArray]:
+    """Nodes of the points (wi, wr) (N, 3) at one level and aspect (:func:`_aspect`), with
+    ``n_gl`` Gauss–Legendre nodes along a footprint the sample's edge cuts
+    (:func:`_chord_nodes`; 0: Gauss–Hermite): incident and receiver directions (N, K, 3)
+    and weights (N, K)."""
     n = wi.shape[0]
     w_beam = receiver.beam_radius_mm
     cos_i = np.maximum(wi[:, 2], 1e-9)
@@ -310,36 +335,26 @@ def _level_nodes(wi: NDArray, wr: NDArray, receiver: ReceiverGeometry,
     ev = np.stack([-eu[:, 1], eu[:, 0], np.zeros(n)], axis=-1)
     nu, nv = level.footprint
     t, wt = _hermite(nv)
-    n_gl = 0  # set below from the longest chord
     v = t * w_beam / np.sqrt(2.0)  # (nv,) mm
     s_gh, w_gh = _hermite(nu)
-    if receiver.sample_radius_mm is None:
+    if n_gl == 0:
         s = np.broadcast_to(s_gh, (n, nv, nu))
         ws = np.broadcast_to(w_gh, (n, nv, nu))
     else:
-        # chord of the sample disk at each v, in s units. Gauss–Hermite where the edge is
-        # beyond the Gaussian's reach (s > 3.8: a tail of erfc(3.8)/2 < 1e-8, lost from G
-        # and the model alike); else
-        # Gauss–Legendre over the chord with the Gaussian in the weights (≥ 16 nodes: a
-        # chord to s = 4.4 needs 24 for 1e-10 of e^{−s²} alone)
+        # Gauss–Legendre over the chord of the sample disk at each v (in s units), with
+        # the Gaussian in the weights; a v node whose chord reaches past the Gaussian's
+        # reach keeps Gauss–Hermite (padded with zero-weight nodes to one shape)
+        assert receiver.sample_radius_mm is not None
         rs = receiver.sample_radius_mm
         chord = np.sqrt(np.maximum(rs * rs - v * v, 0.0))  # (nv,) mm
         s_edge = chord[None, :] * cos_i[:, None] * np.sqrt(2.0) / w_beam  # (n, nv)
-        if np.all(s_edge > 3.8):
-            s = np.broadcast_to(s_gh, (n, nv, nu))
-            ws = np.broadcast_to(w_gh, (n, nv, nu))
-        else:
-            # e^{−s²} on [−a, a] to 1e-9 takes about 4.5a + 4 Gauss–Legendre nodes (24 at
-            # a = 4.4, 13 at a = 2); the BRDF's variation asks for 2·nu + 2 at least
-            a_max = float(np.max(np.where(s_edge > 3.8, 0.0, s_edge)))
-            n_gl = max(int(np.ceil(4.5 * a_max + 4.0)), 2 * nu + 2)
-            x, wl = _legendre(n_gl)
-            s_gl = s_edge[..., None] * x
-            w_gl = s_edge[..., None] * wl * np.exp(-s_gl * s_gl) / np.sqrt(np.pi)
-            use_gh = (s_edge > 3.8)[..., None]
-            pad = np.zeros(n_gl - nu)  # one node count per call: GH padded with zeros
-            s = np.where(use_gh, np.concatenate([s_gh, pad]), s_gl)
-            ws = np.where(use_gh, np.concatenate([w_gh, pad]), w_gl)
+        x, wl = _legendre(n_gl)
+        s_gl = s_edge[..., None] * x
+        w_gl = s_edge[..., None] * wl * np.exp(-s_gl * s_gl) / np.sqrt(np.pi)
+        use_gh = (s_edge > _GH_EDGE)[..., None]
+        pad = np.zeros(max(n_gl - nu, 0))
+        s = np.where(use_gh, np.concatenate([s_gh, pad])[:n_gl], s_gl)
+        ws = np.where(use_gh, np.concatenate([w_gh, pad])[:n_gl], w_gl)
     u = s * w_beam / (np.sqrt(2.0) * cos_i[:, None, None])  # (n, nv, nu') mm
     spot = (u[..., None] * eu[:, None, None, :]
             + np.broadcast_to(v[None, :, None, None], (*u.shape, 1)) * ev[:, None, None, :])
@@ -412,19 +427,20 @@ def receiver_nodes(geometry: Geometry, receiver: ReceiverGeometry,
     NodeSet
         Nodes stored point after point; ``weights`` are W (their per-point sum is G).
     """
-    wi, wr = _unit_vectors(geometry)
-    n = wi.shape[0]
+    n = int(np.prod(geometry.shape))
     lev = np.broadcast_to(np.asarray(levels, dtype=np.intp), (n,))
     if n and (lev.min() < 0 or lev.max() >= len(LEVELS)):
         raise ValueError(f"levels must lie in 0..{len(LEVELS) - 1}")
     counts = np.zeros(n, dtype=np.intp)
     blocks: list[tuple[NDArray, NDArray, NDArray, NDArray]] = []
-    aspect = _aspect(wi, wr) if receiver.sample_aperture else np.ones(n, dtype=np.intp)
-    for k, a in sorted(set(zip(lev.tolist(), aspect.tolist(), strict=True))):
-        idx = np.flatnonzero((lev == k) & (aspect == a))
-        bi, br, bw = _level_nodes(wi[idx], wr[idx], receiver, LEVELS[int(k)], int(a))
-        counts[idx] = bw.shape[1]
-        blocks.append((idx, bi, br, bw))
+    for k in np.unique(lev):
+        for idx_all, bi, br, bw in _level_blocks(geometry, receiver, int(k)):
+            keep = lev[idx_all] == k
+            if not keep.any():
+                continue
+            idx = idx_all[keep]
+            counts[idx] = bw.shape[1]
+            blocks.append((idx, bi[keep], br[keep], bw[keep]))
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
     total = int(counts.sum())
     vi, vr, vw = np.empty((total, 3)), np.empty((total, 3)), np.empty(total)
@@ -435,6 +451,26 @@ def receiver_nodes(geometry: Geometry, receiver: ReceiverGeometry,
         vr[pos] = br.reshape(-1, 3)
         vw[pos] = bw.reshape(-1)
     return NodeSet(geometry_from_vectors(vi, vr), vw, starts)
+
+
+def _level_blocks(geometry: Geometry, receiver: ReceiverGeometry, level: int
+                  ) -> list[tuple[NDArray, NDArray, NDArray, NDArray]]:
+    """Every point's nodes at ``level``, in blocks of one shape (aspect, chord nodes):
+    (point indices, incident (m, K, 3), receiver (m, K, 3), weights (m, K)); cached on the
+    geometry, so that any mix of levels only gathers rows."""
+    key = ("receiver-level", receiver, level)
+    if key not in geometry.cache:
+        wi, wr = _unit_vectors(geometry)
+        n = wi.shape[0]
+        aspect = _aspect(wi, wr) if receiver.sample_aperture else np.ones(n, dtype=np.intp)
+        n_gl = _chord_nodes(wi, receiver, LEVELS[level])
+        out = []
+        for a, m in sorted(set(zip(aspect.tolist(), n_gl.tolist(), strict=True))):
+            idx = np.flatnonzero((aspect == a) & (n_gl == m))
+            out.append((idx, *_level_nodes(wi[idx], wr[idx], receiver, LEVELS[level],
+                                            int(a), int(m))))
+        geometry.cache[key] = out
+    return geometry.cache[key]
 
 
 def receiver_factor(
@@ -453,8 +489,13 @@ def receiver_factor(
     """
     g = make_geometry(*flat_angles(theta_i, phi_i, theta_r, phi_r))
     wi, wr = _unit_vectors(g)
-    _, _, w = _level_nodes(wi, wr, receiver, _FACTOR_LEVEL)
-    return w.sum(axis=1)
+    n_gl = _chord_nodes(wi, receiver, _FACTOR_LEVEL)
+    out = np.empty(wi.shape[0])
+    for m in np.unique(n_gl):
+        idx = np.flatnonzero(n_gl == m)
+        _, _, w = _level_nodes(wi[idx], wr[idx], receiver, _FACTOR_LEVEL, 1, int(m))
+        out[idx] = w.sum(axis=1)
+    return out
 
 
 #: The rule of :func:`receiver_factor`: f ≡ 1 leaves a smooth integrand, but where the

@@ -169,3 +169,38 @@ def test_second_pass_plan_and_the_two_passes_reduced_together(sharp_first_pass,
     (tmp_path / "first.h5").rename(tmp_path / "moved.h5")
     with pytest.raises(ValueError, match="keep the two runs side by side"):
         reduce_run(second)
+
+
+@pytest.mark.slow
+def test_two_pass_lobe_run_through_the_engine(tmp_path: Path, capsys) -> None:
+    """``scatterlab run`` on a lobe plan: the first pass through the real engine, drivers
+    and firmware emulators, its fit, the Fisher-placed second pass, and ``scatterlab fit``
+    of the second run reducing both (a sharp GGX lobe, α = 0.05)."""
+    import h5py
+
+    from instrument.cli import main
+
+    setup = ScanSetup(theta_i_deg=(20.0, 60.0), power_w=2e-8, sensor_px=48)
+    sample = Sample("sharp", "lambert+ggx", (0.3, 0.5, 0.05))
+    bench = tmp_path / "bench.toml"
+    bench.write_text(profile_text(setup, sample).replace("speed=20", "speed=400").replace(
+        "stage=MTS25-Z8&speed=400", "stage=MTS25-Z8&speed=400&start=0"), encoding="utf-8")
+    plan = tmp_path / "lobe.toml"
+    plan.write_text(LOBE_PLAN.replace('points = 10,', 'points = 8, prior = "lambert+ggx",'),
+                    encoding="utf-8")
+    runs = tmp_path / "runs"
+    assert main(["run", str(plan), "--bench", str(bench), "--out", str(runs), "--no-fsync",
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "second pass: 8 points placed by Fisher information" in out
+    second = Path(out.split("fit both passes: scatterlab fit ")[1].split()[0])
+    assert main(["fit", str(second), "--out", str(tmp_path / "rep"), "--models",
+                 "lambert,lambert+ggx", "--no-cv"]) == 0
+    fit_out = capsys.readouterr().out
+    assert "the model describes the data" in fit_out
+    with h5py.File(second, "r") as f:
+        sources = {s.decode() for s in f["entry/analysis/reduced/source_run"][()]}
+        params = f["entry/analysis/chosen/params"][()]
+        stderr = f["entry/analysis/chosen/stderr"][()]
+    assert len(sources) == 2
+    assert np.all(np.abs(params - np.array(sample.params)) < 4.0 * stderr)
