@@ -32,11 +32,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from analysis.brdf import get_model
 from analysis.brdf.geometry import make_geometry
-from analysis.brdf.reduction import LEVELS, absolute_brdf, forward_model, receiver_model
+from analysis.brdf.reduction import LEVELS, forward_model, receiver_model
 from analysis.brdf.reduction.forward import point_keys
-from tests.instrument.sim_scan import Sample, ScanSetup, receiver, reduce_seed, render
-
-PHOTON_J = 6.62607015e-34 * 299792458.0 / 633e-9
+from tests.instrument.sim_scan import Sample, ScanSetup, noise_free, receiver, reduce_seed, render
 
 
 def adaptive_levels(model, rg, params, g, sigma, tau=0.1) -> dict:
@@ -60,10 +58,8 @@ def compare(alpha: float, theta_i: float, px: int) -> dict:
     sample = Sample(f"a{alpha}", "lambert+ggx", (0.3, 0.5, alpha))
     r = render(setup, sample)
     a = r.angles_rad
-    power = r.photon_rate.reshape(len(a), -1).sum(axis=1) * PHOTON_J
     rg = receiver(setup)
-    data = absolute_brdf(power, power, *a.T, incident_power_w=setup.power_w,
-                         solid_angle=rg.solid_angle_sr, receiver=rg).brdf
+    data = noise_free(r).brdf
     model = get_model(sample.model)
     p = np.array(sample.params)
     g = make_geometry(*a.T)

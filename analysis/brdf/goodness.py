@@ -92,8 +92,9 @@ class GoodnessOfFit:
 
     def summary(self) -> str:
         """χ²/ν with its expected spread and the p-value, in words."""
+        p = "p < 1e-300" if self.p_value == 0.0 else f"p = {self.p_value:.2g}"
         return (f"χ²/dof = {self.reduced_chi2:.4g} for {self.dof} dof (expected 1 ± "
-                f"{self.expected_spread:.2g}), p = {self.p_value:.2g}")
+                f"{self.expected_spread:.2g}), {p}")
 
     def verdict(self) -> str:
         """The sentence reports print."""

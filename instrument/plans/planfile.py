@@ -223,15 +223,24 @@ def _boolean(v: _Validator, t: dict, key: str, path: str) -> None:
         v.error(f"{path}.{key}", "must be true or false")
 
 
+def _subtable(v: _Validator, t: dict, key: str, path: str, keys: set[str],
+              hint: str = "") -> dict | None:
+    """``t[key]`` when it is a table of known ``keys`` (errors recorded), else None."""
+    if key not in t:
+        return None
+    sub = t[key]
+    if not isinstance(sub, dict):
+        v.error(f"{path}.{key}", "must be a table" + (f" {hint}" if hint else ""))
+        return None
+    v.unknown(sub, f"{path}.{key}", keys)
+    return sub
+
+
 def _specular(v: _Validator, t: dict, path: str, keys: set[str]) -> None:
-    if "specular" not in t:
+    s = _subtable(v, t, "specular", path, keys)
+    if s is None:
         return
-    s = t["specular"]
     where = f"{path}.specular"
-    if not isinstance(s, dict):
-        v.error(where, "must be a table")
-        return
-    v.unknown(s, where, keys)
     number(v, s, "half_width_deg", where, lo=0.01, hi=45.0, required=True)
     if "step_deg" in keys:
         number(v, s, "step_deg", where, lo=0.01, hi=45.0, required=True)
@@ -283,15 +292,12 @@ def _point_pairs(v: _Validator, t: dict, path: str) -> None:
 def _lobe(v: _Validator, t: dict, path: str) -> None:
     """``lobe = {points, step_deg, search_half_width_deg, search_step_deg, prior}``: sample
     the lobe in two passes (:mod:`instrument.plans.lobe`)."""
-    if "lobe" not in t:
+    lb = _subtable(v, t, "lobe", path, {"points", "step_deg", "search_half_width_deg",
+                                        "search_step_deg", "prior", "target"},
+                   "{points = N, ...}")
+    if lb is None:
         return
-    lb = t["lobe"]
     where = f"{path}.lobe"
-    if not isinstance(lb, dict):
-        v.error(where, "must be a table {points = N, ...}")
-        return
-    v.unknown(lb, where, {"points", "step_deg", "search_half_width_deg", "search_step_deg",
-                          "prior", "target"})
     number(v, lb, "points", where, lo=1, hi=10000, integer=True, required=True)
     number(v, lb, "step_deg", where, lo=0.01, hi=10.0)
     number(v, lb, "search_half_width_deg", where, lo=0.5, hi=45.0)

@@ -188,6 +188,18 @@ def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = 
     return Rendered(setup, sample, np.array(angles), np.array(rates), plan)
 
 
+def noise_free(r: Rendered) -> BRDFPoints:
+    """The noise-free reduction of ``r``: the collected power of every point (its photon
+    rates summed over the frame) by the absolute method, receiver factor divided out."""
+    photon_j = 6.62607015e-34 * 299792458.0 / 633e-9
+    power = r.photon_rate.reshape(len(r.photon_rate), -1).sum(axis=1) * photon_j
+    rg = receiver(r.setup)
+    a = r.angles_rad
+    return absolute_brdf(power, power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                         incident_power_w=r.setup.power_w, solid_angle=rg.solid_angle_sr,
+                         receiver=rg)
+
+
 def exposures_us(r: Rendered) -> np.ndarray:
     """Per-point exposure: the brightest pixel at ``fill`` of the full well, capped."""
     s = r.setup
