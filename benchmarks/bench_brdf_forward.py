@@ -93,9 +93,9 @@ def main() -> int:
     args = ap.parse_args()
     alphas = (0.3, 0.02) if args.quick else (0.3, 0.1, 0.05, 0.02)
     thetas = (40.0, 80.0) if args.quick else (0.0, 20.0, 40.0, 60.0, 80.0)
-    print("| α | θi | points | max |Δ|/f | max |Δ|/σ, closed loop | max |Δ|/σ, high SNR "
-          "| points per level 0–4 | old model: max |Δ|/σ, closed loop "
-          "| nominal angles: max |Δ|/σ, closed loop | time (s) |")
+    print("| α | θi | points | max abs Δ/f | max abs Δ/σ, closed loop | max abs Δ/σ, high SNR "
+          "| points per level 0–4 | old model: max abs Δ/σ, closed loop "
+          "| nominal angles: max abs Δ/σ, closed loop | time (s) |")
     print("|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|")
     for alpha in alphas:
         for ti in thetas:

@@ -7,10 +7,13 @@ of the best score (the plausible set) are then refitted with the set-point scatt
 from their own slopes (effective variance, from ``sigma_indep``), and one rule chooses
 among them — the information criterion with cross-validation:
 
-1. **Information criterion.** Among the models within ``delta`` (default 2: "not worth
-   more than a bare mention", Kass & Raftery 1995) of the best plausible score, the one
-   with the fewest parameters (ties: the lower score). ``plausible_delta`` defaults to 10
-   ("very strong" evidence against the models beyond, same source).
+1. **Information criterion.** Among the models within ``delta`` of the best plausible
+   score, the one with the fewest parameters (ties: the lower score). The pipeline's
+   ``delta`` is 6 ("strong" evidence on Kass & Raftery's 1995 scale: with 23 candidates
+   some fit a smaller model's noise better by 2–6 by chance;
+   :data:`instrument.pipelines.brdf.analyse.SELECTION_DELTA`); this function defaults to
+   2 ("not worth more than a bare mention"). ``plausible_delta`` defaults to 10 ("very
+   strong" evidence against the models beyond, same source).
 2. **Cross-validation as the check.** The plausible models are scored by grouped k-fold
    cross-validation that holds out whole incidence angles (prediction at an unseen θi,
    :func:`analysis.brdf.selection.cross_validate`'s folds), each fold refitted from the
@@ -31,7 +34,8 @@ best-scoring one does not beat beyond doubt.
 
 Speed (benchmarks/bench_brdf_fit.py, the default 23 candidates): the sums of a diffuse and
 a lobe model start from the fits of their parts and inherit the lobe part's quadrature
-levels, so most converge in a few iterations; only the candidates near the best score are
+levels, so most converge in a few iterations; the first pass stops at χ² to 10⁻⁷ and the
+plausible set is refitted to full precision; only the candidates near the best score are
 refitted from more starts, and only the plausible set is cross-validated.
 """
 
