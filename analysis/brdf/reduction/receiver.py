@@ -39,9 +39,11 @@ than a fraction of the noise):
 * footprint: Gauss–Hermite in (s, t) = (√2 u cos θi / w, √2 v / w), whose weight is the
   Gaussian itself; where the sample's edge cuts the footprint, Gauss–Legendre over the
   chord of the sample disk at each t node, with the Gaussian in the weights;
-* aperture: Radon's degree-5 disk rule (Stroud 1971, S2:5-1) at level 0, then
-  Gauss–Jacobi rules in r with weight r (exact in r to degree 2n − 1) × equally spaced
-  azimuths; a pinhole (``sample_aperture=False``) uses the aperture centre only;
+* aperture: Radon's degree-5 disk rule (Stroud 1971, S2:5-1) at level 0, then product
+  rules of Gauss–Chebyshev (second kind) across and Gauss–Legendre along the chords,
+  aligned with the plane of ωi and ωr and with more nodes across it where a lobe seen at
+  grazing is narrow there (:func:`_aspect`); a pinhole (``sample_aperture=False``) uses
+  the aperture centre only;
 * angular spread (divergence ⊕ set-point uncertainty, a Gaussian in up to three angles):
   the centre at level 0, Stroud's degree-3 rule (±√n along each axis) at level 1, the
   3-point Gauss–Hermite product (degree 5) above.
