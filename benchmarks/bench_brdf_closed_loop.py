@@ -12,7 +12,16 @@ and the camera method's geometric systematics at high signal.
 3. High SNR (1024² px, 80 % full well, 4 frames averaged): the sim bench's sample fitted
    with the receiver model and with the BRDF at the nominal angles, z = (estimate − truth)/σ.
 
-Run: ``python benchmarks/bench_brdf_closed_loop.py [--quick] [--seeds N] [--high-snr N]``.
+4. ``--matrix N``: the validation matrix of issue 13 §5 — ten ground-truth samples, one per
+   family, from diffuse to a sharp GGX lobe (α = 0.02), scanned at θi = 20°, 50°, 80°
+   (tests/instrument/sim_scan.py ``MATRIX``), N sensor seeds each, every scan analysed as
+   ``scatterlab fit`` does (the default candidates, instrument-aware fits, the
+   goodness-of-fit gate); per sample the right-model rate, the fraction of the true
+   model's parameters inside the reported 2σ, the fraction flagged as not described by
+   the model and the χ²/dof of the chosen fit.
+
+Run: ``python benchmarks/bench_brdf_closed_loop.py [--quick] [--seeds N] [--high-snr N]``;
+``python benchmarks/bench_brdf_closed_loop.py --seeds 0 --high-snr 0 --matrix 20``.
 """
 
 from __future__ import annotations
@@ -29,8 +38,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from analysis.brdf import get_model
 from analysis.brdf.fit import fit_brdf
 from analysis.brdf.reduction import absolute_brdf, receiver_model, solid_angle_sr
-from tests.instrument.pipelines.brdf.test_closed_loop import closed_loop
-from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, receiver, reduce_seed, render
+from tests.instrument.pipelines.brdf.test_closed_loop import closed_loop, matrix_stats
+from tests.instrument.sim_scan import (
+    MATRIX,
+    SAMPLES,
+    Sample,
+    ScanSetup,
+    receiver,
+    reduce_seed,
+    render,
+)
 
 #: The sim bench's own sample (instrument/bench/profiles/sim.toml [simulation.scene]).
 EXAMPLE = Sample("example", "lambert+ggx", (0.5, 0.2, 0.2))
@@ -111,6 +128,29 @@ def high_snr_table(seeds: int) -> None:
           f"std of z = {', '.join(f'{x:.2f}' for x in z_all.std(axis=0))}")
 
 
+def matrix_table(n: int, names: list[str] | None = None) -> None:
+    print("| sample | truth | seeds | right model | right or indistinguishable | flagged "
+          "(model rejected) | truth inside reported 2σ (per parameter) | χ²/dof of the chosen "
+          "fit: median [min, max] | clipped readings left out | s per fit | time (s) |")
+    print("|---|---|---:|---:|---:|---:|---|---|---:|---:|---:|")
+    for s in MATRIX:
+        if names and s.name not in names:
+            continue
+        t0 = time.perf_counter()
+        st = matrix_stats(s, range(n))
+        names_p = get_model(s.model).param_names
+        truth = ", ".join(f"{k}={v:g}" for k, v in zip(names_p, s.params, strict=True))
+        cov = ", ".join(f"{x:.0%}" for x in st.coverage_2sigma)
+        c = st.chi2_dof
+        print(f"| {s.name} | {s.model}: {truth} | {n} | {st.right_model:.0%} | "
+              f"{st.right_or_twin:.0%} | {st.flagged:.0%} | {cov} | {np.median(c):.2f} "
+              f"[{c.min():.2f}, {c.max():.2f}] | {st.clipped:.1f} | {st.seconds_per_fit:.2f} | "
+              f"{time.perf_counter() - t0:.0f} |", flush=True)
+        others = sorted({x for x in st.chosen if x != s.model})
+        if others:
+            print(f"<!-- {s.name}: also chosen {', '.join(others)} -->", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="10 seeds per sample, 1 high-SNR")
@@ -118,7 +158,14 @@ def main() -> int:
                     help="seeds per sample (default 50; 0 skips the coverage table)")
     ap.add_argument("--high-snr", type=int, default=None,
                     help="high-SNR seeds (default 3; 0 skips the full-resolution parts)")
+    ap.add_argument("--matrix", type=int, default=0, metavar="N",
+                    help="the validation matrix with N seeds per sample (default 0: skip)")
+    ap.add_argument("--samples", default=None,
+                    help="comma-separated matrix sample names (default: all)")
     args = ap.parse_args()
+    if args.matrix > 0:
+        matrix_table(args.matrix, args.samples.split(",") if args.samples else None)
+        print()
     n = args.seeds if args.seeds is not None else (10 if args.quick else 50)
     if n > 0:
         coverage_table(n)

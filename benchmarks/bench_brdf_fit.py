@@ -9,7 +9,14 @@ A control row gives ``curve_fit`` (trf) the geometry built once as well
 (``BRDFModel.evaluate_geometry``): it separates what the speed-up owes to caching the
 geometry from what it owes to the analytic Jacobian and the lean LM step.
 
+``--selection`` times the default fit instead (issue 13 §4): model selection among the
+default candidates as ``scatterlab fit`` runs it (``instrument.pipelines.brdf.analyse.
+analyse`` with its ``DEFAULT_MODELS``, cross-validation on) on the closed loop's 57-point
+in-plane scan of the glossy sample (tests/instrument/sim_scan.py, sensor seed 0); wall and
+CPU time, median of the repeats. ``--models`` times another candidate list.
+
 Run:  python benchmarks/bench_brdf_fit.py [--quick] [--samples N] [--repeats R]
+      python benchmarks/bench_brdf_fit.py --selection [--repeats R] [--models a,b+c]
 """
 
 from __future__ import annotations
@@ -17,8 +24,10 @@ from __future__ import annotations
 import argparse
 import platform
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import scipy
@@ -65,13 +74,44 @@ def timed_round_robin(
     return {k: (statistics.median(wall[k]), statistics.median(cpu[k]), outs[k]) for k in fns}
 
 
+def selection_timing(repeats: int, models: str | None) -> None:
+    """The default fit's wall and CPU time on the 57-point closed-loop scan (docstring)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS, analyse
+    from tests.instrument.sim_scan import SAMPLES, ScanSetup, reduce_seed, render
+
+    names = list(DEFAULT_MODELS) if models is None else models.split(",")
+    pts = reduce_seed(render(ScanSetup(), SAMPLES[1]), 0)
+    res = analyse(pts, names)  # warm-up (imports, caches)
+    walls, cpus = [], []
+    for _ in range(repeats):
+        w0, c0 = time.perf_counter(), time.process_time()
+        res = analyse(pts, names)
+        walls.append(time.perf_counter() - w0)
+        cpus.append(time.process_time() - c0)
+    fit = res.chosen_fit
+    print(f"# default fit: {len(names)} candidates, {pts.n} points, median of {repeats} runs; "
+          f"python {platform.python_version()}, numpy {np.__version__}")
+    print("| candidates | wall [ms] | CPU [ms] | chosen | χ² | α |")
+    print("|---:|---:|---:|---|---:|---|")
+    print(f"| {len(names)} | {statistics.median(walls) * 1e3:.0f} | "
+          f"{statistics.median(cpus) * 1e3:.0f} | {res.chosen} | {fit.chi2:.1f} | "
+          f"{fit.params[-1]:.5f} ± {fit.stderr[-1]:.1e} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="3 repeats instead of 15")
     ap.add_argument("--samples", type=int, default=10_000)
     ap.add_argument("--repeats", type=int, default=None)
+    ap.add_argument("--selection", action="store_true",
+                    help="time the default model selection on a 57-point scan instead")
+    ap.add_argument("--models", default=None, help="candidates for --selection")
     args = ap.parse_args()
     repeats = args.repeats or (3 if args.quick else 15)
+    if args.selection:
+        selection_timing(repeats, args.models)
+        return
 
     model = get_model("lambert+ggx")
     y, sig, ti, pi_, tr, pr = make_data(args.samples)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -40,8 +41,10 @@ class Quadrature:
     weights: NDArray[np.float64]
 
 
+@lru_cache(maxsize=8)
 def hemisphere_quadrature(n_mu: int = 96, n_phi: int = 192) -> Quadrature:
-    """Gauss–Legendre in μ ∈ [0, 1] × trapezoid in φ: dω cos θ = μ dμ dφ."""
+    """Gauss–Legendre in μ ∈ [0, 1] × trapezoid in φ: dω cos θ = μ dμ dφ (cached: the
+    same nodes serve every θi and model; callers must not modify the arrays)."""
     t, w = np.polynomial.legendre.leggauss(n_mu)
     mu = 0.5 * (t + 1.0)
     wmu = 0.5 * w

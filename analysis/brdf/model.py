@@ -205,7 +205,8 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
     """The sum f = Σ f_m of models (e.g. Lambertian + Cook–Torrance GGX).
 
     Parameter names become ``"<component>.<param>"``; a component name that repeats gets a
-    numeric suffix ("ggx", "ggx2"). The Jacobian is analytic if every part's is. The sum is
+    numeric suffix ("ggx", "ggx2"). The Jacobian is analytic for the parts that have one
+    and central differences of the part alone for the others. The sum is
     energy bounded only as the sum of the parts' bounds (e.g. ρd + ks ≤ 1 keeps
     Lambertian + microfacet ≤ 1) — stated in ``validity``.
     """
@@ -240,10 +241,17 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
         return total
 
     jac: JacFn | None = None
-    if all(m.jac_fn is not None for m in parts):
+    if any(m.jac_fn is not None for m in parts):
+        # analytic where a part has it, central differences of that part alone where not
+        # (a sum's columns are its parts' columns: no need to difference the whole sum)
+
+        def part_jac(m: BRDFModel, q: NDArray[np.float64], g: Geometry) -> NDArray:
+            if m.jac_fn is not None:
+                return m.jac_fn(q, g)
+            return numeric_jacobian(m.value_fn, q, g)
 
         def jac(p: NDArray[np.float64], g: Geometry) -> NDArray[np.float64]:
-            cols = [m.jac_fn(p[sl], g) for m, sl in zip(parts, slices, strict=True)]
+            cols = [part_jac(m, p[sl], g) for m, sl in zip(parts, slices, strict=True)]
             return np.concatenate(cols, axis=-1)
 
     return CompositeModel(

@@ -44,6 +44,25 @@ _ALIASES = {
 }
 
 
+#: The library's model families, each by its representative registry names (the default
+#: candidate set of a fit, :func:`default_candidates`).
+FAMILIES: dict[str, tuple[str, ...]] = {
+    "diffuse": ("lambert", "oren_nayar", "hapke"),
+    "specular": ("ggx", "beckmann", "phong"),
+    "physical_optics": ("beckmann_kirchhoff", "rayleigh_rice_gauss"),
+}
+
+
+def default_candidates() -> tuple[str, ...]:
+    """Candidates for a sample whose model is not known: every diffuse, specular and
+    physical-optics family member alone, then every sum of one diffuse and one specular or
+    physical-optics model (3 + 3 + 2 + 3 × 5 = 23 names; physics.md §2: "practical fits
+    usually combine a diffuse and a specular lobe")."""
+    lobes = FAMILIES["specular"] + FAMILIES["physical_optics"]
+    sums = tuple(f"{d}+{s}" for d in FAMILIES["diffuse"] for s in lobes)
+    return FAMILIES["diffuse"] + lobes + sums
+
+
 def available_models() -> tuple[str, ...]:
     """Registered base-model names (sorted)."""
     return tuple(sorted(_FACTORIES))
@@ -65,8 +84,16 @@ def unregister_model(name: str) -> None:
     _FACTORIES.pop(name, None)
 
 
-def get_model(name: str) -> BRDFModel:
-    """The model called ``name``; "a+b+…" builds the sum of the parts.
+#: Models whose value depends on the wavelength (factories taking ``wavelength_um``).
+_SPECTRAL = {
+    "rayleigh_rice_gauss": lambda lam: rayleigh_rice(psd="gaussian", wavelength_um=lam),
+    "rayleigh_rice_abc": lambda lam: rayleigh_rice(psd="abc", wavelength_um=lam),
+}
+
+
+def get_model(name: str, *, wavelength_um: float | None = None) -> BRDFModel:
+    """The model called ``name``; "a+b+…" builds the sum of the parts. ``wavelength_um``
+    sets the wavelength of the models that depend on it (Rayleigh–Rice; default 0.6328).
 
     Raises
     ------
@@ -81,6 +108,9 @@ def get_model(name: str) -> BRDFModel:
             raise KeyError(
                 f"unknown BRDF model {part!r}; known: {', '.join(available_models())}"
             )
+        if wavelength_um is not None and key in _SPECTRAL:
+            models.append(_SPECTRAL[key](float(wavelength_um)))
+            continue
         models.append(_FACTORIES[key]())
     return models[0] if len(models) == 1 else sum_models(*models)
 

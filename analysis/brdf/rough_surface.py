@@ -34,6 +34,20 @@ def beckmann_kirchhoff() -> BRDFModel:
         d = mf.beckmann_d(g.cos_theta_h, m, g.tan2_theta_h)
         return p[0] * d * mf.separable_smith_visibility(g.mu_i, g.mu_r, m)
 
+    def jac(p: NDArray, g: Geometry) -> NDArray:
+        # V = 1/(4 a_i a_r), a = μ + μΛ(μ): ∂V/∂m = −V (∂a_i/a_i + ∂a_r/a_r), ∂a = ∂(μΛ)/∂m
+        m = float(p[1])
+        mi = np.maximum(g.mu_i, mf.MU_FLOOR)
+        mr = np.maximum(g.mu_r, mf.MU_FLOOR)
+        a_i = mi + mf.beckmann_mu_lambda(mi, m)
+        a_r = mr + mf.beckmann_mu_lambda(mr, m)
+        v = 0.25 / np.maximum(a_i * a_r, mf._DEN_FLOOR)
+        dv = -v * (mf.beckmann_mu_lambda_dalpha(mi, m) / a_i
+                   + mf.beckmann_mu_lambda_dalpha(mr, m) / a_r)
+        d = mf.beckmann_d(g.cos_theta_h, m, g.tan2_theta_h)
+        dd = mf.beckmann_d_dalpha(g.cos_theta_h, m, g.tan2_theta_h)
+        return np.stack([d * v, p[0] * (dd * v + d * dv)], axis=-1)
+
     return BRDFModel(
         name="beckmann_kirchhoff",
         params=(
@@ -41,6 +55,7 @@ def beckmann_kirchhoff() -> BRDFModel:
             ParamSpec("m", "1", 1e-3, 2.0, 0.3, log=True, description="rms surface slope"),
         ),
         value_fn=value,
+        jac_fn=jac,
         description="Beckmann–Kirchhoff very-rough limit with Beckmann (Smith) shadowing.",
         validity="σ ≫ λ, correlation length ≫ λ; energy bounded for R ≤ 1",
         reference="Beckmann & Spizzichino 1963; Beckmann 1965; physics.md §2",

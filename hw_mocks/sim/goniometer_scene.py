@@ -57,7 +57,9 @@ def _dot3(v: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]
     """v · a over the last axis of ``v`` (shape (..., 3)) with a fixed 3-vector ``a``."""
     return v[..., 0] * a[0] + v[..., 1] * a[1] + v[..., 2] * a[2]
 
-#: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays.
+#: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays. A function may also
+#: carry ``from_vectors(ω_i, ω_r)`` (unit vectors in the sample frame), which the renderer
+#: prefers.
 BrdfFunction = Callable[[Any, Any, Any, Any], NDArray[np.float64]]
 
 
@@ -75,6 +77,7 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         names take the model's start values); default the start values.
     """
     from analysis.brdf import get_model
+    from analysis.brdf.geometry import geometry_from_vectors
 
     model = get_model(name)
     if params is None:
@@ -94,6 +97,12 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
     def brdf(theta_i, phi_i, theta_r, phi_r):
         return model.evaluate(vector, theta_i, phi_i, theta_r, phi_r)
 
+    def from_vectors(omega_i, omega_r):
+        # the same values from unit vectors in the sample frame (no angles in between:
+        # the renderer has vectors, and arccos/sin/cos per ray cost more than the model)
+        return model.evaluate_geometry(vector, geometry_from_vectors(omega_i, omega_r))
+
+    brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     brdf.model_name = name  # type: ignore[attr-defined]
     brdf.params = tuple(float(v) for v in vector)  # type: ignore[attr-defined]
     return brdf
@@ -108,6 +117,10 @@ def lambertian_brdf(reflectance: float) -> BrdfFunction:
     def brdf(theta_i, phi_i, theta_r, phi_r):
         return np.full(np.broadcast(theta_i, phi_i, theta_r, phi_r).shape, value)
 
+    def from_vectors(omega_i, omega_r):
+        return np.full(np.shape(omega_r)[:-1], value)
+
+    brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     return brdf
 
 
@@ -170,6 +183,12 @@ class GoniometerScene:
             raise ValueError(f"unknown scene keys {sorted(unknown)}")
         return cls(brdf=brdf_from_model(name, params),
                    reference_brdf=lambertian_brdf(reference), **cfg)
+
+    @property
+    def depth_extent_mm(self) -> float:
+        """How far (mm) lit scene points can lie from the sample centre: a camera focused
+        there sees them defocused by at most this depth (the sample's radius)."""
+        return self.sample_radius_mm
 
     # helpers ------------------------------------------------------------------
     def _active_brdf(self) -> BrdfFunction | None:
@@ -241,13 +260,18 @@ class GoniometerScene:
         if not lit.any():
             return out
         irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
-        ti, pi = pose.local_angles(pose.source_dir)
         d_lit = d[lit]
         # Towards the observer: −d, in the sample frame.
         lx, ly, lz = -_dot3(d_lit, x_s), -_dot3(d_lit, y_s), -_dot3(d_lit, n)
-        tr = np.arccos(np.clip(lz, -1.0, 1.0))
-        pr = np.arctan2(ly, lx)
-        values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
+        from_vectors = getattr(brdf, "from_vectors", None)
+        if from_vectors is not None:
+            values = np.asarray(from_vectors(s_loc, np.stack([lx, ly, lz], axis=-1)),
+                                dtype=float)
+        else:
+            ti, pi = pose.local_angles(pose.source_dir)
+            tr = np.arccos(np.clip(lz, -1.0, 1.0))
+            pr = np.arctan2(ly, lx)
+            values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
         out[lit] += values * irradiance
         return out
 

@@ -220,6 +220,10 @@ class LightFieldBenchScene:
         return cls(hidden, track, float(cfg.get("reference_power_w", 1e-3)),
                    float(cfg.get("ambient_radiance", 0.0)))
 
+    #: A flatland scene renders rays (y_m, θ_m) in one plane; the simulated camera keeps
+    #: its pinhole model here (the light-field analysis models pinhole rays too).
+    pupil_sampling = False
+
     @property
     def d2_mm(self) -> float:
         """Wall → measurement-plane distance (mm)."""

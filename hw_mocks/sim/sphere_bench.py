@@ -228,6 +228,11 @@ class SphereBenchScene:
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False,
                                   hash=False)
 
+    #: The sphere pipeline maps each pixel to one surface normal (a pinhole view, issue 7);
+    #: the simulated camera keeps its chief-ray model here. Sampling the pupil would add
+    #: defocus at the limbs and cost a full pupil integral per pixel of every sphere.
+    pupil_sampling = False
+
     def __post_init__(self) -> None:
         if not self.spheres:
             raise ValueError("a sphere scene needs at least one sphere")

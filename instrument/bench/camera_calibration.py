@@ -47,9 +47,10 @@ class CameraCalibration:
         Pixels summed per point (the frame), for planning; optional.
     chief_ray_only : bool
         True for a camera model that takes each pixel's radiance along its chief ray
-        through the pupil centre (the simulated camera); False for a real lens, which
-        averages the scene over its pupil. Decides whether the receiver model integrates
-        the pupil (:class:`analysis.brdf.reduction.ReceiverGeometry`).
+        through the pupil centre (a simulated camera with ``pupil=chief``); False for a
+        real lens, and the default simulated camera, which average the scene over the
+        pupil. Decides whether the receiver model integrates the pupil
+        (:class:`analysis.brdf.reduction.ReceiverGeometry`).
     prnu_rel : float
         Photo-response non-uniformity (EMVA 1288 R3.1 §4: relative σ of one pixel's
         response); without a flat-field correction it is an error of the summed signal
@@ -114,8 +115,9 @@ def simulated_camera_calibration(url: str, *, wavelength_nm: float = 633.0,
                                  pixel_pitch_um=p.pixel_pitch_um,
                                  focal_length_mm=cam.optics.focal_length_mm,
                                  n_pixels=p.width * p.height,
-                                 # it traces one ray per pixel centre from the pupil centre
-                                 chief_ray_only=True, prnu_rel=p.prnu)
+                                 # a pinhole unless it integrates its pupil (the default)
+                                 chief_ray_only=cam.optics.pupil == "chief",
+                                 prnu_rel=p.prnu)
     finally:
         cam.close()
 

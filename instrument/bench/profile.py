@@ -168,12 +168,22 @@ class CollisionZone:
 
 @dataclass(frozen=True)
 class GeometrySpec:
+    """The goniometer's geometry. The optional beam and sample entries describe what each
+    reading integrates (the instrument function of the BRDF fit,
+    :mod:`analysis.brdf.reduction.receiver`): the beam's 1/e² radius at the sample and its
+    divergence (1/e² half-angle), and the sample's radius (it clips the footprint at
+    grazing incidence). ``None``: not declared (a simulated bench takes them from its
+    source and scene)."""
+
     kind: str = "in_plane"
     detector_distance_mm: float = 300.0
     detector_aperture_mm: float = 5.0
     min_bistatic_deg: float = 6.0
     source_theta_deg: float = 0.0
     collisions: tuple[CollisionZone, ...] = ()
+    beam_radius_mm: float | None = None
+    beam_divergence_mrad: float | None = None
+    sample_radius_mm: float | None = None
 
     @property
     def detector_solid_angle_sr(self) -> float:
@@ -377,7 +387,8 @@ def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:
 
 def _geometry(v: _Validator, t: dict, path: str) -> GeometrySpec:
     v.unknown(t, path, {"kind", "detector_distance_mm", "detector_aperture_mm",
-                        "min_bistatic_deg", "source_theta_deg", "collision"})
+                        "min_bistatic_deg", "source_theta_deg", "collision",
+                        "beam_radius_mm", "beam_divergence_mrad", "sample_radius_mm"})
     default = GeometrySpec()
     kind = v.string(t, "kind", path) or default.kind
     if kind not in ("in_plane", "out_of_plane"):
@@ -396,8 +407,15 @@ def _geometry(v: _Validator, t: dict, path: str) -> GeometrySpec:
         v.error(f"{path}.source_theta_deg", "must be a number of degrees in [-180, 180]")
         source = default.source_theta_deg
     collisions = _collisions(v, t.get("collision", []), f"{path}.collision")
+    divergence = t.get("beam_divergence_mrad")
+    if divergence is not None and (not _is_number(divergence) or divergence < 0):
+        v.error(f"{path}.beam_divergence_mrad", f"must be a number >= 0, got {divergence!r}")
+        divergence = None
     return GeometrySpec(kind, float(distance), float(aperture), float(bistatic), float(source),
-                        collisions)
+                        collisions, beam_radius_mm=v.positive(t, "beam_radius_mm", path),
+                        beam_divergence_mrad=(None if divergence is None
+                                              else float(divergence)),
+                        sample_radius_mm=v.positive(t, "sample_radius_mm", path))
 
 
 def _collisions(v: _Validator, raw: Any, path: str) -> tuple[CollisionZone, ...]:

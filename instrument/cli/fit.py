@@ -7,6 +7,7 @@ The results go into the run file (``/entry/analysis``) and the report (PNG figur
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
@@ -107,8 +108,16 @@ def run(args: argparse.Namespace) -> int:
     fit = result.chosen_fit
     print(f"{reduced.points.n} points ({reduced.points.method}); chosen model "
           f"{result.chosen} ({result.selection.rule})")
+    # the goodness-of-fit gate (docs/decisions/0051)
+    print(f"  {result.verdict}")
+    factor = result.inflation.get(result.chosen, 1.0)
+    flag = "" if factor == 1.0 else f"  (σ inflated ×{factor:.3g}: model rejected)"
     for name, value, err, unit in fit.table():
-        print(f"  {name:<16} {value:12.6g} ± {err:.3g} {unit}")
+        print(f"  {name:<16} {value:12.6g} ± {err:.3g} {unit}{flag}")
+    for k, r in (result.disagreeing_points()[:10] if not result.adequate else []):
+        p = reduced.points
+        print(f"  disagrees: {reduced.point_label(k)} (θi={math.degrees(p.theta_i[k]):.1f}°, "
+              f"θr={math.degrees(p.theta_r[k]):.1f}°) r = {r:+.1f}σ")
     if fit.bootstrap is not None:
         b = fit.bootstrap
         print(f"  bootstrap ({b.samples.shape[0]} resamples, noise only): σ = "

@@ -13,6 +13,7 @@ from instrument.cli import _planner
 from instrument.cli._progress import fmt_s
 from instrument.plans import build_plan, load_plan
 from instrument.plans.coverage import write_coverage_png
+from instrument.plans.lobe import lobe_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -49,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
           f"{est.n_points} points, order {spec.order}")
     if plan.dropped_in_beam:
         print(f"  {plan.dropped_in_beam} point(s) with the detector in the beam left out")
+    lobe = lobe_of(spec)
+    if lobe is not None:
+        print(f"  this is the first pass of a two-pass lobe plan: `scatterlab run` fits it "
+              f"and adds {lobe.points} points placed by Fisher information (a second run)")
     for role, dist in est.travel.items():
         unit = "mm" if role == "camera_z" else "deg"
         print(f"  travel {role:<15} {dist:10.1f} {unit}")

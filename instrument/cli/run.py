@@ -1,4 +1,5 @@
-"""``scatterlab run PLAN.toml``: run a plan on a bench and store it in one run file."""
+"""``scatterlab run PLAN.toml``: run a plan on a bench and store it in one run file (a
+two-pass lobe plan: two run files, the second naming the first)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,10 @@ from pathlib import Path
 from instrument.bench.devices import open_bench
 from instrument.bench.guard import GuardError
 from instrument.bench.profile import load_profile
+from instrument.cli._lobe import second_pass_plan
 from instrument.cli._progress import ConsoleProgress, print_summary
 from instrument.plans import build_plan, load_plan
+from instrument.plans.lobe import lobe_of
 from instrument.run.engine import EngineState, RunEngine
 from instrument.run.runner import DEFAULT_RUNS_DIR, start_run
 
@@ -89,4 +92,27 @@ def run(args: argparse.Namespace) -> int:
         return 2
     with open_bench(profile) as bench:
         engine = start_run(plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
-        return drive(engine, args.quiet)
+        code = drive(engine, args.quiet)
+        if code != 0 or lobe_of(spec) is None:
+            return code
+        return _second_pass(Path(engine.store.path), spec, profile, bench, args)
+
+
+def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) -> int:
+    """A two-pass lobe plan (``[scan] lobe``): fit the first pass, place the second pass's
+    points by Fisher information and run them (:mod:`instrument.plans.lobe`)."""
+    try:
+        second = second_pass_plan(first, spec, profile)
+    except (ValueError, GuardError) as err:
+        print(f"error: the second pass of {first.name} could not be planned: {err}")
+        return 2
+    pl = second.placement
+    print(f"second pass: {len(second.plan.points)} points placed by Fisher information on "
+          f"{second.model} fitted to the first pass ({second.verdict})")
+    for name in pl.sigma_first:
+        print(f"  predicted σ({name}): {pl.sigma_first[name]:.3g} after the first pass, "
+              f"{pl.sigma_both[name]:.3g} with the second")
+    engine = start_run(second.plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
+    code = drive(engine, args.quiet)
+    print(f"fit both passes: scatterlab fit {engine.store.path}")
+    return code

@@ -30,7 +30,7 @@ from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, spe
 from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
 
-__all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of"]
+__all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points"]
 
 #: Used for planning when a profile gives no velocity/acceleration for an axis.
 DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
@@ -148,12 +148,21 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
 
     pts: list[ScanPoint] = []
     angles: list[Angles] = []
-    if kind in ("brdf_in_plane", "reference", "signature"):
+    if kind in ("brdf_in_plane", "reference", "signature") and "points" in s:
+        angles.extend(_in_plane_angles(float(ti), float(tr)) for ti, tr in s["points"])
+    elif kind in ("brdf_in_plane", "reference", "signature"):
         theta_r = _expand(s["theta_r"])
+        # a two-pass lobe plan builds its first pass: the θr grid and a search around the
+        # mirror direction (instrument.plans.lobe)
+        search = s.get("specular")
+        if "lobe" in s:
+            lb = s["lobe"]
+            search = {"half_width_deg": float(lb.get("search_half_width_deg", 5.0)),
+                      "step_deg": float(lb.get("search_step_deg", 1.0))}
         for ti in _expand(s["theta_i"]):
             rs = list(theta_r)
-            if "specular" in s:
-                hw, step = s["specular"]["half_width_deg"], s["specular"]["step_deg"]
+            if search is not None:
+                hw, step = search["half_width_deg"], search["step_deg"]
                 n = math.floor(hw / step + 1e-9)
                 rs += [ti_abs + k * step for k in range(-n, n + 1)
                        for ti_abs in (abs(ti),) if abs(ti_abs + k * step) < 90]
@@ -245,6 +254,15 @@ def _ptc_exposures(x) -> list[float]:
             return list(np.geomspace(float(x["start"]), float(x["stop"]), n))
         return list(np.linspace(float(x["start"]), float(x["stop"]), n))
     return _expand(x)
+
+
+def guarded_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
+    """The points ``spec`` expands to on ``profile``, in generation order, less every point
+    the guard rejects (a candidate list for planning, e.g. :mod:`instrument.plans.lobe`;
+    :func:`build_plan` refuses such points instead)."""
+    raw = [replace(p, index=i) for i, p in enumerate(_raw_points(spec, profile))]
+    bad = {v.index for v in guard.check(raw, profile)}
+    return [p for p in raw if p.index not in bad]
 
 
 def build_plan(spec: PlanSpec, profile: BenchProfile, *,

@@ -34,6 +34,13 @@ explicit list):
   (range; signed: > 0 on the specular side of the normal, < 0 on the source side),
   optional ``specular = {half_width_deg, step_deg}`` for extra sampling around the
   specular direction, ``reciprocity = true`` to drop reciprocity-equivalent points;
+  or ``points = [[θi, θr], ...]`` (explicit signed pairs) instead of ``theta_i`` and
+  ``theta_r``. ``lobe = {points = N, step_deg = 0.25, search_half_width_deg = 5,
+  search_step_deg = 1, prior = "MODEL", target = "PARAM"}`` samples the lobe in two passes
+  (:mod:`instrument.plans.lobe`): the plan itself is the coarse first pass (the θr grid and
+  a search around the mirror direction); ``scatterlab run`` then fits it and runs a second
+  plan of N points placed by Fisher information, which names its first pass in
+  ``first_pass = "RUN"`` (the analysis reduces both runs together);
   ``reference`` also takes ``reference_name`` and ``reflectance``;
   ``skip_beam_points = true`` leaves out (and reports) the points whose detector would sit
   in the incident beam instead of rejecting the plan.
@@ -216,15 +223,24 @@ def _boolean(v: _Validator, t: dict, key: str, path: str) -> None:
         v.error(f"{path}.{key}", "must be true or false")
 
 
+def _subtable(v: _Validator, t: dict, key: str, path: str, keys: set[str],
+              hint: str = "") -> dict | None:
+    """``t[key]`` when it is a table of known ``keys`` (errors recorded), else None."""
+    if key not in t:
+        return None
+    sub = t[key]
+    if not isinstance(sub, dict):
+        v.error(f"{path}.{key}", "must be a table" + (f" {hint}" if hint else ""))
+        return None
+    v.unknown(sub, f"{path}.{key}", keys)
+    return sub
+
+
 def _specular(v: _Validator, t: dict, path: str, keys: set[str]) -> None:
-    if "specular" not in t:
+    s = _subtable(v, t, "specular", path, keys)
+    if s is None:
         return
-    s = t["specular"]
     where = f"{path}.specular"
-    if not isinstance(s, dict):
-        v.error(where, "must be a table")
-        return
-    v.unknown(s, where, keys)
     number(v, s, "half_width_deg", where, lo=0.01, hi=45.0, required=True)
     if "step_deg" in keys:
         number(v, s, "step_deg", where, lo=0.01, hi=45.0, required=True)
@@ -235,14 +251,62 @@ def _specular(v: _Validator, t: dict, path: str, keys: set[str]) -> None:
 
 def _in_plane(v: _Validator, t: dict, path: str) -> None:
     v.unknown(t, path, {"theta_i", "theta_r", "specular", "reciprocity", "reference_name",
-                        "reflectance", "skip_beam_points"})
+                        "reflectance", "skip_beam_points", "points", "first_pass", "lobe"})
     _boolean(v, t, "skip_beam_points", path)
-    values(v, t, "theta_i", path, lo=-89.9, hi=89.9, allow_range=True)
-    values(v, t, "theta_r", path, lo=-89.9, hi=89.9)
+    explicit = "points" in t
+    if explicit:
+        _point_pairs(v, t, path)
+        for key in ("theta_i", "theta_r", "specular", "lobe"):
+            if key in t:
+                v.error(f"{path}.{key}", "cannot be combined with an explicit points list")
+    else:
+        values(v, t, "theta_i", path, lo=-89.9, hi=89.9, allow_range=True)
+        values(v, t, "theta_r", path, lo=-89.9, hi=89.9)
     _specular(v, t, path, {"half_width_deg", "step_deg"})
+    _lobe(v, t, path)
+    if "first_pass" in t:
+        v.string(t, "first_pass", path)
     _boolean(v, t, "reciprocity", path)
     v.string(t, "reference_name", path)
     number(v, t, "reflectance", path, lo=0.0, hi=1.0)
+
+
+def _point_pairs(v: _Validator, t: dict, path: str) -> None:
+    """``points = [[θi, θr], ...]``: explicit signed in-plane pairs (degrees)."""
+    where = f"{path}.points"
+    pts = t["points"]
+    if not isinstance(pts, list) or not pts:
+        v.error(where, "must be a non-empty list of [theta_i, theta_r] pairs (degrees)")
+        return
+    if len(pts) > MAX_POINTS:
+        v.error(where, f"has {len(pts)} pairs; at most {MAX_POINTS}")
+        return
+    bad = [i for i, q in enumerate(pts)
+           if not (isinstance(q, list) and len(q) == 2 and all(_num(x) for x in q)
+                   and all(-89.9 <= x <= 89.9 for x in q))]
+    for i in bad[:5]:
+        v.error(f"{where}[{i}]", f"must be [theta_i, theta_r] with both in [-89.9, 89.9] "
+                f"degrees, got {pts[i]!r}")
+
+
+def _lobe(v: _Validator, t: dict, path: str) -> None:
+    """``lobe = {points, step_deg, search_half_width_deg, search_step_deg, prior}``: sample
+    the lobe in two passes (:mod:`instrument.plans.lobe`)."""
+    lb = _subtable(v, t, "lobe", path, {"points", "step_deg", "search_half_width_deg",
+                                        "search_step_deg", "prior", "target"},
+                   "{points = N, ...}")
+    if lb is None:
+        return
+    where = f"{path}.lobe"
+    number(v, lb, "points", where, lo=1, hi=10000, integer=True, required=True)
+    number(v, lb, "step_deg", where, lo=0.01, hi=10.0)
+    number(v, lb, "search_half_width_deg", where, lo=0.5, hi=45.0)
+    number(v, lb, "search_step_deg", where, lo=0.05, hi=10.0)
+    v.string(lb, "prior", where)
+    v.string(lb, "target", where)
+    if "specular" in t:
+        v.error(f"{path}.specular", "is replaced by lobe.search_half_width_deg and "
+                "lobe.search_step_deg in a two-pass lobe plan")
 
 
 def _hemisphere(v: _Validator, t: dict, path: str) -> None:

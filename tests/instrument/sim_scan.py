@@ -17,7 +17,7 @@ off, same exposure, same averaging) follows.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +59,21 @@ SAMPLES = (
 #: Candidate models the fits choose from.
 CANDIDATES = ("lambert", "oren_nayar", "lambert+ggx")
 
+#: The closed-loop validation matrix of issue 13 §5: one sample per family of the library,
+#: from diffuse to a sharp specular lobe (GGX α = 0.02), scanned at θi = 20°, 50°, 80°.
+MATRIX = (
+    Sample("lambert", "lambert", (0.8,)),
+    Sample("oren-nayar", "oren_nayar", (0.8, 0.3)),
+    Sample("hapke", "hapke", (0.6,)),
+    Sample("rough-beckmann", "lambert+beckmann", (0.4, 0.4, 0.3)),
+    Sample("smooth-rayleigh-rice", "lambert+rayleigh_rice_gauss", (0.3, 5.0, 4.0)),
+    Sample("glossy-ggx", "lambert+ggx", (0.3, 0.5, 0.2)),
+    Sample("glossy-phong", "lambert+phong", (0.3, 0.5, 300.0)),
+    Sample("sharp-ggx-0.05", "lambert+ggx", (0.3, 0.5, 0.05)),
+    Sample("sharp-ggx-0.02", "lambert+ggx", (0.3, 0.5, 0.02)),
+    Sample("metal-beckmann-kirchhoff", "beckmann_kirchhoff", (0.9, 0.2)),
+)
+
 
 @dataclass(frozen=True)
 class ScanSetup:
@@ -80,6 +95,7 @@ class ScanSetup:
     focal_length_mm: float = 50.0
     aperture_mm: float = 12.5
     distance_mm: float = 300.0
+    sample_radius_mm: float = 12.5
     sensor: SensorParams = field(default_factory=SensorParams)
     #: Rays per pixel side: a pixel integrates the irradiance over its area, the simulated
     #: camera samples its centre. Coarse pixels (2 mm on the sample at θr = 80° for 96 px)
@@ -92,7 +108,6 @@ class ScanSetup:
     def sensor_params(self) -> SensorParams:
         # same field of view as the 1024-px default camera, coarser pixels
         pitch = self.sensor.pixel_pitch_um * self.sensor.width / self.sensor_px
-        from dataclasses import replace
 
         return replace(self.sensor, width=self.sensor_px, height=self.sensor_px,
                        pixel_pitch_um=pitch)
@@ -129,13 +144,16 @@ class Rendered:
     plan: Plan
 
 
-def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None
-           ) -> Rendered:
-    """Render every plan point of ``setup`` for ``sample`` (noise-free); ``scene`` replaces
-    the default scene (the sample alone) e.g. to add an instrument signature."""
-    plan = setup.plan()
+def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None,
+           plan: Plan | None = None, cache: dict | None = None) -> Rendered:
+    """Render every plan point of ``setup`` (or of ``plan``) for ``sample`` (noise-free);
+    ``scene`` replaces the default scene (the sample alone) e.g. to add an instrument
+    signature. ``cache`` (a dict kept by the caller) reuses the frames of axis targets
+    rendered before for the same sample and setup."""
+    plan = plan if plan is not None else setup.plan()
     if scene is None:
-        scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params))
+        scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params),
+                                sample_radius_mm=setup.sample_radius_mm)
     world = VirtualBench(
         f"closed-loop-{sample.name}", scene=scene, arm_length_mm=setup.distance_mm,
         source=SourceState(on=True, power_w=setup.power_w, max_power_w=1.0,
@@ -143,7 +161,6 @@ def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = 
     )
     ss = setup.rays_per_pixel_side()
     coarse = setup.sensor_params()
-    from dataclasses import replace
 
     fine = replace(coarse, width=coarse.width * ss, height=coarse.height * ss,
                    pixel_pitch_um=coarse.pixel_pitch_um / ss)
@@ -153,16 +170,34 @@ def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = 
     )
     rates, angles = [], []
     for p in plan.points:
-        for role, value in p.targets:
-            world.set_role(role, value)
-        state = world.snapshot()
-        rate = np.array(cam.photon_rate(state), dtype=np.float64)
-        # each pixel sums its ss × ss sub-pixels (area integration)
-        rates.append(rate.reshape(coarse.height, ss, coarse.width, ss).sum(axis=(1, 3)))
+        key = (sample, setup, tuple((r, round(v, 9)) for r, v in p.targets))
+        if cache is not None and key in cache:
+            rates.append(cache[key])
+        else:
+            for role, value in p.targets:
+                world.set_role(role, value)
+            state = world.snapshot()
+            rate = np.array(cam.photon_rate(state), dtype=np.float64)
+            # each pixel sums its ss × ss sub-pixels (area integration)
+            rates.append(rate.reshape(coarse.height, ss, coarse.width, ss).sum(axis=(1, 3)))
+            if cache is not None:
+                cache[key] = rates[-1]
         a = p.angles
         angles.append([math.radians(a.theta_i), math.radians(a.phi_i),
                        math.radians(a.theta_r), math.radians(a.phi_r)])
     return Rendered(setup, sample, np.array(angles), np.array(rates), plan)
+
+
+def noise_free(r: Rendered) -> BRDFPoints:
+    """The noise-free reduction of ``r``: the collected power of every point (its photon
+    rates summed over the frame) by the absolute method, receiver factor divided out."""
+    photon_j = 6.62607015e-34 * 299792458.0 / 633e-9
+    power = r.photon_rate.reshape(len(r.photon_rate), -1).sum(axis=1) * photon_j
+    rg = receiver(r.setup)
+    a = r.angles_rad
+    return absolute_brdf(power, power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                         incident_power_w=r.setup.power_w, solid_angle=rg.solid_angle_sr,
+                         receiver=rg)
 
 
 def exposures_us(r: Rendered) -> np.ndarray:
@@ -188,12 +223,12 @@ def noise_model(setup: ScanSetup) -> DetectorNoise:
 
 
 def receiver(setup: ScanSetup) -> ReceiverGeometry:
-    """What the simulated camera integrates: the footprint seen along chief rays through its
-    pupil centre, with Ω = A_pupil/R² (what ``instrument.pipelines.brdf.reduce`` builds for a
-    run)."""
+    """What the simulated camera integrates: the footprint seen through its whole entrance
+    pupil, on the scene's sample disk, with Ω = A_pupil/R² (what
+    ``instrument.pipelines.brdf.reduce`` builds for a run)."""
     omega, _ = camera_solid_angle_sr(setup.aperture_mm, setup.distance_mm)
     return ReceiverGeometry(setup.beam_radius_mm, setup.distance_mm, setup.aperture_mm, omega,
-                            sample_aperture=False)
+                            sample_aperture=True, sample_radius_mm=setup.sample_radius_mm)
 
 
 def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
@@ -212,6 +247,7 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
                      1.0)
     rates = np.empty(n)
     variances = np.empty(n)
+    clipped = np.zeros(n, dtype=bool)
     zero = np.zeros_like(r.photon_rate[0], dtype=np.float32)
     for k in range(n):
         light, dark = [], []
@@ -225,6 +261,7 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
         sig = camera_signal(lf[None], [t[k]], df[None], noise=noise, n_averaged=s.frames,
                             flat=flat)
         rates[k], variances[k] = sig.rate_dn_per_us, sig.variance
+        clipped[k] = sig.clipped_pixels > 0
     k_gain = noise.system_gain_dn_per_e
     wl = 633.0
     power = camera_power_w(rates, system_gain_dn_per_e=k_gain,
@@ -234,10 +271,12 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
     rg = receiver(s)
     a = r.angles_rad
     sig_t = math.radians(sigma_theta_deg)
-    return absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
-                         incident_power_w=s.power_w, solid_angle=rg.solid_angle_sr,
-                         sigma_theta_i=sig_t, sigma_theta_r=sig_t,
-                         receiver=rg if receiver_geometry else None)
+    pts = absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                        incident_power_w=s.power_w, solid_angle=rg.solid_angle_sr,
+                        sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                        receiver=rg if receiver_geometry else None)
+    # readings clipped even at the shortest exposure are lower bounds, as in a run
+    return replace(pts, clipped=clipped)
 
 
 def profile_text(setup: ScanSetup, sample: Sample) -> str:
@@ -257,10 +296,11 @@ def profile_text(setup: ScanSetup, sample: Sample) -> str:
 
 
 def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_plane",
-                   run_id: str = "closed-loop") -> Path:
+                   run_id: str = "closed-loop", plan_text: str | None = None) -> Path:
     """Acquire every point of ``r`` with sensor ``seed`` and store it as a run file with
     :class:`instrument.run.storage.RunStore` (the engine's writer), frames per point: the light
-    frame then its dark frame."""
+    frame then its dark frame. ``plan_text`` is stored as the run's plan (default the
+    setup's)."""
     import time as _time
 
     from instrument.run.storage import FrameData, PointRecord, RunHeader, RunStore
@@ -273,7 +313,8 @@ def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_p
     plan = r.plan
     pol = plan.spec.acquisition
     header = RunHeader(
-        run_id=run_id, plan_kind=kind, plan_name=plan.spec.name, plan_text=s.plan_text(),
+        run_id=run_id, plan_kind=kind, plan_name=plan.spec.name,
+        plan_text=plan_text if plan_text is not None else s.plan_text(),
         profile_text=profile_text(s, r.sample), bench_name="sim", sample_name=r.sample.name,
         sample_description="closed-loop sample", axes=plan.axes,
         planned_targets=plan.targets_array().tolist(),

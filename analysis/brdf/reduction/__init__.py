@@ -1,9 +1,12 @@
 """BRDF reduction: detector signals → BRDF values with an uncertainty budget.
 
 Pure functions on arrays (no I/O), one module per job: :mod:`.detector` (signals, noise,
-solid angles), :mod:`.receiver` (footprint and aperture), :mod:`.values` (absolute and
-relative BRDF, signature), :mod:`.angular` (positioning uncertainty), :mod:`.reciprocity`
-(a check of the data) and :mod:`.uncertainty` (shared and correlated errors in fits).
+solid angles), :mod:`.receiver` (the instrument function: beam footprint and divergence,
+receiver aperture, set-point spread), :mod:`.values` (absolute and relative BRDF,
+signature), :mod:`.angular` (positioning uncertainty), :mod:`.reciprocity` (a check of the
+data), :mod:`.uncertainty` (shared and correlated errors in fits), :mod:`.forward` (the
+forward model a fit compares the data with, its quadrature refined against the noise) and
+:mod:`.candidates` (model selection among forward fits).
 The chain, per measured point:
 
 1. **Camera frames → collected power.** Light brackets and their dark frames are merged with
@@ -72,7 +75,16 @@ from analysis.brdf.reduction.detector import (
     pixel_response_covariance,
     solid_angle_sr,
 )
+from analysis.brdf.reduction.forward import (
+    ForwardFit,
+    fit_forward,
+    forward_model,
+    forward_slopes,
+)
 from analysis.brdf.reduction.receiver import (
+    LEVELS,
+    NodeSet,
+    QuadratureLevel,
     ReceiverGeometry,
     receiver_factor,
     receiver_model,
@@ -96,9 +108,13 @@ from analysis.brdf.reduction.values import (
 )
 
 __all__ = [
+    "LEVELS",
     "BRDFPoints",
     "CameraSignal",
     "DetectorNoise",
+    "ForwardFit",
+    "NodeSet",
+    "QuadratureLevel",
     "ReceiverGeometry",
     "ReciprocityCheck",
     "ReferenceStandard",
@@ -107,6 +123,9 @@ __all__ = [
     "camera_power_w",
     "camera_signal",
     "camera_solid_angle_sr",
+    "fit_forward",
+    "forward_model",
+    "forward_slopes",
     "pixel_response_covariance",
     "receiver_factor",
     "receiver_model",

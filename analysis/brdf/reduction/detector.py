@@ -82,6 +82,11 @@ class CameraSignal:
     profile_block : int
     profile_sq_sum : float
         Σ s_i² over the pixels (exact, not from blocks), with the profile.
+    clipped_pixels : int
+        Pixels of the region at or above the saturation level in the *shortest* bracket:
+        their true rate is unknown (above what the merge reports), so the summed rate is
+        only a lower bound — a point to leave out of fits, or to re-measure with less
+        light.
     """
 
     rate_dn_per_us: float
@@ -92,6 +97,7 @@ class CameraSignal:
     profile: NDArray[np.float64] | None = None
     profile_block: int = 0
     profile_sq_sum: float = 0.0
+    clipped_pixels: int = 0
 
     @property
     def sigma(self) -> float:
@@ -176,6 +182,8 @@ def camera_signal(
         h, w = (img.shape[0] // b) * b, (img.shape[1] // b) * b
         profile = img[:h, :w].reshape(h // b, b, w // b, b).sum(axis=(1, 3))
         sq_sum = float(np.sum(img * img))
+    shortest = int(np.argmin(t))
+    clipped = int(np.count_nonzero((stack[shortest] >= noise.saturation_dn) & sel))
     return CameraSignal(
         rate_dn_per_us=float(rate[sel].sum()),
         variance=float(var[sel].sum()),
@@ -185,6 +193,7 @@ def camera_signal(
         profile=profile,
         profile_block=int(profile_block),
         profile_sq_sum=sq_sum,
+        clipped_pixels=clipped,
     )
 
 

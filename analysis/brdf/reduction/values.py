@@ -43,6 +43,10 @@ class BRDFPoints:
         Covariance (unit of ``brdf`` squared) of errors shared between points, e.g. the
         camera's pixel response (:func:`pixel_response_covariance`). Like the common scale
         it is not fitted as noise: :func:`with_correlated_uncertainty` propagates it.
+    clipped : ndarray of bool, shape (n,), or None
+        Readings clipped by the detector (pixels saturated even in the shortest exposure,
+        :attr:`CameraSignal.clipped_pixels`): lower bounds, not values. Fits leave them
+        out and say so.
     """
 
     theta_i: NDArray[np.float64]
@@ -58,6 +62,7 @@ class BRDFPoints:
     method: str
     receiver: ReceiverGeometry | None = None
     cov_corr: NDArray[np.float64] | None = None
+    clipped: NDArray[np.bool_] | None = None
 
     @property
     def n(self) -> int:
@@ -67,6 +72,18 @@ class BRDFPoints:
     def u_point(self) -> NDArray[np.float64]:
         """Independent part: √(u_stat² + u_angle² + u_ref²) — the σ to fit with."""
         return np.sqrt(self.u_stat**2 + self.u_angle**2 + self.u_ref**2)
+
+    @property
+    def u_indep(self) -> NDArray[np.float64]:
+        """√(u_stat² + u_ref²): the independent part without the angular term, for fits
+        that take the angular scatter from the model's own slopes (effective variance,
+        :func:`analysis.brdf.reduction.fit_forward`)."""
+        return np.sqrt(self.u_stat**2 + self.u_ref**2)
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Points that are values (not clipped lower bounds)."""
+        return np.ones(self.n, dtype=bool) if self.clipped is None else ~self.clipped
 
     @property
     def u_total(self) -> NDArray[np.float64]:
@@ -81,6 +98,12 @@ class BRDFPoints:
             return self.brdf, self.u_point
         c = np.maximum(np.cos(self.theta_r), 1e-12)
         return self.brdf / c, self.u_point / c
+
+    def plain_u_indep(self) -> NDArray[np.float64]:
+        """:attr:`u_indep` for the BRDF f whatever ``cosine_corrected`` is."""
+        if not self.cosine_corrected:
+            return self.u_indep
+        return self.u_indep / np.maximum(np.cos(self.theta_r), 1e-12)
 
     def plain_cov_corr(self) -> NDArray[np.float64] | None:
         """:attr:`cov_corr` for the BRDF f whatever ``cosine_corrected`` is."""
@@ -98,6 +121,7 @@ class BRDFPoints:
             u_stat=self.u_stat[idx], u_angle=self.u_angle[idx], u_ref=self.u_ref[idx],
             cov_corr=(None if self.cov_corr is None
                       else self.cov_corr[np.ix_(*(np.arange(self.n)[idx],) * 2)]),
+            clipped=None if self.clipped is None else self.clipped[idx],
         )
 
 

@@ -63,14 +63,18 @@ def fit_run(
     for name in models:
         get_model(name)
     reduced = reduce_run(path, options)
-    result = analyse(reduced.points, models, criterion=criterion, run_cv=run_cv,
-                     n_bootstrap=n_bootstrap)
     run = read_run(path)
+    wavelength = run.profile().get("simulation", {}).get("source", {}).get("wavelength_nm")
+    result = analyse(reduced.points, models, criterion=criterion, run_cv=run_cv,
+                     n_bootstrap=n_bootstrap,
+                     wavelength_nm=None if wavelength is None else float(wavelength))
     page = None
     if report:
         page = write_report(report_dir or default_report_dir(path), reduced.points, result,
                             title=f"BRDF of {run.sample_name or run.run_id} "
-                            f"(run {run.run_id})", provenance=reduced.provenance)
+                            f"(run {run.run_id})", provenance=reduced.provenance,
+                            point_labels=[reduced.point_label(k)
+                                          for k in range(reduced.points.n)])
     if write:
         write_analysis(path, reduced, result.to_dict())
     return FitRun(run, reduced, result, page)

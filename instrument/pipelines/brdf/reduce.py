@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +79,10 @@ class ReductionOptions:
         the points are treated as point samples and the provenance says so.
     receiver_geometry : bool
         Use the receiver geometry when the beam radius is known (default True).
+    beam_divergence_mrad, sample_radius_mm : float or None
+        The beam's 1/e² divergence half-angle and the sample's radius; default the run's
+        calibration or stored bench geometry, or on a simulated bench its source
+        (collimated) and scene.
     """
 
     method: str = "absolute"
@@ -98,16 +102,31 @@ class ReductionOptions:
     reference_table: str | None = None
     beam_radius_mm: float | None = None
     receiver_geometry: bool = True
+    beam_divergence_mrad: float | None = None
+    sample_radius_mm: float | None = None
 
 
 @dataclass(frozen=True)
 class Reduced:
-    """A reduced run: BRDF points and where every number came from."""
+    """A reduced run: BRDF points and where every number came from.
+
+    A two-pass lobe run is reduced together with its first pass: ``sources`` lists the
+    run ids (this run first) and ``source`` says which one each point came from."""
 
     points: BRDFPoints
-    rows: np.ndarray            # row of each BRDF point in the run's tables
+    rows: np.ndarray            # row of each BRDF point in its run's tables
     detector_theta: np.ndarray  # read-back arm position per point (deg; NaN if unknown)
     provenance: dict[str, Any]
+    point_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    source: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    sources: tuple[str, ...] = ()
+
+    def point_label(self, k: int) -> str:
+        """How a reduced point is named to the user: its run's point index (and the run,
+        for a point of a first pass)."""
+        idx = int(self.point_index[k]) if self.point_index.size else int(self.rows[k])
+        src = int(self.source[k]) if self.source.size else 0
+        return f"point {idx}" + (f" of {self.sources[src]}" if src else "")
 
 
 def flat_from_run(path: str | Path) -> FlatField:
@@ -163,22 +182,53 @@ def _flat_for(run: RunData, opts: ReductionOptions
 _PROFILE_SIDE = 128
 
 
+@dataclass(frozen=True)
+class _Signals:
+    """Collected power (W) and its σ per row, the pixels clipped in each row's shortest
+    exposure, and the signal images for the pixel-response covariance (camera, when a
+    response error is carried; ``block`` 0 otherwise)."""
+
+    power_w: np.ndarray
+    u_power_w: np.ndarray
+    clipped: np.ndarray
+    profiles: list[np.ndarray]
+    sq_sums: list[float]
+    block: int
+
+    @staticmethod
+    def join(parts: list[_Signals]) -> _Signals:
+        return _Signals(np.concatenate([p.power_w for p in parts]),
+                        np.concatenate([p.u_power_w for p in parts]),
+                        np.concatenate([p.clipped for p in parts]),
+                        [x for p in parts for x in p.profiles],
+                        [x for p in parts for x in p.sq_sums],
+                        max(p.block for p in parts))
+
+    def covariance(self, u_response_rel: float) -> np.ndarray | None:
+        """Relative covariance of the pixel-response error between rows (None without
+        profiles): :func:`analysis.brdf.reduction.pixel_response_covariance`."""
+        if not self.block or not self.profiles:
+            return None
+        return pixel_response_covariance(np.array(self.profiles),
+                                         u_response_rel=u_response_rel, block=self.block,
+                                         sq_sums=self.sq_sums)
+
+
 def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
              cal: CameraCalibration | None, flat: FlatField | None = None,
-             *, u_response_rel: float = 0.0
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Collected power (W) and its σ per row, from the camera or the power meter, and the
-    relative covariance of the camera's pixel-response error between rows (``None`` for
-    the power meter or when ``u_response_rel`` is 0)."""
+             *, u_response_rel: float = 0.0) -> _Signals:
+    """The camera's or the power meter's signals of ``rows`` (:class:`_Signals`)."""
     if opts.detector == "power_meter":
         p = run.power_w[rows].astype(float)
         if not np.all(np.isfinite(p)):
             raise ValueError("the run has no power-meter readings at every point")
-        return p, np.abs(p) * opts.u_power_meter_rel, None
+        return _Signals(p, np.abs(p) * opts.u_power_meter_rel,
+                        np.zeros(rows.size, dtype=int), [], [], 0)
     assert cal is not None
     n_avg = int(run.acquisition.get("frames", 1))
     rate = np.empty(rows.size)
     sd = np.empty(rows.size)
+    clipped = np.zeros(rows.size, dtype=int)
     block = 0
     profiles, sq_sums = [], []
     for k, r in enumerate(rows):
@@ -189,15 +239,33 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
             block = max(1, max(light.shape[1:]) // _PROFILE_SIDE)
         s = camera_signal(light, exp, dark, noise=cal.noise, n_averaged=n_avg, flat=flat,
                           profile_block=block)
-        rate[k], sd[k] = s.rate_dn_per_us, s.sigma
+        rate[k], sd[k], clipped[k] = s.rate_dn_per_us, s.sigma, s.clipped_pixels
         if s.profile is not None:
             profiles.append(s.profile)
             sq_sums.append(s.profile_sq_sum)
     conv = {"system_gain_dn_per_e": cal.noise.system_gain_dn_per_e,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
-    cov = (pixel_response_covariance(np.array(profiles), u_response_rel=u_response_rel,
-                                     block=block, sq_sums=sq_sums) if block else None)
-    return camera_power_w(rate, **conv), camera_power_w(sd, **conv), cov
+    return _Signals(camera_power_w(rate, **conv), camera_power_w(sd, **conv), clipped,
+                    profiles, sq_sums, block)
+
+
+def _first_pass(run: RunData) -> Path | None:
+    """The first-pass run a two-pass lobe plan names (``[scan] first_pass``,
+    :mod:`instrument.plans.lobe`), resolved next to the run file."""
+    if not run.plan_text:
+        return None
+    ref = tomllib.loads(run.plan_text).get("scan", {}).get("first_pass")
+    if ref is None:
+        return None
+    path = Path(ref)
+    if not path.is_absolute() and not path.exists():
+        path = run.path.parent / ref
+        if not path.suffix:
+            path = path.with_suffix(".h5")
+    if not path.is_file():
+        raise ValueError(f"run {run.run_id} is the second pass of {ref!r}, which is not at "
+                         f"{path}: keep the two runs side by side")
+    return path
 
 
 def _incident_power(run: RunData, opts: ReductionOptions) -> tuple[float, float, str]:
@@ -250,10 +318,36 @@ def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, st
     return None, "unknown (points treated as point samples: give --beam-radius-mm)"
 
 
+def _beam_divergence_rad(run: RunData, opts: ReductionOptions) -> tuple[float, str]:
+    if opts.beam_divergence_mrad is not None:
+        return 1e-3 * float(opts.beam_divergence_mrad), "option"
+    for table, where in ((run.calibration, "run calibration"), (run.geometry, "bench geometry")):
+        if "beam_divergence_mrad" in table:
+            return 1e-3 * float(table["beam_divergence_mrad"]), where
+    if "source" in run.profile().get("simulation", {}):
+        return 0.0, "simulated source (collimated)"
+    return 0.0, "not declared (taken as collimated: set geometry.beam_divergence_mrad)"
+
+
+def _sample_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, str]:
+    if opts.sample_radius_mm is not None:
+        return float(opts.sample_radius_mm), "option"
+    if "sample_radius_mm" in run.geometry:
+        return float(run.geometry["sample_radius_mm"]), "bench geometry"
+    scene = run.profile().get("simulation", {}).get("scene")
+    if isinstance(scene, dict) and scene.get("kind", "goniometer") == "goniometer":
+        # the simulated goniometer scene's sample disk (hw_mocks GoniometerScene default)
+        return float(scene.get("sample_radius_mm", 12.5)), "simulated scene (bench profile)"
+    return None, ("not declared (the sample is taken as larger than the footprint: set "
+                  "geometry.sample_radius_mm)")
+
+
 def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
               cal: CameraCalibration | None) -> tuple[ReceiverGeometry | None, dict[str, Any]]:
     """What each reading integrated: the camera pupil or the meter aperture (module
-    docstring of :mod:`analysis.brdf.reduction`), with the solid angle the reduction uses.
+    docstring of :mod:`analysis.brdf.reduction`), with the solid angle the reduction uses,
+    and the rest of the instrument function from the run's stored profile: the beam's
+    radius and divergence, the sample's radius and the axes' set-point uncertainty.
 
     Camera: Ω = A_pupil/R², the étendue of its calibration (camera equation); power meter:
     the aperture's cone solid angle. The receiver factor corrects either to what the
@@ -273,16 +367,28 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
                                         u_distance_mm=opts.u_distance_mm)
         sampled = True
     w, w_src = _beam_radius(run, opts)
+    div, div_src = _beam_divergence_rad(run, opts)
+    radius, radius_src = _sample_radius(run, opts)
+    sig_t = _sigma_theta_rad(run, opts)
     info: dict[str, Any] = {"solid_angle_sr": omega, "u_solid_angle_sr": u_omega,
                             "receiver_aperture_mm": aperture, "receiver_distance_mm": distance,
                             "receiver_distance_source": dist_src, "beam_radius_mm": w,
-                            "beam_radius_source": w_src}
+                            "beam_radius_source": w_src, "beam_divergence_mrad": 1e3 * div,
+                            "beam_divergence_source": div_src, "sample_radius_mm": radius,
+                            "sample_radius_source": radius_src}
     if w is None or not opts.receiver_geometry:
         info["receiver_model"] = "none (point spot, point receiver)"
         return None, info
-    rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled)
-    info["receiver_model"] = ("footprint × " + ("aperture (7-point disk rule)" if sampled
-                                                 else "chief ray through the pupil centre"))
+    rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled,
+                          beam_divergence_rad=div, sample_radius_mm=radius,
+                          sigma_theta_i_rad=sig_t, sigma_theta_r_rad=sig_t)
+    info["receiver_model"] = (
+        "instrument function: Gaussian footprint"
+        + (" clipped by the sample's edge" if radius is not None else "")
+        + (" × aperture integrated" if sampled else " × chief ray through the pupil centre")
+        + (f" × beam divergence {1e3 * div:g} mrad" if div > 0 else "")
+        + f" × set-point spread σθ = {math.degrees(sig_t):.3g}°"
+        + "; quadrature refined per point until below 0.1σ")
     return rg, info
 
 
@@ -313,23 +419,39 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     rows = run.brdf_rows()
     if rows.size == 0:
         raise ValueError(f"{path}: no measured scattering points")
+    # a second pass of a two-pass lobe plan is reduced with its first pass
+    parts: list[tuple[RunData, np.ndarray]] = [(run, rows)]
+    first = _first_pass(run)
+    if first is not None:
+        r1 = read_run(first)
+        parts.append((r1, r1.brdf_rows()))
     cal = (run.camera_calibration(opts.camera_calibration)
            if opts.detector == "camera" else None)
     rad = np.radians
-    ti, pi_ = rad(run.theta_i[rows]), rad(run.phi_i[rows])
-    tr, pr = rad(run.theta_r[rows]), rad(run.phi_r[rows])
+
+    def joined(attr: str) -> np.ndarray:
+        return np.concatenate([getattr(r, attr)[rw] for r, rw in parts])
+
+    ti, pi_ = rad(joined("theta_i")), rad(joined("phi_i"))
+    tr, pr = rad(joined("theta_r")), rad(joined("phi_r"))
     sig_t = _sigma_theta_rad(run, opts)
     flat, flat_src, n_flat = _flat_for(run, opts) if cal is not None else (None, "none", 0)
     # the pixel-response error left in the summed signal: PRNU without a flat, the flat's
-    # own noise with one (shared between points that image the spot onto the same pixels)
+    # own noise with one (shared between points that image the spot onto the same pixels,
+    # in either pass)
     u_resp = 0.0
     if cal is not None:
         u_resp = (_flat_residual_rel(flat, n_flat, cal) if flat is not None
                   else cal.prnu_rel)
-    p_s, u_s, cov_rel = _signals(run, rows, opts, cal, flat, u_response_rel=u_resp)
+    sig = _Signals.join([_signals(r, rw, opts, cal, flat, u_response_rel=u_resp)
+                         for r, rw in parts])
+    p_s, u_s, cov_rel, n_clipped = (sig.power_w, sig.u_power_w, sig.covariance(u_resp),
+                                    sig.clipped)
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
                             "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
                             "options": asdict(opts)}
+    if first is not None:
+        prov["first_pass"] = f"{parts[1][0].run_id} ({parts[1][1].size} points, {first})"
     if cal is not None:
         prov["camera_calibration"] = cal.source
         prov["flat_field"] = flat_src
@@ -351,23 +473,37 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             raise ValueError("the relative method needs --reference RUN (a reference-standard "
                              "run at the same geometry)")
         ref_run = read_run(opts.reference_run)
-        ref_rows = _match_rows(run, rows, ref_run)
+        ref_cal = (ref_run.camera_calibration(opts.camera_calibration)
+                   if opts.detector == "camera" else None)
         # same geometry, same pixels: the pixel response cancels in the ratio
-        r_s, r_u, _ = _signals(ref_run, ref_rows, opts,
-                            ref_run.camera_calibration(opts.camera_calibration)
-                            if opts.detector == "camera" else None)
+        ref = _Signals.join([_signals(ref_run, _match_rows(r, rw, ref_run), opts, ref_cal)
+                             for r, rw in parts])
         std = _reference_standard(ref_run, opts)
-        pts = relative_brdf(p_s, u_s, r_s, r_u, ti, pi_, tr, pr, reference=std,
-                            sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+        pts = relative_brdf(p_s, u_s, ref.power_w, ref.u_power_w, ti, pi_, tr, pr,
+                            reference=std, sigma_theta_i=sig_t, sigma_theta_r=sig_t,
                             cosine_corrected=opts.cosine_corrected)
         # the ratio to a diffuse standard read through the same receiver is already the
         # normalised average of f over it: keep the geometry for the fit
         pts = replace(pts, receiver=receiver)
         prov.update(reference_run=ref_run.run_id, reference_standard=std.name)
+        n_clipped = n_clipped + ref.clipped
+    arm = np.concatenate([r.position("detector_theta")[rw] for r, rw in parts])
     if opts.signature_run is not None:
-        pts = _subtract_signature(run, rows, pts, opts)
+        pts = _subtract_signature(arm, pts, opts)
         prov["signature_run"] = str(opts.signature_run)
-    return Reduced(pts, rows, run.position("detector_theta")[rows], prov)
+    clipped = n_clipped > 0
+    pts = replace(pts, clipped=clipped)
+    all_rows = np.concatenate([rw for _, rw in parts])
+    index = np.concatenate([r.index[rw] for r, rw in parts])
+    source = np.concatenate([np.full(rw.size, k) for k, (_, rw) in enumerate(parts)])
+    red = Reduced(pts, all_rows, arm, prov, index, source,
+                  tuple(r.run_id for r, _ in parts))
+    if clipped.any():
+        prov["clipped_points"] = [
+            f"{red.point_label(k)} (θi={math.degrees(ti[k]):.1f}°, "
+            f"θr={math.degrees(tr[k]):.1f}°): {int(n_clipped[k])} pixels saturated even in "
+            "its shortest exposure" for k in np.flatnonzero(clipped)]
+    return red
 
 
 def _match_rows(run: RunData, rows: np.ndarray, other: RunData, *, tol_deg: float = 0.05
@@ -424,12 +560,12 @@ def load_reference_table(path: str | Path) -> ReferenceStandard:
     return ReferenceStandard(Path(path).stem, ti, tr, f, u)
 
 
-def _subtract_signature(run: RunData, rows: np.ndarray, pts: BRDFPoints,
+def _subtract_signature(arm: np.ndarray, pts: BRDFPoints,
                         opts: ReductionOptions) -> BRDFPoints:
-    """Signature run reduced like the sample, interpolated in the detector-arm angle."""
+    """Signature run reduced like the sample, interpolated in the detector-arm angle
+    ``arm`` (deg, per point)."""
     assert opts.signature_run is not None
     sig = reduce_run(opts.signature_run, replace(opts, signature_run=None))
-    arm = run.position("detector_theta")[rows]
     order = np.argsort(sig.detector_theta)
     x = sig.detector_theta[order]
     f = np.interp(arm, x, sig.points.brdf[order])

@@ -18,7 +18,7 @@ import numpy as np
 
 from analysis.brdf.geometry import make_geometry
 from analysis.brdf.reduction import BRDFPoints
-from instrument.pipelines.brdf.analyse import AnalysisResult, model_band
+from instrument.pipelines.brdf.analyse import UNCERTAINTY_RULE, AnalysisResult, model_band
 
 __all__ = ["write_report"]
 
@@ -69,16 +69,21 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
     signed = _signed_deg(points)
     groups = _groups(points)
     plane = _in_plane(points)
+    clipped = ~points.valid
     fig, axes = plt.subplots(len(groups), 1, figsize=(7.5, 3.0 * len(groups)), squeeze=False)
     s_grid = np.linspace(-89.0, 89.0, 357)
     for ax, (ti, pi_, group) in zip(axes[:, 0], groups, strict=True):
         # the curves are the plane of incidence: out-of-plane points are left to the
         # residual plot instead of being drawn against the wrong curve
-        sel = group[plane[group]]
-        n_off = group.size - sel.size
+        sel = group[plane[group] & ~clipped[group]]
+        low = group[plane[group] & clipped[group]]
+        n_off = int(np.sum(~plane[group]))
         ax.errorbar(signed[sel], f[sel], yerr=u[sel], fmt="o", ms=3, color="k",
                     label="measured ±1σ", zorder=3)
-        for name, fit in res.fits.items():
+        if low.size:
+            ax.plot(signed[low], f[low], "^", ms=6, mfc="none", color="r", zorder=3,
+                    label="clipped (lower bound, not fitted)")
+        for name, fit in _shown(res).items():
             val, sd = model_band(res.models[name], fit, *_curve(ti, pi_, s_grid))
             chosen = name == res.chosen
             line, = ax.plot(s_grid, val, lw=2.0 if chosen else 0.9,
@@ -96,6 +101,13 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _shown(res: AnalysisResult) -> dict:
+    """The fits drawn as curves: the chosen model and the plausible ones (the comparison
+    table lists every candidate)."""
+    return {n: f for n, f in res.fits.items()
+            if (n == res.chosen or n in res.plausible) and f.converged}
 
 
 def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
@@ -134,7 +146,8 @@ def _plot_residuals(points: BRDFPoints, res: AnalysisResult, path: Path) -> None
     import matplotlib.pyplot as plt
 
     signed = _signed_deg(points)
-    r = res.selection.fits[res.chosen].residuals
+    r = np.full(points.n, np.nan)
+    r[res.fitted_index] = res.selection.fits[res.chosen].residuals
     plane = _in_plane(points)
     fig, ax = plt.subplots(figsize=(7.5, 3.2))
     for ti, pi_, group in _groups(points):
@@ -151,8 +164,9 @@ def _plot_residuals(points: BRDFPoints, res: AnalysisResult, path: Path) -> None
         ax.axhline(k, color="grey", lw=0.6, ls="--")
     ax.set_xlabel("signed θr (deg)")
     ax.set_ylabel("(data − model)/σ")
-    ax.set_title(f"normalised residuals of {res.chosen} (χ²/dof = "
-                 f"{res.selection.fits[res.chosen].reduced_chi2:.2f})", fontsize=9)
+    gof = res.chosen_goodness
+    ax.set_title(f"normalised residuals of {res.chosen} ({gof.summary()})", fontsize=9,
+                 color="k" if gof.adequate else "r")
     ax.legend(fontsize=7)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
@@ -177,6 +191,38 @@ def _plot_dhr(res: AnalysisResult, path: Path) -> None:
 
 
 # ------------------------------------------------------------------------------ html
+def _verdict_html(points: BRDFPoints, res: AnalysisResult,
+                  point_labels: Sequence[str] | None) -> str:
+    """The goodness-of-fit gate at the top of the page (ADR 0051): the verdict, χ²/dof
+    with its expected spread, the uncertainty rule and the points that disagree."""
+    gof = res.chosen_goodness
+    colour = "#2e7d32" if gof.adequate else "#c62828"
+    text = (f"<b>{html.escape(res.chosen)}: {html.escape(gof.verdict())}.</b>")
+    if not gof.adequate:
+        text += (f"<br>The parameters below are the best approximation this model allows; "
+                 f"their standard errors are inflated ×{gof.birge_ratio:.3g} (the Birge "
+                 f"ratio √(χ²/dof)) and are not an uncertainty of the sample's properties. "
+                 f"Rule: {html.escape(UNCERTAINTY_RULE)}.")
+    pts = res.disagreeing_points()
+    table = ""
+    if pts:
+        deg = np.degrees
+        f, u = points.plain_brdf()
+        caption = ("Points that disagree with the model (|r| > 3, largest first):"
+                   if not gof.adequate else
+                   f"Points with |r| > 3 (about {0.0027 * gof.dof:.1g} expected by chance "
+                   "for a correct model):")
+        table = f"<p>{caption}</p>" + _table(
+            ("point", "θi (deg)", "φi (deg)", "θr (deg)", "φr (deg)", "BRDF (1/sr)", "σ",
+             "(data − model)/σ"),
+            [(point_labels[k] if point_labels is not None else f"point {k}",
+              float(deg(points.theta_i[k])), float(deg(points.phi_i[k])),
+              float(deg(points.theta_r[k])), float(deg(points.phi_r[k])), float(f[k]),
+              float(u[k]), float(r)) for k, r in pts[:25]])
+    return (f'<div style="border:2px solid {colour};padding:0.5em;margin:0.5em 0">'
+            f"{text}{table}</div>")
+
+
 def _table(head: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     def cell(v: Any) -> str:
         if isinstance(v, float):
@@ -195,8 +241,11 @@ def write_report(
     *,
     title: str,
     provenance: dict[str, Any] | None = None,
+    point_labels: Sequence[str] | None = None,
 ) -> Path:
-    """Write the PNG figures and ``index.html`` into ``out_dir``; returns the HTML path."""
+    """Write the PNG figures and ``index.html`` into ``out_dir``; returns the HTML path.
+    ``point_labels`` (e.g. "point 12" per reduced point) names the disagreeing points
+    (default: their position in ``points``)."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -212,7 +261,10 @@ def write_report(
         fn(points, res, out / name)
     _plot_dhr(res, out / "dhr.png")
     fit = res.chosen_fit
-    head = ("parameter", "value", "σ (incl. common scale)", "unit", "at bound")
+    factor = res.inflation.get(res.chosen, 1.0)
+    sigma_head = ("σ (incl. common scale)" if factor == 1.0
+                  else f"σ INFLATED ×{factor:.3g} (model rejected)")
+    head = ("parameter", "value", sigma_head, "unit", "at bound")
     rows = [(n, float(v), float(e), unit, "yes" if b else "")
             for (n, v, e, unit), b in zip(fit.table(), fit.at_bound, strict=True)]
     boot = fit.bootstrap
@@ -227,9 +279,13 @@ def write_report(
     corr = _table(("", *fit.param_names),
                   [(n, *[float(x) for x in row])
                    for n, row in zip(fit.param_names, fit.correlation, strict=True)])
-    comp = _table(("model", "k", "χ²", "AIC", "AICc", "BIC", "CV score", "CV σ", "converged"),
-                  [(r.name, r.n_params, r.chi2, r.aic, r.aicc, r.bic, r.cv_score, r.cv_stderr,
-                    r.converged) for r in res.selection.table])
+    comp = _table(("model", "k", "χ²", "χ²/dof", "p", "AIC", "AICc", "BIC", "CV score",
+                   "CV σ", "plausible", "converged"),
+                  [(r.name, r.n_params, r.chi2, res.goodness[r.name].reduced_chi2,
+                    res.goodness[r.name].p_value, r.aic, r.aicc, r.bic, r.cv_score,
+                    r.cv_stderr, "yes" if r.name in res.plausible else "", r.converged)
+                   for r in res.selection.table])
+    verdict = _verdict_html(points, res, point_labels)
     rec = res.reciprocity
     if rec.n_pairs:
         rec_html = (f"<p>{rec.n_pairs} pair(s) measured both ways; "
@@ -254,6 +310,7 @@ def write_report(
 table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #bbb;padding:2px 6px;
 font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
 <h1>{html.escape(title)}</h1>
+{verdict}
 <p>{points.n} points, {html.escape(points.method)} method, stored as the {kind}.
 Common (correlated) relative scale uncertainty {points.u_scale_rel:.3%}, added to the
 parameter uncertainties below. Chosen model: <b>{html.escape(res.chosen)}</b>

@@ -1,10 +1,12 @@
 """BRDF results in the run file: the reduced points, the fits and the chosen model.
 
 ``/entry/analysis`` (NXprocess, replaced whole by a new fit) holds ``reduced/`` (NXdata: the
-BRDF per point with its uncertainty columns, angles in degrees), ``provenance_json``,
-``results_json`` (every fit, the selection table and the checks,
+BRDF per point with its uncertainty columns, angles in degrees, and which readings were
+clipped), ``provenance_json``, ``results_json`` (every fit, the selection table, the
+goodness-of-fit verdicts and the checks,
 :meth:`instrument.pipelines.brdf.analyse.AnalysisResult.to_dict`) and ``chosen/`` (the
-chosen model's parameters, standard errors and covariance as arrays).
+chosen model's parameters, standard errors and covariance as arrays; its verdict,
+χ², dof, p-value, the σ inflation factor and the disagreeing points, docs/decisions/0051).
 """
 
 from __future__ import annotations
@@ -45,6 +47,11 @@ def write_analysis(path: str | Path, reduced: Reduced, results: dict[str, Any]) 
             red.create_dataset(name, data=getattr(pts, name)).attrs["units"] = "1/sr"
         red.create_dataset("u_total", data=pts.u_total).attrs["units"] = "1/sr"
         red.create_dataset("point_index", data=reduced.rows)
+        red.create_dataset("clipped", data=~pts.valid)
+        if len(reduced.sources) > 1:  # a two-pass lobe run, reduced with its first pass
+            red.create_dataset("source_run", data=np.array(
+                [reduced.sources[k] for k in reduced.source], dtype=object),
+                dtype=h5py.string_dtype())
         put(g, "provenance_json", json.dumps(reduced.provenance, default=str))
         put_json(g, "results_json", results)
         chosen = results.get("selection", {}).get("chosen")
@@ -53,6 +60,18 @@ def write_analysis(path: str | Path, reduced: Reduced, results: dict[str, Any]) 
             c = g.create_group("chosen")
             fit = fits[chosen]
             c.attrs["model"] = chosen
+            # the goodness-of-fit gate (docs/decisions/0051): whether the model describes
+            # the data, and the factor its σ were inflated by when it does not
+            gof = results.get("goodness", {}).get(chosen)
+            if gof is not None:
+                c.attrs["model_adequate"] = bool(gof["adequate"])
+                c.attrs["verdict"] = str(gof["verdict"])
+                for key in ("chi2", "dof", "p_value", "expected_spread"):
+                    c.attrs[key] = gof[key]
+                c.attrs["stderr_inflation"] = float(results.get("inflation", {})
+                                                    .get(chosen, 1.0))
+                c.create_dataset("disagreeing_points",
+                                 data=np.asarray(gof["disagreeing_points"], dtype=int))
             for key in ("params", "stderr", "covariance"):
                 c.create_dataset(key, data=np.asarray(fit[key], dtype=float))
             c.create_dataset("param_names", data=np.array(fit["param_names"], dtype=object),

@@ -345,10 +345,12 @@ def _noise_free(setup: ScanSetup, sample: Sample):
 
 
 def test_receiver_model_reproduces_the_simulated_camera() -> None:
-    """Noise-free camera rendering (footprint seen through the pupil centre, pixels
-    integrated over their area) against the receiver model: equal to 10⁻⁷, where the
-    point-sample reduction (cone Ω, G = 1, f at the nominal angles) is off by +3…+4·10⁻⁴
-    on the diffuse side and −4·10⁻⁴ on the specular peak (issue 5: the camera-method bias)."""
+    """Noise-free camera rendering (the footprint seen through the whole pupil, pixels
+    integrated over their area) against the receiver model: equal to 10⁻⁸ at quadrature
+    level 2 (10⁻⁶ already at level 0 for this broad lobe), where the point-sample
+    reduction (cone Ω, G = 1, f at the nominal angles) is off by +3…+4·10⁻⁴ on the diffuse
+    side and −4·10⁻³ on the specular peak (issue 5: the camera-method bias; issue 13: the
+    pupil's average)."""
     setup = ScanSetup()
     sample = SAMPLES[1]
     a, power = _noise_free(setup, sample)
@@ -356,8 +358,10 @@ def test_receiver_model_reproduces_the_simulated_camera() -> None:
     pts = absolute_brdf(power, 1e-3 * power, *a.T, incident_power_w=setup.power_w,
                         solid_angle=rg.solid_angle_sr, receiver=rg)
     model = get_model(sample.model)
-    seen = receiver_model(model, rg).evaluate(np.array(sample.params), *a.T)
-    np.testing.assert_allclose(pts.brdf, seen, rtol=1e-7)
+    seen = receiver_model(model, rg, level=2).evaluate(np.array(sample.params), *a.T)
+    np.testing.assert_allclose(pts.brdf, seen, rtol=1e-8)
+    coarse = receiver_model(model, rg, level=0).evaluate(np.array(sample.params), *a.T)
+    np.testing.assert_allclose(pts.brdf, coarse, rtol=1e-6)
     assert pts.receiver == rg
     # the old reduction: exact-cone Ω, no receiver factor, the BRDF at the nominal angles
     cone, _ = solid_angle_sr(setup.aperture_mm, setup.distance_mm)
@@ -365,7 +369,7 @@ def test_receiver_model_reproduces_the_simulated_camera() -> None:
                         solid_angle=cone).brdf
     nominal = model.evaluate(np.array(sample.params), *a.T)
     bias = old / nominal - 1
-    assert np.max(bias) > 3e-4 and np.min(bias) < -3e-4
+    assert np.max(bias) > 3e-4 and np.min(bias) < -3e-3
 
 
 def test_receiver_factor_limits() -> None:

@@ -73,7 +73,7 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
     examples = Path(__file__).resolve().parents[3] / "examples"
     benches = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
                "sphere_capture": "sim-spheres"}
-    directional = {"brdf_inplane", "brdf_hemisphere", "calibration_reference",
+    directional = {"brdf_inplane", "brdf_lobe", "brdf_hemisphere", "calibration_reference",
                    "calibration_signature"}
     names = sorted(p.stem for p in examples.glob("*.toml"))
     assert len(names) >= 10

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from analysis.brdf import get_model
+from analysis.brdf.registry import default_candidates
 from instrument.cli import main
 from instrument.pipelines.brdf.analyse import analyse
 from instrument.pipelines.brdf.reduce import ReductionOptions, read_run, reduce_run
@@ -68,8 +69,8 @@ def test_cli_fit_writes_analysis_and_report(glossy_run, tmp_path, capsys) -> Non
     truth = np.array(GLOSSY.params)
     assert np.all(np.abs(params - truth) < 3.5 * stderr)
     assert results["selection"]["chosen"] == "lambert+ggx"
-    assert {r["name"] for r in results["selection"]["table"]} == {
-        "lambert", "oren_nayar", "lambert+ggx"}
+    assert {r["name"] for r in results["selection"]["table"]} == set(default_candidates())
+    assert results["model_adequate"] is True and "describes the data" in results["verdict"]
     # fitting again replaces the group, it does not fail or duplicate
     assert main(["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx",
                  "--no-cv"]) == 0
@@ -245,8 +246,9 @@ def test_run_reduction_records_the_receiver(glossy_run) -> None:
     prov = red.provenance
     assert prov["solid_angle_sr"] == pytest.approx(math.pi * 6.25**2 / 300.0**2, rel=1e-12)
     assert prov["beam_radius_mm"] == pytest.approx(2.0)
-    assert "chief ray" in prov["receiver_model"]
-    assert red.points.receiver is not None and not red.points.receiver.sample_aperture
+    assert "aperture integrated" in prov["receiver_model"]
+    assert prov["sample_radius_mm"] == pytest.approx(12.5)
+    assert red.points.receiver is not None and red.points.receiver.sample_aperture
     bare = reduce_run(glossy_run, ReductionOptions(receiver_geometry=False))
     assert bare.points.receiver is None and bare.provenance["receiver_model"].startswith("none")
     ratio = red.points.brdf / bare.points.brdf
@@ -309,3 +311,31 @@ def test_a_fit_that_did_not_converge_is_noted(glossy_run, tmp_path) -> None:
     assert res.chosen == "lambert+ggx"
     assert any(n.startswith("nan_lambert: the fit did not converge") for n in res.notes)
     assert "did not converge" in page.read_text(encoding="utf-8")
+
+
+def test_a_model_the_data_reject_is_flagged_everywhere(glossy_run, tmp_path, capsys) -> None:
+    """Issue 13 / ADR 0051: the glossy sample offered only diffuse models. The chosen one
+    does not describe the data: the console, the report and the results file say so, the
+    σ are inflated by the Birge ratio and flagged, and the specular points are named."""
+    out = tmp_path / "rejected"
+    assert main(["fit", str(glossy_run), "--out", str(out), "--models", "lambert,oren_nayar",
+                 "--no-cv"]) == 0
+    text = capsys.readouterr().out
+    assert "the model does not describe the data" in text
+    assert "σ inflated ×" in text and "disagrees: point" in text
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "the model does not describe the data" in page and "INFLATED" in page
+    with h5py.File(glossy_run, "r") as f:
+        c = f["entry/analysis/chosen"]
+        assert not c.attrs["model_adequate"] and c.attrs["p_value"] < 1e-3
+        factor = float(c.attrs["stderr_inflation"])
+        disagreeing = c["disagreeing_points"][()]
+        res = json.loads(f["entry/analysis/results_json"][()])
+    assert factor == pytest.approx(np.sqrt(c_chi2 := res["goodness"][res["selection"]["chosen"]]
+                                           ["reduced_chi2"]), rel=1e-9) and c_chi2 > 10
+    red = reduce_run(glossy_run)
+    worst = disagreeing[0]
+    # the worst point sits at the specular peak the diffuse models cannot follow
+    assert abs(red.points.theta_r[worst] - red.points.theta_i[worst]) <= math.radians(4.5)
+    nominal = res["fits"][res["selection"]["chosen"]]["stderr"]
+    assert all(s > 0 for s in nominal)
