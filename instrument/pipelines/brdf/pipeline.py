@@ -70,7 +70,9 @@ def fit_run(
     if report:
         page = write_report(report_dir or default_report_dir(path), reduced.points, result,
                             title=f"BRDF of {run.sample_name or run.run_id} "
-                            f"(run {run.run_id})", provenance=reduced.provenance)
+                            f"(run {run.run_id})", provenance=reduced.provenance,
+                            warnings=reduced.warnings,
+                            scale_unknown=bool(reduced.scale_unknown))
     if write:
         write_analysis(path, reduced, result.to_dict())
     return FitRun(run, reduced, result, page)

@@ -313,11 +313,12 @@ SIM_SPHERES_THRESHOLD_SCALE = 2.12
 #: the results when no threshold factor is given. Measured by
 #: ``benchmarks/bench_sphere_capture.py`` (BENCHMARKS.md ``## sphere_capture``).
 CONSISTENCY_LIMIT = (
-    "the M21 threshold is calibrated on noise-only bootstrap captures (fit-residual level), "
-    "not on model departures consistent captures share (sphere horizon, finite view, "
-    "orders > lmax): on the sim-spheres bench 2 of 16 untampered captures are flagged at "
-    "alpha = 0.01 (8 of 100 in a second set), not 1 %; with --threshold-scale 2.12, the "
-    "factor calibrated for alpha = 0.01 on 100 consistent captures of that bench, 0 of 16 "
-    "held-out untampered captures and 10 of 16 top-half splices are flagged; on another "
-    "instrument calibrate its own factor (benchmarks/bench_sphere_capture.py --calibrate)"
+    "the consistency threshold is calibrated on noise-only bootstrap captures (fit-residual "
+    "level), not on model departures consistent captures share (sphere horizon, finite "
+    "view, orders above the fit's): on the sim-spheres bench 2 of 16 untampered captures "
+    "are flagged at a false-alarm rate of 0.01 (8 of 100 in a second set), not 1 %; with "
+    "--threshold-scale 2.12, the factor calibrated for 0.01 on 100 consistent captures of "
+    "that bench, 0 of 16 held-out untampered captures and 10 of 16 top-half splices are "
+    "flagged; on another instrument calibrate its own factor "
+    "(benchmarks/bench_sphere_capture.py --calibrate)"
 )

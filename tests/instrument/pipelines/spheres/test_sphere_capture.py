@@ -384,6 +384,10 @@ def test_cli_spheres_reports(capture_run, tmp_path, capsys):
     assert "L1 error" in out and "consistent" in out
     # the decision's known limit (false alarms above α on the bench) is stated with it
     assert CONSISTENCY_LIMIT in out and "2 of 16" in out
+    # the identities are named in words with the paper's equation, not by private tags
+    assert "two objects × two lightings" in out and "[eq. 21]" in out
+    assert "Mahajan, Ramamoorthi & Curless 2006" in out
+    assert not any(tag in out for tag in ("M10", "M16", "M19", "M21", "M25", "α"))
     assert main(["spheres", str(tmp_path / "missing.h5")]) == 2
 
 
