@@ -1,4 +1,4 @@
-"""Closed-loop BRDF validation figures (issue 5 §5): coverage, model selection, σ vs scatter,
+"""Closed-loop BRDF validation figures: coverage, model selection, σ vs scatter,
 and the camera method's geometric systematics at high signal.
 
 1. Three ground-truth samples scanned on the simulated bench (camera/scene/sensor code

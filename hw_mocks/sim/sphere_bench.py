@@ -1,9 +1,9 @@
 """The sphere scene of the virtual bench: spheres of chosen BRDF under environment lighting.
 
-This puts the sphere renderer of :mod:`hw_mocks.sim.sphere_scene` (physics.md §5, issue 7
-§5) on the virtual bench of :mod:`hw_mocks.sim.world`, so that the simulated camera records
-what a real sphere capture would, through its EMVA 1288 sensor model, and the engine's
-auto-exposure/HDR policy takes the brackets.
+This puts the sphere renderer of :mod:`hw_mocks.sim.sphere_scene` (Mahajan, Ramamoorthi &
+Curless 2006) on the virtual bench of :mod:`hw_mocks.sim.world`, so that the simulated
+camera records what a real sphere capture would, through its EMVA 1288 sensor model, and the
+engine's auto-exposure/HDR policy takes the brackets.
 
 Geometry (lab frame of :mod:`hw_mocks.sim.world`, lengths in mm)
 ------------------------------------------------------------------

@@ -98,7 +98,7 @@ def figures_dir(args: argparse.Namespace) -> Path | None:
 def reconstruction_summary(r: ReconstructionResult, *, brdf_given: bool) -> list[str]:
     """The reconstruction's figures of merit in words: what each number is, its unit, and
     how to judge it (the symbols γ, SNR_eff and p̂_max of the figures in brackets; Sasaki
-    2020, PhD thesis, Univ. of Minnesota, ch. 2 eqs. 37–38)."""
+    2020, PhD thesis, Univ. of Minnesota, eqs. 2-37 and 2-38)."""
     rec = r.reconstruction
     diag = rec.diagnostics
     reg = rec.regularization

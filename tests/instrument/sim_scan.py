@@ -50,7 +50,7 @@ class Sample:
     params: tuple[float, ...]
 
 
-#: The three closed-loop samples of issue 5 §5.
+#: The three closed-loop samples (BENCHMARKS.md brdf_closed_loop).
 SAMPLES = (
     Sample("lambert", "lambert", (0.8,)),
     Sample("glossy", "lambert+ggx", (0.3, 0.5, 0.2)),

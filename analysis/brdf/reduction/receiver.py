@@ -34,7 +34,7 @@ class ReceiverGeometry:
     aperture (diameter D) is centred at distance R from the sample centre along ωr and faces
     it collects P = ∫_spot ∫_aperture f(ωi, ω) E cos θ cos α / r² dA_ap dA, with ω, r the
     direction and distance from a spot point to an aperture point, θ its polar angle and α
-    its angle to the aperture normal (hardware.md §5e: the angular resolution is set by the
+    its angle to the aperture normal (ASTM E2387: the angular resolution is set by the
     aperture and the spot size seen from the receiver).
 
     Attributes
@@ -154,7 +154,7 @@ def receiver_factor(
 def receiver_model(model: BRDFModel, receiver: ReceiverGeometry) -> BRDFModel:
     """``model`` as the receiver sees it: f_meas = Σ W f(node) / Σ W (:func:`receiver_nodes`).
 
-    Instrument-aware fitting (issue 5 §3): near a specular peak the reading is the average
+    Instrument-aware fitting: near a specular peak the reading is the average
     of f over the directions from the footprint to the aperture, not f at the nominal
     angles. The normalisation matches values reduced with :func:`receiver_factor` divided
     out. Same name, parameters and bounds as ``model``; the Jacobian is the same average of

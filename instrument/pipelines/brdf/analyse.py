@@ -9,7 +9,7 @@ every fit's covariance (:func:`analysis.brdf.reduction.with_scale_uncertainty`,
 :func:`~analysis.brdf.reduction.with_correlated_uncertainty`). Physical checks: Helmholtz
 reciprocity of the *data* where a geometry was measured both ways, and the
 directional–hemispherical reflectance of each fitted model (≤ 1 where the model promises
-energy conservation; physics.md §1).
+energy conservation; Nicodemus et al. 1977).
 
 :func:`model_band` gives a model's value with its standard uncertainty
 σ_f² = J C Jᵀ from the parameter covariance (the report's ±1σ bands).
@@ -115,8 +115,8 @@ def analyse(
 
     With ``instrument_aware`` and a receiver geometry on ``points`` (the reduction records
     what each reading integrated: beam footprint and receiver aperture), every candidate is
-    fitted as the receiver sees it (:func:`analysis.brdf.reduction.receiver_model`, issue 5
-    §3): near a specular peak a reading is the average of f over the directions from the
+    fitted as the receiver sees it (:func:`analysis.brdf.reduction.receiver_model`):
+    near a specular peak a reading is the average of f over the directions from the
     footprint to the aperture, a few 10⁻⁴ below the peak value on the sim bench — many σ at
     high signal. The DHR checks use the BRDF itself.
     """

@@ -3,7 +3,7 @@
 Reconstruction: the measured light field L_meas(y_m, θ_m), the reconstructed incident
 field at the wall L_obj(c, θ), and the diagnostics (shared filter factors, pooled signal
 spectrum against the noise power, the relative noise error Δ_p of Sasaki (2020, PhD thesis,
-Univ. of Minnesota) ch. 2 eq. 37, and the degree of specularity γ and effective SNR along
+Univ. of Minnesota) eq. 2-37, and the degree of specularity γ and effective SNR along
 the wall).  Localisation: the (y, z) map (RP refocusing) with the detected
 objects and their theoretical blur, a focal stack (conventional refocusing at the
 detected depths and a few others), and the depth-filter z-profiles.
@@ -102,7 +102,7 @@ def reconstruction_figures(r: ReconstructionResult, folder: str | Path) -> list[
     dp = median_delta_p(diag.delta_p)
     axs[1, 0].semilogy(p[order], dp[order], ".")
     axs[1, 0].axhline(1.0, color="k", lw=0.6)
-    axs[1, 0].set_title("relative noise error Δ_p (Sasaki 2020, ch. 2 eq. 37)")
+    axs[1, 0].set_title("relative noise error Δ_p (Sasaki 2020, eq. 2-37)")
     axs[1, 0].set_xlabel("angular Fourier order p")
     axs[1, 0].set_ylabel("Δ_p, median over wall points\n(dimensionless; > 1: noise dominates)")
     c = rec.incident_field.y_mm

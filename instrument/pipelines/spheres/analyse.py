@@ -6,8 +6,9 @@
    normals and reflected directions (:func:`analysis.sh.sphere_image.sphere_geometry`, with
    the camera's pinhole intrinsics when known), fits B_lm of every image with one shared
    least-squares operator;
-2. runs the identities of physics.md §5 — M16 (two objects, one lighting) per lighting,
-   M21 (two objects × two lightings) on the corner images, M25 (rank one) on all — and,
+2. runs the identities of Mahajan, Ramamoorthi & Curless (ECCV 2006; Mn is their eq. n) —
+   M16 (two objects, one lighting) per lighting, M21 (two objects × two lightings) on the
+   corner images, M25 (rank one) on all — and,
    for an object whose BRDF the plan declares known, estimates each lighting by Wiener
    deconvolution (M7) and tests M10 (known lighting) and M19 (one object, two lightings);
 3. renders the last image B^{r,s} from B^{1,1}, B^{1,s}, B^{r,1} by BRDF transfer

@@ -348,7 +348,7 @@ def test_receiver_model_reproduces_the_simulated_camera() -> None:
     """Noise-free camera rendering (footprint seen through the pupil centre, pixels
     integrated over their area) against the receiver model: equal to 10⁻⁷, where the
     point-sample reduction (cone Ω, G = 1, f at the nominal angles) is off by +3…+4·10⁻⁴
-    on the diffuse side and −4·10⁻⁴ on the specular peak (issue 5: the camera-method bias)."""
+    on the diffuse side and −4·10⁻⁴ on the specular peak (the camera-method bias)."""
     setup = ScanSetup()
     sample = SAMPLES[1]
     a, power = _noise_free(setup, sample)

@@ -388,7 +388,7 @@ def test_too_coarse_an_angle_grid_is_noted_not_silently_over_smoothed(scan_run):
              min_size=1, max_size=4).map(",".join),
 ))
 def test_parse_brdf_gives_a_valid_model_or_an_error_naming_the_text(text):
-    """--brdf: either a finite, physical S2-14 model or a ValueError that quotes the input."""
+    """--brdf: either a finite, physical eq. 2-14 model or a ValueError that quotes the input."""
     try:
         b = parse_brdf(text)
     except ValueError as err:
