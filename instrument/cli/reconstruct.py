@@ -106,6 +106,7 @@ def reconstruction_summary(r: ReconstructionResult, *, brdf_given: bool) -> list
     snr = float(diag.snr_eff.mean())
     where = "--brdf" if brdf_given else "the bench profile's simulated wall"
     lines = [
+        f"geometry: from the {r.geometry.source} (--geometry for another)",
         f"wall BRDF: {r.brdf.name or 'custom'} (from {where})",
         f"  degree of specularity (γ) {gamma:.3f}: the specular share of the wall's "
         "response, 1 mirror-like, 0 purely diffuse (a diffuse wall carries no object "

@@ -180,7 +180,7 @@ def localisation_figures(det: Detection, p_hat: float, folder: str | Path) -> li
         ax.plot(st.z_mm, det.depth_profiles[k],
                 label=f"object {k}: y = {y:.1f} mm, z = {z:.1f} mm")
         ax.axvline(z, color="k", lw=0.5, ls=":")
-    ax.set_xlabel("z (mm)")
+    ax.set_xlabel("depth z (mm; wall at 0)")
     ax.set_ylabel("depth-filter profile (dimensionless, peak 1)")
     ax.set_title("depth profiles of the objects: the peak is the depth estimate (dotted)",
                  fontsize=10)
