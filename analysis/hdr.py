@@ -20,7 +20,8 @@ so that var(x_i) = σ²_y,i / (t_i g_i)². To avoid the bias of weights computed
 noisy values themselves, the variances are evaluated at the signal *predicted* from a
 first hat-weighted estimate.
 
-OpenCV's Debevec/Robertson merges take 8-bit input only (hardware.md §2d) and are not used.
+OpenCV's Debevec/Robertson merges take 8-bit input only (a 256-entry response table;
+OpenCV documentation of ``cv::MergeDebevec``) and are not used.
 """
 
 from __future__ import annotations

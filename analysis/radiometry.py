@@ -14,7 +14,7 @@ vignetting, removed by dividing by a normalised flat field).
 
 A pinhole camera with an entrance pupil of area A_ap and focal length f maps scene
 radiance L (W m⁻² sr⁻¹) to power on a pixel of pitch p as (the "camera equation", e.g.
-Nicodemus 1977 / Stover 1990, and hardware.md §2e, §5d)
+Nicodemus 1977 / Stover 1990, and ASTM E2387)
 
     Φ_pixel = L · A_ap · (p / f)² · cos⁴ α
 
@@ -126,7 +126,7 @@ def flat_field(
 
     Notes
     -----
-    This is the PRNU correction of EMVA 1288 R3.1 §4 / hardware.md §2e. The residual
+    This is the PRNU correction of EMVA 1288 R3.1 §4. The residual
     non-uniformity after correction is the flat's own shot noise, so average enough
     frames that its variance, ``σ²_flat / N``, is well below that of the frames being
     corrected.

@@ -1,4 +1,4 @@
-"""Closed-loop BRDF validation figures (issue 5 §5): coverage, model selection, σ vs scatter,
+"""Closed-loop BRDF validation figures: coverage, model selection, σ vs scatter,
 and the camera method's geometric systematics at high signal.
 
 1. Three ground-truth samples scanned on the simulated bench (camera/scene/sensor code
@@ -12,7 +12,7 @@ and the camera method's geometric systematics at high signal.
 3. High SNR (1024² px, 80 % full well, 4 frames averaged): the sim bench's sample fitted
    with the receiver model and with the BRDF at the nominal angles, z = (estimate − truth)/σ.
 
-4. ``--matrix N``: the validation matrix of issue 13 §5 — ten ground-truth samples, one per
+4. ``--matrix N``: the validation matrix — ten ground-truth samples, one per
    family, from diffuse to a sharp GGX lobe (α = 0.02), scanned at θi = 20°, 50°, 80°
    (tests/instrument/sim_scan.py ``MATRIX``), N sensor seeds each, every scan analysed as
    ``scatterlab fit`` does (the default candidates, instrument-aware fits, the

@@ -9,7 +9,7 @@ A control row gives ``curve_fit`` (trf) the geometry built once as well
 (``BRDFModel.evaluate_geometry``): it separates what the speed-up owes to caching the
 geometry from what it owes to the analytic Jacobian and the lean LM step.
 
-``--selection`` times the default fit instead (issue 13 §4): model selection among the
+``--selection`` times the default fit instead: model selection among the
 default candidates as ``scatterlab fit`` runs it (``instrument.pipelines.brdf.analyse.
 analyse`` with its ``DEFAULT_MODELS``, cross-validation on) on the closed loop's 57-point
 in-plane scan of the glossy sample (tests/instrument/sim_scan.py, sensor seed 0); wall and

@@ -1,4 +1,4 @@
-"""The forward model against the simulated camera (issue 13 §1): lobes α = 0.3 … 0.02,
+"""The forward model against the simulated camera: lobes α = 0.3 … 0.02,
 incidence 0° … 80°, noise-free.
 
 For each lobe and incidence angle the in-plane scan of the closed loop (θr from −70° to

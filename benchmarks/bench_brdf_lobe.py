@@ -1,4 +1,4 @@
-"""Sampling the lobe (issue 13 §3): σ(α) of a two-pass lobe plan against the uniform plan at
+"""Sampling the lobe: σ(α) of a two-pass lobe plan against the uniform plan at
 equal scan time.
 
 Uniform plan: the closed loop's in-plane scan (θi = 20°, 40°, 60°; θr from −70° to 80° in

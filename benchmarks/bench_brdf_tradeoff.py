@@ -129,37 +129,47 @@ def main() -> int:
 
 
 def _plot(rows: list[dict], front: set[int], path: Path) -> None:
+    """One panel per exposure cap (so that no option hides under another), σ(α) against
+    the duration; colour: θr step, marker: frames averaged, filled: measured, open:
+    predicted; the black steps are the Pareto front of all options, on every panel."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    caps = sorted({r["cap_us"] for r in rows})
+    fig, axes = plt.subplots(1, len(caps), figsize=(4.2 * len(caps) + 1.0, 4.8), sharey=True,
+                             squeeze=False, layout="constrained")
     markers = {1: "o", 2: "s", 4: "^", 8: "D"}
     steps = sorted({r["step"] for r in rows})
     colors = dict(zip(steps, plt.cm.viridis(np.linspace(0, 0.9, len(steps))), strict=True))
-    for r in rows:
-        ax.plot(r["duration_s"], r["measured"], markers.get(r["frames"], "o"),
-                color=colors[r["step"]], ms=6)
-        ax.plot(r["duration_s"], r["pred"], markers.get(r["frames"], "o"), mfc="none",
-                color=colors[r["step"]], ms=8, alpha=0.6)
     fr = sorted((r for r in rows if id(r["result"]) in front), key=lambda r: r["duration_s"])
-    ax.step([r["duration_s"] for r in fr], [r["pred"] for r in fr], where="post", color="k",
-            lw=1.0, label="Pareto front (predicted)")
-    for s in steps:
-        ax.plot([], [], "o", color=colors[s], label=f"θr step {s:g}°")
-    for f, mk in markers.items():
-        if any(r["frames"] == f for r in rows):
-            ax.plot([], [], mk, color="grey", label=f"{f} frame(s)")
-    ax.plot([], [], "o", mfc="none", color="grey", label="open: predicted; filled: measured")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("scan duration (s): engine estimate, motion + exposures + readout")
-    ax.set_ylabel("σ(α) of Lambertian + GGX fit")
-    ax.set_title("In-plane BRDF scan: speed vs accuracy (simulated bench)", fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
+    for ax, cap in zip(axes[0], caps, strict=True):
+        for r in (r for r in rows if r["cap_us"] == cap):
+            ax.plot(r["duration_s"], r["measured"], markers.get(r["frames"], "o"),
+                    color=colors[r["step"]], ms=6)
+            ax.plot(r["duration_s"], r["pred"], markers.get(r["frames"], "o"), mfc="none",
+                    color=colors[r["step"]], ms=9, alpha=0.7)
+        ax.step([r["duration_s"] for r in fr], [r["pred"] for r in fr], where="post",
+                color="k", lw=1.0)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(f"exposure cap {cap / 1e3:g} ms", fontsize=9)
+        ax.set_xlabel("scan duration (s)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0, 0].set_ylabel("σ of the fitted GGX roughness α (dimensionless)")
+    handles = [plt.Line2D([], [], color="k", lw=1.0, label="Pareto front, all caps "
+                          "(predicted)")]
+    handles += [plt.Line2D([], [], ls="", marker="o", color=colors[s], label=f"θr step {s:g}°")
+                for s in steps]
+    handles += [plt.Line2D([], [], ls="", marker=mk, color="grey", label=f"{f} frame(s)")
+                for f, mk in markers.items() if any(r["frames"] == f for r in rows)]
+    handles += [plt.Line2D([], [], ls="", marker="o", color="grey", label="measured"),
+                plt.Line2D([], [], ls="", marker="o", mfc="none", color="grey",
+                           label="predicted by the planner")]
+    fig.legend(handles=handles, fontsize=8, ncol=5, loc="outside lower center")
+    fig.suptitle("In-plane BRDF scan on the simulated bench: speed against accuracy "
+                 "(duration: engine estimate, motion + exposures + readout)", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

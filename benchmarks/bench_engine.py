@@ -5,7 +5,8 @@ scatterlab runs it on hw_mocks.sim.ideal devices (moves, a power-meter reading p
 storage of every scalar reading in the HDF5 run file and its journal); Bluesky runs
 ``grid_scan([det], motor1, ..., motor2, ...)`` with ophyd.sim's SynAxis/SynGauss and its
 documents collected in memory by a subscriber. Both in the same benchmark run; Bluesky
-runs in its own environment (``--bluesky-python``, default /work/benchvenv/bin/python),
+runs in its own environment (``--bluesky-python``, default benchvenv/bin/python, a
+virtual environment in the repository root that holds bluesky and ophyd),
 so it is never a dependency of scatterlab.
 
     python benchmarks/bench_engine.py            # 1,000 and 10,000 points
@@ -99,7 +100,7 @@ def run_bluesky(python: str, n_side: int, repeats: int) -> dict | None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="1,000 points only, one repeat")
-    ap.add_argument("--bluesky-python", default="/work/benchvenv/bin/python")
+    ap.add_argument("--bluesky-python", default="benchvenv/bin/python")
     args = ap.parse_args()
     # 32 × 32 = 1,024 and 100 × 100 = 10,000 points; Bluesky runs the same grids.
     sides = [32] if args.quick else [32, 100]

@@ -1,4 +1,4 @@
-"""Benchmark: per-point spectral reconstruction vs dense least squares (issue 6 §6).
+"""Benchmark: per-point spectral reconstruction vs dense least squares.
 
 Same data for both: a hidden scene (Gaussian emitters and a bar in front of a glossy wall)
 rendered by the continuous renderer ``hw_mocks.sim.lightfield_scene`` on the measurement

@@ -1,4 +1,4 @@
-"""Spherical-harmonic transform benchmark and inverse-rendering validation figures (issue 7 §6, §7).
+"""Spherical-harmonic transform benchmark and inverse-rendering validation figures.
 
 Forward + inverse transform time and round-trip error of ``analysis.sh.transform`` on its
 Gauss–Legendre grid, in the same run as ducc0 (``ducc0.sht.synthesis_2d``/``analysis_2d``,
@@ -6,17 +6,16 @@ GL grid) and pyshtools (``MakeGridGLQ``/``SHExpandGLQ`` with the Fortran "shtool
 and, where installed, the "ducc" backend), all single-threaded. A band-limited random signal
 (standard-normal coefficients) goes coefficients → grid → coefficients; the error is
 max|c_out − c_in| / max|c_in|; times are the best of several runs (``BEST_OF``; the
-median under ``BEST_OF = False``). Grid/plan setup is timed separately and excluded, as
-numerics.md §2.1 does.
+median under ``BEST_OF = False``). Grid/plan setup is timed separately and excluded.
 
 ducc0 and pyshtools are benchmark-only dependencies (install them in a separate
-environment, e.g. ``/work/benchvenv``); what is not installed is reported as such.
+environment, e.g. ``benchvenv/``); what is not installed is reported as such.
 
 Usage::
 
     python benchmarks/bench_sht.py [--quick] [--validation] [--skip-transforms] [--before DIR]
 
-``--validation`` adds the §6 figures: relighting L1 error, tamper detection rates, the
+``--validation`` adds the validation figures: relighting L1 error, tamper detection rates, the
 Wiener K curve and inverse rendering on simulated spheres.
 """
 
@@ -235,7 +234,7 @@ def run_before_after(before: str, quick: bool) -> None:
 
 
 def run_validation(quick: bool) -> None:
-    """§6 figures on simulated spheres (same scenes as tests/analysis/sh/test_validation)."""
+    """Validation figures on simulated spheres (scenes of tests/analysis/sh/test_validation)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "analysis" / "sh"))
     import test_validation as tv
 
@@ -304,7 +303,7 @@ def run_validation(quick: bool) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="L ≤ 256 and fewer scenes")
-    ap.add_argument("--validation", action="store_true", help="add the §6 validation figures")
+    ap.add_argument("--validation", action="store_true", help="add the validation figures")
     ap.add_argument("--skip-transforms", action="store_true",
                     help="only the validation figures (they need pytest and scipy, not ducc0)")
     ap.add_argument("--before", metavar="DIR",

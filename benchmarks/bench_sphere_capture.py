@@ -1,4 +1,4 @@
-"""Sphere capture end to end on the emulated sphere bench (issue 7 §5, §6).
+"""Sphere capture end to end on the emulated sphere bench.
 
 For each procedural environment (``[simulation.scene] environment = { seed = n }`` of the
 sim-spheres profile) the example plan ``examples/sphere_capture.toml`` runs through

@@ -1,7 +1,8 @@
 """Thorlabs APT ("Kinesis") binary protocol: message ids, frames, payloads, stream parser.
 
-Source: *Thorlabs APT Controllers Host-Controller Communications Protocol* (Issue 23/25),
-as summarised in ``shared/reference/hardware.md`` §1c. Everything is little-endian.
+Source: *Thorlabs APT Controllers Host-Controller Communications Protocol* (Issue 23, 2018;
+Issue 25, 2020), cross-checked with pylablib ``kinesis.py`` and thorlabs-apt-protocol.
+Everything is little-endian.
 
 Frames
 ------

@@ -1,13 +1,14 @@
 """Newport SMC100 (CC/PP) single-axis motion controller driver.
 
-Serial settings: 57600 baud, 8N1, CR LF terminator, ASCII (hardware reference §1a;
-hvl_ccb and QMI use 57600 — several drivers on GitHub wrongly use CONEX-CC's 921600).
-Flow control: none by default. A driver comment quoted in the reference says the SMC100
-uses XON/XOFF (**unverified** against the manual). We leave it off on purpose: this
-driver sends one short request at a time and waits for its answer, so it can never fill
-the controller's input buffer, and with XON/XOFF on a single noise byte 0x13 on the line
-would freeze the host's output until a 0x11 happened to arrive, a stall no timeout or
-retry can clear. ``xonxoff=True`` turns it on for a setup that needs it.
+Serial settings: 57600 baud, 8N1, CR LF terminator, ASCII (Newport *SMC100CC & SMC100PP
+Single-Axis Motion Controller/Driver User's Manual*; hvl_ccb and QMI use 57600 — several
+drivers on GitHub wrongly use CONEX-CC's 921600). Flow control: none by default. A comment
+in one open-source driver says the SMC100 uses XON/XOFF (**unverified** against the manual).
+We leave it off on purpose: this driver sends one short request at a time and waits for its
+answer, so it can never fill the controller's input buffer, and with XON/XOFF on a single
+noise byte 0x13 on the line would freeze the host's output until a 0x11 happened to arrive,
+a stall no timeout or retry can clear. ``xonxoff=True`` turns it on for a setup that needs
+it.
 
 Protocol rules this driver follows (see :mod:`drivers.smc100_protocol`):
 

@@ -1,6 +1,7 @@
 """A camera on OpenCV's ``cv2.VideoCapture`` (V4L2/UVC devices, image sequences, videos).
 
-OpenCV is a convenience path, not a scientific camera API (hardware.md §2a): property
+OpenCV is a convenience path, not a scientific camera API (OpenCV ``VideoCapture``
+documentation; opencv/opencv#14494, #9738, #13145): property
 support and units depend on the backend, ``set()`` may return success and change nothing,
 frames arrive without per-frame metadata, and V4L2 keeps about four buffers, so a frame read
 after a move may have been exposed before it. This driver therefore

@@ -4,8 +4,9 @@ No I/O happens here; :mod:`drivers.newport_smc100` does the talking. Every decod
 only :class:`~drivers.errors.ProtocolError` on bytes that do not follow the protocol, so
 a driver has exactly one failure channel for "the wire said something wrong".
 
-Wire format (hardware reference §1a; MagAO-X ``smc100ccCtrl_test.cpp`` transcripts;
-QMI ``single_axis_motion_controller.py``):
+Wire format (Newport *SMC100CC & SMC100PP Single-Axis Motion Controller/Driver User's
+Manual*; MagAO-X ``smc100ccCtrl_test.cpp`` transcripts; QMI
+``single_axis_motion_controller.py``):
 
 - A request is ``<address><CMD>[<value>|?]\\r\\n``: address 1..31 in decimal, a
   two-letter upper-case command, an optional value (a number, or ``?`` to query a
@@ -114,7 +115,8 @@ def _states() -> dict[int, StateInfo]:
     return {code: StateInfo(code, name, phase) for code, name, phase in rows}
 
 
-#: Controller states by code (QMI ``STATE_TABLE``, bliss ``HWSTATES``; reference §1a).
+#: Controller states by code (QMI ``STATE_TABLE``, bliss ``HWSTATES``; the SMC100 user's
+#: manual).
 STATE_TABLE: dict[int, StateInfo] = _states()
 
 #: Positioner error bits (first field of ``TS``; QMI ``POSITIONER_ERROR_TABLE``).

@@ -1,10 +1,10 @@
 """Thorlabs APT motion controllers: K10CR1 rotation mount, KDC101 with PRM1-Z8 or MTS25-Z8.
 
-Protocol facts (frames, ids, status bits, scaling, quirks) are in
-``shared/reference/hardware.md`` §1c and :mod:`drivers.apt_protocol`. Transport: FTDI
-USB-serial at 115200 8N1 with RTS/CTS flow control, opened through
-:func:`drivers.transport.open_serial`, so a device path, a pseudo-terminal or a
-``simapt://`` URL all work.
+Protocol facts (frames, ids, status bits, scaling, quirks) are in *Thorlabs APT Controllers
+Host-Controller Communications Protocol*, Issue 23 (2018) and Issue 25 (2020) and
+:mod:`drivers.apt_protocol`. Transport: FTDI USB-serial at 115200 8N1 with RTS/CTS flow
+control, opened through :func:`drivers.transport.open_serial`, so a device path, a
+pseudo-terminal or a ``simapt://`` URL all work.
 
 How this driver deals with the protocol's habits
 ------------------------------------------------

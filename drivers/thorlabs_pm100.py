@@ -1,13 +1,14 @@
 """Thorlabs PM100USB optical power meter (USBTMC, VID 0x1313 / PID 0x8072).
 
-SCPI subset used (hardware reference §3b; QMI ``pm100d.py``, pylablib ``GenericPM``):
-``*IDN?`` → ``Thorlabs,PM100USB,<serial>,<firmware>``; ``SYST:SENS:IDN?`` → sensor name,
-serial, calibration message, type, subtype, flags; ``SENS:CORR:WAV <nm>`` and
-``SENS:CORR:WAV? MIN|MAX`` (the photodiode responsivity correction: a wrong wavelength
-gives a wrong power); ``SENS:POW:RANG:AUTO 0|1``; ``SENS:AVER:COUN <n>``; ``MEAS:POW?``
-(W); dark zero with ``SENS:CORR:COLL:ZERO:INIT`` and polling ``…:ZERO:STAT?`` (1 while
-running, 0 when done; drivers in the wild disagree, hardware reference §3b, so the
-poll also stops on any other value only after the timeout); ``SYST:ERR?``.
+SCPI subset used (Thorlabs *PM100USB Operation Manual* (2020), ch. 7 "Computer Interface";
+QMI ``pm100d.py``, pylablib ``GenericPM``): ``*IDN?`` →
+``Thorlabs,PM100USB,<serial>,<firmware>``; ``SYST:SENS:IDN?`` → sensor name, serial,
+calibration message, type, subtype, flags; ``SENS:CORR:WAV <nm>`` and ``SENS:CORR:WAV?
+MIN|MAX`` (the photodiode responsivity correction: a wrong wavelength gives a wrong power);
+``SENS:POW:RANG:AUTO 0|1``; ``SENS:AVER:COUN <n>``; ``MEAS:POW?`` (W); dark zero with
+``SENS:CORR:COLL:ZERO:INIT`` and polling ``…:ZERO:STAT?`` (1 while running, 0 when done;
+open-source drivers disagree, QMI against pylablib, so the poll also stops on any other value only
+after the timeout); ``SYST:ERR?``.
 
 Every *setting* command is followed by draining ``SYST:ERR?`` until ``0``; any error there
 raises :class:`ControllerError` carrying the SCPI code (e.g. -222 data out of range).

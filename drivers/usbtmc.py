@@ -1,7 +1,8 @@
 """USBTMC (USB Test & Measurement Class 1.0) over pyusb endpoints.
 
 A message-based link to an instrument such as the Thorlabs PM100USB, written against the
-USBTMC 1.0 specification as summarised in the hardware reference §3a (cross-checked with
+USB-IF *Universal Serial Bus Test and Measurement Class Specification (USBTMC)*, Revision 1.0, 2003
+(cross-checked with
 python-usbtmc and pyvisa-py behaviour):
 
 * Every bulk-OUT transfer starts with a 12-byte header

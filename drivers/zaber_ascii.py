@@ -1,6 +1,6 @@
 """Zaber motion stages (rotary and linear) over the Zaber ASCII protocol.
 
-Serial settings: 115200 baud, 8N1, no flow control (hardware reference §1d; many scripts
+Serial settings: 115200 baud, 8N1, no flow control (Zaber *ASCII Protocol Manual*; many scripts
 open ``serial.Serial(port, 115200)``). The older *binary* protocol ran at 9600 baud and is
 not spoken here. The message layer is :mod:`drivers.zaber_protocol`.
 

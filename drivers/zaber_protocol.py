@@ -32,7 +32,7 @@ What is not from the manual (its later sections could not be read here)
 * The alert layout ``!01 1 IDLE --`` (``zaber.serial`` ``AsciiReply``): device, axis,
   status, warning flag, optional data; no reply flag and no message id.
 * The warning flags and their meanings: Zaber Motion Library ``WarningFlags``; the
-  rejection reasons: the project's hardware reference §1d plus ``DRIVERDISABLED`` (the
+  rejection reasons: Zaber's *ASCII Protocol Manual* plus ``DRIVERDISABLED`` (the
   Zaber Motion Library's ``DriverDisabledException``, "a device cannot carry out a movement
   command because the motor driver is disabled").
 """
@@ -87,7 +87,7 @@ class FlagLevel(enum.Enum):
     NONE = "-"
 
 
-#: Warning flags (Zaber Motion Library ``WarningFlags``; hardware reference §1d).
+#: Warning flags (Zaber Motion Library ``WarningFlags``; Zaber *ASCII Protocol Manual*).
 WARNING_FLAGS: dict[str, str] = {
     # faults
     "FF": "critical system error",
@@ -128,7 +128,7 @@ WARNING_FLAGS: dict[str, str] = {
     "NB": "device in firmware update mode",
 }
 
-#: Reasons in the data field of an ``RJ`` reply (hardware reference §1d; ``DRIVERDISABLED``
+#: Reasons in the data field of an ``RJ`` reply (Zaber *ASCII Protocol Manual*; ``DRIVERDISABLED``
 #: from the Zaber Motion Library's exceptions).
 REJECTION_REASONS: dict[str, str] = {
     "AGAIN": "the device cannot take the command now; send it again",

@@ -19,7 +19,7 @@ _INV_PI = 1.0 / np.pi
 
 # ------------------------------------------------------------------------------ Lambertian
 def lambertian() -> BRDFModel:
-    """Lambertian f = ρ/π (physics.md §2; numerics.md §3.1). DHR = ρ for every θi."""
+    """Lambertian f = ρ/π (Lambert 1760; Nicodemus et al. 1977). DHR = ρ for every θi."""
 
     def value(p: NDArray, g: Geometry) -> NDArray:
         return np.full(g.shape, p[0] * _INV_PI)
@@ -34,7 +34,7 @@ def lambertian() -> BRDFModel:
         jac_fn=jac,
         description="Lambertian diffuser, f = ρ/π.",
         validity="any geometry; energy bounded for ρ ≤ 1",
-        reference="Lambert 1760; physics.md §2",
+        reference="Lambert 1760",
     )
 
 
@@ -50,21 +50,22 @@ def _on_ab(sigma: float) -> tuple[float, float, float, float]:
 
 def _on_term(g: Geometry) -> NDArray:
     # max(0, cos(φr−φi)) sin α tan β = max(0, xi xr + yi yr) / max(μi, μr): the stable form
-    # of numerics.md §3.5, no tan β → ∞ at β → 90°.
+    # (cos(φr−φi) sin θi sin θr = xi xr + yi yr), no tan β → ∞ at β → 90°.
     return np.maximum(0.0, g.xi * g.xr + g.yi * g.yr) / np.maximum(
         np.maximum(g.mu_i, g.mu_r), MU_FLOOR
     )
 
 
 def oren_nayar() -> BRDFModel:
-    """Oren–Nayar "qualitative" model (Oren & Nayar, SIGGRAPH 1994, eq. 30; physics.md §2).
+    """Oren–Nayar "qualitative" model (Oren & Nayar, SIGGRAPH 1994, eq. 30).
 
     f = ρ/π [A + B max(0, cos(φr−φi)) sin α tan β], A = 1 − 0.5σ²/(σ²+0.33),
     B = 0.45σ²/(σ²+0.09), α = max(θi, θr), β = min(θi, θr); σ is the facet-slope standard
     deviation in radians. σ = 0 gives the Lambertian ρ/π exactly.
 
     **Not energy conserving** (documented exception): with ρ = 1 the DHR is 0.78 at θi = 0
-    and σ = 0.5, and exceeds 1 near grazing for σ ≈ 0.3 (1.004 at 89°; numerics.md §3.5).
+    and σ = 0.5, and exceeds 1 near grazing for σ ≈ 0.3 (1.004 at 89°,
+    by quadrature in tests/analysis/brdf/test_models.py).
     """
 
     def value(p: NDArray, g: Geometry) -> NDArray:
@@ -88,13 +89,13 @@ def oren_nayar() -> BRDFModel:
         description="Oren–Nayar rough diffuse (qualitative model).",
         validity="rough diffuse surfaces, σ ≲ 0.6 rad; not energy conserving (DHR can exceed "
         "ρ near grazing); diverges as 1/max(μi, μr) only when both directions graze",
-        reference="Oren & Nayar, SIGGRAPH 1994; numerics.md §3.5",
+        reference="Oren & Nayar, SIGGRAPH 1994",
     )
 
 
 # ----------------------------------------------------------------------- Lommel–Seeliger
 def lommel_seeliger() -> BRDFModel:
-    """Lommel–Seeliger f = (w/4π)/(μi + μr) (Hapke 2012 §8; numerics.md §3.7).
+    """Lommel–Seeliger f = (w/4π)/(μi + μr) (Hapke 2012 §8).
 
     DHR(μ0) = (w/2)[1 − μ0 ln((1+μ0)/μ0)] (:func:`lommel_seeliger_dhr`), ≤ w/2.
     """
@@ -112,7 +113,7 @@ def lommel_seeliger() -> BRDFModel:
         jac_fn=jac,
         description="Lommel–Seeliger single scattering by a particulate half-space.",
         validity="dark particulate surfaces (single scattering dominates); energy bounded",
-        reference="Hapke, JGR 86(B4) 1981; numerics.md §3.7",
+        reference="Hapke, JGR 86(B4) 1981",
     )
 
 
@@ -128,8 +129,8 @@ def lommel_seeliger_dhr(mu0: ArrayLike, w: float) -> NDArray[np.float64]:
 def hapke_h2002(x: ArrayLike, w: float | ArrayLike) -> NDArray[np.float64]:
     """Hapke's 2002 approximation to Chandrasekhar's H function for isotropic scattering,
     H(x) ≈ [1 − w x (r₀ + (1 − 2r₀x)/2 · ln((1+x)/x))]⁻¹, r₀ = (1−γ)/(1+γ), γ = √(1−w)
-    (Hapke, Icarus 157, 2002, eq. 13; within 1 % of the exact H for w ≤ 0.99,
-    numerics.md §3.7). H(0) = 1.
+    (Hapke, Icarus 157, 2002, eq. 13; within 1 % of the exact H for w ≤ 0.99, measured
+    against :func:`chandrasekhar_h`). H(0) = 1.
     """
     x = np.asarray(x, dtype=float)
     w = np.asarray(w, dtype=float)
@@ -142,7 +143,7 @@ def hapke_h2002(x: ArrayLike, w: float | ArrayLike) -> NDArray[np.float64]:
 
 def hapke_h1981(x: ArrayLike, w: float | ArrayLike) -> NDArray[np.float64]:
     """Hapke's 1981 approximation H(x) ≈ (1 + 2x)/(1 + 2γx), γ = √(1−w): error ≤ 4.0 % for
-    w ≤ 0.99 (measured against :func:`chandrasekhar_h`; numerics.md §3.7 quotes 3.8 %)."""
+    w ≤ 0.99 (measured against :func:`chandrasekhar_h`)."""
     x = np.asarray(x, dtype=float)
     gam = np.sqrt(1.0 - np.asarray(w, dtype=float))
     return (1.0 + 2.0 * x) / (1.0 + 2.0 * gam * x)
@@ -178,7 +179,7 @@ def chandrasekhar_h(x: ArrayLike, w: float, *, n_nodes: int = 200) -> NDArray[np
 
 
 def hapke(*, h_function: str = "2002", opposition: bool = False) -> BRDFModel:
-    """Isotropic Hapke model without macroscopic roughness (Hapke 1981, eq. 16; numerics.md §3.7).
+    """Isotropic Hapke model without macroscopic roughness (Hapke 1981, eq. 16).
 
     f = (w/4π)/(μi + μr) · [(1 + B(g)) p(g) + H(μi)H(μr) − 1] with an isotropic phase function
     p = 1, so without opposition f = (w/4π) H(μi)H(μr)/(μi + μr).
@@ -220,5 +221,5 @@ def hapke(*, h_function: str = "2002", opposition: bool = False) -> BRDFModel:
         description=f"Isotropic Hapke with the H-function approximation of {h_function}.",
         validity="particulate surfaces, isotropic single scattering; energy bounded up to the "
         "H approximation error (≤ 1 %) without the opposition term",
-        reference="Hapke, JGR 86(B4) 1981; Icarus 157, 2002; numerics.md §3.7",
+        reference="Hapke, JGR 86(B4) 1981; Icarus 157, 2002",
     )

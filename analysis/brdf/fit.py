@@ -3,14 +3,16 @@
 Method
 ------
 * Parameters flagged ``log`` in the model (widths, exponents) are fitted as u = ln p, the
-  others as u = p; bounds are mapped accordingly (numerics.md §4.2, "fit log α with bounds").
+  others as u = p; bounds are mapped accordingly (a width spanning decades is well
+  conditioned in its logarithm).
 * Residuals r_j, chosen by ``residual``:
 
   - ``"absolute"``: r = (y − m)/σ, σ the per-point standard uncertainty (1 if not given);
   - ``"relative"``: r = (y − m)/|y|, divided by σ/|y| instead when σ is given (i.e. the same
     as absolute with σ) — without σ it is the fit of relative errors;
   - ``"log"``: r = (ln(y⁺+ε) − ln(m⁺+ε))/s with s = σ/(y⁺+ε) when σ is given, else 1; ε =
-    ``log_floor`` keeps zeros finite (numerics.md §4.2, log-relative metrics) and x⁺ =
+    ``log_floor`` keeps zeros finite (the log-relative metric of Nielsen, Jensen &
+    Ramamoorthi, SIGGRAPH Asia 2015) and x⁺ =
     max(x, 0): a reading that noise (dark or signature subtraction) pushed below zero counts
     as zero instead of making the residual NaN.
 

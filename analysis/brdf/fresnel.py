@@ -4,10 +4,10 @@ Conventions
 -----------
 * Time dependence exp(−iωt), hence an absorbing medium has index **n̂ = n + ik with k ≥ 0**
   (physics texts; Mitsuba and ellipsometry use exp(+iωt) and n − ik — pass
-  ``np.conj`` of such an index: intensities agree, phases change sign, numerics.md §3.4).
+  ``np.conj`` of such an index: intensities agree, phases change sign).
 * ``n`` is the *relative* index n_t / n_i (incident medium index 1 by default).
-* n̂ cos θt = √(n̂² − sin²θi), principal square root (Im ≥ 0 for k ≥ 0): physics.md §1,
-  numerics.md §3.4.
+* n̂ cos θt = √(n̂² − sin²θi), principal square root (Im ≥ 0 for k ≥ 0): Born & Wolf,
+  *Principles of Optics*.
 * r_s = (cos θi − n̂ cos θt) / (cos θi + n̂ cos θt),
   r_p = (n̂² cos θi − n̂ cos θt) / (n̂² cos θi + n̂ cos θt).
   With these signs r_p = −r_s at normal incidence and r_p = r_s = −1 at grazing incidence.
@@ -56,7 +56,7 @@ def _safe_ratio(num: NDArray, den: NDArray) -> NDArray:
 
 
 def fresnel(cos_theta_i: ArrayLike, n: complex | ArrayLike) -> FresnelResult:
-    """Full complex-index Fresnel coefficients (Born & Wolf; numerics.md §3.4).
+    """Full complex-index Fresnel coefficients (Born & Wolf, *Principles of Optics*).
 
     Parameters
     ----------
@@ -98,7 +98,7 @@ def schlick(cos_theta_i: ArrayLike, r0: ArrayLike) -> NDArray[np.float64]:
     """Schlick's approximation R ≈ R₀ + (1 − R₀)(1 − cos θ)⁵ (Schlick, CGF 13(3) 1994).
 
     Only for comparison: it has no polarisation and errs by up to 0.09 for Al near 83°
-    (numerics.md §3.4).
+    (tests/analysis/brdf/test_fresnel.py).
     """
     c = np.clip(np.asarray(cos_theta_i, dtype=float), 0.0, 1.0)
     r0a = np.asarray(r0, dtype=float)

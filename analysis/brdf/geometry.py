@@ -11,12 +11,13 @@ Conventions (stated once, used by every module of :mod:`analysis.brdf`)
 * With both vectors pointing away from the surface, the **specular (mirror) direction is
   θr = θi, φr = φi + π**. In the plane of incidence φi = 0, a detector on the far side of
   the normal from the source therefore has φr = π.
-* cos 2β = ωi·ωr = cosθi cosθr + sinθi sinθr cos(φr − φi) (physics.md §2), where 2β is the
+* cos 2β = ωi·ωr = cosθi cosθr + sinθi sinθr cos(φr − φi) (Torrance & Sparrow 1967), where 2β is the
   angle between the two directions (the phase angle g of planetary photometry) and β the
   half angle; the unnormalised half vector is v = ωi + ωr, h = v/|v|, cos β = |v|/2 = ωi·h,
   and the facet-normal polar angle θh has cos θh = v_z/|v|.
-* The in-plane (flatland) signed angles of physics.md §3 are s_i = atan2(−x_i, z_i) and
-  s_r = atan2(x_r, z_r): the specular ray continues "straight through" (s_r = s_i).
+* The in-plane (flatland) signed angles of Sasaki (2020, PhD thesis, Univ. of Minnesota,
+  ch. 2) are s_i = atan2(−x_i, z_i) and s_r = atan2(x_r, z_r): the specular ray continues
+  "straight through" (s_r = s_i).
 
 Grazing incidence
 -----------------

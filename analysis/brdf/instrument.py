@@ -8,7 +8,7 @@ f_meas(ωi, ωr) = (1/Ω) ∫_cone(ωr, a) f(ωi, ω) cos θ / cos θr dω,
 and likewise for a beam whose directions fill a cone of half-angle b about ωi, weighted by
 cos θ'/cos θi (irradiance of each beam direction). Both cones are uniform (top-hat) in solid
 angle. Near a sharp specular peak the measured lobe is this average, not the BRDF
-(numerics.md §4.2; OpenMATERIAL-3D PR #476: record the solid angle).
+(ASTM E2387 and ISO 19986 ask for the receiver solid angle to be reported with BRDF data).
 
 Quadrature per cone: Gauss–Legendre in (1 − cos δ) (uniform in solid angle) with ``n_radial``
 rings × ``n_azimuth`` equally spaced azimuths (offset by half a step on alternate rings).

@@ -1,5 +1,5 @@
 """Directional–hemispherical reflectance ρ(θi) = ∫ f(ωi, ωr) cos θr dωr by quadrature
-(physics.md §1; numerics.md §3).
+(Nicodemus et al. 1977, NBS Monograph 160).
 
 Two quadratures, both deterministic and vectorised over θi:
 
@@ -148,7 +148,7 @@ def flatland_reflectance(
     model: BRDFModel, params: ArrayLike, theta_in: ArrayLike, *, n_theta: int = 2001
 ) -> NDArray[np.float64]:
     """∫_{−π/2}^{π/2} f(θo, θm) cos θm dθm for a flatland (1/rad) model in the plane φ = 0,
-    θo the signed incoming angle (physics.md §3); trapezoid rule on ``n_theta`` points."""
+    θo the signed incoming angle (Sasaki 2020, ch. 2); trapezoid rule on ``n_theta`` points."""
     tin = np.atleast_1d(np.asarray(theta_in, dtype=float))
     tm = np.linspace(-np.pi / 2, np.pi / 2, n_theta)
     # signed flatland angle s_i = atan2(−x_i, z_i): incidence from φi = π for s_i > 0.

@@ -1,6 +1,9 @@
-"""The separable-diffuse + windowed shift-invariant specular flatland BRDF (physics.md §3):
+"""The separable-diffuse + windowed shift-invariant specular flatland BRDF
 
-f(θo, θm) = f_wind(θo) f_spec(θm − θo) + f_diff(θo) f_diff(θm)     (Sasaki thesis, S2-14)
+f(θo, θm) = f_wind(θo) f_spec(θm − θo) + f_diff(θo) f_diff(θm)     (Sasaki 2020, eq. 2-14)
+
+Sasaki, *Information extraction from non-line-of-sight objects using plenoptic data from
+scattered light*, PhD thesis, University of Minnesota, 2020; equations numbered as there.
 
 θo is the signed in-plane angle of the incoming ray and θm that of the outgoing ray, both in
 (−π/2, π/2) from the normal, with the sign chosen so that mirror reflection is θm = θo (the
@@ -49,14 +52,14 @@ def f_diff(theta: ArrayLike, rho_d: float) -> NDArray[np.float64]:
 def flatland_brdf(
     theta_o: ArrayLike, theta_m: ArrayLike, *, rho_d: float, ks: float, width: float, q: float
 ) -> NDArray[np.float64]:
-    """S2-14 on signed flatland angles (radians), 1/rad, broadcast shape."""
+    """Eq. 2-14 on signed flatland angles (radians), 1/rad, broadcast shape."""
     to = np.asarray(theta_o, dtype=float)
     tm = np.asarray(theta_m, dtype=float)
     return f_wind(to, q) * f_spec(tm - to, ks, width) + f_diff(to, rho_d) * f_diff(tm, rho_d)
 
 
 def separable_specular() -> BRDFModel:
-    """:class:`BRDFModel` of S2-14 with parameters (rho_d, ks, width [rad], q)."""
+    """:class:`BRDFModel` of eq. 2-14 with parameters (rho_d, ks, width [rad], q)."""
 
     def value(p: NDArray, g: Geometry) -> NDArray:
         return flatland_brdf(
@@ -94,8 +97,9 @@ def separable_specular() -> BRDFModel:
         energy_bounded=False,
         reciprocal=False,
         unit="1/rad",
-        description="Flatland separable diffuse + windowed shift-invariant specular (S2-14).",
+        description="Flatland separable diffuse + windowed shift-invariant specular "
+        "(Sasaki 2020, eq. 2-14).",
         validity="in-plane (2-D) scattering off a wall; flatland energy bounded for ρd + ks ≤ 1; "
         "reciprocal only for q = 0",
-        reference="Sasaki thesis (Univ. Minnesota) eq. S2-14; physics.md §3",
+        reference="Sasaki 2020, PhD thesis, Univ. of Minnesota, eq. 2-14",
     )

@@ -1,11 +1,11 @@
 """Microfacet distributions, Smith masking and combined visibility terms.
 
 A microfacet BRDF is f = F(cos β) · D(h) · V(ωi, ωr) with the *combined visibility*
-V = G₂ / (4 μi μr) (Walter et al., EGSR 2007, eq. 20; numerics.md §3.3). Evaluating V as one
+V = G₂ / (4 μi μr) (Walter et al., EGSR 2007, eq. 20). Evaluating V as one
 finite expression instead of G₂ and 1/(4μiμr) separately is what keeps every model finite at
-grazing (numerics.md §4.1; STYLE.md §12).
+grazing (Heitz, JCGT 3(2), 2014).
 
-Normalisation of every distribution: ∫ D(h) cos θh dω_h = 1 (physics.md §2).
+Normalisation of every distribution: ∫ D(h) cos θh dω_h = 1 (Walter et al., EGSR 2007).
 
 All functions take cos θh (``c``), cos θ of the directions (``mu``) and widths as arrays that
 broadcast together, and return arrays of the broadcast shape. Derivatives with respect to the
@@ -70,7 +70,7 @@ def beckmann_d_dalpha(c: ArrayLike, alpha: ArrayLike, tan2: ArrayLike | None = N
 
 
 def blinn_phong_d(c: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
-    """Normalised Blinn–Phong NDF D(h) = (s+2)/(2π) cos^s θh (Blinn 1977; numerics.md §3.2)."""
+    """Normalised Blinn–Phong NDF D(h) = (s+2)/(2π) cos^s θh (Blinn 1977)."""
     c = np.clip(np.asarray(c, dtype=float), 0.0, 1.0)
     s = np.asarray(s, dtype=float)
     return (s + 2.0) / (2.0 * np.pi) * c**s
@@ -144,7 +144,8 @@ def smith_visibility(
     """Height-correlated Smith V = G₂/(4μiμr), G₂ = 1/(1 + Λi + Λr) (Heitz 2014, eq. 99).
 
     Written as V = 1/(4(μiμr + μr·μiΛi + μi·μrΛr)), whose terms are all finite at μ = 0;
-    for GGX it reduces to 0.5/(μr√(α² + (1−α²)μi²) + μi√(α² + (1−α²)μr²)) (numerics.md §4.1).
+    for GGX it reduces to 0.5/(μr√(α² + (1−α²)μi²) + μi√(α² + (1−α²)μr²)), finite at μ = 0
+    (Heitz 2014).
     """
     mi = np.maximum(np.asarray(mu_i, dtype=float), MU_FLOOR)
     mr = np.maximum(np.asarray(mu_r, dtype=float), MU_FLOOR)
@@ -218,7 +219,7 @@ def vcavity_visibility(
     mu_i: ArrayLike, mu_r: ArrayLike, cos_theta_h: ArrayLike, cos_beta: ArrayLike
 ) -> NDArray[np.float64]:
     """V-cavity V = G/(4μiμr), G = min(1, 2 cosθh μr / cos β, 2 cosθh μi / cos β)
-    (Torrance & Sparrow 1967; Cook & Torrance 1982; physics.md §2).
+    (Torrance & Sparrow 1967; Cook & Torrance 1982).
 
     Written as min(1/(4μiμr), cosθh/(2 cos β μi), cosθh/(2 cos β μr)), finite unless both
     μ vanish (then bounded by the μ floor).

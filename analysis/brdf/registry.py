@@ -56,8 +56,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
 def default_candidates() -> tuple[str, ...]:
     """Candidates for a sample whose model is not known: every diffuse, specular and
     physical-optics family member alone, then every sum of one diffuse and one specular or
-    physical-optics model (3 + 3 + 2 + 3 × 5 = 23 names; physics.md §2: "practical fits
-    usually combine a diffuse and a specular lobe")."""
+    physical-optics model (3 + 3 + 2 + 3 × 5 = 23 names; practical fits usually combine
+    a diffuse and a specular lobe: Montes & Ureña 2012, "An overview of BRDF models")."""
     lobes = FAMILIES["specular"] + FAMILIES["physical_optics"]
     sums = tuple(f"{d}+{s}" for d in FAMILIES["diffuse"] for s in lobes)
     return FAMILIES["diffuse"] + lobes + sums

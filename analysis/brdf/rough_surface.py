@@ -19,7 +19,7 @@ from analysis.brdf.model import BRDFModel, ParamSpec
 # ----------------------------------------------------------------- Beckmann–Kirchhoff
 def beckmann_kirchhoff() -> BRDFModel:
     """Kirchhoff (tangent-plane) scattering in the geometric-optics limit σ ≫ λ
-    (Beckmann & Spizzichino 1963; physics.md §2), Gaussian slopes of rms m:
+    (Beckmann & Spizzichino 1963), Gaussian slopes of rms m:
 
     f₀ = R [1 + ωi·ωr]² / (π m² μiμr (μi+μr)⁴) · exp(−|v_xy|² / (m² v_z²)),
 
@@ -58,21 +58,22 @@ def beckmann_kirchhoff() -> BRDFModel:
         jac_fn=jac,
         description="Beckmann–Kirchhoff very-rough limit with Beckmann (Smith) shadowing.",
         validity="σ ≫ λ, correlation length ≫ λ; energy bounded for R ≤ 1",
-        reference="Beckmann & Spizzichino 1963; Beckmann 1965; physics.md §2",
+        reference="Beckmann & Spizzichino 1963; Beckmann 1965",
     )
 
 
 # ---------------------------------------------------------------------------- PSD models
 def psd_gaussian(f: ArrayLike, sigma_um: float, ell_um: float) -> NDArray[np.float64]:
     """Isotropic 2-D PSD of a Gaussian ACF σ² exp(−τ²/ℓ²): S₂(f) = πℓ²σ² exp(−(πℓf)²)
-    (µm⁴ for σ, ℓ in µm, f in 1/µm); ∫∫ S₂ d²f = σ² (numerics.md §3.9)."""
+    (µm⁴ for σ, ℓ in µm, f in 1/µm); ∫∫ S₂ d²f = σ² (Stover, *Optical Scattering*)."""
     f = np.asarray(f, dtype=float)
     return np.pi * ell_um**2 * sigma_um**2 * np.exp(-((np.pi * ell_um * f) ** 2))
 
 
 def psd_abc(f: ArrayLike, a_um4: float, b_um: float, c: float) -> NDArray[np.float64]:
     """ABC / K-correlation PSD S₂(f) = A / (1 + (Bf)²)^{C/2} (Church, Takacs & Leonard 1989;
-    numerics.md §3.9). Its total σ² = 2πA / (B²(C − 2)) for C > 2 (:func:`abc_sigma2`)."""
+    Stover, *Optical Scattering*). Its total σ² = 2πA / (B²(C − 2)) for C > 2
+    (:func:`abc_sigma2`)."""
     f = np.asarray(f, dtype=float)
     return a_um4 / (1.0 + (b_um * f) ** 2) ** (0.5 * c)
 
@@ -101,7 +102,7 @@ def spatial_frequency(g: Geometry, wavelength_um: float) -> NDArray[np.float64]:
 
 def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328, q: float = 1.0):
     """Rayleigh–Rice first-order vector perturbation BRDF (Church, Jenkinson & Zavada 1979;
-    Elson & Bennett 1979; Stover, *Optical Scattering*; numerics.md §3.9):
+    Elson & Bennett 1979; Stover, *Optical Scattering*):
 
     f = (16π²/λ⁴) μi μr Q S₂(f),
 
@@ -151,7 +152,7 @@ def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328, q: fl
         description=f"Rayleigh–Rice smooth-surface scatter, {psd} PSD, λ = {lam} µm, Q = {q}.",
         validity="σ ≪ λ; first order in (kσ); Q taken constant; not energy bounded (a "
         "perturbation series: TIS = (4πσ cos θi/λ)² is meaningful only while ≪ 1)",
-        reference="Church, Jenkinson & Zavada 1979; Stover, Optical Scattering; numerics.md §3.9",
+        reference="Church, Jenkinson & Zavada 1979; Stover, Optical Scattering",
     )
 
 

@@ -1,7 +1,7 @@
 """Model selection: information criteria with an explicit noise model and k-fold
 cross-validation grouped by incidence angle; the smallest model the data support wins.
 
-Rules (physics.md §2, "choose the smallest one the data support")
+Rules (the smallest model the data support)
 -----------------------------------------------------------------
 * ``criterion`` in {"bic", "aic", "aicc"}: every candidate is fitted to all data under the
   same noise model (:mod:`analysis.brdf.fit`); the best score is found and, among the models

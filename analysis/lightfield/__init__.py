@@ -1,9 +1,12 @@
 """Light fields from scattered light: data types, operators, reconstruction, localisation.
 
-Implements the flatland plenoptic NLOS analysis of Sasaki's thesis (physics.md §§3–4,
-equations S1–S3): propagation and scattering of light fields, the unfolded forward model
-(S2-3/S2-6), the per-scattering-point reconstruction (S2-13 … S2-38) with diagnostics and
-regularisation, and localisation by (radiance-preserving) refocusing and depth filtering.
+Implements the flatland plenoptic analysis of hidden objects of T. Sasaki, *Information
+extraction from non-line-of-sight objects using plenoptic data from scattered light*, PhD
+thesis, University of Minnesota, 2020 ("Sasaki 2020"; equation numbers as there, eq. 2-14
+is chapter 2's fourteenth): propagation and scattering of light fields, the unfolded forward
+model (eqs. 2-3, 2-6), the per-scattering-point reconstruction (eqs. 2-13 … 2-38) with
+diagnostics and regularisation, and localisation by (radiance-preserving) refocusing and
+depth filtering (ch. 3).
 """
 
 from .brdf import MATERIALS, FlatlandBRDF, SpatiallyVaryingBRDF, material

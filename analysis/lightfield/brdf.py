@@ -2,18 +2,18 @@
 
 Conventions
 -----------
-Angles are in radians in the *unfolded* scene of Sasaki's thesis (physics.md §3): the
+Angles are in radians in the *unfolded* scene of Sasaki 2020 (ch. 2): the
 scattering plane is mirrored so that a specular ray continues straight on, i.e. a mirror
 has ``f(θ_in, θ_out) ∝ δ(θ_out − θ_in)``.  Both arguments are measured from the (local)
 surface normal.  A flatland BRDF has unit 1/rad and conserves energy as
 ``∫_{−π/2}^{π/2} f(θ_in, θ_out) cos θ_out dθ_out ≤ 1``; a flatland Lambertian surface of
 albedo ρ therefore has ``f = ρ/2``.
 
-The model is the separable diffuse + shift-invariant specular form of eq. (S2-14),
+The model is the separable diffuse + shift-invariant specular form of eq. (2-14),
 ``f(θ_o, θ_m) = f_wind(θ_o) f_spec(θ_m − θ_o) + f_diff(θ_o) f_diff(θ_m)``, with a Gaussian
 specular lobe normalised on the real line, ``f_spec(ζ) = ρ_s N(ζ; 0, σ)``, a constant
 ``f_diff = √(ρ_d / 2)`` and an optional window ``f_wind(θ) = cos^k θ``.  The component
-functions are those of :mod:`analysis.brdf.lightfield` (one implementation of S2-14); this
+functions are those of :mod:`analysis.brdf.lightfield` (one implementation of eq. 2-14); this
 module adds the light-field side: a parameter record, γ on a domain, the inhomogeneous form
 and the four thesis materials.
 """
@@ -39,7 +39,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class FlatlandBRDF:
-    """Diffuse + Gaussian-specular flatland BRDF, eq. (S2-14) of Sasaki's thesis.
+    """Diffuse + Gaussian-specular flatland BRDF, eq. (2-14) of Sasaki 2020.
 
     Parameters
     ----------
@@ -50,7 +50,7 @@ class FlatlandBRDF:
     diffuse_reflectance : float
         ρ_d, flatland Lambertian albedo; ``f_diff(θ) = √(ρ_d/2)`` (1/√rad).
     window_exponent : float
-        k in ``f_wind(θ_in) = cos^k θ_in``; 0 (default) gives the flat window of S2-32/33.
+        k in ``f_wind(θ_in) = cos^k θ_in``; 0 (default) gives the flat window of eq. 2-32/33.
     name : str
         Free label, e.g. the material name.
     """
@@ -115,7 +115,8 @@ class FlatlandBRDF:
         )
 
     def degree_of_specularity(self, domain_rad: tuple[float, float]) -> float:
-        """γ ≈ 1/(1 + Σ|D_p|²/S_pp) for a flat window (S2-37); here D_p = δ_p0 √(ρ_d(b−a)/2).
+        """γ ≈ 1/(1 + Σ|D_p|²/S_pp) for a flat window (Sasaki 2020, eq. 2-37);
+        here D_p = δ_p0 √(ρ_d(b−a)/2).
 
         The Gaussian lobe's S_00 on one period is ρ_s up to the tails beyond ±(b−a)/2.
         """

@@ -1,12 +1,13 @@
-"""Noise and conditioning diagnostics of the per-point reconstruction (physics.md §3).
+"""Noise and conditioning diagnostics of the per-point reconstruction (Sasaki 2020,
+ch. 2, eqs. 2-37 and 2-38).
 
 Normalisation: coefficients are ``X_p = ⟨x, φ_p⟩`` (:func:`spectral.coefficients`), so white
 noise of variance σ² per angle sample has ``PSD_p = E|X_p|² = σ²/N`` (Parseval; the "divide
-by √N" remark after eq. S2-38).  M_0 is the mean of the measured curve.
+by √N" remark after eq. 2-38).  M_0 is the mean of the measured curve.
 
-* Degree of specularity ``γ = 1 / (1 + Σ_p |D_p|²/S_pp)`` (S2-37 text);
+* Degree of specularity ``γ = 1 / (1 + Σ_p |D_p|²/S_pp)`` (eq. 2-37 text);
 * ``SNR = M_0/√PSD`` and the effective ``SNR_eff = M_0 γ/√PSD``;
-* relative noise error per term ``Δ_p = |S_00/S_pp| √PSD_p / (M_0 γ)`` (S2-37, S2-38).
+* relative noise error per term ``Δ_p = |S_00/S_pp| √PSD_p / (M_0 γ)`` (eq. 2-37, eq. 2-38).
 The sums over p skip orders where ``|S_pp| < rel_floor·max|S|``: there the specular
 response is numerically zero, and dividing a small D_p by it only measures round-off.
 """
@@ -59,7 +60,7 @@ def degree_of_specularity(
 def relative_noise_error(
     s: ArrayLike, m0: ArrayLike, gamma: ArrayLike, psd: ArrayLike
 ) -> NDArray[np.float64]:
-    """Δ_p = |S_00/S_pp| √PSD_p/(|M_0| γ) (S2-37); ``inf`` where S_pp = 0 or γ M_0 = 0.
+    """Δ_p = |S_00/S_pp| √PSD_p/(|M_0| γ) (eq. 2-37); ``inf`` where S_pp = 0 or γ M_0 = 0.
 
     ``s`` (..., N) in fftfreq order (S_00 at index 0), ``m0`` and ``gamma`` (...),
     ``psd`` scalar or (N,).
@@ -99,7 +100,7 @@ def _tail(n: int, tail_fraction: float) -> NDArray[np.bool_]:
 def noise_psd_from_coefficients(
     m_coeffs: ArrayLike, *, tail_fraction: float = 0.25, valid_rows: ArrayLike | None = None
 ) -> NoiseEstimate:
-    """White-noise PSD from the high-|p| tail of measured coefficients (S2-38 remark).
+    """White-noise PSD from the high-|p| tail of measured coefficients (eq. 2-38 remark).
 
     The specular lobe low-passes the object (``S_pp`` decays), so the top ``tail_fraction``
     of orders holds noise only.  Each point's mean tail power is Gamma(n, PSD/n)
@@ -162,7 +163,7 @@ def noise_psd_from_frames(frames: ArrayLike) -> NoiseEstimate:
 
 @dataclass(frozen=True)
 class Diagnostics:
-    """Per-point conditioning and noise figures of a reconstruction (S2-37, S2-38).
+    """Per-point conditioning and noise figures of a reconstruction (eq. 2-37, eq. 2-38).
 
     Attributes
     ----------

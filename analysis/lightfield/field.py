@@ -2,9 +2,9 @@
 
 2-D (flatland) light field ``L(y, θ)``: radiance on a plane at axial position ``z_mm``,
 transverse position ``y`` in mm and ray angle ``θ`` in rad measured from the +z axis
-(``tan θ = dy/dz``), physics.md §3 (Sasaki, ch. 1–2).  The angle grid is the cell-centred
+(``tan θ = dy/dz``), as in Sasaki 2020 (ch. 1–2).  The angle grid is the cell-centred
 grid of a stated domain ``[a, b] ⊂ (−π/2, π/2)``: ``θ_j = a + (j + ½)(b − a)/N_θ``, so the
-discrete Fourier basis of the domain (S2-13) is sampled exactly.
+discrete Fourier basis of the domain (eq. 2-13) is sampled exactly.
 
 4-D light field ``L(x, y, u, v)``: positions x, y in mm and the two ray angles u = θ_x,
 v = θ_y in rad on cell-centred grids of their domains (same conventions per axis).

@@ -1,8 +1,8 @@
 """Forward model of the unfolded NLOS scene: object →d1→ wall →d2→ measurement plane.
 
-Eq. (S2-3) of Sasaki's thesis (physics.md §3):
+Eq. (2-3) of Sasaki 2020 (PhD thesis, Univ. of Minnesota):
 ``L_meas(y_m, θ_m) = ∫_a^b f(θ_o, θ_m) cos θ_o L_obj(y_m − d2 tan θ_m − d1 tan θ_o, θ_o) dθ_o``,
-and its per-point form (S2-6) with the local normal angle Θ(c).  Coordinates: the wall
+and its per-point form (eq. 2-6) with the local normal angle Θ(c).  Coordinates: the wall
 (scattering plane) is at z = 0, the object plane at z = −d1, the measurement plane at
 z = +d2; y in mm, θ in rad from the +z axis in the unfolded frame.
 
@@ -28,7 +28,7 @@ __all__ = ["UnfoldedScene"]
 
 @dataclass(frozen=True)
 class UnfoldedScene:
-    """Geometry and wall of the unfolded scene (S2-3/S2-6).
+    """Geometry and wall of the unfolded scene (eq. 2-3/eq. 2-6).
 
     Parameters
     ----------
@@ -83,7 +83,7 @@ class UnfoldedScene:
         *,
         method: Interpolation = "cubic",
     ) -> LightField2D:
-        """Measured light field of an object-plane field (discretised S2-3)."""
+        """Measured light field of an object-plane field (discretised eq. 2-3)."""
         return self.measure_from_wall(self.wall_incident(lf_obj, method=method), y_meas_mm,
                                       method=method)
 

@@ -1,4 +1,4 @@
-"""Localisation of hidden objects from a reconstructed light field (physics.md §4, ch. S3).
+"""Localisation of hidden objects from a reconstructed light field (Sasaki 2020, ch. 3).
 
 Input is the reconstructed incident light field at the wall, ``L(c, θ)`` (z = 0; objects at
 z < 0).  A trial point (y, z) collects the rays ``L(y − z tan θ, θ)`` (a shear, S1).
@@ -215,7 +215,8 @@ def refocus_4d(
 
 @dataclass(frozen=True)
 class Resolution:
-    """Theoretical resolution of a localisation (physics.md §4).
+    """Theoretical resolution of a localisation (Sasaki 2020, ch. 3; derivation in
+    the module docstring).
 
     Attributes
     ----------

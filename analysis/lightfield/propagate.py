@@ -1,7 +1,7 @@
 """Free-space propagation (shear), sampling along shear curves, and projection.
 
 Propagation by a distance d along +z is the ABCD shear that preserves radiance
-(physics.md §3, Durand et al. 2005; numerics.md §3.11):
+(Durand et al., SIGGRAPH 2005; Sasaki 2020, ch. 1):
 ``P_d[L](y, θ) = L(y − d tan θ, θ)``.  Three evaluations are offered:
 
 * ``"fourier"`` — an exact sub-sample shift of each angle column by the Fourier shift
@@ -98,7 +98,8 @@ def _fourier_shift_columns(values: NDArray, shift_samples: NDArray[np.float64]) 
 def propagate(
     lf: LightField2D, distance_mm: float, *, method: Interpolation = "cubic"
 ) -> LightField2D:
-    """Propagate by ``distance_mm`` along +z: ``L'(y, θ) = L(y − d tan θ, θ)`` (physics.md §3).
+    """Propagate by ``distance_mm`` along +z: ``L'(y, θ) = L(y − d tan θ, θ)``
+    (a shear; Durand et al. 2005).
 
     The result lives on the same (y, θ) grids at ``z_mm + d``; radiance that would come from
     outside the sampled y range is 0 (or wraps into the zero padding for ``"fourier"``).
@@ -120,7 +121,7 @@ def sample_along_curves(
     *,
     method: Literal["linear", "cubic"] = "cubic",
 ) -> tuple[NDArray, NDArray[np.bool_]]:
-    """Sample ``L(c_r + d_r tan θ_j, θ_j)`` for every point c_r (the curve of S2-6).
+    """Sample ``L(c_r + d_r tan θ_j, θ_j)`` for every point c_r (the curve of eq. 2-6).
 
     Parameters
     ----------

@@ -1,14 +1,14 @@
 """Reconstruction of the hidden object's light field, one scattering point at a time.
 
-Procedure of Sasaki's thesis (physics.md §3, S2-6 … S2-38), vectorised over points c_r:
+Procedure of Sasaki 2020 (ch. 2, eqs. 2-6 … 2-38), vectorised over points c_r:
 
 1. sample the measured field along each point's curve ``y_m = c_r + d2,r tan θ_m``;
-2. take Fourier coefficients ``M_p`` on the domain [a, b] (S2-13);
-3. solve ``M = B̃ Õ`` in the cosine-weighted basis (S2-18), where
+2. take Fourier coefficients ``M_p`` on the domain [a, b] (eq. 2-13);
+3. solve ``M = B̃ Õ`` in the cosine-weighted basis (eq. 2-18), where
    ``G(θ_o) = cos(θ_o − Θ_r) O(θ_o) = Σ_q Õ_q φ_q(θ_o)`` so the obliquity cancels:
    * ``solver="closed_form"`` (separable diffuse + shift-invariant specular, flat window):
      ``α = Σ_p (D_p*/S_pp) M_p / (1 + Σ_p |D_p|²/S_pp)``, ``Õ_p = (M_p − α D_p)/S_pp``
-     (S2-32, S2-33), then regularised mode by mode (:mod:`.regularize`);
+     (eq. 2-32, eq. 2-33), then regularised mode by mode (:mod:`.regularize`);
    * ``solver="general"``: B̃ from the BRDF's 2-D Fourier coefficients
      (:func:`.spectral.brdf_fourier_matrix`, or ``S_pp W_{p−q} + D_p D_q*`` for a
      separable model with a window), an SVD, and the same regularisation on the
@@ -64,7 +64,7 @@ class Reconstruction:
         (z = 0); all zeros when ``recoverable`` is False
     coefficients : ndarray (R, N) complex — Õ_p (weighted basis, fftfreq order)
     orders : ndarray (N,) — the Fourier orders p
-    alpha : ndarray (R,) complex — diffuse projection of S2-32 (0 for the general solver)
+    alpha : ndarray (R,) complex — diffuse projection of eq. 2-32 (0 for the general solver)
     regularization : RegularizationResult — method, parameter, filter factors, dof, residual
     diagnostics : Diagnostics — γ, SNR, SNR_eff, Δ_p, the noise PSD used
     solver : str — "closed_form" or "general"
@@ -112,7 +112,7 @@ class CurveSolution:
     ----------
     radiance : ndarray (R, N) — O_r(θ_j), object radiance on the curves (0 if unrecoverable)
     coefficients : ndarray (R, N) complex — Õ_p (weighted basis, fftfreq order)
-    alpha : ndarray (R,) complex — diffuse projection of S2-32 (0 for the general solver)
+    alpha : ndarray (R,) complex — diffuse projection of eq. 2-32 (0 for the general solver)
     regularization : RegularizationResult
     diagnostics : Diagnostics
     solver : str — "closed_form" or "general"
@@ -292,7 +292,7 @@ def reconstruct(
     p_max: int | None = None,
     gamma_min: float = 1e-6,
 ) -> Reconstruction:
-    """Reconstruct the object light field from a measured one (S2-6, S2-13 … S2-38).
+    """Reconstruct the object light field from a measured one (eq. 2-6, eq. 2-13 … eq. 2-38).
 
     Parameters
     ----------

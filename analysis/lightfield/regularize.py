@@ -1,12 +1,13 @@
 """Regularised solution of the per-point modal problem ``m_k = s_k x_k + noise_k``.
 
-After the closed form (S2-32/33: diffuse rank-one term removed, modes = Fourier orders,
+After the closed form (eq. 2-32/33: diffuse rank-one term removed, modes = Fourier orders,
 gains s_k = S_pp) or an SVD of B̃ (modes = singular vectors, gains = singular values),
 every scattering point r gives data ``m_rk`` with noise power ``σ_k² = E|noise_rk|²``.
-The estimate is ``x̂_rk = φ_k m_rk / s_k`` with filter factors φ_k (numerics.md §§4.4–4.5):
+The estimate is ``x̂_rk = φ_k m_rk / s_k`` with filter factors φ_k (Hansen,
+*Discrete Inverse Problems*, SIAM 2010, ch. 4–5):
 
 * ``"truncation"`` — keep modes with level ≤ p_max (level = |p| for Fourier modes); p_max is
-  where the first difference of the MSE (physics.md §3, S2-37 ff.)
+  where the first difference of the MSE (Sasaki 2020, eq. 2-37 ff.)
   ``ΔMSE(L) = Σ_{k∈L} (σ_k²/|s_k|² − P_k)`` first turns positive, i.e. where a term's noise
   power overtakes its signal power;
 * ``"wiener"`` — ``φ_k = P_k / (P_k + σ_k²/|s_k|²)``, the per-mode Wiener filter with the
@@ -17,7 +18,7 @@ The estimate is ``x̂_rk = φ_k m_rk / s_k`` with filter factors φ_k (numerics.
 * ``"none"`` — the naive inverse on observable modes.
 
 The signal spectrum is pooled over all points (the unbiased plug-in estimate
-``P_k = mean_r |m_rk/s_k|² − σ_k²/|s_k|²``, numerics.md §4.5), so one filter serves the
+``P_k = mean_r |m_rk/s_k|² − σ_k²/|s_k|²``, the UPRE idea; Hansen 2010), so one filter serves the
 whole light field.  Modes with s_k = 0 are unobservable: φ = 0 there, never NaN.
 """
 

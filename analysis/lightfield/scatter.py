@@ -1,8 +1,8 @@
-"""Scattering of a flatland light field by a surface with a BRDF (physics.md §3).
+"""Scattering of a flatland light field by a surface with a BRDF (Sasaki 2020, ch. 2).
 
 ``L_out(y_s, θ_out) = ∫_a^b f(y_s, θ_in − Θ(y_s), θ_out − Θ(y_s)) cos(θ_in − Θ(y_s))
-L_in(y_s, θ_in) dθ_in`` — the scattering operator of Sasaki's thesis with the local
-normal angle Θ of a tilted or curved surface as in eq. (S2-6); angles in the unfolded
+L_in(y_s, θ_in) dθ_in`` — the scattering operator of Sasaki 2020 with the local
+normal angle Θ of a tilted or curved surface as in eq. (2-6); angles in the unfolded
 frame, ``cos`` clipped at 0 for rays arriving from behind the local surface.  The
 integral is the midpoint rule on the incident field's cell-centred angle grid.
 """

@@ -1,16 +1,17 @@
-"""Fourier basis on an angle domain and the BRDF matrices B and B̃ (physics.md §3).
+"""Fourier basis on an angle domain and the BRDF matrices B and B̃ (Sasaki 2020,
+ch. 2).
 
-Basis (S2-13): ``φ_p(θ) = exp(i p ω (θ − θ_c))``, ``ω = 2π/(b − a)``, ``θ_c = (a + b)/2``,
+Basis (eq. 2-13): ``φ_p(θ) = exp(i p ω (θ − θ_c))``, ``ω = 2π/(b − a)``, ``θ_c = (a + b)/2``,
 orthonormal under ``⟨f, g⟩ = (1/(b − a)) ∫_a^b f g* dθ``.  On the cell-centred grid
 ``θ_j = a + (j + ½)Δθ`` the coefficients ``X_p = ⟨x, φ_p⟩`` are computed exactly (for
 band-limited x) by one FFT: ``X_p = e^{iπp(1 − 1/N)} FFT(x)_p / N``; orders are kept in
 numpy ``fftfreq`` order, ``p = −N/2 … N/2 − 1``.
 
 Matrices (M_p = Σ_q B_pq O_q):
-* plain basis  ``B_pq  = (1/(b−a)) ∬ f(θ_o, θ_m) cos θ_o φ_q(θ_o) φ_p*(θ_m) dθ_o dθ_m`` (S2-13);
-* weighted basis (S2-18) — the unknown is ``G(θ_o) = cos θ_o · O(θ_o)`` — so that
+* plain basis  ``B_pq  = (1/(b−a)) ∬ f(θ_o, θ_m) cos θ_o φ_q(θ_o) φ_p*(θ_m) dθ_o dθ_m`` (eq. 2-13);
+* weighted basis (eq. 2-18) — the unknown is ``G(θ_o) = cos θ_o · O(θ_o)`` — so that
   ``B̃_pq = (1/(b−a)) ∬ f φ_q(θ_o) φ_p*(θ_m)``, the plain 2-D Fourier coefficient of f;
-* separable model (S2-14…25): ``B̃_pq = S_pp W_{p−q} + D_p D_q*`` with
+* separable model (eq. 2-14…25): ``B̃_pq = S_pp W_{p−q} + D_p D_q*`` with
   ``S_pp = ∫_{−(b−a)/2}^{(b−a)/2} f_spec(ζ) e^{−ipωζ} dζ`` (one period: the specular
   convolution is treated as periodic on the domain), ``W_k = ⟨f_wind, φ_k⟩`` and
   ``D_p = (1/√(b−a)) ∫_a^b f_diff φ_p* dθ``.
@@ -48,7 +49,7 @@ def _phase(n: int) -> NDArray[np.complex128]:
 
 
 def coefficients(samples: ArrayLike, *, axis: int = -1) -> NDArray[np.complex128]:
-    """Coefficients ``X_p = ⟨x, φ_p⟩`` of cell-centred samples along ``axis`` (S2-13)."""
+    """Coefficients ``X_p = ⟨x, φ_p⟩`` of cell-centred samples along ``axis`` (eq. 2-13)."""
     x = np.asarray(samples)
     n = x.shape[axis]
     shape = [1] * x.ndim
@@ -81,7 +82,7 @@ def _resample_orders(c_fine: NDArray, n: int) -> NDArray:
 
 @dataclass(frozen=True)
 class SeparableSpectra:
-    """Spectra of the separable BRDF model per scattering point (S2-20…25).
+    """Spectra of the separable BRDF model per scattering point (eq. 2-20…25).
 
     Attributes
     ----------
@@ -89,7 +90,7 @@ class SeparableSpectra:
     s : ndarray (R or 1, N) complex — S_pp, the approximate eigenvalues
     d : ndarray (R or 1, N) complex — D_p, the diffuse coefficients
     w : ndarray (N,) complex — W_k of the window (δ_k0 for a flat window)
-    flat_window : bool — True when W_k = δ_k0 and the closed form S2-32/33 is exact
+    flat_window : bool — True when W_k = δ_k0 and the closed form eq. 2-32/33 is exact
     """
 
     orders: NDArray[np.int64]
@@ -156,7 +157,7 @@ def brdf_fourier_matrix(
     oversample: int = 4,
     lobe_width_rad: float | None = None,
 ) -> NDArray[np.complex128]:
-    """Dense B̃ (``weighted=True``, S2-18) or B (S2-13) of any BRDF, shape (N, N).
+    """Dense B̃ (``weighted=True``, eq. 2-18) or B (eq. 2-13) of any BRDF, shape (N, N).
 
     The double integral over ``[a, b]²`` is the midpoint rule on a fine grid of
     ``K ≥ oversample·N`` points per axis (and ≥ 16 points per ``lobe_width_rad``), via one

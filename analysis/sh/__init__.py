@@ -1,4 +1,8 @@
-"""Spherical-harmonic signal processing for inverse rendering (physics.md §5, equations R, M).
+"""Spherical-harmonic signal processing for inverse rendering.
+
+Reflection as a spherical convolution (Ramamoorthi & Hanrahan, SIGGRAPH 2001) and the
+identities of Mahajan, Ramamoorthi & Curless (ECCV 2006; tags M4 … M25 in this package are
+that paper's equation numbers).
 
 Submodules: :mod:`convention` (the SH convention object), :mod:`legendre` (stable normalised
 Legendre recurrences), :mod:`transform` (Gauss–Legendre SHT and scattered fits),

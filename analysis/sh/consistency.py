@@ -1,13 +1,13 @@
 """Image-consistency checking: identity errors per order against the noise level.
 
-Mahajan, Ramamoorthi & Curless (PAMI 2008, §8) detect tampering by testing an identity
-(e.g. M10 with known lighting, M16, M21) on the images; numerics.md §3.10 insists the
-residual be tested "against the noise level, not against exact zero". Noise, the finite
-view (grazing pixels, the unseen cap behind the sphere) and the departures of a real
-sphere from the ideal radially symmetric convolution all give consistent images non-zero
-identity errors, so the reference is measured: per order l, the distribution of the
-normalised error e_l over consistent data (simulated with the measured noise level, or held
-out), summarised by a robust centre (median) and scale (1.4826·MAD).
+Mahajan, Ramamoorthi & Curless (PAMI 2008, §8) detect tampering by testing an identity (e.g. M10
+with known lighting, M16, M21: equation numbers of the ECCV 2006 paper) on the images; the residual
+must be tested against the noise level, not against exact zero. Noise, the finite view (grazing
+pixels, the unseen cap behind the sphere) and the departures of a real sphere from the ideal
+radially symmetric convolution all give consistent images non-zero identity errors, so the
+reference is measured: per order l, the distribution of the normalised error e_l over consistent
+data (simulated with the measured noise level, or held out), summarised by a robust centre (median)
+and scale (1.4826·MAD).
 
 The decision statistic is T = Σ_l max(z_l, 0)², z_l = (e_l − median_l)/scale_l: only
 errors larger than consistent data produce count. Its threshold is the empirical

@@ -6,7 +6,7 @@ Conventions (the project's canonical one is :data:`PROJECT_CONVENTION`):
   towards +y (0 ≤ φ < 2π). Unit vectors are (sin θ cos φ, sin θ sin φ, cos θ).
 * Normalisation: **orthonormal** on the unit sphere, ∫ Y_lm Y_l'm' dΩ = δ_ll' δ_mm'.
 * Real harmonics (the graphics convention of Ramamoorthi & Hanrahan, SIGGRAPH 2001, and of
-  physics.md §5 / numerics.md §3.1, where Y_1,1 = +0.488603 x):
+  Mahajan, Ramamoorthi & Curless 2006, where Y_1,1 = +0.488603 x):
 
       Y_l0      = λ_l^0(cos θ)
       Y_lm      = √2 λ_l^m(cos θ) cos(mφ)      (m > 0)

@@ -1,9 +1,10 @@
 """Spherical convolution B_lm = A_l L_lm and Wiener deconvolution of lighting.
 
-Physics.md §5 (Mahajan et al. M4, M5, M7); numerics.md §3.10 and §4.4. The Wiener filter
+Mahajan, Ramamoorthi & Curless (ECCV 2006), eqs. 4, 5 and 7 (tagged M4, M5, M7 below);
+Ramamoorthi & Hanrahan (SIGGRAPH 2001). The Wiener filter
 A*_l = A_l / (A_l² + K_l) never divides by zero: bands with A_l = 0 exactly (odd l > 1 for a
 Lambertian kernel) are unobservable and are returned as zero with a flag, and K_l > 0 is
-chosen per band from the noise level as K_l = σ² / P_L(l) (numerics.md §4.4), σ² the
+chosen per band from the noise level as K_l = σ² / P_L(l) (the per-band Wiener choice), σ² the
 noise variance of one coefficient and P_L(l) a power law, both fitted to the band powers of
 the image, P_B(l) = A_l² P_L(l) + σ². The effective number of recovered degrees of freedom
 Σ_l (2l+1) A_l²/(A_l² + K_l) and the K_l actually used are reported.

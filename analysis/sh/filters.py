@@ -1,15 +1,17 @@
 """BRDF filters A_l = Λ_l ρ_l of radially symmetric reflection kernels, and the 9-term irradiance.
 
 Reflection by a radially symmetric kernel is a spherical convolution B_lm = A_l L_lm
-(physics.md §5, Mahajan et al. eqs. M4–M5; Ramamoorthi & Hanrahan 2001). For a zonal kernel
+(Mahajan, Ramamoorthi & Curless 2006, eqs. 4–5; Ramamoorthi & Hanrahan 2001). For a zonal kernel
 K(t), t = cos of the angle to the kernel axis, Funk–Hecke gives A_l = 2π ∫_{−1}^{1} K(t) P_l(t) dt.
 
-* Lambertian (axis = normal, K = max(t, 0)): closed form (numerics.md §3.1, R&H 2001).
+* Lambertian (axis = normal, K = max(t, 0)): closed form (Ramamoorthi & Hanrahan
+  2001, "An efficient representation for irradiance environment maps").
 * Phong in the reflected parameterisation (axis = reflected view direction,
-  K = (s+1)/(2π) max(t, 0)^s, normalised so A_0 = 1): the exact Γ-ratio (numerics.md §3.2)
+  K = (s+1)/(2π) max(t, 0)^s, normalised so A_0 = 1): the exact Γ-ratio (Funk–Hecke; derived
+  here and checked against quadrature in tests/analysis/sh)
   and the approximation exp(−l(l+1)/(2s)).
-* Torrance–Sparrow, Beckmann slope σ: the approximation exp(−σ² l(l+1)) (numerics.md §3.3;
-  R&H give exp(−(σl)²), which is less accurate).
+* Torrance–Sparrow, Beckmann slope σ: the approximation exp(−σ² l(l+1)) (closer to quadrature;
+  Ramamoorthi & Hanrahan give exp(−(σl)²), which is less accurate).
 
 Factorials and powers are evaluated in log space with ``gammaln``: they overflow for l > 170.
 Every filter reports its band limit (the last degree whose |A_l| is at least ``tol``·|A_0|).
@@ -72,7 +74,7 @@ def band_limit(values: np.ndarray, *, tol: float = 1e-2) -> int:
 
 
 def lambertian_filter(lmax: int, *, tol: float = 1e-2) -> SHFilter:
-    """Exact clamped-cosine filter Â_l (Ramamoorthi & Hanrahan 2001; numerics.md §3.1).
+    """Exact clamped-cosine filter Â_l (Ramamoorthi & Hanrahan 2001).
 
     Â_0 = π, Â_1 = 2π/3, Â_l = 0 for odd l > 1, and for even l ≥ 2
     Â_l = 2π (−1)^{l/2−1} / ((l+2)(l−1)) · C(l, l/2) / 2^l, with the binomial in log space.
@@ -95,7 +97,7 @@ def lambertian_filter(lmax: int, *, tol: float = 1e-2) -> SHFilter:
 def kernel_energy_fraction(values: np.ndarray, total: float) -> np.ndarray:
     """Cumulative fraction of a zonal kernel's energy ∫K² dω = Σ (2l+1) A_l²/(4π) up to each l.
 
-    For the clamped cosine ``total`` is 2π/3 (numerics.md §3.1: 87.50 % at l ≤ 1,
+    For the clamped cosine ``total`` is 2π/3 (87.50 % at l ≤ 1,
     99.22 % at l ≤ 2).
     """
     a = np.asarray(values, dtype=float)
@@ -104,7 +106,7 @@ def kernel_energy_fraction(values: np.ndarray, total: float) -> np.ndarray:
 
 
 def phong_filter(lmax: int, s: float, *, exact: bool = True, tol: float = 1e-2) -> SHFilter:
-    """Phong filter in the reflected parameterisation, A_0 = 1 (numerics.md §3.2).
+    """Phong filter in the reflected parameterisation, A_0 = 1 (Ramamoorthi & Hanrahan 2001).
 
     Exact:  A_l = (s+1) ∫₀¹ x^s P_l(x) dx
                 = (s+1) √π Γ(s+1) / (2^{s+1} Γ((s−l)/2+1) Γ((s+l+3)/2)),
@@ -144,7 +146,7 @@ def phong_filter(lmax: int, s: float, *, exact: bool = True, tol: float = 1e-2) 
 def torrance_sparrow_filter(lmax: int, sigma: float, *, tol: float = 1e-2) -> SHFilter:
     """Approximate Torrance–Sparrow filter exp(−σ² l(l+1)), σ the Beckmann slope.
 
-    Valid near normal exitance (numerics.md §3.3: quadrature 0.942, 0.743, 0.334 at
+    Valid near normal exitance (by quadrature: 0.942, 0.743, 0.334 at
     l = 2, 5, 10 for σ = 0.1 against 0.942, 0.741, 0.333); the lobe is not isotropic away from
     it, so this is an approximation by construction.
     """

@@ -1,9 +1,9 @@
 """Spherical-harmonic identities, BRDF/lighting transfer and diffuse/specular separation.
 
 Mahajan, Ramamoorthi & Curless, "A theory of frequency domain invariants: spherical harmonic
-identities for BRDF/lighting transfer and image consistency", IEEE PAMI 30(2), 2008 (ECCV
-2006); equation tags (M…) as in physics.md §5. All images are in the reflected
-parameterisation (coefficients of B(R), R the reflected view direction) unless said
+identities for BRDF/lighting transfer and image consistency", IEEE PAMI 30(2), 2008 (ECCV 2006);
+equation tags M4 … M25 are the equation numbers of the ECCV 2006 paper. All images are in the
+reflected parameterisation (coefficients of B(R), R the reflected view direction) unless said
 otherwise; coefficients use the flat layout of :mod:`analysis.sh.convention`.
 
 Each identity is reported per order l as the normalised error
@@ -384,10 +384,10 @@ def separate_diffuse_specular(
 ) -> SeparationResult:
     """Split an image (normal parameterisation) into l ≤ 2 diffuse and l > 2 specular parts.
 
-    The Lambertian kernel keeps 99.2 % of its energy in l ≤ 2 (numerics.md §3.1), so in the
-    normal parameterisation those terms are taken as diffuse and the rest as specular
-    (physics.md §5, Mahajan et al. §6). The specular lobe's own l ≤ 2 content is assigned to
-    the diffuse part: the standard approximation of the method.
+    The Lambertian kernel keeps 99.2 % of its energy in l ≤ 2 (Basri & Jacobs, PAMI 25(2), 2003),
+    so in the normal parameterisation those terms are taken as diffuse and the rest as specular
+    (Mahajan et al. §6). The specular lobe's own l ≤ 2 content is assigned to the diffuse part: the
+    standard approximation of the method.
     """
     c = np.asarray(image_normal, dtype=float)
     lmax_from_size(c.size)

@@ -4,7 +4,8 @@ The functions are λ_l^m(cos θ) = √((2l+1)/(4π) (l−m)!/(l+m)!) P_l^m(cos �
 Condon–Shortley phase (see :mod:`analysis.sh.convention`), so that
 ∫ λ_l^m(cos θ)² sin θ dθ = 1/(2π).
 
-Recurrences (numerics.md §4.3, "fully normalized three-term recurrences"):
+Recurrences (fully normalised three-term recurrences; Holmes &
+Featherstone 2002):
 
 * sectoral seed:  λ_0^0 = 1/√(4π),  λ_m^m = √((2m+1)/(2m)) sin θ · λ_{m−1}^{m−1};
 * first step:     λ_{m+1}^m = √(2m+3) cos θ · λ_m^m;
@@ -12,7 +13,7 @@ Recurrences (numerics.md §4.3, "fully normalized three-term recurrences"):
   a_lm = √((4l²−1)/(l²−m²)),  b_lm = √(((l−1)²−m²)/(4(l−1)²−1)).
 
 Near the poles the sectoral seed sin^m θ underflows long before the values at higher l become
-representable again (numerics.md §4.3; jmert/AssociatedLegendrePolynomials.jl #27). We carry a
+representable again (jmert/AssociatedLegendrePolynomials.jl #27). We carry a
 separate integer exponent, the approach of libpsht/libsharp (Reinecke 2011,
 arXiv:1010.2084 §3.1.1), which extends the range Holmes & Featherstone (2002, J. Geodesy 76,
 279–299) obtain with a fixed 10^−280 scale factor: a value is stored as

@@ -1,6 +1,6 @@
 """From a camera image of a sphere to directions and spherical-harmonic coefficients.
 
-Geometry (physics.md §5 "Practicalities"; Mahajan et al. 2008 §7): a single view of a convex
+Geometry (Mahajan et al. 2008 §7): a single view of a convex
 sphere of known centre and radius gives, per pixel, the surface normal n and the reflected
 view direction R = 2(n·v)n − v. The image is then a function of R (reflected
 parameterisation, for mirror-like lobes such as Phong) or of n (normal parameterisation, for

@@ -6,8 +6,9 @@ Condon–Shortley phase, θ colatitude); coefficients in the flat layout ``l*l +
 Grid: L+1 Gauss–Legendre rings in θ (:func:`analysis.sh.legendre.gauss_legendre`) by
 2L+1 equispaced longitudes φ_k = 2πk/(2L+1). For a function band-limited to degree L the
 analysis on this grid is exact (the product of two degree-L harmonics has degree ≤ 2L, which
-L+1 Gauss nodes integrate exactly in cos θ, and 2L+1 points exactly in φ) — the exact
-quadrature numerics.md §4.3 asks for.
+L+1 Gauss nodes integrate exactly in cos θ, and 2L+1 points exactly in φ) — an exact
+quadrature, as high orders need (approximate ones leave a bias that iterations do not
+remove).
 
 Algorithm (the standard "semi-naive" SHT, e.g. Reinecke 2011 arXiv:1010.2084 §2):
 synthesis G_m(θ_j) = Σ_l Z_lm λ_l^m(cos θ_j) followed by an inverse real FFT per ring;
@@ -558,7 +559,7 @@ def fit_scattered(
     """Least-squares fit of real SH coefficients to masked scattered samples.
 
     Minimises Σ_i w_i (f_i − Σ c_lm Y_lm(θ_i, φ_i))² + ridge · Σ c_lm² over the samples with
-    ``mask`` true (a camera sees only part of the sphere; numerics.md §2.2 warns that such
+    ``mask`` true (a camera sees only part of the sphere; such
     coverage makes the design matrix rank-deficient, which the ridge term regularises).
 
     Parameters

@@ -1,8 +1,9 @@
 """Firmware emulator of Thorlabs APT motion controllers: K10CR1 and KDC101 (+ stage).
 
-Written from the protocol description (``shared/reference/hardware.md`` §1c, after the
-*APT Host-Controller Communications Protocol*), not from the driver: it imports nothing
-from ``drivers/`` and packs its own bytes, so a bug shared by both sides cannot pass.
+Written from the protocol description (*Thorlabs APT Controllers Host-Controller
+Communications Protocol*, Issue 23 (2018) and Issue 25 (2020)), not from the driver: it
+imports nothing from ``drivers/`` and packs its own bytes, so a bug shared by both sides
+cannot pass.
 
 Frames are little-endian: a 6-byte header ``<HBBBB`` (id, param1, param2, dest, source),
 or ``<HHBB`` (id, data length, dest | 0x80, source) followed by the data. The device is

@@ -5,7 +5,8 @@ in :mod:`hw_mocks.usb.backend` strips the bulk framing) and returns the response
 messages. It imports nothing from ``drivers/``, so a shared misunderstanding of the
 protocol cannot pass the tests on both sides.
 
-Command subset (hardware reference §3b; QMI ``pm100d.py``, pylablib ``GenericPM``)::
+Command subset (Thorlabs *PM100USB Operation Manual* (2020), ch. 7 "Computer Interface";
+QMI ``pm100d.py``, pylablib ``GenericPM``)::
 
     *IDN?  *RST  *CLS  *OPC?
     SYSTem:ERRor[:NEXT]?                     -> <code>,"<message>"   (FIFO, 10 entries)

@@ -1,8 +1,9 @@
 """Firmware emulator of a Newport SMC100 (CC) single-axis controller with its stage.
 
-Written from the manual facts in the hardware reference (§1a), independently of
-``drivers/`` (it imports nothing from there, so a misreading shared by the driver and
-the emulator cannot pass unnoticed).
+Written from the manual (Newport *SMC100CC & SMC100PP Single-Axis Motion Controller/Driver
+User's Manual*) and the transcripts of MagAO-X ``smc100ccCtrl_test.cpp``, independently of
+``drivers/`` (it imports nothing from there, so a misreading shared by the driver and the
+emulator cannot pass unnoticed).
 
 The device side of the ASCII protocol: requests ``<addr><CMD>[value|?]\\r\\n``; replies
 echo address and command (``1TP`` → ``1TP10.500000\\r\\n``); motion and set commands

@@ -1,6 +1,6 @@
 """Firmware emulator of a Zaber ASCII-protocol controller with one or more axes.
 
-Written from the protocol facts (hardware reference §1d; Zaber's *ASCII Protocol Manual*
+Written from the protocol facts (Zaber's *ASCII Protocol Manual*
 conventions, the *A-Series ASCII Protocol (alpha)* wiki page, the article *Zaber's ASCII
 Protocol*, and Zaber's own ``zaber.serial`` library for the checksum and alert layouts),
 independently of ``drivers/``: it imports nothing from there, so a misreading shared by

@@ -1,6 +1,6 @@
 """The goniometer scene: a flat sample with a ground-truth BRDF under a collimated beam.
 
-Physics (physics.md §1, hardware.md §5d-e). The sample is a disk of radius
+Physics (Nicodemus et al. 1977; ASTM E2387; Li & Torrance 2003). The sample is a disk of radius
 ``sample_radius_mm`` in the plane through the lab origin with normal n (the pose of
 :mod:`hw_mocks.sim.world`). A collimated Gaussian beam of power P and 1/e² radius w travels
 along −ω_s through the origin, with intensity I(r⊥) = 2P/(πw²) exp(−2 r⊥²/w²) across it. A
@@ -22,7 +22,7 @@ Optional terms:
 
 * ``target``: ``"sample"`` (the BRDF under test), ``"reference"`` (a reference standard,
   by default an ideal Lambertian of reflectance 0.99 — real PTFE deviates at large angles,
-  hardware.md §5d), or ``"none"`` (no sample: the beam passes through, which gives the
+  EMRP xDReflect), or ``"none"`` (no sample: the beam passes through, which gives the
   instrument signature and the direct-beam power measurement).
 * Instrument signature (stray light from the source optics, air scatter): a veiling
   radiance ``L_sig = f_sig(ψ) · E_peak`` added to every ray, with the BRDF-equivalent

@@ -5,7 +5,7 @@ measures the run engine and storage alone (engine-overhead benchmark, soak test)
 complete instantly; the camera returns small frames whose level is
 ``brightness() × exposure + 10`` DN, clipped at saturation (optionally with seeded Gaussian
 noise); the power meter reads a constant. Imports only :mod:`drivers.base`
-(ARCHITECTURE.md import rules).
+(docs/architecture.md import rules).
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
 """The light-field scene of the virtual bench: a scattering wall, hidden objects, a camera track.
 
-This puts the continuous-geometry renderer :class:`hw_mocks.sim.lightfield_scene.HiddenScene`
-(Sasaki's unfolded flatland scene, physics.md §3, eq. S2-3/S2-6) on the virtual bench, so
-that the simulated camera on its linear stage records the light field a real light-field
-scan would, through the EMVA 1288 sensor model.
+This puts the continuous-geometry renderer
+:class:`hw_mocks.sim.lightfield_scene.HiddenScene` (the unfolded flatland scene of Sasaki
+2020, PhD thesis, Univ. of Minnesota, eqs. 2-3, 2-6) on the virtual bench, so that the
+simulated camera on its linear stage records the light field a real light-field scan would,
+through the EMVA 1288 sensor model.
 
 Geometry (lab frame of :mod:`hw_mocks.sim.world`, lengths in mm)
 -------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """Continuous-geometry renderer of the light field scattered by a wall off hidden objects.
 
-The unfolded flatland scene of Sasaki's thesis (physics.md §3, eq. S2-3/S2-6): hidden
+The unfolded flatland scene of Sasaki 2020 (PhD thesis, Univ. of Minnesota, eqs. 2-3, 2-6): hidden
 objects at depths z < 0 in front of a scattering wall at z = 0, and a measurement plane at
 z = d2 where the camera on its linear stage samples rays ``(y_m, θ_m)``.  For each camera
 sample the renderer traces the ray back to its wall point ``c = y_m − d2 tan θ_m``, finds in

@@ -1,9 +1,9 @@
 """The sphere scene of the virtual bench: spheres of chosen BRDF under environment lighting.
 
-This puts the sphere renderer of :mod:`hw_mocks.sim.sphere_scene` (physics.md §5, issue 7
-§5) on the virtual bench of :mod:`hw_mocks.sim.world`, so that the simulated camera records
-what a real sphere capture would, through its EMVA 1288 sensor model, and the engine's
-auto-exposure/HDR policy takes the brackets.
+This puts the sphere renderer of :mod:`hw_mocks.sim.sphere_scene` (Mahajan, Ramamoorthi &
+Curless 2006) on the virtual bench of :mod:`hw_mocks.sim.world`, so that the simulated
+camera records what a real sphere capture would, through its EMVA 1288 sensor model, and the
+engine's auto-exposure/HDR policy takes the brackets.
 
 Geometry (lab frame of :mod:`hw_mocks.sim.world`, lengths in mm)
 ------------------------------------------------------------------
@@ -228,7 +228,7 @@ class SphereBenchScene:
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False,
                                   hash=False)
 
-    #: The sphere pipeline maps each pixel to one surface normal (a pinhole view, issue 7);
+    #: The sphere pipeline maps each pixel to one surface normal (a pinhole view);
     #: the simulated camera keeps its chief-ray model here. Sampling the pupil would add
     #: defocus at the limbs and cost a full pupil integral per pixel of every sphere.
     pupil_sampling = False

@@ -1,11 +1,11 @@
 """Simulated sphere scenes: procedural environment lighting and rendered sphere radiance images.
 
-Ground truth for the spherical-harmonic inverse-rendering analysis (issue 7 §5; physics.md
-§5). Images are rendered by numerical integration over incoming directions,
-B(pixel) = ∫ L(ω) f(ω, v) (n·ω)⁺ dω, on a Gauss–Legendre product quadrature much finer than
-any analysis order plus explicit sub-samples of each sharp source, directly from the BRDF in
-the spatial domain: never with the SH convolution the analysis inverts (no inverse crime;
-ARCHITECTURE.md "The simulated bench").
+Ground truth for the spherical-harmonic inverse-rendering analysis (Ramamoorthi & Hanrahan
+2001; Mahajan, Ramamoorthi & Curless 2006). Images are rendered by numerical integration
+over incoming directions, B(pixel) = ∫ L(ω) f(ω, v) (n·ω)⁺ dω, on a Gauss–Legendre product
+quadrature much finer than any analysis order plus explicit sub-samples of each sharp
+source, directly from the BRDF in the spatial domain: never with the SH convolution the
+analysis inverts (no inverse crime; docs/architecture.md "The virtual bench").
 
 Frames (shared with :mod:`analysis.sh.sphere_image`): world +x along image columns, +y up,
 +z towards the distant (orthographic) viewer; pixel (row i, column j) has its centre at
@@ -254,7 +254,7 @@ class Lambertian:
 
 @dataclass(frozen=True)
 class Phong:
-    """Diffuse plus the reflection-space Phong lobe of Ramamoorthi & Hanrahan (numerics.md §3.2):
+    """Diffuse plus the reflection-space Phong lobe of Ramamoorthi & Hanrahan (SIGGRAPH 2001):
     kernel kd/π (n·ω)⁺ + ks (s+1)/(2π) ((R·ω)⁺)^s, with light from below the surface's
     horizon excluded (a physical sphere, not the idealised radially symmetric kernel)."""
 

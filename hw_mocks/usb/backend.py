@@ -1,14 +1,15 @@
 """A pyusb backend whose one device is an emulated USBTMC instrument.
 
-``usb.core.find(backend=EmulatedUsbtmcBackend(firmware), idVendor=…, idProduct=…)``
-returns a real :class:`usb.core.Device`; every descriptor read, control request and bulk
-transfer the host makes through pyusb lands here. pyusb documents this extension point
-(``usb.backend.IBackend``; hardware reference §3c), so nothing in ``usb.core`` is patched
-and the driver's whole pyusb code path runs.
+``usb.core.find(backend=EmulatedUsbtmcBackend(firmware), idVendor=…, idProduct=…)`` returns
+a real :class:`usb.core.Device`; every descriptor read, control request and bulk transfer
+the host makes through pyusb lands here. pyusb documents this extension point
+(``usb.backend.IBackend`` in pyusb's ``usb/backend/__init__.py``), so nothing in
+``usb.core`` is patched and the driver's whole pyusb code path runs.
 
 The device side implements USBTMC 1.0 (and the USB488 interface descriptor) as far as a
-power meter needs it, written from the specification summary in the hardware reference
-§3a and independent of ``drivers/usbtmc.py``:
+power meter needs it, written from the specification (USB-IF *Universal Serial Bus Test and
+Measurement Class Specification (USBTMC)*, Revision 1.0, 2003) and independent of
+``drivers/usbtmc.py``:
 
 * descriptors: device (VID/PID, bus/address/port/speed), one configuration, one USBTMC
   interface (class 0xFE, subclass 0x03, protocol 0x01), bulk-OUT 0x02, bulk-IN 0x81,

@@ -6,7 +6,7 @@ gives (a calibrated real camera), from the file named in the run's ``calibration
 or — for a simulated camera (``simcam://`` URL in the bench profile) — from the simulator
 itself, as a perfect calibration would give it. The simulator is reached only by the
 string entry point keyed on the URL scheme (:data:`instrument.bench.devices.SIM_ENTRY_POINTS`),
-never by an import (ARCHITECTURE.md import rules).
+never by an import (docs/architecture.md import rules).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ A point is rejected when
 * the detector would sit in, or shadow, the incident beam: the bistatic angle
   |detector_theta| (the angle between source and detector directions, see
   :mod:`instrument.bench.kinematics`) is below the geometry's ``min_bistatic_deg``
-  (physics.md §6: no exact backscatter);
+  (a detector cannot sit in the incident beam: no exact backscatter);
 * a direction leaves the upper hemisphere (θi or θr ≥ 90°: the beam or the detector would
   look at the sample from behind);
 * an axis (or a difference of two axes) lies in one of the profile's arm-collision zones.

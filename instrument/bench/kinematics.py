@@ -1,6 +1,6 @@
 """Goniometer kinematics: axis positions ↔ scattering angles (θi, φi, θr, φr).
 
-Geometry of a type-(ii) goniometer (physics.md §6, hardware.md §5c): a fixed source, a
+Geometry of an in-plane or out-of-plane point-detector goniometer (ADR 0012): a fixed source, a
 sample that rotates, a detector on an arm that orbits in the horizontal plane.
 
 Frames and signs (all angles in **degrees**)

@@ -60,12 +60,16 @@ def run_from_args(args: argparse.Namespace, spec: PlanSpec, profile: BenchProfil
         print(f"error: {prior.model} has no parameter {param!r}; it has {', '.join(names)}")
         return 2
     results = sweep(spec, profile, default_options(), prior=prior, det=det)
-    print(f"prior {prior.model} {dict(zip(names, prior.params, strict=True))}; "
-          f"target σ({param}) ≤ {args.target_uncertainty:g}")
-    print("Pareto front (duration vs predicted σ):")
+    where = "--prior" if args.prior else "the bench profile's simulated sample"
+    values = ", ".join(f"{n} = {v:g}" for n, v in zip(names, prior.params, strict=True))
+    print(f"expected BRDF: {prior.model} with {values} (from {where})")
+    print(f"target: standard uncertainty of {param} ≤ {args.target_uncertainty:g}")
+    print("fastest scan for each reachable uncertainty (the Pareto front):")
+    print(f"  {'duration':>9}  {'σ(' + param + ')':>16}  points  θr step  exposure cap  frames")
     for r in pareto_front(results, param):
-        print(f"  {r.duration_s:9.1f} s  σ={r.sigma[param]:.3g}  {r.n_points:4d} points  "
-              f"{r.option.label()}")
+        o = r.option
+        print(f"  {r.duration_s:7.1f} s  {r.sigma[param]:16.3g}  {r.n_points:6d}  "
+              f"{o.theta_r_step_deg:6g}°  {o.max_exposure_us:9g} µs  {o.frames:6d}")
     best = fastest_for_target(results, param, args.target_uncertainty)
     if best is None:
         reach = min(r.sigma[param] for r in results)
@@ -73,8 +77,9 @@ def run_from_args(args: argparse.Namespace, spec: PlanSpec, profile: BenchProfil
               f"(best {reach:.3g}); add incidence angles or raise the exposure caps")
         return 1
     o = best.option
-    print(f"fastest: {o.label()} — {best.n_points} points, {best.duration_s:.1f} s "
-          f"(motion {best.motion_s:.1f} s), predicted σ({param}) = {best.sigma[param]:.3g}")
+    print(f"fastest: θr step {o.theta_r_step_deg:g}°, exposure cap {o.max_exposure_us:g} µs, "
+          f"{o.frames} frame(s) — {best.n_points} points, {best.duration_s:.1f} s (of which "
+          f"motion {best.motion_s:.1f} s), predicted σ({param}) = {best.sigma[param]:.3g}")
     print(f"  in the plan file: theta_r step = {o.theta_r_step_deg:g}, "
           f"[acquisition] max_exposure_us = {o.max_exposure_us:g}, frames = {o.frames}")
     return 0

@@ -59,11 +59,11 @@ class ConsoleProgress:
             case PointCompleted():
                 parts = []
                 if ev.angles is not None:
-                    parts.append(f"θi={ev.angles[0]:.1f} θr={ev.angles[2]:.1f}")
+                    parts.append(f"θi={ev.angles[0]:.1f}° θr={ev.angles[2]:.1f}°")
                 if ev.signal == ev.signal:
-                    parts.append(f"signal={ev.signal:.3g} DN/us")
+                    parts.append(f"camera {ev.signal:.3g} DN/µs")
                 if ev.power_w == ev.power_w:
-                    parts.append(f"P={ev.power_w:.3g} W")
+                    parts.append(f"power meter {ev.power_w:.3g} W")
                 if ev.status != "ok":
                     parts.append(ev.status.upper())
                 self._live = " ".join(parts)

@@ -13,6 +13,7 @@ from pathlib import Path
 from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
 from instrument.pipelines.brdf.pipeline import fit_run
 from instrument.pipelines.brdf.reduce import ReductionOptions
+from instrument.pipelines.brdf.report import unit_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="relative standard uncertainty of the incident power")
     p.add_argument("--distance-mm", type=float, default=None,
                    help="sample-to-receiver distance (default: profile + camera_z read-back)")
+    p.add_argument("--distance-u-mm", type=float, default=None,
+                   help="standard uncertainty of that distance in mm (default: unknown; "
+                        "it enters the common scale uncertainty)")
     p.add_argument("--camera-calibration", default=None,
                    help="JSON with the camera's K, η, read noise, saturation and pupil")
     p.add_argument("--sigma-theta-deg", type=float, default=None,
@@ -82,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method, detector=args.detector, cosine_corrected=args.cosine_corrected,
         incident_power_w=args.incident_power_w, u_incident_power_rel=args.incident_power_u,
         sigma_theta_deg=args.sigma_theta_deg, receiver_distance_mm=args.distance_mm,
+        u_distance_mm=args.distance_u_mm,
         camera_calibration=args.camera_calibration, flat_run=args.flat,
         reference_run=args.reference, signature_run=args.signature,
         reference_table=args.reference_table,
@@ -106,25 +111,41 @@ def run(args: argparse.Namespace) -> int:
         return 2
     reduced, result, page = done.reduced, done.result, done.report
     fit = result.chosen_fit
-    print(f"{reduced.points.n} points ({reduced.points.method}); chosen model "
+    n = reduced.points.n
+    print(f"{n} points ({reduced.points.method} method); chosen model "
           f"{result.chosen} ({result.selection.rule})")
     # the goodness-of-fit gate (docs/decisions/0051)
     print(f"  {result.verdict}")
+    for warning in reduced.warnings:
+        print(f"warning: {warning}")
+    scale = ("common scale unknown, not included" if reduced.scale_unknown
+             else f"common scale {reduced.points.u_scale_rel:.2%} included")
     factor = result.inflation.get(result.chosen, 1.0)
-    flag = "" if factor == 1.0 else f"  (σ inflated ×{factor:.3g}: model rejected)"
+    inflated = ("" if factor == 1.0
+                else f"; σ inflated ×{factor:.3g} because the model is rejected")
+    print(f"parameters of {result.chosen} (value ± standard uncertainty from noise, angles "
+          f"and pixel response; {scale}{inflated}):")
+    specs = {ps.name: ps for ps in result.models[result.chosen].params}
     for name, value, err, unit in fit.table():
-        print(f"  {name:<16} {value:12.6g} ± {err:.3g} {unit}{flag}")
+        what = specs[name].description if name in specs else ""
+        print(f"  {name:<16} {value:12.6g} ± {err:<9.3g} {unit_text(unit) or '':<6} {what}")
     for k, r in (result.disagreeing_points()[:10] if not result.adequate else []):
         p = reduced.points
         print(f"  disagrees: {reduced.point_label(k)} (θi={math.degrees(p.theta_i[k]):.1f}°, "
               f"θr={math.degrees(p.theta_r[k]):.1f}°) r = {r:+.1f}σ")
     if fit.bootstrap is not None:
         b = fit.bootstrap
-        print(f"  bootstrap ({b.samples.shape[0]} resamples, noise only): σ = "
-              + ", ".join(f"{v:.3g}" for v in b.stderr))
+        print(f"  bootstrap check ({b.samples.shape[0]} resamples, noise only): σ of "
+              + ", ".join(f"{name} {v:.3g}" for name, v
+                          in zip(fit.param_names, b.stderr, strict=True)))
+    print("model comparison (χ²/dof ≈ 1: the model fits within the uncertainties; "
+          f"lower {result.selection.criterion.upper()} is better):")
+    best = min(row.score(result.selection.criterion) for row in result.selection.table)
     for row in result.selection.table:
-        print(f"  {row.name:<22} k={row.n_params}  χ²={row.chi2:10.2f}  "
-              f"BIC={row.bic:10.2f}")
+        dof = max(n - row.n_params, 1)
+        delta = row.score(result.selection.criterion) - best
+        print(f"  {row.name:<22} {row.n_params} parameter(s)  χ²/dof {row.chi2 / dof:10.4g}"
+              f"  Δ{result.selection.criterion.upper()} {delta:10.4g}")
     for note in result.notes:
         print(f"  note: {note}")
     print(f"report: {page}")

@@ -17,8 +17,16 @@ from instrument.cli.reconstruct import (
     figures_dir,
     options,
 )
+from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
 from instrument.pipelines.lightfield.locate import locate_run
 from instrument.pipelines.lightfield.results import GROUP
+
+#: The depth-quality flags of :data:`analysis.lightfield.QUALITY_FLAGS`, in words.
+QUALITY_WORDS = {
+    "resolved": "resolved (the three depth estimates agree)",
+    "two_estimates_agree": "likely (two of the three depth estimates agree)",
+    "unresolved": "unresolved (the data support only an interval)",
+}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,12 +65,16 @@ def run(args: argparse.Namespace) -> int:
         res = det.resolutions[k]
         far, near = det.depth_interval_mm[k]
         quality = det.quality[k]
-        depth = (f"z = {z:8.2f} mm" if quality != "unresolved"
-                 else f"z unresolved, best guess {z:.1f} mm")
-        print(f"  object {k} [{quality}]: y = {y:7.2f} mm, {depth}, z in [{far:.1f}, "
-              f"{near:.1f}] mm  (blur ±{res.transverse_mm:.1f} mm across, ±{res.depth_mm:.1f} "
-              f"mm in depth); brightness RP {det.brightness_rp[k]:.4g}, conventional "
-              f"{det.brightness_conventional[k]:.4g}")
+        if quality == "unresolved":
+            depth = f"z between {far:.1f} and {near:.1f} mm (best guess {z:.1f} mm)"
+        else:
+            depth = f"z = {z:.2f} mm (interval {far:.1f} to {near:.1f} mm)"
+        print(f"  object {k}, depth {QUALITY_WORDS.get(quality, quality)}: y = {y:.2f} mm, "
+              f"{depth}")
+        print(f"    theoretical blur ±{res.transverse_mm:.1f} mm across, ±{res.depth_mm:.1f} "
+              f"mm in depth; brightness {det.brightness_rp[k]:.4g} {RADIANCE_UNIT} "
+              f"(radiance-preserving refocusing; conventional refocusing gives "
+              f"{det.brightness_conventional[k]:.4g}, lower the farther the object sits)")
     if r.figures:
         print(f"figures: {', '.join(str(p) for p in r.figures)}")
     print(f"stored in {args.run}:/{GROUP}/localisation")

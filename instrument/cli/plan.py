@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -24,6 +25,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="coverage picture path (default: <plan name>_coverage.png here)")
     _planner.add_arguments(p)
     p.set_defaults(func=run)
+
+
+def _value(v: object) -> str:
+    """A policy value as read in a sentence (lists joined, true/false as yes/no)."""
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, list):
+        return "+".join(str(x) for x in v)
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         if raster.motion_s > 0:
             print(f"  naive raster order would need motion {fmt_s(raster.motion_s)} "
                   f"({est.motion_s / raster.motion_s:.0%} of it used here)")
-    print(f"  acquisition: {spec.acquisition.as_json()}")
+    acq = json.loads(spec.acquisition.as_json())
+    print("  acquisition: " + ", ".join(f"{k} {_value(v)}" for k, v in acq.items()))
     if any(p.angles is not None for p in plan.points):
         png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
         try:

@@ -2,17 +2,26 @@
 
 A driver in another process (or another program) opens the printed paths with plain
 ``serial.Serial(path)``. Runs until interrupted or for ``--duration`` seconds.
+
+The pty numbers change from one start to the next; ``--link-dir DIR`` also makes a stable
+symbolic link ``DIR/<role>`` to each, so a bench profile can name the ports by role
+(``examples/bench_serve_sim.toml`` uses ``/tmp/scatterlab-ptys``), the way a real bench
+names its adapters by ``/dev/serial/by-id``. The links are removed on exit.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import time
+from pathlib import Path
 
 from instrument.bench.profile import load_profile
 
 PTY_ENTRY = ("hw_mocks.pty_server", "serve_url")
+#: URL schemes of the emulated serial controllers (each has a pyserial URL handler).
+SERIAL_SCHEMES = ("simapt", "simsmc", "simzaber", "simsr830")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bench", default="sim", help="profile name or path (default: sim)")
     p.add_argument("--duration", type=float, default=None,
                    help="stop after this many seconds (default: until Ctrl-C)")
+    p.add_argument("--link-dir", default=None, metavar="DIR",
+                   help="also make a link DIR/<role> to each pty (stable names for a "
+                        "profile; removed on exit)")
     p.set_defaults(func=run)
 
 
@@ -28,12 +40,17 @@ def run(args: argparse.Namespace) -> int:
     module, func = PTY_ENTRY
     serve_url = getattr(importlib.import_module(module), func)
     servers = []
+    links: list[Path] = []
     try:
         for role, spec in profile.devices.items():
-            if spec.url.split("://", 1)[0] in ("simapt", "simsmc"):
+            if spec.url.split("://", 1)[0] in SERIAL_SCHEMES:
                 server = serve_url(spec.url)
                 servers.append(server)
-                print(f"{role}: {spec.url} -> {server.path}", flush=True)
+                where = server.path
+                if args.link_dir is not None:
+                    links.append(_link(Path(args.link_dir), role, server.path))
+                    where += f" (link {links[-1]})"
+                print(f"{role}: {spec.url} -> {where}", flush=True)
         if not servers:
             print("this bench has no emulated serial controllers")
             return 1
@@ -43,7 +60,26 @@ def run(args: argparse.Namespace) -> int:
             time.sleep(0.1)
     except KeyboardInterrupt:
         pass
+    except OSError as err:
+        print(f"error: --link-dir {args.link_dir}: {err}")
+        return 2
     finally:
+        for link in links:
+            with contextlib.suppress(OSError):
+                link.unlink()
         for server in servers:
             server.close()
     return 0
+
+
+def _link(folder: Path, role: str, target: str) -> Path:
+    """``folder/role`` → ``target``, replacing a stale link of an earlier run (never a
+    file that is not a link)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    link = folder / role
+    if link.is_symlink():
+        link.unlink()
+    elif link.exists():
+        raise OSError(f"{link} exists and is not a link; choose another folder")
+    link.symlink_to(target)
+    return link

@@ -1,7 +1,7 @@
 """Typed plan commands and the per-point acquisition policy.
 
 A plan is a generator of these frozen dataclasses; the engine executes them with a
-``match`` on the class (STYLE.md §6). A point's commands are always
+``match`` on the class. A point's commands are always
 ``Move → Acquire → PointDone``, optionally preceded by ``SetLight``.
 """
 

@@ -91,7 +91,7 @@ def _key(a: Angles, isotropic: bool, ndigits: int = 6) -> tuple[float, ...]:
 def dedupe_reciprocal(angles: list[Angles], *, isotropic: bool = True) -> list[int]:
     """Indices of ``angles`` to keep: one of each set equal under reciprocity.
 
-    Helmholtz reciprocity f(i→r) = f(r→i) (physics.md §1) makes a point and its
+    Helmholtz reciprocity f(i→r) = f(r→i) (Nicodemus et al. 1977) makes a point and its
     source/detector exchange measure the same value; for an isotropic sample only
     θi, θr and φr − φi matter. The first occurrence is kept; exact duplicates go too.
     """

@@ -54,7 +54,7 @@ explicit list):
   fixed axis positions ``positions = {role = value}``.
 * ``photon_transfer``: ``exposures_us`` (range or list) or ``{start, stop, n, log}``,
   ``pairs`` (frame pairs per exposure, default 2), ``dark = true`` (dark at each exposure).
-* ``sphere_capture``: images of objects × lighting conditions (issue 7 §5). ``objects``
+* ``sphere_capture``: images of objects × lighting conditions. ``objects``
   (list of ``{name, station_deg, known_brdf}``: the sample-changer position of each sphere
   and, optionally, a BRDF known beforehand, ``{model = "phong", s, ks}``, ``{model =
   "lambertian", albedo}`` or ``{model = "mirror", reflectance}``, which lets the analysis

@@ -449,7 +449,8 @@ def _write_rows(grp: h5py.Group, n0: int, recs: list[tuple[PointRecord, int, int
                 n_axes: int) -> None:
     n1 = n0 + len(recs)
     cols: dict[str, list[Any]] = {k: [] for k in (*FLOAT_FIELDS, *INT_FIELDS, *STR_FIELDS)}
-    pos = np.full((len(recs), n_axes), np.nan)
+    # a plan that moves no axis (dark frames) still has a one-column table (see _ext)
+    pos = np.full((len(recs), max(n_axes, 1)), np.nan)
     for k, (r, frame_start, n_frames) in enumerate(recs):
         cols["t_start"].append(r.t_start)
         cols["t_end"].append(r.t_end)
@@ -800,7 +801,7 @@ def _reconcile(f: h5py.File, header: RunHeader, points: list[dict[str, Any]],
     n = len(points)
     dropped = max(0, pts["index"].shape[0] - n)
     cols: dict[str, list[Any]] = {k: [] for k in (*FLOAT_FIELDS, *INT_FIELDS, *STR_FIELDS)}
-    pos = np.full((n, len(header.axes)), np.nan)
+    pos = np.full((n, max(len(header.axes), 1)), np.nan)
     frame_cols: dict[str, list[Any]] = {k: [] for k in FRAME_FIELDS}
     crcs: list[int] = []
     for k, p in enumerate(points):

@@ -1,7 +1,8 @@
 """APT frame codec and stream parser: reference byte sequences, resynchronisation, fuzzing.
 
-Reference bytes are from ``shared/reference/hardware.md`` §1c ("Concrete byte
-sequences"), written out by hand here rather than produced by the code under test.
+Reference bytes are computed by hand from the frame layouts of the *Thorlabs APT
+Controllers Host-Controller Communications Protocol* (Issue 25), written out here rather
+than produced by the code under test.
 """
 
 from __future__ import annotations

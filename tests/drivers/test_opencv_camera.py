@@ -154,7 +154,8 @@ def test_missing_source_fails_to_connect(tmp_path):
 class V4l2CaptureEmulator:
     """Device-side model of a UVC camera as OpenCV's V4L2 backend presents it.
 
-    Behaviour (hardware.md §2a): ``exposure_time_absolute`` in 100 µs integer units
+    Behaviour (V4L2 UVC controls; opencv/opencv#9738): ``exposure_time_absolute`` in 100 µs
+    integer units
     (1…5000, out-of-range values clamped with ``set`` still returning True), auto exposure
     as a menu (1 manual, 3 aperture priority; exposure writes are ignored in auto mode),
     integer gain 0…100 (clamped), FOURCC ``YUYV``/``GREY`` (8-bit) or ``Y16`` (16-bit),

@@ -1,8 +1,9 @@
 """AptMotor: byte-exact transcripts, the motion contract on both transports, field quirks
 and every injected fault.
 
-Transcript bytes are written out by hand from ``shared/reference/hardware.md`` §1c (header
-layouts, ids, the K10CR1 and KDC101 scaling), independently of the driver's packers.
+Transcript bytes are written out by hand from the *APT Host-Controller Communications
+Protocol* (header layouts, ids, the K10CR1 and KDC101 scaling), independently of the
+driver's packers.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 The real pyusb code path runs: ``usb.core.find(backend=…)`` builds ``usb.core.Device``
 objects from the emulated descriptors and every transfer goes through pyusb's endpoint
 and control-transfer code. Nothing patches ``usb.core``. Byte-exact expectations come
-from the USBTMC 1.0 layout (hardware reference §3a), not from the driver.
+from the USBTMC 1.0 specification's layout (USB-IF, 2003), not from the driver.
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ def test_write_and_read_request_bytes_are_exact():
     tmc = open_tmc(max_transfer_size=1024)
     backend = backend_from_url("simusb://tmc")
     assert tmc.query("*IDN?") == IDN
-    # Hardware reference §3a, computed from the USBTMC layout.
+    # Computed by hand from the USBTMC 1.0 bulk header layout.
     assert backend.bulk_out_log[-2] == bytes.fromhex(
         "01 01 FE 00 06 00 00 00 01 00 00 00 2A 49 44 4E 3F 0A 00 00")
     assert backend.bulk_out_log[-1] == bytes.fromhex("02 02 FD 00 00 04 00 00 00 00 00 00")

@@ -40,7 +40,7 @@ from drivers.zaber_protocol import (
     ((0, 0, "get pos"), {}, b"/0 0 get pos\n"),
     ((12, 3, "home"), {"message_id": 0}, b"/12 3 0 home\n"),
     ((1, 0, "warnings clear"), {"message_id": 99}, b"/1 0 99 warnings clear\n"),
-    # checksum: two's complement of the byte sum after '/' (hardware reference §1d example)
+    # checksum: two's complement of the byte sum after '/' (zaber.serial's LRC, computed by hand)
     ((1, 1, "move abs 10000"), {"with_checksum": True}, b"/1 1 move abs 10000:40\n"),
     ((2, 0, "get pos"), {"message_id": 7, "with_checksum": True}, b"/2 0 7 get pos:55\n"),
 ])

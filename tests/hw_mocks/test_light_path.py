@@ -44,7 +44,7 @@ def lit_bench(**kw) -> VirtualBench:
 
 
 def lambert_power(power_w: float) -> float:
-    """f = ρ/π: P = ρ/π · P_i · cos θr · Ω (physics.md §1)."""
+    """f = ρ/π: P = ρ/π · P_i · cos θr · Ω (Nicodemus et al. 1977)."""
     return 0.5 / math.pi * power_w * math.cos(math.radians(30.0)) * OMEGA
 
 

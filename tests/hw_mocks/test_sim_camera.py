@@ -364,7 +364,7 @@ def test_saturation_level_and_binning():
 
 
 def test_photon_transfer_recovers_simulator_gain_and_read_noise():
-    """Validation (issue 3 §5): K and read noise within 5 % of the simulator's."""
+    """Validation: K and read noise within 5 % of the simulator's."""
     world = flat_bench(radiance=2.0)
     cam = SimulatedCamera(world=world, seed=9, sensor=SensorParams(width=256, height=256),
                           pixel_format=PixelFormat.MONO16)
@@ -391,7 +391,7 @@ def test_photon_transfer_recovers_simulator_gain_and_read_noise():
 
 
 def test_hdr_merge_is_linear_over_1e6_on_the_simulated_bench():
-    """Validation (issue 3 §5): an HDR merge of the beam spot, whose radiance spans more
+    """Validation: an HDR merge of the beam spot, whose radiance spans more
     than 10⁶, agrees with the simulator's noise-free truth within 2 % wherever some bracket
     is unsaturated."""
     world = lit_bench(0.0, 20.0)
@@ -431,7 +431,7 @@ def test_hdr_merge_is_linear_over_1e6_on_the_simulated_bench():
 
 
 def test_dark_and_flat_remove_the_fixed_pattern_to_shot_noise():
-    """Validation (issue 3 §5): after dark + flat correction the spatial noise of a uniform
+    """Validation: after dark + flat correction the spatial noise of a uniform
     scene equals the temporal (shot + read) noise; before, the fixed pattern dominates."""
     world = flat_bench(radiance=2.0)
     cam = SimulatedCamera(world=world, seed=21, sensor=SensorParams(width=1024, height=1024,

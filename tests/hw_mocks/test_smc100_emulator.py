@@ -1,6 +1,6 @@
 """The SMC100 firmware emulator on its own: raw bytes in, raw bytes out, manual time.
 
-These tests pin the emulator to the manual facts (reference §1a) without the driver, so
+These tests pin the emulator to the facts of the SMC100CC/PP user's manual without the driver, so
 that the driver's tests really test the driver against an independent reading.
 """
 

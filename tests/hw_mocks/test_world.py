@@ -78,7 +78,7 @@ def test_kinematics_theta_two_theta_is_specular():
 
 @pytest.mark.parametrize("theta_d", [10.0, 30.0, 60.0])
 def test_power_on_head_lambertian(theta_d):
-    """f = ρ/π: P = ρ/π · P_i · cos θr · Ω (physics.md §1), within 0.5 %."""
+    """f = ρ/π: P = ρ/π · P_i · cos θr · Ω (Nicodemus et al. 1977), within 0.5 %."""
     world = bench(0.0, theta_d)
     expected = 0.5 / math.pi * 1e-3 * math.cos(math.radians(theta_d)) * OMEGA
     assert world.optical_power_w(633.0) == pytest.approx(expected, rel=5e-3)

@@ -1,7 +1,7 @@
 """The Zaber firmware emulator on its own: raw bytes in, raw bytes out, manual time.
 
-These tests pin the emulator to the protocol facts (hardware reference §1d and the sources
-in its docstring) without the driver, so the driver's tests test the driver against an
+These tests pin the emulator to the protocol facts (Zaber's *ASCII Protocol Manual* and the
+sources in its docstring) without the driver, so the driver's tests test the driver against an
 independent reading.
 """
 

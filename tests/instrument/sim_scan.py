@@ -50,7 +50,7 @@ class Sample:
     params: tuple[float, ...]
 
 
-#: The three closed-loop samples of issue 5 §5.
+#: The three closed-loop samples (BENCHMARKS.md brdf_closed_loop).
 SAMPLES = (
     Sample("lambert", "lambert", (0.8,)),
     Sample("glossy", "lambert+ggx", (0.3, 0.5, 0.2)),
@@ -59,7 +59,7 @@ SAMPLES = (
 #: Candidate models the fits choose from.
 CANDIDATES = ("lambert", "oren_nayar", "lambert+ggx")
 
-#: The closed-loop validation matrix of issue 13 §5: one sample per family of the library,
+#: The closed-loop validation matrix (benchmarks/bench_brdf_closed_loop.py --matrix): one sample per family of the library,
 #: from diffuse to a sharp specular lobe (GGX α = 0.02), scanned at θi = 20°, 50°, 80°.
 MATRIX = (
     Sample("lambert", "lambert", (0.8,)),

@@ -18,7 +18,7 @@ The chain, per measured point:
    ``Φ_pixel = L A_ap (p/f)² cos⁴α`` over the image of the footprint gives the power through
    the entrance pupil. The camera is then a detector whose aperture is its pupil.
 2. **Absolute method** (Nicodemus et al. 1977, NBS Monograph 160, eq. for f_r = dL_r/dE_i;
-   ASTM E2387 practice, hardware.md §5d; physics.md §1): for an under-filled sample
+   ASTM E2387 practice; Stover, *Optical Scattering*): for an under-filled sample
    ``f = P_s / (P_i · Ω · cos θr · G)``, with P_i the incident power (power meter in the
    direct beam), Ω the receiver solid angle (a meter aperture: the cone 2π(1 − cos a),
    tan a = (D/2)/R; a camera: A_pupil/R², the étendue of its calibration,
@@ -28,22 +28,23 @@ The chain, per measured point:
    projected solid angle. A value is then the normalised average of f over what the
    receiver integrated, exact for a Lambertian sample; near a specular peak that average
    differs from f at the nominal angles (−7·10⁻⁴ on the sim bench's GGX α = 0.2 peak), which
-   instrument-aware fitting accounts for (:func:`receiver_model`; issue 5 §3).
-3. **Relative method** (hardware.md §5d; Li & Torrance 2003): a reference standard measured at
+   instrument-aware fitting accounts for (:func:`receiver_model`).
+3. **Relative method** (ASTM E2387; Li & Torrance 2003): a reference standard measured at
    the same geometry, ``f = (S / S_ref) · f_ref(θi, θr)``, with f_ref from the standard's
    *measured* BRDF table (:class:`ReferenceStandard`), not ρ/π — real diffusers deviate by up
-   to 20 % at large angles. Source drift between the two runs is removed with monitor
-   readings when given.
-4. **Instrument signature** (hardware.md §5e): the BRDF-equivalent signal with no sample,
-   reduced the same way, is subtracted point by point (:func:`subtract_signature`).
+   to 20 % at large angles (PTB and IO-CSIC, EMRP project xDReflect). Source drift between
+   the two runs is removed with monitor readings when given.
+4. **Instrument signature** (ASTM E2387; Li & Torrance 2003): the BRDF-equivalent signal
+   with no sample, reduced the same way, is subtracted point by point (:func:`subtract_signature`).
 
 Output convention (flag ``cosine_corrected``): ``False`` gives the BRDF f (1/sr) of
 Nicodemus; ``True`` gives Stover's *cosine-corrected BRDF* f·cos θr = P_s/(P_i Ω) (1/sr),
-the quantity scatterometers often report (ASTM E1392/E2387 "CC-BRDF"). hardware.md §5d
-calls the f form "cosine-corrected" because cos θr is divided out; the flag names the
+the quantity scatterometers often report (ASTM E1392/E2387 "CC-BRDF"). Some texts
+call the f form "cosine-corrected" because cos θr is divided out; the flag names the
 result, not the operation.
 
-Uncertainty budget (hardware.md §5f), kept in separate columns of :class:`BRDFPoints`:
+Uncertainty budget (sources as in ASTM E2387 and the EURAMET BRDF comparison, Basic et
+al., Applied Optics 62(13), 2023), kept in separate columns of :class:`BRDFPoints`:
 
 * ``u_stat``: signal noise — shot, read and dark noise of the light and dark frames
   (camera), or the reading noise of a power meter; independent between points.

@@ -45,7 +45,8 @@ def angular_uncertainty(
     the same set angle: their readings are averaged before differencing, never differenced
     over the jitter. Without ``phi_i``/``phi_r`` all points are taken as in-plane on one
     side. The slope of noisy data overestimates the true slope slightly, which errs on the
-    safe side (hardware.md §5f: angular errors matter through steep BRDF slopes).
+    safe side (angular errors matter through steep BRDF slopes: Basic et al., Applied Optics 62(13),
+    2023).
 
     Returns
     -------

@@ -15,7 +15,7 @@ A reading of the goniometer is not f at the nominal angles. It integrates f over
   is part of the kernel here; its scatter is noise, carried by
   :mod:`analysis.brdf.reduction.forward` as an effective variance (Orear 1982).
 
-Radiometry (Nicodemus et al. 1977, NBS Monograph 160, eq. for dΦ_r; physics.md §1): the
+Radiometry (Nicodemus et al. 1977, NBS Monograph 160, eq. for dΦ_r): the
 power a receiver collects is
 
     P = ∫_spot ∫_aperture f(ωi, ω) E(x) cos θ cos α / r² dA_ap dA,

@@ -41,9 +41,9 @@ def reciprocity_check(
 ) -> ReciprocityCheck:
     """Find points whose source and detector directions are exchanged and compare them.
 
-    Helmholtz reciprocity f(ωi→ωr) = f(ωr→ωi) (physics.md §1) holds for the BRDF f, so
+    Helmholtz reciprocity f(ωi→ωr) = f(ωr→ωi) (Nicodemus et al. 1977) holds for the BRDF f, so
     cosine-corrected values are converted first. With ``isotropic`` (f depends on φr − φi
-    only, physics.md §1) a pair needs θi(a) = θr(b), θr(a) = θi(b) and equal cos(φr − φi);
+    only) a pair needs θi(a) = θr(b), θr(a) = θi(b) and equal cos(φr − φi);
     otherwise the direction vectors themselves must be exchanged. Angles match within
     ``tol_rad``.
     """

@@ -256,7 +256,7 @@ class ReferenceStandard:
         """A table with the same value ρ/π everywhere — an *ideal* diffuser's certificate.
 
         Only for ideal simulated standards: a real diffuser's table comes from its
-        certificate (hardware.md §5d).
+        certificate (ASTM E2387: Spectralon is not Lambertian at large angles).
         """
         ti = np.asarray(theta_i_deg, dtype=float)
         tr = np.asarray(theta_r_deg, dtype=float)
@@ -376,7 +376,7 @@ def relative_brdf(
 def subtract_signature(
     points: BRDFPoints, signature: ArrayLike, u_signature: ArrayLike
 ) -> BRDFPoints:
-    """Remove the instrument signature (hardware.md §5e), point by point.
+    """Remove the instrument signature (ASTM E2387; Li & Torrance 2003), point by point.
 
     ``signature`` is the BRDF-equivalent signal measured with no sample (or a beam dump) at
     the same detector positions and reduced the same way (same method, same

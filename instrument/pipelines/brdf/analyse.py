@@ -25,7 +25,7 @@ the data:
    named.
 5. **Physical checks.** Helmholtz reciprocity of the *data* where a geometry was measured
    both ways, and the directional–hemispherical reflectance of the chosen and plausible
-   models (≤ 1 where the model promises energy conservation; physics.md §1).
+   models (≤ 1 where the model promises energy conservation; Nicodemus et al. 1977).
 
 :func:`model_band` gives a model's value with its standard uncertainty σ_f² = J C Jᵀ from
 the parameter covariance (the report's ±1σ bands).

@@ -74,7 +74,9 @@ def fit_run(
                             title=f"BRDF of {run.sample_name or run.run_id} "
                             f"(run {run.run_id})", provenance=reduced.provenance,
                             point_labels=[reduced.point_label(k)
-                                          for k in range(reduced.points.n)])
+                                          for k in range(reduced.points.n)],
+                            warnings=reduced.warnings,
+                            scale_unknown=bool(reduced.scale_unknown))
     if write:
         write_analysis(path, reduced, result.to_dict())
     return FitRun(run, reduced, result, page)

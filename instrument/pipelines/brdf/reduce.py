@@ -58,8 +58,9 @@ class ReductionOptions:
     receiver_distance_mm : float or None
         Sample-to-receiver distance; default the profile's detector distance plus the
         run's ``camera_z`` read-back when the run moved it (the camera rides on it).
-    u_distance_mm, u_aperture_mm : float
-        Uncertainties of the receiver geometry.
+    u_distance_mm, u_aperture_mm : float or None
+        Standard uncertainties of the receiver distance and aperture (mm); ``None``: not
+        known (taken as 0 and reported as an unknown part of the common scale).
     sigma_theta_deg : float or None
         Angular standard uncertainty; default the stages' position tolerance.
     u_power_meter_rel : float
@@ -91,8 +92,8 @@ class ReductionOptions:
     incident_power_w: float | None = None
     u_incident_power_rel: float | None = None
     receiver_distance_mm: float | None = None
-    u_distance_mm: float = 0.0
-    u_aperture_mm: float = 0.0
+    u_distance_mm: float | None = None
+    u_aperture_mm: float | None = None
     sigma_theta_deg: float | None = None
     u_power_meter_rel: float = 0.005
     camera_calibration: str | None = None
@@ -111,7 +112,14 @@ class Reduced:
     """A reduced run: BRDF points and where every number came from.
 
     A two-pass lobe run is reduced together with its first pass: ``sources`` lists the
-    run ids (this run first) and ``source`` says which one each point came from."""
+    run ids (this run first) and ``source`` says which one each point came from.
+
+    ``warnings`` are the assumptions that change the result (an assumed receiver distance,
+    an unknown beam radius, a common scale whose uncertainty nobody gave): each says what
+    was assumed and which option sets it. ``scale_unknown`` names the contributions to
+    the common scale uncertainty that are unknown, so that ``points.u_scale_rel`` is a
+    lower bound rather than a value when it is not empty.
+    """
 
     points: BRDFPoints
     rows: np.ndarray            # row of each BRDF point in its run's tables
@@ -120,6 +128,8 @@ class Reduced:
     point_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     source: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     sources: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    scale_unknown: tuple[str, ...] = ()
 
     def point_label(self, k: int) -> str:
         """How a reduced point is named to the user: its run's point index (and the run,
@@ -268,16 +278,19 @@ def _first_pass(run: RunData) -> Path | None:
     return path
 
 
-def _incident_power(run: RunData, opts: ReductionOptions) -> tuple[float, float, str]:
+def _incident_power(run: RunData, opts: ReductionOptions
+                    ) -> tuple[float, float | None, str]:
+    """(P_i in W, its relative standard uncertainty or None when nobody gave it, source)."""
+    u_opt = opts.u_incident_power_rel
     if opts.incident_power_w is not None:
-        return float(opts.incident_power_w), float(opts.u_incident_power_rel or 0.0), "option"
+        return float(opts.incident_power_w), u_opt, "option"
     if "incident_power_w" in run.calibration:
+        u_cal = run.calibration.get("u_incident_power_rel", u_opt)
         return (float(run.calibration["incident_power_w"]),
-                float(run.calibration.get("u_incident_power_rel", opts.u_incident_power_rel
-                                          or 0.0)), "run calibration")
+                None if u_cal is None else float(u_cal), "run calibration")
     sim = run.profile().get("simulation", {})
     if "power_w" in sim.get("source", {}):
-        return (float(sim["source"]["power_w"]), float(opts.u_incident_power_rel or 0.0),
+        return (float(sim["source"]["power_w"]), u_opt,
                 "simulated source power (bench profile)")
     raise ValueError("the absolute method needs the incident power (--incident-power-w)")
 
@@ -358,13 +371,14 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
         assert cal is not None
         aperture = cal.pupil_diameter_mm
         omega, u_omega = camera_solid_angle_sr(aperture, distance,
-                                               u_diameter_mm=opts.u_aperture_mm,
-                                               u_distance_mm=opts.u_distance_mm)
+                                               u_diameter_mm=opts.u_aperture_mm or 0.0,
+                                               u_distance_mm=opts.u_distance_mm or 0.0)
         sampled = not cal.chief_ray_only
     else:
         aperture = float(run.geometry.get("detector_aperture_mm", 5.0))
-        omega, u_omega = solid_angle_sr(aperture, distance, u_diameter_mm=opts.u_aperture_mm,
-                                        u_distance_mm=opts.u_distance_mm)
+        omega, u_omega = solid_angle_sr(aperture, distance,
+                                        u_diameter_mm=opts.u_aperture_mm or 0.0,
+                                        u_distance_mm=opts.u_distance_mm or 0.0)
         sampled = True
     w, w_src = _beam_radius(run, opts)
     div, div_src = _beam_divergence_rad(run, opts)
@@ -458,11 +472,19 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         prov["pixel_response_u_rel"] = u_resp
     receiver, rinfo = _receiver(run, rows, opts, cal)
     prov.update(rinfo)
+    warnings = _receiver_warnings(rinfo)
+    scale_unknown: list[str] = []
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
+        if u_pi_rel is None:
+            scale_unknown.append(f"the incident power ({p_i:.4g} W, {src}; set it with "
+                                 "--incident-power-u)")
+        if opts.u_distance_mm is None and opts.u_aperture_mm is None:
+            scale_unknown.append("the receiver distance (set it with --distance-u-mm)")
         pts = absolute_brdf(
             p_s, u_s, ti, pi_, tr, pr, incident_power_w=p_i,
-            u_incident_power_w=p_i * u_pi_rel, solid_angle=rinfo["solid_angle_sr"],
+            u_incident_power_w=p_i * (u_pi_rel or 0.0),
+            solid_angle=rinfo["solid_angle_sr"],
             u_solid_angle=rinfo["u_solid_angle_sr"],
             u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
             sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected,
@@ -487,23 +509,44 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         pts = replace(pts, receiver=receiver)
         prov.update(reference_run=ref_run.run_id, reference_standard=std.name)
         n_clipped = n_clipped + ref.clipped
+        if opts.reference_table is None:
+            scale_unknown.append("the reference standard's reflectance (set it with "
+                                 "--reference-table, a CSV with a u_rel column)")
     arm = np.concatenate([r.position("detector_theta")[rw] for r, rw in parts])
     if opts.signature_run is not None:
         pts = _subtract_signature(arm, pts, opts)
         prov["signature_run"] = str(opts.signature_run)
+    if scale_unknown:
+        prov["common_scale_unknown"] = "; ".join(scale_unknown)
+        known = (f"the ± values include only its known part, {pts.u_scale_rel:.2%}"
+                 if pts.u_scale_rel > 0 else "the ± values leave it out")
+        warnings.append(f"common scale uncertainty unknown ({known}): no uncertainty was "
+                        "given for " + " or for ".join(scale_unknown))
     clipped = n_clipped > 0
     pts = replace(pts, clipped=clipped)
     all_rows = np.concatenate([rw for _, rw in parts])
     index = np.concatenate([r.index[rw] for r, rw in parts])
     source = np.concatenate([np.full(rw.size, k) for k, (_, rw) in enumerate(parts)])
-    red = Reduced(pts, all_rows, arm, prov, index, source,
-                  tuple(r.run_id for r, _ in parts))
+    red = Reduced(pts, all_rows, arm, prov, point_index=index, source=source,
+                  sources=tuple(r.run_id for r, _ in parts), warnings=tuple(warnings),
+                  scale_unknown=tuple(scale_unknown))
     if clipped.any():
         prov["clipped_points"] = [
             f"{red.point_label(k)} (θi={math.degrees(ti[k]):.1f}°, "
             f"θr={math.degrees(tr[k]):.1f}°): {int(n_clipped[k])} pixels saturated even in "
             "its shortest exposure" for k in np.flatnonzero(clipped)]
     return red
+
+
+def _receiver_warnings(rinfo: dict[str, Any]) -> list[str]:
+    """The receiver assumptions that change the BRDF's scale or shape, in words."""
+    out = []
+    src = str(rinfo["receiver_distance_source"])
+    if "assumed" in src:
+        out.append(f"receiver distance {rinfo['receiver_distance_mm']:g} mm: {src}")
+    if rinfo["beam_radius_mm"] is None:
+        out.append(f"beam radius {rinfo['beam_radius_source']}")
+    return out
 
 
 def _match_rows(run: RunData, rows: np.ndarray, other: RunData, *, tol_deg: float = 0.05

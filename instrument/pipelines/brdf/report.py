@@ -20,7 +20,47 @@ from analysis.brdf.geometry import make_geometry
 from analysis.brdf.reduction import BRDFPoints
 from instrument.pipelines.brdf.analyse import UNCERTAINTY_RULE, AnalysisResult, model_band
 
-__all__ = ["write_report"]
+__all__ = ["coincident_with", "unit_text", "write_report"]
+
+
+def unit_text(unit: str) -> str:
+    """A parameter's unit as shown to people: empty for a dimensionless "1"."""
+    return "" if unit.strip() == "1" else unit
+
+
+#: Two curves closer than this (relative, everywhere) are drawn as coinciding.
+_COINCIDENT_REL = 1e-3
+
+
+def coincident_with(curves: dict[str, np.ndarray]) -> dict[str, str]:
+    """For each curve that coincides everywhere with an earlier one (within
+    _COINCIDENT_REL of its value), the name of that earlier curve."""
+    out: dict[str, str] = {}
+    names = list(curves)
+    for k, name in enumerate(names):
+        for prev in names[:k]:
+            a, b = curves[name], curves[prev]
+            scale = np.maximum(np.abs(b), 1e-300)
+            if a.shape == b.shape and np.all(np.abs(a - b) <= _COINCIDENT_REL * scale):
+                out[name] = out.get(prev, prev)
+                break
+    return out
+
+
+def _coincidence_styles(curves: dict[str, np.ndarray], chosen: str
+                        ) -> dict[str, dict[str, Any]]:
+    """Line styles and legend labels that keep coinciding curves visible: the later one
+    is drawn dashed on top of the earlier, and its label says which curve it covers."""
+    same = coincident_with(curves)
+    styles = {}
+    for name in curves:
+        style: dict[str, Any] = {"lw": 2.0 if name == chosen else 1.2, "ls": "-",
+                                 "label": name + (" (chosen)" if name == chosen else "")}
+        if name in same:
+            style.update(ls=(0, (4, 3)), lw=style["lw"] + 0.6,
+                         label=f"{style['label']} (same curve as {same[name]})")
+        styles[name] = style
+    return styles
 
 
 def _signed_deg(points: BRDFPoints) -> np.ndarray:
@@ -62,7 +102,19 @@ def _in_plane(points: BRDFPoints) -> np.ndarray:
     return np.degrees(np.arcsin(np.minimum(off, 1.0))) <= _PLANE_TOL_DEG
 
 
-def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
+def _band_width_px(ax, x: np.ndarray, val: np.ndarray, sd: np.ndarray) -> float:
+    """The widest ±1σ band on the panel, in display pixels (after autoscaling)."""
+    ax.autoscale_view()
+    ok = np.isfinite(val) & (val - sd > 0)
+    if not np.any(ok):
+        return float("inf")
+    lo = ax.transData.transform(np.column_stack([x[ok], (val - sd)[ok]]))[:, 1]
+    hi = ax.transData.transform(np.column_stack([x[ok], (val + sd)[ok]]))[:, 1]
+    return float(np.max(np.abs(hi - lo)))
+
+
+def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> str:
+    """Draw the in-plane panels; return a sentence on the ±1σ band's visibility."""
     import matplotlib.pyplot as plt
 
     f, u = points.plain_brdf()
@@ -72,7 +124,15 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
     clipped = ~points.valid
     fig, axes = plt.subplots(len(groups), 1, figsize=(7.5, 3.0 * len(groups)), squeeze=False)
     s_grid = np.linspace(-89.0, 89.0, 357)
-    for ax, (ti, pi_, group) in zip(axes[:, 0], groups, strict=True):
+    # the models on every panel, so that coinciding curves are found once for the figure
+    values = {name: [model_band(res.models[name], fit, *_curve(ti, pi_, s_grid))
+                     for ti, pi_, _ in groups] for name, fit in _shown(res).items()}
+    styles = _coincidence_styles(
+        {name: np.concatenate([v for v, _ in bands]) for name, bands in values.items()},
+        res.chosen)
+    band_rel, band_px, line_px, bar_px = 0.0, 0.0, 0.0, 0.0
+    dot_px = 3.0 * fig.dpi / 72.0  # the marker's diameter (ms = 3 pt)
+    for k, (ax, (ti, pi_, group)) in enumerate(zip(axes[:, 0], groups, strict=True)):
         # the curves are the plane of incidence: out-of-plane points are left to the
         # residual plot instead of being drawn against the wrong curve
         sel = group[plane[group] & ~clipped[group]]
@@ -83,24 +143,46 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
         if low.size:
             ax.plot(signed[low], f[low], "^", ms=6, mfc="none", color="r", zorder=3,
                     label="clipped (lower bound, not fitted)")
-        for name, fit in _shown(res).items():
-            val, sd = model_band(res.models[name], fit, *_curve(ti, pi_, s_grid))
-            chosen = name == res.chosen
-            line, = ax.plot(s_grid, val, lw=2.0 if chosen else 0.9,
-                            label=f"{name}{' (chosen)' if chosen else ''}")
-            if chosen:
-                ax.fill_between(s_grid, val - sd, val + sd, color=line.get_color(), alpha=0.3,
-                                label="chosen ±1σ")
+        for name in values:
+            val, sd = values[name][k]
+            line, = ax.plot(s_grid, val, **styles[name])
+            if name == res.chosen:
+                ax.fill_between(s_grid, val - sd, val + sd, color=line.get_color(),
+                                alpha=0.3, label="chosen ±1σ", zorder=2.5)
+                chosen_val, chosen_sd = val, sd
+                line_px = line.get_linewidth() * fig.dpi / 72.0
         ax.set_yscale("log")
         ax.set_title(f"θi = {math.degrees(ti):.1f}°, φi = {math.degrees(pi_):.0f}°"
                      + (f" ({n_off} out-of-plane points not shown)" if n_off else ""))
         ax.set_xlabel("signed θr (deg; > 0 specular side)")
         ax.set_ylabel("BRDF (1/sr)")
         ax.grid(True, which="both", alpha=0.3)
-    axes[0, 0].legend(fontsize=7, loc="best")
+        band_px = max(band_px, _band_width_px(ax, s_grid, chosen_val, chosen_sd))
+        if sel.size:
+            bar_px = max(bar_px, _band_width_px(ax, signed[sel], f[sel], u[sel]))
+        ok = chosen_val > 0
+        band_rel = max(band_rel, float(np.max(chosen_sd[ok] / chosen_val[ok])))
+    ok = f > 0
+    bar_rel = float(np.max(u[ok] / f[ok])) if np.any(ok) else 0.0
+    relabel = {}
+    if band_px < line_px:
+        sentence = (f"The chosen model's ±1σ band is narrower than its line (at most "
+                    f"±{band_rel:.2%} of the value).")
+        relabel["chosen ±1σ"] = f"chosen ±1σ (narrower than the line: ≤ ±{band_rel:.2%})"
+    else:
+        sentence = (f"The shaded band is the chosen model's ±1σ (at most ±{band_rel:.2%} of "
+                    f"the value).")
+    if bar_px < dot_px:
+        sentence += (f" The measured points' ±1σ error bars are shorter than the dots (at "
+                     f"most ±{bar_rel:.2%}).")
+        relabel["measured ±1σ"] = f"measured (±1σ smaller than the dot: ≤ ±{bar_rel:.2%})"
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    axes[0, 0].legend(handles, [relabel.get(lab, lab) for lab in labels], fontsize=7,
+                      loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return sentence
 
 
 def _shown(res: AnalysisResult) -> dict:
@@ -130,7 +212,9 @@ def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
         line, = ax.plot(np.radians(s_grid), val, lw=1.2,
                         label=f"θi = {math.degrees(ti):.0f}°")
         ax.plot(signed[sel], f[sel], "o", ms=3, color=line.get_color())
-    ax.set_title(f"{res.chosen}: BRDF (1/sr) vs signed θr", fontsize=9)
+    ax.set_title(f"{res.chosen} (lines) and the measured points (dots)", fontsize=9)
+    ax.set_xlabel("radius: BRDF (1/sr); angle: signed θr (deg, > 0 specular side)",
+                  fontsize=8)
     # on a half-disc the default radial tick labels run together along the bottom edge
     from matplotlib.ticker import MaxNLocator
 
@@ -162,8 +246,8 @@ def _plot_residuals(points: BRDFPoints, res: AnalysisResult, path: Path) -> None
     ax.axhline(0.0, color="k", lw=0.8)
     for k in (-2, 2):
         ax.axhline(k, color="grey", lw=0.6, ls="--")
-    ax.set_xlabel("signed θr (deg)")
-    ax.set_ylabel("(data − model)/σ")
+    ax.set_xlabel("signed θr (deg; > 0 specular side)")
+    ax.set_ylabel("(data − model)/σ (dimensionless)")
     gof = res.chosen_goodness
     ax.set_title(f"normalised residuals of {res.chosen} ({gof.summary()})", fontsize=9,
                  color="k" if gof.adequate else "r")
@@ -178,11 +262,14 @@ def _plot_dhr(res: AnalysisResult, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.0, 3.2))
+    styles = _coincidence_styles({n: np.asarray(v, float) for n, v in res.dhr.items()},
+                                 res.chosen)
     for name, vals in res.dhr.items():
-        ax.plot(res.dhr_theta_deg, vals, lw=2.0 if name == res.chosen else 0.9, label=name)
-    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax.plot(res.dhr_theta_deg, vals, **styles[name])
+    ax.axhline(1.0, color="k", lw=0.8, ls=":", label="1 (energy conservation limit)")
     ax.set_xlabel("θi (deg)")
-    ax.set_ylabel("DHR of the fitted model")
+    ax.set_ylabel("DHR (dimensionless)")
+    ax.set_title("directional–hemispherical reflectance of the fitted models", fontsize=9)
     ax.legend(fontsize=7)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
@@ -242,10 +329,16 @@ def write_report(
     title: str,
     provenance: dict[str, Any] | None = None,
     point_labels: Sequence[str] | None = None,
+    warnings: Sequence[str] = (),
+    scale_unknown: bool = False,
 ) -> Path:
     """Write the PNG figures and ``index.html`` into ``out_dir``; returns the HTML path.
+
     ``point_labels`` (e.g. "point 12" per reduced point) names the disagreeing points
-    (default: their position in ``points``)."""
+    (default: their position in ``points``). ``warnings`` (assumptions that change the
+    result) head the page; ``scale_unknown`` says that the common scale uncertainty is not
+    known, so the parameter σ leave it out.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -257,15 +350,18 @@ def write_report(
         "polar.png": ("Polar plot of the chosen model and the data", _plot_polar),
         "residuals.png": ("Normalised residuals of the chosen model", _plot_residuals),
     }
-    for name, (_, fn) in figures.items():
-        fn(points, res, out / name)
+    captions = {name: fn(points, res, out / name) for name, (_, fn) in figures.items()}
     _plot_dhr(res, out / "dhr.png")
     fit = res.chosen_fit
     factor = res.inflation.get(res.chosen, 1.0)
-    sigma_head = ("σ (incl. common scale)" if factor == 1.0
-                  else f"σ INFLATED ×{factor:.3g} (model rejected)")
-    head = ("parameter", "value", sigma_head, "unit", "at bound")
-    rows = [(n, float(v), float(e), unit, "yes" if b else "")
+    specs = {ps.name: ps for ps in res.models[res.chosen].params}
+    sigma_head = ("σ (common scale unknown, not included)" if scale_unknown
+                  else "σ (incl. common scale)")
+    if factor != 1.0:
+        sigma_head += f", INFLATED ×{factor:.3g} (model rejected)"
+    head = ("parameter", "meaning", "value", sigma_head, "unit", "at bound")
+    rows = [(n, specs[n].description if n in specs else "", float(v), float(e),
+             unit_text(unit) or "dimensionless", "yes" if b else "")
             for (n, v, e, unit), b in zip(fit.table(), fit.at_bound, strict=True)]
     boot = fit.bootstrap
     if boot is not None:
@@ -302,7 +398,20 @@ def write_report(
                                             if k != "options"))
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in res.notes) or "<li>none</li>"
     figs = "".join(f'<h3>{html.escape(cap)}</h3><img src="{name}" alt="{html.escape(cap)}">'
+                   + (f"<p>{html.escape(captions[name])}</p>" if captions[name] else "")
                    for name, (cap, _) in figures.items())
+    warn_html = ("<h2>Warnings (assumptions that change the result)</h2><ul>"
+                 + "".join(f"<li>{html.escape(w)}</li>" for w in warnings) + "</ul>"
+                 if warnings else "")
+    if scale_unknown:
+        known = (f"; the known part, {points.u_scale_rel:.3%}, is included below"
+                 if points.u_scale_rel > 0 else "; it is left out of the parameter "
+                 "uncertainties below")
+        scale_html = ("Common (correlated) scale uncertainty: <b>unknown</b> (see the "
+                      f"warnings){known}.")
+    else:
+        scale_html = (f"Common (correlated) relative scale uncertainty "
+                      f"{points.u_scale_rel:.3%}, added to the parameter uncertainties below.")
     kind = "cosine-corrected BRDF f·cosθr" if points.cosine_corrected else "BRDF f"
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
@@ -312,12 +421,17 @@ font-size:13px;text-align:right}}img{{max-width:100%}}</style></head><body>
 <h1>{html.escape(title)}</h1>
 {verdict}
 <p>{points.n} points, {html.escape(points.method)} method, stored as the {kind}.
-Common (correlated) relative scale uncertainty {points.u_scale_rel:.3%}, added to the
-parameter uncertainties below. Chosen model: <b>{html.escape(res.chosen)}</b>
+{scale_html} Chosen model: <b>{html.escape(res.chosen)}</b>
 ({html.escape(res.selection.rule)}).</p>
+{warn_html}
 <h2>Parameters of {html.escape(res.chosen)}</h2>{params}
 <h3>Correlations</h3>{corr}
 <h2>Model comparison</h2>{comp}
+<p>k: number of parameters; χ²: sum of squared normalised residuals (about the number of
+points minus k for a model that fits within the uncertainties); AIC, AICc, BIC: information
+criteria (lower is better; a difference above 10 is strong evidence); CV score: mean squared
+normalised residual at held-out incidence angles (about 1 for a model that predicts within
+the uncertainties), with its standard error.</p>
 <h2>Figures</h2>{figs}
 <h2>Physical checks</h2>
 <h3>Reciprocity of the data</h3>{rec_html}

@@ -254,7 +254,7 @@ def geometry_from_run(path: str | Path) -> LightFieldGeometry:
 
 
 def parse_brdf(text: str) -> FlatlandBRDF:
-    """A wall BRDF from a material name or ``"ρ_s,σ_deg,ρ_d"`` (flatland, eq. S2-14)."""
+    """A wall BRDF from a material name or ``"ρ_s,σ_deg,ρ_d"`` (flatland, eq. 2-14)."""
     if text in MATERIALS:
         return MATERIALS[text]
     usage = (f"BRDF {text!r}: a material ({', '.join(sorted(MATERIALS))}) "

@@ -83,7 +83,8 @@ def locate_run(
                              solvable_domain_rad=solvable,  # type: ignore[arg-type]
                              filter_factors=stored["filter_factors"], threshold_rel=threshold_rel,
                              min_measure_fraction=min_measure_fraction)
-        message = f"{det.count} object(s) found (p̂_max = {p_hat:g})"
+        message = (f"{det.count} object(s) found (highest recovered angular order "
+                   f"{p_hat:g})")
     else:
         det = detect_objects(field_, p_max=0.0, y_mm=ys, z_mm=zs,
                              solvable_domain_rad=solvable,  # type: ignore[arg-type]

@@ -2,7 +2,7 @@
 
 :func:`reconstruct_run` assembles the measured field (:mod:`.scan`) and runs
 :func:`analysis.lightfield.reconstruct` (per scattering point, closed form of Sasaki's thesis
-eqs. S2-32/33, Wiener filter from the pooled signal spectrum; ADR 0030) on the scattering
+eqs. 2-32/33, Wiener filter from the pooled signal spectrum; ADR 0030) on the scattering
 points whose curves lie inside the measured y range; results and figures as in
 :mod:`.results` and :mod:`.figures`.
 """

@@ -6,8 +6,9 @@
    normals and reflected directions (:func:`analysis.sh.sphere_image.sphere_geometry`, with
    the camera's pinhole intrinsics when known), fits B_lm of every image with one shared
    least-squares operator;
-2. runs the identities of physics.md §5 — M16 (two objects, one lighting) per lighting,
-   M21 (two objects × two lightings) on the corner images, M25 (rank one) on all — and,
+2. runs the identities of Mahajan, Ramamoorthi & Curless (ECCV 2006; Mn is their eq. n) —
+   M16 (two objects, one lighting) per lighting, M21 (two objects × two lightings) on the
+   corner images, M25 (rank one) on all — and,
    for an object whose BRDF the plan declares known, estimates each lighting by Wiener
    deconvolution (M7) and tests M10 (known lighting) and M19 (one object, two lightings);
 3. renders the last image B^{r,s} from B^{1,1}, B^{1,s}, B^{r,1} by BRDF transfer
@@ -313,11 +314,12 @@ SIM_SPHERES_THRESHOLD_SCALE = 2.12
 #: the results when no threshold factor is given. Measured by
 #: ``benchmarks/bench_sphere_capture.py`` (BENCHMARKS.md ``## sphere_capture``).
 CONSISTENCY_LIMIT = (
-    "the M21 threshold is calibrated on noise-only bootstrap captures (fit-residual level), "
-    "not on model departures consistent captures share (sphere horizon, finite view, "
-    "orders > lmax): on the sim-spheres bench 2 of 16 untampered captures are flagged at "
-    "alpha = 0.01 (8 of 100 in a second set), not 1 %; with --threshold-scale 2.12, the "
-    "factor calibrated for alpha = 0.01 on 100 consistent captures of that bench, 0 of 16 "
-    "held-out untampered captures and 10 of 16 top-half splices are flagged; on another "
-    "instrument calibrate its own factor (benchmarks/bench_sphere_capture.py --calibrate)"
+    "the consistency threshold is calibrated on noise-only bootstrap captures (fit-residual "
+    "level), not on model departures consistent captures share (sphere horizon, finite "
+    "view, orders above the fit's): on the sim-spheres bench 2 of 16 untampered captures "
+    "are flagged at a false-alarm rate of 0.01 (8 of 100 in a second set), not 1 %; with "
+    "--threshold-scale 2.12, the factor calibrated for 0.01 on 100 consistent captures of "
+    "that bench, 0 of 16 held-out untampered captures and 10 of 16 top-half splices are "
+    "flagged; on another instrument calibrate its own factor "
+    "(benchmarks/bench_sphere_capture.py --calibrate)"
 )

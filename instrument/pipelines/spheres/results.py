@@ -70,7 +70,7 @@ def write_sphere_analysis(path: str | Path, capture: SphereCapture,
         g = replace_group(f["entry"], "analysis", "NXprocess")
         g.attrs["program"] = "scatterlab spheres"
         g.attrs["references"] = ("Ramamoorthi & Hanrahan 2001; Mahajan, Ramamoorthi & "
-                                 "Curless, PAMI 2008 (identities M10-M25); physics.md §5")
+                                 "Curless, ECCV 2006 / PAMI 2008 (identities: their eqs. 10-25)")
         g.create_dataset("results_json", data=json.dumps(summary(capture, result)),
                          dtype=h5py.string_dtype())
         img = replace_group(g, "images", "NXdata")

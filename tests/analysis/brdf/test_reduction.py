@@ -349,8 +349,8 @@ def test_receiver_model_reproduces_the_simulated_camera() -> None:
     integrated over their area) against the receiver model: equal to 10⁻⁸ at quadrature
     level 2 (10⁻⁶ already at level 0 for this broad lobe), where the point-sample
     reduction (cone Ω, G = 1, f at the nominal angles) is off by +3…+4·10⁻⁴ on the diffuse
-    side and −4·10⁻³ on the specular peak (issue 5: the camera-method bias; issue 13: the
-    pupil's average)."""
+    side and −4·10⁻³ on the specular peak (the camera-method bias and
+    the pupil's average)."""
     setup = ScanSetup()
     sample = SAMPLES[1]
     a, power = _noise_free(setup, sample)

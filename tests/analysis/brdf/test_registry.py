@@ -65,5 +65,5 @@ def test_every_model_documents_parameters_units_and_validity(name: str) -> None:
     for p in m.params:
         assert p.unit and p.description, (name, p.name)
     if not m.energy_bounded:
-        # the documented exception must be stated where users read it (issue 5 §2)
+        # the documented exception must be stated where users read it
         assert "energy" in m.validity or "DHR" in m.validity, (name, m.validity)

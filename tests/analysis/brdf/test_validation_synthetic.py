@@ -1,5 +1,5 @@
-"""Closed-loop check of fitting + selection on synthetic scans (issue 5 §5 criteria, without
-the simulated bench): for three ground truths, over 50 seeds, the true parameters lie within
+"""Closed-loop check of fitting + selection on synthetic scans (without the simulated
+bench): for three ground truths, over 50 seeds, the true parameters lie within
 the reported 2σ in ≥ 90 % of fits and the right model is chosen in ≥ 90 %."""
 
 import numpy as np

@@ -2,7 +2,7 @@
 
 The ideal input of localisation: the true incident field at the wall (cell averages of the
 continuous renderer's ground truth, a 1.5 mm disc) seen through a truncation at P angular
-orders, with the cosine-weighted basis of the reconstruction (S2-18).
+orders, with the cosine-weighted basis of the reconstruction (eq. 2-18).
 
 History: the conventional stack's peak sits nearer the wall (its height scales as W/|z|);
 weighting it by |z| (the matched filter, module doc of ``analysis.lightfield.localize``)

@@ -1,5 +1,5 @@
 """Localisation behind the four thesis walls: located where the data support it, flagged
-"unresolved" (never wrong) where they do not (issue 6 follow-up).
+"unresolved" (never wrong) where they do not.
 
 Measurements come from the continuous renderer ``hw_mocks.sim.lightfield_scene`` (exact
 object geometry, Gauss–Legendre quadrature over the BRDF), with seeded Gaussian noise, and

@@ -193,7 +193,7 @@ def test_separable_spectra_match_analytic_and_dense_matrix():
 
 def test_curved_wall_forward_model_matches_the_renderer_and_needs_the_normals():
     """A curved wall, Θ(c) = c/R (R = 200 mm, ±0.3 rad over the wall): the discretised
-    S2-6 with per-point normals against the continuous renderer on the same incident field.
+    eq. 2-6 with per-point normals against the continuous renderer on the same incident field.
 
     Window (cos² θ_o) and diffuse term make the result depend on Θ; the midpoint rule on
     256 angles agrees to 3e-7 of the peak, while ignoring the curvature is off by ~1 %.

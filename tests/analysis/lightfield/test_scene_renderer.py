@@ -66,7 +66,7 @@ def test_tilted_wall_moves_the_specular_peak():
     th = np.linspace(-0.3, 0.3, 2001)
     flat = HiddenScene(obj, Wall(-100, 100, brdf), 0.0).radiance(np.zeros_like(th), th)
     # with the BRDF written in the local frame, f_spec depends on θ_m − θ_o only, so a
-    # uniform tilt changes the obliquity cos(θ_o − Θ) but not the peak direction (S2-6)
+    # uniform tilt changes the obliquity cos(θ_o − Θ) but not the peak direction (eq. 2-6)
     tilt = HiddenScene(obj, Wall(-100, 100, brdf, 0.2), 0.0).radiance(np.zeros_like(th), th)
     assert th[np.argmax(flat)] == pytest.approx(0.0, abs=1e-3)
     assert th[np.argmax(tilt)] == pytest.approx(0.0, abs=1e-3)

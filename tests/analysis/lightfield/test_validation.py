@@ -1,4 +1,4 @@
-"""Theory against simulation (issue 6 §5): Δp, truncation, Wiener, localisation, RP.
+"""Theory against simulation (Sasaki 2020): Δp, truncation, Wiener, localisation, RP.
 
 Measurements come from the continuous renderer ``hw_mocks.sim.lightfield_scene`` (exact
 object geometry, Gauss–Legendre quadrature), never from the discretised operator.
@@ -55,7 +55,7 @@ def test_gamma_spans_the_requested_range(name):
 
 @pytest.mark.parametrize("name", list(BRDFS))
 def test_delta_p_matches_200_noise_realisations(name):
-    """Eq. S2-37 against the spread of 200 noisy reconstructions of one scattering point.
+    """Eq. 2-37 against the spread of 200 noisy reconstructions of one scattering point.
 
     The prediction uses the noise PSD estimated from the noisy data themselves (the
     high-|p| tail), M_0 and γ of the scene, as a user would; the spread is measured.
@@ -76,7 +76,7 @@ def test_delta_p_matches_200_noise_realisations(name):
     assert abs(np.mean(ratio) - 1.0) < 0.10
     # each order: 200 complex samples give a 3.5 % standard error; 4σ bound
     assert np.all(np.abs(ratio - 1.0) < 0.15)
-    # and the prediction is S2-37 itself: |S_00/S_pp| √PSD / (M_0 γ)
+    # and the prediction is eq. 2-37 itself: |S_00/S_pp| √PSD / (M_0 γ)
     spec = separable_spectra(brdf, DOMAIN, N_THETA)
     d = ref.diagnostics
     manual = (np.abs(spec.s[0, 0] / spec.s[0, p]) * np.sqrt(d.noise.psd[p])

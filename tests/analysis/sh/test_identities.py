@@ -1,4 +1,4 @@
-"""SH identities, transfer, separation and the consistency checker (issue 7 §3)."""
+"""SH identities, transfer, separation and the consistency checker."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Legendre recurrences, convention and transforms (issue 7 §1)."""
+"""Legendre recurrences, convention and transforms."""
 
 from __future__ import annotations
 
@@ -87,7 +87,7 @@ def test_legendre_matches_high_precision(l: int, m: int, theta: float) -> None:
         (2048, 1000, 0.05),  # truly 2e−877: must come back as 0, not NaN
         (2048, 1500, 0.9),
         (2048, 2048, 1.3),
-        (500, 250, 0.05),  # SciPy returns 0 here, truth 4.3e−223 (numerics.md §2.3)
+        (500, 250, 0.05),  # SciPy returns 0 here, truth 4.3e−223 (mpmath)
         (1000, 999, 3.1),
     ],
 )
@@ -115,7 +115,7 @@ def test_gauss_legendre_matches_numpy() -> None:
 
 
 def test_real_harmonics_match_graphics_constants() -> None:
-    # Ramamoorthi & Hanrahan 2001 constants (numerics.md §3.1), at a random direction.
+    # Ramamoorthi & Hanrahan 2001 constants (their eq. 13), at a random direction.
     d = np.array([0.3, -0.5, 0.6])
     d /= np.linalg.norm(d)
     x, y, z = d

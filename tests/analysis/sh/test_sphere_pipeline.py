@@ -1,4 +1,4 @@
-"""Sphere-image geometry and the simulated sphere renderer against the theory (issue 7 §4, §5)."""
+"""Sphere-image geometry and the simulated sphere renderer against the theory."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Validation on simulated spheres (issue 7 §6): relighting, tamper detection, Wiener K curve,
+"""Validation on simulated spheres: relighting, tamper detection, Wiener K curve,
 inverse rendering.
 
 Images come from :mod:`hw_mocks.sim.sphere_scene`, rendered by direct integration over a
@@ -217,7 +217,8 @@ def test_inverse_rendering_kd_ks_roughness_within_uncertainty() -> None:
 @pytest.mark.slow
 def test_microfacet_roughness_matches_the_torrance_sparrow_filter() -> None:
     """Near normal exitance a Beckmann lobe of slope α filters like exp(−α² l(l+1))
-    (numerics.md §3.3), i.e. like Phong with s = 1/(2α²): the Phong fit's σ = 1/√(2s)
+    (Ramamoorthi & Hanrahan 2001, refined), i.e. like Phong with s = 1/(2α²): the Phong
+    fit's σ = 1/√(2s)
     recovers α from a Lambertian + microfacet sphere (pixels within 40° of the view)."""
     rng = np.random.default_rng(11)
     env = random_environment(rng)

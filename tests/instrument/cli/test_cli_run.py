@@ -75,7 +75,8 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
                "sphere_capture": "sim-spheres"}
     directional = {"brdf_inplane", "brdf_lobe", "brdf_hemisphere", "calibration_reference",
                    "calibration_signature"}
-    names = sorted(p.stem for p in examples.glob("*.toml"))
+    names = sorted(p.stem for p in examples.glob("*.toml")
+                   if "[plan]" in p.read_text(encoding="utf-8"))  # plans, not profiles
     assert len(names) >= 10
     for name in names:
         rc = main(["plan", str(examples / f"{name}.toml"), "--bench",
@@ -148,3 +149,19 @@ def test_runs_filters_from_the_command_line(tmp_path, capsys):
     assert listed("--since-days", "2") == ["b-dark", "c-white"]
     assert listed("--limit", "1") == ["c-white"]  # newest first
     assert listed("--status", "paused") == []
+
+
+def test_a_plan_that_moves_no_axis_runs_and_stores_its_points(tmp_path, capsys):
+    """Dark frames (examples/calibration_dark.toml moves nothing): the positions table keeps
+    one NaN column instead of failing to store the first point."""
+    plan = tmp_path / "dark.toml"
+    plan.write_text('[plan]\nkind = "dark"\nname = "dark"\n[scan]\nexposures_us = [100, 1000]\n'
+                    'frames = 1\n[acquisition]\ndetectors = ["camera"]\n')
+    out = tmp_path / "runs"
+    assert main(["run", str(plan), "--out", str(out), "--quiet"]) == 0
+    assert "run finished: 2 of 2 points" in capsys.readouterr().out
+    (run,) = out.glob("*.h5")
+    with h5py.File(run, "r") as f:
+        assert f["entry/points/positions"].shape == (2, 1)
+        assert np.all(np.isnan(f["entry/points/positions"][()]))
+        assert f["entry/data/frames"].shape[0] == 2

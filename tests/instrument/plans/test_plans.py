@@ -22,6 +22,7 @@ from instrument.plans import (
     PointDone,
     SetLight,
     build_plan,
+    load_plan,
     parse_plan,
 )
 from instrument.plans.build import dynamics_of
@@ -332,7 +333,8 @@ _EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[3] / "example
 _EXAMPLE_BENCH = {p.stem: {"brdf_hemisphere": "sim_out_of_plane",
                            "lightfield_scan": "sim-lightfield", "lightfield": "sim-lightfield",
                            "sphere_capture": "sim-spheres"}.get(p.stem, "sim")
-                  for p in sorted(_EXAMPLES.glob("*.toml"))}
+                  for p in sorted(_EXAMPLES.glob("*.toml"))
+                  if "[plan]" in p.read_text(encoding="utf-8")}  # not the bench profiles
 
 
 @st.composite
@@ -363,3 +365,23 @@ def test_fuzzed_example_plans_of_every_kind_dry_run_or_give_field_errors(case):
     assert est.n_points == len(plan.points) >= 1
     assert math.isfinite(est.total_s) and est.total_s >= 0
     assert coverage_image(plan).shape[2] == 3
+
+
+def test_coverage_separates_incidence_angles_and_writes_a_png(tmp_path):
+    """In-plane plans get one panel per θi (never overlaid); hemisphere plans a polar panel
+    per incidence direction; both write a PNG."""
+    from instrument.plans.coverage import _in_plane, _incidences, write_coverage_png
+
+    inplane = build_plan(load_plan(_EXAMPLES / "brdf_inplane.toml"), load_profile("sim"))
+    angled = [p for p in inplane.points if p.angles is not None]
+    groups = _incidences(angled)
+    assert [ti for ti, _, _ in groups] == [20.0, 40.0, 60.0] and _in_plane(angled)
+    assert sum(len(pts) for _, _, pts in groups) == len(angled)
+    hemi = build_plan(load_plan(_EXAMPLES / "brdf_hemisphere.toml"),
+                      load_profile("sim_out_of_plane"))
+    assert not _in_plane([p for p in hemi.points if p.angles is not None])
+    for plan, name in ((inplane, "a.png"), (hemi, "b.png")):
+        png = write_coverage_png(plan, tmp_path / name)
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(OSError, match=r"must end in \.png"):
+        write_coverage_png(inplane, tmp_path / "c.jpg")

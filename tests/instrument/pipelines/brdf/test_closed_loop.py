@@ -1,10 +1,10 @@
-"""Closed-loop validation on the simulated bench (issue 5 §5; issue 13 §5).
+"""Closed-loop validation on the simulated bench.
 
 Three samples with known ground truth — Lambertian ρ = 0.8; Lambertian ρ = 0.3 + Cook–
 Torrance GGX (ks = 0.5, α = 0.2); Oren–Nayar ρ = 0.8, σ = 0.3 — are scanned in plane
 (θi = 20°, 40°, 60°; θr from −70° to 80° in 10° steps plus ±4° around specular in 2°
 steps; 57 points), reduced by the absolute method (receiver factor divided out) and fitted
-as the receiver sees the models (instrument-aware, issue 5 §3) with selection among
+as the receiver sees the models (instrument-aware) with selection among
 {lambert, oren_nayar, lambert+ggx} (BIC, smallest model within ΔBIC ≤ 2).
 
 * 50 seeds per sample through the simulated camera/scene/sensor code without the motion
@@ -171,7 +171,7 @@ def test_closed_loop_50_seeds(sample: Sample) -> None:
 
 @pytest.mark.slow
 def test_high_snr_truth_inside_reported_2sigma() -> None:
-    """Issue 5 at high signal: the full-resolution camera (1024² px) with 80 %-full-well
+    """At high signal: the full-resolution camera (1024² px) with 80 %-full-well
     exposures averaged over 4 frames gives σ(ρd) ≈ 8·10⁻⁶ — 5× below the geometric
     biases of a point-sample reduction (the cone solid angle, +3.3·10⁻⁴; the footprint's
     1/r² and obliquities, ±2·10⁻⁴; the specular peak averaged over the footprint seen from

@@ -39,6 +39,41 @@ def reference_run(tmp_path_factory):
                           kind="reference", run_id="ptfe")
 
 
+def test_fit_says_what_it_assumed_and_what_is_unknown(glossy_run, tmp_path, capsys) -> None:
+    """An assumed receiver distance and a common scale nobody gave an uncertainty for reach
+    the console and the report's head; the scale reads "unknown", not 0 %."""
+    out = tmp_path / "report"
+    assert main(["fit", str(glossy_run), "--models", "lambert,lambert+ggx", "--no-cv",
+                 "--no-write", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "warning: common scale uncertainty unknown" in text
+    assert "--incident-power-u" in text and "--distance-u-mm" in text
+    assert "common scale unknown, not included" in text
+    # no bare "1" unit after a dimensionless parameter; each says what it is
+    rho = next(line for line in text.splitlines() if "lambert.rho" in line)
+    assert "diffuse reflectance" in rho and not rho.rstrip().endswith(" 1")
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "<b>unknown</b>" in page and "0.000%" not in page and "Warnings" in page
+    # with the uncertainties given, the scale is a number and the warning is gone
+    assert main(["fit", str(glossy_run), "--models", "lambert+ggx", "--no-cv", "--no-write",
+                 "--out", str(out), "--incident-power-u", "0.02",
+                 "--distance-u-mm", "0.5"]) == 0
+    text = capsys.readouterr().out
+    assert "common scale uncertainty unknown" not in text
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "<b>unknown</b>" not in page and "relative scale uncertainty 2.0" in page
+
+
+def test_coinciding_curves_are_named() -> None:
+    from instrument.pipelines.brdf.report import coincident_with, unit_text
+
+    x = np.linspace(0.1, 1.0, 50)
+    same = coincident_with({"lambert": 0.2 * x, "oren_nayar": 0.2 * x * (1 + 1e-5),
+                            "ggx": x**2, "copy": 0.2 * x})
+    assert same == {"oren_nayar": "lambert", "copy": "lambert"}
+    assert unit_text("1") == "" and unit_text("1/sr") == "1/sr"
+
+
 def test_read_run_points_and_frames(glossy_run) -> None:
     run = read_run(glossy_run)
     rows = run.brdf_rows()
@@ -123,7 +158,7 @@ def test_bootstrap_sigma_checks_the_covariance(glossy_run, tmp_path, capsys) -> 
     out = tmp_path / "boot"
     assert main(["fit", str(glossy_run), "--models", "lambert+ggx", "--no-cv", "--no-write",
                  "--bootstrap", "10", "--out", str(out)]) == 0
-    assert "bootstrap (10 resamples" in capsys.readouterr().out
+    assert "bootstrap check (10 resamples" in capsys.readouterr().out
     assert "bootstrap 95 % interval" in (out / "index.html").read_text(encoding="utf-8")
     assert main(["fit", str(glossy_run), "--bootstrap", "-1", "--no-write"]) == 2
     assert "--bootstrap" in capsys.readouterr().out

@@ -168,7 +168,9 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
                                                                            capsys):
     assert main(["reconstruct", str(scan_run)]) == 0
     out = capsys.readouterr().out
-    assert "p̂_max" in out and "figures:" in out
+    assert "highest recovered angular order" in out and "figures:" in out
+    # figures of merit are named in words, with how to judge them
+    assert "degree of specularity" in out and "effective signal-to-noise ratio" in out
     assert main(["locate", str(scan_run)]) == 0
     out = capsys.readouterr().out
     assert "object(s) found" in out
@@ -196,7 +198,7 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
     assert np.all(interval[:, 0] <= pos[:, 1] + 1e-9)
     assert np.all(pos[:, 1] <= interval[:, 1] + 1e-9)
     assert set(quality) <= {"resolved", "two_estimates_agree", "unresolved"}
-    assert "[resolved]" in out or "[two_estimates_agree]" in out
+    assert "depth resolved" in out or "depth likely" in out
     # the brushed-metal wall keeps ~18 angular orders at this SNR (≥ the thesis' 10)
     assert 10 <= p_hat <= 30
     # the noise the reconstruction estimated from its high-|p| tail agrees with the
@@ -386,7 +388,7 @@ def test_too_coarse_an_angle_grid_is_noted_not_silently_over_smoothed(scan_run):
              min_size=1, max_size=4).map(",".join),
 ))
 def test_parse_brdf_gives_a_valid_model_or_an_error_naming_the_text(text):
-    """--brdf: either a finite, physical S2-14 model or a ValueError that quotes the input."""
+    """--brdf: either a finite, physical eq. 2-14 model or a ValueError that quotes the input."""
     try:
         b = parse_brdf(text)
     except ValueError as err:

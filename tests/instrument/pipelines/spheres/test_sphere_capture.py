@@ -1,4 +1,4 @@
-"""Sphere captures end to end (issue 7 §5, §6): the sphere scene on the virtual bench, the
+"""Sphere captures end to end: the sphere scene on the virtual bench, the
 ``sphere_capture`` plan, the engine's HDR acquisition and the SH analysis of the run file.
 
 * Scene physics, checked independently of the renderer's quadrature: a Lambertian sphere
@@ -10,7 +10,7 @@
   SMC100 firmware emulators under the real drivers, simulated camera with its EMVA 1288
   sensor, auto-exposure HDR brackets, a dark per bracket), then ``scatterlab spheres``:
   the fourth image rendered from the other three is within 6.5 % (L1) of the measured one
-  (issue §6: the published real-data figures are 9.5 % and 6.5 %), the untampered capture
+  (Mahajan et al. 2006 report 9.5 % and 6.5 % on real data), the untampered capture
   passes the calibrated consistency check and a spliced one does not.
 """
 
@@ -384,6 +384,10 @@ def test_cli_spheres_reports(capture_run, tmp_path, capsys):
     assert "L1 error" in out and "consistent" in out
     # the decision's known limit (false alarms above α on the bench) is stated with it
     assert CONSISTENCY_LIMIT in out and "2 of 16" in out
+    # the identities are named in words with the paper's equation, not by private tags
+    assert "two objects × two lightings" in out and "[eq. 21]" in out
+    assert "Mahajan, Ramamoorthi & Curless 2006" in out
+    assert not any(tag in out for tag in ("M10", "M16", "M19", "M21", "M25", "α"))
     assert main(["spheres", str(tmp_path / "missing.h5")]) == 2
 
 
