@@ -7,25 +7,38 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from instrument.bench.guard import GuardError
-from instrument.bench.profile import load_profile
 from instrument.cli import _planner
-from instrument.cli._progress import fmt_s
-from instrument.plans import build_plan, load_plan
-from instrument.plans.coverage import write_coverage_png
+from instrument.cli._format import fmt_s
+from instrument.run.paths import DEFAULT_RUNS_DIR
+
+HELP = "dry run of a plan: points, travel, duration, coverage PNG"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plan", help="dry run of a plan: points, travel, duration, coverage PNG")
+    p = sub.add_parser("plan", help=HELP)
     p.add_argument("plan", help="plan file (TOML)")
     p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")
+    p.add_argument("--out", default=str(DEFAULT_RUNS_DIR),
+                   help="folder for the coverage picture <plan file name>_coverage.png "
+                   f"(default: the runs folder, {DEFAULT_RUNS_DIR})")
     p.add_argument("--png", default=None,
-                   help="coverage picture path (default: <plan name>_coverage.png here)")
+                   help="the coverage picture's exact path (instead of --out)")
     _planner.add_arguments(p)
     p.set_defaults(func=run)
 
 
+def coverage_path(args: argparse.Namespace) -> Path:
+    """``--png``, or ``<plan file name>_coverage.png`` in ``--out``."""
+    if args.png:
+        return Path(args.png)
+    return Path(args.out) / f"{Path(args.plan).stem}_coverage.png"
+
+
 def run(args: argparse.Namespace) -> int:
+    from instrument.bench.guard import GuardError
+    from instrument.bench.profile import load_profile
+    from instrument.plans import build_plan, load_plan
+
     spec = load_plan(args.plan)
     profile = load_profile(args.bench)
     if getattr(args, "target_uncertainty", None) is not None:
@@ -61,11 +74,16 @@ def run(args: argparse.Namespace) -> int:
                   f"({est.motion_s / raster.motion_s:.0%} of it used here)")
     print(f"  acquisition: {spec.acquisition.as_json()}")
     if any(p.angles is not None for p in plan.points):
-        png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
+        from instrument.plans.coverage import write_coverage_png
+
+        png = coverage_path(args)
         try:
+            png.parent.mkdir(parents=True, exist_ok=True)
             write_coverage_png(plan, png)
         except OSError as err:
-            print(f"error: --png: {err}", file=sys.stderr)
+            option = "--png" if args.png else "--out"
+            print(f"error: {option}: cannot write {png} ({err.strerror or err})",
+                  file=sys.stderr)
             return 2
         print(f"  coverage picture: {png}")
     else:  # light-field, sphere and calibration plans sample no scattering directions

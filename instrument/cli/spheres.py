@@ -3,8 +3,10 @@
 Merges each point's HDR brackets into a radiance image, fits spherical harmonics, tests the
 identities of physics.md §5 (M10/M16/M19/M21/M25), renders the last image from the other
 three corner images by BRDF transfer and checks the capture's consistency against the noise
-level (:mod:`instrument.pipelines.spheres`). Results go into ``/entry/analysis`` of the run file;
-the figure to ``<run>.spheres.png`` (or ``--figure``).
+level (:mod:`instrument.pipelines.spheres`). Results (``results.h5``) and the figure
+(``relighting.png``) go into ``DIR/RUN/spheres/`` next to the run file ``DIR/RUN.h5`` (ADR
+0013); ``--out`` names another folder. The run file is only read, unless ``--into-run``
+asks for the results in it as well.
 
 Exit status: 0 consistent, 1 the consistency check flags the capture, 2 on errors.
 The check's α is calibrated against noise only; on the simulated bench its false-alarm
@@ -16,14 +18,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
-from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT
-from instrument.pipelines.spheres.pipeline import analyse_run
+HELP = "relight and check a sphere capture (SH analysis)"
+FIGURE_NAME = "relighting.png"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("spheres", help="relight and check a sphere capture (SH analysis)")
+    p = sub.add_parser("spheres", help=HELP)
     p.add_argument("run", help="run file (.h5) of a sphere_capture plan")
     p.add_argument("--lmax", type=int, default=20, help="SH order of the fits (default 20)")
     p.add_argument("--lmax-check", type=int, default=12,
@@ -37,10 +37,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold-scale", type=float, default=1.0,
                    help="multiply the bootstrap threshold by the bench's calibrated factor "
                         "(BENCHMARKS.md sphere_capture; default 1: noise-only threshold)")
-    p.add_argument("--figure", default=None,
-                   help="figure path (default <run>.spheres.png; 'none' for no figure)")
-    p.add_argument("--no-write", action="store_true",
-                   help="do not write the results into the run file")
+    p.add_argument("--out", default=None,
+                   help="folder for results.h5 and the figure (default: RUN/spheres/ next "
+                   "to the run file RUN.h5)")
+    p.add_argument("--no-figures", action="store_true", help="draw no figure")
+    p.add_argument("--no-write", action="store_true", help="write no results file")
+    p.add_argument("--into-run", action="store_true",
+                   help="also write the results into the run file (/entry/analysis); by "
+                   "default the run file is only read")
     p.set_defaults(func=run)
 
 
@@ -64,24 +68,28 @@ def _option_error(args: argparse.Namespace) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT
+    from instrument.pipelines.spheres.pipeline import analyse_run
+    from instrument.run.paths import RESULTS_NAME, results_dir
+
     bad = _option_error(args)
     if bad is not None:
         print(f"error: {bad}")
         return 2
-    fig = args.figure
-    if fig is None:
-        fig = str(Path(args.run).with_suffix("")) + ".spheres.png"
-    elif fig.lower() == "none":
-        fig = None
+    folder = Path(args.out) if args.out else results_dir(args.run, "spheres")
+    fig = None if args.no_figures else folder / FIGURE_NAME
     try:
         capture, res = analyse_run(
-            args.run, write=not args.no_write, figure=fig, lmax=args.lmax,
+            args.run, write=not args.no_write, figure=fig, into_run=args.into_run,
+            out_dir=args.out, lmax=args.lmax,
             lmax_check=args.lmax_check, max_view_angle_deg=args.max_view_angle,
             check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
             threshold_scale=args.threshold_scale,
         )
     except (ValueError, OSError, KeyError) as err:
-        print(f"error: {args.run}: {err} (is it the run file of a sphere_capture plan?)")
+        print(f"error: {err}")
         return 2
     r, s = capture.radiance.shape[:2]
     print(f"sphere capture: {s} objects ({', '.join(capture.objects)}) × {r} lightings "
@@ -113,5 +121,7 @@ def run(args: argparse.Namespace) -> int:
     if fig is not None:
         print(f"figure: {fig}")
     if not args.no_write:
-        print(f"stored in {args.run}:/entry/analysis")
+        print(f"results: {folder / RESULTS_NAME}")
+    if args.into_run:
+        print(f"results also written into {args.run} (/entry/analysis)")
     return 1 if rep.inconsistent else 0
