@@ -288,7 +288,7 @@ class RunEngine:
                 notes.append("could not make safe: " + "; ".join(problems))
             try:
                 self._writer.drain()
-            except StorageError as err:
+            except Exception as err:  # a storage error, or a bug: the run must still end
                 self._store_broken = True
                 notes.append(f"last point not stored: {err}")
             self._writer.stop()

@@ -433,7 +433,7 @@ def _reconcile(f: h5py.File, j: _Journalled, rebuilt: bool, check_all: bool
     dropped = max(0, had - n)
     restored = max(0, n - had)
     cols: dict[str, list[Any]] = {k: [] for k in (*FLOAT_FIELDS, *INT_FIELDS, *STR_FIELDS)}
-    pos = np.full((n, len(header.axes)), np.nan)
+    pos = np.full((n, max(len(header.axes), 1)), np.nan)  # no axis moved: one NaN column
     for k, p in enumerate(points):
         for jj, name in enumerate(("theta_i", "phi_i", "theta_r", "phi_r")):
             cols[name].append(p["angles"][jj])

@@ -421,7 +421,7 @@ def _write_rows(grp: h5py.Group, n0: int, recs: list[tuple[PointRecord, int, int
                 n_axes: int) -> None:
     n1 = n0 + len(recs)
     cols: dict[str, list[Any]] = {k: [] for k in (*FLOAT_FIELDS, *INT_FIELDS, *STR_FIELDS)}
-    pos = np.full((len(recs), n_axes), np.nan)
+    pos = np.full((len(recs), max(n_axes, 1)), np.nan)  # a plan that moves no axis: 1 NaN
     for k, (r, frame_start, n_frames) in enumerate(recs):
         cols["t_start"].append(r.t_start)
         cols["t_end"].append(r.t_end)
