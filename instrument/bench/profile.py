@@ -20,6 +20,7 @@ Schema (all lengths in mm, angles in degrees)::
     acceleration = 20.0                # motion: units/s²
     position_tolerance = 0.01          # motion: arrival tolerance in axis units
     settle_s = 0.01                    # motion: settling after each move (planning, s)
+    home_s = 20.0                      # motion: time homing takes (estimates, s)
     frame_overhead_s = 0.02            # camera: time per frame beyond the exposure (s)
     scene_change_s = 0.1               # camera: extra time of the first frame after a
                                        # move or the light turned on (s); both for
@@ -142,6 +143,8 @@ class DeviceSpec:
     #: frame after the scene changed (estimates only; :mod:`instrument.bench.timing`).
     frame_overhead_s: float = 0.0
     scene_change_s: float = 0.0
+    #: Motion: seconds homing takes on the real stage (estimates only).
+    home_s: float = 0.0
 
     @property
     def is_axis(self) -> bool:
@@ -283,7 +286,7 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
              "position_tolerance", "options", "retry", "settle_s", "settings",
-             *CAMERA_TIMING}
+             "home_s", *CAMERA_TIMING}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
     if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
@@ -310,7 +313,7 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
             limits = (float(raw[0]), float(raw[1]))
     if not is_axis:
         for key in ("limits", "velocity", "acceleration", "position_tolerance", "stage",
-                    "settle_s"):
+                    "settle_s", "home_s"):
             if key in t and driver is not None:
                 v.error(f"{path}.{key}", f"only motion devices take {key!r}")
     velocity = v.positive(t, "velocity", path)
@@ -327,6 +330,11 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
         settle = 0.0
     settings = _settings(v, t.get("settings", {}), driver, f"{path}.settings")
     timing = {}
+    home = t.get("home_s", 0.0)
+    if not _is_number(home) or not 0 <= home <= 600:
+        v.error(f"{path}.home_s", "must be a number of seconds from 0 to 600")
+    elif is_axis:
+        timing["home_s"] = float(home)
     for key, high in CAMERA_TIMING.items():
         if key not in t:
             continue

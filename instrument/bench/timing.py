@@ -9,14 +9,15 @@ also costs time beyond the exposure: per frame (``frame_overhead_s``: readout an
 on a real camera; synthesising the sensor noise on the simulated one) and once after each
 change of the scene (``scene_change_s``: the first frame after a move or after the light
 came on, when a real camera's queue is flushed and the simulated one renders the new
-view). :func:`bench_timing` collects these from a profile so that an estimate says what
-*this* bench will take.
+view). Homing an axis takes ``home_s`` of its own time (the profile says how long; an
+emulated axis takes that divided by its speed-up). :func:`bench_timing` collects these from
+a profile so that an estimate says what *this* bench will take.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from urllib.parse import parse_qs, urlsplit
 
 from instrument.bench.profile import BenchProfile, DeviceSpec
@@ -60,11 +61,13 @@ def exposes_in_wall_time(spec: DeviceSpec) -> bool:
 class BenchTiming:
     """What the profile says about time on this bench (see the module docstring).
 
-    ``axis_speed`` maps an axis role to its clock speed-up; ``exposure_factor`` is 1 when
-    exposures take wall time, else 0.
+    ``axis_speed`` maps an axis role to its clock speed-up, ``home_s`` to the wall-clock
+    seconds its homing takes; ``exposure_factor`` is 1 when exposures take wall time,
+    else 0.
     """
 
     axis_speed: dict[str, float]
+    home_s: dict[str, float] = field(default_factory=dict)
     exposure_factor: float = 1.0
     frame_overhead_s: float = 0.0
     scene_change_s: float = 0.0
@@ -78,13 +81,14 @@ class BenchTiming:
 
 def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming:
     """The timing of ``profile`` for a plan moving ``axes``."""
-    speed = {}
+    speed, home = {}, {}
     for role in axes:
         spec = profile.devices.get(role)
         speed[role] = 1.0 if spec is None else clock_speed(spec)
+        home[role] = 0.0 if spec is None else spec.home_s / speed[role]
     camera = next((d for d in profile.devices.values()
                    if d.driver in ("sim_camera", "opencv_camera")), None)
     if camera is None:
-        return BenchTiming(speed)
-    return BenchTiming(speed, 1.0 if exposes_in_wall_time(camera) else 0.0,
+        return BenchTiming(speed, home)
+    return BenchTiming(speed, home, 1.0 if exposes_in_wall_time(camera) else 0.0,
                        camera.frame_overhead_s, camera.scene_change_s)

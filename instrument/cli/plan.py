@@ -65,9 +65,11 @@ def run(args: argparse.Namespace) -> int:
     for role, dist in est.travel.items():
         unit = "mm" if role == "camera_z" else "deg"
         print(f"  travel {role:<15} {dist:10.1f} {unit}")
+    homing = sum(est.homing_s.values())
     print(f"  estimated duration on this bench {fmt_s(est.total_s)} (motion "
           f"{fmt_s(est.bench_motion_s)}, acquisition and storage "
-          f"{fmt_s(est.bench_acquisition_s)}; homing not included)")
+          f"{fmt_s(est.bench_acquisition_s)})"
+          + (f", and {fmt_s(homing)} before it to home axes not homed yet" if homing else ""))
     if est.speedup > 1.001:
         print(f"  its emulated stages run {est.speedup:.3g}× faster than real ones: on real "
               f"stages at the profile's speeds the motion alone takes {fmt_s(est.motion_s)}")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Container, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,8 +46,9 @@ class PlanEstimate:
     speed/accuracy planner compares). ``bench_motion_s`` and ``bench_acquisition_s`` are
     what *this* bench takes on the wall clock (:mod:`instrument.bench.timing`): emulated
     stages run ``speedup`` times faster, a simulated camera exposes in no time but renders,
-    and every point costs its storage; :attr:`total_s` is their sum. Homing at the start is
-    not included.
+    and every point costs its storage; :attr:`total_s` is their sum. ``homing_s`` maps each
+    axis of the plan to the wall-clock seconds its homing takes, for a start on axes that
+    are not homed yet (not in :attr:`total_s`).
     """
 
     n_points: int
@@ -57,6 +58,7 @@ class PlanEstimate:
     bench_motion_s: float | None = None
     bench_acquisition_s: float | None = None
     speedup: float = 1.0
+    homing_s: dict[str, float] = field(default_factory=dict)
 
     @property
     def total_s(self) -> float:
@@ -121,7 +123,7 @@ class Plan:
         bench_motion, _ = route_time(t, self.axes, fast)
         speedup = motion / bench_motion if bench_motion > 0 else 1.0
         return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
-                            self._acquisition_on(timing), speedup)
+                            self._acquisition_on(timing), speedup, dict(timing.home_s))
 
     def _acquisition_on(self, timing: BenchTiming) -> float:
         """Wall-clock seconds of every point's acquisition and storage on a bench.

@@ -272,7 +272,8 @@ class RunEngine:
             est = self.plan.estimate()
             self._emit(RunStarted(self.store.header.run_id, str(self.store.path),
                                   self.plan.kind, self._n_total, len(self._done),
-                                  est.total_s * (1 - len(self._done) / max(1, self._n_total))))
+                                  est.total_s * (1 - len(self._done) / max(1, self._n_total))
+                                  + self._homing_s(est.homing_s)))
             self._prepare()
             status = self._loop()
         except _Abort:
@@ -316,6 +317,17 @@ class RunEngine:
             self._emit(RunFinished(status, len(self._done), self._n_total, self._n_skipped,
                                    str(self.store.path), time.monotonic() - self._t0,
                                    self._message))
+
+    def _homing_s(self, homing_s: dict[str, float]) -> float:
+        """Seconds :meth:`_prepare` will spend homing the plan's axes that are not homed."""
+        total = 0.0
+        for role in self.plan.axes:
+            try:
+                if not self._axis(role).status().is_homed:
+                    total += homing_s.get(role, 0.0)
+            except (DeviceError, _PointFailed):
+                continue  # _prepare reports it
+        return total
 
     def _prepare(self) -> None:
         """Enable and home every axis the plan moves (homing is skipped when homed)."""

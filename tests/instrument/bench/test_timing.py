@@ -108,3 +108,51 @@ def test_light_switches_without_moves_count_as_scene_changes():
     assert est.bench_acquisition_s == pytest.approx(
         frames * timing.frame_overhead_s + timing.scene_change_s
         + len(plan.points) * POINT_OVERHEAD_S, rel=1e-12)
+
+
+def test_homing_is_estimated_per_axis_and_added_only_for_axes_not_homed(tmp_path):
+    from instrument.run.events import RunStarted
+    from instrument.run.runner import start_run
+    from tests.instrument.helpers import IDEAL_PROFILE, ideal_bench, inplane_plan
+
+    profile = load_profile("sim")
+    plan = build_plan(load_plan(ROOT / "examples" / "brdf_inplane.toml"), profile)
+    est = plan.estimate()
+    speed = {r: clock_speed(profile.devices[r]) for r in plan.axes}
+    assert est.homing_s == pytest.approx({r: profile.devices[r].home_s / speed[r]
+                                          for r in plan.axes})
+    # the ideal bench's axes are always homed: the run's first estimate has no homing in it
+    text = IDEAL_PROFILE.replace('on_failure = "pause"', 'on_failure = "pause"\n'
+                                 ).replace("acceleration = 10.0\n",
+                                           "acceleration = 10.0\nhome_s = 30.0\n", 1)
+    bench = ideal_bench(text)
+    ideal = build_plan(parse_plan(inplane_plan()), bench.profile)
+    assert sum(ideal.estimate().homing_s.values()) == 30.0
+    engine = start_run(ideal, bench, runs_dir=tmp_path, fsync=False, catalog=False)
+    started = []
+    engine.subscribe(lambda ev: started.append(ev) if isinstance(ev, RunStarted) else None)
+    engine.run()
+    assert started[0].estimated_s == pytest.approx(ideal.estimate().total_s)
+
+
+def test_a_run_on_freshly_powered_emulated_stages_counts_their_homing(tmp_path):
+    from drivers.transport import add_url_handler_package
+    from instrument.bench.devices import open_bench
+    from instrument.run.events import RunStarted
+    from instrument.run.runner import start_run
+
+    add_url_handler_package("hw_mocks.urlhandler")
+    profile = load_profile("sim-lightfield")
+    plan = build_plan(parse_plan(
+        '[plan]\nkind = "lightfield"\nname = "two rows"\n[sample]\nname = "wall"\n'
+        '[scan]\ncamera_z = [0.0, 1.0]\n'
+        '[acquisition]\nmode = "fixed"\nexposure_us = 5000\ndetectors = ["camera"]\n'),
+        profile)
+    est = plan.estimate()
+    assert est.homing_s["camera_z"] > 0
+    with open_bench(profile) as bench:
+        engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False, catalog=False)
+        started = []
+        engine.subscribe(lambda ev: started.append(ev) if isinstance(ev, RunStarted) else None)
+        engine.run()
+    assert started[0].estimated_s == pytest.approx(est.total_s + est.homing_s["camera_z"])
