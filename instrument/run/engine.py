@@ -446,6 +446,8 @@ class RunEngine:
             self._done = _DoneSet(self._n_total, done)
         self._writer = _Writer(self.store)
         self._store_broken = False
+        for line in self.store.repairs:  # what the recovery did, said where the run is shown
+            self._emit(Fault("storage", f"repaired: {line}", "continue", None))
 
     def store_event(self, kind: str, **fields) -> None:
         if self._store_broken:

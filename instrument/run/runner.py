@@ -244,9 +244,10 @@ def _reopener(path: Path, *, fsync: bool, sync_interval_s: float, min_free_bytes
     any repair in the catalog), open it to append; with ``remeasure`` the points whose
     frames are lost are still to do."""
     def reopen() -> tuple[RunStore, set[int]]:
-        recover_run(path, catalog=catalog)
+        report = recover_run(path, catalog=catalog)
         store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
                                       min_free_bytes=min_free_bytes)
+        store.repairs = report.repairs + store.repairs
         return store, (done - set(store.lost)) if remeasure else done
     return reopen
 

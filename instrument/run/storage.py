@@ -117,6 +117,8 @@ class RunStore:
         #: it again (its row is rewritten in place, see the module docstring).
         self.lost = tuple(lost)
         self._rows = {i: r for i, r in (rows or {}).items() if i in set(lost)}
+        #: What the recovery before this reopening repaired, in words (empty: nothing).
+        self.repairs: tuple[str, ...] = ()
         self._pending: list[tuple[PointRecord, int, int]] = []
         self._pending_replaced: list[tuple[int, PointRecord, int, int]] = []
         self._pending_events: list[str] = []
@@ -162,6 +164,7 @@ class RunStore:
         store = cls(path, h5, journal, report.header, n_points=report.n_points,
                     n_frames=report.n_frames, fsync=fsync, sync_interval_s=sync_interval_s,
                     min_free_bytes=min_free_bytes, rows=report.rows, lost=report.lost)
+        store.repairs = report.repairs
         return store, report.done
 
     # writing ------------------------------------------------------------------
