@@ -29,6 +29,9 @@ StateError / NotHomedError
     axis, motion before homing).
 MotionError
     A move ended, but not where it was sent (outside the position tolerance).
+OverloadError
+    A measuring instrument's input or output is beyond its range on every setting that
+    could cure it (a lock-in overloaded on its largest full scale).
 UnsupportedFeature
     The device or backend cannot do what was asked (for example, an OpenCV backend
     that ignores an exposure setting). Never silently ignored.
@@ -44,6 +47,7 @@ __all__ = [
     "LimitError",
     "MotionError",
     "NotHomedError",
+    "OverloadError",
     "ProtocolError",
     "StateError",
     "UnsupportedFeature",
@@ -138,6 +142,10 @@ class NotHomedError(StateError):
 
 class MotionError(DeviceError):
     """A move finished outside the position tolerance of its target."""
+
+
+class OverloadError(DeviceError):
+    """The signal exceeds the instrument's range and no range setting cures it."""
 
 
 class UnsupportedFeature(DeviceError):

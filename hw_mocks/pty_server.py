@@ -78,7 +78,9 @@ class PtyServer:
 
 
 def serve_url(url: str) -> PtyServer:
-    """Serve the emulator named by a ``simapt://``/``simsmc://`` URL on a new pty."""
+    """Serve the emulator named by a ``simapt://``, ``simsmc://``, ``simzaber://`` or
+    ``simsr830://`` URL (any scheme with a handler in :mod:`hw_mocks.urlhandler`) on a new
+    pty."""
     import importlib
 
     from hw_mocks import registry

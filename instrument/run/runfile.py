@@ -286,7 +286,7 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
     identities = {name: {k: as_text(v) for k, v in g.attrs.items()}
                   for name, g in inst.items() if isinstance(g, h5py.Group)}
     axes = tuple(as_text(a) for a in e["plan/axes"][()])
-    cal = {k: as_text(v) for k, v in e["calibration"].attrs.items()}
+    cal = {k: as_text(v) for k, v in e["calibration"].attrs.items() if k != "NX_class"}
     frames = d.get("frames")
 
     def col(name: str, grp: h5py.Group = p) -> np.ndarray:

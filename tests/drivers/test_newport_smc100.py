@@ -18,7 +18,6 @@ from drivers.base import AxisKind
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
-    DeviceError,
     DeviceTimeout,
     LimitError,
     NotHomedError,
@@ -37,7 +36,15 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.fault_checks import corrupted_reads
 from tests.drivers.motion_contract import MotionAxisContract
+from tests.drivers.serial_faults import (
+    QUERY_FAULTS,
+    motion_fault_session,
+    query_survives,
+    unplug_during_move,
+    unplug_during_query,
+)
 
 SPEED = 200.0
 
@@ -424,23 +431,11 @@ def faulty(homed):
     return homed, emulator_of(homed).faults
 
 
-@pytest.mark.parametrize("kind, params", [
-    (FaultKind.DROP, {}),
-    # longer than one reply timeout (0.1 s), shorter than all three attempts
-    (FaultKind.DELAY, {"delay_s": 0.15}),
-    (FaultKind.SPLIT, {"chunks": 4, "gap_s": 0.01}),
-    (FaultKind.GARBAGE, {"nbytes": 5}),
-    (FaultKind.UNSOLICITED, {}),
-])
+@pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover_by_retry(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
-    for _ in range(5):
-        faults.schedule(kind, nth=1, **params)
-        t0 = time.monotonic()
-        assert axis.position == pytest.approx(4.0, abs=1e-6)
-        assert time.monotonic() - t0 < 2.0
-    assert [k for _, k in faults.log] == [kind] * 5
+    query_survives(faults, kind, params, lambda: round(axis.position, 6), 4.0)
 
 
 def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
@@ -451,23 +446,12 @@ def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
     """
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
-    right = wrong = failed = 0
     t0 = time.monotonic()
-    for _ in range(30):
-        faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
-        try:
-            value = axis.position
-        except (ProtocolError, DeviceTimeout) as err:
-            assert err.device == "beh" and err.command == "1TP"
-            failed += 1
-            continue
-        if value == pytest.approx(4.0, abs=1e-6):
-            right += 1
-        else:
-            wrong += 1
+    got = corrupted_reads(lambda: axis.position, lambda v: v == pytest.approx(4.0, abs=1e-6),
+                          faults, n=30, device="beh", command="1TP")
     assert time.monotonic() - t0 < 15.0
-    assert failed == 0  # one corrupted reply never exhausts the retries
-    assert right >= 15 and right + wrong == 30
+    assert got.failed == 0  # one corrupted reply never exhausts the retries
+    assert got.right >= 15 and got.right + got.wrong == 30
 
 
 @pytest.mark.parametrize("kind, params", [
@@ -493,23 +477,7 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
 
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
-    axis, faults = faulty
-    for kind in (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT,
-                 FaultKind.UNSOLICITED, FaultKind.DELAY):
-        faults.randomly(kind, 0.05, gap_s=0.002, nbytes=3, delay_s=0.15)
-    ok = typed = 0
-    t0 = time.monotonic()
-    for i in range(30):
-        try:
-            axis.move_to((i % 5) - 2.0, wait=True, timeout=5)
-            ok += 1
-        except DeviceError as err:
-            assert err.device == "beh" and err.command
-            typed += 1
-            time.sleep(0.2)  # let a late reply or a started move finish
-    assert time.monotonic() - t0 < 60
-    assert ok + typed == 30 and ok >= 15
-    assert len(faults.log) >= 5
+    motion_fault_session(*faulty)
 
 
 def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, servers):
@@ -519,19 +487,9 @@ def test_disconnect_is_typed_and_reconnect_finds_same_state(transport, servers):
     axis.home(timeout=10)
     axis.move_to(2.0, wait=True, timeout=10)
     axis.reply_timeout = 0.1
-    emulator = emulator_of(axis)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        axis.position  # noqa: B018
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == "dc" and info.value.command == "1TP"
-    if transport == "url":
-        axis.close()
-        axis = open_axis(transport, "dc", cleanup=servers)
-    else:
-        emulator.faults.reconnect()  # the cable is back; the same port works again
+    axis = unplug_during_query(axis, emulator_of(axis), transport,
+                               lambda: open_axis(transport, "dc", cleanup=servers),
+                               command="1TP")
     assert axis.is_homed and axis.position == pytest.approx(2.0, abs=1e-6)
     axis.close()
 
@@ -544,23 +502,9 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, s
     axis.velocity = 2.0
     axis.move_to(6.0)  # 3 s of emulated time: 15 ms at SPEED
     axis.reply_timeout = 0.1
-    emulator = emulator_of(axis)
-    emulator.faults.schedule(FaultKind.DISCONNECT, nth=1)
-    expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
-    with pytest.raises(expected) as info:
-        axis.wait(10)
-    assert time.monotonic() - t0 < 2.0
-    assert info.value.device == "mid" and info.value.command == "1TS"
-    assert info.value.__cause__ is not None
-    if transport == "url":
-        axis.close()
-        axis = open_axis(transport, "mid", cleanup=servers)
-    else:
-        emulator.faults.reconnect()
-    deadline = time.monotonic() + 5.0
-    while axis.is_moving and time.monotonic() < deadline:
-        time.sleep(0.005)
+    axis = unplug_during_move(axis, emulator_of(axis), transport,
+                              lambda: open_axis(transport, "mid", cleanup=servers),
+                              command="1TS")
     assert axis.is_homed
     assert axis.position == pytest.approx(6.0, abs=1e-6)
     axis.close()

@@ -6,7 +6,6 @@ device 0x50), so these tests do not lean on the driver's codec.
 
 from __future__ import annotations
 
-import ast
 import math
 import struct
 from pathlib import Path
@@ -21,6 +20,7 @@ from hw_mocks.clock import ManualClock
 from hw_mocks.firmware import apt as firmware
 from hw_mocks.firmware.apt import PROFILES, AptEmulator
 from hw_mocks.motion import TrapezoidalProfile
+from tests.hw_mocks.purity import assert_imports_nothing_forbidden
 
 K10_CPU = 409600 / 3
 
@@ -294,10 +294,7 @@ def test_unknown_model_is_refused():
 
 
 def test_emulator_imports_nothing_from_drivers():
-    tree = ast.parse(Path(firmware.__file__).read_text())
-    modules = [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
-    modules += [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
-    assert not [m for m in modules if m.split(".")[0] == "drivers"]
+    assert_imports_nothing_forbidden(Path(firmware.__file__))
     assert math.isfinite(PROFILES[("K10CR1", "K10CR1")].counts_per_unit)
 
 

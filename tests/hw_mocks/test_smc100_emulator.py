@@ -6,7 +6,6 @@ that the driver's tests really test the driver against an independent reading.
 
 from __future__ import annotations
 
-import ast
 import math
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from hw_mocks import registry
 from hw_mocks.clock import ManualClock
 from hw_mocks.firmware.smc100 import STAGE_MODELS, Smc100Emulator
 from hw_mocks.motion import TrapezoidalProfile
+from tests.hw_mocks.purity import assert_imports_nothing_forbidden
 
 
 @pytest.fixture
@@ -323,17 +323,8 @@ def test_linear_stage_defaults():
 
 def test_firmware_emulator_imports_nothing_from_drivers():
     root = Path(__file__).resolve().parents[2] / "hw_mocks"
-    for path in (root / "firmware" / "smc100.py", root / "urlhandler" / "protocol_simsmc.py"):
-        tree = ast.parse(path.read_text())
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):
-                names = [node.module or ""]
-            else:
-                continue
-            assert not any(n.split(".")[0] in ("drivers", "instrument", "gui")
-                           for n in names), (path, names)
+    assert_imports_nothing_forbidden(root / "firmware" / "smc100.py",
+                                     root / "urlhandler" / "protocol_simsmc.py")
 
 
 # --------------------------------------------------------------------------- fuzzing

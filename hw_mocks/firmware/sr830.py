@@ -1,0 +1,661 @@
+"""Firmware emulator of a Stanford Research SR830 DSP lock-in amplifier on RS-232.
+
+Written from the manual (Stanford Research Systems, *Model SR830 DSP Lock-In Amplifier*,
+Revision 2.5, 10/2011), independently of ``drivers/`` (it imports nothing from there, so a
+misreading shared by the driver and the emulator cannot pass unnoticed).
+
+The wire (manual ch. 5)
+-----------------------
+Commands are four-character mnemonics (``*`` + three letters for common commands), ``?``
+for queries, comma-separated parameters; case and embedded spaces do not matter; a line
+ends in CR or LF and may hold several commands separated by ``;`` (p. 5-1). Each query
+answers one line ending in CR (p. 5-2) — sent only if the output interface is RS-232
+(``OUTX 0``); with ``OUTX 1`` (GPIB) the answers go to the other connector and nothing
+comes back on this line (p. 5-19). An unknown command sets CMD (bit 5) in the standard
+event status byte, a parameter out of range or not allowed now sets EXE (bit 4); a failed
+query answers nothing. ``AGAN`` keeps the interpreter busy (IFC clear); lines received
+meanwhile wait in the input queue and run afterwards (p. 5-2), so an RS-232 ``*STB?``
+asked during an auto gain is answered when it is over.
+
+Implemented: ``*IDN? *RST *CLS *ESE(?) *SRE(?) *ESR? *STB? ERRE(?) ERRS? LIAE(?) LIAS?
+OUTX(?) FMOD(?) FREQ(?) PHAS(?) ICPL(?) SENS(?) OFLT(?) OFSL(?) SNAP? OUTP? AGAN``
+(status queries take the optional bit number). Tables: ``SENS`` 0…26 = 2 nV … 1 V rms in
+1-2-5 steps, ``OFLT`` 0…19 = 10 µs … 30 ks in 1-3 steps (> 30 s refused above a 200 Hz
+detection frequency), ``OFSL`` 0…3 = 6…24 dB/oct (p. 5-6).
+
+The measurement model (documented emulator choices, not calibrations)
+-------------------------------------------------------------------
+* The input is an :class:`InputSignal` supplied by whoever binds the emulator (a test, or
+  :mod:`hw_mocks.sim.photodiode` for the virtual bench): the rms amplitude and phase of the
+  Fourier component at the modulation frequency, and a DC part. The lock-in reports rms
+  values of the component at the reference frequency (p. 3-3: a 2 V pk-pk square wave
+  reads 1.273/√2 V); DC does not reach X and Y.
+* Reference: internal oscillator (``FREQ``, 1 kHz at reset) or REF IN (``FMOD 0``), where
+  :attr:`Sr830Emulator.reference_input_hz` is what is connected there (a chopper's
+  reference output; ``None``: nothing, the reference is unlocked and UNLK latches). A
+  signal contributes only if it is modulated at the detection frequency (``frequency_hz``
+  ``None`` means "whatever the lock-in references", like the SR830's own sine output
+  looped back).
+* Output filter: ``n`` = slope/6 cascaded single-pole stages of time constant τ on the
+  emulator clock, updated exactly for an input held constant between updates. The input
+  is sampled whenever a query is executed and held over the interval since the previous
+  update (a change is taken to have happened at the start of the interval).
+* Noise: seeded white Gaussian noise of density ``input_noise_v_per_rthz`` (V/√Hz rms)
+  drives both filter chains, scaled so that the output's standard deviation is
+  density·√ENBW with ENBW = 1/(4τ), 1/(8τ), 3/(32τ), 5/(64τ) for 6…24 dB/oct (p. 3-25).
+  Only the last 50 τ are simulated (older noise has decayed below 1e-15).
+* Overloads (latched in ``LIAS?``): OUTPT when |X|, |Y| or R exceeds the full scale; the
+  reading is then clipped at ±109 % of full scale (the output voltage limit of 10.9 V for
+  10 V full scale, p. 2-10). INPUT when the input's peak (√2·rms, plus DC with DC coupling
+  ``ICPL 1``) exceeds :data:`INPUT_LIMIT_V` — a single input range, not the SR830's
+  reserve-dependent one. FILTR is not modelled.
+* ``AGAN`` picks the smallest full scale with R ≤ 0.8 × full scale from the noiseless
+  output, and keeps the interpreter busy for ``agan_time_constants`` × τ (at least 50 ms);
+  above τ = 1 s it does nothing, as the manual says (p. 5-11).
+* Power-up and ``*RST`` settings (1 V, 100 ms, 12 dB/oct, internal 1 kHz, phase 0, AC
+  coupling) follow the manual's standard settings (p. 4-4) as far as they could be
+  checked; the output interface is a retained setting and powers up as
+  ``output_interface`` (default GPIB, the quirk that makes a program that skips ``OUTX 0``
+  hear nothing).
+* Fault injection: :meth:`Sr830Emulator.enter_error_state` latches an ``ERRS?`` bit (code
+  ``"0"``…``"7"``, default ``"6"`` DSP error) or, with ``"power_cycle"``, restarts the
+  instrument (standard settings, PON latched). The SR830 sends nothing unsolicited; the
+  "unsolicited" frame is a stray carriage return (line noise on the cable).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_discrete_lyapunov
+
+from hw_mocks.clock import Clock
+from hw_mocks.emulator import FirmwareEmulator
+
+__all__ = ["INPUT_LIMIT_V", "InputSignal", "Sr830Emulator"]
+
+SENSITIVITIES_V = tuple(float(f"{m}e{e}") for e in range(-9, 0) for m in (2, 5, 10))
+TIME_CONSTANTS_S = tuple(float(f"{m}e{e}") for e in range(-5, 5) for m in (1, 3))
+POLES_BY_OFSL = (1, 2, 3, 4)
+#: Equivalent noise bandwidth × τ by number of poles (manual p. 3-25).
+ENBW_TIMES_TAU = {1: 1 / 4, 2: 1 / 8, 3: 3 / 32, 4: 5 / 64}
+#: Peak input that overloads the input stage (emulator choice: 1 V rms sine).
+INPUT_LIMIT_V = math.sqrt(2.0)
+#: Output clipping, in full scales (10.9 V output limit for 10 V full scale).
+OUTPUT_CLIP = 1.09
+_MAX_LINE = 256
+_MEMORY_TAUS = 50.0
+_SUBSTEPS_PER_TAU = 16
+
+_CMD_RE = re.compile(r"(\*[A-Z]{3}|[A-Z]{4})(\?)?(.*)", re.DOTALL)
+_NUMBER_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:E[+-]?\d+)?")
+
+# Status bits.
+_ESR_INP, _ESR_EXE, _ESR_CMD, _ESR_PON = 0x01, 0x10, 0x20, 0x80
+_LIA_INPUT, _LIA_OUTPUT, _LIA_UNLOCK = 0x01, 0x04, 0x08
+
+
+@dataclass(frozen=True)
+class InputSignal:
+    """What reaches the lock-in's input.
+
+    ``ac_rms_v`` and ``phase_deg``: rms amplitude and phase (relative to the reference) of
+    the component at ``frequency_hz`` (``None``: at whatever frequency the lock-in
+    references). ``dc_v``: the unmodulated part, rejected by the demodulator.
+    ``noise_v_per_rthz``: white noise density at the input (``None``: the emulator's).
+    """
+
+    ac_rms_v: float = 0.0
+    phase_deg: float = 0.0
+    frequency_hz: float | None = None
+    dc_v: float = 0.0
+    noise_v_per_rthz: float | None = None
+
+
+class _BadCommand(Exception):
+    """Raised inside the interpreter; ``bit`` goes to the standard event status byte."""
+
+    def __init__(self, bit: int) -> None:
+        super().__init__(bit)
+        self.bit = bit
+
+
+def _cascade_matrix(x: float, poles: int) -> np.ndarray:
+    """Exact state transition of ``poles`` identical single-pole stages over ``x`` = dt/τ.
+
+    For a constant input u, the deviations e = s − u obey e' = M e with
+    M[i, j] = e^{−x} x^{i−j}/(i−j)! for j ≤ i (stage i is fed by stage i−1).
+    """
+    m = np.zeros((poles, poles))
+    decay = math.exp(-x)
+    for i in range(poles):
+        for k in range(i + 1):
+            m[i, i - k] = decay * x**k / math.factorial(k)
+    return m
+
+
+_NOISE_GAIN: dict[int, tuple[np.ndarray, float]] = {}
+
+
+def _noise_model(poles: int) -> tuple[np.ndarray, float]:
+    """Sub-step transition matrix and the stationary output variance per unit input
+    variance for noise held constant over τ/16 sub-steps (solved once per pole count)."""
+    if poles not in _NOISE_GAIN:
+        a = _cascade_matrix(1.0 / _SUBSTEPS_PER_TAU, poles)
+        b = (np.eye(poles) - a) @ np.ones(poles)
+        p = solve_discrete_lyapunov(a, np.outer(b, b))
+        _NOISE_GAIN[poles] = (a, float(p[-1, -1]))
+    return _NOISE_GAIN[poles]
+
+
+def _fmt(value: float) -> str:
+    """A reply number the way the manual's examples look (``-1.01026``,
+    ``-1.234567e-009``): six significant digits, three-digit exponents when small/large."""
+    if value == 0.0:
+        return "0"
+    if 1e-3 <= abs(value) < 1e6:
+        return f"{value:.6g}"
+    mantissa, exponent = f"{value:.6e}".split("e")
+    power = int(exponent)
+    return f"{mantissa}e{'-' if power < 0 else '+'}{abs(power):03d}"
+
+
+class Sr830Emulator(FirmwareEmulator):
+    """An SR830 with its input fed by :attr:`input_signal` (or :meth:`set_input`).
+
+    Parameters
+    ----------
+    name
+        Instance name (URL host part).
+    baudrate
+        The rate its Setup menu is set to (a link opened at another rate sees nothing).
+    reference_input_hz
+        Frequency of what drives REF IN (a chopper); ``None``: nothing connected.
+    input_noise_v_per_rthz
+        White noise density at the input, V/√Hz rms.
+    output_interface
+        ``0`` RS-232 or ``1`` GPIB at power-up (retained setting; see the module).
+    agan_time_constants
+        How long ``AGAN`` keeps the interpreter busy, in time constants.
+    serial_number, model, firmware
+        What ``*IDN?`` reports.
+    """
+
+    scheme = "simsr830"
+    baudrate = 9600
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        baudrate: int = 9600,
+        reference_input_hz: float | None = None,
+        input_noise_v_per_rthz: float = 10e-9,
+        output_interface: int = 1,
+        agan_time_constants: float = 10.0,
+        serial_number: str = "00111",
+        model: str = "SR830",
+        firmware: str = "1.07",
+        clock: Clock | None = None,
+        seed: int = 0,
+    ) -> None:
+        super().__init__(name, clock=clock, seed=seed)
+        if output_interface not in (0, 1):
+            raise ValueError("output_interface must be 0 (RS-232) or 1 (GPIB)")
+        if input_noise_v_per_rthz < 0:
+            raise ValueError("input_noise_v_per_rthz must be >= 0")
+        self.baudrate = int(baudrate)
+        self.reference_input_hz = reference_input_hz
+        self.input_noise_v_per_rthz = float(input_noise_v_per_rthz)
+        self.agan_time_constants = float(agan_time_constants)
+        self.idn = f"Stanford_Research_Systems,{model},s/n{serial_number},ver{firmware}"
+        self.outx = output_interface
+        #: Callable giving the input now; ``None`` uses the constant set by :meth:`set_input`.
+        self.input_signal: Callable[[], InputSignal] | None = None
+        self.bound_world: str | None = None
+        self._constant = InputSignal()
+        self._rng = np.random.default_rng(seed)
+        self._rx_lines: list[bytes] = []
+        self._busy_until = -math.inf
+        #: Replies the SR830 sent to its GPIB connector instead (``OUTX 1``), for tests.
+        self.replies_to_gpib = 0
+        self.ese = self.sre = self.erre = self.liae = 0
+        self.esr = _ESR_PON
+        self.errs = 0
+        self.lias = 0
+        self._standard_settings()
+        self._d = np.zeros((2, 4))  # noiseless stage outputs (X chain, Y chain)
+        self._z = np.zeros((2, 4))  # noise part of the stage outputs
+        self._t_last = self.clock.now()
+        self._noise_carry = 0.0
+
+    # backdoor -------------------------------------------------------------------
+    def set_input(self, ac_rms_v: float = 0.0, *, phase_deg: float = 0.0,
+                  frequency_hz: float | None = None, dc_v: float = 0.0,
+                  noise_v_per_rthz: float | None = None) -> None:
+        """Feed a constant signal (and forget a bound :attr:`input_signal`)."""
+        with self.lock:
+            self._advance()  # the old input held until now
+            self.input_signal = None
+            self._constant = InputSignal(ac_rms_v, phase_deg, frequency_hz, dc_v,
+                                         noise_v_per_rthz)
+
+    @property
+    def time_constant_s(self) -> float:
+        return TIME_CONSTANTS_S[self.oflt]
+
+    @property
+    def poles(self) -> int:
+        return POLES_BY_OFSL[self.ofsl]
+
+    @property
+    def full_scale_v(self) -> float:
+        return SENSITIVITIES_V[self.sens]
+
+    def detection_frequency_hz(self) -> float:
+        """The reference frequency (0 when the external reference is missing)."""
+        if self.fmod == 1:
+            return self.freq
+        return float(self.reference_input_hz or 0.0)
+
+    def locked(self) -> bool:
+        return self.fmod == 1 or bool(self.reference_input_hz)
+
+    def target_xy(self, signal: InputSignal | None = None) -> tuple[float, float]:
+        """The noiseless X, Y the filter converges to for the present input."""
+        signal = self._signal() if signal is None else signal
+        if not self.locked():
+            return 0.0, 0.0
+        f_det = self.detection_frequency_hz()
+        if signal.frequency_hz is not None and abs(signal.frequency_hz - f_det) > 1e-6 * f_det:
+            return 0.0, 0.0  # modulated at another frequency: averaged away
+        phi = math.radians(signal.phase_deg - self.phase)
+        return signal.ac_rms_v * math.cos(phi), signal.ac_rms_v * math.sin(phi)
+
+    def outputs(self) -> tuple[float, float]:
+        """X, Y now (noise included, not clipped)."""
+        with self.lock:
+            self._advance()
+            n = self.poles
+            return (float(self._d[0, n - 1] + self._z[0, n - 1]),
+                    float(self._d[1, n - 1] + self._z[1, n - 1]))
+
+    def is_busy(self) -> bool:
+        with self.lock:
+            return self.clock.now() < self._busy_until
+
+    # FirmwareEmulator -------------------------------------------------------------
+    def _handle_input(self, buf: bytearray) -> list[bytes]:
+        while True:
+            ends = [i for i in (buf.find(b"\r"), buf.find(b"\n")) if i >= 0]
+            if not ends:
+                if len(buf) > _MAX_LINE:  # the input queue overflows: the line is lost
+                    buf.clear()
+                    self.esr |= _ESR_INP
+                break
+            end = min(ends)
+            line = bytes(buf[:end])
+            del buf[: end + 1]
+            if line.strip():
+                self._rx_lines.append(line)
+        return self._run_queue()
+
+    def poll(self) -> list[bytes]:
+        with self.lock:
+            return self._run_queue()
+
+    def unsolicited_frame(self) -> bytes:
+        """The SR830 sends nothing by itself: a stray CR (line noise) stands in."""
+        return b"\r"
+
+    def enter_error_state(self, code: str | None = None) -> None:
+        """Latch an ``ERRS?`` bit (``"0"``…``"7"``, default ``"6"``, DSP error) or, with
+        ``"power_cycle"``, restart: standard settings, PON latched, filters emptied."""
+        with self.lock:
+            if code == "power_cycle":
+                self._standard_settings()
+                self._d[:] = 0.0
+                self._z[:] = 0.0
+                self._t_last = self.clock.now()
+                self._busy_until = -math.inf
+                self._rx_lines.clear()
+                self.esr |= _ESR_PON
+                return
+            try:
+                bit = int(code) if code is not None else 6
+            except ValueError:
+                raise ValueError(f"SR830 error state code must be an ERRS bit 0-7 or "
+                                 f"'power_cycle', got {code!r}") from None
+            if not 0 <= bit <= 7:
+                raise ValueError(f"ERRS bit must be 0-7, got {bit}")
+            self.errs |= 1 << bit
+
+    # interpreter ------------------------------------------------------------------
+    def _standard_settings(self) -> None:
+        self.fmod = 1
+        self.freq = 1000.0
+        self.phase = 0.0
+        self.icpl = 0
+        self.sens = 26
+        self.oflt = 8
+        self.ofsl = 1
+
+    def _run_queue(self) -> list[bytes]:
+        replies: list[bytes] = []
+        while self._rx_lines and self.clock.now() >= self._busy_until:
+            line = self._rx_lines.pop(0)
+            for text in self._execute_line(line):
+                if self.outx == 0:
+                    replies.append(text.encode("ascii") + b"\r")
+                else:
+                    self.replies_to_gpib += 1
+        return replies
+
+    def _execute_line(self, line: bytes) -> list[str]:
+        try:
+            text = line.decode("ascii")
+        except UnicodeDecodeError:
+            self.esr |= _ESR_CMD
+            return []
+        answers: list[str] = []
+        parts = text.split(";")
+        for position, part in enumerate(parts):
+            command = "".join(part.split()).upper()
+            if not command:
+                continue
+            if self.clock.now() < self._busy_until:
+                # AGAN started earlier on this line: the rest waits its turn.
+                self._rx_lines.insert(0, ";".join(parts[position:]).encode("ascii"))
+                break
+            try:
+                answer = self._execute(command)
+            except _BadCommand as bad:
+                self.esr |= bad.bit
+                continue
+            if answer is not None:
+                answers.append(answer)
+        return answers
+
+    def _execute(self, command: str) -> str | None:
+        match = _CMD_RE.fullmatch(command)
+        if match is None:
+            raise _BadCommand(_ESR_CMD)
+        mnemonic, query, rest = match.group(1), bool(match.group(2)), match.group(3)
+        args = rest.split(",") if rest else []
+        handler = getattr(self, "_cmd_" + mnemonic.replace("*", "star_"), None)
+        if handler is None:
+            raise _BadCommand(_ESR_CMD)
+        self._advance()
+        return handler(query, args)
+
+    # argument helpers
+    @staticmethod
+    def _number(text: str) -> float:
+        if not _NUMBER_RE.fullmatch(text):
+            raise _BadCommand(_ESR_CMD)
+        return float(text)
+
+    def _index(self, args: list[str], high: int, position: int = 0) -> int:
+        if len(args) <= position:
+            raise _BadCommand(_ESR_CMD)
+        value = self._number(args[position])
+        if value != int(value) or not 0 <= value <= high:
+            raise _BadCommand(_ESR_EXE)
+        return int(value)
+
+    def _setting(self, query: bool, args: list[str], attribute: str, high: int) -> str | None:
+        if query:
+            if args:
+                raise _BadCommand(_ESR_CMD)
+            return str(getattr(self, attribute))
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        setattr(self, attribute, self._index(args, high))
+        return None
+
+    def _register_read(self, query: bool, args: list[str], attribute: str, *,
+                       clears: bool) -> str:
+        if not query or len(args) > 1:
+            raise _BadCommand(_ESR_CMD)
+        value = getattr(self, attribute)
+        if args:
+            bit = self._index(args, 7)
+            if clears:
+                setattr(self, attribute, value & ~(1 << bit))
+            return str((value >> bit) & 1)
+        if clears:
+            setattr(self, attribute, 0)
+        return str(value)
+
+    def _enable(self, query: bool, args: list[str], attribute: str) -> str | None:
+        if query:
+            if len(args) > 1:
+                raise _BadCommand(_ESR_CMD)
+            value = getattr(self, attribute)
+            return str((value >> self._index(args, 7)) & 1) if args else str(value)
+        if len(args) == 1:
+            setattr(self, attribute, self._index(args, 255))
+        elif len(args) == 2:
+            bit, on = self._index(args, 7), self._index(args, 1, 1)
+            value = getattr(self, attribute)
+            setattr(self, attribute, value | (1 << bit) if on else value & ~(1 << bit))
+        else:
+            raise _BadCommand(_ESR_CMD)
+        return None
+
+    # common and status commands
+    def _cmd_star_IDN(self, query: bool, args: list[str]) -> str:
+        if not query or args:
+            raise _BadCommand(_ESR_CMD)
+        return self.idn
+
+    def _cmd_star_RST(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self._standard_settings()
+
+    def _cmd_star_CLS(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.esr = self.errs = self.lias = 0
+
+    def _cmd_star_ESR(self, query: bool, args: list[str]) -> str:
+        return self._register_read(query, args, "esr", clears=True)
+
+    def _cmd_ERRS(self, query: bool, args: list[str]) -> str:
+        return self._register_read(query, args, "errs", clears=True)
+
+    def _cmd_LIAS(self, query: bool, args: list[str]) -> str:
+        return self._register_read(query, args, "lias", clears=True)
+
+    def _cmd_star_STB(self, query: bool, args: list[str]) -> str:
+        if not query or len(args) > 1:
+            raise _BadCommand(_ESR_CMD)
+        # SCN (no scan: storage is not modelled) and IFC (answering means idle).
+        byte = 0x01 | 0x02
+        if self.errs & self.erre:
+            byte |= 0x04
+        if self.lias & self.liae:
+            byte |= 0x08
+        if self.esr & self.ese:
+            byte |= 0x20
+        if byte & self.sre & 0x3F:
+            byte |= 0x40
+        if args:
+            return str((byte >> self._index(args, 7)) & 1)
+        return str(byte)
+
+    def _cmd_star_ESE(self, query: bool, args: list[str]) -> str | None:
+        return self._enable(query, args, "ese")
+
+    def _cmd_star_SRE(self, query: bool, args: list[str]) -> str | None:
+        return self._enable(query, args, "sre")
+
+    def _cmd_ERRE(self, query: bool, args: list[str]) -> str | None:
+        return self._enable(query, args, "erre")
+
+    def _cmd_LIAE(self, query: bool, args: list[str]) -> str | None:
+        return self._enable(query, args, "liae")
+
+    def _cmd_OUTX(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "outx", 1)
+
+    # reference
+    def _cmd_FMOD(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "fmod", 1)
+
+    def _cmd_FREQ(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if args:
+                raise _BadCommand(_ESR_CMD)
+            return _fmt(self.detection_frequency_hz())
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        value = self._number(args[0])
+        if self.fmod != 1 or not 0.001 <= value <= 102000.0:
+            raise _BadCommand(_ESR_EXE)  # allowed only with the internal reference
+        self.freq = float(f"{value:.5g}") if value >= 1.0 else round(value, 4)
+        return None
+
+    def _cmd_PHAS(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if args:
+                raise _BadCommand(_ESR_CMD)
+            return _fmt(self.phase)
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        value = self._number(args[0])
+        if not -360.0 <= value <= 729.99:
+            raise _BadCommand(_ESR_EXE)
+        wrapped = (round(value, 2) + 180.0) % 360.0 - 180.0
+        self.phase = 180.0 if wrapped == -180.0 else wrapped
+        return None
+
+    # input, gain and filter
+    def _cmd_ICPL(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "icpl", 1)
+
+    def _cmd_SENS(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "sens", len(SENSITIVITIES_V) - 1)
+
+    def _cmd_OFLT(self, query: bool, args: list[str]) -> str | None:
+        if not query and len(args) == 1:
+            index = self._index(args, len(TIME_CONSTANTS_S) - 1)
+            if TIME_CONSTANTS_S[index] > 30.0 and self.detection_frequency_hz() > 200.0:
+                raise _BadCommand(_ESR_EXE)  # > 30 s only below 200 Hz (p. 5-6)
+        return self._setting(query, args, "oflt", len(TIME_CONSTANTS_S) - 1)
+
+    def _cmd_OFSL(self, query: bool, args: list[str]) -> str | None:
+        old = self.poles
+        answer = self._setting(query, args, "ofsl", 3)
+        new = self.poles
+        if new > old:  # added stages start from the last stage's output
+            self._d[:, old:new] = self._d[:, old - 1:old]
+            self._z[:, old:new] = self._z[:, old - 1:old]
+        return answer
+
+    # data
+    def _reading(self) -> dict[int, float]:
+        n = self.poles
+        x = float(self._d[0, n - 1] + self._z[0, n - 1])
+        y = float(self._d[1, n - 1] + self._z[1, n - 1])
+        clip = OUTPUT_CLIP * self.full_scale_v
+        theta = math.degrees(math.atan2(y, x)) if (x or y) else 0.0
+        return {
+            1: max(-clip, min(clip, x)),
+            2: max(-clip, min(clip, y)),
+            3: min(clip, math.hypot(x, y)),
+            4: theta,
+            5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0,
+            9: self.detection_frequency_hz(),
+            10: max(-clip, min(clip, x)),
+            11: max(-clip, min(clip, y)),
+        }
+
+    def _cmd_SNAP(self, query: bool, args: list[str]) -> str:
+        if not query or not 2 <= len(args) <= 6:
+            raise _BadCommand(_ESR_CMD)
+        codes = [self._index(args, 11, i) for i in range(len(args))]
+        if 0 in codes:
+            raise _BadCommand(_ESR_EXE)
+        values = self._reading()
+        return ",".join(_fmt(values[c]) for c in codes)
+
+    def _cmd_OUTP(self, query: bool, args: list[str]) -> str:
+        if not query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        code = self._index(args, 4)
+        if code == 0:
+            raise _BadCommand(_ESR_EXE)
+        return _fmt(self._reading()[code])
+
+    def _cmd_AGAN(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        tau = self.time_constant_s
+        if tau > 1.0:
+            return  # "AGAN does nothing if the time constant is greater than 1 second"
+        r = math.hypot(*self.target_xy())
+        self.sens = next((i for i, fs in enumerate(SENSITIVITIES_V) if r <= 0.8 * fs),
+                         len(SENSITIVITIES_V) - 1)
+        self._busy_until = self.clock.now() + max(self.agan_time_constants * tau, 0.05)
+
+    # physics ------------------------------------------------------------------------
+    def _signal(self) -> InputSignal:
+        return self.input_signal() if self.input_signal is not None else self._constant
+
+    def _advance(self) -> None:
+        """Run the output filters from the last update to now; latch overloads."""
+        now = self.clock.now()
+        dt = now - self._t_last
+        if dt < 0:
+            return
+        self._t_last = now
+        n, tau = self.poles, self.time_constant_s
+        signal = self._signal()
+        ux, uy = self.target_xy(signal)
+        u = np.array([[ux], [uy]])
+        if dt > 0:
+            m = _cascade_matrix(dt / tau, n)
+            self._d[:, :n] = u + (self._d[:, :n] - u) @ m.T
+            density = (self.input_noise_v_per_rthz if signal.noise_v_per_rthz is None
+                       else signal.noise_v_per_rthz)
+            self._advance_noise(dt, n, tau, density)
+        # overloads, latched until read (LIAS?) or cleared (*CLS)
+        peak = math.sqrt(2.0) * abs(signal.ac_rms_v) + (abs(signal.dc_v) if self.icpl else 0.0)
+        if peak > INPUT_LIMIT_V:
+            self.lias |= _LIA_INPUT
+        x = self._d[0, n - 1] + self._z[0, n - 1]
+        y = self._d[1, n - 1] + self._z[1, n - 1]
+        full_scale = self.full_scale_v
+        if abs(x) > full_scale or abs(y) > full_scale or math.hypot(x, y) > full_scale:
+            self.lias |= _LIA_OUTPUT
+        if not self.locked():
+            self.lias |= _LIA_UNLOCK
+
+    def _advance_noise(self, dt: float, n: int, tau: float, density: float) -> None:
+        if density <= 0.0:
+            self._z[:] = 0.0
+            return
+        span = dt
+        if dt > _MEMORY_TAUS * tau:  # what came before has decayed away
+            self._z[:, :n] = 0.0
+            span = _MEMORY_TAUS * tau
+        # Whole sub-steps only; the remainder carries over to the next update.
+        self._noise_carry = min(self._noise_carry, 1.0) + span * _SUBSTEPS_PER_TAU / tau
+        steps = int(self._noise_carry)
+        self._noise_carry -= steps
+        if steps == 0:
+            return
+        a, unit_variance = _noise_model(n)
+        sigma_out = density * math.sqrt(ENBW_TIMES_TAU[n] / tau)
+        sigma_in = sigma_out / math.sqrt(unit_variance)
+        z = self._z[:, :n]
+        at = a.T
+        for w in self._rng.normal(0.0, sigma_in, size=(steps, 2, 1)):
+            z = w + (z - w) @ at
+        self._z[:, :n] = z

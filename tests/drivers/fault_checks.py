@@ -1,0 +1,101 @@
+"""Fault-injection loops shared by the serial drivers' tests.
+
+Each helper drives one operation of a driver through many injected faults and counts the
+outcomes; the calling test states what its protocol allows (how many wrong values a
+protocol without checksum may let through, how many typed failures a session may have).
+Every failure must be a typed :class:`~drivers.errors.DeviceError` naming the device and
+the command; anything else propagates and fails the test.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from drivers.errors import ConnectionFailed, DeviceError, DeviceTimeout, ProtocolError
+from hw_mocks.faults import FaultInjector, FaultKind
+
+#: The fault kinds of a "random faults on a long session" test.
+SESSION_FAULTS = (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT, FaultKind.UNSOLICITED,
+                  FaultKind.DELAY)
+
+
+@dataclass
+class Outcomes:
+    """How a series of faulty operations ended."""
+
+    right: int = 0
+    wrong: int = 0
+    failed: int = 0
+
+
+def corrupted_reads(read: Callable[[], float], is_right: Callable[[float], bool],
+                    faults: FaultInjector, *, n: int, device: str, command: str) -> Outcomes:
+    """``n`` reads, each with one bit flipped in the first reply: count right and wrong
+    values and typed failures (which must name ``device`` and ``command``)."""
+    outcomes = Outcomes()
+    for _ in range(n):
+        faults.schedule(FaultKind.CORRUPT, nth=1, nbytes=1)
+        try:
+            value = read()
+        except (ProtocolError, DeviceTimeout) as err:
+            assert err.device == device and err.command == command, err
+            outcomes.failed += 1
+            continue
+        if is_right(value):
+            outcomes.right += 1
+        else:
+            outcomes.wrong += 1
+    return outcomes
+
+
+def random_fault_session(operation: Callable[[int], None], faults: FaultInjector, *, n: int,
+                         device: str, probability: float = 0.05,
+                         after_failure: Callable[[], None] | None = None) -> Outcomes:
+    """Arm :data:`SESSION_FAULTS` at random, run ``operation(i)`` ``n`` times; ``right``
+    counts successes, ``failed`` typed errors (which must name ``device`` and a command)."""
+    for kind in SESSION_FAULTS:
+        faults.randomly(kind, probability, gap_s=0.002, nbytes=3, delay_s=0.15)
+    outcomes = Outcomes()
+    for i in range(n):
+        try:
+            operation(i)
+            outcomes.right += 1
+        except DeviceError as err:
+            assert err.device == device and err.command, err
+            outcomes.failed += 1
+            if after_failure is not None:
+                after_failure()
+    return outcomes
+
+
+def unplug_and_replug(device, faults: FaultInjector, transport: str,
+                      operation: Callable[[], object], reopen: Callable[[], object], *,
+                      command: str | None, limit_s: float):
+    """Pull the cable at the next frame and put it back; return the device to go on with.
+
+    ``operation`` must then fail within ``limit_s`` with the transport's typed error naming
+    the device and ``command``: in-process the link raises (ConnectionFailed); a pty stays
+    open but the dead instrument answers nothing (DeviceTimeout after the retries);
+    ``command=None`` accepts any command (a wait polls several). Back
+    on: an in-process device is closed and ``reopen()`` ed (reaching the same emulator); a
+    pty's port works again as it is.
+    """
+    faults.schedule(FaultKind.DISCONNECT, nth=1)
+    expected = ConnectionFailed if transport == "url" else DeviceTimeout
+    t0 = time.monotonic()
+    try:
+        operation()
+    except expected as err:
+        assert time.monotonic() - t0 < limit_s
+        assert err.device == device.name, err
+        assert command is None or err.command == command, err
+        assert err.__cause__ is not None
+    else:
+        raise AssertionError(f"no {expected.__name__} after the cable was pulled")
+    if transport == "url":
+        device.close()
+        return reopen()
+    faults.reconnect()
+    return device
