@@ -2,8 +2,10 @@
 
 The planner's motion model (:mod:`instrument.bench.dynamics`) gives the time a move takes
 on the real stage. A bench may not run in real time: an emulated controller
-(``simapt://``, ``simsmc://``) runs its motion on a clock ``speed`` times faster than the
-wall clock (the ``speed=`` option of its URL, hw_mocks/clock.py ``ScaledClock``), and the
+(``simapt://``, ``simsmc://``, any ``sim…://`` URL) runs its motion on a clock ``speed``
+times faster than the wall clock (the ``speed=`` option of its URL, hw_mocks/clock.py
+``ScaledClock``; ``step=`` advances the clock at every reading, so a move takes no wall
+time to speak of, taken here as a speed-up of 10⁹), and the
 simulated camera takes no wall time to expose unless its URL says ``realtime=1``. A camera
 also costs time beyond the exposure: per frame (``frame_overhead_s``: readout and transfer
 on a real camera; synthesising the sensor noise on the simulated one) and once after each
@@ -25,13 +27,14 @@ from instrument.bench.profile import BenchProfile, DeviceSpec
 __all__ = ["POINT_OVERHEAD_S", "BenchTiming", "bench_timing", "clock_speed",
            "exposes_in_wall_time"]
 
+#: The speed-up taken for an emulator clock that steps per reading (``step=``).
+STEPPING_SPEEDUP = 1e9
+
 #: Seconds the engine and the storage add per point with frames: the HDF5 flush and the
 #: two fsyncs (file and journal) that make the point durable, the status polls that end
 #: the move, the hand-over to the writer thread. Measured on the project's dev box
 #: (points of examples/lightfield_scan.toml, whose camera costs ~1 ms): 10–14 ms.
 POINT_OVERHEAD_S = 0.012
-#: URL schemes of emulated controllers whose clock the ``speed=`` option scales.
-EMULATED_MOTION = ("simapt", "simsmc")
 
 
 def _query(url: str) -> dict[str, str]:
@@ -41,13 +44,17 @@ def _query(url: str) -> dict[str, str]:
 def clock_speed(spec: DeviceSpec) -> float:
     """How many times faster than the wall clock the device's motion runs: the ``speed=``
     option of an emulated controller's URL (default 1), 1 for real hardware."""
-    if urlsplit(spec.url).scheme not in EMULATED_MOTION:
+    scheme = urlsplit(spec.url).scheme
+    if not scheme.startswith("sim") or scheme in ("simcam", "simsource", "simusb"):
         return 1.0
+    query = _query(spec.url)
+    if "step" in query:
+        return STEPPING_SPEEDUP
     try:
-        speed = float(_query(spec.url).get("speed", 1.0))
+        speed = float(query.get("speed", 1.0))
     except ValueError:
         return 1.0
-    return speed if speed > 0 else 1.0
+    return speed if 0 < speed < float("inf") else 1.0
 
 
 def exposes_in_wall_time(spec: DeviceSpec) -> bool:

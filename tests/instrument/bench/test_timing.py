@@ -28,6 +28,8 @@ def spec(url: str, driver: str = "thorlabs_apt") -> DeviceSpec:
     ("simapt://sample_theta?model=K10CR1&speed=20", 20.0),
     ("simsmc://camera_z?kind=linear&speed=50", 50.0),
     ("simsmc://detector_theta?kind=rotary", 1.0),        # the emulator's default: real time
+    ("simzaber://x?device=1&speed=100", 100.0),           # any emulated controller
+    ("simapt://x?step=0.001", 1e9),                        # clock steps per reading
     ("simapt://x?speed=-3", 1.0),                          # nonsense is not a speed-up
     ("simapt://x?speed=fast", 1.0),
     ("/dev/ttyUSB0", 1.0),                                 # real hardware runs in real time
