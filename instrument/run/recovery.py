@@ -256,6 +256,8 @@ def _recover(path: Path, *, fresh: bool) -> RecoveryReport:
             f["entry"].attrs["frames_lost"] = n_lost_frames  # zeros standing in for frames
         repairs = _describe(path, j, rebuilt=rebuilt, original=original, cut=cut,
                             newly=newly, dropped=dropped, restored=0 if fresh else restored)
+        if original is not None and not original.exists():
+            original = None  # the file was missing: nothing was kept
         if repairs:
             _log_repair(path, f, repairs, newly, original)
         f["entry"].attrs["status"] = j.status
@@ -275,9 +277,11 @@ def _describe(path: Path, j: _Journalled, *, rebuilt: bool, original: Path | Non
     """What a recovery changed, one sentence per repair (empty when nothing)."""
     out = []
     how = (f"cut short: {cut[0]} of its {cut[1]} bytes on disk" if cut and cut[1] > cut[0]
+           else "it was missing" if original is not None and not original.exists()
            else "its HDF5 structure was damaged")
     if rebuilt:
-        kept = f"; the damaged original is kept as {original.name}" if original else ""
+        kept = (f"; the damaged original is kept as {original.name}"
+                if original is not None and original.exists() else "")
         out.append(f"the run file could not be used as it was ({how}): rebuilt from the "
                    f"journal, every frame checked against its checksum{kept}")
     elif cut:

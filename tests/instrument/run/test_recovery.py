@@ -194,3 +194,14 @@ def test_a_finished_file_gives_back_its_reserved_space_and_sizes_its_chunks(tmp_
                 for x in f["entry/data/frames"][()]]
     assert recover(path).repairs == ()  # and the trimmed file is a healthy run file
     assert len(crcs) == read_summary(path).n_frames
+
+
+def test_a_missing_run_file_with_its_journal_is_rebuilt_and_said_so(tmp_path):
+    path = finished_run(tmp_path)
+    n = read_summary(path).n_points
+    path.unlink()
+    report = recover(path)
+    assert report.rebuilt and report.original is None
+    assert "it was missing" in report.repairs[0] and "kept as" not in report.repairs[0]
+    assert len(report.lost) == n  # no frame could be salvaged: every point said lost
+    assert read_summary(path).n_points == n
