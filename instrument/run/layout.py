@@ -12,18 +12,20 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
                                 axes, planned_targets (N, A), planned_angles (N, 4),
                                 planned_label, planned_light, planned_exposure_us
       calibration/ NXcollection one attribute per calibration reference (run id or path)
-      points/      NXcollection per completed point (row = point index order of
-                                completion): index, label, status (0 ok, 1 skipped, 2 frames
-                                lost to a damaged file), note,
+      points/      NXcollection per completed point (row = order of first completion; a
+                                point measured again keeps its row): index, label, status
+                                (0 ok, 1 skipped, 2 frames lost to a damaged file), note,
                                 t_start, t_end (Unix s), positions (N, A) read back,
                                 theta_i, phi_i, theta_r, phi_r (deg, from the read-back
                                 positions), exposure_us, power_w, signal, n_frames,
                                 frame_start, retries
       data/        NXdata       frames (F, H, W) chunked per frame, compressed when it
-                                pays; frame_point, frame_exposure_us, frame_light,
+                                pays; frame_point (-1: a lost measurement's frames, since
+                                measured again), frame_exposure_us, frame_light,
                                 frame_timestamp, frame_saturated; signal/axes linked from
                                 points/
-      events/      NXcollection log: one JSON string per event (faults, pauses, resumes)
+      events/      NXcollection log: one JSON string per event (faults, pauses, resumes,
+                                repairs of the file)
 
 Tables grow one row per point; their chunks hold ``table_chunk_rows(n_planned)`` rows, so a
 short run does not carry a 1024-row chunk per table. :func:`new_run_file` makes the empty
