@@ -20,7 +20,7 @@ from pathlib import Path
 
 import h5py
 
-from instrument.run.health import is_lock_refusal
+from instrument.run.health import held_by_this_process, is_lock_refusal
 from instrument.run.journal import read_journal
 
 __all__ = ["CATALOG_NAME", "Catalog", "RepairRow", "RunRow"]
@@ -203,13 +203,8 @@ def _held_open(path: Path) -> bool:
     h5py's open file ids, since HDF5 lets a process reopen its own file; another process
     is detected by HDF5's file lock refusing the open.
     """
-    for fid in h5py.h5f.get_obj_ids(types=h5py.h5f.OBJ_FILE):
-        try:
-            same = Path(fid.name.decode()).resolve() == path.resolve()
-        except (OSError, ValueError):
-            continue
-        if same and fid.get_intent() & h5py.h5f.ACC_RDWR:
-            return True
+    if held_by_this_process(path):
+        return True
     try:
         with h5py.File(path, "r"):
             return False

@@ -25,8 +25,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-__all__ = ["OPTIONAL_COLUMNS", "FileState", "Readable", "ZeroPadded", "inspect_run_file",
-           "is_lock_refusal",
+__all__ = ["OPTIONAL_COLUMNS", "FileState", "Readable", "ZeroPadded", "held_by_this_process",
+           "inspect_run_file", "is_lock_refusal",
            "open_damaged", "readable_points", "recorded_length"]
 
 #: HDF5's word for a file shorter than its superblock says (the library's message text).
@@ -349,14 +349,15 @@ def inspect_run_file(path: str | Path) -> FileState:
         recorded = lengths[1] if lengths else size
         return _damaged(path, size, recorded, has_journal)
     return FileState(path, "ok", "", True, has_journal, size, size, plan_kind=kind) \
-        if status != "running" or not _held_elsewhere(path) else \
+        if status != "running" or not held_by_this_process(path) else \
         FileState(path, "busy", f"{path} is still being written by a run; analyse it when "
                   "the run has ended", True, has_journal, size, size, plan_kind=kind)
 
 
-def _held_elsewhere(path: Path) -> bool:
+def held_by_this_process(path: Path) -> bool:
     """True while this process holds ``path`` open for writing (an engine in this
-    process; another process's lock already refused the open above)."""
+    process: HDF5 lets a process reopen its own file, so only h5py's open file ids tell;
+    another process is found by its lock refusing an open)."""
     for fid in h5py.h5f.get_obj_ids(types=h5py.h5f.OBJ_FILE):
         try:
             same = Path(fid.name.decode()).resolve() == path.resolve()
