@@ -20,6 +20,11 @@ Schema (all lengths in mm, angles in degrees)::
     acceleration = 20.0                # motion: units/s²
     position_tolerance = 0.01          # motion: arrival tolerance in axis units
     settle_s = 0.01                    # motion: settling after each move (planning, s)
+    home_s = 20.0                      # motion: time homing takes (estimates, s)
+    frame_overhead_s = 0.02            # camera: time per frame beyond the exposure (s)
+    scene_change_s = 0.1               # camera: extra time of the first frame after a
+                                       # move or the light turned on (s); both for
+                                       # duration estimates (instrument.bench.timing)
     options = { ... }                  # driver-specific keyword arguments
 
     [devices.<role>.retry]             # recovery policy for this device (optional)
@@ -80,6 +85,9 @@ AXIS_ROLES = (
 #: Motion drivers and the kind of axis they drive by default.
 MOTION_DRIVERS = ("thorlabs_apt", "newport_smc100")
 OTHER_DRIVERS = ("pm100usb", "opencv_camera", "sim_camera", "sim_source")
+CAMERA_DRIVERS = ("opencv_camera", "sim_camera")
+#: Camera timing keys (seconds, for duration estimates) and their upper bound.
+CAMERA_TIMING = {"frame_overhead_s": 60.0, "scene_change_s": 600.0}
 ON_FAILURE = ("pause", "skip", "rehome", "abort")
 
 
@@ -131,6 +139,12 @@ class DeviceSpec:
     #: Measurement settings applied after opening, through the device's validated public
     #: properties (e.g. a power meter's ``wavelength_nm``): see :data:`DEVICE_SETTINGS`.
     settings: dict[str, Any] = field(default_factory=dict)
+    #: Cameras: seconds per frame beyond the exposure, and extra seconds of the first
+    #: frame after the scene changed (estimates only; :mod:`instrument.bench.timing`).
+    frame_overhead_s: float = 0.0
+    scene_change_s: float = 0.0
+    #: Motion: seconds homing takes on the real stage (estimates only).
+    home_s: float = 0.0
 
     @property
     def is_axis(self) -> bool:
@@ -281,7 +295,8 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
 
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
-             "position_tolerance", "options", "retry", "settle_s", "settings"}
+             "position_tolerance", "options", "retry", "settle_s", "settings",
+             "home_s", *CAMERA_TIMING}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
     if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
@@ -308,7 +323,7 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
             limits = (float(raw[0]), float(raw[1]))
     if not is_axis:
         for key in ("limits", "velocity", "acceleration", "position_tolerance", "stage",
-                    "settle_s"):
+                    "settle_s", "home_s"):
             if key in t and driver is not None:
                 v.error(f"{path}.{key}", f"only motion devices take {key!r}")
     velocity = v.positive(t, "velocity", path)
@@ -324,10 +339,25 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
         v.error(f"{path}.settle_s", "must be a number of seconds from 0 to 10")
         settle = 0.0
     settings = _settings(v, t.get("settings", {}), driver, f"{path}.settings")
+    timing = {}
+    home = t.get("home_s", 0.0)
+    if not _is_number(home) or not 0 <= home <= 600:
+        v.error(f"{path}.home_s", "must be a number of seconds from 0 to 600")
+    elif is_axis:
+        timing["home_s"] = float(home)
+    for key, high in CAMERA_TIMING.items():
+        if key not in t:
+            continue
+        if driver is not None and driver not in CAMERA_DRIVERS:
+            v.error(f"{path}.{key}", f"only cameras take {key!r}")
+        elif not _is_number(t[key]) or not 0 <= t[key] <= high:
+            v.error(f"{path}.{key}", f"must be a number of seconds from 0 to {high:g}")
+        else:
+            timing[key] = float(t[key])
     if driver is None or url is None:
         return None
     return DeviceSpec(role, driver, url, stage, limits, velocity, acceleration, tolerance,
-                      dict(options), retry, float(settle), settings)
+                      dict(options), retry, float(settle), settings, **timing)
 
 
 #: Settings a profile may apply after opening, per driver: name → (type, low, high).

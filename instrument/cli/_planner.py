@@ -7,18 +7,12 @@ its answer into command-line text.
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-from analysis.brdf import get_model
-from instrument.bench.profile import BenchProfile
-from instrument.plans.planfile import PlanSpec
-from instrument.plans.tradeoff import (
-    Prior,
-    default_options,
-    fastest_for_target,
-    pareto_front,
-    setup_from_profile,
-    sweep,
-)
+if TYPE_CHECKING:  # the search and the models load SciPy: only when asked for
+    from instrument.bench.profile import BenchProfile
+    from instrument.plans.planfile import PlanSpec
+    from instrument.plans.tradeoff import Prior
 
 __all__ = ["add_arguments", "run_from_args"]
 
@@ -37,6 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _parse_prior(text: str) -> Prior:
+    from analysis.brdf import get_model
+    from instrument.plans.tradeoff import Prior
+
     name, _, values = text.partition(":")
     model = get_model(name.strip())
     try:
@@ -52,6 +49,15 @@ def _parse_prior(text: str) -> Prior:
 
 def run_from_args(args: argparse.Namespace, spec: PlanSpec, profile: BenchProfile) -> int:
     """Answer ``--target-uncertainty``: print the Pareto front and the fastest scan."""
+    from analysis.brdf import get_model
+    from instrument.plans.tradeoff import (
+        default_options,
+        fastest_for_target,
+        pareto_front,
+        setup_from_profile,
+        sweep,
+    )
+
     prior = _parse_prior(args.prior) if args.prior else None
     prior, det = setup_from_profile(profile, spec, prior=prior, readout_s=args.readout_s)
     names = get_model(prior.model).param_names

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 import time
 
+from instrument.cli._format import fmt_s
 from instrument.run.events import (
     Event,
     Fault,
@@ -15,18 +16,9 @@ from instrument.run.events import (
     RunFinished,
     RunStarted,
 )
-from instrument.run.runfile import read_summary
+from instrument.run.runfile import RunFileError, read_summary
 
-
-def fmt_s(seconds: float) -> str:
-    seconds = max(0.0, float(seconds))
-    if seconds < 10:  # short acquisitions would otherwise all read "0s"
-        return f"{seconds:.2g}s" if seconds >= 0.01 or seconds == 0 else "<0.01s"
-    if seconds < 60:
-        return f"{seconds:.0f}s"
-    if seconds < 3600:
-        return f"{int(seconds // 60)}m{int(seconds % 60):02d}s"
-    return f"{int(seconds // 3600)}h{int(seconds % 3600 // 60):02d}m"
+__all__ = ["ConsoleProgress", "fmt_s", "print_summary"]
 
 
 class ConsoleProgress:
@@ -97,7 +89,7 @@ class ConsoleProgress:
 
 
 def print_summary(ev: RunFinished, faults: int, stream=None) -> None:
-    """What happened and what the run file holds."""
+    """What happened and what the run file holds (only what the bench recorded)."""
     out = stream or sys.stdout
     print(f"\nrun {ev.status}: {ev.n_done} of {ev.n_total} points in {fmt_s(ev.elapsed_s)}"
           + (f", {ev.n_skipped} skipped" if ev.n_skipped else "")
@@ -107,16 +99,28 @@ def print_summary(ev: RunFinished, faults: int, stream=None) -> None:
     print(f"run file: {ev.path}", file=out)
     try:
         s = read_summary(ev.path)
-        sample, axes = s.sample_name, ", ".join(s.axes)
-        frames = (f"{s.n_frames} frames of {s.frame_shape[1]}x{s.frame_shape[0]} px"
-                  if s.frame_shape else "no frames")
-        print(f"  holds: sample {sample!r}, {s.n_points} points ({axes}; angles, exposures, "
-              f"power readings, timestamps), {frames}; plan, bench profile, device "
-              f"identities, policies ({s.size_bytes / 2**20:.1f} MiB)", file=out)
+    except (OSError, KeyError, RunFileError) as err:
+        print(f"  (could not read the file back: {err}; `scatterlab resume {ev.path}` "
+              "repairs it)", file=out)
+    else:
+        print(f"  holds: {holdings(s)}", file=out)
         print("  read it with h5py: h5py.File(path)['entry/points'] and ['entry/data/frames']",
               file=out)
-    except (OSError, KeyError) as err:
-        print(f"  (could not read the file back: {err}; `scatterlab resume` repairs it)",
-              file=out)
+        if s.lost:
+            print(f"  the frames of point(s) {', '.join(map(str, s.lost))} are lost (status 2, "
+                  f"left out of analysis); measure them again with: scatterlab resume "
+                  f"--remeasure-lost {ev.path}", file=out)
     if ev.status != "finished":
         print(f"  continue it with: scatterlab resume {ev.path}", file=out)
+
+
+def holdings(s) -> str:
+    """What a run file holds, in one line: sample, points and what was recorded at each,
+    frames, provenance, size (a :class:`~instrument.run.runfile.RunSummary`)."""
+    recorded = ", ".join(s.recorded) or "nothing per point"
+    axes = ", ".join(s.axes) or "no axis moved"
+    frames = (f"{s.n_frames} frames of {s.frame_shape[1]}x{s.frame_shape[0]} px"
+              if s.frame_shape else "no frames")
+    return (f"sample {s.sample_name!r}, {s.n_points} points ({axes}; {recorded}), {frames}; "
+            f"plan, bench profile, device identities, policies "
+            f"({s.size_bytes / 2**20:.2f} MiB)")

@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import argparse
 
-from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
-from drivers.errors import DeviceError
-from instrument.bench.devices import open_bench
-from instrument.bench.profile import load_profile
+HELP = "list the bench's devices: identity, state, position"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("devices", help="list the bench's devices: identity, state, position")
+    p = sub.add_parser("devices", help=HELP)
     p.add_argument("--bench", default="sim", help="profile name or path (default: sim)")
     p.add_argument("--home", action="store_true", help="home every axis first")
     p.set_defaults(func=run)
@@ -19,6 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def describe(device) -> str:
     """One line of live state for a device."""
+    from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
+
     if isinstance(device, MotionAxis):
         s = device.status()
         homed = "homed" if s.is_homed else "NOT homed"
@@ -37,6 +36,10 @@ def describe(device) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from drivers.errors import DeviceError
+    from instrument.bench.devices import open_bench
+    from instrument.bench.profile import load_profile
+
     profile = load_profile(args.bench)
     print(f"bench {profile.name!r}: {profile.description}")
     failures = 0

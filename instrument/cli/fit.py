@@ -1,7 +1,8 @@
 """``scatterlab fit RUN``: reduce a BRDF run, fit and select models, write results and a report.
 
-The results go into the run file (``/entry/analysis``) and the report (PNG figures and
-``index.html``) into ``--out`` (default: ``<run file stem>_report`` next to the run file).
+Everything goes next to the run file ``DIR/RUN.h5``, into ``DIR/RUN/fit/`` (ADR 0013): the
+report (``index.html`` and PNG figures) and ``results.h5``; ``--out`` names another folder.
+The run file is only read, unless ``--into-run`` asks for the results in it as well.
 """
 
 from __future__ import annotations
@@ -10,19 +11,20 @@ import argparse
 import math
 from pathlib import Path
 
-from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
-from instrument.pipelines.brdf.pipeline import fit_run
-from instrument.pipelines.brdf.reduce import ReductionOptions
-from instrument.pipelines.brdf.report import unit_text
+HELP = "BRDF of a run: reduce, fit models, select, report"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fit", help="BRDF of a run: reduce, fit models, select, report")
+    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+
+    p = sub.add_parser("fit", help=HELP)
     p.add_argument("run", help="run file (.h5) of a brdf_in_plane or brdf_hemisphere plan")
     p.add_argument("--models", default=",".join(DEFAULT_MODELS),
                    help="comma-separated candidates, '+' for sums "
                    f"(default: {','.join(DEFAULT_MODELS)})")
-    p.add_argument("--out", default=None, help="report folder (default: <run>_report)")
+    p.add_argument("--out", default=None,
+                   help="folder for the report, figures and results.h5 (default: RUN/fit/ "
+                   "next to the run file RUN.h5)")
     p.add_argument("--criterion", default="bic", choices=("bic", "aic", "aicc", "cv"),
                    help="model-selection rule (default: bic)")
     p.add_argument("--method", default="absolute", choices=("absolute", "relative"))
@@ -61,20 +63,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-cv", action="store_true",
                    help="skip the cross-validation columns of the comparison")
     p.add_argument("--no-write", action="store_true",
-                   help="leave the run file untouched (report only)")
+                   help="write no results file (report only)")
+    p.add_argument("--into-run", action="store_true",
+                   help="also write the results into the run file (/entry/analysis), for "
+                   "tools that expect one file; by default the run file is only read")
     p.set_defaults(func=run)
 
 
 def _missing_inputs(args: argparse.Namespace) -> list[str]:
-    """'<option> <path>' for every named input file that does not exist."""
-    named = [("run", args.run), ("--reference", args.reference), ("--flat", args.flat),
-             ("--signature", args.signature), ("--reference-table", args.reference_table),
+    """'<option> <path>' for every named input file (not a run: those are checked by the
+    pipeline, with the words of every command) that does not exist."""
+    named = [("--reference-table", args.reference_table),
              ("--camera-calibration", args.camera_calibration)]
     return [f"{opt} {path}" for opt, path in named
             if path is not None and not Path(path).is_file()]
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.pipelines.brdf.pipeline import fit_run
+    from instrument.pipelines.brdf.reduce import ReductionOptions
+    from instrument.pipelines.brdf.report import unit_text
+
     if args.bootstrap < 0:
         print(f"error: --bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
         return 2
@@ -96,18 +105,16 @@ def run(args: argparse.Namespace) -> int:
     try:
         done = fit_run(args.run, opts, models, criterion=args.criterion, run_cv=not args.no_cv,
                        n_bootstrap=args.bootstrap, report_dir=args.out,
-                       write=not args.no_write)
+                       write=not args.no_write, into_run=args.into_run)
     except KeyError as err:
         print(f"error: {err.args[0] if err.args else err}")
         return 2
     except ValueError as err:
         print(f"error: {err}")
         return 2
-    except OSError as err:
-        # h5py raises OSError for a file that is not HDF5 (or is locked) and does not
-        # always name it
-        print(f"error: cannot read {args.run} or one of its companion runs as a "
-              f"scatterlab run file (HDF5): {err}")
+    except OSError as err:  # a companion file (table, calibration) that cannot be read
+        print(f"error: {err.strerror or err}"
+              + (f": {err.filename}" if getattr(err, "filename", None) else ""))
         return 2
     reduced, result, page = done.reduced, done.result, done.report
     fit = result.chosen_fit
@@ -149,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
     for note in result.notes:
         print(f"  note: {note}")
     print(f"report: {page}")
-    if not args.no_write:
-        print(f"results written to {args.run} (/entry/analysis)")
+    if done.results is not None:
+        print(f"results: {done.results}")
+    if args.into_run:
+        print(f"results also written into {args.run} (/entry/analysis)")
     return 0

@@ -1,10 +1,11 @@
 """``scatterlab locate RUN``: find the hidden objects of a light-field run.
 
-Uses the reconstruction stored by ``scatterlab reconstruct`` (or makes it, with the same
-options), refocuses it over a (y, z) grid and detects the objects with their theoretical
-resolution (:func:`instrument.pipelines.lightfield.locate.locate_run`). Results go into
-the run file under ``/entry/analysis/lightfield/localisation``; figures ((y, z) map, focal stack,
-z-profiles) to ``<run>.lightfield/``.
+Uses the reconstruction stored by ``scatterlab reconstruct`` in ``DIR/RUN/lightfield/
+results.h5`` (or makes it, with the same options), refocuses it over a (y, z) grid and
+detects the objects with their theoretical resolution
+(:func:`instrument.pipelines.lightfield.locate.locate_run`). Results go into the same
+results file under ``/entry/analysis/lightfield/localisation``; figures ((y, z) map, focal
+stack, z-profiles) into the same folder (ADR 0013).
 """
 
 from __future__ import annotations
@@ -13,13 +14,12 @@ import argparse
 
 from instrument.cli.reconstruct import (
     add_reconstruction_options,
-    check_run_file,
     figures_dir,
     options,
+    out_dir,
 )
-from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
-from instrument.pipelines.lightfield.locate import locate_run
-from instrument.pipelines.lightfield.results import GROUP
+
+HELP = "locate the hidden objects of a light-field run"
 
 #: The depth-quality flags of :data:`analysis.lightfield.QUALITY_FLAGS`, in words.
 QUALITY_WORDS = {
@@ -30,7 +30,7 @@ QUALITY_WORDS = {
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("locate", help="locate the hidden objects of a light-field run")
+    p = sub.add_parser("locate", help=HELP)
     p.add_argument("run", help="run file (.h5) of a lightfield plan")
     p.add_argument("--y-range", type=float, nargs=2, metavar=("Y0", "Y1"), default=None,
                    help="trial y range in mm (default: the wall points ± 60 mm)")
@@ -39,22 +39,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", type=float, default=0.3,
                    help="drop detections weaker than this fraction of the strongest")
     p.add_argument("--again", action="store_true",
-                   help="reconstruct again even if the run file holds a reconstruction")
+                   help="reconstruct again even if the results file holds a reconstruction")
     add_reconstruction_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
+    from instrument.pipelines.lightfield.locate import locate_run
+    from instrument.run.paths import RESULTS_NAME
+
     recon: dict = {}
     given = (args.geometry, args.brdf, args.domain)
     try:
-        check_run_file(args.run)
         if args.again or any(v is not None for v in given) or args.n_theta != 128 \
                 or args.method != "wiener":
             recon = options(args)
         r = locate_run(args.run, y_range_mm=args.y_range, z_range_mm=tuple(args.z_range),
-                            threshold_rel=args.threshold, figures_dir=figures_dir(args),
-                            **recon)
+                       threshold_rel=args.threshold, figures_dir=figures_dir(args),
+                       out_dir=args.out, into_run=args.into_run, **recon)
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2
@@ -77,5 +80,7 @@ def run(args: argparse.Namespace) -> int:
               f"{det.brightness_conventional[k]:.4g}, lower the farther the object sits)")
     if r.figures:
         print(f"figures: {', '.join(str(p) for p in r.figures)}")
-    print(f"stored in {args.run}:/{GROUP}/localisation")
+    print(f"results: {out_dir(args) / RESULTS_NAME}")
+    if args.into_run:
+        print(f"results also written into {args.run} (/entry/analysis/lightfield)")
     return 0 if r.recoverable else 1

@@ -8,21 +8,22 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from instrument.bench.guard import GuardError
-from instrument.bench.profile import load_profile
 from instrument.cli import _planner
-from instrument.cli._progress import fmt_s
-from instrument.plans import build_plan, load_plan
-from instrument.plans.coverage import write_coverage_png
-from instrument.plans.lobe import lobe_of
+from instrument.cli._format import fmt_s
+from instrument.run.paths import DEFAULT_RUNS_DIR
+
+HELP = "dry run of a plan: points, travel, duration, coverage PNG"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plan", help="dry run of a plan: points, travel, duration, coverage PNG")
+    p = sub.add_parser("plan", help=HELP)
     p.add_argument("plan", help="plan file (TOML)")
     p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")
+    p.add_argument("--out", default=str(DEFAULT_RUNS_DIR),
+                   help="folder for the coverage picture <plan file name>_coverage.png "
+                   f"(default: the runs folder, {DEFAULT_RUNS_DIR})")
     p.add_argument("--png", default=None,
-                   help="coverage picture path (default: <plan name>_coverage.png here)")
+                   help="the coverage picture's exact path (instead of --out)")
     _planner.add_arguments(p)
     p.set_defaults(func=run)
 
@@ -34,9 +35,19 @@ def _value(v: object) -> str:
     if isinstance(v, list):
         return "+".join(str(x) for x in v)
     return f"{v:g}" if isinstance(v, float) else str(v)
+def coverage_path(args: argparse.Namespace) -> Path:
+    """``--png``, or ``<plan file name>_coverage.png`` in ``--out``."""
+    if args.png:
+        return Path(args.png)
+    return Path(args.out) / f"{Path(args.plan).stem}_coverage.png"
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.bench.guard import GuardError
+    from instrument.bench.profile import load_profile
+    from instrument.plans import build_plan, load_plan
+    from instrument.plans.lobe import lobe_of
+
     spec = load_plan(args.plan)
     profile = load_profile(args.bench)
     if getattr(args, "target_uncertainty", None) is not None:
@@ -67,8 +78,14 @@ def run(args: argparse.Namespace) -> int:
     for role, dist in est.travel.items():
         unit = "mm" if role == "camera_z" else "deg"
         print(f"  travel {role:<15} {dist:10.1f} {unit}")
-    print(f"  estimated duration {fmt_s(est.total_s)} "
-          f"(motion {fmt_s(est.motion_s)}, acquisition {fmt_s(est.acquisition_s)})")
+    homing = sum(est.homing_s.values())
+    print(f"  estimated duration on this bench {fmt_s(est.total_s)} (motion "
+          f"{fmt_s(est.bench_motion_s)}, acquisition and storage "
+          f"{fmt_s(est.bench_acquisition_s)})"
+          + (f", and {fmt_s(homing)} before it to home axes not homed yet" if homing else ""))
+    if est.speedup > 1.001:
+        print(f"  its emulated stages run {est.speedup:.3g}× faster than real ones: on real "
+              f"stages at the profile's speeds the motion alone takes {fmt_s(est.motion_s)}")
     if spec.order == "optimised" and plan.axes:
         raster = build_plan(replace(spec, order="raster"), profile).estimate()
         if raster.motion_s > 0:
@@ -77,11 +94,16 @@ def run(args: argparse.Namespace) -> int:
     acq = json.loads(spec.acquisition.as_json())
     print("  acquisition: " + ", ".join(f"{k} {_value(v)}" for k, v in acq.items()))
     if any(p.angles is not None for p in plan.points):
-        png = Path(args.png or f"{Path(args.plan).stem}_coverage.png")
+        from instrument.plans.coverage import write_coverage_png
+
+        png = coverage_path(args)
         try:
+            png.parent.mkdir(parents=True, exist_ok=True)
             write_coverage_png(plan, png)
         except OSError as err:
-            print(f"error: --png: {err}", file=sys.stderr)
+            option = "--png" if args.png else "--out"
+            print(f"error: {option}: cannot write {png} ({err.strerror or err})",
+                  file=sys.stderr)
             return 2
         print(f"  coverage picture: {png}")
     else:  # light-field, sphere and calibration plans sample no scattering directions

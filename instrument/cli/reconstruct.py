@@ -1,10 +1,11 @@
 """``scatterlab reconstruct RUN``: the hidden object's light field from a light-field run.
 
 Assembles the measured light field from the run's frames, reconstructs the object light
-field at the wall (:mod:`instrument.pipelines.lightfield.reconstruct`), stores both in the
-run file under
-``/entry/analysis/lightfield`` and writes the figures (measured and reconstructed light
-fields, diagnostics) to ``<run>.lightfield/``.
+field at the wall (:mod:`instrument.pipelines.lightfield.reconstruct`) and writes both, with
+the figures (measured and reconstructed light fields, diagnostics), into ``DIR/RUN/lightfield/``
+next to the run file ``DIR/RUN.h5`` (``results.h5`` and PNGs; ADR 0013); ``--out`` names
+another folder. The run file is only read, unless ``--into-run`` asks for the results in
+it as well.
 """
 
 from __future__ import annotations
@@ -12,16 +13,16 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
-from instrument.pipelines.lightfield.geometry import load_geometry, parse_brdf
-from instrument.pipelines.lightfield.reconstruct import reconstruct_run
-from instrument.pipelines.lightfield.results import GROUP, ReconstructionResult
+if TYPE_CHECKING:
+    from instrument.pipelines.lightfield.results import ReconstructionResult
+
+HELP = "reconstruct the hidden object's light field from a light-field run"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("reconstruct",
-                       help="reconstruct the hidden object's light field from a light-field run")
+    p = sub.add_parser("reconstruct", help=HELP)
     p.add_argument("run", help="run file (.h5) of a lightfield plan")
     add_reconstruction_options(p)
     p.set_defaults(func=run)
@@ -42,9 +43,13 @@ def add_reconstruction_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="wiener",
                    choices=("wiener", "truncation", "gcv", "discrepancy", "none"),
                    help="regularisation (default: wiener, from the pooled signal spectrum)")
-    p.add_argument("--figures", default=None,
-                   help="folder for the PNG figures (default: <run>.lightfield/)")
+    p.add_argument("--out", default=None,
+                   help="folder for results.h5 and the figures (default: RUN/lightfield/ "
+                   "next to the run file RUN.h5); locate reads the reconstruction there")
     p.add_argument("--no-figures", action="store_true", help="write no figures")
+    p.add_argument("--into-run", action="store_true",
+                   help="also write the results into the run file "
+                   "(/entry/analysis/lightfield); by default the run file is only read")
 
 
 def _n_theta(text: str) -> int:
@@ -60,6 +65,8 @@ def options(args: argparse.Namespace) -> dict:
     Raises ValueError naming the option when ``--domain`` is not inside (−90°, 90°).
     """
     import math
+
+    from instrument.pipelines.lightfield.geometry import load_geometry, parse_brdf
 
     domain = None
     if args.domain is not None:
@@ -77,22 +84,15 @@ def options(args: argparse.Namespace) -> dict:
     }
 
 
-def check_run_file(path: str) -> None:
-    """Raise OSError naming the run file when it is missing or not an HDF5 file."""
-    import h5py
+def out_dir(args: argparse.Namespace) -> Path:
+    """``--out``, or ``RUN/lightfield/`` next to the run file."""
+    from instrument.run.paths import results_dir
 
-    p = Path(path)
-    if not p.is_file():
-        raise OSError(f"run file {path} does not exist")
-    if not h5py.is_hdf5(p):
-        raise OSError(f"{path} is not an HDF5 run file: give the .h5 written by "
-                      f"'scatterlab run' for a lightfield plan")
+    return Path(args.out) if args.out else results_dir(args.run, "lightfield")
 
 
 def figures_dir(args: argparse.Namespace) -> Path | None:
-    if args.no_figures:
-        return None
-    return Path(args.figures) if args.figures else Path(args.run).with_suffix(".lightfield")
+    return None if args.no_figures else out_dir(args)
 
 
 def reconstruction_summary(r: ReconstructionResult, *, brdf_given: bool) -> list[str]:
@@ -132,9 +132,13 @@ def reconstruction_summary(r: ReconstructionResult, *, brdf_given: bool) -> list
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
+    from instrument.pipelines.lightfield.reconstruct import reconstruct_run
+    from instrument.run.paths import RESULTS_NAME
+
     try:
-        check_run_file(args.run)
-        r = reconstruct_run(args.run, figures_dir=figures_dir(args), **options(args))
+        r = reconstruct_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
+                            into_run=args.into_run, **options(args))
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2
@@ -154,5 +158,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if r.figures:
         print(f"figures: {', '.join(str(p) for p in r.figures)}")
-    print(f"stored in {args.run}:/{GROUP}")
+    print(f"results: {out_dir(args) / RESULTS_NAME}")
+    if args.into_run:
+        print(f"results also written into {args.run} (/entry/analysis/lightfield)")
     return 0 if rec.recoverable else 1

@@ -1,29 +1,40 @@
-"""``scatterlab resume RUN``: continue a paused, aborted or crashed run in the same file."""
+"""``scatterlab resume RUN``: continue a paused, aborted or crashed run in the same file.
+
+The run file is made to agree with its journal first (or, without a usable journal,
+rebuilt from what the file still holds); every repair is printed and recorded in the
+catalog, finished run or not. ``--remeasure-lost`` measures again, into the same file, the
+points whose frames a damaged file lost.
+"""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from instrument.bench.devices import open_bench
-from instrument.bench.profile import load_profile, parse_profile
-from instrument.cli.run import add_common, drive
-from instrument.run.catalog import Catalog
-from instrument.run.runner import resume_run
-from instrument.run.storage import StorageError, recover
+from instrument.cli.run import add_common
+
+HELP = "continue a run that did not finish, or repair one (same file)"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("resume", help="continue a run that did not finish (same file)")
+    p = sub.add_parser("resume", help=HELP)
     p.add_argument("run", help="run id (looked up in the --out catalog) or run file path")
+    p.add_argument("--remeasure-lost", action="store_true",
+                   help="also measure again the points whose frames a damaged file lost "
+                   "(they are marked status 2); finished runs too")
     add_common(p)
     p.set_defaults(func=run)
 
 
 def find_run(run: str, out: str) -> Path:
+    from instrument.run.catalog import CATALOG_NAME, Catalog
+
     path = Path(run)
     if path.suffix == ".h5" or path.exists():
         return path
+    if not (Path(out) / CATALOG_NAME).is_file():
+        raise FileNotFoundError(f"{run}: no such run file, and no run catalog in {out} to "
+                                "look the id up in")
     with Catalog(out) as cat:
         row = cat.get(run)
     if row is None:
@@ -31,26 +42,53 @@ def find_run(run: str, out: str) -> Path:
     return Path(row.path)
 
 
+def print_repairs(report, path: Path) -> None:
+    """Every repair a recovery made, and what it left lost."""
+    for line in report.repairs:
+        print(f"  repaired: {line}")
+    if report.repairs:
+        print(f"  (recorded in the run's event log and in the catalog of {path.parent})")
+
+
 def run(args: argparse.Namespace) -> int:
+    from instrument.run.recovery import describe_points
+    from instrument.run.runner import recover_run
+    from instrument.run.storage import StorageError
+
     try:
         path = find_run(args.run, args.out)
-        report = recover(path)
+        report = recover_run(path)
     except (FileNotFoundError, StorageError) as err:
         print(f"error: {err.strerror or err}")  # the message, without "[Errno N]"
         return 2
-    if report.status == "finished":
-        print(f"run {report.header.run_id} is already finished ({report.n_points} points)")
-        return 0
-    lost = f", {report.frames_lost} frame(s) lost" if report.frames_lost else ""
-    if report.points_lost:
-        lost += (f"; point(s) {', '.join(map(str, report.points_lost))} marked status 2 "
-                 "(frames lost: kept out of analysis)")
-    print(f"run {report.header.run_id}: {report.n_points} of "
-          f"{len(report.header.planned_label)} points on disk"
-          f" ({'rebuilt from the journal' if report.rebuilt else 'file intact'}{lost})")
+    path = Path(path).resolve()
+    h = report.header
+    n_planned = len(h.planned_label)
+    where = (f"rebuilt; the original is kept as {report.original.name}" if report.original
+             else "repaired in place" if report.repaired else "file intact")
+    print(f"run {h.run_id} ({report.status}): {report.n_points} of {n_planned} points on "
+          f"disk ({where})")
+    print_repairs(report, path)
+    lost = report.lost
+    again = lost if args.remeasure_lost else ()
+    if lost and not args.remeasure_lost:
+        print(f"  the frames of point(s) {describe_points(lost)} are lost: they are left out "
+              "of analysis; measure them again into this file with:\n"
+              f"    scatterlab resume --remeasure-lost {path}")
+    if report.status == "finished" and not again:
+        print(f"run {h.run_id} is already finished ({report.n_points} points); nothing to "
+              "continue")
+        return 1 if lost else 0
+    if again:
+        print(f"  measuring point(s) {describe_points(again)} again into {path.name}")
+    from instrument.bench.devices import open_bench
+    from instrument.bench.profile import load_profile, parse_profile
+    from instrument.cli.run import drive
+    from instrument.run.runner import resume_run
+
     profile = (load_profile(args.bench) if args.bench else
-               parse_profile(report.header.profile_text,
-                             source=f"bench profile stored in {path}"))
+               parse_profile(h.profile_text, source=f"bench profile stored in {path}"))
     with open_bench(profile) as bench:
-        engine = resume_run(path, bench, fsync=not args.no_fsync)
+        engine = resume_run(path, bench, fsync=not args.no_fsync,
+                            remeasure_lost=args.remeasure_lost)
         return drive(engine, args.quiet)

@@ -7,20 +7,18 @@ import argparse
 import signal
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from instrument.bench.devices import open_bench
-from instrument.bench.guard import GuardError
-from instrument.bench.profile import load_profile
-from instrument.cli._lobe import second_pass_plan
-from instrument.cli._progress import ConsoleProgress, print_summary
-from instrument.plans import build_plan, load_plan
-from instrument.plans.lobe import lobe_of
-from instrument.run.engine import EngineState, RunEngine
-from instrument.run.runner import DEFAULT_RUNS_DIR, start_run
+from instrument.run.paths import DEFAULT_RUNS_DIR
+
+if TYPE_CHECKING:
+    from instrument.run.engine import RunEngine
+
+HELP = "run a plan (BRDF, light field, calibration) on a bench"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("run", help="run a plan (BRDF, light field, calibration) on a bench")
+    p = sub.add_parser("run", help=HELP)
     p.add_argument("plan", help="plan file (TOML), e.g. examples/brdf_inplane.toml")
     add_common(p)
     p.set_defaults(func=run)
@@ -38,7 +36,14 @@ def add_common(p: argparse.ArgumentParser) -> None:
 
 
 def drive(engine: RunEngine, quiet: bool) -> int:
-    """Run the engine in the foreground: progress, Ctrl-C aborts cleanly, summary."""
+    """Run the engine in the foreground: progress, Ctrl-C aborts cleanly, summary.
+
+    A second Ctrl-C forces the program out at once; the journal still holds every
+    committed point, so the message names the ``resume`` command that continues the run.
+    """
+    from instrument.cli._progress import ConsoleProgress, print_summary
+    from instrument.run.engine import EngineState
+
     progress = ConsoleProgress()
     if quiet:
         progress.stream = open("/dev/null", "w")  # noqa: SIM115 - closed below
@@ -62,6 +67,9 @@ def drive(engine: RunEngine, quiet: bool) -> int:
                 # Nobody at a console can resume an automatic pause: stop here cleanly;
                 # the run continues later with `scatterlab resume`.
                 engine.stop_when_paused()
+    except KeyboardInterrupt:
+        print(forced_stop_message(engine.store.path))
+        return 130
     finally:
         if old is not None:
             signal.signal(signal.SIGINT, old)
@@ -73,7 +81,20 @@ def drive(engine: RunEngine, quiet: bool) -> int:
     return 1
 
 
+def forced_stop_message(path) -> str:
+    """What a forced stop (second Ctrl-C) left, and the command that continues the run."""
+    return (f"\ninterrupted before the run file was closed: every committed point is in its "
+            f"journal; continue the run with:\n  scatterlab resume {path}")
+
+
 def run(args: argparse.Namespace) -> int:
+    from instrument.bench.devices import open_bench
+    from instrument.bench.guard import GuardError
+    from instrument.bench.profile import load_profile
+    from instrument.plans import build_plan, load_plan
+    from instrument.plans.lobe import lobe_of
+    from instrument.run.runner import start_run
+
     spec = load_plan(args.plan)
     profile = load_profile(args.bench or "sim")
     try:
@@ -101,6 +122,10 @@ def run(args: argparse.Namespace) -> int:
 def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) -> int:
     """A two-pass lobe plan (``[scan] lobe``): fit the first pass, place the second pass's
     points by Fisher information and run them (:mod:`instrument.plans.lobe`)."""
+    from instrument.bench.guard import GuardError
+    from instrument.cli._lobe import second_pass_plan
+    from instrument.run.runner import start_run
+
     try:
         second = second_pass_plan(first, spec, profile)
     except (ValueError, GuardError) as err:

@@ -17,15 +17,14 @@ import importlib
 import time
 from pathlib import Path
 
-from instrument.bench.profile import load_profile
-
 PTY_ENTRY = ("hw_mocks.pty_server", "serve_url")
 #: URL schemes of the emulated serial controllers (each has a pyserial URL handler).
 SERIAL_SCHEMES = ("simapt", "simsmc", "simzaber", "simsr830")
+HELP = "serve the emulated serial controllers on ptys"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("serve-sim", help="serve the emulated serial controllers on ptys")
+    p = sub.add_parser("serve-sim", help=HELP)
     p.add_argument("--bench", default="sim", help="profile name or path (default: sim)")
     p.add_argument("--duration", type=float, default=None,
                    help="stop after this many seconds (default: until Ctrl-C)")
@@ -36,6 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.bench.profile import load_profile
+
     profile = load_profile(args.bench)
     module, func = PTY_ENTRY
     serve_url = getattr(importlib.import_module(module), func)

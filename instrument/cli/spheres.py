@@ -4,8 +4,10 @@ Merges each point's HDR brackets into a radiance image, fits spherical harmonics
 spherical-harmonic identities of Mahajan, Ramamoorthi & Curless (ECCV 2006, eqs. 10, 16, 19,
 21 and 25), renders the last image from the other three corner images by BRDF transfer and
 checks the capture's consistency against the noise level
-(:mod:`instrument.pipelines.spheres`). Results go into ``/entry/analysis`` of the run file;
-the figure to ``<run>.spheres.png`` (or ``--figure``).
+(:mod:`instrument.pipelines.spheres`). Results (``results.h5``) and the figure
+(``relighting.png``) go into ``DIR/RUN/spheres/`` next to the run file ``DIR/RUN.h5`` (ADR
+0013); ``--out`` names another folder. The run file is only read, unless ``--into-run``
+asks for the results in it as well.
 
 Exit status: 0 consistent, 1 the consistency check flags the capture, 2 on errors.
 The check's false-alarm rate is calibrated against noise only; on the simulated bench
@@ -16,12 +18,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    from instrument.pipelines.spheres.capture import SphereCapture
 
-from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT
-from instrument.pipelines.spheres.capture import SphereCapture
-from instrument.pipelines.spheres.pipeline import analyse_run
+HELP = "relight and check a sphere capture (SH analysis)"
+FIGURE_NAME = "relighting.png"
 
 
 def unit_words(units: str) -> str:
@@ -53,7 +56,7 @@ def identity_words(name: str, capture: SphereCapture) -> tuple[str, str]:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("spheres", help="relight and check a sphere capture (SH analysis)")
+    p = sub.add_parser("spheres", help=HELP)
     p.add_argument("run", help="run file (.h5) of a sphere_capture plan")
     p.add_argument("--lmax", type=int, default=20, help="SH order of the fits (default 20)")
     p.add_argument("--lmax-check", type=int, default=12,
@@ -67,10 +70,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold-scale", type=float, default=1.0,
                    help="multiply the bootstrap threshold by the bench's calibrated factor "
                         "(BENCHMARKS.md sphere_capture; default 1: noise-only threshold)")
-    p.add_argument("--figure", default=None,
-                   help="figure path (default <run>.spheres.png; 'none' for no figure)")
-    p.add_argument("--no-write", action="store_true",
-                   help="do not write the results into the run file")
+    p.add_argument("--out", default=None,
+                   help="folder for results.h5 and the figure (default: RUN/spheres/ next "
+                   "to the run file RUN.h5)")
+    p.add_argument("--no-figures", action="store_true", help="draw no figure")
+    p.add_argument("--no-write", action="store_true", help="write no results file")
+    p.add_argument("--into-run", action="store_true",
+                   help="also write the results into the run file (/entry/analysis); by "
+                   "default the run file is only read")
     p.set_defaults(func=run)
 
 
@@ -94,24 +101,28 @@ def _option_error(args: argparse.Namespace) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT
+    from instrument.pipelines.spheres.pipeline import analyse_run
+    from instrument.run.paths import RESULTS_NAME, results_dir
+
     bad = _option_error(args)
     if bad is not None:
         print(f"error: {bad}")
         return 2
-    fig = args.figure
-    if fig is None:
-        fig = str(Path(args.run).with_suffix("")) + ".spheres.png"
-    elif fig.lower() == "none":
-        fig = None
+    folder = Path(args.out) if args.out else results_dir(args.run, "spheres")
+    fig = None if args.no_figures else folder / FIGURE_NAME
     try:
         capture, res = analyse_run(
-            args.run, write=not args.no_write, figure=fig, lmax=args.lmax,
+            args.run, write=not args.no_write, figure=fig, into_run=args.into_run,
+            out_dir=args.out, lmax=args.lmax,
             lmax_check=args.lmax_check, max_view_angle_deg=args.max_view_angle,
             check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
             threshold_scale=args.threshold_scale,
         )
     except (ValueError, OSError, KeyError) as err:
-        print(f"error: {args.run}: {err} (is it the run file of a sphere_capture plan?)")
+        print(f"error: {err}")
         return 2
     r, s = capture.radiance.shape[:2]
     role = capture.lighting_role
@@ -150,5 +161,7 @@ def run(args: argparse.Namespace) -> int:
     if fig is not None:
         print(f"figure: {fig}")
     if not args.no_write:
-        print(f"stored in {args.run}:/entry/analysis")
+        print(f"results: {folder / RESULTS_NAME}")
+    if args.into_run:
+        print(f"results also written into {args.run} (/entry/analysis)")
     return 1 if rep.inconsistent else 0

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Container, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from instrument.bench import guard
 from instrument.bench.dynamics import AxisDynamics, route_time
 from instrument.bench.kinematics import Angles, UnreachableError, kinematics_for
 from instrument.bench.profile import BenchProfile, FieldError
+from instrument.bench.timing import BenchTiming, bench_timing
 from instrument.plans.commands import (
     Acquire,
     Command,
@@ -38,13 +39,37 @@ DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
 
 @dataclass(frozen=True)
 class PlanEstimate:
+    """How long a plan takes.
+
+    ``motion_s`` and ``acquisition_s`` are the instrument's own time: moves at the
+    profile's velocities and accelerations, exposures plus the policy's readout (what the
+    speed/accuracy planner compares). ``bench_motion_s`` and ``bench_acquisition_s`` are
+    what *this* bench takes on the wall clock (:mod:`instrument.bench.timing`): emulated
+    stages run ``speedup`` times faster, a simulated camera exposes in no time but renders,
+    and every point costs its storage; :attr:`total_s` is their sum. ``homing_s`` maps each
+    axis of the plan to the wall-clock seconds its homing takes, for a start on axes that
+    are not homed yet (not in :attr:`total_s`).
+    """
+
     n_points: int
     travel: dict[str, float]       # total distance per axis, axis units
     motion_s: float
     acquisition_s: float
+    bench_motion_s: float | None = None
+    bench_acquisition_s: float | None = None
+    speedup: float = 1.0
+    homing_s: dict[str, float] = field(default_factory=dict)
 
     @property
     def total_s(self) -> float:
+        """Seconds this bench will take (the instrument's own time when not known)."""
+        if self.bench_motion_s is None or self.bench_acquisition_s is None:
+            return self.real_time_s
+        return self.bench_motion_s + self.bench_acquisition_s
+
+    @property
+    def real_time_s(self) -> float:
+        """Seconds on real stages and a real camera (no emulated speed-up)."""
         return self.motion_s + self.acquisition_s
 
 
@@ -84,7 +109,8 @@ class Plan:
             yield PointDone(p.index)
 
     def estimate(self, *, start: dict[str, float] | None = None) -> PlanEstimate:
-        """Points, travel and duration from the axes' dynamics and the exposures."""
+        """Points, travel and duration from the axes' dynamics and the exposures, in the
+        instrument's own time and on this bench's clocks (:class:`PlanEstimate`)."""
         t = self.targets_array()
         t = _fill_forward(t, start, self.axes)
         dyn = dynamics_of(self.profile, self.axes)
@@ -92,7 +118,49 @@ class Plan:
         motion, _ = route_time(t, self.axes, dyn)
         pol = self.spec.acquisition
         acq = sum(pol.estimated_seconds(p.exposure_us) for p in self.points)
-        return PlanEstimate(len(self.points), travel, motion, acq)
+        timing = bench_timing(self.profile, self.axes)
+        fast = {r: _faster(d, timing.axis_speed.get(r, 1.0)) for r, d in dyn.items()}
+        bench_motion, _ = route_time(t, self.axes, fast)
+        speedup = motion / bench_motion if bench_motion > 0 else 1.0
+        return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
+                            self._acquisition_on(timing), speedup, dict(timing.home_s))
+
+    def _acquisition_on(self, timing: BenchTiming) -> float:
+        """Wall-clock seconds of every point's acquisition and storage on a bench.
+
+        Per point: the light brackets (1; with auto-exposure and HDR, half of
+        ``max_brackets`` and one more, the middle of what a scene needs) and as many dark
+        frames with ``dark = "per_point"``, each of ``frames`` averaged frames costing the
+        exposure (when the camera exposes in wall time) and the camera's per-frame time;
+        the camera's scene-change time for a lit point after a move or after the light came
+        on; the engine's and storage's time per point.
+        """
+        pol = self.spec.acquisition
+        total = 0.0
+        lit: bool | None = None
+        where: tuple | None = None
+        for p in self.points:
+            moved = bool(p.targets) and p.targets != where
+            if p.targets:
+                where = p.targets
+            if not pol.uses_camera:
+                total += timing.point_overhead_s / 4  # a journal line, no frames
+                lit = p.light
+                continue
+            exposure_s = (p.exposure_us if p.exposure_us is not None
+                          else pol.exposure_us) * 1e-6
+            brackets = 1.0
+            if p.exposure_us is None and pol.mode == "auto" and pol.hdr:
+                brackets = (max(pol.max_brackets, 1) + 1) / 2
+            darks = brackets if pol.dark == "per_point" and p.light else 0.0
+            per_frame = (exposure_s * timing.exposure_factor
+                         + max(timing.frame_overhead_s, pol.readout_s))
+            total += (brackets + darks) * pol.frames * per_frame
+            if p.light and (moved or lit is not True):
+                total += timing.scene_change_s
+            lit = p.light
+            total += timing.point_overhead_s
+        return total
 
 
 def _fill_forward(t: np.ndarray, start: dict[str, float] | None, axes) -> np.ndarray:
@@ -105,6 +173,13 @@ def _fill_forward(t: np.ndarray, start: dict[str, float] | None, axes) -> np.nda
                 t[i, k] = prev
             prev = t[i, k]
     return t
+
+
+def _faster(d: AxisDynamics, speed: float) -> AxisDynamics:
+    """The dynamics of an axis whose clock runs ``speed`` times faster: every move takes
+    1/speed of the time (velocity × s, acceleration × s², settle / s)."""
+    return AxisDynamics(d.velocity * speed, d.acceleration * speed * speed,
+                        d.settle_s / speed)
 
 
 def dynamics_of(profile: BenchProfile, axes) -> dict[str, AxisDynamics]:

@@ -5,19 +5,25 @@ its row when it starts, pauses and ends, so a process killed mid-run leaves a ro
 "running"; :meth:`Catalog.refresh` corrects such a row from the run's journal (committed
 points, last status) once no process holds the run file open, marking it "interrupted".
 Writes are short transactions in WAL mode, so a GUI can read while a run writes.
+
+Every repair of a run file (``recover``/``salvage``: what was lost, which points, where the
+damaged original went) is a row of the ``repairs`` table, so ``scatterlab runs`` shows it
+next to the run long after the console message scrolled away.
 """
 
 from __future__ import annotations
 
+import json
 import sqlite3
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
 
+from instrument.run.health import held_by_this_process, is_lock_refusal
 from instrument.run.journal import read_journal
 
-__all__ = ["CATALOG_NAME", "Catalog", "RunRow"]
+__all__ = ["CATALOG_NAME", "Catalog", "RepairRow", "RunRow"]
 
 CATALOG_NAME = "catalog.sqlite"
 
@@ -39,6 +45,14 @@ CREATE TABLE IF NOT EXISTS runs (
     path      TEXT NOT NULL
 );
 CREATE INDEX IF NOT EXISTS runs_started ON runs(started);
+CREATE TABLE IF NOT EXISTS repairs (
+    run_id      TEXT NOT NULL,
+    time        REAL NOT NULL,
+    what        TEXT NOT NULL,
+    points_lost TEXT NOT NULL,
+    original    TEXT
+);
+CREATE INDEX IF NOT EXISTS repairs_run ON repairs(run_id);
 """
 
 
@@ -55,6 +69,18 @@ class RunRow:
     n_points: int
     n_planned: int
     path: str
+
+
+@dataclass(frozen=True)
+class RepairRow:
+    """One repair of a run file: when, what it did (sentences), the points whose frames it
+    found lost, and where the damaged original went (``None``: repaired in place)."""
+
+    run_id: str
+    time: float
+    what: tuple[str, ...]
+    points_lost: tuple[int, ...]
+    original: str | None
 
 
 class Catalog:
@@ -96,6 +122,19 @@ class Catalog:
         with self._db:
             self._db.execute(f"UPDATE runs SET {', '.join(sets)} WHERE run_id = ?",
                              (*args, run_id))
+
+    def add_repair(self, row: RepairRow) -> None:
+        with self._db:
+            self._db.execute("INSERT INTO repairs VALUES (?,?,?,?,?)",
+                             (row.run_id, row.time, json.dumps(list(row.what)),
+                              json.dumps(list(row.points_lost)), row.original))
+
+    def repairs(self, run_id: str) -> list[RepairRow]:
+        """The repairs of a run, oldest first."""
+        cur = self._db.execute("SELECT * FROM repairs WHERE run_id = ? ORDER BY time",
+                               (run_id,))
+        return [RepairRow(r[0], r[1], tuple(json.loads(r[2])), tuple(json.loads(r[3])), r[4])
+                for r in cur.fetchall()]
 
     def get(self, run_id: str) -> RunRow | None:
         cur = self._db.execute("SELECT * FROM runs WHERE run_id = ?", (run_id,))
@@ -164,19 +203,13 @@ def _held_open(path: Path) -> bool:
     h5py's open file ids, since HDF5 lets a process reopen its own file; another process
     is detected by HDF5's file lock refusing the open.
     """
-    for fid in h5py.h5f.get_obj_ids(types=h5py.h5f.OBJ_FILE):
-        try:
-            same = Path(fid.name.decode()).resolve() == path.resolve()
-        except (OSError, ValueError):
-            continue
-        if same and fid.get_intent() & h5py.h5f.ACC_RDWR:
-            return True
+    if held_by_this_process(path):
+        return True
     try:
         with h5py.File(path, "r"):
             return False
     except FileNotFoundError:
         return False
     except OSError as err:
-        text = str(err).lower()
-        return "lock" in text or "already open" in text
+        return is_lock_refusal(str(err))
 

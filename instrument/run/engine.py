@@ -272,7 +272,8 @@ class RunEngine:
             est = self.plan.estimate()
             self._emit(RunStarted(self.store.header.run_id, str(self.store.path),
                                   self.plan.kind, self._n_total, len(self._done),
-                                  est.total_s * (1 - len(self._done) / max(1, self._n_total))))
+                                  est.total_s * (1 - len(self._done) / max(1, self._n_total))
+                                  + self._homing_s(est.homing_s)))
             self._prepare()
             status = self._loop()
         except _Abort:
@@ -288,7 +289,7 @@ class RunEngine:
                 notes.append("could not make safe: " + "; ".join(problems))
             try:
                 self._writer.drain()
-            except StorageError as err:
+            except Exception as err:  # a storage error, or a bug: the run must still end
                 self._store_broken = True
                 notes.append(f"last point not stored: {err}")
             self._writer.stop()
@@ -316,6 +317,17 @@ class RunEngine:
             self._emit(RunFinished(status, len(self._done), self._n_total, self._n_skipped,
                                    str(self.store.path), time.monotonic() - self._t0,
                                    self._message))
+
+    def _homing_s(self, homing_s: dict[str, float]) -> float:
+        """Seconds :meth:`_prepare` will spend homing the plan's axes that are not homed."""
+        total = 0.0
+        for role in self.plan.axes:
+            try:
+                if not self._axis(role).status().is_homed:
+                    total += homing_s.get(role, 0.0)
+            except (DeviceError, _PointFailed):
+                continue  # _prepare reports it
+        return total
 
     def _prepare(self) -> None:
         """Enable and home every axis the plan moves (homing is skipped when homed)."""
@@ -434,6 +446,8 @@ class RunEngine:
             self._done = _DoneSet(self._n_total, done)
         self._writer = _Writer(self.store)
         self._store_broken = False
+        for line in self.store.repairs:  # what the recovery did, said where the run is shown
+            self._emit(Fault("storage", f"repaired: {line}", "continue", None))
 
     def store_event(self, kind: str, **fields) -> None:
         if self._store_broken:

@@ -28,6 +28,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from instrument.run.paths import PIPELINES, RESULTS_NAME, results_dir, results_path
 from instrument.run.runfile import as_text
 from instrument.version import software_version
 
@@ -48,12 +49,6 @@ __all__ = [
     "results_path",
     "write_results_file",
 ]
-
-#: The pipelines, by the name of their folder next to the run.
-PIPELINES = ("fit", "lightfield", "spheres")
-#: The results file in each pipeline's folder.
-RESULTS_NAME = "results.h5"
-
 
 class RunStillRunning(RuntimeError):
     """The run file is still being written by a run; analyse it when the run ends."""
@@ -114,19 +109,6 @@ def put_json(g: h5py.Group, name: str, value: Any) -> h5py.Dataset:
 
 
 # ------------------------------------------------------------------------------ where
-def results_dir(run_path: str | Path, pipeline: str) -> Path:
-    """``DIR/RUN/<pipeline>/`` for the run file ``DIR/RUN.h5`` (not created here)."""
-    if pipeline not in PIPELINES:
-        raise ValueError(f"unknown pipeline {pipeline!r}; one of {', '.join(PIPELINES)}")
-    p = Path(run_path)
-    return p.parent / p.stem / pipeline
-
-
-def results_path(run_path: str | Path, pipeline: str) -> Path:
-    """``DIR/RUN/<pipeline>/results.h5``."""
-    return results_dir(run_path, pipeline) / RESULTS_NAME
-
-
 def options_fingerprint(options: Mapping[str, Any]) -> str:
     """SHA-256 of the options as canonical JSON (sorted keys; paths and numpy values as
     text and lists): equal options give equal fingerprints, across processes and machines."""
@@ -136,14 +118,16 @@ def options_fingerprint(options: Mapping[str, Any]) -> str:
 
 @contextlib.contextmanager
 def write_results_file(run_path: str | Path, pipeline: str, *, run_id: str, program: str,
-                       options: Mapping[str, Any]) -> Iterator[h5py.Group]:
+                       options: Mapping[str, Any], folder: str | Path | None = None
+                       ) -> Iterator[h5py.Group]:
     """Write ``results.h5`` of ``pipeline`` for a run; yields its ``/entry/analysis`` group.
 
-    The file is built under a temporary name in the same folder, flushed to disk and
+    The file goes to :func:`results_path` (``folder``, when given, instead of the run's
+    own). It is built under a temporary name in the same folder, flushed to disk and
     renamed over the old one only when the block ends without an exception, so readers see
     the previous results or the new ones, never a mixture.
     """
-    final = results_path(run_path, pipeline)
+    final = results_path(run_path, pipeline, folder)
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
     try:
@@ -176,9 +160,10 @@ def write_results_file(run_path: str | Path, pipeline: str, *, run_id: str, prog
             tmp.unlink()
 
 
-def read_results_attrs(run_path: str | Path, pipeline: str) -> dict[str, Any] | None:
+def read_results_attrs(run_path: str | Path, pipeline: str,
+                       folder: str | Path | None = None) -> dict[str, Any] | None:
     """The ``/entry`` attributes of a run's results file, or ``None`` if it has none."""
-    path = results_path(run_path, pipeline)
+    path = results_path(run_path, pipeline, folder)
     if not path.is_file():
         return None
     try:
@@ -190,9 +175,11 @@ def read_results_attrs(run_path: str | Path, pipeline: str) -> dict[str, Any] | 
 
 
 def already_done(run_path: str | Path, pipeline: str, *, run_id: str,
-                 options: Mapping[str, Any]) -> bool:
+                 options: Mapping[str, Any], folder: str | Path | None = None) -> bool:
     """True when the run's ``results.h5`` of ``pipeline`` names ``run_id`` and was made with
-    the same options (ADR 0013: a rerun skips it unless forced)."""
-    attrs = read_results_attrs(run_path, pipeline)
+    the same options (ADR 0013: a rerun skips it unless forced). The options are those
+    the pipeline records (``fit_options``, ``lightfield_options``, ``sphere_options`` of the
+    pipelines)."""
+    attrs = read_results_attrs(run_path, pipeline, folder)
     return (attrs is not None and attrs.get("run_id") == run_id
             and attrs.get("options_sha256") == options_fingerprint(options))

@@ -8,6 +8,12 @@ with the per-frame tables ``frame_point``, ``frame_exposure_us``, ``frame_light`
 ``/entry/calibration``. Everything that reads a run — the analysis pipelines, ``resume``,
 the CLI's summaries — reads it through this module, with plain h5py and read-only.
 
+A file that cannot be read as a run (missing, not HDF5, not a run, damaged, still being
+written) raises :class:`RunFileError` with the words of
+:func:`instrument.run.health.inspect_run_file`, the same in every command;
+:func:`check_run_file` also refuses a run of a kind the analysis does not handle, naming
+the command that does.
+
 Angles are in degrees, as stored. A point's frames are its light brackets followed by one
 dark frame per bracket at the same exposure (``dark = "per_point"``); with
 ``dark = "start"`` the dark-labelled points of the run are the master darks, matched by
@@ -30,14 +36,94 @@ import numpy as np
 
 from instrument.bench.camera_calibration import CameraCalibration, camera_calibration_for
 from instrument.plans.planfile import PlanSpec, parse_plan
-from instrument.run.storage import STATUS_SKIPPED
+from instrument.run.health import inspect_run_file
+from instrument.run.layout import FRAMES_LOST, STATUS_OK, STATUS_SKIPPED
 
-__all__ = ["PlannedPoints", "RunData", "RunFileError", "RunSummary", "as_text", "read_plan_kind",
-           "read_planned", "read_run", "read_summary"]
+__all__ = ["ANALYSES", "PlannedPoints", "RunData", "RunFileError", "RunSummary", "as_text",
+           "check_run_file", "open_run", "read_plan_kind", "read_planned", "read_run",
+           "read_summary"]
 
 
 class RunFileError(ValueError):
     """A file that is not a complete scatterlab run file (the message names what is missing)."""
+
+
+#: The analysis commands and the plan kinds each analyses.
+ANALYSES: dict[str, tuple[str, ...]] = {
+    "fit": ("brdf_in_plane", "brdf_hemisphere", "reference", "signature"),
+    "reconstruct": ("lightfield",),
+    "locate": ("lightfield",),
+    "spheres": ("sphere_capture",),
+}
+#: What each analysis analyses, in words.
+_ANALYSED = {"fit": "BRDF runs", "reconstruct": "lightfield runs",
+             "locate": "lightfield runs", "spheres": "sphere-capture runs"}
+#: A plan kind in words, and what to do with a run of that kind.
+_KINDS: dict[str, tuple[str, str]] = {
+    "brdf_in_plane": ("an in-plane BRDF run", "use scatterlab fit"),
+    "brdf_hemisphere": ("a hemispherical BRDF run", "use scatterlab fit"),
+    "reference": ("a reference-standard run", "use scatterlab fit (or give it to "
+                  "scatterlab fit --method relative --reference)"),
+    "signature": ("an instrument-signature run", "give it to scatterlab fit --signature"),
+    "lightfield": ("a lightfield run", "use scatterlab reconstruct / scatterlab locate"),
+    "sphere_capture": ("a sphere-capture run", "use scatterlab spheres"),
+    "dark": ("a dark-frame calibration run", "name it in a plan's [calibration] dark = ..."),
+    "flat_field": ("a flat-field calibration run", "give it to scatterlab fit --flat"),
+    "photon_transfer": ("a photon-transfer calibration run", "it calibrates the camera "
+                        "(gain and noise); it is not analysed by itself"),
+}
+
+
+def kind_in_words(kind: str) -> str:
+    """'a lightfield run', or "a run of plan kind 'x'" for a kind this does not know."""
+    return _KINDS.get(kind, (f"a run of plan kind {kind!r}", ""))[0]
+
+
+def check_run_file(path: str | Path, analysis: str | None = None, *,
+                   kinds: tuple[str, ...] | None = None, role: str | None = None) -> str:
+    """Check, before anything else is read, that ``path`` is a readable run file of a kind
+    ``analysis`` (a key of :data:`ANALYSES`) or ``kinds`` handles; return its plan kind.
+
+    ``role`` names the file on the command line (``--flat``) in the message.
+
+    Raises
+    ------
+    RunFileError
+        Missing, not a run, damaged, still being written (the words of
+        :func:`instrument.run.health.inspect_run_file`), or of another kind: "… is a
+        lightfield run; `scatterlab fit` analyses BRDF runs: use scatterlab reconstruct /
+        scatterlab locate".
+    """
+    state = inspect_run_file(path)
+    prefix = f"{role}: " if role else ""
+    if not state.ok:
+        raise RunFileError(prefix + state.message)
+    allowed = kinds if kinds is not None else ANALYSES.get(analysis or "", ())
+    kind = state.plan_kind
+    if allowed and kind not in allowed:
+        todo = _KINDS.get(kind, ("", ""))[1]
+        wanted = (_ANALYSED[analysis] if kinds is None and analysis in _ANALYSED
+                  else " or ".join(kind_in_words(k).removeprefix("a ").removeprefix("an ")
+                                   .replace(" run", " runs") for k in allowed))
+        who = f"`scatterlab {analysis}` analyses" if analysis else f"{role or 'this'} needs"
+        plural = "s" if len(allowed) > 1 else ""
+        raise RunFileError(f"{prefix}{path} is {kind_in_words(kind)}; {who} {wanted} "
+                           f"(plan kind{plural} {', '.join(allowed)})"
+                           + (f": {todo}" if todo else ""))
+    return kind
+
+
+@contextlib.contextmanager
+def open_run(path: str | Path) -> Iterator[h5py.File]:
+    """A run file open read-only; :class:`RunFileError` in words when it cannot be."""
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        state = inspect_run_file(path)
+        raise RunFileError(state.message or f"{path} cannot be read as a run file"
+                           ) from err
+    with f:
+        yield f
 
 
 def as_text(value: Any) -> str:
@@ -122,7 +208,9 @@ class RunData:
     @contextlib.contextmanager
     def frames(self) -> Iterator[h5py.Dataset]:
         """The frame stack ``(n_frames, H, W)`` on disk, open for reading while in the block."""
-        with h5py.File(self.path, "r") as f:
+        with open_run(self.path) as f:
+            if "frames" not in f["entry/data"]:
+                raise RunFileError(f"{self.path} holds no frames")
             yield f["entry/data/frames"]
 
     def frames_of(self, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -153,7 +241,7 @@ class RunData:
         return lf, le, np.array(darks)
 
     def _run_dark(self, frames: h5py.Dataset, exposure_us: float) -> np.ndarray | None:
-        for r in np.flatnonzero(self.label == "dark"):
+        for r in np.flatnonzero((self.label == "dark") & (self.point_status == STATUS_OK)):
             n0, n = int(self.frame_start[r]), int(self.n_frames[r])
             for j in range(n0, n0 + n):
                 if math.isclose(float(self.frame_exposure_us[j]), exposure_us):
@@ -164,9 +252,10 @@ class RunData:
 def read_plan_kind(path: str | Path) -> str:
     """The plan kind a run file records (``brdf_in_plane``, ``lightfield`` …), read alone so
     that an analysis can refuse a run of another kind before it reads anything else."""
-    with h5py.File(path, "r") as f:
+    with open_run(path) as f:
         if "entry" not in f:
-            raise RunFileError(f"{path} is not a scatterlab run file (no /entry group)")
+            raise RunFileError(f"{path} is an HDF5 file but not a scatterlab run file (no "
+                               "/entry with a run id)")
         return as_text(f["entry"].attrs.get("plan_kind", ""))
 
 
@@ -179,7 +268,7 @@ def read_run(path: str | Path) -> RunData:
         A group or table of the layout is missing (it names which).
     """
     path = Path(path)
-    with h5py.File(path, "r") as f:
+    with open_run(path) as f:
         try:
             return _read_run(path, f)
         except KeyError as err:
@@ -252,7 +341,7 @@ class PlannedPoints:
 
 def read_planned(path: str | Path) -> PlannedPoints:
     """The planned points stored in a run file (what ``resume`` continues)."""
-    with h5py.File(path, "r") as f:
+    with open_run(path) as f:
         p = f["entry/plan"]
         return PlannedPoints(
             as_text(p["plan_text"][()]),
@@ -279,15 +368,28 @@ class RunSummary:
     size_bytes: int
     sample_name: str = ""
     axes: tuple[str, ...] = ()
+    #: What the bench recorded per point, in words ("angles", "exposures", "power
+    #: readings", "signals", "timestamps"): only the columns that hold a value somewhere.
+    recorded: tuple[str, ...] = ()
+    #: Points whose frames a damaged file lost (status 2), not measured again yet.
+    lost: tuple[int, ...] = ()
+
+
+#: Point columns and their names in a summary, in the order they are listed.
+_RECORDED = (("theta_r", "angles"), ("exposure_us", "exposures"),
+             ("power_w", "power readings"), ("signal", "signals"), ("t_end", "timestamps"))
 
 
 def read_summary(path: str | Path) -> RunSummary:
     """What a (closed) run file holds, read with plain h5py."""
     path = Path(path)
-    with h5py.File(path, "r") as f:
+    with open_run(path) as f:
         e = f["entry"]
         frames = e["data"].get("frames")
         status = e["points/status"][:]
+        recorded = tuple(words for name, words in _RECORDED
+                         if name in e["points"] and np.isfinite(e["points"][name][()]).any())
+        lost = tuple(int(i) for i in e["points/index"][()][status == FRAMES_LOST])
         return RunSummary(path, as_text(e.attrs["run_id"]), as_text(e.attrs["plan_kind"]),
                           as_text(e.attrs["status"]), int(e["points/index"].shape[0]),
                           int(e.attrs["n_planned"]),
@@ -296,4 +398,4 @@ def read_summary(path: str | Path) -> RunSummary:
                           None if frames is None else tuple(frames.shape[1:]),
                           path.stat().st_size,
                           as_text(e["sample/name"][()]) if "sample/name" in e else "",
-                          tuple(as_text(a) for a in e["plan/axes"][()]))
+                          tuple(as_text(a) for a in e["plan/axes"][()]), recorded, lost)

@@ -22,16 +22,20 @@ from instrument.bench.profile import FieldError
 from instrument.plans.build import Plan
 from instrument.plans.commands import ScanPoint
 from instrument.plans.planfile import PlanError, parse_plan
-from instrument.run.catalog import Catalog, RunRow
+from instrument.run.catalog import Catalog, RepairRow, RunRow
 from instrument.run.engine import RunEngine
 from instrument.run.events import Event, Paused, Progress, RunFinished, RunStarted
+from instrument.run.health import inspect_run_file
+from instrument.run.paths import DEFAULT_RUNS_DIR
+from instrument.run.recovery import RecoveryReport, journal_usable, recover, salvage
 from instrument.run.runfile import read_planned
-from instrument.run.storage import RunHeader, RunStore, recover
+from instrument.run.storage import RunHeader, RunStore
 from instrument.version import software_version
 
-__all__ = ["DEFAULT_RUNS_DIR", "new_run_id", "plan_from_run", "resume_run", "start_run"]
+__all__ = ["DEFAULT_RUNS_DIR", "new_run_id", "plan_from_run", "recover_run", "resume_run",
+           "start_run"]
 
-DEFAULT_RUNS_DIR = Path("runs")
+
 
 
 def new_run_id(kind: str) -> str:
@@ -174,7 +178,9 @@ def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_D
     path = runs_dir / f"{run_id}.h5"
     store = RunStore.create(path, header, fsync=fsync, sync_interval_s=sync_interval_s,
                             min_free_bytes=min_free_bytes)
-    engine = RunEngine(bench, plan, store)
+    engine = RunEngine(bench, plan, store, reopen_store=_reopener(
+        path, fsync=fsync, sync_interval_s=sync_interval_s, min_free_bytes=min_free_bytes,
+        catalog=catalog))
     if catalog:
         cat = Catalog(runs_dir)
         cat.add(RunRow(run_id, plan.spec.sample_name, plan.kind, plan.spec.name,
@@ -198,18 +204,78 @@ def plan_from_run(path: str | Path, bench: Bench) -> Plan:
     return Plan(replace(spec), bench.profile, stored.axes, tuple(points))
 
 
+def recover_run(path: str | Path, *, catalog: bool = True) -> RecoveryReport:
+    """Make a run file agree with its journal (:func:`~instrument.run.recovery.recover`),
+    or, when the journal is missing or unreadable and the file is a scatterlab run, rebuild
+    both from what the file holds (:func:`~instrument.run.recovery.salvage`); every repair
+    goes into the catalog of the run's folder.
+
+    Raises
+    ------
+    StorageError
+        The file is missing, not a scatterlab run, or held open by a run.
+    """
+    path = Path(path).resolve()
+    if not journal_usable(path) and inspect_run_file(path).is_run:
+        report = salvage(path)
+    else:
+        report = recover(path)
+    if catalog and report.repaired:
+        record_repair(path, report)
+    return report
+
+
+def record_repair(path: Path, report: RecoveryReport) -> None:
+    """Put a repair into the catalog of the run's folder (adding the run if it is not
+    listed there)."""
+    h = report.header
+    with Catalog(path.parent) as cat:
+        if cat.get(h.run_id) is None:
+            cat.add(RunRow(h.run_id, h.sample_name, h.plan_kind, h.plan_name, h.bench_name,
+                           report.status, h.created, None, report.n_points,
+                           len(h.planned_label), str(path)))
+        cat.add_repair(RepairRow(h.run_id, time.time(), report.repairs, report.points_lost,
+                                 None if report.original is None else str(report.original)))
+
+
+def _reopener(path: Path, *, fsync: bool, sync_interval_s: float, min_free_bytes: int,
+              catalog: bool, remeasure: bool = False):
+    """How the engine reopens the run file after a storage error: recover it (recording
+    any repair in the catalog), open it to append; with ``remeasure`` the points whose
+    frames are lost are still to do."""
+    def reopen() -> tuple[RunStore, set[int]]:
+        report = recover_run(path, catalog=catalog)
+        store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
+                                      min_free_bytes=min_free_bytes)
+        store.repairs = report.repairs + store.repairs
+        return store, (done - set(store.lost)) if remeasure else done
+    return reopen
+
+
 def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
                sync_interval_s: float = 0.25, min_free_bytes: int = 64 << 20,
-               catalog: bool = True) -> RunEngine:
-    """Recover the run file from its journal and return an engine for the missing points."""
+               catalog: bool = True, remeasure_lost: bool = False) -> RunEngine:
+    """Recover the run file from its journal and return an engine for the missing points.
+
+    With ``remeasure_lost`` the points whose frames a damaged file lost are measured
+    again too, into the same file (their rows are rewritten; the journal keeps both
+    records, the newer one stands). Raises :class:`StorageError` when there is nothing
+    to resume from (see :func:`recover_run`).
+    """
     path = Path(path).resolve()
-    recover(path)
+    recover_run(path, catalog=catalog)
     plan = plan_from_run(path, bench)
     check_bench_for_plan(plan, bench)
     store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
                                   min_free_bytes=min_free_bytes)
-    store.event({"kind": "resumed", "n_done": len(done)})
-    engine = RunEngine(bench, plan, store, done=done)
+    again = set(store.lost) if remeasure_lost else set()
+    event: dict[str, Any] = {"kind": "resumed", "n_done": len(done - again)}
+    if again:
+        event["remeasure"] = sorted(again)
+    store.event(event)
+    engine = RunEngine(bench, plan, store, done=done - again, reopen_store=_reopener(
+        path, fsync=fsync, sync_interval_s=sync_interval_s, min_free_bytes=min_free_bytes,
+        catalog=catalog, remeasure=remeasure_lost))
     if catalog:
         cat = Catalog(path.parent)
         h = store.header

@@ -59,7 +59,8 @@ SAMPLES = (
 #: Candidate models the fits choose from.
 CANDIDATES = ("lambert", "oren_nayar", "lambert+ggx")
 
-#: The closed-loop validation matrix (benchmarks/bench_brdf_closed_loop.py --matrix): one sample per family of the library,
+#: The closed-loop validation matrix (bench_brdf_closed_loop.py --matrix): one sample per
+#: family of the library,
 #: from diffuse to a sharp specular lobe (GGX α = 0.02), scanned at θi = 20°, 50°, 80°.
 MATRIX = (
     Sample("lambert", "lambert", (0.8,)),

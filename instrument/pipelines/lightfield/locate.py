@@ -25,9 +25,21 @@ from instrument.pipelines.lightfield.results import (
     read_reconstruction,
     write_localisation,
 )
-from instrument.run.runfile import as_text
+from instrument.run.paths import results_path
+from instrument.run.runfile import as_text, check_run_file, read_summary
 
-__all__ = ["locate_run", "resolution_at"]
+__all__ = ["locate_options", "locate_run", "resolution_at"]
+
+
+def locate_options(*, y_range_mm: tuple[float, float] | None = None,
+                   z_range_mm: tuple[float, float] = (-400.0, -60.0), y_step_mm: float = 0.5,
+                   z_step_mm: float = 1.0, threshold_rel: float = 0.3,
+                   min_measure_fraction: float = 0.1) -> dict[str, Any]:
+    """The options of :func:`locate_run` that change its result (besides the
+    reconstruction's), as recorded in the results file."""
+    return {"y_range_mm": None if y_range_mm is None else list(y_range_mm),
+            "z_range_mm": list(z_range_mm), "y_step_mm": y_step_mm, "z_step_mm": z_step_mm,
+            "threshold_rel": threshold_rel, "min_measure_fraction": min_measure_fraction}
 
 
 def locate_run(
@@ -41,6 +53,8 @@ def locate_run(
     min_measure_fraction: float = 0.1,
     write: bool = True,
     figures_dir: str | Path | None = None,
+    out_dir: str | Path | None = None,
+    into_run: bool = False,
     **reconstruct_options: Any,
 ) -> LocalisationResult:
     """Locate the hidden objects of a light-field run (reconstructing it first if needed).
@@ -51,19 +65,27 @@ def locate_run(
     light-field bench's wall aperture W limits that fraction to about
     ``W / (|z| (B − A))``, so the default is lower than the analysis default (0.25), which
     would hide everything beyond ~230 mm on the 100 mm emulated stage.  ``threshold_rel``:
-    detections weaker than this fraction of the strongest are dropped.  Results go to
-    ``/entry/analysis/lightfield/localisation``.
+    detections weaker than this fraction of the strongest are dropped.
+
+    The reconstruction is read from the light-field results file (in ``out_dir``, default
+    ``DIR/RUN/lightfield/``) and made there first when it holds none or
+    ``reconstruct_options`` are given. Results go to
+    ``/entry/analysis/lightfield/localisation`` of the same file (with ``into_run``, of
+    the run file as well).
     """
+    check_run_file(path, "locate")
+    store = results_path(path, "lightfield", out_dir)
     for name, rng in (("y_range_mm", y_range_mm), ("z_range_mm", z_range_mm)):
         if rng is not None and not (len(rng) == 2 and float(rng[0]) < float(rng[1])):
             raise ValueError(f"{name} {tuple(rng)} must be (low, high) with low < high (mm)")
     if not 0.0 <= threshold_rel < 1.0:
         raise ValueError(f"threshold_rel {threshold_rel:g} must be in [0, 1): a fraction of "
                          f"the strongest detection")
-    stored = None if reconstruct_options else read_reconstruction(path)
+    stored = None if reconstruct_options else read_reconstruction(store)
     if stored is None:
-        reconstruct_run(path, write=True, **reconstruct_options)
-        stored = read_reconstruction(path)
+        reconstruct_run(path, write=True, out_dir=out_dir, into_run=into_run,
+                        **reconstruct_options)
+        stored = read_reconstruction(store)
         if stored is None:  # pragma: no cover - written just above
             raise RuntimeError("the reconstruction was not stored")
     dom = tuple(float(x) for x in stored["domain_rad"])
@@ -91,7 +113,15 @@ def locate_run(
                              max_objects=0)
         message = f"nothing located: {as_text(stored['message'])}"
     if write:
-        write_localisation(path, det, p_hat, message)
+        write_localisation(path, det, p_hat, message, run_id=read_summary(path).run_id,
+                           options=locate_options(
+                               y_range_mm=y_range_mm, z_range_mm=z_range_mm,
+                               y_step_mm=y_step_mm, z_step_mm=z_step_mm,
+                               threshold_rel=threshold_rel,
+                               min_measure_fraction=min_measure_fraction),
+                           folder=out_dir)
+    if into_run:
+        write_localisation(path, det, p_hat, message, into_run=True)
     figs: tuple[Path, ...] = ()
     if figures_dir is not None:
         figs = tuple(localisation_figures(det, p_hat, figures_dir))

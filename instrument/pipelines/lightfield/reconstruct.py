@@ -10,7 +10,9 @@ points whose curves lie inside the measured y range; results and figures as in
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,8 +31,10 @@ from instrument.pipelines.lightfield.geometry import (
 )
 from instrument.pipelines.lightfield.results import ReconstructionResult, write_reconstruction
 from instrument.pipelines.lightfield.scan import assemble, read_scan
+from instrument.run.runfile import check_run_file, read_summary
 
-__all__ = ["NOISE_DISAGREEMENT_FACTOR", "reconstruct_run", "scattering_points"]
+__all__ = ["NOISE_DISAGREEMENT_FACTOR", "reconstruct_options", "reconstruct_run",
+           "scattering_points"]
 
 
 def scattering_points(lf: LightField2D, d2_mm: float) -> NDArray[np.float64]:
@@ -56,13 +60,22 @@ def reconstruct_run(
     method: str = "wiener",
     write: bool = True,
     figures_dir: str | Path | None = None,
+    out_dir: str | Path | None = None,
+    into_run: bool = False,
 ) -> ReconstructionResult:
     """Assemble L_meas from the run, reconstruct the object light field, store the result.
 
     ``geometry``/``brdf`` default to the emulated bench's own (:func:`geometry_from_run`,
     :func:`brdf_from_run`).  With ``write`` the measured field and the reconstruction go
-    into ``/entry/analysis/lightfield``; with ``figures_dir`` the PNG figures too.
+    into ``/entry/analysis/lightfield`` of the results file (in ``out_dir``, default
+    ``DIR/RUN/lightfield/``; ADR 0013), with ``into_run`` into the run file as well; with
+    ``figures_dir`` the PNG figures too. Raises
+    :class:`~instrument.run.runfile.RunFileError` first when the file is not a readable
+    light-field run.
     """
+    check_run_file(path, "reconstruct")
+    recorded = reconstruct_options(geometry=geometry, brdf=brdf, domain_rad=domain_rad,
+                                   n_theta=n_theta, method=method)
     geometry = geometry or geometry_from_run(path)
     brdf = brdf or brdf_from_run(path)
     scan = read_scan(path, geometry)
@@ -76,11 +89,26 @@ def reconstruct_run(
                                              measured.sigma_rows, n_theta)
     result = ReconstructionResult(measured, rec, p_hat, geometry, brdf, notes)
     if write:
-        write_reconstruction(path, result)
+        write_reconstruction(path, result, run_id=read_summary(path).run_id,
+                             options=recorded, folder=out_dir)
+    if into_run:
+        write_reconstruction(path, result, into_run=True)
     if figures_dir is not None:
         figs = reconstruction_figures(result, figures_dir)
         result = ReconstructionResult(measured, rec, p_hat, geometry, brdf, notes, tuple(figs))
     return result
+
+
+def reconstruct_options(*, geometry: LightFieldGeometry | None = None,
+                        brdf: FlatlandBRDF | None = None,
+                        domain_rad: tuple[float, float] | None = None, n_theta: int = 128,
+                        method: str = "wiener") -> dict[str, Any]:
+    """The options of :func:`reconstruct_run` that change its result, as recorded in the
+    results file (``None``: the bench's own geometry or wall)."""
+    return {"geometry": None if geometry is None else geometry.as_dict(),
+            "brdf": None if brdf is None else asdict(brdf),
+            "domain_rad": None if domain_rad is None else list(domain_rad),
+            "n_theta": n_theta, "method": method}
 
 
 #: Tail-noise estimate over sensor-row prediction above which the tail holds signal.  The

@@ -1,7 +1,9 @@
 """Light-field results: what a reconstruction and a localisation produced, and their storage.
 
-Results go into the run file under ``/entry/analysis/lightfield`` (an ``NXprocess``; rewritten
-on every call)::
+Results go into the results file ``DIR/RUN/lightfield/results.h5`` next to the run file
+``DIR/RUN.h5`` (ADR 0013) — into the run file itself only with ``--into-run`` — under
+``/entry/analysis/lightfield`` (an ``NXprocess``). A reconstruction writes a new results
+file; a localisation writes one holding the stored reconstruction and its own group::
 
     measured/        radiance (N_y, N_θ), y_mm, theta_rad, cell_pixels (N_θ,) ; attrs
                      units, domain_rad, sigma_rows (noise of one cell from the row spread)
@@ -35,7 +37,13 @@ from analysis.lightfield import (
 )
 from instrument.pipelines.lightfield.geometry import LightFieldGeometry
 from instrument.pipelines.lightfield.scan import Assembled
-from instrument.run.results import analysis_group, open_for_results, replace_group
+from instrument.run.paths import results_path
+from instrument.run.results import (
+    analysis_group,
+    open_for_results,
+    replace_group,
+    write_results_file,
+)
 from instrument.run.runfile import as_text
 from instrument.version import software_version
 
@@ -45,12 +53,14 @@ __all__ = [
     "ReconstructionResult",
     "median_delta_p",
     "read_reconstruction",
+    "stored_options",
     "write_localisation",
     "write_reconstruction",
 ]
 
 
 GROUP = "entry/analysis/lightfield"
+PROGRAM = {"reconstruct": "scatterlab reconstruct", "locate": "scatterlab locate"}
 
 
 @dataclass(frozen=True)
@@ -97,55 +107,73 @@ def _brdf_dict(b: FlatlandBRDF) -> dict[str, Any]:
             "window_exponent": b.window_exponent}
 
 
-def write_reconstruction(path: str | Path, r: ReconstructionResult) -> None:
+def write_reconstruction(path: str | Path, r: ReconstructionResult, *, run_id: str = "",
+                         options: dict[str, Any] | None = None,
+                         folder: str | Path | None = None, into_run: bool = False) -> Path:
+    """Store a reconstruction: a new results file (in ``folder``, default
+    ``DIR/RUN/lightfield/``), whose earlier localisation it makes stale; with ``into_run``
+    in the run file instead. Returns the file written."""
+    if into_run:
+        with open_for_results(path) as f:
+            _fill_reconstruction(analysis_group(f, "lightfield"), r)
+        return Path(path)
+    with write_results_file(path, "lightfield", run_id=run_id, program=PROGRAM["reconstruct"],
+                            options={"reconstruct": options or {}}, folder=folder) as g:
+        _fill_reconstruction(analysis_group(g.file, "lightfield"), r)
+    return results_path(path, "lightfield", folder)
+
+
+def _fill_reconstruction(g: h5py.Group, r: ReconstructionResult) -> None:
     rec = r.reconstruction
     reg = rec.regularization
     diag = rec.diagnostics
     lf = r.measured.field
-    with open_for_results(path) as f:
-        g = analysis_group(f, "lightfield")
-        g.attrs["program"] = "scatterlab reconstruct"
-        g.attrs["version"] = software_version()
-        g.attrs["date"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-        g.attrs["geometry"] = json.dumps(r.geometry.as_dict())
-        g.attrs["brdf"] = json.dumps(_brdf_dict(r.brdf))
-        g.attrs["notes"] = json.dumps(list(r.notes))
-        m = replace_group(g, "measured", "NXdata")
-        m["radiance"] = lf.radiance
-        m["radiance"].attrs["units"] = "DN/us (cos^4-corrected, proportional to radiance)"
-        m["y_mm"] = lf.y_mm
-        m["theta_rad"] = lf.theta_rad
-        m["cell_pixels"] = r.measured.cell_pixels
-        m.attrs["domain_rad"] = lf.domain_rad
-        m.attrs["d2_mm"] = lf.z_mm
-        m.attrs["sigma_rows"] = r.measured.sigma_rows
-        m.attrs["signal"] = "radiance"
-        c = replace_group(g, "reconstruction", "NXdata")
-        c["incident_radiance"] = rec.incident_field.radiance
-        c["points_mm"] = rec.incident_field.y_mm
-        c["theta_rad"] = rec.incident_field.theta_rad
-        c["filter_factors"] = np.atleast_2d(reg.filter_factors).mean(axis=0)
-        c["orders"] = rec.orders
-        c["signal_power"] = reg.signal_power
-        c["noise_power"] = reg.noise_power
-        c["gamma"] = diag.gamma
-        c["snr_eff"] = diag.snr_eff
-        c["delta_p"] = median_delta_p(diag.delta_p)
-        c["valid_fraction"] = rec.valid_fraction
-        c.attrs.update({
-            "signal": "incident_radiance", "method": reg.method,
-            "parameter_name": reg.parameter_name, "parameter": reg.parameter,
-            "effective_dof": reg.effective_dof, "residual_ratio": reg.residual_ratio,
-            "recoverable": rec.recoverable, "message": rec.message, "solver": rec.solver,
-            "p_hat": r.p_hat, "solvable_domain_rad": rec.solvable_domain_rad,
-            "noise_sigma": diag.noise.sigma_per_sample, "noise_method": diag.noise.method,
-            "domain_rad": rec.incident_field.domain_rad,
-        })
-        if "localisation" in g:  # stale: it belonged to an earlier reconstruction
-            del g["localisation"]
+    g.attrs["program"] = PROGRAM["reconstruct"]
+    g.attrs["version"] = software_version()
+    g.attrs["date"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    g.attrs["geometry"] = json.dumps(r.geometry.as_dict())
+    g.attrs["brdf"] = json.dumps(_brdf_dict(r.brdf))
+    g.attrs["notes"] = json.dumps(list(r.notes))
+    m = replace_group(g, "measured", "NXdata")
+    m["radiance"] = lf.radiance
+    m["radiance"].attrs["units"] = "DN/us (cos^4-corrected, proportional to radiance)"
+    m["y_mm"] = lf.y_mm
+    m["theta_rad"] = lf.theta_rad
+    m["cell_pixels"] = r.measured.cell_pixels
+    m.attrs["domain_rad"] = lf.domain_rad
+    m.attrs["d2_mm"] = lf.z_mm
+    m.attrs["sigma_rows"] = r.measured.sigma_rows
+    m.attrs["signal"] = "radiance"
+    c = replace_group(g, "reconstruction", "NXdata")
+    c["incident_radiance"] = rec.incident_field.radiance
+    c["points_mm"] = rec.incident_field.y_mm
+    c["theta_rad"] = rec.incident_field.theta_rad
+    c["filter_factors"] = np.atleast_2d(reg.filter_factors).mean(axis=0)
+    c["orders"] = rec.orders
+    c["signal_power"] = reg.signal_power
+    c["noise_power"] = reg.noise_power
+    c["gamma"] = diag.gamma
+    c["snr_eff"] = diag.snr_eff
+    c["delta_p"] = median_delta_p(diag.delta_p)
+    c["valid_fraction"] = rec.valid_fraction
+    c.attrs.update({
+        "signal": "incident_radiance", "method": reg.method,
+        "parameter_name": reg.parameter_name, "parameter": reg.parameter,
+        "effective_dof": reg.effective_dof, "residual_ratio": reg.residual_ratio,
+        "recoverable": rec.recoverable, "message": rec.message, "solver": rec.solver,
+        "p_hat": r.p_hat, "solvable_domain_rad": rec.solvable_domain_rad,
+        "noise_sigma": diag.noise.sigma_per_sample, "noise_method": diag.noise.method,
+        "domain_rad": rec.incident_field.domain_rad,
+    })
+    if "localisation" in g:  # stale: it belonged to an earlier reconstruction
+        del g["localisation"]
 
 
 def read_reconstruction(path: str | Path) -> dict[str, Any] | None:
+    """The reconstruction stored in ``path`` (a light-field results file, or a run file
+    analysed ``--into-run``), or None when it holds none."""
+    if not Path(path).is_file():
+        return None
     with h5py.File(path, "r") as f:
         if f"{GROUP}/reconstruction" not in f:
             return None
@@ -181,28 +209,66 @@ class LocalisationResult:
     figures: tuple[Path, ...] = ()
 
 
-def write_localisation(path: str | Path, det: Detection, p_hat: float, message: str) -> None:
-    with open_for_results(path) as f:
-        g = analysis_group(f, "lightfield")
-        loc = replace_group(g, "localisation", "NXdata")
-        loc["positions_mm"] = det.positions_mm
-        loc["positions_mm"].attrs["columns"] = "y_mm, z_mm"
-        loc["brightness_rp"] = det.brightness_rp
-        loc["brightness_conventional"] = det.brightness_conventional
-        loc["transverse_mm"] = np.array([r.transverse_mm for r in det.resolutions])
-        loc["depth_mm"] = np.array([r.depth_mm for r in det.resolutions])
-        loc["depth_profiles"] = det.depth_profiles
-        # What the depth is worth: the interval the data support, the flag, and the three
-        # estimates behind it (depth filter, matched filter, RP peak).
-        loc["depth_interval_mm"] = det.depth_interval_mm
-        loc["depth_interval_mm"].attrs["columns"] = "far_mm, near_mm"
-        loc["depth_estimates_mm"] = det.depth_estimates_mm
-        loc["depth_estimates_mm"].attrs["columns"] = (
-            "depth_filter_mm, matched_filter_mm, radiance_preserving_mm")
-        loc["quality"] = np.array(det.quality, dtype=h5py.string_dtype())
-        loc["stack_y_mm"] = det.stack.y_mm
-        loc["stack_z_mm"] = det.stack.z_mm
-        loc["stack_conventional"] = det.stack.conventional
-        loc["stack_rp"] = det.stack.radiance_preserving
-        loc.attrs.update({"count": det.count, "p_hat": p_hat, "message": message,
-                          "signal": "stack_rp"})
+def stored_options(path: str | Path) -> dict[str, Any]:
+    """The options recorded in a light-field results file (``{}`` when none)."""
+    if not Path(path).is_file():
+        return {}
+    try:
+        with h5py.File(path, "r") as f:
+            return json.loads(as_text(f["entry"].attrs.get("options_json", "{}")))
+    except (OSError, KeyError, ValueError):
+        return {}
+
+
+def write_localisation(path: str | Path, det: Detection, p_hat: float, message: str, *,
+                       run_id: str = "", options: dict[str, Any] | None = None,
+                       folder: str | Path | None = None, into_run: bool = False) -> Path:
+    """Store a localisation. In a results file (in ``folder``, default
+    ``DIR/RUN/lightfield/``): a new file holding the reconstruction it was made from
+    (copied from the current results file) and the localisation; with ``into_run`` in the
+    run file next to its reconstruction. Returns the file written."""
+    if into_run:
+        with open_for_results(path) as f:
+            _fill_localisation(analysis_group(f, "lightfield"), det, p_hat, message)
+        return Path(path)
+    old = results_path(path, "lightfield", folder)
+    recorded = {"reconstruct": stored_options(old).get("reconstruct", {}),
+                "locate": options or {}}
+    with write_results_file(path, "lightfield", run_id=run_id, program=PROGRAM["locate"],
+                            options=recorded, folder=folder) as g:
+        lf = analysis_group(g.file, "lightfield")
+        if old.is_file():
+            with h5py.File(old, "r") as src:
+                if GROUP in src:
+                    for key, value in src[GROUP].attrs.items():
+                        lf.attrs[key] = value
+                    for name in ("measured", "reconstruction"):
+                        if name in src[GROUP]:
+                            src.copy(src[GROUP][name], lf, name)
+        _fill_localisation(lf, det, p_hat, message)
+    return old
+
+
+def _fill_localisation(g: h5py.Group, det: Detection, p_hat: float, message: str) -> None:
+    loc = replace_group(g, "localisation", "NXdata")
+    loc["positions_mm"] = det.positions_mm
+    loc["positions_mm"].attrs["columns"] = "y_mm, z_mm"
+    loc["brightness_rp"] = det.brightness_rp
+    loc["brightness_conventional"] = det.brightness_conventional
+    loc["transverse_mm"] = np.array([r.transverse_mm for r in det.resolutions])
+    loc["depth_mm"] = np.array([r.depth_mm for r in det.resolutions])
+    loc["depth_profiles"] = det.depth_profiles
+    # What the depth is worth: the interval the data support, the flag, and the three
+    # estimates behind it (depth filter, matched filter, RP peak).
+    loc["depth_interval_mm"] = det.depth_interval_mm
+    loc["depth_interval_mm"].attrs["columns"] = "far_mm, near_mm"
+    loc["depth_estimates_mm"] = det.depth_estimates_mm
+    loc["depth_estimates_mm"].attrs["columns"] = (
+        "depth_filter_mm, matched_filter_mm, radiance_preserving_mm")
+    loc["quality"] = np.array(det.quality, dtype=h5py.string_dtype())
+    loc["stack_y_mm"] = det.stack.y_mm
+    loc["stack_z_mm"] = det.stack.z_mm
+    loc["stack_conventional"] = det.stack.conventional
+    loc["stack_rp"] = det.stack.radiance_preserving
+    loc.attrs.update({"count": det.count, "p_hat": p_hat, "message": message,
+                      "signal": "stack_rp"})

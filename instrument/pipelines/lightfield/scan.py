@@ -79,7 +79,11 @@ def read_scan(path: str | Path, geometry: LightFieldGeometry) -> MeasuredScan:
             cos4 = cos4[top:top + h]
         iz = axes.index("camera_z")
         iyaw = axes.index("detector_theta") if "detector_theta" in axes else None
-        dark_frames = [k for k in range(len(fpoint)) if not flight[k]]
+        # Dark frames of measured points only: a point whose frames a damaged file lost
+        # (status 2) holds zeros, and frames of no point (frame_point -1) were superseded.
+        valid = {int(i) for i, st in zip(index, status, strict=True) if st == 0}
+        dark_frames = [k for k in range(len(fpoint))
+                       if not flight[k] and int(fpoint[k]) in valid]
         shared_darks: dict[tuple[int, ...], NDArray[np.float64]] = {}
         ys, ths, rads, vars_, exps, idxs = [], [], [], [], [], []
         for row, pidx in enumerate(index):

@@ -30,6 +30,7 @@ from analysis.radiometry import (
     pinhole_relative_illumination,
     rate_to_radiance,
 )
+from instrument.run.layout import FRAMES_LOST
 from instrument.run.runfile import RunData, read_run
 
 __all__ = ["SphereCapture", "locate_sphere", "read_capture"]
@@ -117,7 +118,11 @@ def read_capture(path: str | Path, *, position_tol_deg: float = 0.5) -> SphereCa
         table[k, j] = row  # a point taken twice (resume): the last one counts
     if np.any(table < 0):
         missing = [(lights[k], objects[j]) for k, j in zip(*np.nonzero(table < 0), strict=True)]
-        raise ValueError(f"{run.path}: no image for (lighting, object) {missing}")
+        lost = run.index[run.point_status == FRAMES_LOST]
+        why = (f"; the frames of point(s) {', '.join(map(str, lost))} were lost to a damaged "
+               f"file: measure them again with `scatterlab resume --remeasure-lost "
+               f"{run.path}`" if lost.size else "")
+        raise ValueError(f"{run.path}: no image for (lighting, object) {missing}{why}")
     merger = _Merger(run)
     imgs, vars_, valid = [], [], []
     for row in table.ravel():

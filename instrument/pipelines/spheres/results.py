@@ -1,5 +1,7 @@
-"""Sphere-capture results in the run file: images, SH coefficients, relighting, the summary.
+"""Sphere-capture results: images, SH coefficients, relighting, the summary.
 
+The results file ``DIR/RUN/spheres/results.h5`` (ADR 0013) holds them under
+``/entry/analysis``; with ``--into-run`` the same group goes into the run file as well.
 ``/entry/analysis`` (NXprocess, replaced whole): ``results_json`` (:func:`summary`),
 ``images/`` (merged radiance, variance, validity per [lighting, object]), ``sh/`` (the
 images' SH coefficients, the BRDF transfer γ_l, the estimated lighting) and ``relight/``
@@ -17,10 +19,14 @@ import numpy as np
 
 from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT, SphereAnalysis
 from instrument.pipelines.spheres.capture import SphereCapture
-from instrument.run.results import open_for_results, replace_group
+from instrument.run.paths import results_path
+from instrument.run.results import open_for_results, replace_group, write_results_file
 from instrument.run.runfile import as_text
 
-__all__ = ["read_sphere_results", "summary", "write_sphere_analysis"]
+__all__ = ["fill_sphere_analysis", "read_sphere_results", "summary", "write_sphere_analysis",
+           "write_sphere_results"]
+
+PROGRAM = "scatterlab spheres"
 
 
 def summary(capture: SphereCapture, result: SphereAnalysis) -> dict[str, Any]:
@@ -63,48 +69,70 @@ def summary(capture: SphereCapture, result: SphereAnalysis) -> dict[str, Any]:
     }
 
 
+def write_sphere_results(path: str | Path, capture: SphereCapture, result: SphereAnalysis,
+                         *, run_id: str, options: dict[str, Any],
+                         folder: str | Path | None = None) -> Path:
+    """Write ``results.h5`` of the sphere analysis next to the run (or into ``folder``);
+    returns its path. The run file is not touched."""
+    with write_results_file(path, "spheres", run_id=run_id, program=PROGRAM, options=options,
+                            folder=folder) as g:
+        fill_sphere_analysis(g, capture, result)
+    return results_path(path, "spheres", folder)
+
+
 def write_sphere_analysis(path: str | Path, capture: SphereCapture,
                           result: SphereAnalysis) -> None:
-    """Write ``/entry/analysis`` (NXprocess, replacing an earlier analysis)."""
+    """Write ``/entry/analysis`` into the run file itself (``--into-run``), replacing an
+    earlier analysis."""
     with open_for_results(path) as f:
-        g = replace_group(f["entry"], "analysis", "NXprocess")
-        g.attrs["program"] = "scatterlab spheres"
-        g.attrs["references"] = ("Ramamoorthi & Hanrahan 2001; Mahajan, Ramamoorthi & "
-                                 "Curless, ECCV 2006 / PAMI 2008 (identities: their eqs. 10-25)")
-        g.create_dataset("results_json", data=json.dumps(summary(capture, result)),
-                         dtype=h5py.string_dtype())
-        img = replace_group(g, "images", "NXdata")
-        img.attrs["signal"] = "radiance"
-        img.attrs["axes_order"] = "lighting, object, row, column"
-        img.create_dataset("radiance", data=capture.radiance, compression="gzip")
-        img["radiance"].attrs["units"] = capture.units
-        img.create_dataset("variance", data=capture.variance, compression="gzip")
-        img.create_dataset("valid", data=capture.valid, compression="gzip")
-        img.create_dataset("point_row", data=capture.rows)
-        img.create_dataset("lighting_deg", data=np.array(capture.lighting_deg))
-        img.create_dataset("objects", data=np.array(capture.objects, dtype=object),
-                           dtype=h5py.string_dtype())
-        sh = replace_group(g, "sh", "NXdata")
-        sh.attrs["convention"] = ("real orthonormal, Condon-Shortley phase, theta colatitude "
-                                  "from +z (towards the camera); docs/decisions/0040")
-        sh.create_dataset("coeffs", data=result.coeffs)
-        sh.create_dataset("gamma", data=result.gamma)
-        if result.lighting is not None:
-            sh.create_dataset("lighting", data=result.lighting)
-            sh["lighting"].attrs["from_object"] = str(result.lighting_object)
-        rel = replace_group(g, "relight", "NXdata")
-        rel.attrs["signal"] = "predicted"
-        rel.create_dataset("predicted", data=result.predicted)
-        rel.create_dataset("measured", data=result.measured)
-        rel.create_dataset("observed", data=result.observed)
-        rel.attrs["l1_error"] = result.relight_l1
+        fill_sphere_analysis(replace_group(f["entry"], "analysis", "NXprocess"), capture,
+                             result)
+
+
+def fill_sphere_analysis(g: h5py.Group, capture: SphereCapture,
+                         result: SphereAnalysis) -> None:
+    """Fill an empty analysis group ``g`` (module docstring)."""
+    g.attrs["NX_class"] = "NXprocess"
+    g.attrs["program"] = PROGRAM
+    g.attrs["references"] = ("Ramamoorthi & Hanrahan 2001; Mahajan, Ramamoorthi & "
+                             "Curless, ECCV 2006 / PAMI 2008 (identities: their eqs. 10-25)")
+    g.create_dataset("results_json", data=json.dumps(summary(capture, result)),
+                     dtype=h5py.string_dtype())
+    img = replace_group(g, "images", "NXdata")
+    img.attrs["signal"] = "radiance"
+    img.attrs["axes_order"] = "lighting, object, row, column"
+    img.create_dataset("radiance", data=capture.radiance, compression="gzip")
+    img["radiance"].attrs["units"] = capture.units
+    img.create_dataset("variance", data=capture.variance, compression="gzip")
+    img.create_dataset("valid", data=capture.valid, compression="gzip")
+    img.create_dataset("point_row", data=capture.rows)
+    img.create_dataset("lighting_deg", data=np.array(capture.lighting_deg))
+    img.create_dataset("objects", data=np.array(capture.objects, dtype=object),
+                       dtype=h5py.string_dtype())
+    sh = replace_group(g, "sh", "NXdata")
+    sh.attrs["convention"] = ("real orthonormal, Condon-Shortley phase, theta colatitude "
+                              "from +z (towards the camera); docs/decisions/0040")
+    sh.create_dataset("coeffs", data=result.coeffs)
+    sh.create_dataset("gamma", data=result.gamma)
+    if result.lighting is not None:
+        sh.create_dataset("lighting", data=result.lighting)
+        sh["lighting"].attrs["from_object"] = str(result.lighting_object)
+    rel = replace_group(g, "relight", "NXdata")
+    rel.attrs["signal"] = "predicted"
+    rel.create_dataset("predicted", data=result.predicted)
+    rel.create_dataset("measured", data=result.measured)
+    rel.create_dataset("observed", data=result.observed)
+    rel.attrs["l1_error"] = result.relight_l1
 
 
 def read_sphere_results(path: str | Path) -> dict[str, Any] | None:
-    """The ``results_json`` a sphere analysis stored in a run file, or None."""
+    """The ``results_json`` of a sphere analysis in ``path`` (its results file, or a run
+    file analysed ``--into-run``), or None."""
+    if not Path(path).is_file():
+        return None
     with h5py.File(path, "r") as f:
         g = f.get("entry/analysis")
-        if g is None or g.attrs.get("program") != "scatterlab spheres":
+        if g is None or g.attrs.get("program") != PROGRAM:
             return None
         raw = g["results_json"][()]
         return json.loads(as_text(raw))

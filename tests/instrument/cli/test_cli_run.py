@@ -48,6 +48,7 @@ def test_run_on_sim_bench_then_runs_and_resume(tmp_path, capsys):
     assert main(["run", str(plan), "--out", str(out_dir), "--no-fsync"]) == 0
     out = capsys.readouterr().out
     assert "run finished: 3 of 3 points" in out and "run file:" in out
+    assert "angles, exposures, power readings" in out  # what this bench recorded
     path = next(out_dir.glob("*.h5"))
     with h5py.File(path, "r") as f:
         e = f["entry"]

@@ -231,7 +231,7 @@ def test_closed_loop_through_the_engine(tmp_path: Path, sample: Sample, seed: in
         assert f["entry"].attrs["status"] == "finished"
         assert f["entry/points/index"].shape[0] == 57
     assert main(["fit", str(path), "--out", str(tmp_path / "report"), "--no-cv"]) == 0
-    with h5py.File(path, "r") as f:
+    with h5py.File(tmp_path / "report" / "results.h5", "r") as f:
         g = f["entry/analysis"]
         res = json.loads(g["results_json"][()])
         params, stderr = g["chosen/params"][()], g["chosen/stderr"][()]

@@ -86,14 +86,18 @@ def test_read_run_points_and_frames(glossy_run) -> None:
 
 def test_cli_fit_writes_analysis_and_report(glossy_run, tmp_path, capsys) -> None:
     out = tmp_path / "report"
+    raw = glossy_run.read_bytes()
     assert main(["fit", str(glossy_run), "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "chosen model lambert+ggx" in text
+    assert "chosen model lambert+ggx" in text and f"results: {out / 'results.h5'}" in text
     for name in ("index.html", "inplane.png", "polar.png", "residuals.png", "dhr.png"):
         assert (out / name).stat().st_size > 1000
     page = (out / "index.html").read_text(encoding="utf-8")
     assert "Model comparison" in page and "Reciprocity" in page and "ggx.alpha" in page
-    with h5py.File(glossy_run, "r") as f:
+    assert glossy_run.read_bytes() == raw  # the raw run file stays as acquired (ADR 0013)
+    with h5py.File(out / "results.h5", "r") as f:
+        assert f["entry"].attrs["run_id"] == "closed-loop"
+        assert f["entry"].attrs["program"] == "scatterlab fit"
         g = f["entry/analysis"]
         assert g.attrs["NX_class"] == "NXprocess" and g.attrs["method"] == "absolute"
         assert g["reduced/brdf"].shape == (57,)
@@ -106,12 +110,13 @@ def test_cli_fit_writes_analysis_and_report(glossy_run, tmp_path, capsys) -> Non
     assert results["selection"]["chosen"] == "lambert+ggx"
     assert {r["name"] for r in results["selection"]["table"]} == set(default_candidates())
     assert results["model_adequate"] is True and "describes the data" in results["verdict"]
-    # fitting again replaces the group, it does not fail or duplicate
+    # fitting again replaces the results, it does not fail or duplicate
     assert main(["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx",
                  "--no-cv"]) == 0
-    with h5py.File(glossy_run, "r") as f:
+    with h5py.File(out / "results.h5", "r") as f:
         res = json.loads(f["entry/analysis/results_json"][()])
         assert list(res["fits"]) == ["lambert+ggx"]
+    assert glossy_run.read_bytes() == raw
 
 
 def test_relative_method_agrees_with_absolute(glossy_run, reference_run, tmp_path) -> None:
@@ -187,15 +192,16 @@ def test_missing_or_foreign_files_are_named_without_a_traceback(glossy_run, tmp_
                                                                 capsys) -> None:
     missing = tmp_path / "nope.h5"
     assert main(["fit", str(missing), "--no-write"]) == 2
-    assert f"run {missing}" in capsys.readouterr().out
+    assert capsys.readouterr().out == f"error: {missing}: no such run file\n"
     assert main(["fit", str(glossy_run), "--method", "relative", "--reference", str(missing),
                  "--no-write"]) == 2
-    assert f"--reference {missing}" in capsys.readouterr().out
+    assert capsys.readouterr().out == f"error: --reference: {missing}: no such run file\n"
     text = tmp_path / "notes.h5"
     text.write_text("not an HDF5 file")
     assert main(["fit", str(text), "--no-write"]) == 2
     out = capsys.readouterr().out
-    assert "cannot read" in out and str(text) in out
+    assert out == f"error: {text} is not a scatterlab run file (not an HDF5 file)\n"
+    assert "HDF5" in out and "errno" not in out.lower() and "unable" not in out.lower()
 
 
 def test_flat_field_run_corrects_prnu(glossy_run, tmp_path) -> None:
@@ -295,10 +301,10 @@ def test_cli_fit_receiver_options_reach_the_reduction(glossy_run, tmp_path, caps
     out = tmp_path / "r"
     base = ["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx", "--no-cv"]
     assert main([*base, "--beam-radius-mm", "1.5"]) == 0
-    with h5py.File(glossy_run, "r") as f:
+    with h5py.File(out / "results.h5", "r") as f:
         prov = json.loads(f["entry/analysis/provenance_json"][()])
     assert main([*base, "--point-receiver"]) == 0
-    with h5py.File(glossy_run, "r") as f:
+    with h5py.File(out / "results.h5", "r") as f:
         prov_point = json.loads(f["entry/analysis/provenance_json"][()])
     capsys.readouterr()
     text, text_point = json.dumps(prov), json.dumps(prov_point)

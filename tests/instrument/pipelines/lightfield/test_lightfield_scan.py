@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from pathlib import Path
@@ -41,6 +42,7 @@ from instrument.pipelines.lightfield.locate import locate_run
 from instrument.pipelines.lightfield.reconstruct import NOISE_DISAGREEMENT_FACTOR, reconstruct_run
 from instrument.pipelines.lightfield.results import GROUP
 from instrument.pipelines.lightfield.scan import MeasuredScan, assemble, read_scan
+from instrument.run.paths import results_dir, results_path
 
 ROOT = Path(__file__).resolve().parents[4]
 EXAMPLE = ROOT / "examples" / "lightfield_scan.toml"
@@ -166,19 +168,27 @@ def test_scan_records_one_light_field_row_per_stage_position(scan_run):
 
 def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan_run,
                                                                            capsys):
+    raw = scan_run.read_bytes()
     assert main(["reconstruct", str(scan_run)]) == 0
     out = capsys.readouterr().out
+    figs = results_dir(scan_run, "lightfield")  # DIR/RUN/lightfield/ (ADR 0013)
     assert "highest recovered angular order" in out and "figures:" in out
+    assert f"results: {figs / 'results.h5'}" in out
     # figures of merit are named in words, with how to judge them
     assert "degree of specularity" in out and "effective signal-to-noise ratio" in out
-    assert main(["locate", str(scan_run)]) == 0
+    with h5py.File(figs / "results.h5", "r") as f:
+        assert "localisation" not in f[GROUP] and "reconstruction" in f[GROUP]
+        assert json.loads(f["entry"].attrs["options_json"])["reconstruct"]["n_theta"] == 128
+    assert main(["locate", str(scan_run)]) == 0  # reads the reconstruction stored there
     out = capsys.readouterr().out
     assert "object(s) found" in out
-    figs = scan_run.with_suffix(".lightfield")
+    assert scan_run.read_bytes() == raw  # the raw run file stays as acquired
     for name in ("measured", "reconstructed", "diagnostics", "yz_map", "focal_stack",
                  "z_profiles"):
         assert (figs / f"{name}.png").stat().st_size > 10_000
-    with h5py.File(scan_run, "r") as f:
+    with h5py.File(figs / "results.h5", "r") as f:
+        assert f["entry"].attrs["program"] == "scatterlab locate"
+        assert set(json.loads(f["entry"].attrs["options_json"])) == {"reconstruct", "locate"}
         g = f[GROUP]
         rec = g["reconstruction"]
         assert rec.attrs["recoverable"] and rec.attrs["method"] == "wiener"
@@ -230,8 +240,9 @@ def test_a_diffuse_wall_model_reports_no_object_information(scan_run, capsys):
     out = capsys.readouterr().out
     assert rc == 1
     assert "no recoverable object information" in out
-    with h5py.File(scan_run, "r") as f:
+    with h5py.File(results_path(scan_run, "lightfield"), "r") as f:
         assert f[f"{GROUP}/localisation"].attrs["count"] == 0
+        assert json.loads(f["entry"].attrs["options_json"])["reconstruct"]["brdf"] is not None
 
 
 def test_geometry_file_round_trip_and_errors(tmp_path):
@@ -352,8 +363,8 @@ def test_cli_bad_input_names_the_file_or_option(scan_run, tmp_path, capsys):
     junk = tmp_path / "junk.h5"
     junk.write_text("not hdf5")
     cases = [
-        (["reconstruct", str(tmp_path / "missing.h5")], "missing.h5 does not exist"),
-        (["locate", str(junk)], "junk.h5 is not an HDF5 run file"),
+        (["reconstruct", str(tmp_path / "missing.h5")], "missing.h5: no such run file"),
+        (["locate", str(junk)], "junk.h5 is not a scatterlab run file (not an HDF5 file)"),
         (["reconstruct", str(scan_run), "--domain", "50", "-50"], "--domain 50 -50"),
         (["locate", str(scan_run), "--domain", "-95", "10"], "-90 < A < B < 90"),
         (["locate", str(scan_run), "--z-range", "-100", "-400"], "z_range_mm"),

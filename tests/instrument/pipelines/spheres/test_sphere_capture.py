@@ -54,6 +54,8 @@ from instrument.pipelines.spheres.capture import read_capture
 from instrument.pipelines.spheres.pipeline import analyse_run
 from instrument.pipelines.spheres.results import read_sphere_results, summary
 from instrument.plans import PlanError, build_plan, parse_plan
+from instrument.run.paths import results_path
+from instrument.run.runfile import read_run
 
 ROOT = Path(__file__).resolve().parents[4]
 EXAMPLE = ROOT / "examples" / "sphere_capture.toml"
@@ -292,10 +294,12 @@ def test_merged_hdr_radiance_is_the_scene_radiance(capture_run):
 
 @pytest.fixture(scope="module")
 def analysed(capture_run, tmp_path_factory):
-    """The capture analysed once (written into the run file, figure drawn) for the tests
-    that read its results."""
+    """The capture analysed once (results file written next to the run, figure drawn) for
+    the tests that read its results."""
     fig = tmp_path_factory.mktemp("spheres-figure") / "relight.png"
+    raw = capture_run.read_bytes()
     capture, res = analyse_run(capture_run, figure=fig)
+    assert capture_run.read_bytes() == raw  # the raw run file stays as acquired
     return capture, res, fig
 
 
@@ -314,11 +318,14 @@ def test_relighting_the_fourth_image_and_consistency(capture_run, analysed):
     assert res.lighting_object == "glossy" and res.lighting.shape == (2, 21 * 21)
     assert {"M21", "M25", "M10 0,1", "M19 satin"} <= set(res.identities)
     assert fig.stat().st_size > 10_000
-    stored = read_sphere_results(capture_run)
+    assert read_sphere_results(capture_run) is None  # nothing written into the run file
+    results = results_path(capture_run, "spheres")
+    stored = read_sphere_results(results)
     assert stored["relight"]["l1_error"] == pytest.approx(res.relight_l1)
     assert stored["consistency"]["inconsistent"] is False
     assert stored["consistency"]["limit"] == CONSISTENCY_LIMIT
-    with h5py.File(capture_run, "r") as f:
+    with h5py.File(results, "r") as f:
+        assert f["entry"].attrs["run_id"] == read_run(capture_run).run_id
         assert f["entry/analysis/images/radiance"].shape == (2, 2, 72, 72)
         assert f["entry/analysis/sh/coeffs"].shape == (2, 2, 441)
 
@@ -377,8 +384,7 @@ def test_a_spliced_capture_is_flagged_at_the_benchs_calibrated_threshold(capture
 
 
 def test_cli_spheres_reports(capture_run, tmp_path, capsys):
-    rc = main(["spheres", str(capture_run), "--figure", str(tmp_path / "f.png"),
-               "--no-write"])
+    rc = main(["spheres", str(capture_run), "--out", str(tmp_path), "--no-write"])
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "L1 error" in out and "consistent" in out
@@ -388,6 +394,8 @@ def test_cli_spheres_reports(capture_run, tmp_path, capsys):
     assert "two objects × two lightings" in out and "[eq. 21]" in out
     assert "Mahajan, Ramamoorthi & Curless 2006" in out
     assert not any(tag in out for tag in ("M10", "M16", "M19", "M21", "M25", "α"))
+    assert (tmp_path / "relighting.png").stat().st_size > 10_000
+    assert not (tmp_path / "results.h5").exists()
     assert main(["spheres", str(tmp_path / "missing.h5")]) == 2
 
 
@@ -410,4 +418,4 @@ def test_cli_spheres_names_an_unreadable_file(tmp_path, capsys):
     bad.write_text("not hdf5")
     assert main(["spheres", str(bad), "--no-write"]) == 2
     out = capsys.readouterr().out
-    assert str(bad) in out and "sphere_capture" in out, out
+    assert out == f"error: {bad} is not a scatterlab run file (not an HDF5 file)\n", out

@@ -1,0 +1,160 @@
+"""Duration estimates of this bench: the emulated stages' speed-up from their URLs, the
+camera's costs from the profile, and what a plan's estimate makes of them (issue 12 §6)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from instrument.bench.profile import DeviceSpec, ProfileError, load_profile, parse_profile
+from instrument.bench.timing import (
+    POINT_OVERHEAD_S,
+    bench_timing,
+    clock_speed,
+    exposes_in_wall_time,
+)
+from instrument.plans import build_plan, load_plan, parse_plan
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def spec(url: str, driver: str = "thorlabs_apt") -> DeviceSpec:
+    return DeviceSpec("sample_theta", driver, url)
+
+
+@pytest.mark.parametrize(("url", "speed"), [
+    ("simapt://sample_theta?model=K10CR1&speed=20", 20.0),
+    ("simsmc://camera_z?kind=linear&speed=50", 50.0),
+    ("simsmc://detector_theta?kind=rotary", 1.0),        # the emulator's default: real time
+    ("simzaber://x?device=1&speed=100", 100.0),           # any emulated controller
+    ("simapt://x?step=0.001", 1e9),                        # clock steps per reading
+    ("simapt://x?speed=-3", 1.0),                          # nonsense is not a speed-up
+    ("simapt://x?speed=fast", 1.0),
+    ("/dev/ttyUSB0", 1.0),                                 # real hardware runs in real time
+    ("loop://?speed=20", 1.0),                             # not an emulated controller
+])
+def test_the_speed_up_is_what_the_url_of_an_emulated_controller_says(url, speed):
+    assert clock_speed(spec(url)) == speed
+
+
+def test_a_simulated_camera_exposes_in_wall_time_only_when_its_url_says_so():
+    assert not exposes_in_wall_time(spec("simcam://camera?world=sim", "sim_camera"))
+    assert exposes_in_wall_time(spec("simcam://camera?realtime=1", "sim_camera"))
+    assert exposes_in_wall_time(spec("/dev/video0", "opencv_camera"))
+
+
+def test_camera_timing_keys_are_validated_per_field():
+    base = ('[bench]\nname = "t"\n[devices.camera]\ndriver = "{driver}"\nurl = "x"\n'
+            '{key} = {value}\n')
+    ok = parse_profile(base.format(driver="sim_camera", key="scene_change_s", value=2.5))
+    assert ok.devices["camera"].scene_change_s == 2.5
+    for driver, key, value, words in [
+        ("sim_camera", "frame_overhead_s", -1, "frame_overhead_s"),
+        ("sim_camera", "scene_change_s", '"slow"', "scene_change_s"),
+        ("pm100usb", "frame_overhead_s", 0.1, "only cameras take 'frame_overhead_s'"),
+    ]:
+        with pytest.raises(ProfileError) as exc:
+            parse_profile(base.format(driver=driver, key=key, value=value))
+        assert words in str(exc.value) and f"devices.camera.{key}" in str(exc.value)
+
+
+def test_motion_on_an_emulated_bench_takes_the_real_time_divided_by_its_speed_up():
+    profile = load_profile("sim-lightfield")  # camera_z at speed=50
+    plan = build_plan(load_plan(ROOT / "examples" / "lightfield_scan.toml"), profile)
+    est = plan.estimate()
+    assert est.speedup == pytest.approx(50.0, rel=1e-12)
+    assert est.bench_motion_s * 50.0 == pytest.approx(est.motion_s, rel=1e-12)
+    assert est.total_s == pytest.approx(est.bench_motion_s + est.bench_acquisition_s)
+    # the same bench run in real time: the estimate is the real motion
+    real = replace(profile, devices={
+        r: replace(d, url=d.url.replace("speed=50", "speed=1")) for r, d in
+        profile.devices.items()})
+    assert build_plan(plan.spec, real).estimate().bench_motion_s == pytest.approx(
+        est.motion_s, rel=1e-12)
+
+
+def test_acquisition_counts_frames_scene_changes_and_storage():
+    profile = load_profile("sim-spheres")
+    timing = bench_timing(profile)
+    plan = build_plan(load_plan(ROOT / "examples" / "sphere_capture.toml"), profile)
+    pol = plan.spec.acquisition
+    assert pol.mode == "auto" and pol.hdr and pol.dark == "per_point"
+    brackets = (pol.max_brackets + 1) / 2
+    n = len(plan.points)  # four lit points, each after a move
+    expected = n * (2 * brackets * timing.frame_overhead_s + timing.scene_change_s
+                    + POINT_OVERHEAD_S)
+    assert plan.estimate().bench_acquisition_s == pytest.approx(expected, rel=1e-12)
+    # a fixed exposure, no darks: one frame per point, and a camera exposing in real time
+    # adds the exposures
+    fixed = replace(plan.spec, acquisition=replace(pol, mode="fixed", hdr=False, dark="none"))
+    live = replace(profile, devices={**profile.devices, "camera": replace(
+        profile.devices["camera"], url=profile.devices["camera"].url + "&realtime=1")})
+    slow = build_plan(fixed, live).estimate().bench_acquisition_s
+    quick = build_plan(fixed, profile).estimate().bench_acquisition_s
+    assert slow - quick == pytest.approx(n * pol.exposure_us * 1e-6, rel=1e-9)
+
+
+def test_light_switches_without_moves_count_as_scene_changes():
+    """Dark frames at the start, then the lit points at the same position: the light
+    coming on is one change of the scene, the lit points after it none."""
+    text = (ROOT / "examples" / "calibration_flat.toml").read_text()
+    profile = load_profile("sim")
+    plan = build_plan(parse_plan(text), profile)
+    timing = bench_timing(profile, plan.axes)
+    lit = sum(p.light for p in plan.points)
+    frames = sum(plan.spec.acquisition.frames for _ in plan.points)
+    est = plan.estimate()
+    assert lit >= 1 and est.bench_motion_s == 0
+    assert est.bench_acquisition_s == pytest.approx(
+        frames * timing.frame_overhead_s + timing.scene_change_s
+        + len(plan.points) * POINT_OVERHEAD_S, rel=1e-12)
+
+
+def test_homing_is_estimated_per_axis_and_added_only_for_axes_not_homed(tmp_path):
+    from instrument.run.events import RunStarted
+    from instrument.run.runner import start_run
+    from tests.instrument.helpers import IDEAL_PROFILE, ideal_bench, inplane_plan
+
+    profile = load_profile("sim")
+    plan = build_plan(load_plan(ROOT / "examples" / "brdf_inplane.toml"), profile)
+    est = plan.estimate()
+    speed = {r: clock_speed(profile.devices[r]) for r in plan.axes}
+    assert est.homing_s == pytest.approx({r: profile.devices[r].home_s / speed[r]
+                                          for r in plan.axes})
+    # the ideal bench's axes are always homed: the run's first estimate has no homing in it
+    text = IDEAL_PROFILE.replace('on_failure = "pause"', 'on_failure = "pause"\n'
+                                 ).replace("acceleration = 10.0\n",
+                                           "acceleration = 10.0\nhome_s = 30.0\n", 1)
+    bench = ideal_bench(text)
+    ideal = build_plan(parse_plan(inplane_plan()), bench.profile)
+    assert sum(ideal.estimate().homing_s.values()) == 30.0
+    engine = start_run(ideal, bench, runs_dir=tmp_path, fsync=False, catalog=False)
+    started = []
+    engine.subscribe(lambda ev: started.append(ev) if isinstance(ev, RunStarted) else None)
+    engine.run()
+    assert started[0].estimated_s == pytest.approx(ideal.estimate().total_s)
+
+
+def test_a_run_on_freshly_powered_emulated_stages_counts_their_homing(tmp_path):
+    from drivers.transport import add_url_handler_package
+    from instrument.bench.devices import open_bench
+    from instrument.run.events import RunStarted
+    from instrument.run.runner import start_run
+
+    add_url_handler_package("hw_mocks.urlhandler")
+    profile = load_profile("sim-lightfield")
+    plan = build_plan(parse_plan(
+        '[plan]\nkind = "lightfield"\nname = "two rows"\n[sample]\nname = "wall"\n'
+        '[scan]\ncamera_z = [0.0, 1.0]\n'
+        '[acquisition]\nmode = "fixed"\nexposure_us = 5000\ndetectors = ["camera"]\n'),
+        profile)
+    est = plan.estimate()
+    assert est.homing_s["camera_z"] > 0
+    with open_bench(profile) as bench:
+        engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False, catalog=False)
+        started = []
+        engine.subscribe(lambda ev: started.append(ev) if isinstance(ev, RunStarted) else None)
+        engine.run()
+    assert started[0].estimated_s == pytest.approx(est.total_s + est.homing_s["camera_z"])
