@@ -9,18 +9,26 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from instrument.batch.analyses import fit_arguments, reduction_defaults
 from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
 from instrument.pipelines.brdf.pipeline import fit_run
-from instrument.pipelines.brdf.reduce import ReductionOptions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="BRDF of a run: reduce, fit models, select, report")
     p.add_argument("run", help="run file (.h5) of a brdf_in_plane or brdf_hemisphere plan")
+    add_fit_options(p)
+    p.add_argument("--out", default=None, help="report folder (default: <run>_report)")
+    p.add_argument("--no-write", action="store_true",
+                   help="leave the run file untouched (report only)")
+    p.set_defaults(func=run)
+
+
+def add_fit_options(p: argparse.ArgumentParser) -> None:
+    """The analysis options of ``scatterlab fit``, shared with ``scatterlab batch fit``."""
     p.add_argument("--models", default=",".join(DEFAULT_MODELS),
                    help="comma-separated candidates, '+' for sums "
                    f"(default: {','.join(DEFAULT_MODELS)})")
-    p.add_argument("--out", default=None, help="report folder (default: <run>_report)")
     p.add_argument("--criterion", default="bic", choices=("bic", "aic", "aicc", "cv"),
                    help="model-selection rule (default: bic)")
     p.add_argument("--method", default="absolute", choices=("absolute", "relative"))
@@ -55,41 +63,65 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "and report the bootstrap σ and 95 %% interval (default: 0, off)")
     p.add_argument("--no-cv", action="store_true",
                    help="skip the cross-validation columns of the comparison")
-    p.add_argument("--no-write", action="store_true",
-                   help="leave the run file untouched (report only)")
-    p.set_defaults(func=run)
 
 
-def _missing_inputs(args: argparse.Namespace) -> list[str]:
-    """'<option> <path>' for every named input file that does not exist."""
-    named = [("run", args.run), ("--reference", args.reference), ("--flat", args.flat),
-             ("--signature", args.signature), ("--reference-table", args.reference_table),
-             ("--camera-calibration", args.camera_calibration)]
-    return [f"{opt} {path}" for opt, path in named
-            if path is not None and not Path(path).is_file()]
+#: Companion files of the fit options, by option name and attribute.
+_COMPANIONS = (("--reference", "reference"), ("--flat", "flat"), ("--signature", "signature"),
+               ("--reference-table", "reference_table"),
+               ("--camera-calibration", "camera_calibration"))
+
+
+def fit_options(args: argparse.Namespace) -> dict:
+    """The fit options as plain data (companion files as absolute paths), the form
+    :func:`instrument.batch.analyses.fit_arguments` takes and a results file records.
+
+    Raises
+    ------
+    ValueError
+        An option out of range or a companion file that does not exist (named).
+    """
+    if args.bootstrap < 0:
+        raise ValueError(f"--bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
+    missing = [f"{opt} {getattr(args, attr)}" for opt, attr in _COMPANIONS
+               if getattr(args, attr) is not None and not Path(getattr(args, attr)).is_file()]
+    if missing:
+        raise ValueError(f"no such file: {'; '.join(missing)}")
+
+    def path(attr: str) -> str | None:
+        v = getattr(args, attr)
+        return None if v is None else str(Path(v).resolve())
+
+    reduction = {
+        **reduction_defaults(),
+        "method": args.method, "detector": args.detector,
+        "cosine_corrected": args.cosine_corrected, "incident_power_w": args.incident_power_w,
+        "u_incident_power_rel": args.incident_power_u, "sigma_theta_deg": args.sigma_theta_deg,
+        "receiver_distance_mm": args.distance_mm,
+        "camera_calibration": path("camera_calibration"), "flat_run": path("flat"),
+        "reference_run": path("reference"), "signature_run": path("signature"),
+        "reference_table": path("reference_table"), "beam_radius_mm": args.beam_radius_mm,
+        "receiver_geometry": not args.point_receiver,
+    }
+    return {
+        "reduction": reduction,
+        "models": [m.strip() for m in args.models.split(",") if m.strip()],
+        "criterion": args.criterion,
+        "run_cv": not args.no_cv,
+        "n_bootstrap": int(args.bootstrap),
+    }
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.bootstrap < 0:
-        print(f"error: --bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
+    if not Path(args.run).is_file():
+        print(f"error: no such file: run {args.run}")
         return 2
-    missing = _missing_inputs(args)
-    if missing:
-        print(f"error: no such file: {'; '.join(missing)}")
-        return 2
-    opts = ReductionOptions(
-        method=args.method, detector=args.detector, cosine_corrected=args.cosine_corrected,
-        incident_power_w=args.incident_power_w, u_incident_power_rel=args.incident_power_u,
-        sigma_theta_deg=args.sigma_theta_deg, receiver_distance_mm=args.distance_mm,
-        camera_calibration=args.camera_calibration, flat_run=args.flat,
-        reference_run=args.reference, signature_run=args.signature,
-        reference_table=args.reference_table,
-        beam_radius_mm=args.beam_radius_mm, receiver_geometry=not args.point_receiver,
-    )
-    models = [m.strip() for m in args.models.split(",") if m.strip()]
     try:
-        done = fit_run(args.run, opts, models, criterion=args.criterion, run_cv=not args.no_cv,
-                       n_bootstrap=args.bootstrap, report_dir=args.out,
+        options = fit_options(args)
+    except ValueError as err:
+        print(f"error: {err}")
+        return 2
+    try:
+        done = fit_run(args.run, **fit_arguments(options), report_dir=args.out,
                        write=not args.no_write)
     except KeyError as err:
         print(f"error: {err.args[0] if err.args else err}")

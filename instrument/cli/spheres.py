@@ -25,6 +25,17 @@ from instrument.pipelines.spheres.pipeline import analyse_run
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("spheres", help="relight and check a sphere capture (SH analysis)")
     p.add_argument("run", help="run file (.h5) of a sphere_capture plan")
+    add_sphere_options(p)
+    p.add_argument("--figure", default=None,
+                   help="figure path (default <run>.spheres.png; 'none' for no figure)")
+    p.add_argument("--no-write", action="store_true",
+                   help="do not write the results into the run file")
+    p.set_defaults(func=run)
+
+
+def add_sphere_options(p: argparse.ArgumentParser) -> None:
+    """The analysis options of ``scatterlab spheres``, shared with ``scatterlab batch
+    spheres``."""
     p.add_argument("--lmax", type=int, default=20, help="SH order of the fits (default 20)")
     p.add_argument("--lmax-check", type=int, default=12,
                    help="orders 0..N of M21 used by the consistency check (default 12)")
@@ -37,11 +48,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold-scale", type=float, default=1.0,
                    help="multiply the bootstrap threshold by the bench's calibrated factor "
                         "(BENCHMARKS.md sphere_capture; default 1: noise-only threshold)")
-    p.add_argument("--figure", default=None,
-                   help="figure path (default <run>.spheres.png; 'none' for no figure)")
-    p.add_argument("--no-write", action="store_true",
-                   help="do not write the results into the run file")
-    p.set_defaults(func=run)
 
 
 def _option_error(args: argparse.Namespace) -> str | None:
@@ -63,10 +69,30 @@ def _option_error(args: argparse.Namespace) -> str | None:
     return None
 
 
-def run(args: argparse.Namespace) -> int:
+def sphere_options(args: argparse.Namespace) -> dict:
+    """The analysis options as plain data: the keyword arguments of
+    :func:`instrument.pipelines.spheres.analyse.analyse_capture`.
+
+    Raises
+    ------
+    ValueError
+        The first out-of-range option, named as on the command line.
+    """
     bad = _option_error(args)
     if bad is not None:
-        print(f"error: {bad}")
+        raise ValueError(bad)
+    return {"lmax": int(args.lmax), "lmax_check": int(args.lmax_check),
+            "max_view_angle_deg": float(args.max_view_angle),
+            "check_view_angle_deg": float(args.check_view_angle),
+            "false_alarm": float(args.false_alarm),
+            "threshold_scale": float(args.threshold_scale)}
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        options = sphere_options(args)
+    except ValueError as err:
+        print(f"error: {err}")
         return 2
     fig = args.figure
     if fig is None:
@@ -74,12 +100,7 @@ def run(args: argparse.Namespace) -> int:
     elif fig.lower() == "none":
         fig = None
     try:
-        capture, res = analyse_run(
-            args.run, write=not args.no_write, figure=fig, lmax=args.lmax,
-            lmax_check=args.lmax_check, max_view_angle_deg=args.max_view_angle,
-            check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
-            threshold_scale=args.threshold_scale,
-        )
+        capture, res = analyse_run(args.run, write=not args.no_write, figure=fig, **options)
     except (ValueError, OSError, KeyError) as err:
         print(f"error: {args.run}: {err} (is it the run file of a sphere_capture plan?)")
         return 2
