@@ -12,15 +12,25 @@ and the camera method's geometric systematics at high signal.
 3. High SNR (1024² px, 80 % full well, 4 frames averaged): the sim bench's sample fitted
    with the receiver model and with the BRDF at the nominal angles, z = (estimate − truth)/σ.
 
-Run: ``python benchmarks/bench_brdf_closed_loop.py [--quick] [--seeds N] [--high-snr N]``.
+Run: ``python benchmarks/bench_brdf_closed_loop.py [--quick] [--seeds N] [--high-snr N]
+[--workers N | --scheduler ADDRESS]``. With ``--workers``/``--scheduler`` the seeds run as
+Dask tasks (ADR 0070): the tables are the same, value for value, as the serial run's (every
+seed carries its own RNG seeds).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+
+# One BLAS thread, as in the Dask workers, so that serial and cluster runs compute alike.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np
 
@@ -29,21 +39,30 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from analysis.brdf import get_model
 from analysis.brdf.fit import fit_brdf
 from analysis.brdf.reduction import absolute_brdf, receiver_model, solid_angle_sr
+from instrument.cli._cluster import add_cluster_options, mapper, open_cluster
 from tests.instrument.pipelines.brdf.test_closed_loop import closed_loop
-from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, receiver, reduce_seed, render
+from tests.instrument.sim_scan import (
+    SAMPLES,
+    Rendered,
+    Sample,
+    ScanSetup,
+    receiver,
+    reduce_seed,
+    render,
+)
 
 #: The sim bench's own sample (instrument/bench/profiles/sim.toml [simulation.scene]).
 EXAMPLE = Sample("example", "lambert+ggx", (0.5, 0.2, 0.2))
 PHOTON_J = 6.62607015e-34 * 299792458.0 / 633e-9
 
 
-def coverage_table(n: int) -> None:
+def coverage_table(n: int, run_map: Callable | None = None) -> None:
     print("| sample | truth | seeds | inside 2σ (per parameter) | all inside 2σ | right model "
           "| std of z | estimate spread / reported σ | time (s) |")
     print("|---|---|---:|---|---:|---:|---|---|---:|")
     for s in SAMPLES:
         t0 = time.perf_counter()
-        st = closed_loop(s, range(n))
+        st = closed_loop(s, range(n), mapper=run_map)
         dt = time.perf_counter() - t0
         names = get_model(s.model).param_names
         truth = ", ".join(f"{k}={v:g}" for k, v in zip(names, s.params, strict=True))
@@ -83,27 +102,37 @@ def geometry_table() -> None:
               f"{d[spec].mean():+.2e} |")
 
 
-def high_snr_table(seeds: int) -> None:
-    setup = ScanSetup(sensor_px=1024, power_w=1e-3, fill=0.8, frames=4)
-    r = render(setup, EXAMPLE)
+def high_snr_seed(seed: int, *, r: Rendered) -> tuple[np.ndarray, float, np.ndarray]:
+    """One high-SNR seed: σ, χ² and z of the receiver-aware fit, z of the nominal-angle fit."""
     a = r.angles_rad
     truth = np.array(EXAMPLE.params)
-    seen = receiver_model(get_model(EXAMPLE.model), receiver(setup))
+    seen = receiver_model(get_model(EXAMPLE.model), receiver(r.setup))
     plain = get_model(EXAMPLE.model)
+    pts = reduce_seed(r, seed)
+    fit = fit_brdf(seen, pts.brdf, *a.T, sigma=pts.u_point)
+    naive = fit_brdf(plain, pts.brdf, *a.T, sigma=pts.u_point)
+    z = (fit.params - truth) / fit.stderr
+    z0 = (naive.params - truth) / naive.stderr
+    return fit.stderr, float(fit.chi2), np.stack([z, z0])
+
+
+def high_snr_table(seeds: int, run_map: Callable | None = None) -> None:
+    setup = ScanSetup(sensor_px=1024, power_w=1e-3, fill=0.8, frames=4)
+    r = render(setup, EXAMPLE)
     print("| seed | σ (ρd, ks, α) | z, receiver-aware fit | χ² (54 dof) "
           "| z, BRDF at nominal angles |")
     print("|---:|---|---|---:|---|")
+    if run_map is None:
+        per_seed = [high_snr_seed(seed, r=r) for seed in range(seeds)]
+    else:
+        per_seed = run_map(high_snr_seed, range(seeds), r=r)
     chi2, zs = [], []
-    for seed in range(seeds):
-        pts = reduce_seed(r, seed)
-        fit = fit_brdf(seen, pts.brdf, *a.T, sigma=pts.u_point)
-        naive = fit_brdf(plain, pts.brdf, *a.T, sigma=pts.u_point)
-        z = (fit.params - truth) / fit.stderr
-        z0 = (naive.params - truth) / naive.stderr
-        sig = ", ".join(f"{x:.2g}" for x in fit.stderr)
-        print(f"| {seed} | {sig} | {', '.join(f'{x:+.2f}' for x in z)} | {fit.chi2:.1f} | "
+    for seed, (stderr, c2, zz) in enumerate(per_seed):
+        z, z0 = zz
+        sig = ", ".join(f"{x:.2g}" for x in stderr)
+        print(f"| {seed} | {sig} | {', '.join(f'{x:+.2f}' for x in z)} | {c2:.1f} | "
               f"{', '.join(f'{x:+.2f}' for x in z0)} |")
-        chi2.append(fit.chi2)
+        chi2.append(c2)
         zs.append(z)
     z_all = np.array(zs)
     print(f"\n{seeds} seeds: χ² = {np.mean(chi2):.1f} ± {np.std(chi2) / np.sqrt(seeds):.1f}; "
@@ -118,16 +147,21 @@ def main() -> int:
                     help="seeds per sample (default 50; 0 skips the coverage table)")
     ap.add_argument("--high-snr", type=int, default=None,
                     help="high-SNR seeds (default 3; 0 skips the full-resolution parts)")
+    add_cluster_options(ap, local_by_default=False)
     args = ap.parse_args()
     n = args.seeds if args.seeds is not None else (10 if args.quick else 50)
-    if n > 0:
-        coverage_table(n)
     hs = args.high_snr if args.high_snr is not None else (1 if args.quick else 3)
-    if hs > 0:
-        print()
-        geometry_table()
-        print()
-        high_snr_table(hs)
+    t0 = time.perf_counter()
+    with open_cluster(args, local_by_default=False, out=sys.stderr) as client:
+        run_map = mapper(client)
+        if n > 0:
+            coverage_table(n, run_map)
+        if hs > 0:
+            print()
+            geometry_table()
+            print()
+            high_snr_table(hs, run_map)
+    print(f"\nwall time {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return 0
 
 

@@ -20,8 +20,10 @@ Figures: BENCHMARKS.md, section brdf_closed_loop.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -33,6 +35,7 @@ from analysis.brdf.selection import select_model
 from tests.instrument.sim_scan import (
     CANDIDATES,
     SAMPLES,
+    Rendered,
     Sample,
     ScanSetup,
     profile_text,
@@ -53,25 +56,37 @@ class LoopStats:
     spread_over_sigma: np.ndarray  # std of the estimates / mean reported σ
 
 
-def closed_loop(sample: Sample, seeds: range, setup: ScanSetup | None = None) -> LoopStats:
-    """Scan, reduce, select and compare with the truth for every seed."""
-    setup = setup or ScanSetup()
-    r = render(setup, sample)
+def seed_fit(seed: int, *, r: Rendered, sample: Sample) -> tuple[np.ndarray, np.ndarray, bool]:
+    """One seed of the loop: acquire every point of ``r`` with sensor ``seed``, reduce,
+    select; the true model's estimates and σ, and whether it was the one chosen."""
     # instrument-aware candidates: each as the camera sees it (footprint through the pupil)
-    cands = [receiver_model(get_model(c), receiver(setup)) for c in CANDIDATES]
-    truth = np.array(sample.params)
+    cands = [receiver_model(get_model(c), receiver(r.setup)) for c in CANDIDATES]
     a = r.angles_rad
-    est, err, right = [], [], []
-    for seed in seeds:
-        pts = reduce_seed(r, seed)
-        sel = select_model(cands, pts.brdf, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
-                           sigma=pts.u_point, criterion="bic", run_cv=False, n_starts=3,
-                           seed=seed)
-        right.append(sel.chosen == sample.model)
-        fit = sel.fits[sample.model]
-        est.append(fit.params)
-        err.append(fit.stderr)
-    est, err = np.array(est), np.array(err)
+    pts = reduce_seed(r, seed)
+    sel = select_model(cands, pts.brdf, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                       sigma=pts.u_point, criterion="bic", run_cv=False, n_starts=3, seed=seed)
+    fit = sel.fits[sample.model]
+    return fit.params, fit.stderr, sel.chosen == sample.model
+
+
+def closed_loop(sample: Sample, seeds: Iterable[int], setup: ScanSetup | None = None, *,
+                mapper: Callable[..., Sequence[Any]] | None = None) -> LoopStats:
+    """Scan, reduce, select and compare with the truth for every seed.
+
+    ``mapper(fn, items, **shared)`` runs the seeds elsewhere (a Dask cluster:
+    ``instrument.batch.cluster.cluster_map``); every seed carries its own RNG seeds, so the
+    statistics equal the loop's value for value.
+    """
+    r = render(setup or ScanSetup(), sample)
+    seeds = list(seeds)
+    if mapper is None:
+        per_seed = [seed_fit(seed, r=r, sample=sample) for seed in seeds]
+    else:
+        per_seed = mapper(seed_fit, seeds, r=r, sample=sample)
+    truth = np.array(sample.params)
+    est = np.array([p for p, _, _ in per_seed])
+    err = np.array([e for _, e, _ in per_seed])
+    right = [c for _, _, c in per_seed]
     z = (est - truth) / err
     inside = np.abs(z) <= 2.0
     return LoopStats(sample.name, len(seeds), inside.mean(axis=0),
