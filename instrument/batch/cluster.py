@@ -76,10 +76,17 @@ def connect(scheduler: str | None = None, workers: int | None = None, *,
     os.environ.update(BLAS_ENV)
     config = {"distributed.scheduler.allowed-failures": int(retries),
               "distributed.nanny.pre-spawn-environ": {
-                  **dask.config.get("distributed.nanny.pre-spawn-environ", {}), **BLAS_ENV}}
+                  **dask.config.get("distributed.nanny.pre-spawn-environ", {}), **BLAS_ENV},
+              # The statistical profiler samples the task thread's stack every 10 ms and
+              # takes the GIL to do it: measurable on analyses that are mostly Python-level
+              # loops (BENCHMARKS.md batch). The dashboard loses its profile page only.
+              "distributed.worker.profile.enabled": False}
     with dask.config.set(config):
+        # Without the dashboard the scheduler still serves a small HTTP endpoint (health,
+        # metrics): on a free port, so that it never competes for 8787.
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=":8787" if dashboard else None,
+                               dashboard_address=":8787" if dashboard else ":0",
+                               scheduler_kwargs={"dashboard": bool(dashboard)},
                                silence_logs=logging.ERROR, env=dict(BLAS_ENV))
     try:
         client = Client(cluster, timeout=timeout_s)

@@ -22,7 +22,7 @@ from instrument.batch.task import Outcome
 __all__ = ["summary_columns", "write_csv", "write_html"]
 
 _HEAD = ("run", "run_id", "sample", "kind", "analysis", "status", "result")
-_TAIL = ("flags", "cause", "seconds", "worker")
+_TAIL = ("flags", "cause", "seconds", "cpu_seconds", "worker")
 
 
 def summary_columns(outcomes: Sequence[Outcome]) -> list[str]:
@@ -38,8 +38,8 @@ def summary_columns(outcomes: Sequence[Outcome]) -> list[str]:
 def _cell(o: Outcome, col: str) -> Any:
     if col == "flags":
         return "; ".join(o.flags)
-    if col == "seconds":
-        return round(o.seconds, 3)
+    if col in ("seconds", "cpu_seconds"):
+        return round(getattr(o, col), 3)
     if col in _HEAD or col in _TAIL:
         return getattr(o, col)
     return (o.values or {}).get(col, "")

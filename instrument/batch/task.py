@@ -36,6 +36,7 @@ import h5py
 
 from instrument.batch.analyses import AnalysisFailed, get_analysis
 from instrument.run.results import (
+    RESULTS_NAME,
     already_done,
     put_json,
     results_dir,
@@ -81,6 +82,9 @@ class Outcome:
         Why it failed, was skipped or not applicable ("" when analysed).
     seconds : float
         Wall time of the task.
+    cpu_seconds : float
+        CPU time of the task's thread (below ``seconds`` when the process waited for a
+        core or for the disk).
     worker : str
         ``host:pid`` of the process that ran it.
     detail : str
@@ -98,6 +102,7 @@ class Outcome:
     flags: tuple[str, ...] = ()
     cause: str = ""
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
     worker: str = ""
     detail: str = ""
 
@@ -171,6 +176,15 @@ def _detail(err: BaseException, limit: int = 4000) -> str:
     return text[-limit:]
 
 
+def _remove_stale_temporaries(folder: Path) -> None:
+    """Delete temporary results files left by a task killed while writing (called with the
+    run's lock held, so no live writer owns one)."""
+    if folder.is_dir():
+        for tmp in folder.glob(f".{RESULTS_NAME}.*.tmp"):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+
+
 def _previous(run_path: str | Path, pipeline: str) -> dict[str, Any]:
     """The summary row an earlier analysis stored in the results file ({} if none)."""
     import json
@@ -184,19 +198,23 @@ def _previous(run_path: str | Path, pipeline: str) -> dict[str, Any]:
 
 
 def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
-             report: bool = True, force: bool = False) -> Outcome:
+             report: bool = True, force: bool = False,
+             lock_wait_s: float = LOCK_WAIT_S) -> Outcome:
     """Analyse one run (module docstring); never raises for a problem of the run.
 
     ``report``: make the analysis's report and figures in ``DIR/RUN/<pipeline>/``.
+    ``lock_wait_s``: how long to wait for another analysis of the run to finish.
     """
     t0 = time.perf_counter()
+    c0 = time.thread_time()
     spec = get_analysis(analysis)
     run = str(run_path)
     ident: dict[str, str] = {}
 
     def outcome(status: str, **kw: Any) -> Outcome:
         return Outcome(run, analysis, status, seconds=time.perf_counter() - t0,
-                       worker=_worker_name(), **ident, **kw)
+                       cpu_seconds=time.thread_time() - c0, worker=_worker_name(), **ident,
+                       **kw)
 
     try:
         s = read_summary(run)
@@ -209,7 +227,8 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
                            "'running'); analyse it when it ends, or resume it if its "
                            "process was killed")
         record = record_options(analysis, options, report)
-        with run_lock(run):
+        with run_lock(run, wait_s=lock_wait_s):
+            _remove_stale_temporaries(results_dir(run, spec.pipeline))
             if not force and already_done(run, spec.pipeline, run_id=s.run_id,
                                           options=record):
                 prev = _previous(run, spec.pipeline)
