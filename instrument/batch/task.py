@@ -159,7 +159,7 @@ def _cause(err: BaseException, run: str) -> str:
     if isinstance(err, AnalysisFailed):
         return f"not usable: {err}"
     if isinstance(err, FileNotFoundError):
-        return f"no such file: {run}"
+        return f"no such file: {err.filename or run}"
     if isinstance(err, OSError):
         # h5py's OSError for a non-HDF5, truncated or locked file does not always name it
         return f"cannot read {run} as a scatterlab run file (HDF5): {err}"
@@ -237,6 +237,8 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
                                cause="already analysed with the same options (--force "
                                      "analyses it again)")
             out_dir = results_dir(run, spec.pipeline) if report else None
+            if out_dir is not None:
+                out_dir.mkdir(parents=True, exist_ok=True)
             done = spec.adapter(run, options, out_dir=out_dir)
             row = {**done.row(), **ident}
             with write_results_file(run, spec.pipeline, run_id=s.run_id,

@@ -7,6 +7,8 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+import subprocess
+import sys
 import threading
 
 import h5py
@@ -156,7 +158,7 @@ def test_summary_csv_reads_back_value_for_value_and_html_names_every_run(tmp_pat
     rows = [
         Outcome("a.h5", "fit", "analysed", "a", "s1", "brdf_in_plane", "lambert: ρ = 0.8",
                 {"model": "lambert", "lambert.rho": 0.1 + 0.2, "chi2": np.float64(3.5).item()},
-                ("a <b> flag",), "", 1.0, "h:1"),
+                ("a <b> flag",), seconds=1.0, worker="h:1"),
         Outcome("b.h5", "fit", "failed", cause="cannot read b.h5", detail="Traceback …"),
         Outcome("c.h5", "fit", "skipped", "c", "s2", "brdf_in_plane", "oren_nayar",
                 {"model": "oren_nayar", "oren_nayar.sigma": 1e-300}),
@@ -218,3 +220,29 @@ def test_adapter_rows_are_plain_data(runs):
     assert isinstance(a, Analysed)
     json.dumps(a.row(), allow_nan=True)  # no numpy scalars: JSON and pickling stay exact
     assert all(type(v) in (str, int, float, bool) for v in a.values.values())
+
+
+_NO_DASK = """
+import sys
+for name in ("dask", "distributed", "dask_jobqueue"):
+    sys.modules[name] = None  # importing them now raises ImportError, as if not installed
+from instrument.cli import build_parser, main
+build_parser()
+assert not [m for m in sys.modules if m.split(".")[0] in ("dask", "distributed", "bokeh")
+            and sys.modules[m] is not None]
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_without_dask_the_cli_starts_and_batches_here_and_says_what_to_install(runs):
+    def scatterlab(*argv: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", _NO_DASK, *argv], capture_output=True,
+                              text=True, timeout=300, check=False)
+
+    here = scatterlab("batch", "fit", str(runs / "run-00.h5"), "--workers", "0", "--no-cv",
+                      "--no-report")
+    assert here.returncode == 0, here.stdout + here.stderr
+    assert "1 analysed" in here.stdout
+    cluster = scatterlab("batch", "fit", str(runs / "run-00.h5"), "--workers", "2")
+    assert cluster.returncode == 2
+    assert "install the cluster extra" in cluster.stdout and "--workers 0" in cluster.stdout
