@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -132,12 +133,13 @@ def run_on_cluster(client: Client, analysis: str, runs: Sequence[str | Path],
     they end.
     """
     futures = []
+    batch = uuid.uuid4().hex[:8]
     for i, run in enumerate(runs):
-        # pure=False: a rerun is a new task even with equal arguments (the file may have
-        # changed); the key names the run on the dashboard
+        # a key of this batch's own (a rerun is new work even with equal arguments: the
+        # file may have changed) that names the run on the dashboard
         futures.append(client.submit(run_task, analysis, str(run), dict(options),
                                      report=report, force=force, pure=False,
-                                     key=f"{analysis}-{i:05d}-{Path(run).name}"))
+                                     key=f"{analysis}-{batch}-{i:05d}-{Path(run).name}"))
     where = {f.key: i for i, f in enumerate(futures)}
     out: list[Outcome | None] = [None] * len(futures)
     for fut in as_completed(futures):

@@ -90,6 +90,9 @@ def open_cluster(args: argparse.Namespace, *, local_by_default: bool, dashboard:
         except OSError as err:
             raise ClusterUnavailable(str(err)) from err
         print(f"Dask cluster: {cluster.describe(client)}", file=out)
+        if not client.scheduler_info().get("workers"):
+            print("  no workers yet: the tasks wait for them (batch-system jobs may still "
+                  "be queued)", file=out)
         link = client.dashboard_link
         if link:
             print(f"Dask dashboard: {link}", file=out)

@@ -138,7 +138,7 @@ def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries)
         stop.set()
         killer.join(30)
     assert killed, "no worker was busy to be killed"
-    held = {k.split("-", 2)[2] for k in killed[0][1]}  # keys are fit-00000-<file name>
+    held = {k.split("-", 3)[3] for k in killed[0][1]}  # keys: fit-<batch>-<i>-<file name>
     by = {Path(o.run).name: o for o in out}
     assert len(by) == len(runs)  # every run accounted for
     for name, o in by.items():
