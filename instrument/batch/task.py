@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import json
 import os
 import socket
 import time
@@ -187,8 +188,6 @@ def _remove_stale_temporaries(folder: Path) -> None:
 
 def _previous(run_path: str | Path, pipeline: str) -> dict[str, Any]:
     """The summary row an earlier analysis stored in the results file ({} if none)."""
-    import json
-
     try:
         with h5py.File(results_path(run_path, pipeline), "r") as f:
             g = f.get("entry/analysis/summary_json")
@@ -240,15 +239,15 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
             if out_dir is not None:
                 out_dir.mkdir(parents=True, exist_ok=True)
             done = spec.adapter(run, options, out_dir=out_dir)
-            row = {**done.row(), **ident}
+            flags = list(done.flags)
+            if s.status != "finished":
+                flags.append(f"run status {s.status!r}: not every planned point was measured")
+            row = {**done.row(), "flags": flags, **ident}
             with write_results_file(run, spec.pipeline, run_id=s.run_id,
                                     program=f"scatterlab batch {analysis}",
                                     options=record) as g:
                 put_json(g, "summary_json", row)
                 put_json(g, "results_json", done.details)
-        flags = list(done.flags)
-        if s.status != "finished":
-            flags.append(f"run status {s.status!r}: not every planned point was measured")
         return outcome("analysed", result=done.result, values=done.values, flags=tuple(flags))
     except Exception as err:  # one run's problem is reported, the batch goes on
         row = err.row if isinstance(err, AnalysisFailed) and err.row else {}

@@ -246,3 +246,14 @@ def test_without_dask_the_cli_starts_and_batches_here_and_says_what_to_install(r
     cluster = scatterlab("batch", "fit", str(runs / "run-00.h5"), "--workers", "2")
     assert cluster.returncode == 2
     assert "install the cluster extra" in cluster.stdout and "--workers 0" in cluster.stdout
+
+
+def test_an_aborted_run_is_analysed_and_flagged_also_when_skipped(runs):
+    shutil.copy2(runs / "run-00.h5", runs / "aborted.h5")
+    with h5py.File(runs / "aborted.h5", "r+") as f:
+        f["entry"].attrs["status"] = "aborted"
+    first, again = (run_task("fit", runs / "aborted.h5", _options("--no-cv"), report=False)
+                    for _ in range(2))
+    assert (first.status, again.status) == ("analysed", "skipped")
+    assert "run status 'aborted'" in first.flags[-1]
+    assert again.flags == first.flags
