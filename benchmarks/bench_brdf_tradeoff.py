@@ -15,16 +15,24 @@ then draws the Pareto plot (docs/brdf_tradeoff_pareto.png) and answers "the fast
 with σ(α) ≤ X" for a few X. Sample: ρd = 0.3, ks = 0.5, α = 0.2 under a 20 nW beam
 (a neutral-density-filtered source: exposures of milliseconds, so they count).
 
-Run: ``python benchmarks/bench_brdf_tradeoff.py [--quick] [--seeds N] [--png PATH]``.
+Run: ``python benchmarks/bench_brdf_tradeoff.py [--quick] [--seeds N] [--png PATH]
+[--workers N | --scheduler ADDRESS]``. With ``--workers``/``--scheduler`` the options run as
+Dask tasks (ADR 0070), with the same numbers as the serial run.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+
+# One BLAS thread, as in the Dask workers, so that serial and cluster runs compute alike.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np
 
@@ -33,7 +41,8 @@ sys.path.insert(0, str(ROOT))
 
 from analysis.brdf import get_model  # noqa: E402
 from analysis.brdf.fit import fit_brdf  # noqa: E402
-from instrument.bench.profile import parse_profile  # noqa: E402
+from instrument.bench.profile import BenchProfile, parse_profile  # noqa: E402
+from instrument.cli._cluster import add_cluster_options, mapper, open_cluster  # noqa: E402
 from instrument.plans.planfile import parse_plan  # noqa: E402
 from instrument.plans.tradeoff import (  # noqa: E402
     ScanOption,
@@ -44,6 +53,8 @@ from instrument.plans.tradeoff import (  # noqa: E402
 )
 from tests.instrument.sim_scan import (  # noqa: E402
     SAMPLES,
+    Rendered,
+    Sample,
     ScanSetup,
     profile_text,
     reduce_seed,
@@ -54,49 +65,63 @@ READOUT_S = 0.02
 PARAM = "ggx.alpha"
 
 
+def measure_option(option: tuple[float, float, int], *, base: ScanSetup, sample: Sample,
+                   profile: BenchProfile, rendered: dict[float, Rendered],
+                   n_seeds: int) -> dict:
+    """Prediction and measured scatter of σ(α) over ``n_seeds`` sensor seeds for one
+    (θr step, exposure cap, frames)."""
+    step, cap, nf = option
+    model = get_model(sample.model)
+    j = model.param_names.index(PARAM)
+    setup = replace(base, theta_r_step=step, max_exposure_us=cap, frames=nf)
+    spec = parse_plan(setup.plan_text())
+    prior, det = setup_from_profile(profile, spec, readout_s=READOUT_S)
+    det = replace(det, fill=setup.fill)
+    pred = predict(spec, profile, ScanOption(step, cap, nf), prior=prior, det=det)
+    r = replace(rendered[step], setup=setup)
+    a = r.angles_rad
+    est, rep = [], []
+    for seed in range(n_seeds):
+        pts = reduce_seed(r, 1000 + seed)
+        fit = fit_brdf(model, pts.brdf, *a.T, sigma=pts.u_point)
+        est.append(fit.params[j])
+        rep.append(fit.stderr[j])
+    return {
+        "step": step, "cap_us": cap, "frames": nf, "points": pred.n_points,
+        "duration_s": pred.duration_s, "motion_s": pred.motion_s,
+        "acq_s": pred.acquisition_s, "pred": pred.sigma[PARAM],
+        "measured": float(np.std(est, ddof=1)), "reported": float(np.mean(rep)),
+        "bias": float(np.mean(est) - sample.params[j]), "result": pred,
+    }
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="8 options, 4 seeds")
     ap.add_argument("--seeds", type=int, default=None, help="seeds per option (default 16)")
     ap.add_argument("--png", default=str(ROOT / "docs" / "brdf_tradeoff_pareto.png"))
+    add_cluster_options(ap, local_by_default=False)
     args = ap.parse_args()
     steps = (10.0, 20.0) if args.quick else (5.0, 10.0, 20.0, 30.0)
     caps = (1e3, 1e4) if args.quick else (1e3, 1e4, 1e5)
     frames = (1, 4) if args.quick else (1, 2, 4, 8)
     n_seeds = args.seeds or (4 if args.quick else 16)
     sample = SAMPLES[1]
-    model = get_model(sample.model)
-    j = model.param_names.index(PARAM)
     base = ScanSetup(power_w=2e-8, fill=0.5)
     profile = parse_profile(profile_text(base, sample))
-    rendered: dict[float, object] = {}
-    rows = []
     t0 = time.perf_counter()
-    for step in steps:
-        for cap in caps:
-            for nf in frames:
-                setup = replace(base, theta_r_step=step, max_exposure_us=cap, frames=nf)
-                spec = parse_plan(setup.plan_text())
-                prior, det = setup_from_profile(profile, spec, readout_s=READOUT_S)
-                det = replace(det, fill=setup.fill)
-                pred = predict(spec, profile, ScanOption(step, cap, nf), prior=prior, det=det)
-                if step not in rendered:
-                    rendered[step] = render(setup, sample)
-                r = replace(rendered[step], setup=setup)
-                a = r.angles_rad
-                est, rep = [], []
-                for seed in range(n_seeds):
-                    pts = reduce_seed(r, 1000 + seed)
-                    fit = fit_brdf(model, pts.brdf, *a.T, sigma=pts.u_point)
-                    est.append(fit.params[j])
-                    rep.append(fit.stderr[j])
-                rows.append({
-                    "step": step, "cap_us": cap, "frames": nf, "points": pred.n_points,
-                    "duration_s": pred.duration_s, "motion_s": pred.motion_s,
-                    "acq_s": pred.acquisition_s, "pred": pred.sigma[PARAM],
-                    "measured": float(np.std(est, ddof=1)), "reported": float(np.mean(rep)),
-                    "bias": float(np.mean(est) - sample.params[j]), "result": pred,
-                })
+    # the noise-free photon rates depend on the angles only: one rendering per θr step
+    rendered = {step: render(replace(base, theta_r_step=step, max_exposure_us=caps[0],
+                                     frames=frames[0]), sample) for step in steps}
+    options = [(step, cap, nf) for step in steps for cap in caps for nf in frames]
+    shared = {"base": base, "sample": sample, "profile": profile, "rendered": rendered,
+              "n_seeds": n_seeds}
+    with open_cluster(args, local_by_default=False, out=sys.stderr) as client:
+        run_map = mapper(client)
+        if run_map is None:
+            rows = [measure_option(o, **shared) for o in options]
+        else:
+            rows = run_map(measure_option, options, **shared)
     wall = time.perf_counter() - t0
     print(f"{len(rows)} options × {n_seeds} seeds in {wall:.1f} s; sample {sample.model} "
           f"{sample.params}, σ of {PARAM}")

@@ -1,13 +1,16 @@
 """The speed/accuracy planner's options of ``scatterlab plan`` (``--target-uncertainty``).
 
 The search itself is :mod:`instrument.plans.tradeoff`; this module turns its options and
-its answer into command-line text.
+its answer into command-line text. ``--workers N`` / ``--scheduler ADDRESS`` run the sweep
+over the candidate scans on a Dask cluster (same answer as here, in the same order).
 """
 
 from __future__ import annotations
 
 import argparse
 from typing import TYPE_CHECKING
+
+from instrument.cli._cluster import ClusterUnavailable, add_cluster_options, mapper, open_cluster
 
 if TYPE_CHECKING:  # the search and the models load SciPy: only when asked for
     from instrument.bench.profile import BenchProfile
@@ -28,6 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="expected BRDF (default: the simulated scene of the bench)")
     p.add_argument("--readout-s", type=float, default=None,
                    help="per-frame readout overhead for the estimate (default: the plan's)")
+    add_cluster_options(p, local_by_default=False)
 
 
 def _parse_prior(text: str) -> Prior:
@@ -65,7 +69,13 @@ def run_from_args(args: argparse.Namespace, spec: PlanSpec, profile: BenchProfil
     if param not in names:
         print(f"error: {prior.model} has no parameter {param!r}; it has {', '.join(names)}")
         return 2
-    results = sweep(spec, profile, default_options(), prior=prior, det=det)
+    try:
+        with open_cluster(args, local_by_default=False) as client:
+            results = sweep(spec, profile, default_options(), prior=prior, det=det,
+                            mapper=mapper(client))
+    except ClusterUnavailable as err:
+        print(f"error: {err}")
+        return 2
     where = "--prior" if args.prior else "the bench profile's simulated sample"
     values = ", ".join(f"{n} = {v:g}" for n, v in zip(names, prior.params, strict=True))
     print(f"expected BRDF: {prior.model} with {values} (from {where})")

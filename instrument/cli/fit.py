@@ -19,9 +19,26 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("fit", help=HELP)
     p.add_argument("run", help="run file (.h5) of a brdf_in_plane or brdf_hemisphere plan")
-    p.add_argument("--models", default=",".join(DEFAULT_MODELS),
+    add_fit_options(p, DEFAULT_MODELS)
+    p.add_argument("--out", default=None,
+                   help="folder for the report, figures and results.h5 (default: RUN/fit/ "
+                   "next to the run file RUN.h5)")
+    p.add_argument("--no-write", action="store_true",
+                   help="write no results file (report only)")
+    p.add_argument("--into-run", action="store_true",
+                   help="also write the results into the run file (/entry/analysis), for "
+                   "tools that expect one file; by default the run file is only read")
+    p.set_defaults(func=run)
+
+
+def add_fit_options(p: argparse.ArgumentParser,
+                    default_models: tuple[str, ...] | None = None) -> None:
+    """The analysis options of ``scatterlab fit``, shared with ``scatterlab batch fit``."""
+    if default_models is None:
+        from instrument.pipelines.brdf.analyse import DEFAULT_MODELS as default_models
+    p.add_argument("--models", default=",".join(default_models),
                    help="comma-separated candidates, '+' for sums "
-                   f"(default: {','.join(DEFAULT_MODELS)})")
+                   f"(default: {','.join(default_models)})")
     p.add_argument("--out", default=None,
                    help="folder for the report, figures and results.h5 (default: RUN/fit/ "
                    "next to the run file RUN.h5)")
@@ -62,49 +79,68 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "and report the bootstrap σ and 95 %% interval (default: 0, off)")
     p.add_argument("--no-cv", action="store_true",
                    help="skip the cross-validation columns of the comparison")
-    p.add_argument("--no-write", action="store_true",
-                   help="write no results file (report only)")
-    p.add_argument("--into-run", action="store_true",
-                   help="also write the results into the run file (/entry/analysis), for "
-                   "tools that expect one file; by default the run file is only read")
-    p.set_defaults(func=run)
 
 
-def _missing_inputs(args: argparse.Namespace) -> list[str]:
-    """'<option> <path>' for every named input file (not a run: those are checked by the
-    pipeline, with the words of every command) that does not exist."""
-    named = [("--reference-table", args.reference_table),
-             ("--camera-calibration", args.camera_calibration)]
-    return [f"{opt} {path}" for opt, path in named
-            if path is not None and not Path(path).is_file()]
+#: Companion files of the fit options, by option name and attribute.
+_COMPANIONS = (("--reference", "reference"), ("--flat", "flat"), ("--signature", "signature"),
+               ("--reference-table", "reference_table"),
+               ("--camera-calibration", "camera_calibration"))
+
+
+def fit_options(args: argparse.Namespace) -> dict:
+    """The fit options as plain data (companion files as absolute paths), the form
+    :func:`instrument.batch.analyses.fit_arguments` takes and a batch records.
+
+    Raises
+    ------
+    ValueError
+        An option out of range or a companion file that does not exist (named).
+    """
+    from instrument.batch.analyses import reduction_defaults
+
+    if args.bootstrap < 0:
+        raise ValueError(f"--bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
+    missing = [f"{opt} {getattr(args, attr)}" for opt, attr in _COMPANIONS
+               if getattr(args, attr) is not None and not Path(getattr(args, attr)).exists()]
+    if missing:
+        raise ValueError(f"no such file: {'; '.join(missing)}")
+
+    def path(attr: str) -> str | None:
+        v = getattr(args, attr)
+        return None if v is None else str(Path(v).resolve())
+
+    reduction = {
+        **reduction_defaults(),
+        "method": args.method, "detector": args.detector,
+        "cosine_corrected": args.cosine_corrected, "incident_power_w": args.incident_power_w,
+        "u_incident_power_rel": args.incident_power_u, "sigma_theta_deg": args.sigma_theta_deg,
+        "receiver_distance_mm": args.distance_mm, "u_distance_mm": args.distance_u_mm,
+        "camera_calibration": path("camera_calibration"), "flat_run": path("flat"),
+        "reference_run": path("reference"), "signature_run": path("signature"),
+        "reference_table": path("reference_table"), "beam_radius_mm": args.beam_radius_mm,
+        "receiver_geometry": not args.point_receiver,
+    }
+    return {
+        "reduction": reduction,
+        "models": [m.strip() for m in args.models.split(",") if m.strip()],
+        "criterion": args.criterion,
+        "run_cv": not args.no_cv,
+        "n_bootstrap": int(args.bootstrap),
+    }
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.batch.analyses import fit_arguments
     from instrument.pipelines.brdf.pipeline import fit_run
-    from instrument.pipelines.brdf.reduce import ReductionOptions
     from instrument.pipelines.brdf.report import unit_text
 
-    if args.bootstrap < 0:
-        print(f"error: --bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
-        return 2
-    missing = _missing_inputs(args)
-    if missing:
-        print(f"error: no such file: {'; '.join(missing)}")
-        return 2
-    opts = ReductionOptions(
-        method=args.method, detector=args.detector, cosine_corrected=args.cosine_corrected,
-        incident_power_w=args.incident_power_w, u_incident_power_rel=args.incident_power_u,
-        sigma_theta_deg=args.sigma_theta_deg, receiver_distance_mm=args.distance_mm,
-        u_distance_mm=args.distance_u_mm,
-        camera_calibration=args.camera_calibration, flat_run=args.flat,
-        reference_run=args.reference, signature_run=args.signature,
-        reference_table=args.reference_table,
-        beam_radius_mm=args.beam_radius_mm, receiver_geometry=not args.point_receiver,
-    )
-    models = [m.strip() for m in args.models.split(",") if m.strip()]
     try:
-        done = fit_run(args.run, opts, models, criterion=args.criterion, run_cv=not args.no_cv,
-                       n_bootstrap=args.bootstrap, report_dir=args.out,
+        options = fit_options(args)
+    except ValueError as err:
+        print(f"error: {err}")
+        return 2
+    try:
+        done = fit_run(args.run, **fit_arguments(options), report_dir=args.out,
                        write=not args.no_write, into_run=args.into_run)
     except KeyError as err:
         print(f"error: {err.args[0] if err.args else err}")

@@ -13,10 +13,11 @@ from __future__ import annotations
 import argparse
 
 from instrument.cli.reconstruct import (
+    add_figure_options,
     add_reconstruction_options,
     figures_dir,
-    options,
     out_dir,
+    reconstruction_options,
 )
 
 HELP = "locate the hidden objects of a light-field run"
@@ -32,6 +33,14 @@ QUALITY_WORDS = {
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("locate", help=HELP)
     p.add_argument("run", help="run file (.h5) of a lightfield plan")
+    add_locate_options(p)
+    add_figure_options(p)
+    p.set_defaults(func=run)
+
+
+def add_locate_options(p: argparse.ArgumentParser) -> None:
+    """The localisation options (with the reconstruction's), shared with ``scatterlab
+    batch locate``."""
     p.add_argument("--y-range", type=float, nargs=2, metavar=("Y0", "Y1"), default=None,
                    help="trial y range in mm (default: the wall points ± 60 mm)")
     p.add_argument("--z-range", type=float, nargs=2, metavar=("Z0", "Z1"),
@@ -41,23 +50,37 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--again", action="store_true",
                    help="reconstruct again even if the results file holds a reconstruction")
     add_reconstruction_options(p)
-    p.set_defaults(func=run)
+
+
+def locate_options(args: argparse.Namespace) -> dict:
+    """The localisation options as plain data, the form :func:`instrument.batch.analyses.
+    locate_arguments` takes: ``reconstruct`` holds the reconstruction options when the
+    run must be reconstructed again (``--again`` or any reconstruction option other than
+    its default), None to use the reconstruction the run holds.
+
+    Raises
+    ------
+    ValueError
+        An option that cannot be used (named).
+    """
+    given = (args.geometry, args.brdf, args.domain)
+    again = (args.again or any(v is not None for v in given) or args.n_theta != 128
+             or args.method != "wiener")
+    return {"y_range_mm": None if args.y_range is None else [float(v) for v in args.y_range],
+            "z_range_mm": [float(v) for v in args.z_range],
+            "threshold_rel": float(args.threshold),
+            "reconstruct": reconstruction_options(args) if again else None}
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.batch.analyses import locate_arguments
     from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
     from instrument.pipelines.lightfield.locate import locate_run
     from instrument.run.paths import RESULTS_NAME
 
-    recon: dict = {}
-    given = (args.geometry, args.brdf, args.domain)
     try:
-        if args.again or any(v is not None for v in given) or args.n_theta != 128 \
-                or args.method != "wiener":
-            recon = options(args)
-        r = locate_run(args.run, y_range_mm=args.y_range, z_range_mm=tuple(args.z_range),
-                       threshold_rel=args.threshold, figures_dir=figures_dir(args),
-                       out_dir=args.out, into_run=args.into_run, **recon)
+        r = locate_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
+                       into_run=args.into_run, **locate_arguments(locate_options(args)))
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2

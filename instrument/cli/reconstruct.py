@@ -25,11 +25,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reconstruct", help=HELP)
     p.add_argument("run", help="run file (.h5) of a lightfield plan")
     add_reconstruction_options(p)
+    add_figure_options(p)
     p.set_defaults(func=run)
 
 
 def add_reconstruction_options(p: argparse.ArgumentParser) -> None:
-    """Options shared with ``scatterlab locate``."""
+    """The reconstruction options, shared with ``scatterlab locate`` and ``scatterlab
+    batch reconstruct|locate``."""
     p.add_argument("--geometry", default=None,
                    help="geometry file (TOML: [camera], [track]); default: the emulated "
                    "bench's own, from the profile stored in the run")
@@ -43,6 +45,11 @@ def add_reconstruction_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="wiener",
                    choices=("wiener", "truncation", "gcv", "discrepancy", "none"),
                    help="regularisation (default: wiener, from the pooled signal spectrum)")
+
+
+def add_figure_options(p: argparse.ArgumentParser) -> None:
+    """Where one run's outputs go (``reconstruct`` and ``locate``; a batch puts them next
+    to each run)."""
     p.add_argument("--out", default=None,
                    help="folder for results.h5 and the figures (default: RUN/lightfield/ "
                    "next to the run file RUN.h5); locate reads the reconstruction there")
@@ -59,13 +66,17 @@ def _n_theta(text: str) -> int:
     return n
 
 
-def options(args: argparse.Namespace) -> dict:
-    """Keyword arguments of :func:`instrument.pipelines.lightfield.reconstruct.reconstruct_run`.
+def reconstruction_options(args: argparse.Namespace) -> dict:
+    """The reconstruction options as plain data (geometry file as an absolute path, BRDF
+    text, domain in degrees), the form :func:`instrument.batch.analyses.
+    reconstruct_arguments` takes and a results file records.
 
-    Raises ValueError naming the option when ``--domain`` is not inside (−90°, 90°).
+    Raises
+    ------
+    ValueError
+        ``--domain`` not inside (−90°, 90°), or a ``--geometry``/``--brdf`` that does not
+        load (named).
     """
-    import math
-
     from instrument.pipelines.lightfield.geometry import load_geometry, parse_brdf
 
     domain = None
@@ -74,14 +85,15 @@ def options(args: argparse.Namespace) -> dict:
         if not -90.0 < a < b < 90.0:
             raise ValueError(f"--domain {a:g} {b:g}: the angle domain in degrees must satisfy "
                              f"-90 < A < B < 90")
-        domain = (math.radians(a), math.radians(b))
-    return {
-        "geometry": load_geometry(args.geometry) if args.geometry else None,
-        "brdf": parse_brdf(args.brdf) if args.brdf else None,
-        "domain_rad": domain,
-        "n_theta": args.n_theta,
-        "method": args.method,
-    }
+        domain = [float(a), float(b)]
+    geometry = None
+    if args.geometry:
+        load_geometry(args.geometry)  # refused here, not once per run of a batch
+        geometry = str(Path(args.geometry).resolve())
+    if args.brdf:
+        parse_brdf(args.brdf)
+    return {"geometry": geometry, "brdf": args.brdf or None, "domain_deg": domain,
+            "n_theta": int(args.n_theta), "method": args.method}
 
 
 def out_dir(args: argparse.Namespace) -> Path:
@@ -132,13 +144,15 @@ def reconstruction_summary(r: ReconstructionResult, *, brdf_given: bool) -> list
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.batch.analyses import reconstruct_arguments
     from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
     from instrument.pipelines.lightfield.reconstruct import reconstruct_run
     from instrument.run.paths import RESULTS_NAME
 
     try:
         r = reconstruct_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
-                            into_run=args.into_run, **options(args))
+                            into_run=args.into_run,
+                            **reconstruct_arguments(reconstruction_options(args)))
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2

@@ -58,6 +58,21 @@ def identity_words(name: str, capture: SphereCapture) -> tuple[str, str]:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("spheres", help=HELP)
     p.add_argument("run", help="run file (.h5) of a sphere_capture plan")
+    add_sphere_options(p)
+    p.add_argument("--out", default=None,
+                   help="folder for results.h5 and the figure (default: RUN/spheres/ next "
+                   "to the run file RUN.h5)")
+    p.add_argument("--no-figures", action="store_true", help="draw no figure")
+    p.add_argument("--no-write", action="store_true", help="write no results file")
+    p.add_argument("--into-run", action="store_true",
+                   help="also write the results into the run file (/entry/analysis); by "
+                   "default the run file is only read")
+    p.set_defaults(func=run)
+
+
+def add_sphere_options(p: argparse.ArgumentParser) -> None:
+    """The analysis options of ``scatterlab spheres``, shared with ``scatterlab batch
+    spheres``."""
     p.add_argument("--lmax", type=int, default=20, help="SH order of the fits (default 20)")
     p.add_argument("--lmax-check", type=int, default=12,
                    help="SH orders 0..N used by the consistency check (default 12)")
@@ -70,15 +85,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold-scale", type=float, default=1.0,
                    help="multiply the bootstrap threshold by the bench's calibrated factor "
                         "(BENCHMARKS.md sphere_capture; default 1: noise-only threshold)")
-    p.add_argument("--out", default=None,
-                   help="folder for results.h5 and the figure (default: RUN/spheres/ next "
-                   "to the run file RUN.h5)")
-    p.add_argument("--no-figures", action="store_true", help="draw no figure")
-    p.add_argument("--no-write", action="store_true", help="write no results file")
-    p.add_argument("--into-run", action="store_true",
-                   help="also write the results into the run file (/entry/analysis); by "
-                   "default the run file is only read")
-    p.set_defaults(func=run)
 
 
 def _option_error(args: argparse.Namespace) -> str | None:
@@ -100,6 +106,25 @@ def _option_error(args: argparse.Namespace) -> str | None:
     return None
 
 
+def sphere_options(args: argparse.Namespace) -> dict:
+    """The analysis options as plain data: the keyword arguments of
+    :func:`instrument.pipelines.spheres.analyse.analyse_capture`.
+
+    Raises
+    ------
+    ValueError
+        The first out-of-range option, named as on the command line.
+    """
+    bad = _option_error(args)
+    if bad is not None:
+        raise ValueError(bad)
+    return {"lmax": int(args.lmax), "lmax_check": int(args.lmax_check),
+            "max_view_angle_deg": float(args.max_view_angle),
+            "check_view_angle_deg": float(args.check_view_angle),
+            "false_alarm": float(args.false_alarm),
+            "threshold_scale": float(args.threshold_scale)}
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -107,20 +132,16 @@ def run(args: argparse.Namespace) -> int:
     from instrument.pipelines.spheres.pipeline import analyse_run
     from instrument.run.paths import RESULTS_NAME, results_dir
 
-    bad = _option_error(args)
-    if bad is not None:
-        print(f"error: {bad}")
+    try:
+        options = sphere_options(args)
+    except ValueError as err:
+        print(f"error: {err}")
         return 2
     folder = Path(args.out) if args.out else results_dir(args.run, "spheres")
     fig = None if args.no_figures else folder / FIGURE_NAME
     try:
-        capture, res = analyse_run(
-            args.run, write=not args.no_write, figure=fig, into_run=args.into_run,
-            out_dir=args.out, lmax=args.lmax,
-            lmax_check=args.lmax_check, max_view_angle_deg=args.max_view_angle,
-            check_view_angle_deg=args.check_view_angle, false_alarm=args.false_alarm,
-            threshold_scale=args.threshold_scale,
-        )
+        capture, res = analyse_run(args.run, write=not args.no_write, figure=fig,
+                                   into_run=args.into_run, out_dir=args.out, **options)
     except (ValueError, OSError, KeyError) as err:
         print(f"error: {err}")
         return 2

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -199,9 +199,25 @@ def default_options() -> list[ScanOption]:
             for frames in (1, 2, 4, 8)]
 
 
+def _predict_option(option: ScanOption, *, spec: PlanSpec, profile: BenchProfile,
+                    prior: Prior, det: DetectorSetup) -> OptionResult:
+    return predict(spec, profile, option, prior=prior, det=det)
+
+
 def sweep(spec: PlanSpec, profile: BenchProfile, options: Iterable[ScanOption], *,
-          prior: Prior, det: DetectorSetup) -> list[OptionResult]:
-    return [predict(spec, profile, o, prior=prior, det=det) for o in options]
+          prior: Prior, det: DetectorSetup,
+          mapper: Callable[..., Sequence[OptionResult]] | None = None) -> list[OptionResult]:
+    """:func:`predict` for every option, in order.
+
+    ``mapper(fn, items, **shared)`` must return ``[fn(item, **shared) for item in items]``
+    in that order, e.g. on a Dask cluster (:func:`instrument.batch.cluster.cluster_map`);
+    the predictions are deterministic, so the results equal the loop's. Default: the loop.
+    """
+    options = list(options)
+    if mapper is None:
+        return [predict(spec, profile, o, prior=prior, det=det) for o in options]
+    return list(mapper(_predict_option, options, spec=spec, profile=profile, prior=prior,
+                       det=det))
 
 
 def pareto_front(results: Sequence[OptionResult], param: str) -> list[OptionResult]:

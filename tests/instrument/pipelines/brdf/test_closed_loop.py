@@ -20,8 +20,10 @@ Figures: BENCHMARKS.md, section brdf_closed_loop.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -34,6 +36,7 @@ from tests.instrument.sim_scan import (
     CANDIDATES,
     MATRIX,
     SAMPLES,
+    Rendered,
     Sample,
     ScanSetup,
     profile_text,
@@ -54,25 +57,37 @@ class LoopStats:
     spread_over_sigma: np.ndarray  # std of the estimates / mean reported σ
 
 
-def closed_loop(sample: Sample, seeds: range, setup: ScanSetup | None = None) -> LoopStats:
-    """Scan, reduce, select and compare with the truth for every seed."""
-    setup = setup or ScanSetup()
-    r = render(setup, sample)
+def seed_fit(seed: int, *, r: Rendered, sample: Sample) -> tuple[np.ndarray, np.ndarray, bool]:
+    """One seed of the loop: acquire every point of ``r`` with sensor ``seed``, reduce,
+    select; the true model's estimates and σ, and whether it was the one chosen."""
     # instrument-aware candidates: each as the camera sees it (footprint through the pupil)
-    cands = [receiver_model(get_model(c), receiver(setup)) for c in CANDIDATES]
-    truth = np.array(sample.params)
+    cands = [receiver_model(get_model(c), receiver(r.setup)) for c in CANDIDATES]
     a = r.angles_rad
-    est, err, right = [], [], []
-    for seed in seeds:
-        pts = reduce_seed(r, seed)
-        sel = select_model(cands, pts.brdf, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
-                           sigma=pts.u_point, criterion="bic", run_cv=False, n_starts=3,
-                           seed=seed)
-        right.append(sel.chosen == sample.model)
-        fit = sel.fits[sample.model]
-        est.append(fit.params)
-        err.append(fit.stderr)
-    est, err = np.array(est), np.array(err)
+    pts = reduce_seed(r, seed)
+    sel = select_model(cands, pts.brdf, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                       sigma=pts.u_point, criterion="bic", run_cv=False, n_starts=3, seed=seed)
+    fit = sel.fits[sample.model]
+    return fit.params, fit.stderr, sel.chosen == sample.model
+
+
+def closed_loop(sample: Sample, seeds: Iterable[int], setup: ScanSetup | None = None, *,
+                mapper: Callable[..., Sequence[Any]] | None = None) -> LoopStats:
+    """Scan, reduce, select and compare with the truth for every seed.
+
+    ``mapper(fn, items, **shared)`` runs the seeds elsewhere (a Dask cluster:
+    ``instrument.batch.cluster.cluster_map``); every seed carries its own RNG seeds, so the
+    statistics equal the loop's value for value.
+    """
+    r = render(setup or ScanSetup(), sample)
+    seeds = list(seeds)
+    if mapper is None:
+        per_seed = [seed_fit(seed, r=r, sample=sample) for seed in seeds]
+    else:
+        per_seed = mapper(seed_fit, seeds, r=r, sample=sample)
+    truth = np.array(sample.params)
+    est = np.array([p for p, _, _ in per_seed])
+    err = np.array([e for _, e, _ in per_seed])
+    right = [c for _, _, c in per_seed]
     z = (est - truth) / err
     inside = np.abs(z) <= 2.0
     return LoopStats(sample.name, len(seeds), inside.mean(axis=0),
@@ -97,47 +112,53 @@ class MatrixStats:
     chosen: tuple[str, ...]     # per seed
 
 
-def matrix_stats(sample: Sample, seeds: range, setup: ScanSetup | None = None,
-                 models: tuple[str, ...] | None = None) -> MatrixStats:
-    """Scan, reduce, analyse with the default candidates (as ``scatterlab fit``) and compare
-    with the truth for every seed."""
+def matrix_seed(seed: int, *, r, sample: Sample, models: tuple[str, ...]) -> tuple:
+    """One seed of the validation matrix: (right model, right or an indistinguishable twin,
+    flagged, truth inside 2σ per parameter, χ²/dof, clipped readings, chosen, fit seconds)."""
     import time
 
-    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS, analyse
+    from instrument.pipelines.brdf.analyse import analyse
+
+    pts = reduce_seed(r, seed)
+    t0 = time.perf_counter()
+    res = analyse(pts, models, seed=seed)
+    seconds = time.perf_counter() - t0
+    rows = {row.name: row for row in res.selection.table}
+    right = res.chosen == sample.model
+    twin = right or (sample.model in res.plausible
+                     and rows[sample.model].n_params == rows[res.chosen].n_params
+                     and abs(rows[sample.model].bic - rows[res.chosen].bic) <= 2.0)
+    fit = res.fits[sample.model]
+    inside = np.abs(fit.params - np.array(sample.params)) <= 2.0 * fit.stderr
+    return (right, twin, not res.adequate, inside, res.chosen_goodness.reduced_chi2,
+            int(res.excluded_index.size), res.chosen, seconds)
+
+
+def matrix_stats(sample: Sample, seeds: range, setup: ScanSetup | None = None,
+                 models: tuple[str, ...] | None = None, *,
+                 mapper: Callable[..., Sequence[Any]] | None = None) -> MatrixStats:
+    """Scan, reduce, analyse with the default candidates (as ``scatterlab fit``) and compare
+    with the truth for every seed (``mapper`` as in :func:`closed_loop`)."""
+    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
 
     setup = setup or ScanSetup(theta_i_deg=(20.0, 50.0, 80.0))
     models = models or DEFAULT_MODELS
     r = render(setup, sample)
-    truth = np.array(sample.params)
-    right, twin, flagged, inside, chi, clipped, chosen = [], [], [], [], [], [], []
-    seconds = 0.0
-    for seed in seeds:
-        pts = reduce_seed(r, seed)
-        t0 = time.perf_counter()
-        res = analyse(pts, models, seed=seed)
-        seconds += time.perf_counter() - t0
-        rows = {row.name: row for row in res.selection.table}
-        right.append(res.chosen == sample.model)
-        twin.append(right[-1] or (
-            sample.model in res.plausible
-            and rows[sample.model].n_params == rows[res.chosen].n_params
-            and abs(rows[sample.model].bic - rows[res.chosen].bic) <= 2.0))
-        flagged.append(not res.adequate)
-        fit = res.fits[sample.model]
-        inside.append(np.abs(fit.params - truth) <= 2.0 * fit.stderr)
-        chi.append(res.chosen_goodness.reduced_chi2)
-        clipped.append(int(res.excluded_index.size))
-        chosen.append(res.chosen)
+    if mapper is None:
+        per = [matrix_seed(seed, r=r, sample=sample, models=models) for seed in seeds]
+    else:
+        per = mapper(matrix_seed, seeds, r=r, sample=sample, models=models)
+    right, twin, flagged, inside, chi, clipped, chosen, seconds = zip(*per, strict=True)
     n = len(seeds)
     return MatrixStats(sample.name, n, float(np.mean(right)), float(np.mean(twin)),
                        float(np.mean(flagged)), np.mean(inside, axis=0), np.array(chi),
-                       float(np.mean(clipped)), seconds / n, tuple(chosen))
+                       float(np.mean(clipped)), sum(seconds) / n, tuple(chosen))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["lambert", "glossy-ggx", "sharp-ggx-0.02"])
 def test_validation_matrix_reduced(name: str) -> None:
-    """Issue 13 §5 in CI: three samples of the matrix (diffuse, glossy, sharp α = 0.02 at
+    """The validation matrix in CI: three samples of the matrix (diffuse, glossy, sharp α = 0.02 at
     θi up to 80°), 5 seeds, every scan analysed as ``scatterlab fit`` does. Each sample is
     either recovered (right model, truth inside the reported 2σ) or flagged; the full
     matrix (ten samples, 20 seeds) is benchmarks/bench_brdf_closed_loop.py --matrix."""

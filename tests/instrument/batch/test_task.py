@@ -1,0 +1,259 @@
+"""Batch tasks in this process (no Dask): what a task does with good, bad, foreign, busy and
+already analysed runs, the results file it leaves, the summary table and the command line.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import sys
+import threading
+
+import h5py
+import numpy as np
+import pytest
+
+from instrument.batch.analyses import ANALYSES, Analysed, Analysis, AnalysisFailed, analyse_fit
+from instrument.batch.summary import summary_columns, write_csv, write_html
+from instrument.batch.task import Outcome, record_options, run_lock, run_serial, run_task
+from instrument.cli import build_parser, main
+from instrument.cli.fit import fit_options
+from instrument.pipelines.brdf.pipeline import fit_run
+from instrument.run.results import already_done, read_results_attrs, results_path
+from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run
+
+
+@pytest.fixture(scope="module")
+def runs_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("batch-runs")
+    make_brdf_runs(folder, 3)
+    make_flat_run(folder)
+    return folder
+
+
+@pytest.fixture
+def runs(runs_dir, tmp_path):
+    return fresh_copy(runs_dir, tmp_path / "runs")
+
+
+def _options(*argv: str) -> dict:
+    """The fit options of a command line (the single-run command's own parser)."""
+    args = build_parser().parse_args(["fit", "x.h5", *argv])
+    return fit_options(args)
+
+
+def test_a_task_analyses_a_run_as_the_single_run_command_does(runs):
+    opts = _options("--no-cv")
+    o = run_task("fit", runs / "run-00.h5", opts, report=False)
+    assert o.status == "analysed" and o.cause == "" and o.run_id == "run-00"
+    assert (o.sample, o.kind) == ("glossy", "brdf_in_plane")
+    single = fit_run(runs / "run-00.h5", models=opts["models"], run_cv=False, report=False,
+                     write=False)
+    fit = single.result.chosen_fit
+    assert o.values["model"] == single.result.chosen == "lambert+ggx"
+    for name, value, err, _ in fit.table():  # value for value
+        assert o.values[name] == value and o.values[f"{name}_sigma"] == err
+    assert o.values["n_points"] == 39 and o.values["dof"] == fit.dof
+    # the results file names the run, the program and the options; the raw run is untouched
+    attrs = read_results_attrs(runs / "run-00.h5", "fit")
+    assert attrs["run_id"] == "run-00" and attrs["program"] == "scatterlab batch fit"
+    assert json.loads(attrs["options_json"]) == record_options("fit", opts, False)
+    with h5py.File(results_path(runs / "run-00.h5", "fit"), "r") as f:
+        row = json.loads(f["entry/analysis/summary_json"][()])
+        details = json.loads(f["entry/analysis/results_json"][()])
+    assert row["values"] == dict(o.values) and row["run_id"] == "run-00"
+    assert details["analysis"]["selection"]["chosen"] == "lambert+ggx"
+    with h5py.File(runs / "run-00.h5", "r") as f:
+        assert "analysis" not in f["entry"]
+
+
+def test_a_rerun_skips_what_was_analysed_with_the_same_options(runs):
+    opts = _options("--no-cv")
+    first = run_serial("fit", sorted(runs.glob("run-*.h5")), opts, report=False)
+    assert [o.status for o in first] == ["analysed"] * 3
+    stamps = [results_path(p, "fit").stat().st_mtime_ns for p in sorted(runs.glob("run-*.h5"))]
+    again = run_serial("fit", sorted(runs.glob("run-*.h5")), opts, report=False)
+    assert [o.status for o in again] == ["skipped"] * 3
+    assert all("already analysed" in o.cause for o in again)
+    # the skipped rows carry the stored answer, so the summary table is still complete
+    assert [dict(o.values) for o in again] == [dict(o.values) for o in first]
+    assert [o.result for o in again] == [o.result for o in first]
+    assert stamps == [results_path(p, "fit").stat().st_mtime_ns
+                      for p in sorted(runs.glob("run-*.h5"))]
+    # other options, or --force: analysed again
+    other = run_task("fit", runs / "run-00.h5", _options("--no-cv", "--criterion", "aic"),
+                     report=False)
+    assert other.status == "analysed"
+    forced = run_task("fit", runs / "run-01.h5", opts, report=False, force=True)
+    assert forced.status == "analysed" and dict(forced.values) == dict(first[1].values)
+    # a report asked for is part of what was done: the report is made, once
+    made = run_task("fit", runs / "run-02.h5", opts, report=True)
+    assert made.status == "analysed"
+    assert (results_path(runs / "run-02.h5", "fit").parent / "index.html").is_file()
+    assert run_task("fit", runs / "run-02.h5", opts, report=True).status == "skipped"
+
+
+def test_bad_foreign_and_unfinished_runs_are_reported_with_their_cause(runs):
+    (runs / "garbage.h5").write_bytes(b"this is not an HDF5 file\n" * 10)
+    data = (runs / "run-00.h5").read_bytes()
+    (runs / "truncated.h5").write_bytes(data[: len(data) // 3])
+    shutil.copy2(runs / "run-01.h5", runs / "live.h5")
+    with h5py.File(runs / "live.h5", "r+") as f:
+        f["entry"].attrs["status"] = "running"
+    names = ["garbage.h5", "run-00.h5", "truncated.h5", "missing.h5", "flat.h5", "live.h5",
+             "run-02.h5"]
+    out = run_serial("fit", [runs / n for n in names], _options("--no-cv"), report=False)
+    by = {o.run.rsplit("/", 1)[-1]: o for o in out}
+    assert [o.status for o in out] == ["failed", "analysed", "failed", "failed",
+                                       "not applicable", "failed", "analysed"]
+    assert "cannot read" in by["garbage.h5"].cause and "garbage.h5" in by["garbage.h5"].cause
+    assert "truncated.h5" in by["truncated.h5"].cause
+    assert by["missing.h5"].cause.startswith("no such file")
+    assert "flat_field run" in by["flat.h5"].cause
+    assert "still being written" in by["live.h5"].cause
+    assert by["garbage.h5"].detail  # the traceback, for the HTML table
+    # nothing was created next to the files that are not analysable runs
+    for n in ("garbage", "truncated", "missing", "flat", "live"):
+        assert not (runs / n).exists(), n
+
+
+def test_a_run_busy_with_another_analysis_is_not_analysed_twice_at_once(runs):
+    run = runs / "run-00.h5"
+    opts = _options("--no-cv")
+    with run_lock(run):
+        o = run_task("fit", run, opts, report=False, lock_wait_s=0.3)
+    assert o.status == "failed" and "held its lock" in o.cause
+    assert not results_path(run, "fit").exists()
+    # Two tasks of the same run at once (e.g. a task Dask runs again while the first is
+    # still alive): whichever comes second waits for the other's lock, then finds its
+    # results.
+    first: list[Outcome] = []
+    t = threading.Thread(target=lambda: first.append(run_task("fit", run, opts,
+                                                              report=False)))
+    t.start()
+    second = run_task("fit", run, opts, report=False)
+    t.join(60)
+    assert sorted([first[0].status, second.status]) == ["analysed", "skipped"]
+    assert dict(second.values) == dict(first[0].values)
+
+
+def test_a_fit_that_does_not_converge_fails_with_what_it_found(runs, monkeypatch):
+    def not_converged(path, options, *, out_dir=None):
+        row = analyse_fit(path, options, out_dir=out_dir)
+        raise AnalysisFailed("the fit of the chosen model lambert+ggx did not converge "
+                             "(maximum evaluations)", row.row())
+
+    monkeypatch.setitem(ANALYSES, "fit", Analysis("fit", "fit", ("brdf_in_plane",),
+                                                  "scatterlab fit", not_converged))
+    o = run_task("fit", runs / "run-00.h5", _options("--no-cv"), report=False)
+    assert o.status == "failed" and o.cause.startswith("not usable: the fit of the chosen")
+    assert o.values["model"] == "lambert+ggx"  # what it found is kept for the table
+    # a failed analysis is not a finished one: the rerun tries again
+    assert not results_path(runs / "run-00.h5", "fit").exists()
+
+
+def test_summary_csv_reads_back_value_for_value_and_html_names_every_run(tmp_path):
+    rows = [
+        Outcome("a.h5", "fit", "analysed", "a", "s1", "brdf_in_plane", "lambert: ρ = 0.8",
+                {"model": "lambert", "lambert.rho": 0.1 + 0.2, "chi2": np.float64(3.5).item()},
+                ("a <b> flag",), seconds=1.0, worker="h:1"),
+        Outcome("b.h5", "fit", "failed", cause="cannot read b.h5", detail="Traceback …"),
+        Outcome("c.h5", "fit", "skipped", "c", "s2", "brdf_in_plane", "oren_nayar",
+                {"model": "oren_nayar", "oren_nayar.sigma": 1e-300}),
+    ]
+    cols = summary_columns(rows)
+    assert cols[:7] == ["run", "run_id", "sample", "kind", "analysis", "status", "result"]
+    assert cols[7:11] == ["model", "lambert.rho", "chi2", "oren_nayar.sigma"]
+    with open(write_csv(rows, tmp_path / "s.csv"), newline="", encoding="utf-8") as fh:
+        back = list(csv.DictReader(fh))
+    assert float(back[0]["lambert.rho"]) == 0.1 + 0.2
+    assert float(back[2]["oren_nayar.sigma"]) == 1e-300
+    assert back[1]["status"] == "failed" and back[1]["cause"] == "cannot read b.h5"
+    assert back[1]["lambert.rho"] == ""
+    page = write_html(rows, tmp_path / "s.html", title="t", about={"options": "{}"})
+    text = page.read_text(encoding="utf-8")
+    assert all(n in text for n in ("a.h5", "b.h5", "c.h5", "1 failed", "a &lt;b&gt; flag"))
+
+
+def test_cli_batch_fit_here_then_again(runs, tmp_path, capsys):
+    argv = ["batch", "fit", str(runs / "run-*.h5"), str(runs / "flat.h5"), "--no-cv",
+            "--workers", "0", "--no-report", "--summary-dir", str(tmp_path / "s")]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "3 analysed" in out and "1 not applicable" in out
+    (csv_path,) = (tmp_path / "s").glob("batch-fit-*.csv")
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        rows = {r["run_id"]: r for r in csv.DictReader(fh)}
+    direct = run_task("fit", runs / "run-01.h5", _options("--no-cv"), report=False, force=True)
+    assert rows["run-01"]["model"] == direct.values["model"] == "oren_nayar"
+    assert rows["run-01"]["ggx.alpha"] == ""  # a column of the other runs' model
+    for k, v in direct.values.items():
+        assert rows["run-01"][k] == (repr(v) if isinstance(v, float) else str(v)), k
+    assert already_done(runs / "run-00.h5", "fit", run_id="run-00",
+                        options=record_options("fit", _options("--no-cv"), False))
+    shutil.rmtree(tmp_path / "s")
+    assert main(argv) == 0
+    assert "3 skipped" in capsys.readouterr().out
+    # errors in the command itself: exit 2, a message naming the problem
+    assert main(["batch", "fit", str(runs / "nothing-*.h5"), "--workers", "0"]) == 2
+    assert "matches no run file" in capsys.readouterr().out
+    assert main(["batch", "fit", "--workers", "0"]) == 2
+    assert "no runs" in capsys.readouterr().out
+    assert main(["batch", "fit", str(runs), "--workers", "0", "--bootstrap", "-1"]) == 2
+    assert "--bootstrap" in capsys.readouterr().out
+    assert main(["batch", "fit", "--catalog-query", "colour=red", "--workers", "0"]) == 2
+    assert "unknown key 'colour'" in capsys.readouterr().out
+
+
+def test_a_bad_run_makes_the_exit_status_1_and_is_named(runs, tmp_path, capsys):
+    (runs / "bad.h5").write_text("nope")
+    assert main(["batch", "fit", str(runs), "--workers", "0", "--no-report", "--no-cv",
+                 "--summary-dir", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert f"FAILED {runs / 'bad.h5'}: cannot read" in out and "3 analysed" in out
+
+
+def test_adapter_rows_are_plain_data(runs):
+    a = analyse_fit(runs / "run-00.h5", _options("--no-cv"))
+    assert isinstance(a, Analysed)
+    json.dumps(a.row(), allow_nan=True)  # no numpy scalars: JSON and pickling stay exact
+    assert all(type(v) in (str, int, float, bool) for v in a.values.values())
+
+
+_NO_DASK = """
+import sys
+for name in ("dask", "distributed", "dask_jobqueue"):
+    sys.modules[name] = None  # importing them now raises ImportError, as if not installed
+from instrument.cli import build_parser, main
+build_parser()
+assert not [m for m in sys.modules if m.split(".")[0] in ("dask", "distributed", "bokeh")
+            and sys.modules[m] is not None]
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_without_dask_the_cli_starts_and_batches_here_and_says_what_to_install(runs):
+    def scatterlab(*argv: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", _NO_DASK, *argv], capture_output=True,
+                              text=True, timeout=300, check=False)
+
+    here = scatterlab("batch", "fit", str(runs / "run-00.h5"), "--workers", "0", "--no-cv",
+                      "--no-report")
+    assert here.returncode == 0, here.stdout + here.stderr
+    assert "1 analysed" in here.stdout
+    cluster = scatterlab("batch", "fit", str(runs / "run-00.h5"), "--workers", "2")
+    assert cluster.returncode == 2
+    assert "install the cluster extra" in cluster.stdout and "--workers 0" in cluster.stdout
+
+
+def test_an_aborted_run_is_analysed_and_flagged_also_when_skipped(runs):
+    shutil.copy2(runs / "run-00.h5", runs / "aborted.h5")
+    with h5py.File(runs / "aborted.h5", "r+") as f:
+        f["entry"].attrs["status"] = "aborted"
+    first, again = (run_task("fit", runs / "aborted.h5", _options("--no-cv"), report=False)
+                    for _ in range(2))
+    assert (first.status, again.status) == ("analysed", "skipped")
+    assert "run status 'aborted'" in first.flags[-1]
+    assert again.flags == first.flags
