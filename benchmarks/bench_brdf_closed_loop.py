@@ -24,7 +24,8 @@ Run: ``python benchmarks/bench_brdf_closed_loop.py [--quick] [--seeds N] [--high
 [--matrix N] [--workers N | --scheduler ADDRESS]``. With ``--workers``/``--scheduler``
 the seeds run as Dask tasks (ADR 0070): the tables are the same, value for value, as the
 serial run's (every seed carries its own RNG seeds). The high-SNR part sends its
-(≈ 0.5 GB) to every worker once, so it gains only with several seeds per worker: with
+full-resolution rendering (≈ 0.5 GB) to every worker once, so it gains only with several
+seeds per worker: with
 ``--seeds 3 --high-snr 1`` two local workers took 138 s against 72 s serial on the shared
 2-core box, with identical tables.
 """
