@@ -17,8 +17,8 @@ from instrument.version import package_version
 __all__ = ["main"]
 
 #: Subcommand modules under instrument.cli, in the order `--help` lists them.
-SUBCOMMANDS = ("devices", "serve_sim", "plan", "run", "resume", "runs", "fit", "reconstruct",
-               "locate", "spheres")
+SUBCOMMANDS = ("gui", "devices", "serve_sim", "plan", "run", "resume", "runs", "fit",
+               "reconstruct", "locate", "spheres")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,224 @@
+"""The operator's main window: docks around the bench, an always-visible Stop all.
+
+The window receives its collaborators (the session, its bridge, the settings store, the
+runs folder) in the constructor, so tests build it on any bench with no patching.
+
+Keyboard: **Esc** stops all motion (during a run: aborts it, the engine makes the bench
+safe) from anywhere in the application; **Space** pauses or resumes the run unless a text
+or number field has the focus (where a space is typed). Layout, window geometry, the
+last bench and the last folders are kept in ``QSettings``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import QByteArray, QEvent, QObject, QSettings, Qt, QTimer
+from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShortcut
+from PySide6.QtWidgets import (
+    QAbstractSpinBox,
+    QApplication,
+    QComboBox,
+    QDockWidget,
+    QLabel,
+    QLineEdit,
+    QMainWindow,
+    QMessageBox,
+    QPlainTextEdit,
+    QPushButton,
+    QTextEdit,
+    QToolBar,
+    QWidget,
+)
+
+from gui.model.session import BenchSession, CommandResult, ConnectionStatus, RunHandle
+from gui.qt.bench_panel import BenchPanel
+from gui.qt.bridge import SessionBridge
+
+__all__ = ["MainWindow"]
+
+#: Bump when the dock set changes: an old saved layout is then ignored.
+LAYOUT_VERSION = 1
+
+
+class MainWindow(QMainWindow):
+    """Docks: bench, goniometer, camera, plan, run, live plot, runs, log."""
+
+    def __init__(self, session: BenchSession, bridge: SessionBridge, *,
+                 settings: QSettings, runs_dir: Path, bench: str | None = None,
+                 parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.bridge = bridge
+        self.settings = settings
+        self.runs_dir = Path(runs_dir)
+        self.setWindowTitle("scatterlab")
+        self.setObjectName("main_window")
+        self.setDockNestingEnabled(True)
+        self.docks: dict[str, QDockWidget] = {}
+        self._closing = False
+        self._close_confirmed = False
+
+        # Stop all: a toolbar that cannot be hidden, moved or floated away
+        bar = QToolBar("Safety")
+        bar.setObjectName("safety_toolbar")
+        bar.setMovable(False)
+        bar.setFloatable(False)
+        bar.toggleViewAction().setEnabled(False)
+        bar.setContextMenuPolicy(Qt.PreventContextMenu)
+        self.stop_button = QPushButton("STOP ALL  (Esc)")
+        self.stop_button.setObjectName("stop_all")
+        self.stop_button.setMinimumHeight(36)
+        self.stop_button.setStyleSheet(
+            "QPushButton { background: #c62828; color: white; font-weight: 700; "
+            "padding: 4px 18px; border-radius: 4px } QPushButton:pressed { background: #8e0000 }")
+        self.stop_button.setToolTip("stop every axis now; during a run: abort it "
+                                    "(motion stopped, light off, file finalised)")
+        self.stop_button.clicked.connect(self.stop_all)
+        bar.addWidget(self.stop_button)
+        self.run_label = QLabel("")
+        self.run_label.setObjectName("run_label")
+        bar.addSeparator()
+        bar.addWidget(self.run_label)
+        self.addToolBar(Qt.TopToolBarArea, bar)
+        self.safety_toolbar = bar
+
+        self.escape = QShortcut(QKeySequence(Qt.Key_Escape), self)
+        self.escape.setContext(Qt.ApplicationShortcut)
+        self.escape.activated.connect(self.stop_all)
+
+        self.bench_panel = BenchPanel(session)
+        self.add_dock("bench", "Bench", self.bench_panel, Qt.LeftDockWidgetArea)
+
+        bridge.statesChanged.connect(self.bench_panel.on_states)
+        bridge.connectionChanged.connect(self._on_connection)
+        bridge.resultReady.connect(self._on_result)
+        bridge.runChanged.connect(self._on_run)
+        self.bench_panel.benchChosen.connect(lambda b: self.settings.setValue("bench", b))
+
+        self._views_menu = self.menuBar().addMenu("&View")
+        self._build_views()
+        for dock in self.docks.values():
+            self._views_menu.addAction(dock.toggleViewAction())
+        reset = QAction("Reset layout", self)
+        reset.triggered.connect(self.reset_layout)
+        self._views_menu.addAction(reset)
+
+        self._default_state = self.saveState(LAYOUT_VERSION)
+        self._restore(bench)
+        QApplication.instance().installEventFilter(self)
+
+    # docks ---------------------------------------------------------------------------
+    def add_dock(self, name: str, title: str, widget: QWidget,
+                 area: Qt.DockWidgetArea) -> QDockWidget:
+        dock = QDockWidget(title, self)
+        dock.setObjectName(f"dock_{name}")
+        dock.setWidget(widget)
+        dock.setFeatures(QDockWidget.DockWidgetMovable | QDockWidget.DockWidgetFloatable
+                         | QDockWidget.DockWidgetClosable)
+        self.addDockWidget(area, dock)
+        self.docks[name] = dock
+        return dock
+
+    def _build_views(self) -> None:
+        """The views beside the bench panel (each phase of the window adds its own)."""
+
+    def reset_layout(self) -> None:
+        self.restoreState(self._default_state, LAYOUT_VERSION)
+        for dock in self.docks.values():
+            dock.show()
+
+    # settings ------------------------------------------------------------------------
+    def _restore(self, bench: str | None) -> None:
+        geometry = self.settings.value("geometry")
+        if isinstance(geometry, QByteArray | bytes):
+            self.restoreGeometry(QByteArray(geometry))
+        else:
+            self.resize(1500, 950)
+        state = self.settings.value("window_state")
+        if isinstance(state, QByteArray | bytes):
+            self.restoreState(QByteArray(state), LAYOUT_VERSION)
+        chosen = bench or self.settings.value("bench", "sim")
+        self.bench_panel.choose(str(chosen))
+
+    def save_settings(self) -> None:
+        self.settings.setValue("geometry", self.saveGeometry())
+        self.settings.setValue("window_state", self.saveState(LAYOUT_VERSION))
+        self.settings.setValue("bench", self.bench_panel.chosen)
+        self.settings.sync()
+
+    # safety --------------------------------------------------------------------------
+    def stop_all(self) -> None:
+        self.session.stop_all()
+
+    def toggle_pause(self) -> bool:
+        """Space: pause a running run, resume a paused one. Returns whether it acted."""
+        if self.session.pause_run():
+            return True
+        return self.session.resume_run()
+
+    def eventFilter(self, obj: QObject, event: QEvent) -> bool:
+        if (event.type() == QEvent.KeyPress and event.key() == Qt.Key_Space
+                and not event.isAutoRepeat() and self.isActiveWindow()
+                and self.session.run is not None):
+            focus = QApplication.focusWidget()
+            typing = isinstance(focus, QLineEdit | QTextEdit | QPlainTextEdit
+                                | QAbstractSpinBox) or (
+                isinstance(focus, QComboBox) and focus.isEditable())
+            if not typing:
+                return self.toggle_pause()
+        return super().eventFilter(obj, event)
+
+    # reports -------------------------------------------------------------------------
+    def _on_connection(self, status: ConnectionStatus) -> None:
+        self.bench_panel.on_connection(status)
+        self.statusBar().showMessage(status.message, 8000)
+
+    def _on_result(self, result: CommandResult) -> None:
+        self.bench_panel.on_result(result)
+
+    def _on_run(self, run: RunHandle | None) -> None:
+        self.bench_panel.on_run(run)
+        self.run_label.setText("" if run is None else f"run: {run.path.name}")
+
+    # closing -------------------------------------------------------------------------
+    def closeEvent(self, event: QCloseEvent) -> None:
+        run = self.session.run
+        if run is not None and not self._closing:
+            if not self._close_confirmed:
+                answer = QMessageBox.question(
+                    self, "A run is in progress",
+                    "A run is in progress. Close anyway?\n\nThe run is aborted: motion "
+                    "stopped, light off, the file finalised (it can be resumed later).",
+                    QMessageBox.Yes | QMessageBox.No, QMessageBox.No)
+                if answer != QMessageBox.Yes:
+                    event.ignore()
+                    return
+            self._closing = True
+            self.session.abort_run()
+            self.statusBar().showMessage("aborting the run: making the bench safe …")
+            self._wait_for_run_end()
+            event.ignore()
+            return
+        if self.session.run is not None:
+            event.ignore()  # still ending; _wait_for_run_end closes when it has
+            return
+        self.save_settings()
+        QApplication.instance().removeEventFilter(self)
+        self.shutdown()
+        event.accept()
+
+    def confirm_close_during_run(self, yes: bool = True) -> None:
+        """Answer the close question in advance (tests, scripted shutdown)."""
+        self._close_confirmed = yes
+
+    def _wait_for_run_end(self) -> None:
+        if self.session.run is None:
+            self._closing = False
+            self.close()
+            return
+        QTimer.singleShot(50, self._wait_for_run_end)
+
+    def shutdown(self) -> None:
+        """Close the bench (axes stopped, light off) and end the device worker."""
+        self.session.close(30.0)
