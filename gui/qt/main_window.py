@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from PySide6.QtCore import QByteArray, QEvent, QObject, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
@@ -31,14 +32,23 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from gui.model.devices import DeviceState
 from gui.model.session import BenchSession, CommandResult, ConnectionStatus, RunHandle
 from gui.qt.bench_panel import BenchPanel
 from gui.qt.bridge import SessionBridge
+from gui.qt.goniometer_view import GoniometerView
 
-__all__ = ["MainWindow"]
+__all__ = ["MainWindow", "homed_positions"]
 
 #: Bump when the dock set changes: an old saved layout is then ignored.
 LAYOUT_VERSION = 1
+
+
+def homed_positions(states: dict[str, DeviceState]) -> dict[str, float]:
+    """Positions of the homed axes (an unhomed axis's counter is not a position)."""
+    return {r: float(s.values["position"]) for r, s in states.items()
+            if s.kind == "motion_axis" and s.values.get("homed")
+            and s.values.get("position") is not None}
 
 
 class MainWindow(QMainWindow):
@@ -56,6 +66,7 @@ class MainWindow(QMainWindow):
         self.setObjectName("main_window")
         self.setDockNestingEnabled(True)
         self.docks: dict[str, QDockWidget] = {}
+        self.current_run: RunHandle | None = None  # the running run, or the last one
         self._closing = False
         self._close_confirmed = False
 
@@ -121,7 +132,30 @@ class MainWindow(QMainWindow):
         return dock
 
     def _build_views(self) -> None:
-        """The views beside the bench panel (each phase of the window adds its own)."""
+        """The views beside the bench panel."""
+        self.goniometer = GoniometerView()
+        self.add_dock("goniometer", "Goniometer", self.goniometer, Qt.RightDockWidgetArea)
+        self.bridge.statesChanged.connect(self._on_states)
+        self._run_timer = QTimer(self)
+        self._run_timer.setInterval(100)  # live views redraw at ≤ 10 Hz
+        self._run_timer.timeout.connect(self._tick_run)
+
+    def _on_states(self, states) -> None:
+        self.goniometer.set_positions(homed_positions(states))
+
+    def _tick_run(self) -> None:
+        """Read the run's live values (a copy under a lock) and update the views."""
+        run = self.current_run
+        if run is None:
+            return
+        snap = run.live.snapshot()
+        if snap.version == getattr(self, "_last_version", None):
+            return
+        self._last_version = snap.version
+        self.goniometer.set_positions(snap.positions)
+        done = np.zeros(snap.n_total, bool)
+        done[snap.index[(snap.index >= 0) & (snap.index < snap.n_total)]] = True
+        self.goniometer.set_done(done)
 
     def reset_layout(self) -> None:
         self.restoreState(self._default_state, LAYOUT_VERSION)
@@ -173,6 +207,9 @@ class MainWindow(QMainWindow):
     def _on_connection(self, status: ConnectionStatus) -> None:
         self.bench_panel.on_connection(status)
         self.statusBar().showMessage(status.message, 8000)
+        if status.state in ("connected", "disconnected"):
+            self.goniometer.set_profile(status.profile if status.state == "connected"
+                                        else None)
 
     def _on_result(self, result: CommandResult) -> None:
         self.bench_panel.on_result(result)
@@ -180,6 +217,14 @@ class MainWindow(QMainWindow):
     def _on_run(self, run: RunHandle | None) -> None:
         self.bench_panel.on_run(run)
         self.run_label.setText("" if run is None else f"run: {run.path.name}")
+        if run is not None:
+            self.current_run = run
+            self.goniometer.set_plan(run.plan)
+            self._last_version = None
+            self._run_timer.start()
+        else:
+            self._tick_run()  # the last points of the run that just ended
+            self._run_timer.stop()
 
     # closing -------------------------------------------------------------------------
     def closeEvent(self, event: QCloseEvent) -> None:
