@@ -185,6 +185,11 @@ class FrameSlot:
         with self._lock:
             return self._frame
 
+    def counts(self) -> tuple[int, int, int, bool]:
+        """(received, taken, skipped, whether a frame waits), read together."""
+        with self._lock:
+            return self.received, self.taken, self.skipped, self._fresh
+
     def reset_counts(self) -> None:
         with self._lock:
             self.received = self.taken = self.skipped = 0

@@ -34,8 +34,10 @@ from PySide6.QtWidgets import (
 
 from gui.model.devices import DeviceState
 from gui.model.session import BenchSession, CommandResult, ConnectionStatus, RunHandle
+from gui.qt.background import Background
 from gui.qt.bench_panel import BenchPanel
 from gui.qt.bridge import SessionBridge
+from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
 
 __all__ = ["MainWindow", "homed_positions"]
@@ -133,9 +135,17 @@ class MainWindow(QMainWindow):
 
     def _build_views(self) -> None:
         """The views beside the bench panel."""
+        self.background = Background(workers=2, parent=self)
         self.goniometer = GoniometerView()
         self.add_dock("goniometer", "Goniometer", self.goniometer, Qt.RightDockWidgetArea)
+        self.camera = CameraView(self.session, self.background)
+        self.add_dock("camera", "Camera", self.camera, Qt.RightDockWidgetArea)
+        self.tabifyDockWidget(self.docks["goniometer"], self.docks["camera"])
+        self.docks["goniometer"].raise_()
         self.bridge.statesChanged.connect(self._on_states)
+        self.bridge.statesChanged.connect(self.camera.on_states)
+        self.bridge.resultReady.connect(self.camera.on_result)
+        self.bridge.runChanged.connect(self.camera.on_run)
         self._run_timer = QTimer(self)
         self._run_timer.setInterval(100)  # live views redraw at ≤ 10 Hz
         self._run_timer.timeout.connect(self._tick_run)
@@ -267,3 +277,4 @@ class MainWindow(QMainWindow):
     def shutdown(self) -> None:
         """Close the bench (axes stopped, light off) and end the device worker."""
         self.session.close(30.0)
+        self.background.shutdown(wait=False)
