@@ -111,12 +111,15 @@ def test_settings_remember_the_bench_and_the_layout(qtbot, make_window, settings
                                                     fast_bench_file):
     path = fast_bench_file()
     w = make_window(path)
-    w.resize(640, 480)
+    w.docks["goniometer"].hide()  # the operator closed a dock
     w.save_settings()
     assert settings.value("bench") == path
+    assert settings.value("geometry") is not None
     w2 = make_window(None)
     assert w2.bench_panel.chosen == path
-    assert (w2.width(), w2.height()) == (640, 480)
+    assert w2.docks["goniometer"].isHidden() and not w2.docks["bench"].isHidden()
+    w2.reset_layout()
+    assert not w2.docks["goniometer"].isHidden()
 
 
 def test_the_cli_starts_no_qt_for_other_commands():
