@@ -33,12 +33,20 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model.devices import DeviceState
-from gui.model.session import BenchSession, CommandResult, ConnectionStatus, RunHandle
+from gui.model.session import (
+    BenchSession,
+    CommandResult,
+    ConnectionStatus,
+    RunHandle,
+    StartRun,
+)
 from gui.qt.background import Background
 from gui.qt.bench_panel import BenchPanel
 from gui.qt.bridge import SessionBridge
 from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
+from gui.qt.plan_editor import PlanEditor
+from instrument.bench.profile import ProfileError, load_profile
 
 __all__ = ["MainWindow", "homed_positions"]
 
@@ -142,6 +150,11 @@ class MainWindow(QMainWindow):
         self.add_dock("camera", "Camera", self.camera, Qt.RightDockWidgetArea)
         self.tabifyDockWidget(self.docks["goniometer"], self.docks["camera"])
         self.docks["goniometer"].raise_()
+        self.plan_editor = PlanEditor(self.background, self.validation_profile,
+                                      settings=self.settings)
+        self.add_dock("plan", "Plan", self.plan_editor, Qt.BottomDockWidgetArea)
+        self.plan_editor.startRequested.connect(self.start_run)
+        self.plan_editor.planChanged.connect(self._plan_changed)
         self.bridge.statesChanged.connect(self._on_states)
         self.bridge.statesChanged.connect(self.camera.on_states)
         self.bridge.resultReady.connect(self.camera.on_result)
@@ -149,6 +162,27 @@ class MainWindow(QMainWindow):
         self._run_timer = QTimer(self)
         self._run_timer.setInterval(100)  # live views redraw at ≤ 10 Hz
         self._run_timer.timeout.connect(self._tick_run)
+
+    def validation_profile(self):
+        """The bench plans are checked against: the connected one, else the chosen one."""
+        profile = self.session.profile if self.session.connected else None
+        if profile is not None:
+            return profile
+        try:
+            return load_profile(self.bench_panel.chosen)
+        except (ProfileError, OSError):
+            return None
+
+    def start_run(self, plan) -> None:
+        self.runs_dir.mkdir(parents=True, exist_ok=True)
+        self.session.submit(StartRun(plan, self.runs_dir))
+
+    def _plan_changed(self, plan) -> None:
+        if self.session.run is None:
+            self.goniometer.set_plan(plan)
+
+    def _update_start(self) -> None:
+        self.plan_editor.set_can_start(self.session.connected and self.session.run is None)
 
     def _on_states(self, states) -> None:
         self.goniometer.set_positions(homed_positions(states))
@@ -220,12 +254,16 @@ class MainWindow(QMainWindow):
         if status.state in ("connected", "disconnected"):
             self.goniometer.set_profile(status.profile if status.state == "connected"
                                         else None)
+            self.goniometer.set_plan(self.plan_editor.plan)
+            self.plan_editor.validate_now()
+        self._update_start()
 
     def _on_result(self, result: CommandResult) -> None:
         self.bench_panel.on_result(result)
 
     def _on_run(self, run: RunHandle | None) -> None:
         self.bench_panel.on_run(run)
+        self._update_start()
         self.run_label.setText("" if run is None else f"run: {run.path.name}")
         if run is not None:
             self.current_run = run
