@@ -37,6 +37,7 @@ from gui.model.session import (
     BenchSession,
     CommandResult,
     ConnectionStatus,
+    ResumeRun,
     RunHandle,
     StartRun,
 )
@@ -46,6 +47,7 @@ from gui.qt.bridge import SessionBridge
 from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
 from gui.qt.plan_editor import PlanEditor
+from gui.qt.run_control import FaultPanel, RunControl
 from instrument.bench.profile import ProfileError, load_profile
 
 __all__ = ["MainWindow", "homed_positions"]
@@ -154,6 +156,12 @@ class MainWindow(QMainWindow):
                                       settings=self.settings)
         self.add_dock("plan", "Plan", self.plan_editor, Qt.BottomDockWidgetArea)
         self.plan_editor.startRequested.connect(self.start_run)
+        self.fault_panel = FaultPanel()
+        self.run_control = RunControl(self.session, self.fault_panel)
+        self.add_dock("run", "Run", self.run_control, Qt.LeftDockWidgetArea)
+        self.add_dock("faults", "Faults", self.fault_panel, Qt.BottomDockWidgetArea)
+        self.bridge.engineEvent.connect(self.run_control.on_event)
+        self.bridge.runChanged.connect(self.run_control.on_run)
         self.plan_editor.planChanged.connect(self._plan_changed)
         self.bridge.statesChanged.connect(self._on_states)
         self.bridge.statesChanged.connect(self.camera.on_states)
@@ -260,6 +268,9 @@ class MainWindow(QMainWindow):
 
     def _on_result(self, result: CommandResult) -> None:
         self.bench_panel.on_result(result)
+        if isinstance(result.command, StartRun | ResumeRun) and not result.ok:
+            self.run_control.state.setText(f"the run did not start: {result.message}")
+            self.statusBar().showMessage(result.message, 15000)
 
     def _on_run(self, run: RunHandle | None) -> None:
         self.bench_panel.on_run(run)
