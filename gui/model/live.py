@@ -131,7 +131,7 @@ class LiveData:
         """A point's main frame (:class:`instrument.run.storage.FrameData`)."""
         data = frame.data
         row = None
-        if self.plan_kind == "lightfield" and data.ndim == 2:
+        if self.plan_kind == "lightfield" and data.ndim == 2 and getattr(frame, "light", True):
             row = data.mean(axis=0, dtype=np.float64)
         with self._lock:
             self._image = data

@@ -46,6 +46,7 @@ from gui.qt.bench_panel import BenchPanel
 from gui.qt.bridge import SessionBridge
 from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
+from gui.qt.live_plot import LivePlot
 from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_control import FaultPanel, RunControl
 from instrument.bench.profile import ProfileError, load_profile
@@ -150,7 +151,10 @@ class MainWindow(QMainWindow):
         self.add_dock("goniometer", "Goniometer", self.goniometer, Qt.RightDockWidgetArea)
         self.camera = CameraView(self.session, self.background)
         self.add_dock("camera", "Camera", self.camera, Qt.RightDockWidgetArea)
+        self.live_plot = LivePlot()
+        self.add_dock("live", "Live plot", self.live_plot, Qt.RightDockWidgetArea)
         self.tabifyDockWidget(self.docks["goniometer"], self.docks["camera"])
+        self.tabifyDockWidget(self.docks["camera"], self.docks["live"])
         self.docks["goniometer"].raise_()
         self.plan_editor = PlanEditor(self.background, self.validation_profile,
                                       settings=self.settings)
@@ -205,6 +209,7 @@ class MainWindow(QMainWindow):
             return
         self._last_version = snap.version
         self.goniometer.set_positions(snap.positions)
+        self.live_plot.update_from(snap)
         done = np.zeros(snap.n_total, bool)
         done[snap.index[(snap.index >= 0) & (snap.index < snap.n_total)]] = True
         self.goniometer.set_done(done)
@@ -279,6 +284,8 @@ class MainWindow(QMainWindow):
         if run is not None:
             self.current_run = run
             self.goniometer.set_plan(run.plan)
+            self.live_plot.start(run.plan.kind)
+            self.docks["live"].raise_()
             self._last_version = None
             self._run_timer.start()
         else:

@@ -4,6 +4,7 @@ choice; closing the window during a run."""
 from __future__ import annotations
 
 import h5py
+import numpy as np
 import pytest
 
 from gui.model.faults import PauseKind
@@ -133,3 +134,29 @@ def test_closing_during_a_run_asks_then_makes_everything_safe(qtbot, make_window
     for role in ("sample_theta",):
         assert not registry.get("simapt", role).stage.is_moving()
     assert not registry.get("simsmc", "detector_theta").stage.is_moving()
+
+
+def test_a_small_scan_to_completion_file_catalog_and_live_plot(qtbot, make_window,
+                                                               fast_bench_file, tmp_path):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    run = start(qtbot, w, tmp_path, step=20.0)
+    ev = wait_end(qtbot, w)
+    assert ev.status == "finished" and ev.n_done == len(run.plan.points)
+    data = read_run(run.path)
+    assert data.status == "finished" and data.n_points == ev.n_done
+    assert data.frame_shape == (1024, 1024) and (data.point_status == 0).all()
+    with Catalog(tmp_path / "runs") as cat:
+        row = cat.get(data.run_id)
+    assert (row.status, row.n_points, row.n_planned) == ("finished", ev.n_done, ev.n_done)
+    assert row.sample == "gui-sample" and row.path == str(run.path)
+    # the live plot shows every point done, one curve for the one θi
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=5000)
+    assert w.live_plot.kind == "in_plane" and list(w.live_plot._curves) == [20.0]
+    x, y = w.live_plot._curves[20.0].getData()
+    assert len(x) == ev.n_done and np.all(np.diff(x) > 0)
+    assert np.allclose(np.sort(10 ** y), np.sort(data.signal))  # log-y axis
+    assert "points received" in w.live_plot.caption.text()
+    assert w.run_control.progress.value() == ev.n_done
+    # the bench is the operator's again
+    assert w.bench_panel.panels["sample_theta"].home.isEnabled()
