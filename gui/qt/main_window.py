@@ -36,6 +36,7 @@ from gui.model.devices import DeviceState
 from gui.model.session import (
     BenchSession,
     CommandResult,
+    Connect,
     ConnectionStatus,
     ResumeRun,
     RunHandle,
@@ -48,8 +49,9 @@ from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
 from gui.qt.live_plot import LivePlot
 from gui.qt.plan_editor import PlanEditor
+from gui.qt.run_browser import RunBrowser
 from gui.qt.run_control import FaultPanel, RunControl
-from instrument.bench.profile import ProfileError, load_profile
+from instrument.bench.profile import ProfileError, load_profile, parse_profile
 
 __all__ = ["MainWindow", "homed_positions"]
 
@@ -131,6 +133,7 @@ class MainWindow(QMainWindow):
         self._default_state = self.saveState(LAYOUT_VERSION)
         self._restore(bench)
         QApplication.instance().installEventFilter(self)
+        self.browser.refresh()
 
     # docks ---------------------------------------------------------------------------
     def add_dock(self, name: str, title: str, widget: QWidget,
@@ -164,6 +167,13 @@ class MainWindow(QMainWindow):
         self.run_control = RunControl(self.session, self.fault_panel)
         self.add_dock("run", "Run", self.run_control, Qt.LeftDockWidgetArea)
         self.add_dock("faults", "Faults", self.fault_panel, Qt.BottomDockWidgetArea)
+        self.browser = RunBrowser(self.background, self.runs_dir, settings=self.settings)
+        self.add_dock("runs", "Runs", self.browser, Qt.BottomDockWidgetArea)
+        self.tabifyDockWidget(self.docks["plan"], self.docks["runs"])
+        self.tabifyDockWidget(self.docks["runs"], self.docks["faults"])
+        self.docks["plan"].raise_()
+        self.browser.resumeRequested.connect(self.resume_run)
+        self.run_control.finished.connect(lambda ev: self.browser.refresh())
         self.bridge.engineEvent.connect(self.run_control.on_event)
         self.bridge.runChanged.connect(self.run_control.on_run)
         self.plan_editor.planChanged.connect(self._plan_changed)
@@ -188,6 +198,21 @@ class MainWindow(QMainWindow):
     def start_run(self, plan) -> None:
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         self.session.submit(StartRun(plan, self.runs_dir))
+
+    def resume_run(self, details) -> None:
+        """Continue a run in its own file, on the bench it was recorded on (connected
+        first from the profile stored in the run when another bench is connected)."""
+        profile = self.session.profile if self.session.connected else None
+        if profile is None or profile.name != details.bench_name:
+            try:
+                stored = parse_profile(details.profile_text,
+                                       source=f"bench profile stored in {details.path}")
+            except ProfileError as err:
+                self.run_control.state.setText(f"cannot resume: {err}")
+                return
+            self.session.submit(Connect(stored))
+        self.session.submit(ResumeRun(details.path))
+        self.docks["run"].raise_()
 
     def _plan_changed(self, plan) -> None:
         if self.session.run is None:
