@@ -48,6 +48,7 @@ from gui.qt.bridge import SessionBridge
 from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
 from gui.qt.live_plot import LivePlot
+from gui.qt.log_dock import LogDock
 from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_browser import RunBrowser
 from gui.qt.run_control import FaultPanel, RunControl
@@ -174,6 +175,15 @@ class MainWindow(QMainWindow):
         self.docks["plan"].raise_()
         self.browser.resumeRequested.connect(self.resume_run)
         self.run_control.finished.connect(lambda ev: self.browser.refresh())
+        self.log_dock = LogDock()
+        self.add_dock("log", "Log", self.log_dock, Qt.BottomDockWidgetArea)
+        self.tabifyDockWidget(self.docks["faults"], self.docks["log"])
+        self.docks["plan"].raise_()
+        self.bridge.engineEvent.connect(self.log_dock.on_event)
+        self.bridge.resultReady.connect(self.log_dock.on_result)
+        self.browser.analysisDone.connect(self.log_dock.on_analysis)
+        self.browser.analysisFailed.connect(
+            lambda name, msg: self.log_dock.log("error", name, msg))
         self.bridge.engineEvent.connect(self.run_control.on_event)
         self.bridge.runChanged.connect(self.run_control.on_run)
         self.plan_editor.planChanged.connect(self._plan_changed)
@@ -341,6 +351,7 @@ class MainWindow(QMainWindow):
             return
         self.save_settings()
         QApplication.instance().removeEventFilter(self)
+        self.log_dock.detach()
         self.shutdown()
         event.accept()
 

@@ -130,3 +130,29 @@ def test_filters_and_fit_from_the_browser(qtbot, make_window, glossy_run_in_cata
     assert value == pytest.approx(float(out.tables[0].rows[0][1]))
     assert browser.open_report.isEnabled()
     assert "chosen model" in browser.analysis_summary.text()
+
+
+def test_the_log_dock_collects_filters_and_copies(qtbot, make_window, glossy_run_in_catalog):
+    import logging
+
+    runs, _path, data = glossy_run_in_catalog
+    w = make_window("sim", out=runs)
+    log = w.log_dock
+    _listed(qtbot, w.browser, 2)
+    _select(qtbot, w.browser, data.run_id)
+    with qtbot.waitSignal(w.browser.analysisDone, timeout=120000):
+        w.browser.analyse.click()
+    # the pipeline's own warning (the receiver distance was assumed) reaches the log
+    qtbot.waitUntil(lambda: "assumed" in log.visible_text(), timeout=5000)
+    logging.getLogger("drivers.thorlabs_apt").warning("unsolicited message skipped")
+    qtbot.waitUntil(lambda: "unsolicited message skipped" in log.view.toPlainText(),
+                    timeout=5000)
+    log.level.setCurrentIndex(log.level.findData("error"))
+    assert "assumed" not in log.view.toPlainText()
+    log.level.setCurrentIndex(log.level.findData("info"))
+    log.filter.setText("unsolicited")
+    text = log.copy_visible()
+    assert text.count("\n") == 0 and "WARNING drivers.thorlabs_apt" in text
+    from PySide6.QtGui import QGuiApplication
+
+    assert QGuiApplication.clipboard().text() == text
