@@ -40,9 +40,13 @@ class Background(QObject):
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gui-job")
         self._ids = itertools.count(1)
         self.running: dict[int, str] = {}
+        self.closed = False
         self.finished.connect(self._forget)
 
-    def submit(self, name: str, fn: Callable[[], Any]) -> int:
+    def submit(self, name: str, fn: Callable[[], Any]) -> int | None:
+        """Run ``fn`` on a worker; ``None`` once the pool is shut down (window closing)."""
+        if self.closed:
+            return None
         job_id = next(self._ids)
         self.running[job_id] = name
         t0 = time.monotonic()
@@ -61,4 +65,5 @@ class Background(QObject):
         self.running.pop(done.job_id, None)
 
     def shutdown(self, wait: bool = True) -> None:
+        self.closed = True
         self._pool.shutdown(wait=wait, cancel_futures=True)

@@ -370,3 +370,4 @@ class MainWindow(QMainWindow):
         """Close the bench (axes stopped, light off) and end the device worker."""
         self.session.close(30.0)
         self.background.shutdown(wait=False)
+        self.browser.analysis_pool.shutdown(wait=False)

@@ -8,7 +8,8 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from PySide6.QtCore import QSettings
+from PySide6.QtCore import QEvent, QSettings
+from PySide6.QtWidgets import QApplication
 
 from tests.gui.helpers import fast_profile
 
@@ -54,7 +55,23 @@ def make_window(qtbot, tmp_path, settings):
         qtbot.waitUntil(lambda w=w: not w.session.run, timeout=30000)
         w.session.close(20)
         w.deleteLater()
+    flush_deleted()
+
+
+def flush_deleted() -> None:
+    """Destroy widgets scheduled for deletion now, while Qt and Python are both alive (a
+    pyqtgraph view left to the interpreter's last garbage collection can crash it)."""
+    app = QApplication.instance()
+    if app is not None:
+        app.processEvents()
+        QApplication.sendPostedEvents(None, QEvent.DeferredDelete)
     gc.collect()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _destroy_widgets_before_exit():
+    yield
+    flush_deleted()
 
 
 def connect(qtbot, window, timeout: int = 20000) -> None:
