@@ -109,9 +109,7 @@ def top_view(profile: BenchProfile, positions: Mapping[str, float], *,
         t = np.array([-n[1], n[0]])
         half = 0.12 * R
         shapes.append(Shape("behind_sample", "polygon",
-                            np.array([half * 9 * t, half * 9 * t - 1.3 * R * n,
-                                      -half * 9 * t - 1.3 * R * n, -half * 9 * t,
-                                      half * 9 * t]),
+                            _wedge(n_az + 90.0, n_az + 270.0, 0.0, 1.3 * R),
                             "behind the sample (θ ≥ 90°)"))
         shapes.append(Shape("sample", "line", np.array([half * t, -half * t]), "sample"))
         shapes.append(Shape("normal", "line", np.array([[0.0, 0.0], 0.45 * R * n_h * n]),

@@ -63,6 +63,7 @@ class LiveSnapshot:
     theta_r: np.ndarray
     phi_r: np.ndarray
     signal: np.ndarray        # DN/µs
+    planned_theta_i: np.ndarray  # the plan's signed θi of each point (φi = 180°: < 0)
     power_w: np.ndarray
     positions: dict[str, float]  # the last read-back positions
     field: np.ndarray | None  # light field rows (n_total, n_theta), NaN where not measured
@@ -77,7 +78,10 @@ class LiveData:
     """Live values of one run. ``on_event``/``on_frame`` run on the engine's worker thread;
     :meth:`snapshot` on any thread."""
 
-    def __init__(self, plan_kind: str, n_total: int, *, n_done: int = 0) -> None:
+    def __init__(self, plan_kind: str, n_total: int, *, n_done: int = 0,
+                 planned_angles: np.ndarray | None = None) -> None:
+        """``planned_angles``: (n_total, 4) θi, φi, θr, φr of the plan's points (NaN where
+        a point has none); a curve per incidence angle uses the planned θi."""
         self.plan_kind = plan_kind
         self.n_total = int(n_total)
         n = max(self.n_total, 1)
@@ -97,6 +101,12 @@ class LiveData:
         self._elapsed = 0.0
         self._eta = math.nan
         self._version = 0
+        signed = np.full(n, np.nan)
+        if planned_angles is not None and len(planned_angles):
+            pa = np.asarray(planned_angles, float).reshape(-1, 4)[:n]
+            signed[:len(pa)] = np.where(np.abs(np.mod(pa[:, 1], 360) - 180) < 90,
+                                        -pa[:, 0], pa[:, 0])
+        self._planned_ti = signed
 
     # worker thread -----------------------------------------------------------------
     def on_event(self, ev: Event) -> None:
@@ -165,7 +175,9 @@ class LiveData:
             return LiveSnapshot(
                 self.plan_kind, self.n_total, self._n_done, n, self._index[:n].copy(),
                 self._ok[:n].copy(), a[:, 0], a[:, 1], a[:, 2], a[:, 3],
-                self._signal[:n].astype(np.float64), self._power[:n].astype(np.float64),
+                self._signal[:n].astype(np.float64),
+                self._planned_ti[np.clip(self._index[:n], 0, self._planned_ti.size - 1)],
+                self._power[:n].astype(np.float64),
                 dict(self._positions),
                 None if self._field is None else self._field.copy(),
                 None if self._field_y is None else self._field_y.copy(),

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+import numpy as np
+
 from drivers.base import Camera, Device, MotionAxis
 from drivers.errors import DeviceError
 from gui.model.camera import FramePump, FrameSlot
@@ -726,7 +728,9 @@ class BenchSession:
                 plan, path = engine.plan, Path(engine.store.path)
         except (StorageError, FileExistsError) as err:
             return CommandResult(cmd, False, f"the run file could not be made: {err}")
-        live = LiveData(plan.kind, len(plan.points), n_done=engine.n_done)
+        live = LiveData(plan.kind, len(plan.points), n_done=engine.n_done,
+                        planned_angles=np.array([p.angles.as_tuple() if p.angles else
+                                                 (np.nan,) * 4 for p in plan.points]))
         events = EventQueue(maxsize=EVENT_QUEUE_MAX)
         handle = RunHandle(engine, live, events, plan, Path(path), resumed=resume is not None)
         cam = bench.camera

@@ -131,6 +131,7 @@ class BenchPanel(QWidget):
 
     def _rebuild(self, roles: tuple[str, ...]) -> None:
         for panel in self.panels.values():
+            panel.hide()
             panel.setParent(None)
             panel.deleteLater()
         self.panels = {}

@@ -41,7 +41,8 @@ class LivePlot(QWidget):
         # in-plane
         self.in_plane = pg.PlotWidget(background="w")
         self.in_plane.setLabel("bottom", "θr (signed: > 0 specular side)", units="deg")
-        self.in_plane.setLabel("left", "signal", units="DN/µs")
+        self.in_plane.setLabel("left", "signal (DN/µs)")
+        self.in_plane.getAxis("left").enableAutoSIPrefix(False)
         self.in_plane.setLogMode(y=True)
         self.in_plane.showGrid(x=True, y=True, alpha=0.3)
         self.in_plane_legend = self.in_plane.addLegend(offset=(-10, 10))
@@ -74,7 +75,7 @@ class LivePlot(QWidget):
         # series
         self.series = pg.PlotWidget(background="w")
         self.series.setLabel("bottom", "point")
-        self.series.setLabel("left", "signal", units="DN/µs")
+        self.series.setLabel("left", "signal (DN/µs)")
         self.series_curve = self.series.plot([], [], pen=None, symbol="o", symbolSize=6,
                                              symbolBrush="#1565c0")
         self._pages = {"in_plane": self.in_plane, "hemisphere": self.polar,
@@ -110,7 +111,8 @@ class LivePlot(QWidget):
     # pictures -------------------------------------------------------------------------
     def _draw_in_plane(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
         tr = signed_theta_r(snap.theta_r, snap.phi_i, snap.phi_r)
-        ti = np.round(np.where(snap.phi_i > 90, -snap.theta_i, snap.theta_i), 3)
+        # curves by the planned θi (the read-back one differs by the stage tolerance)
+        ti = np.round(snap.planned_theta_i, 6)
         sel = ok & np.isfinite(tr) & (snap.signal > 0)
         plotted = 0
         for k, value in enumerate(sorted(set(ti[sel].tolist()))):

@@ -162,21 +162,22 @@ class MainWindow(QMainWindow):
         self.docks["goniometer"].raise_()
         self.plan_editor = PlanEditor(self.background, self.validation_profile,
                                       settings=self.settings)
-        self.add_dock("plan", "Plan", self.plan_editor, Qt.BottomDockWidgetArea)
+        self.add_dock("plan", "Plan", self.plan_editor, Qt.RightDockWidgetArea)
+        self.splitDockWidget(self.docks["goniometer"], self.docks["plan"], Qt.Vertical)
         self.plan_editor.startRequested.connect(self.start_run)
         self.fault_panel = FaultPanel()
         self.run_control = RunControl(self.session, self.fault_panel)
         self.add_dock("run", "Run", self.run_control, Qt.LeftDockWidgetArea)
-        self.add_dock("faults", "Faults", self.fault_panel, Qt.BottomDockWidgetArea)
+        self.add_dock("faults", "Faults", self.fault_panel, Qt.RightDockWidgetArea)
         self.browser = RunBrowser(self.background, self.runs_dir, settings=self.settings)
-        self.add_dock("runs", "Runs", self.browser, Qt.BottomDockWidgetArea)
+        self.add_dock("runs", "Runs", self.browser, Qt.RightDockWidgetArea)
         self.tabifyDockWidget(self.docks["plan"], self.docks["runs"])
         self.tabifyDockWidget(self.docks["runs"], self.docks["faults"])
         self.docks["plan"].raise_()
         self.browser.resumeRequested.connect(self.resume_run)
         self.run_control.finished.connect(lambda ev: self.browser.refresh())
         self.log_dock = LogDock()
-        self.add_dock("log", "Log", self.log_dock, Qt.BottomDockWidgetArea)
+        self.add_dock("log", "Log", self.log_dock, Qt.RightDockWidgetArea)
         self.tabifyDockWidget(self.docks["faults"], self.docks["log"])
         self.docks["plan"].raise_()
         self.bridge.engineEvent.connect(self.log_dock.on_event)
@@ -253,6 +254,18 @@ class MainWindow(QMainWindow):
         self.restoreState(self._default_state, LAYOUT_VERSION)
         for dock in self.docks.values():
             dock.show()
+        self.default_sizes()
+
+    def default_sizes(self) -> None:
+        """The bench column (bench over run) 36 % of the width; on the right the views
+        over the plan, runs, faults and log."""
+        w, h = max(self.width(), 800), max(self.height(), 600)
+        d = self.docks
+        self.resizeDocks([d["bench"], d["goniometer"]], [int(0.36 * w), int(0.64 * w)],
+                         Qt.Horizontal)
+        self.resizeDocks([d["bench"], d["run"]], [int(0.68 * h), int(0.32 * h)], Qt.Vertical)
+        self.resizeDocks([d["goniometer"], d["plan"]], [int(0.45 * h), int(0.55 * h)],
+                         Qt.Vertical)
 
     # settings ------------------------------------------------------------------------
     def _restore(self, bench: str | None) -> None:
@@ -261,6 +274,7 @@ class MainWindow(QMainWindow):
             self.restoreGeometry(QByteArray(geometry))
         else:
             self.resize(1500, 950)
+            self.default_sizes()
         state = self.settings.value("window_state")
         if isinstance(state, QByteArray | bytes):
             self.restoreState(QByteArray(state), LAYOUT_VERSION)

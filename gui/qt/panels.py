@@ -60,13 +60,9 @@ def panel_for(kind: str) -> type[DevicePanel]:
 
 
 def badge(text: str, on: bool | None, *, good: bool = True) -> str:
-    """Rich text of a state badge: green (good and on), amber (not good and on), grey."""
-    if on is None:
-        color = "#9e9e9e"
-    elif on:
-        color = "#2e7d32" if good else "#e65100"
-    else:
-        color = "#9e9e9e" if good else "#2e7d32"
+    """Rich text of a state badge: green (a good state that holds), amber (a state that
+    needs attention that holds), grey (does not hold, or unknown)."""
+    color = "#9e9e9e" if not on else ("#2e7d32" if good else "#e65100")
     return (f"<span style='background:{color}; color:white; padding:1px 4px; "
             f"border-radius:3px'>&nbsp;{text}&nbsp;</span>")
 
@@ -257,11 +253,12 @@ class AxisPanel(DevicePanel):
         self.velocity.setText("—" if vel is None else f"{vel:.4g} {units}/s")
         if limits is not None:
             self.limits.setText(f"soft limits [{limits[0]:g}, {limits[1]:g}] {units}")
-        homed = v.get("homed")
+        homed = bool(v.get("homed"))
+        moving = bool(v.get("moving"))
         flags = [badge("connected", state.connected),
-                 badge("homed" if homed else "not homed", homed),
-                 badge("homing" if v.get("homing") else "moving",
-                       bool(v.get("moving")), good=False)]
+                 badge("homed", True) if homed else badge("not homed", True, good=False),
+                 badge("homing" if v.get("homing") else "moving" if moving else "at rest",
+                       moving, good=False)]
         if v.get("at_limit"):
             flags.append(badge("at limit", True, good=False))
         if state.error:
@@ -289,8 +286,10 @@ class CameraPanel(DevicePanel):
             f"{w}×{h} px, {info.get('bit_depth', '?')}-bit; exposure "
             f"{fmt.si(v.get('exposure_us', math.nan) * 1e-6, 's')}, gain "
             f"{v.get('gain', math.nan):.3g}; dropped {v.get('dropped', 0)}")
+        streaming = bool(v.get("streaming"))
         self.status.setText(badge("connected", state.connected) + " "
-                            + badge("streaming", bool(v.get("streaming")), good=False))
+                            + badge("streaming" if streaming else "idle", streaming,
+                                    good=False))
 
 
 class SourcePanel(DevicePanel):

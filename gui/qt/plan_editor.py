@@ -87,6 +87,7 @@ class PlanEditor(QWidget):
         self.start = QPushButton("Start run")
         self.start.setObjectName("start")
         self.start.setEnabled(False)
+        self.start.setMinimumWidth(130)
         self.start.setStyleSheet("QPushButton:enabled { background: #2e7d32; color: white; "
                                  "font-weight: 700; padding: 4px 14px }")
         self.status = QLabel("")
@@ -132,6 +133,9 @@ class PlanEditor(QWidget):
         split.addWidget(right)
         split.setStretchFactor(0, 3)
         split.setStretchFactor(1, 2)
+        split.setSizes([620, 420])
+        split.setChildrenCollapsible(False)
+        scroll.setMinimumWidth(380)
 
         lay = QVBoxLayout(self)
         lay.addLayout(files)
@@ -156,9 +160,11 @@ class PlanEditor(QWidget):
     # form ---------------------------------------------------------------------------
     def _build_form(self) -> None:
         while self._form_layout.count():
-            item = self._form_layout.takeAt(0)
-            if item.widget() is not None:
-                item.widget().deleteLater()
+            old = self._form_layout.takeAt(0).widget()
+            if old is not None:
+                old.hide()  # off the screen now, deleted later
+                old.setParent(None)
+                old.deleteLater()
         self._widgets, self._errors = {}, {}
         boxes: dict[str, QFormLayout] = {}
         for section, title in SECTIONS:

@@ -349,12 +349,14 @@ class RunBrowser(QWidget):
         while self._tables_layout.count():
             item = self._tables_layout.takeAt(0)
             if item.widget() is not None:
+                item.widget().hide()
                 item.widget().deleteLater()
         for t in out.tables:
             self._add_table(t)
         while self._figures_layout.count():
             item = self._figures_layout.takeAt(0)
             if item.widget() is not None:
+                item.widget().hide()
                 item.widget().deleteLater()
         for k, fig in enumerate(out.figures[:12]):
             label = QLabel()
