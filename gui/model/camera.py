@@ -26,8 +26,8 @@ import numpy as np
 from drivers.base import Camera
 from drivers.errors import DeviceError, DeviceTimeout
 
-__all__ = ["FramePump", "FrameSlot", "FrameStats", "LiveFrame", "RateMeter", "RoiBox",
-           "frame_stats", "save_frame"]
+__all__ = ["DISPLAY_MAX_SIDE", "FramePump", "FrameSlot", "FrameStats", "LiveFrame",
+           "RateMeter", "RoiBox", "decimate", "decimation", "frame_stats", "save_frame"]
 
 
 @dataclass(frozen=True)
@@ -76,9 +76,36 @@ def frame_stats(data: np.ndarray, exposure_us: float, saturation_dn: float,
     return FrameStats(mean, peak, per_us, sat, box), mask
 
 
+#: Largest side of the picture the display gets; larger frames are decimated (block
+#: maximum for the saturation mask, so no saturated pixel disappears) off the GUI thread.
+DISPLAY_MAX_SIDE = 1024
+
+
+def decimation(shape: tuple[int, ...], max_side: int = DISPLAY_MAX_SIDE) -> int:
+    """The integer factor that brings the larger side of ``shape`` to ≤ ``max_side``."""
+    return max(1, -(-max(int(shape[0]), int(shape[1])) // max_side))
+
+
+def decimate(data: np.ndarray, factor: int, *, reduce: str = "sample") -> np.ndarray:
+    """``data`` shrunk by ``factor``: every factor-th pixel (``sample``) or the maximum of
+    each factor × factor block (``max``, for masks)."""
+    if factor == 1:
+        return data
+    if reduce == "sample":
+        return data[::factor, ::factor]
+    h, w = (data.shape[0] // factor) * factor, (data.shape[1] // factor) * factor
+    blocks = data[:h, :w].reshape(h // factor, factor, w // factor, factor)
+    return blocks.max(axis=(1, 3))
+
+
 @dataclass(frozen=True)
 class LiveFrame:
-    """A frame ready to show: the data, its statistics and saturation mask."""
+    """A frame ready to show: the data, its statistics and saturation mask.
+
+    ``display`` and ``display_mask`` are what the view paints: the frame and the mask
+    decimated to at most :data:`DISPLAY_MAX_SIDE` pixels a side (``scale`` pixels of the
+    frame per displayed pixel).
+    """
 
     data: np.ndarray
     index: int
@@ -88,13 +115,19 @@ class LiveFrame:
     stats: FrameStats | None  # None until computed (run frames: by the display)
     mask: np.ndarray | None
     source: str  # "stream" | "run"
+    display: np.ndarray | None = None
+    display_mask: np.ndarray | None = None
+    scale: int = 1
 
     def with_stats(self, roi: RoiBox | None) -> LiveFrame:
-        """This frame with its statistics (computed now if they were not)."""
+        """This frame with its statistics and display images (computed now if they were
+        not)."""
         if self.stats is not None:
             return self
         stats, mask = frame_stats(self.data, self.exposure_us, self.saturation_dn, roi)
-        return replace(self, stats=stats, mask=mask)
+        k = decimation(self.data.shape)
+        return replace(self, stats=stats, mask=mask, display=decimate(self.data, k),
+                       display_mask=decimate(mask, k, reduce="max"), scale=k)
 
 
 class RateMeter:

@@ -29,7 +29,7 @@ import numpy as np
 from instrument.bench.kinematics import Angles, kinematics_for
 from instrument.bench.profile import BenchProfile
 
-__all__ = ["Scene", "Shape", "hemisphere_view", "top_view"]
+__all__ = ["Scene", "Shape", "hemisphere_view", "plan_points_xy", "top_view"]
 
 
 @dataclass(frozen=True)
@@ -150,20 +150,41 @@ def top_view(profile: BenchProfile, positions: Mapping[str, float], *,
         shapes.append(Shape("collision", "polygon", poly, zone.reason))
 
     # the plan's detector positions
-    if planned and "detector_theta" in has:
-        flags = list(done) + [False] * (len(planned) - len(done))
-        pts_done, pts_todo = [], []
-        for p, ok in zip(planned, flags, strict=False):
-            if "detector_theta" not in p:
-                continue
-            xy = (R + float(p.get("camera_z", positions.get("camera_z", 0.0)))) \
-                * _unit(src_az + float(p["detector_theta"]))
-            (pts_done if ok else pts_todo).append(xy)
-        for role, pts in (("points_todo", pts_todo), ("points_done", pts_done)):
-            if pts:
-                shapes.append(Shape(role, "markers", np.array(pts),
-                                    f"{len(pts)} point(s) {'done' if 'done' in role else 'to do'}"))
+    if len(planned) and "detector_theta" in has:
+        xy = plan_points_xy(profile, planned, positions)
+        flags = np.zeros(len(xy), bool)
+        flags[:min(len(done), len(xy))] = np.asarray(done[:len(xy)], bool)
+        known = np.isfinite(xy[:, 0])
+        for role, sel in (("points_todo", known & ~flags), ("points_done", known & flags)):
+            if sel.any():
+                shapes.append(Shape(role, "markers", _distinct(xy[sel]),
+                                    "points done" if "done" in role else "points to do"))
     return Scene(f"{profile.name}: top view", tuple(shapes), 1.35 * R, tuple(notes))
+
+
+def _distinct(xy: np.ndarray, resolution: float = 0.1) -> np.ndarray:
+    """The distinct markers of ``xy`` at ``resolution`` (a plan visits each detector angle
+    once per incidence angle: thousands of points, a few hundred places to draw)."""
+    if len(xy) < 2:
+        return xy
+    keys = np.round(xy / resolution).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return xy[np.sort(first)]
+
+
+def plan_points_xy(profile: BenchProfile, planned: Sequence[Mapping[str, float]],
+                   positions: Mapping[str, float]) -> np.ndarray:
+    """Where the detector stands at each planned point in :func:`top_view`, shape (N, 2);
+    NaN for points that do not set ``detector_theta``. Vectorised: a plan of 10⁵ points
+    costs milliseconds."""
+    geo = profile.geometry
+    src_az = geo.source_theta_deg + float(positions.get("source_theta", 0.0))
+    z_now = float(positions.get("camera_z", 0.0))
+    dt = np.array([p.get("detector_theta", np.nan) for p in planned], float)
+    z = np.array([p.get("camera_z", z_now) for p in planned], float)
+    a = np.radians(src_az + dt)
+    r = geo.detector_distance_mm + z
+    return np.column_stack([r * np.cos(a), r * np.sin(a)])
 
 
 def _project(theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
@@ -218,8 +239,9 @@ def hemisphere_view(profile: BenchProfile, positions: Mapping[str, float], *,
                    if a is not None and f == ok]
             if sel:
                 shapes.append(Shape(role, "markers",
-                                    _project([a.theta_r for a in sel], [a.phi_r for a in sel]),
-                                    f"{len(sel)} point(s) {'done' if ok else 'to do'}"))
+                                    _distinct(_project([a.theta_r for a in sel],
+                                                       [a.phi_r for a in sel]), 0.01),
+                                    "points done" if ok else "points to do"))
     return Scene(f"{profile.name}: hemisphere above the sample (radius θ, φ from x)",
                  tuple(shapes), 95.0, tuple(notes))
 

@@ -4,8 +4,8 @@
 methods are called on the device worker's (or the engine's) thread and only emit
 signals; Qt delivers them, queued, to the widgets on the GUI thread. Engine events come
 through the run's bounded :class:`instrument.run.events.EventQueue`, drained by a timer
-(20 Hz) on the GUI thread, so a fast run never floods the GUI's event loop and the
-worker that drives the hardware never waits for it.
+(20 Hz) on the GUI thread, live values coalesced, so a fast run never floods the GUI's
+event loop and the worker that drives the hardware never waits for it.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from gui.model.session import CommandResult, ConnectionStatus, RunHandle
+from instrument.run.events import PointCompleted, Progress
 
 __all__ = ["SessionBridge"]
 
@@ -57,12 +58,22 @@ class SessionBridge(QObject):
         return self._run
 
     def drain(self) -> int:
-        """Emit every queued engine event of the current run; return how many."""
+        """Emit the queued engine events of the current run; return how many were queued.
+
+        Live values are coalesced: of the :class:`Progress` events only the newest is
+        emitted, and :class:`PointCompleted` not at all (the live plots read every point
+        from the run's :class:`gui.model.live.LiveData`); lifecycle events all, in order.
+        """
         run = self._run
         if run is None:
             return 0
         events = run.events.drain()
-        for ev in events:
+        last_progress = max((k for k, ev in enumerate(events) if isinstance(ev, Progress)),
+                            default=-1)
+        for k, ev in enumerate(events):
+            if isinstance(ev, PointCompleted) or (isinstance(ev, Progress)
+                                                  and k != last_progress):
+                continue
             self.engineEvent.emit(ev)
         return len(events)
 

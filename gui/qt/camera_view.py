@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QTimer, Signal
+from PySide6.QtGui import QTransform
 from PySide6.QtWidgets import (
     QCheckBox,
     QDoubleSpinBox,
@@ -65,6 +66,7 @@ class CameraView(QWidget):
         self.shown = 0
         self.last_frame = None
         self._levels_set = False
+        self._scale = 1
         self._snapshot_dir = Path.cwd()
 
         self.graphics = pg.GraphicsLayoutWidget()
@@ -225,16 +227,22 @@ class CameraView(QWidget):
             return False
         self.last_frame = frame
         auto = self.auto_levels.isChecked() and not self._levels_set
-        self.image.setImage(frame.data, autoLevels=False)
+        shown = frame.display if frame.display is not None else frame.data
+        self.image.setImage(shown, autoLevels=False)
+        if frame.scale != self._scale:  # decimated: keep the frame's pixel coordinates
+            self._scale = frame.scale
+            for item in (self.image, self.overlay):
+                item.setTransform(QTransform.fromScale(frame.scale, frame.scale))
         if auto or not self._levels_set:
             top = float(frame.saturation_dn)
-            lo = float(np.percentile(frame.data[::8, ::8], 1))
-            hi = float(np.percentile(frame.data[::8, ::8], 99.9))
+            lo = float(np.percentile(shown[::8, ::8], 1))
+            hi = float(np.percentile(shown[::8, ::8], 99.9))
             self.histogram.setLevels(lo, max(hi, lo + 1.0))
             self.histogram.setHistogramRange(0, top)
             self._levels_set = True
-        if self.show_saturation.isChecked() and frame.mask is not None:
-            self.overlay.setImage(frame.mask, autoLevels=False, levels=(0, 1))
+        mask = frame.display_mask if frame.display_mask is not None else frame.mask
+        if self.show_saturation.isChecked() and mask is not None:
+            self.overlay.setImage(mask, autoLevels=False, levels=(0, 1))
         s = frame.stats
         if s is not None:
             where = "ROI" if s.roi is not None else "frame"

@@ -7,6 +7,7 @@ every bench, plus the hemisphere projection on out-of-plane benches — and redr
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -80,6 +81,9 @@ class GoniometerView(QWidget):
         self.planned_angles: list[Angles | None] = []
         self.done: list[bool] = []
         self.scene: Scene | None = None
+        self._items: list = []
+        self._structure = None
+        self._next_redraw = 0.0
         self._dirty = False
         self._timer = QTimer(self)
         self._timer.setInterval(100)  # ≤ 10 redraws per second
@@ -118,55 +122,80 @@ class GoniometerView(QWidget):
 
     # drawing ------------------------------------------------------------------------
     def _redraw_if_dirty(self) -> None:
-        if self._dirty and self.isVisible():
+        # a redraw that took long waits ten times as long before the next one, so the
+        # drawing never takes more than a tenth of the GUI thread
+        if self._dirty and self.isVisible() and time.monotonic() >= self._next_redraw:
+            t0 = time.monotonic()
             self.redraw()
+            cost = time.monotonic() - t0
+            self._next_redraw = t0 + max(0.1, 10.0 * cost)
 
     def redraw(self) -> None:
+        """Draw the scene. The items are made once per structure (which shapes, which
+        legend) and afterwards only their data changes: a redraw during a run of
+        thousands of points costs a few milliseconds, not a rebuild of the plot."""
         self._dirty = False
-        self.plot.clear()
-        self.legend.clear()
         if self.profile is None:
+            self.plot.clear()
+            self.legend.clear()
+            self._items, self._structure = [], None
             self.caption.setText("no bench")
             self.scene = None
             return
-        if self.which.currentData() == "hemisphere" and \
-                self.profile.geometry.kind == "out_of_plane":
+        hemi = self.which.currentData() == "hemisphere" and \
+            self.profile.geometry.kind == "out_of_plane"
+        if hemi:
             scene = hemisphere_view(self.profile, self.positions,
                                     planned_angles=self.planned_angles, done=self.done)
         else:
             scene = top_view(self.profile, self.positions, planned=self.planned,
                              done=self.done)
         self.scene = scene
-        for shape in scene.shapes:
-            self._draw(shape)
-        e = scene.extent
-        self.plot.setRange(xRange=(-e, e), yRange=(-e, e), padding=0.02)
+        structure = (scene.title, tuple((s.role, s.kind, s.label) for s in scene.shapes))
+        if structure != self._structure:
+            self.plot.clear()
+            self.legend.clear()
+            self._items = [self._create(shape) for shape in scene.shapes]
+            self._structure = structure
+            e = scene.extent
+            self.plot.setRange(xRange=(-e, e), yRange=(-e, e), padding=0.02)
+        else:
+            for item, shape in zip(self._items, scene.shapes, strict=True):
+                _set_data(item, shape.xy)
         pos = ", ".join(f"{k} {v:.3f}" for k, v in sorted(self.positions.items()))
-        self.caption.setText(f"{scene.title}. {pos or 'no homed axis'}"
+        n_done = sum(len(s.xy) for s in scene.by_role("points_done"))
+        n_todo = sum(len(s.xy) for s in scene.by_role("points_todo"))
+        plan = f"; plan: {n_done} done, {n_todo} to do" if n_done or n_todo else ""
+        self.caption.setText(f"{scene.title}. {pos or 'no homed axis'}{plan}"
                              + ("" if not scene.notes else ". " + "; ".join(scene.notes)))
 
-    def _draw(self, shape) -> None:
+    def _create(self, shape):
         pen_c, width, brush, symbol, size = STYLES.get(shape.role,
                                                        ("#000000", 1, None, None, 0))
         xy = shape.xy
-        legend = shape.role not in ("grid", "horizon", "sample")
         if shape.kind == "markers":
             item = pg.ScatterPlotItem(xy[:, 0], xy[:, 1], symbol=symbol or "o",
                                       size=size or 8, pen=pg.mkPen(pen_c or "#000"),
                                       brush=pg.mkBrush(brush or pen_c or "#000"))
-            self.plot.addItem(item)
             sample = item
         elif shape.kind == "polygon":
-            self.plot.addItem(_polygon(xy, brush, pen_c))
-            # a legend sample with the same fill
+            item = _polygon(xy, brush, pen_c)
             sample = pg.PlotDataItem([0, 0], [0, 0], pen=pg.mkPen(pen_c or brush),
                                      fillLevel=0, fillBrush=pg.mkBrush(brush))
         else:
             item = pg.PlotCurveItem(xy[:, 0], xy[:, 1], pen=pg.mkPen(pen_c, width=width))
-            self.plot.addItem(item)
             sample = item
-        if legend and shape.label:
+        self.plot.addItem(item)
+        if shape.label and shape.role not in ("grid", "horizon", "sample"):
             self.legend.addItem(sample, shape.label)
+        return item
+
+
+def _set_data(item, xy: np.ndarray) -> None:
+    if isinstance(item, QGraphicsPolygonItem):
+        item.setPolygon(QPolygonF([QPointF(float(x), float(y)) for x, y in xy]))
+    else:
+        item.setData(xy[:, 0], xy[:, 1])
 
 
 def _polygon(xy: np.ndarray, brush, pen) -> QGraphicsPolygonItem:

@@ -15,6 +15,8 @@ per point.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import QLabel, QStackedWidget, QVBoxLayout, QWidget
@@ -23,6 +25,8 @@ from gui.model.live import LiveSnapshot, plot_kind, signed_theta_r
 
 __all__ = ["LivePlot"]
 
+#: Plans up to this many points get a marker per point; larger ones lines only.
+MARKERS_UP_TO = 600
 PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#4e342e",
            "#ad1457"]
 
@@ -47,6 +51,8 @@ class LivePlot(QWidget):
         self.in_plane.showGrid(x=True, y=True, alpha=0.3)
         self.in_plane_legend = self.in_plane.addLegend(offset=(-10, 10))
         self._curves: dict[float, pg.PlotDataItem] = {}
+        self._counts: dict[float, int] = {}
+        self._power_axis = False
         # hemisphere
         self.polar = pg.PlotWidget(background="w")
         self.polar.setAspectLocked(True)
@@ -95,6 +101,11 @@ class LivePlot(QWidget):
         for c in self._curves.values():
             self.in_plane.removeItem(c)
         self._curves.clear()
+        self._counts.clear()
+        if self._power_axis:
+            self._power_axis = False
+            for plot in (self.in_plane, self.series):
+                plot.setLabel("left", "signal (DN/µs)")
         self.in_plane_legend.clear()
         self.polar_points.clear()
         self.field_image.clear()
@@ -103,6 +114,13 @@ class LivePlot(QWidget):
         self.caption.setText(f"{plan_kind}: waiting for the first point")
 
     def update_from(self, snap: LiveSnapshot) -> None:
+        if not np.isfinite(snap.signal).any() and np.isfinite(snap.power_w).any():
+            # a power-meter-only plan: its reading is the signal
+            snap = replace(snap, signal=snap.power_w)
+            if not self._power_axis:
+                self._power_axis = True
+                for plot in (self.in_plane, self.series):
+                    plot.setLabel("left", "power (W)")
         ok = snap.ok & np.isfinite(snap.signal)
         getattr(self, f"_draw_{self.kind}")(snap, ok)
         self.caption.setText(f"{snap.plan_kind}: {snap.n_received} of {snap.n_total} points "
@@ -115,19 +133,25 @@ class LivePlot(QWidget):
         ti = np.round(snap.planned_theta_i, 6)
         sel = ok & np.isfinite(tr) & (snap.signal > 0)
         plotted = 0
+        # markers cost a paint per point: above a few hundred points lines alone
+        markers = snap.n_total <= MARKERS_UP_TO
         for k, value in enumerate(sorted(set(ti[sel].tolist()))):
             rows = sel & (ti == value)
+            n = int(rows.sum())
+            plotted += n
+            curve = self._curves.get(value)
+            if curve is not None and self._counts.get(value) == n:
+                continue  # nothing new on this curve: no redraw
             order = np.argsort(tr[rows])
             x, y = tr[rows][order], snap.signal[rows][order]
-            curve = self._curves.get(value)
             if curve is None:
                 colour = PALETTE[k % len(PALETTE)]
+                style = dict(symbol="o", symbolSize=6, symbolBrush=colour) if markers else {}
                 curve = self.in_plane.plot([], [], pen=pg.mkPen(colour, width=2),
-                                           symbol="o", symbolSize=6, symbolBrush=colour,
-                                           name=f"θi = {value:g}°")
+                                           name=f"θi = {value:g}°", **style)
                 self._curves[value] = curve
             curve.setData(x, y)
-            plotted += int(rows.sum())
+            self._counts[value] = n
         self.n_plotted = plotted
 
     def _draw_hemisphere(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
