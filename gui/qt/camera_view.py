@@ -18,7 +18,6 @@ from PySide6.QtCore import QTimer, Signal
 from PySide6.QtGui import QTransform
 from PySide6.QtWidgets import (
     QCheckBox,
-    QDoubleSpinBox,
     QFileDialog,
     QGridLayout,
     QHBoxLayout,
@@ -40,6 +39,7 @@ from gui.model.session import (
     StopStream,
 )
 from gui.qt.background import Background, JobDone
+from gui.qt.panels import spin_box
 
 __all__ = ["CameraView"]
 
@@ -89,11 +89,11 @@ class CameraView(QWidget):
         self.stream = QPushButton("Start live")
         self.stream.setObjectName("stream")
         self.stream.setCheckable(True)
-        self.exposure = _spin(0.01, 1e8, 2, 1000.0, "µs")
+        self.exposure = spin_box(0.01, 1e8, 2, 1000.0, "µs")
         self.exposure.setObjectName("exposure")
         self.set_exposure = QPushButton("Set")
         self.set_exposure.setObjectName("set_exposure")
-        self.gain = _spin(-100.0, 1000.0, 2, 0.0, "")
+        self.gain = spin_box(-100.0, 1000.0, 2, 0.0, "")
         self.gain.setObjectName("gain")
         self.set_gain = QPushButton("Set")
         self.set_gain.setObjectName("set_gain")
@@ -288,16 +288,4 @@ class CameraView(QWidget):
             self.error.setText("")
             self.stats.setToolTip(f"saved {done.result}")
             self.snapshotSaved.emit(str(done.result))
-
-
-def _spin(low: float, high: float, decimals: int, value: float, suffix: str
-          ) -> QDoubleSpinBox:
-    box = QDoubleSpinBox()
-    box.setRange(low, high)
-    box.setDecimals(decimals)
-    box.setValue(value)
-    box.setKeyboardTracking(False)
-    if suffix:
-        box.setSuffix(f" {suffix}")
-    return box
 

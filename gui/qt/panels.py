@@ -45,7 +45,7 @@ from gui.model.session import (
     Stop,
 )
 
-__all__ = ["DevicePanel", "GenericPanel", "panel_for", "register_panel"]
+__all__ = ["DevicePanel", "GenericPanel", "panel_for", "register_panel", "spin_box"]
 
 _PANELS: dict[str, type[DevicePanel]] = {}
 
@@ -158,8 +158,9 @@ def _short(v: Any) -> str:
     return str(v)
 
 
-def _spin(low: float, high: float, decimals: int, value: float, suffix: str = "",
-          step: float = 1.0) -> QDoubleSpinBox:
+def spin_box(low: float, high: float, decimals: int, value: float, suffix: str = "",
+             step: float = 1.0) -> QDoubleSpinBox:
+    """A number field that reports only finished edits (no command per keystroke)."""
     box = QDoubleSpinBox()
     box.setRange(low, high)
     box.setDecimals(decimals)
@@ -188,18 +189,18 @@ class AxisPanel(DevicePanel):
         self.home.setObjectName("home")
         self.stop = QPushButton("Stop")
         self.stop.setObjectName("stop")
-        self.step = _spin(0.0001, 360.0, 4, 1.0)
+        self.step = spin_box(0.0001, 360.0, 4, 1.0)
         self.step.setObjectName("step")
         self.step.setToolTip("jog step")
         self.minus = QPushButton("−")
         self.minus.setObjectName("jog_minus")
         self.plus = QPushButton("+")
         self.plus.setObjectName("jog_plus")
-        self.target = _spin(-1e6, 1e6, 4, 0.0)
+        self.target = spin_box(-1e6, 1e6, 4, 0.0)
         self.target.setObjectName("target")
         self.go = QPushButton("Go")
         self.go.setObjectName("go")
-        self.new_velocity = _spin(0.0001, 1e4, 4, 1.0)
+        self.new_velocity = spin_box(0.0001, 1e4, 4, 1.0)
         self.new_velocity.setObjectName("new_velocity")
         self.set_velocity = QPushButton("Set")
         self.set_velocity.setObjectName("set_velocity")
@@ -335,7 +336,7 @@ class PowerMeterPanel(DevicePanel):
         self.reading.setStyleSheet("font-size: 15pt; font-weight: 600")
         self.wavelength = QLabel("—")
         self.wavelength.setObjectName("wavelength")
-        self.new_wavelength = _spin(100.0, 25000.0, 1, 633.0, "nm")
+        self.new_wavelength = spin_box(100.0, 25000.0, 1, 633.0, "nm")
         self.new_wavelength.setObjectName("new_wavelength")
         self.set_wavelength = QPushButton("Set")
         self.set_wavelength.setObjectName("set_wavelength")

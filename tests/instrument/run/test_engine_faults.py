@@ -119,21 +119,28 @@ def test_transient_disconnect_is_retried(tmp_path, make_bench):
     assert any(e["kind"] == "fault" and e["device"] == "detector_theta" for e in log)
 
 
-def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
-    bench = make_bench("pause")
-    engine, q, plan = _start(tmp_path, bench)
-    faults = registry.get("simapt", "sample_theta").faults
+def _disconnect_after_point(engine, faults, index: int) -> threading.Event:
+    """Pull the cable once point ``index`` is done (and leave it out); the event is set
+    when the engine pauses."""
     paused = threading.Event()
     armed = []
 
     def on(ev):
-        if isinstance(ev, PointCompleted) and ev.index == 2 and not armed:
+        if isinstance(ev, PointCompleted) and ev.index == index and not armed:
             armed.append(1)
             faults.schedule(FaultKind.DISCONNECT, nth=1)
         if isinstance(ev, Paused):
             paused.set()
 
     engine.subscribe(on)
+    return paused
+
+
+def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
+    bench = make_bench("pause")
+    engine, q, plan = _start(tmp_path, bench)
+    faults = registry.get("simapt", "sample_theta").faults
+    paused = _disconnect_after_point(engine, faults, 2)
     engine.start()
     assert paused.wait(20)
     events = q.drain()
@@ -232,17 +239,7 @@ def test_after_a_fault_pause_the_operator_skips_the_point(tmp_path, make_bench):
     bench = make_bench("pause")
     engine, q, plan = _start(tmp_path, bench)
     faults = registry.get("simsmc", "detector_theta").faults
-    paused = threading.Event()
-    armed = []
-
-    def on(ev):
-        if isinstance(ev, PointCompleted) and ev.index == 2 and not armed:
-            armed.append(1)
-            faults.schedule(FaultKind.DISCONNECT, nth=1)
-        if isinstance(ev, Paused):
-            paused.set()
-
-    engine.subscribe(on)
+    paused = _disconnect_after_point(engine, faults, 2)
     engine.start()
     assert paused.wait(20)
     pause = [e for e in q.drain() if isinstance(e, Paused)][-1]
