@@ -566,10 +566,12 @@ class BenchSession:
             self._states = {}
         self._last_poll.clear()
         self._info_dirty = set(bench.devices)
-        self._poll(force=True)
+        # connected first, then the first states: a listener builds its panels for the
+        # bench's roles before their states arrive
         self.listener.connection(ConnectionStatus(
             "connected", cmd.profile, f"bench {cmd.profile.name!r} connected",
             tuple(bench.devices)))
+        self._poll(force=True)
         return CommandResult(cmd, True, f"bench {cmd.profile.name!r} connected: "
                              f"{len(bench.devices)} devices")
 

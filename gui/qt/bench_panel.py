@@ -124,8 +124,11 @@ class BenchPanel(QWidget):
         connected = status.state == "connected"
         self.connect_button.setEnabled(status.state != "connecting")
         self.disconnect_button.setEnabled(connected)
-        if connected or status.state == "disconnected":
+        if status.state == "disconnected" or (
+                connected and not set(self.panels) <= set(status.roles)):
             self._rebuild(status.roles if connected else ())
+        elif connected:
+            self._pending_roles = list(status.roles)
         if status.state == "failed":
             self.show_message(status.message, error=True)
 

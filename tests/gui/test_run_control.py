@@ -160,3 +160,27 @@ def test_a_small_scan_to_completion_file_catalog_and_live_plot(qtbot, make_windo
     assert w.run_control.progress.value() == ev.n_done
     # the bench is the operator's again
     assert w.bench_panel.panels["sample_theta"].home.isEnabled()
+
+
+def test_space_pauses_and_resumes_but_not_while_typing(qtbot, make_window, fast_bench_file,
+                                                       tmp_path):
+    from PySide6.QtCore import Qt
+
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    run = start(qtbot, w, tmp_path, step=5.0)
+    wait_points(qtbot, run, 1)
+    w.activateWindow()
+    qtbot.waitUntil(w.isActiveWindow, timeout=5000)
+    field = w.plan_editor.field("plan.name")  # a text field: Space is typed, not a pause
+    field.setFocus()
+    qtbot.keyClick(field, Qt.Key_Space)
+    assert run.engine.state is EngineState.RUNNING
+    w.run_control.state.setFocus()
+    w.run_control.pause.setFocus()
+    qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
+    qtbot.waitUntil(lambda: run.engine.state is EngineState.PAUSED, timeout=20000)
+    qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
+    qtbot.waitUntil(lambda: run.engine.state is EngineState.RUNNING, timeout=20000)
+    w.run_control.abort.click()
+    assert wait_end(qtbot, w).status == "aborted"
