@@ -20,8 +20,8 @@ import sys
 __all__ = ["main"]
 
 #: Subcommand modules under instrument.cli, in the order `--help` lists them.
-SUBCOMMANDS = ("devices", "serve_sim", "plan", "run", "resume", "runs", "fit", "reconstruct",
-               "locate", "spheres", "batch")
+SUBCOMMANDS = ("gui", "devices", "serve_sim", "plan", "run", "resume", "runs", "fit",
+               "reconstruct", "locate", "spheres", "batch")
 
 
 def _command_of(argv: list[str]) -> str | None:

@@ -116,6 +116,7 @@ class _PointState:
     power_w: float = math.nan
     signal: float = math.nan
     retries: int = 0
+    main: FrameData | None = None  # the longest unsaturated light bracket (live views)
 
 
 class RunEngine:
@@ -148,6 +149,8 @@ class RunEngine:
         self._done = _DoneSet(self._n_total, done)
         self._n_skipped = 0
         self._subscribers: list[Callable[[Event], None]] = []
+        self._frame_subscribers: list[Callable[[int, FrameData], None]] = []
+        self._skip_requested = False
         self._lock = threading.Condition()
         self._state = EngineState.IDLE
         self._pause_requested: str | None = None
@@ -186,6 +189,18 @@ class RunEngine:
         """Stop calling ``callback`` (a closing GUI window); unknown callbacks are ignored."""
         with contextlib.suppress(ValueError):
             self._subscribers.remove(callback)
+        with contextlib.suppress(ValueError):
+            self._frame_subscribers.remove(callback)
+
+    def subscribe_frames(self, callback: Callable[[int, FrameData], None]) -> None:
+        """Call ``callback(index, frame)`` on the worker thread with each stored point's main
+        frame (the longest unsaturated bracket), just before its :class:`PointCompleted`.
+
+        For live views (the latest image, a light field growing row by row): the callback
+        must return quickly and keep no more of the frame than it needs. A callback that
+        raises is dropped, as an event subscriber is.
+        """
+        self._frame_subscribers.append(callback)
 
     @property
     def state(self) -> EngineState:
@@ -236,10 +251,18 @@ class RunEngine:
             self._pause_requested = reason
             self._lock.notify_all()
 
-    def resume(self) -> None:
+    def resume(self, *, skip_point: bool = False) -> None:
+        """Continue a paused run.
+
+        After a pause for a point's fault the point is tried again; with ``skip_point`` it
+        is stored as skipped instead (status 1, its note naming the fault and the
+        operator's choice) and the run goes on with the next one. ``skip_point`` means
+        nothing after a pause between points (there is no failed point to skip).
+        """
         with self._lock:
             self._pause_requested = None
             self._resume_requested = True
+            self._skip_requested = bool(skip_point)
             self._lock.notify_all()
 
     def abort(self) -> None:
@@ -262,6 +285,14 @@ class RunEngine:
                 cb(event)
             except Exception as err:  # a broken subscriber must not stop the hardware
                 print(f"scatterlab: event subscriber {cb!r} failed: {err!r}", file=sys.stderr)
+                self.unsubscribe(cb)
+
+    def _emit_frame(self, index: int, frame: FrameData) -> None:
+        for cb in list(self._frame_subscribers):
+            try:
+                cb(index, frame)
+            except Exception as err:  # a broken live view must not stop the hardware
+                print(f"scatterlab: frame subscriber {cb!r} failed: {err!r}", file=sys.stderr)
                 self.unsubscribe(cb)
 
     def _main(self) -> None:
@@ -385,7 +416,12 @@ class RunEngine:
                 if fail.action == "abort":
                     self._message = f"{fail.device}: {fail.cause}"
                     raise _Abort from fail
-                self._enter_pause(f"{fail.device}: {fail.cause}", move.index)
+                if self._enter_pause(f"{fail.device}: {fail.cause}", move.index):
+                    cause = f"skipped by the operator after {fail.device}: {fail.cause}"
+                    self.store_event("skipped", index=move.index, reason=cause)
+                    self._submit(_PointState(move.index, acq.label, time.time()),
+                                 skipped=cause)
+                    return
                 continue
             self._submit(st)
             return
@@ -406,7 +442,9 @@ class RunEngine:
         if reason is not None:
             self._enter_pause(reason, index)
 
-    def _enter_pause(self, reason: str, index: int | None) -> None:
+    def _enter_pause(self, reason: str, index: int | None) -> bool:
+        """Make safe, report, wait for resume or abort; return whether the operator asked
+        to skip the point (:meth:`resume`)."""
         self.bench.make_safe()
         self._light = None  # re-applied on resume
         if not self._store_broken:
@@ -427,6 +465,7 @@ class RunEngine:
                 raise _Abort
             self._state = EngineState.RUNNING
             self._resume_requested = False
+            skip, self._skip_requested = self._skip_requested, False
         if self._store_broken:
             self._reopen_store()
         self.store_event("resumed", index=index)
@@ -434,6 +473,7 @@ class RunEngine:
         want = self._light_wanted
         if want is not None:
             self._set_light(want)
+        return skip
 
     _store_broken = False
     _light_wanted: bool | None = None
@@ -531,6 +571,8 @@ class RunEngine:
         dt = now - getattr(self, "_last_point_t", self._t0)
         self._last_point_t = now
         self._point_dt = dt if self._point_dt is None else 0.9 * self._point_dt + 0.1 * dt
+        if st.main is not None and not skipped:
+            self._emit_frame(st.index, st.main)
         self._emit(PointCompleted(st.index, st.label, "skipped" if skipped else "ok",
                                   dict(st.positions),
                                   None if math.isnan(angles[0]) else angles,
@@ -726,6 +768,7 @@ class RunEngine:
                                lambda: self._brackets(cam, policy, acq), st)
         st.frames.extend(brackets)
         best = _best_bracket(brackets)
+        st.main = best
         st.exposure_us = best.exposure_us
         dark_level = 0.0
         if policy.dark == "per_point" and acq.light and self._source is not None:

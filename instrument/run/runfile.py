@@ -40,8 +40,8 @@ from instrument.run.health import inspect_run_file
 from instrument.run.layout import FRAMES_LOST, STATUS_OK, STATUS_SKIPPED
 
 __all__ = ["ANALYSES", "PlannedPoints", "RunData", "RunFileError", "RunSummary", "as_text",
-           "check_run_file", "open_run", "read_plan_kind", "read_planned", "read_run",
-           "read_summary"]
+           "check_run_file", "open_run", "read_attributes", "read_events", "read_plan_kind",
+           "read_planned", "read_run", "read_summary"]
 
 
 class RunFileError(ValueError):
@@ -399,3 +399,34 @@ def read_summary(path: str | Path) -> RunSummary:
                           path.stat().st_size,
                           as_text(e["sample/name"][()]) if "sample/name" in e else "",
                           tuple(as_text(a) for a in e["plan/axes"][()]), recorded, lost)
+
+
+# ------------------------------------------------------------------------------ log
+def read_events(path: str | Path) -> list[dict[str, Any]]:
+    """The run's event log, oldest first: one dict per ``/entry/events/log`` line as the
+    engine wrote it (``kind`` — fault, paused, resumed, skipped … —, ``time`` in seconds
+    since the epoch, and the kind's fields: a fault has ``device``, ``cause``, ``action``
+    and ``index``). Lines that are not JSON objects are returned as ``{"kind": "text",
+    "text": line}`` rather than dropped."""
+    with h5py.File(path, "r") as f:
+        log = f.get("entry/events/log")
+        lines = [] if log is None else [as_text(x) for x in log[()]]
+    out: list[dict[str, Any]] = []
+    for line in lines:
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            rec = None
+        out.append(rec if isinstance(rec, dict) else {"kind": "text", "text": line})
+    return out
+
+
+def read_attributes(path: str | Path) -> dict[str, str]:
+    """The run's provenance attributes on ``/entry`` (run id, plan kind and name, status,
+    software version, start and end time, durability …) as text."""
+    with h5py.File(path, "r") as f:
+        if "entry" not in f:
+            raise RunFileError(f"{path} is not a scatterlab run file (no /entry group)")
+        attrs = dict(f["entry"].attrs.items())
+        attrs.update(f.attrs.items())
+    return {k: as_text(v) if isinstance(v, bytes | str) else str(v) for k, v in attrs.items()}

@@ -317,3 +317,42 @@ def test_catalog_row_follows_a_running_run(tmp_path, monkeypatch):
     reader.close()
     assert len(seen) >= len(plan.points)
     assert all(status == "running" and n == done for status, n, done in seen)
+
+
+def test_frame_subscribers_see_each_stored_points_main_frame_before_its_event(tmp_path):
+    bench = ideal_bench(shape=(4, 6))
+    plan = build_plan(parse_plan(inplane_plan(step=30.0, mode="auto")), bench.profile)
+    engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False)
+    seen: list[tuple[str, int, float]] = []
+
+    def on_frame(index, frame):
+        assert frame.data.shape == (4, 6) and frame.light
+        seen.append(("frame", index, frame.exposure_us))
+
+    def on_event(ev):
+        if isinstance(ev, PointCompleted):
+            seen.append(("point", ev.index, ev.exposure_us))
+
+    engine.subscribe_frames(on_frame)
+    engine.subscribe(on_event)
+    assert engine.run() is EngineState.FINISHED
+    frames = [s for s in seen if s[0] == "frame"]
+    assert len(frames) == len(plan.points)
+    for k in range(0, len(seen), 2):  # each frame just before its point, same exposure
+        assert seen[k][0] == "frame" and seen[k + 1][0] == "point"
+        assert seen[k][1:] == seen[k + 1][1:]
+
+
+def test_a_broken_frame_subscriber_is_dropped_and_the_run_goes_on(tmp_path, capsys):
+    bench = ideal_bench()
+    plan = build_plan(parse_plan(inplane_plan(step=30.0)), bench.profile)
+    engine = start_run(plan, bench, runs_dir=tmp_path, fsync=False)
+    calls = []
+
+    def broken(index, frame):
+        calls.append(index)
+        raise RuntimeError("view closed")
+
+    engine.subscribe_frames(broken)
+    assert engine.run() is EngineState.FINISHED
+    assert len(calls) == 1 and "frame subscriber" in capsys.readouterr().err

@@ -119,21 +119,28 @@ def test_transient_disconnect_is_retried(tmp_path, make_bench):
     assert any(e["kind"] == "fault" and e["device"] == "detector_theta" for e in log)
 
 
-def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
-    bench = make_bench("pause")
-    engine, q, plan = _start(tmp_path, bench)
-    faults = registry.get("simapt", "sample_theta").faults
+def _disconnect_after_point(engine, faults, index: int) -> threading.Event:
+    """Pull the cable once point ``index`` is done (and leave it out); the event is set
+    when the engine pauses."""
     paused = threading.Event()
     armed = []
 
     def on(ev):
-        if isinstance(ev, PointCompleted) and ev.index == 2 and not armed:
+        if isinstance(ev, PointCompleted) and ev.index == index and not armed:
             armed.append(1)
             faults.schedule(FaultKind.DISCONNECT, nth=1)
         if isinstance(ev, Paused):
             paused.set()
 
     engine.subscribe(on)
+    return paused
+
+
+def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
+    bench = make_bench("pause")
+    engine, q, plan = _start(tmp_path, bench)
+    faults = registry.get("simapt", "sample_theta").faults
+    paused = _disconnect_after_point(engine, faults, 2)
     engine.start()
     assert paused.wait(20)
     events = q.drain()
@@ -224,3 +231,64 @@ def test_abort_stops_a_move_in_progress(tmp_path, make_bench):
     assert n < len(plan.points)
     targets = {p.target_dict()["detector_theta"] for p in plan.points}
     assert all(abs(s.position - t) > 0.01 for t in targets)  # stopped between targets
+
+
+def test_after_a_fault_pause_the_operator_skips_the_point(tmp_path, make_bench):
+    """resume(skip_point=True): the failed point is stored as skipped, named as the
+    operator's choice, and the run goes on with the next point."""
+    bench = make_bench("pause")
+    engine, q, plan = _start(tmp_path, bench)
+    faults = registry.get("simsmc", "detector_theta").faults
+    paused = _disconnect_after_point(engine, faults, 2)
+    engine.start()
+    assert paused.wait(20)
+    pause = [e for e in q.drain() if isinstance(e, Paused)][-1]
+    faults.clear()
+    engine.resume(skip_point=True)
+    assert engine.wait(30) is EngineState.FINISHED
+    idx, status, _, log = _file(engine)
+    assert sorted(idx) == list(range(len(plan.points)))
+    assert status[idx.index(pause.index)] == 1 and status.count(1) == 1
+    skipped = [e for e in log if e["kind"] == "skipped"]
+    assert len(skipped) == 1 and skipped[0]["index"] == pause.index
+    assert "skipped by the operator" in skipped[0]["reason"]
+    with h5py.File(engine.store.path) as f:
+        note = f["entry/points/note"][idx.index(pause.index)]
+    assert b"skipped by the operator" in note
+
+
+def test_skip_point_after_an_operator_pause_skips_nothing(tmp_path, make_bench):
+    bench = make_bench("pause")
+    engine, _q, _plan = _start(tmp_path, bench)
+    paused = threading.Event()
+
+    def on(ev):
+        if isinstance(ev, PointCompleted) and ev.index == 1:
+            engine.pause()
+        if isinstance(ev, Paused):
+            paused.set()
+
+    engine.subscribe(on)
+    engine.start()
+    assert paused.wait(20)
+    engine.resume(skip_point=True)
+    assert engine.wait(30) is EngineState.FINISHED
+    _, status, _, _ = _file(engine)
+    assert set(status) == {0}
+
+
+def test_the_reader_gives_the_event_log_and_provenance(tmp_path, make_bench):
+    from instrument.run.runfile import read_attributes, read_events
+
+    bench = make_bench("pause")
+    engine, _q, _plan = _start(tmp_path, bench)
+    faults = registry.get("simsmc", "detector_theta").faults
+    engine.subscribe(_unplug_after_point(1, faults, reconnect_on="retry 1/1"))
+    assert engine.run() is EngineState.FINISHED
+    events = read_events(engine.store.path)
+    assert events == _file(engine)[3]
+    fault = next(e for e in events if e["kind"] == "fault")
+    assert fault["device"] == "detector_theta" and "disconnected" in fault["cause"]
+    attrs = read_attributes(engine.store.path)
+    assert attrs["status"] == "finished" and attrs["run_id"] == engine.store.header.run_id
+    assert attrs["software_version"] and attrs["durability"] == "process"

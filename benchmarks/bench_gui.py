@@ -1,0 +1,233 @@
+"""The GUI stays responsive: event-loop latency during a long scan and a fit; camera rates.
+
+Measured on the real main window (offscreen, ``QT_QPA_PLATFORM=offscreen``):
+
+1. **Scan.** A 10,000-point in-plane scan on the ideal (zero-latency) bench of
+   tests/instrument/helpers.py, started from the GUI, power meter only (scalar points:
+   the engine's fastest path, so the most events per second the GUI must take): the
+   live plot, goniometer and progress redraw from the live arrays.
+2. **Fit.** ``scatterlab fit`` of a simulated glossy run, launched from the run browser.
+3. **Camera.** The simulated camera streaming at 1024² and at 2048² px: the camera's own
+   frame rate (frames into the view's slot) against frames displayed per second.
+
+Latency is measured by a heartbeat: a 5 ms ``QTimer`` on the GUI thread records when it
+fires; the worst (and 99th-percentile) delay beyond its period is how long the GUI thread
+was unable to react. Target: ≤ 50 ms.
+
+    python benchmarks/bench_gui.py                 # everything
+    python benchmarks/bench_gui.py --quick         # 2,000 scan points, 3 s of camera
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+from PySide6.QtCore import QSettings, QTimer  # noqa: E402
+from PySide6.QtWidgets import QApplication  # noqa: E402
+
+from gui.app import create_window  # noqa: E402
+from gui.model.session import StartRun  # noqa: E402
+from instrument.bench.profile import load_profile, parse_profile  # noqa: E402
+from instrument.plans import build_plan, parse_plan  # noqa: E402
+from instrument.run.catalog import Catalog, RunRow  # noqa: E402
+from tests.instrument.helpers import ideal_bench  # noqa: E402
+
+HEARTBEAT_MS = 5
+
+
+class Heartbeat:
+    """Records the GUI thread's delays beyond a fixed timer period."""
+
+    def __init__(self, period_ms: int = HEARTBEAT_MS) -> None:
+        self.period = period_ms / 1000.0
+        self.timer = QTimer()
+        self.timer.setInterval(period_ms)
+        self.timer.timeout.connect(self._beat)
+        self.t: list[float] = []
+
+    def _beat(self) -> None:
+        self.t.append(time.perf_counter())
+
+    def start(self) -> None:
+        self.t = [time.perf_counter()]
+        self.timer.start()
+
+    def stop(self, *, settle_s: float = 0.0) -> dict[str, float]:
+        """Worst and 99th-percentile delay; ``steady_max_ms`` leaves out the first
+        ``settle_s`` seconds (the run's start)."""
+        self.timer.stop()
+        t = np.array(self.t)
+        gaps = np.diff(t) - self.period if len(t) > 1 else np.zeros(1)
+        late = t[1:] > t[0] + settle_s if len(t) > 1 else np.ones(1, bool)
+        steady = gaps[late] if late.any() else gaps
+        return {"max_ms": 1e3 * float(gaps.max()),
+                "p99_ms": 1e3 * float(np.percentile(gaps, 99)),
+                "steady_max_ms": 1e3 * float(steady.max()), "beats": len(t)}
+
+
+def spin(app: QApplication, cond, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise TimeoutError("benchmark step did not finish")
+        app.processEvents()
+        time.sleep(0.001)
+
+
+def scan_plan(n_target: int) -> str:
+    n_i = 20
+    n_r = max(3, n_target // n_i)
+    step = 170.0 / (n_r - 1)
+    return f"""
+[plan]
+kind = "brdf_in_plane"
+name = "gui benchmark"
+[sample]
+name = "ideal"
+[scan]
+theta_i = {{ start = 5.0, stop = 81.0, step = 4.0 }}
+theta_r = {{ start = -85.0, stop = 85.0, step = {step:.6f} }}
+skip_beam_points = true
+[acquisition]
+mode = "fixed"
+exposure_us = 1000
+detectors = ["power_meter"]
+"""
+
+
+def bench_scan(app: QApplication, work: Path, n_points: int) -> dict:
+    window = create_window(bench="sim", out=work / "runs", opener=lambda p: ideal_bench(),
+                           settings=QSettings(str(work / "s.ini"), QSettings.IniFormat),
+                           fsync=False)
+    window.show()
+    window.bench_panel.connect_bench()
+    spin(app, lambda: window.session.connected and bool(window.session.states()), 30)
+    profile = ideal_bench().profile
+    plan = build_plan(parse_plan(scan_plan(n_points)), profile)
+    hb = Heartbeat()
+    hb.start()
+    t0 = time.perf_counter()
+    window.session.submit(StartRun(plan, work / "runs"))
+    spin(app, lambda: window.current_run is not None, 60)
+    spin(app, lambda: window.session.run is None
+         and window.run_control.last_finished is not None, 3600)
+    elapsed = time.perf_counter() - t0
+    out = hb.stop(settle_s=0.5)
+    ev = window.run_control.last_finished
+    out.update(points=ev.n_done, status=ev.status, seconds=elapsed,
+               plotted=window.live_plot.n_plotted)
+    _close(app, window)
+    return out
+
+
+def bench_fit(app: QApplication, work: Path) -> dict:
+    from tests.instrument.sim_scan import SAMPLES, ScanSetup, render, write_run_file
+
+    runs = work / "fit_runs"
+    runs.mkdir()
+    path = write_run_file(render(ScanSetup(), SAMPLES[1]), 3, runs / "glossy.h5")
+    from instrument.run.runfile import read_run
+
+    data = read_run(path)
+    with Catalog(runs) as cat:
+        cat.add(RunRow(data.run_id, data.sample_name, data.plan_kind, data.plan_name, "sim",
+                       "finished", time.time(), time.time(), data.n_points, data.n_points,
+                       str(path)))
+    window = create_window(bench="sim", out=runs,
+                           settings=QSettings(str(work / "s2.ini"), QSettings.IniFormat),
+                           fsync=False)
+    window.show()
+    browser = window.browser
+    spin(app, lambda: bool(browser.rows), 30)
+    browser.select(data.run_id)
+    spin(app, lambda: browser.details is not None, 30)
+    hb = Heartbeat()
+    hb.start()
+    t0 = time.perf_counter()
+    browser.start_analysis("fit")
+    spin(app, lambda: browser.outcome is not None and not browser.busy.isVisible(), 600)
+    out = hb.stop()
+    out.update(seconds=time.perf_counter() - t0, summary=browser.outcome.summary)
+    _close(app, window)
+    return out
+
+
+def bench_camera(app: QApplication, work: Path, size: int, seconds: float) -> dict:
+    text = load_profile("sim").source_text.replace(
+        "simcam://camera?world=sim&seed=1", f"simcam://camera?world=sim&seed=1&width={size}"
+        f"&height={size}")
+    path = work / f"sim-{size}.toml"
+    path.write_text(parse_profile(text).source_text)
+    window = create_window(bench=str(path), out=work / "runs",
+                           settings=QSettings(str(work / f"c{size}.ini"), QSettings.IniFormat),
+                           fsync=False)
+    window.show()
+    window.docks["camera"].raise_()
+    window.bench_panel.connect_bench()
+    spin(app, lambda: window.camera.role == "camera", 30)
+    cam = window.camera
+    cam.stream.click()
+    spin(app, lambda: cam.shown >= 3, 60)
+    slot = window.session.frame_slot
+    received0, shown0 = slot.received, cam.shown
+    hb = Heartbeat()
+    hb.start()
+    t0 = time.perf_counter()
+    spin(app, lambda: time.perf_counter() - t0 > seconds, seconds + 5)
+    dt = time.perf_counter() - t0
+    out = hb.stop()
+    received, shown = slot.received - received0, cam.shown - shown0
+    out.update(size=size, camera_fps=received / dt, displayed_fps=shown / dt,
+               skipped=slot.skipped,
+               dropped=int(window.session.states()["camera"].value("dropped", 0)))
+    cam.stream.click()
+    _close(app, window)
+    return out
+
+
+def _close(app: QApplication, window) -> None:
+    window.confirm_close_during_run(True)
+    window.close()
+    spin(app, lambda: window.session.run is None, 60)
+    window.deleteLater()
+    app.processEvents()
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    args = p.parse_args()
+    app = QApplication.instance() or QApplication([])
+    work = Path(tempfile.mkdtemp(prefix="bench-gui-"))
+    n = 2000 if args.quick else 10_000
+    secs = 3.0 if args.quick else 10.0
+    scan = bench_scan(app, work, n)
+    print(f"scan: {scan['points']} points ({scan['status']}) in {scan['seconds']:.1f} s "
+          f"({scan['points'] / scan['seconds']:.0f} points/s), live plot {scan['plotted']} "
+          f"points; GUI heartbeat worst {scan['max_ms']:.1f} ms (after the first 0.5 s: "
+          f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "
+          f"({scan['beats']} beats)")
+    fit = bench_fit(app, work)
+    print(f"fit: {fit['seconds']:.1f} s ({fit['summary']}); GUI heartbeat worst "
+          f"{fit['max_ms']:.1f} ms, p99 {fit['p99_ms']:.1f} ms")
+    for size in (1024, 2048):
+        c = bench_camera(app, work, size, secs)
+        print(f"camera {size}²: camera {c['camera_fps']:.1f} frames/s, displayed "
+              f"{c['displayed_fps']:.1f} frames/s (skipped {c['skipped']}, ring dropped "
+              f"{c['dropped']}); GUI heartbeat worst {c['max_ms']:.1f} ms, p99 "
+              f"{c['p99_ms']:.1f} ms")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

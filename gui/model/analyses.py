@@ -1,0 +1,222 @@
+"""The run browser's logic without Qt: what a run holds, and running its analyses.
+
+:func:`run_details` reads a run file through :mod:`instrument.run.runfile` — provenance,
+plan, devices, the fault log. :func:`analyses_for` says which pipelines apply to a plan
+kind and :func:`run_analysis` runs one (the same entry points as ``scatterlab fit``,
+``reconstruct``, ``locate`` and ``spheres``) and returns an :class:`AnalysisOutcome`: the
+tables the GUI shows (fitted parameters, model selection, detected objects, identities),
+the figures written, the HTML report and the notes and warnings. It runs on a background
+thread; nothing here touches Qt or a device.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["ANALYSES", "AnalysisOutcome", "RunDetails", "Table", "analyses_for",
+           "run_analysis", "run_details"]
+
+#: Plan kind → the analyses that apply, in the order an operator runs them.
+ANALYSES: dict[str, tuple[str, ...]] = {
+    "brdf_in_plane": ("fit",),
+    "brdf_hemisphere": ("fit",),
+    "lightfield": ("reconstruct", "locate"),
+    "sphere_capture": ("spheres",),
+}
+#: Statuses from which a run can be continued in its own file.
+RESUMABLE = ("paused", "aborted", "interrupted", "failed")
+
+
+def analyses_for(plan_kind: str) -> tuple[str, ...]:
+    return ANALYSES.get(plan_kind, ())
+
+
+@dataclass(frozen=True)
+class Table:
+    title: str
+    columns: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+
+
+@dataclass(frozen=True)
+class AnalysisOutcome:
+    name: str
+    path: Path
+    summary: str
+    tables: tuple[Table, ...] = ()
+    figures: tuple[Path, ...] = ()
+    report: Path | None = None
+    notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class RunDetails:
+    path: Path
+    provenance: dict[str, str]
+    plan_text: str
+    profile_text: str
+    devices: dict[str, dict[str, str]]
+    faults: tuple[dict[str, Any], ...]
+    events: tuple[dict[str, Any], ...]
+    n_points: int
+    n_planned: int
+    plan_kind: str
+    status: str
+    bench_name: str
+    analyses: tuple[str, ...] = field(default=())
+
+
+def run_details(path: str | Path) -> RunDetails:
+    """Everything the browser shows of one run file (read-only, plain h5py)."""
+    from instrument.run.runfile import read_attributes, read_events, read_run
+
+    path = Path(path)
+    data = read_run(path)
+    attrs = read_attributes(path)
+    events = read_events(path)
+    profile = data.profile()
+    bench = str(profile.get("bench", {}).get("name", ""))
+    prov = {
+        "run id": data.run_id, "status": data.status, "plan": f"{data.plan_name} "
+        f"({data.plan_kind})", "sample": data.sample_name, "bench": bench,
+        "started": attrs.get("start_time", ""), "ended": attrs.get("end_time", ""),
+        "software": attrs.get("software_version", ""),
+        "durability": attrs.get("durability", ""),
+        "points": f"{data.n_points} of {attrs.get('n_planned', '?')} planned",
+        "frames": "none" if data.frame_shape is None else
+        f"{int(data.frame_point.size)} of {data.frame_shape[1]}×{data.frame_shape[0]} px",
+        "file": str(path),
+    }
+    for k, v in data.geometry.items():
+        prov[f"geometry.{k}"] = f"{v:g}" if isinstance(v, float) else str(v)
+    for k, v in data.calibration.items():
+        prov[f"calibration.{k}"] = v
+    n_planned = int(attrs.get("n_planned", data.n_points) or data.n_points)
+    return RunDetails(path, prov, data.plan_text, data.profile_text, data.identities,
+                      tuple(e for e in events if e.get("kind") == "fault"), tuple(events),
+                      data.n_points, n_planned, data.plan_kind, data.status, bench,
+                      analyses_for(data.plan_kind))
+
+
+def _figures(folder: Path, since: float) -> tuple[Path, ...]:
+    if not folder.is_dir():
+        return ()
+    return tuple(sorted(p for p in folder.glob("*.png") if p.stat().st_mtime >= since - 1))
+
+
+def _fmt(x: Any) -> str:
+    if isinstance(x, float):
+        return "—" if not math.isfinite(x) else f"{x:.6g}"
+    return str(x)
+
+
+def run_analysis(name: str, path: str | Path) -> AnalysisOutcome:
+    """Run analysis ``name`` (:data:`ANALYSES`) on the run file ``path``, writing its
+    results into the file and its figures and report beside it, as the CLI does.
+
+    Raises
+    ------
+    ValueError, KeyError, OSError, RuntimeError
+        As the pipeline raises them (their messages say what is missing).
+    """
+    path = Path(path)
+    t0 = time.time()
+    if name == "fit":
+        return _fit(path, t0)
+    if name == "reconstruct":
+        return _reconstruct(path, t0)
+    if name == "locate":
+        return _locate(path, t0)
+    if name == "spheres":
+        return _spheres(path, t0)
+    raise ValueError(f"unknown analysis {name!r}; known: fit, reconstruct, locate, spheres")
+
+
+def _fit(path: Path, t0: float) -> AnalysisOutcome:
+    from instrument.pipelines.brdf.pipeline import fit_run
+
+    done = fit_run(path)
+    result, reduced = done.result, done.reduced
+    fit = result.chosen_fit
+    params = Table(f"{result.chosen}: fitted parameters",
+                   ("parameter", "value", "± σ", "unit"),
+                   tuple((n, _fmt(v), _fmt(e), u) for n, v, e, u in fit.table()))
+    sel = Table(f"model selection ({result.selection.rule})",
+                ("model", "k", "χ²", "BIC"),
+                tuple((r.name, str(r.n_params), f"{r.chi2:.2f}", f"{r.bic:.2f}")
+                      for r in result.selection.table))
+    warnings = [f"{k}: {v}" for k, v in reduced.provenance.items()
+                if isinstance(v, str) and any(w in v for w in ("assumed", "unknown",
+                                                               "not homed"))]
+    folder = done.report.parent if done.report is not None else path.parent
+    return AnalysisOutcome(
+        "fit", path, f"{reduced.points.n} points ({reduced.points.method}); chosen model "
+        f"{result.chosen} ({result.selection.rule})", (params, sel),
+        _figures(folder, t0), done.report, tuple(result.notes), tuple(warnings))
+
+
+def _reconstruct(path: Path, t0: float) -> AnalysisOutcome:
+    from instrument.pipelines.lightfield.reconstruct import reconstruct_run
+
+    folder = path.with_suffix(".lightfield")
+    r = reconstruct_run(path, figures_dir=folder)
+    rec = r.reconstruction
+    lf = r.measured.field
+    rows = (("positions y_m", str(lf.shape[0])), ("angles θ", str(lf.shape[1])),
+            ("d2", f"{r.geometry.d2_mm:g} mm"), ("wall points", str(rec.incident_field.shape[0])),
+            ("p̂_max", f"{r.p_hat:g}"), ("recoverable", str(rec.recoverable)))
+    return AnalysisOutcome("reconstruct", path, rec.message,
+                           (Table("reconstruction", ("quantity", "value"), rows),),
+                           tuple(Path(p) for p in r.figures) or _figures(folder, t0),
+                           None, tuple(r.notes),
+                           () if rec.recoverable else ("the light field is not recoverable",))
+
+
+def _locate(path: Path, t0: float) -> AnalysisOutcome:
+    from instrument.pipelines.lightfield.locate import locate_run
+
+    folder = path.with_suffix(".lightfield")
+    r = locate_run(path, figures_dir=folder)
+    det = r.detection
+    rows = []
+    for k in range(det.count):
+        y, z = det.positions_mm[k]
+        res = det.resolutions[k]
+        rows.append((str(k), det.quality[k], f"{y:.2f}", f"{z:.2f}",
+                     f"±{res.transverse_mm:.1f}", f"±{res.depth_mm:.1f}",
+                     f"{det.brightness_rp[k]:.4g}"))
+    return AnalysisOutcome("locate", path, r.message,
+                           (Table("objects", ("#", "quality", "y (mm)", "z (mm)",
+                                              "across", "depth", "brightness"), tuple(rows)),),
+                           tuple(Path(p) for p in r.figures) or _figures(folder, t0))
+
+
+def _spheres(path: Path, t0: float) -> AnalysisOutcome:
+    import numpy as np
+
+    from instrument.pipelines.spheres.pipeline import analyse_run
+
+    figure = Path(str(path.with_suffix("")) + ".spheres.png")
+    capture, res = analyse_run(path, figure=figure)
+    ident = []
+    for name, e in res.identities.items():
+        ok = e.error[e.defined]
+        ident.append((name, f"{float(np.median(ok)):.3g}" if ok.size else "—"))
+    rep = res.consistency
+    verdict = "INCONSISTENT" if rep.inconsistent else "consistent"
+    rows = (("objects", ", ".join(capture.objects)),
+            ("relighting L1 error", f"{100 * res.relight_l1:.2f} %"),
+            ("consistency T", f"{rep.statistic:.3g} (threshold {rep.threshold:.3g})"),
+            ("verdict", verdict))
+    return AnalysisOutcome(
+        "spheres", path, f"{len(capture.objects)} objects × {capture.radiance.shape[0]} "
+        f"lightings: {verdict}",
+        (Table("summary", ("quantity", "value"), rows),
+         Table("identities (median error)", ("identity", "error"), tuple(ident))),
+        (figure,) if figure.exists() else (), None, (),
+        ("the consistency check flags the capture",) if rep.inconsistent else ())

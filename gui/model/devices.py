@@ -1,0 +1,197 @@
+"""Device kinds the GUI knows, and how to read a device's state (Qt-free).
+
+A kind is one abstract class of :mod:`drivers.base` (motion axis, camera, light source,
+power meter). For each, a :class:`DeviceKind` says how to read the device's static
+information (once, after connecting or after a setting changed) and its live values (on
+every poll), and how often to poll it. Every function here calls the driver, so it runs
+on the thread that owns the bench (the device worker), never on the GUI thread.
+
+**Adding a kind** (a lock-in amplifier, a filter wheel): write its ABC in
+``drivers/base.py``, then register it here with :func:`register_kind` — a name, the ABC,
+``read_info`` and ``read_values`` functions and a poll interval — and give it a panel in
+``gui.qt.panels`` (:func:`gui.qt.panels.register_panel` with the same name). A driver of
+an existing kind (a Zaber axis, a shutter that is a ``LightSource``) needs nothing: it is
+shown and commanded through its kind. A device whose kind is not registered still
+appears, with its identity and an "unknown kind" state.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from drivers.base import Camera, Device, LightSource, MotionAxis, PowerMeter
+from drivers.errors import ConnectionFailed, DeviceError
+
+__all__ = [
+    "UNKNOWN_KIND",
+    "DeviceKind",
+    "DeviceState",
+    "kind_of",
+    "kinds",
+    "read_state",
+    "register_kind",
+]
+
+
+@dataclass(frozen=True)
+class DeviceKind:
+    """How the GUI reads one kind of device.
+
+    ``read_info(device)`` returns what changes only when a setting changes (units, limits,
+    ranges, velocity); ``read_values(device)`` what a poll reads (position, reading, on/off).
+    Both return plain values (numbers, strings, booleans, tuples) that other threads may
+    read.
+    """
+
+    name: str
+    title: str
+    base: type
+    read_info: Callable[[Any], dict[str, Any]]
+    read_values: Callable[[Any], dict[str, Any]]
+    poll_s: float = 0.1
+    #: Public properties the operator may set (validated by the driver's setter).
+    settings: tuple[str, ...] = ()
+    #: Named operations without arguments beyond ``args`` (``name → fn(device, *args)``).
+    actions: Mapping[str, Callable[..., Any]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class DeviceState:
+    """What the GUI shows of one device at one moment."""
+
+    role: str
+    kind: str
+    connected: bool
+    values: Mapping[str, Any] = field(default_factory=dict)
+    info: Mapping[str, Any] = field(default_factory=dict)
+    error: str | None = None
+    t: float = field(default_factory=time.monotonic)
+
+    def value(self, key: str, default: Any = None) -> Any:
+        return self.values.get(key, default)
+
+
+UNKNOWN_KIND = "unknown"
+_KINDS: list[DeviceKind] = []
+
+
+def register_kind(kind: DeviceKind) -> None:
+    """Add a device kind (or replace the one of the same name)."""
+    for k, old in enumerate(_KINDS):
+        if old.name == kind.name:
+            _KINDS[k] = kind
+            return
+    _KINDS.append(kind)
+
+
+def kinds() -> list[DeviceKind]:
+    return list(_KINDS)
+
+
+def kind_of(device: Device) -> DeviceKind | None:
+    """The registered kind whose ABC ``device`` implements (the first registered wins)."""
+    for kind in _KINDS:
+        if isinstance(device, kind.base):
+            return kind
+    return None
+
+
+def identity_info(device: Device) -> dict[str, Any]:
+    ident = device.identity
+    out = {"vendor": ident.vendor, "model": ident.model, "serial": ident.serial,
+           "firmware": ident.firmware}
+    out.update({f"extra.{k}": v for k, v in ident.extra.items()})
+    return out
+
+
+def read_state(role: str, device: Device, *, with_info: bool,
+               info: Mapping[str, Any] | None = None) -> DeviceState:
+    """Read one device (on the thread that owns it). A :class:`DeviceError` becomes the
+    state's ``error``; a lost connection also clears ``connected``."""
+    kind = kind_of(device)
+    name = kind.name if kind is not None else UNKNOWN_KIND
+    base_info = dict(info or {})
+    try:
+        if with_info:
+            base_info = {"identity": identity_info(device)}
+            if kind is not None:
+                base_info.update(kind.read_info(device))
+        values = kind.read_values(device) if kind is not None else {}
+    except ConnectionFailed as err:
+        return DeviceState(role, name, False, {}, base_info, str(err))
+    except (DeviceError, ValueError) as err:
+        return DeviceState(role, name, not device.closed, {}, base_info, str(err))
+    error = values.get("error") if isinstance(values.get("error"), str) else None
+    return DeviceState(role, name, not device.closed, values, base_info, error)
+
+
+# --------------------------------------------------------------------------- the kinds
+
+
+def _axis_info(axis: MotionAxis) -> dict[str, Any]:
+    low, high = axis.soft_limits
+    return {"units": axis.units, "limits": (low, high), "velocity": axis.velocity,
+            "acceleration": axis.acceleration, "tolerance": axis.position_tolerance}
+
+
+def _axis_values(axis: MotionAxis) -> dict[str, Any]:
+    s = axis.status()
+    return {"position": s.position, "moving": s.is_moving or s.is_homing,
+            "homed": s.is_homed, "homing": s.is_homing, "enabled": s.is_enabled,
+            "at_limit": s.at_forward_limit or s.at_reverse_limit, "error": s.error,
+            "target": axis.target}
+
+
+def _camera_info(cam: Camera) -> dict[str, Any]:
+    h, w = cam.sensor_shape
+    return {"sensor": (h, w), "bit_depth": cam.bit_depth,
+            "exposure_range_us": tuple(cam.exposure_range_us),
+            "gain_range": tuple(cam.gain_range)}
+
+
+def _camera_values(cam: Camera) -> dict[str, Any]:
+    return {"exposure_us": cam.exposure_us, "gain": cam.gain,
+            "streaming": cam.is_streaming, "dropped": cam.dropped_frames}
+
+
+def _source_info(src: LightSource) -> dict[str, Any]:
+    rng = src.power_range_w
+    return {"power_range_w": None if rng is None else tuple(rng)}
+
+
+def _source_values(src: LightSource) -> dict[str, Any]:
+    out: dict[str, Any] = {"on": src.is_on}
+    if src.power_range_w is not None:
+        try:
+            out["power_w"] = src.power_w
+        except DeviceError:
+            out["power_w"] = math.nan
+    return out
+
+
+def _meter_info(pm: PowerMeter) -> dict[str, Any]:
+    return {"wavelength_range_nm": tuple(pm.wavelength_range_nm)}
+
+
+def _meter_values(pm: PowerMeter) -> dict[str, Any]:
+    return {"power_w": pm.read_power_w(), "wavelength_nm": pm.wavelength_nm}
+
+
+def _zero(pm: PowerMeter) -> None:
+    pm.zero()
+
+
+register_kind(DeviceKind("motion_axis", "Motion axis", MotionAxis, _axis_info, _axis_values,
+                         poll_s=0.1, settings=("velocity", "acceleration")))
+register_kind(DeviceKind("camera", "Camera", Camera, _camera_info, _camera_values,
+                         poll_s=1.0, settings=("exposure_us", "gain")))
+register_kind(DeviceKind("light_source", "Light source", LightSource, _source_info,
+                         _source_values, poll_s=0.5, settings=("power_w",)))
+register_kind(DeviceKind("power_meter", "Power meter", PowerMeter, _meter_info,
+                         _meter_values, poll_s=0.5,
+                         settings=("wavelength_nm", "averaging", "auto_range"),
+                         actions={"zero": _zero}))

@@ -1,0 +1,192 @@
+"""A run's live values for the plots, without Qt: filled as points arrive, read on a timer.
+
+:class:`LiveData` subscribes to the engine on its worker thread and appends every
+completed point into arrays allocated once for the plan's points, so no event is lost
+when the GUI is busy and nothing grows beyond the plan. The GUI's redraw timer asks for a
+:class:`LiveSnapshot` (copies of the filled part) 10–30 times a second; a plot draws what
+the snapshot holds. Which picture suits a plan kind is :func:`plot_kind`.
+
+A frame subscription keeps the newest frame (sphere captures: the latest image) and, for
+light-field scans, each point's frame averaged over its sensor rows: one row
+L(y = camera_z, θ) of the light field, so the L(y, θ) image grows row by row.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from instrument.run.events import Event, PointCompleted, Progress, RunFinished, RunStarted
+
+__all__ = ["LiveData", "LiveSnapshot", "plot_kind", "signed_theta_r"]
+
+#: Plan kind → the live picture of it.
+PLOTS = {
+    "brdf_in_plane": "in_plane", "reference": "in_plane", "signature": "in_plane",
+    "brdf_hemisphere": "hemisphere", "lightfield": "lightfield",
+    "sphere_capture": "image",
+}
+#: Light-field rows kept at most (columns × rows floats; wider rows are binned).
+MAX_FIELD_VALUES = 16_000_000
+
+
+def plot_kind(plan_kind: str) -> str:
+    """``in_plane`` (signal against θr per θi), ``hemisphere`` (polar map), ``lightfield``
+    (L(y, θ) image), ``image`` (latest frame) or ``series`` (signal per point: the
+    calibrations)."""
+    return PLOTS.get(plan_kind, "series")
+
+
+def signed_theta_r(theta_r: np.ndarray, phi_i: np.ndarray, phi_r: np.ndarray) -> np.ndarray:
+    """θr signed as in plan files: > 0 on the specular side (φr = φi + 180°), < 0 on the
+    source side (φr = φi)."""
+    d = np.mod(phi_r - phi_i, 360.0)
+    specular = np.abs(d - 180.0) < 90.0
+    return np.where(specular, theta_r, -theta_r)
+
+
+@dataclass(frozen=True)
+class LiveSnapshot:
+    """The filled part of the live arrays (copies; the GUI may keep them)."""
+
+    plan_kind: str
+    n_total: int
+    n_done: int
+    n_received: int
+    index: np.ndarray
+    ok: np.ndarray            # bool per point: stored with status ok
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    theta_r: np.ndarray
+    phi_r: np.ndarray
+    signal: np.ndarray        # DN/µs
+    planned_theta_i: np.ndarray  # the plan's signed θi of each point (φi = 180°: < 0)
+    power_w: np.ndarray
+    positions: dict[str, float]  # the last read-back positions
+    field: np.ndarray | None  # light field rows (n_total, n_theta), NaN where not measured
+    field_y: np.ndarray | None  # camera_z of each row (NaN where not measured)
+    image: np.ndarray | None  # the newest frame
+    elapsed_s: float
+    eta_s: float
+    version: int              # changes whenever anything new arrived
+
+
+class LiveData:
+    """Live values of one run. ``on_event``/``on_frame`` run on the engine's worker thread;
+    :meth:`snapshot` on any thread."""
+
+    def __init__(self, plan_kind: str, n_total: int, *, n_done: int = 0,
+                 planned_angles: np.ndarray | None = None) -> None:
+        """``planned_angles``: (n_total, 4) θi, φi, θr, φr of the plan's points (NaN where
+        a point has none); a curve per incidence angle uses the planned θi."""
+        self.plan_kind = plan_kind
+        self.n_total = int(n_total)
+        n = max(self.n_total, 1)
+        self._lock = threading.Lock()
+        self._n = 0
+        self._n_done = int(n_done)
+        self._index = np.zeros(n, np.int64)
+        self._ok = np.zeros(n, bool)
+        self._angles = np.full((n, 4), np.nan, np.float32)
+        self._signal = np.full(n, np.nan, np.float32)
+        self._power = np.full(n, np.nan, np.float32)
+        self._positions: dict[str, float] = {}
+        self._field: np.ndarray | None = None
+        self._field_y: np.ndarray | None = None
+        self._bin = 1
+        self._image: np.ndarray | None = None
+        self._elapsed = 0.0
+        self._eta = math.nan
+        self._version = 0
+        signed = np.full(n, np.nan)
+        if planned_angles is not None and len(planned_angles):
+            pa = np.asarray(planned_angles, float).reshape(-1, 4)[:n]
+            signed[:len(pa)] = np.where(np.abs(np.mod(pa[:, 1], 360) - 180) < 90,
+                                        -pa[:, 0], pa[:, 0])
+        self._planned_ti = signed
+
+    # worker thread -----------------------------------------------------------------
+    def on_event(self, ev: Event) -> None:
+        if isinstance(ev, PointCompleted):
+            with self._lock:
+                k = self._n
+                if k >= self._index.size:  # never beyond the plan (a resumed point again)
+                    return
+                self._index[k] = ev.index
+                self._ok[k] = ev.status == "ok"
+                if ev.angles is not None:
+                    self._angles[k] = ev.angles
+                self._signal[k] = ev.signal
+                self._power[k] = ev.power_w
+                self._positions.update(ev.positions)
+                if self._field_y is not None and "camera_z" in ev.positions \
+                        and 0 <= ev.index < self._field_y.size:
+                    self._field_y[ev.index] = ev.positions["camera_z"]
+                self._n = k + 1
+                self._version += 1
+        elif isinstance(ev, Progress):
+            with self._lock:
+                self._n_done = ev.n_done
+                self._elapsed, self._eta = ev.elapsed_s, ev.eta_s
+                self._version += 1
+        elif isinstance(ev, RunStarted | RunFinished):
+            with self._lock:
+                self._n_done = ev.n_done
+                self._version += 1
+
+    def on_frame(self, index: int, frame) -> None:
+        """A point's main frame (:class:`instrument.run.storage.FrameData`)."""
+        data = frame.data
+        row = None
+        if self.plan_kind == "lightfield" and data.ndim == 2 and getattr(frame, "light", True):
+            row = data.mean(axis=0, dtype=np.float64)
+        with self._lock:
+            self._image = data
+            if row is not None and 0 <= index < self.n_total:
+                if self._field is None:
+                    width = row.size
+                    self._bin = max(1, math.ceil(width * self.n_total / MAX_FIELD_VALUES))
+                    self._field = np.full((self.n_total, math.ceil(width / self._bin)),
+                                          np.nan, np.float32)
+                    self._field_y = np.full(self.n_total, np.nan, np.float32)
+                binned = _bin(row, self._bin, self._field.shape[1])
+                self._field[index] = binned / frame.exposure_us if frame.exposure_us \
+                    else binned
+            self._version += 1
+
+    # any thread --------------------------------------------------------------------
+    @property
+    def version(self) -> int:
+        with self._lock:
+            return self._version
+
+    @property
+    def n_received(self) -> int:
+        with self._lock:
+            return self._n
+
+    def snapshot(self) -> LiveSnapshot:
+        with self._lock:
+            n = self._n
+            a = self._angles[:n].astype(np.float64)
+            return LiveSnapshot(
+                self.plan_kind, self.n_total, self._n_done, n, self._index[:n].copy(),
+                self._ok[:n].copy(), a[:, 0], a[:, 1], a[:, 2], a[:, 3],
+                self._signal[:n].astype(np.float64),
+                self._planned_ti[np.clip(self._index[:n], 0, self._planned_ti.size - 1)],
+                self._power[:n].astype(np.float64),
+                dict(self._positions),
+                None if self._field is None else self._field.copy(),
+                None if self._field_y is None else self._field_y.copy(),
+                self._image, self._elapsed, self._eta, self._version)
+
+
+def _bin(row: np.ndarray, factor: int, width: int) -> np.ndarray:
+    if factor == 1:
+        return row.astype(np.float32)
+    pad = width * factor - row.size
+    padded = np.concatenate([row, np.full(pad, np.nan)]) if pad else row
+    return np.nanmean(padded.reshape(width, factor), axis=1).astype(np.float32)

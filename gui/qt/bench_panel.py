@@ -1,0 +1,181 @@
+"""The bench panel: choose a bench, connect, and every device's panel with live state."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QComboBox,
+    QFileDialog,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QScrollArea,
+    QVBoxLayout,
+    QWidget,
+)
+
+from gui.model.devices import DeviceState
+from gui.model.session import (
+    BenchSession,
+    CommandResult,
+    Connect,
+    ConnectionStatus,
+    Disconnect,
+    RunHandle,
+)
+from gui.qt.panels import DevicePanel, panel_for
+from instrument.bench.profile import BenchProfile, ProfileError, builtin_profiles, load_profile
+
+__all__ = ["BenchPanel"]
+
+
+class BenchPanel(QWidget):
+    """Bench chooser, connection, device panels and the last command's outcome."""
+
+    benchChosen = Signal(str)  # name or path, for the settings
+
+    def __init__(self, session: BenchSession, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.setObjectName("bench_panel")
+        self.chooser = QComboBox()
+        self.chooser.setObjectName("bench_chooser")
+        self.chooser.setEditable(False)
+        for name in builtin_profiles():
+            self.chooser.addItem(name, name)
+        self.browse = QPushButton("File…")
+        self.browse.setToolTip("a bench profile file (TOML)")
+        self.connect_button = QPushButton("Connect")
+        self.connect_button.setObjectName("connect")
+        self.disconnect_button = QPushButton("Disconnect")
+        self.disconnect_button.setObjectName("disconnect")
+        self.disconnect_button.setEnabled(False)
+        self.connection = QLabel("not connected")
+        self.connection.setObjectName("connection")
+        self.connection.setWordWrap(True)
+        self.message = QLabel("")
+        self.message.setObjectName("message")
+        self.message.setWordWrap(True)
+        self.message.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.owner = QLabel("")
+        self.owner.setObjectName("owner")
+        self.owner.setStyleSheet("color: #0d47a1; font-weight: 600")
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Bench"))
+        top.addWidget(self.chooser, 1)
+        top.addWidget(self.browse)
+        buttons = QHBoxLayout()
+        buttons.addWidget(self.connect_button)
+        buttons.addWidget(self.disconnect_button)
+        self._devices = QWidget()
+        self._devices_layout = QVBoxLayout(self._devices)
+        self._devices_layout.setContentsMargins(0, 0, 0, 0)
+        self._devices_layout.addStretch(1)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setWidget(self._devices)
+        lay = QVBoxLayout(self)
+        lay.addLayout(top)
+        lay.addLayout(buttons)
+        lay.addWidget(self.connection)
+        lay.addWidget(self.owner)
+        lay.addWidget(scroll, 1)
+        lay.addWidget(self.message)
+        self.panels: dict[str, DevicePanel] = {}
+        self._manual = True
+        self.browse.clicked.connect(self._browse)
+        self.connect_button.clicked.connect(self.connect_bench)
+        self.disconnect_button.clicked.connect(lambda: self.session.submit(Disconnect()))
+
+    # bench choice -----------------------------------------------------------------
+    def choose(self, name_or_path: str) -> None:
+        """Select a built-in profile by name or add a profile file and select it."""
+        k = self.chooser.findData(name_or_path)
+        if k < 0:
+            self.chooser.addItem(Path(name_or_path).name, name_or_path)
+            k = self.chooser.count() - 1
+        self.chooser.setCurrentIndex(k)
+
+    @property
+    def chosen(self) -> str:
+        return str(self.chooser.currentData())
+
+    def _browse(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Bench profile", "",
+                                              "Bench profiles (*.toml)")
+        if path:
+            self.choose(path)
+
+    def connect_bench(self) -> BenchProfile | None:
+        try:
+            profile = load_profile(self.chosen)
+        except ProfileError as err:
+            self.show_message(str(err), error=True)
+            return None
+        self.benchChosen.emit(self.chosen)
+        self.session.submit(Connect(profile))
+        return profile
+
+    # reports from the session ------------------------------------------------------
+    def on_connection(self, status: ConnectionStatus) -> None:
+        self.connection.setText(status.message)
+        connected = status.state == "connected"
+        self.connect_button.setEnabled(status.state != "connecting")
+        self.disconnect_button.setEnabled(connected)
+        if status.state == "disconnected" or (
+                connected and not set(self.panels) <= set(status.roles)):
+            self._rebuild(status.roles if connected else ())
+        elif connected:
+            self._pending_roles = list(status.roles)
+        if status.state == "failed":
+            self.show_message(status.message, error=True)
+
+    def _rebuild(self, roles: tuple[str, ...]) -> None:
+        for panel in self.panels.values():
+            panel.hide()
+            panel.setParent(None)
+            panel.deleteLater()
+        self.panels = {}
+        self._pending_roles = list(roles)
+
+    def on_states(self, states: dict[str, DeviceState]) -> None:
+        for role, state in states.items():
+            panel = self.panels.get(role)
+            if panel is None or type(panel) is not panel_for(state.kind):
+                if panel is not None:
+                    panel.setParent(None)
+                    panel.deleteLater()
+                panel = panel_for(state.kind)(role, self.session)
+                self.panels[role] = panel
+                self._devices_layout.insertWidget(self._order(role), panel)
+                panel.set_owned(self._manual)
+            panel.set_state(state)
+            panel.set_owned(self._manual)
+
+    def _order(self, role: str) -> int:
+        roles = getattr(self, "_pending_roles", [])
+        present = [r for r in roles if r in self.panels and r != role]
+        k = roles.index(role) if role in roles else len(present)
+        return sum(1 for r in present if roles.index(r) < k)
+
+    def on_result(self, result: CommandResult) -> None:
+        if result.refused or not result.ok:
+            self.show_message(result.message, error=True)
+        else:
+            self.show_message(result.message, error=False)
+
+    def on_run(self, run: RunHandle | None) -> None:
+        self._manual = run is None
+        self.owner.setText("" if run is None else
+                           "a run owns the bench: manual control is locked until it ends")
+        self.connect_button.setEnabled(run is None)
+        self.disconnect_button.setEnabled(run is None and self.session.connected)
+        self.chooser.setEnabled(run is None)
+        for panel in self.panels.values():
+            panel.set_owned(self._manual)
+
+    def show_message(self, text: str, *, error: bool) -> None:
+        self.message.setStyleSheet("color: #b71c1c" if error else "color: #1b5e20")
+        self.message.setText(text)

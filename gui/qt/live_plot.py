@@ -1,0 +1,196 @@
+"""Live plots of a run as its points arrive, one picture per plan kind.
+
+* in-plane BRDF (and the reference/signature calibrations): signal against signed θr,
+  one curve per θi;
+* hemisphere: a polar map of the scattered directions (radius θr, angle φr) coloured by
+  the signal;
+* light field: the L(y, θ) image, one row per camera position, growing row by row;
+* sphere capture: the latest image;
+* the other calibrations: signal per point.
+
+The main window calls :meth:`LivePlot.update_from` with a
+:class:`gui.model.live.LiveSnapshot` at most ten times a second; nothing here is called
+per point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtWidgets import QLabel, QStackedWidget, QVBoxLayout, QWidget
+
+from gui.model.live import LiveSnapshot, plot_kind, signed_theta_r
+
+__all__ = ["LivePlot"]
+
+#: Plans up to this many points get a marker per point; larger ones lines only.
+MARKERS_UP_TO = 600
+PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#4e342e",
+           "#ad1457"]
+
+
+class LivePlot(QWidget):
+    """The live picture of the current (or last) run."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setObjectName("live_plot")
+        self.kind = "series"
+        self.n_plotted = 0
+        self.caption = QLabel("no run yet")
+        self.caption.setObjectName("live_caption")
+        self.stack = QStackedWidget()
+        # in-plane
+        self.in_plane = pg.PlotWidget(background="w")
+        self.in_plane.setLabel("bottom", "θr (signed: > 0 specular side)", units="deg")
+        self.in_plane.setLabel("left", "signal (DN/µs)")
+        self.in_plane.getAxis("left").enableAutoSIPrefix(False)
+        self.in_plane.setLogMode(y=True)
+        self.in_plane.showGrid(x=True, y=True, alpha=0.3)
+        self.in_plane_legend = self.in_plane.addLegend(offset=(-10, 10))
+        self._curves: dict[float, pg.PlotDataItem] = {}
+        self._counts: dict[float, int] = {}
+        self._power_axis = False
+        # hemisphere
+        self.polar = pg.PlotWidget(background="w")
+        self.polar.setAspectLocked(True)
+        self.polar.hideAxis("left")
+        self.polar.hideAxis("bottom")
+        rim = np.radians(np.linspace(0, 360, 181))
+        for deg in (30, 60, 90):
+            self.polar.addItem(pg.PlotCurveItem(deg * np.cos(rim), deg * np.sin(rim),
+                                                pen=pg.mkPen("#9e9e9e")))
+        self.polar_points = pg.ScatterPlotItem(size=9, pen=pg.mkPen(None))
+        self.polar.addItem(self.polar_points)
+        self.cmap = pg.colormap.get("viridis")
+        # light field
+        self.field_plot = pg.PlotWidget(background="w")
+        self.field_plot.setLabel("bottom", "θ (sensor column)")
+        self.field_plot.setLabel("left", "camera position", units="mm")
+        self.field_image = pg.ImageItem(axisOrder="row-major")
+        self.field_image.setColorMap(pg.colormap.get("inferno"))
+        self.field_plot.addItem(self.field_image)
+        # latest image
+        self.image_plot = pg.PlotWidget(background="w")
+        self.image_plot.setAspectLocked(True)
+        self.image_plot.invertY(True)
+        self.latest = pg.ImageItem(axisOrder="row-major")
+        self.image_plot.addItem(self.latest)
+        # series
+        self.series = pg.PlotWidget(background="w")
+        self.series.setLabel("bottom", "point")
+        self.series.setLabel("left", "signal (DN/µs)")
+        self.series_curve = self.series.plot([], [], pen=None, symbol="o", symbolSize=6,
+                                             symbolBrush="#1565c0")
+        self._pages = {"in_plane": self.in_plane, "hemisphere": self.polar,
+                       "lightfield": self.field_plot, "image": self.image_plot,
+                       "series": self.series}
+        for page in self._pages.values():
+            self.stack.addWidget(page)
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.caption)
+        lay.addWidget(self.stack, 1)
+
+    def start(self, plan_kind: str) -> None:
+        """A new run of ``plan_kind``: pick its picture and clear it."""
+        self.kind = plot_kind(plan_kind)
+        self.stack.setCurrentWidget(self._pages[self.kind])
+        self.n_plotted = 0
+        for c in self._curves.values():
+            self.in_plane.removeItem(c)
+        self._curves.clear()
+        self._counts.clear()
+        if self._power_axis:
+            self._power_axis = False
+            for plot in (self.in_plane, self.series):
+                plot.setLabel("left", "signal (DN/µs)")
+        self.in_plane_legend.clear()
+        self.polar_points.clear()
+        self.field_image.clear()
+        self.latest.clear()
+        self.series_curve.setData([], [])
+        self.caption.setText(f"{plan_kind}: waiting for the first point")
+
+    def update_from(self, snap: LiveSnapshot) -> None:
+        if not np.isfinite(snap.signal).any() and np.isfinite(snap.power_w).any():
+            # a power-meter-only plan: its reading is the signal
+            snap = replace(snap, signal=snap.power_w)
+            if not self._power_axis:
+                self._power_axis = True
+                for plot in (self.in_plane, self.series):
+                    plot.setLabel("left", "power (W)")
+        ok = snap.ok & np.isfinite(snap.signal)
+        getattr(self, f"_draw_{self.kind}")(snap, ok)
+        self.caption.setText(f"{snap.plan_kind}: {snap.n_received} of {snap.n_total} points "
+                             f"received, {int(ok.sum())} plotted")
+
+    # pictures -------------------------------------------------------------------------
+    def _draw_in_plane(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
+        tr = signed_theta_r(snap.theta_r, snap.phi_i, snap.phi_r)
+        # curves by the planned θi (the read-back one differs by the stage tolerance)
+        ti = np.round(snap.planned_theta_i, 6)
+        sel = ok & np.isfinite(tr) & (snap.signal > 0)
+        plotted = 0
+        # markers cost a paint per point: above a few hundred points lines alone
+        markers = snap.n_total <= MARKERS_UP_TO
+        for k, value in enumerate(sorted(set(ti[sel].tolist()))):
+            rows = sel & (ti == value)
+            n = int(rows.sum())
+            plotted += n
+            curve = self._curves.get(value)
+            if curve is not None and self._counts.get(value) == n:
+                continue  # nothing new on this curve: no redraw
+            order = np.argsort(tr[rows])
+            x, y = tr[rows][order], snap.signal[rows][order]
+            if curve is None:
+                colour = PALETTE[k % len(PALETTE)]
+                style = dict(symbol="o", symbolSize=6, symbolBrush=colour) if markers else {}
+                curve = self.in_plane.plot([], [], pen=pg.mkPen(colour, width=2),
+                                           name=f"θi = {value:g}°", **style)
+                self._curves[value] = curve
+            curve.setData(x, y)
+            self._counts[value] = n
+        self.n_plotted = plotted
+
+    def _draw_hemisphere(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
+        sel = ok & np.isfinite(snap.theta_r) & (snap.signal > 0)
+        if not sel.any():
+            return
+        t, p = snap.theta_r[sel], np.radians(snap.phi_r[sel])
+        v = np.log10(snap.signal[sel])
+        lo, hi = float(v.min()), float(v.max())
+        colours = self.cmap.map((v - lo) / (hi - lo) if hi > lo else np.zeros_like(v),
+                                mode="qcolor")
+        self.polar_points.setData(t * np.cos(p), t * np.sin(p),
+                                  brush=[pg.mkBrush(c) for c in colours])
+        self.n_plotted = int(sel.sum())
+
+    def _draw_lightfield(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
+        field, y = snap.field, snap.field_y
+        if field is None or y is None:
+            return
+        measured = np.isfinite(field).all(axis=1)
+        if not measured.any():
+            return
+        order = np.argsort(np.where(np.isfinite(y), y, np.inf))
+        img = field[order]
+        lo = float(np.nanmin(img))
+        hi = float(np.nanmax(img))
+        self.field_image.setImage(np.nan_to_num(img, nan=lo), levels=(lo, max(hi, lo + 1e-12)))
+        ys = y[order][np.isfinite(y[order])]
+        if ys.size:
+            y0 = float(ys[0])
+            dy = float(np.median(np.diff(ys))) if ys.size > 1 else 1.0
+            self.field_image.setRect(0, y0 - dy / 2, img.shape[1], dy * img.shape[0])
+        self.n_plotted = int(measured.sum())
+
+    def _draw_image(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
+        if snap.image is not None:
+            self.latest.setImage(snap.image, autoLevels=True)
+        self.n_plotted = int(ok.sum())
+
+    def _draw_series(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
+        self.series_curve.setData(np.flatnonzero(ok), snap.signal[ok])
+        self.n_plotted = int(ok.sum())

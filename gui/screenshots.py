@@ -1,0 +1,177 @@
+"""Render every main view of the GUI on the simulated bench to PNG (``docs/screenshots``).
+
+:func:`render_all` drives the real window as an operator would — connect the ``sim``
+bench, home and move the stages, stream the camera, load a plan, run it (a picture is
+taken while it runs), fit the finished run in the browser — and saves each view with
+``QWidget.grab()``. ``python docs/screenshots/render.py [FOLDER]`` runs it; a test renders
+them and checks that none is blank. Works offscreen (``QT_QPA_PLATFORM=offscreen``).
+"""
+
+from __future__ import annotations
+
+import gc
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from PySide6.QtCore import QEvent, QSettings
+from PySide6.QtWidgets import QApplication
+
+from gui.app import create_window
+from gui.model.session import Home, MoveTo, SetLight
+from gui.qt.main_window import MainWindow
+
+__all__ = ["VIEWS", "render_all"]
+
+#: File names (without .png) of the pictures, in the order they are taken.
+VIEWS = ("bench", "goniometer", "camera", "plan_editor", "run_in_progress", "run_browser_fit",
+         "main_window")
+
+PLAN = """# the screenshots' scan: in-plane BRDF with dark frames, for a fit
+[plan]
+kind = "brdf_in_plane"
+name = "in-plane BRDF, two incidence angles"
+[sample]
+name = "sim-grey"
+description = "simulated glossy sample of the sim bench"
+[scan]
+theta_i = [20.0, 45.0]
+theta_r = { start = -70.0, stop = 80.0, step = 7.5 }
+skip_beam_points = true
+[acquisition]
+mode = "auto"
+exposure_us = 2000
+max_exposure_us = 200000
+dark = "per_point"
+detectors = ["camera", "power_meter"]
+"""
+
+
+def _wait(cond: Callable[[], bool], timeout: float, what: str) -> None:
+    app = QApplication.instance()
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"screenshots: timed out waiting for {what}")
+        app.processEvents()
+        time.sleep(0.01)
+    app.processEvents()
+
+
+def _settle(seconds: float = 0.3) -> None:
+    app = QApplication.instance()
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        app.processEvents()
+        time.sleep(0.01)
+
+
+def _grab(window: MainWindow, dock: str, path: Path) -> Path:
+    d = window.docks[dock]
+    d.show()
+    d.raise_()
+    _settle(0.4)
+    if not d.widget().grab().save(str(path)):
+        raise OSError(f"could not write {path}")
+    return path
+
+
+def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
+    """Take every picture of :data:`VIEWS` into ``out_dir``; returns name → path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    app = QApplication.instance() or QApplication([])
+    work = Path(tempfile.mkdtemp(prefix="scatterlab-screenshots-"))
+    settings = QSettings(str(work / "gui.ini"), QSettings.IniFormat)
+    window = create_window(bench=bench, out=work / "runs", settings=settings, fsync=False)
+    shots: dict[str, Path] = {}
+    try:
+        window.resize(1680, 1050)
+        window.show()
+        window.default_sizes()
+        window.bench_panel.connect_bench()
+        s = window.session
+        _wait(lambda: s.connected and len(window.bench_panel.panels) == len(s.states())
+              and bool(s.states()), 60, "the bench")
+        for role in ("sample_theta", "detector_theta", "camera_z"):
+            s.submit(Home(role))
+        _wait(lambda: all(s.states()[r].value("homed") and not s.states()[r].value("moving")
+                          for r in ("sample_theta", "detector_theta", "camera_z")), 120,
+              "homing")
+        s.submit(MoveTo("detector_theta", 50.0))
+        s.submit(MoveTo("sample_theta", 25.0))
+        _wait(lambda: abs(s.states()["detector_theta"].value("position") - 50) < 0.01
+              and not s.states()["sample_theta"].value("moving"), 60, "the moves")
+        s.submit(SetLight(True))
+        _wait(lambda: s.states()["source"].value("on") is True, 20, "the light")
+        _settle(0.8)
+        shots["bench"] = _grab(window, "bench", out / "bench.png")
+
+        plan_path = work / "screenshot_plan.toml"
+        plan_path.write_text(PLAN, encoding="utf-8")
+        editor = window.plan_editor
+        editor.open_plan(plan_path)
+        _wait(lambda: editor.validation is not None and editor.validation.ok, 60,
+              "the plan's validation")
+        _settle(0.5)
+        shots["goniometer"] = _grab(window, "goniometer", out / "goniometer.png")
+
+        cam = window.camera
+        cam.stream.click()
+        _wait(lambda: cam.shown >= 5, 60, "camera frames")
+        _settle(1.2)
+        shots["camera"] = _grab(window, "camera", out / "camera.png")
+        cam.stream.click()
+        _wait(lambda: not s.states()["camera"].value("streaming", False), 20, "stream stop")
+        shots["plan_editor"] = _grab(window, "plan", out / "plan_editor.png")
+
+        _wait(editor.start.isEnabled, 30, "Start")
+        editor.start.click()
+        _wait(lambda: window.current_run is not None, 30, "the run")
+        run = window.current_run
+        _wait(lambda: run.live.n_received >= max(6, len(run.plan.points) // 2), 300,
+              "half the points")
+        window.docks["live"].raise_()
+        window.docks["run"].raise_()
+        _settle(0.5)
+        app.processEvents()
+        path = out / "run_in_progress.png"
+        window.grab().save(str(path))
+        shots["run_in_progress"] = path
+        _wait(lambda: s.run is None and window.run_control.last_finished is not None, 600,
+              "the end of the run")
+
+        browser = window.browser
+        browser.refresh()
+        _wait(lambda: bool(browser.rows), 30, "the catalog")
+        browser.select(browser.rows[0].run_id)
+        _wait(lambda: browser.details is not None, 30, "the run's details")
+        browser.start_analysis("fit")
+        _wait(lambda: browser.outcome is not None and not browser.busy.isVisible(), 600,
+              "the fit")
+        shots["run_browser_fit"] = _grab(window, "runs", out / "run_browser_fit.png")
+        window.docks["goniometer"].raise_()
+        window.docks["plan"].raise_()
+        _settle(0.5)
+        path = out / "main_window.png"
+        window.grab().save(str(path))
+        shots["main_window"] = path
+    finally:
+        window.confirm_close_during_run(True)
+        window.close()
+        _wait(lambda: s.run is None, 60, "the bench to be safe")
+        window.deleteLater()
+        app.processEvents()
+        QApplication.sendPostedEvents(None, QEvent.DeferredDelete)
+        gc.collect()
+    return shots
+
+
+def main(out_dir: str | None = None) -> int:
+    """Render the screenshots into ``out_dir`` (default: ``docs/screenshots``)."""
+    folder = Path(out_dir) if out_dir else Path(__file__).resolve().parents[1] / "docs" / \
+        "screenshots"
+    for name, path in render_all(folder).items():
+        print(f"{name}: {path}")
+    return 0

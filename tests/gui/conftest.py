@@ -1,0 +1,82 @@
+"""GUI-test fixtures: the main window on a simulated bench, with its own settings file."""
+
+from __future__ import annotations
+
+import gc
+
+import pytest
+
+pytest.importorskip("pytestqt")
+
+from PySide6.QtCore import QEvent, QSettings
+from PySide6.QtWidgets import QApplication
+
+from tests.gui.helpers import fast_profile
+
+
+@pytest.fixture
+def fast_bench_file(tmp_path):
+    """The built-in `sim` bench with fast stage clocks, as a profile file."""
+
+    def make(name: str = "sim", speed: int = 200):
+        path = tmp_path / f"{name}-fast.toml"
+        path.write_text(fast_profile(name, speed).source_text, encoding="utf-8")
+        return str(path)
+
+    return make
+
+
+@pytest.fixture
+def settings(tmp_path):
+    return QSettings(str(tmp_path / "gui.ini"), QSettings.IniFormat)
+
+
+@pytest.fixture
+def make_window(qtbot, tmp_path, settings):
+    """Build the main window (not yet connected); closes it and its session afterwards."""
+    from gui.app import create_window
+
+    windows = []
+
+    def make(bench: str | None = None, **kw):
+        kw.setdefault("out", tmp_path / "runs")
+        kw.setdefault("settings", settings)
+        kw.setdefault("fsync", False)
+        w = create_window(bench=bench, **kw)
+        qtbot.addWidget(w)
+        w.show()
+        windows.append(w)
+        return w
+
+    yield make
+    for w in windows:
+        w.confirm_close_during_run(True)
+        w.close()
+        qtbot.waitUntil(lambda w=w: not w.session.run, timeout=30000)
+        w.session.close(20)
+        w.deleteLater()
+    flush_deleted()
+
+
+def flush_deleted() -> None:
+    """Destroy widgets scheduled for deletion now, while Qt and Python are both alive (a
+    pyqtgraph view left to the interpreter's last garbage collection can crash it)."""
+    app = QApplication.instance()
+    if app is not None:
+        app.processEvents()
+        QApplication.sendPostedEvents(None, QEvent.DeferredDelete)
+    gc.collect()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _destroy_widgets_before_exit():
+    yield
+    flush_deleted()
+
+
+def connect(qtbot, window, timeout: int = 20000) -> None:
+    """Click Connect and wait until every device has its panel."""
+    window.bench_panel.connect_button.click()
+    qtbot.waitUntil(lambda: window.session.connected and bool(window.bench_panel.panels)
+                    and len(window.bench_panel.panels) == len(window.session.states()),
+                    timeout=timeout)

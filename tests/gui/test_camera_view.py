@@ -1,0 +1,90 @@
+"""The camera view under a streaming simulated camera."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.gui.conftest import connect
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as f:
+        pages = int(f.read().split()[1])
+    import os
+
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def _streaming(qtbot, w):
+    cam = w.camera
+    qtbot.waitUntil(lambda: cam.role == "camera", timeout=5000)
+    cam.stream.click()
+    qtbot.waitUntil(lambda: cam.shown >= 3, timeout=15000)
+    return cam
+
+
+def test_five_seconds_of_streaming_grow_nothing_without_bound(qtbot, make_window,
+                                                              fast_bench_file):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    w.docks["camera"].raise_()
+    cam = _streaming(qtbot, w)
+    camera = w.session._bench.camera
+    qtbot.wait(1000)
+    rss0, shown0, received0 = _rss_mb(), cam.shown, cam.slot.received
+    qtbot.wait(4000)
+    rss1 = _rss_mb()
+    shown, received = cam.shown - shown0, cam.slot.received - received0
+    assert shown > 10 and received >= shown
+    # what the display skipped is counted, not queued: the slot holds one frame
+    received, taken, skipped, waiting = cam.slot.counts()
+    assert received == taken + skipped + int(waiting)
+    assert camera.buffered_frames <= camera.ring_capacity
+    # 4 s of 1024² 12-bit frames at the camera's rate would be > 100 MB if queued
+    assert rss1 - rss0 < 60, f"memory grew {rss1 - rss0:.0f} MB while streaming"
+    assert w.camera.last_frame.data.shape == (1024, 1024)
+    text = cam.rates.text()
+    assert "frames/s" in text and "skipped by the display" in text
+    cam.stream.click()
+    qtbot.waitUntil(lambda: not w.session.states()["camera"].value("streaming"),
+                    timeout=5000)
+
+
+def test_roi_statistics_saturation_and_snapshot(qtbot, make_window, fast_bench_file,
+                                                tmp_path):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    cam = _streaming(qtbot, w)
+    cam.roi.setPos((100, 200))
+    cam.roi.setSize((50, 40))
+    cam._roi_moved()
+    qtbot.waitUntil(lambda: cam.last_frame is not None and cam.last_frame.stats.roi
+                    is not None and cam.last_frame.stats.roi.x == 100, timeout=5000)
+    f = cam.last_frame
+    part = f.data[200:240, 100:150]
+    assert f.stats.mean_dn == pytest.approx(part.mean())
+    assert f.stats.max_dn == part.max()
+    assert f.stats.dn_per_us == pytest.approx(part.mean() / f.exposure_us)
+    assert f.stats.saturated_fraction == pytest.approx(np.mean(f.data >= f.saturation_dn))
+    assert "DN/µs" in cam.stats.text()
+    path = tmp_path / "snap.npy"
+    with qtbot.waitSignal(cam.snapshotSaved, timeout=10000):
+        cam.save_snapshot(path)
+    saved = np.load(path)
+    assert saved.shape == (1024, 1024) and saved.dtype == f.data.dtype
+
+
+def test_a_rejected_exposure_shows_the_drivers_error(qtbot, make_window, fast_bench_file):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    cam = w.camera
+    qtbot.waitUntil(lambda: cam.role == "camera", timeout=5000)
+    cam.exposure.setValue(2.0)  # the simulated camera takes 10 µs to 10 s
+    cam.set_exposure.click()
+    qtbot.waitUntil(lambda: "outside [10, 1e+07] us" in cam.error.text(), timeout=5000)
+    cam.exposure.setValue(2500.0)
+    cam.set_exposure.click()
+    qtbot.waitUntil(lambda: w.session.states()["camera"].value("exposure_us") == 2500.0,
+                    timeout=5000)
+    assert cam.error.text() == ""

@@ -1,0 +1,77 @@
+"""Live plots of the other plan kinds: the light field grows row by row; the hemisphere
+map fills with directions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from instrument.run.runfile import read_run
+from tests.gui.conftest import connect
+from tests.gui.test_run_control import wait_end
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+HEMISPHERE = """
+[plan]
+kind = "brdf_hemisphere"
+name = "small hemisphere"
+[sample]
+name = "hemi"
+[scan]
+theta_i = [30.0]
+n_directions = 8
+theta_max_deg = 60.0
+skip_beam_points = true
+[acquisition]
+mode = "fixed"
+exposure_us = 1000
+detectors = ["camera"]
+"""
+
+
+def _run_plan(qtbot, w, path):
+    editor = w.plan_editor
+    assert editor.open_plan(path)
+    qtbot.waitUntil(editor.start.isEnabled, timeout=20000)
+    editor.start.click()
+    qtbot.waitUntil(lambda: w.current_run is not None, timeout=20000)
+    return w.current_run, wait_end(qtbot, w, timeout=120000)
+
+
+def test_the_light_field_image_grows_row_by_row(qtbot, make_window, fast_bench_file,
+                                                tmp_path):
+    w = make_window(fast_bench_file("sim-lightfield"))
+    connect(qtbot, w)
+    text = (EXAMPLES / "lightfield_scan.toml").read_text().replace(
+        "start = -50.0, stop = 50.0, step = 1.0", "start = -20.0, stop = 20.0, step = 2.0")
+    plan = tmp_path / "lf.toml"
+    plan.write_text(text)
+    run, ev = _run_plan(qtbot, w, plan)
+    assert ev.status == "finished"
+    data = read_run(run.path)
+    light = int((data.label == "lightfield").sum())
+    assert light == 21
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == light, timeout=5000)
+    assert w.live_plot.kind == "lightfield"
+    img = w.live_plot.field_image.image
+    assert img.shape == (len(run.plan.points), 1024)
+    snap = run.live.snapshot()
+    order = np.argsort(np.where(np.isfinite(snap.field_y), snap.field_y, np.inf))
+    assert np.all(np.diff(snap.field_y[order][:light]) > 0)  # rows in camera_z order
+
+
+def test_the_hemisphere_map_fills(qtbot, make_window, fast_bench_file, tmp_path):
+    w = make_window(fast_bench_file("sim_out_of_plane"))
+    connect(qtbot, w)
+    plan = tmp_path / "hemi.toml"
+    plan.write_text(HEMISPHERE)
+    run, ev = _run_plan(qtbot, w, plan)
+    assert ev.status == "finished"
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=5000)
+    assert w.live_plot.kind == "hemisphere"
+    x, y = w.live_plot.polar_points.getData()
+    theta = np.hypot(x, y)
+    data = read_run(run.path)
+    assert np.allclose(np.sort(theta), np.sort(data.theta_r), atol=1e-3)
