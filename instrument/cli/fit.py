@@ -39,9 +39,6 @@ def add_fit_options(p: argparse.ArgumentParser,
     p.add_argument("--models", default=",".join(default_models),
                    help="comma-separated candidates, '+' for sums "
                    f"(default: {','.join(default_models)})")
-    p.add_argument("--out", default=None,
-                   help="folder for the report, figures and results.h5 (default: RUN/fit/ "
-                   "next to the run file RUN.h5)")
     p.add_argument("--criterion", default="bic", choices=("bic", "aic", "aicc", "cv"),
                    help="model-selection rule (default: bic)")
     p.add_argument("--method", default="absolute", choices=("absolute", "relative"))
@@ -81,9 +78,9 @@ def add_fit_options(p: argparse.ArgumentParser,
                    help="skip the cross-validation columns of the comparison")
 
 
-#: Companion files of the fit options, by option name and attribute.
-_COMPANIONS = (("--reference", "reference"), ("--flat", "flat"), ("--signature", "signature"),
-               ("--reference-table", "reference_table"),
+#: Companion files of the fit options that are not runs, by option name and attribute (a
+#: companion run is checked by the pipeline, in the words every command uses for runs).
+_COMPANIONS = (("--reference-table", "reference_table"),
                ("--camera-calibration", "camera_calibration"))
 
 

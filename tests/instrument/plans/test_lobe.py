@@ -198,7 +198,7 @@ def test_two_pass_lobe_run_through_the_engine(tmp_path: Path, capsys) -> None:
                  "lambert,lambert+ggx", "--no-cv"]) == 0
     fit_out = capsys.readouterr().out
     assert "the model describes the data" in fit_out
-    with h5py.File(second, "r") as f:
+    with h5py.File(tmp_path / "rep" / "results.h5", "r") as f:
         sources = {s.decode() for s in f["entry/analysis/reduced/source_run"][()]}
         params = f["entry/analysis/chosen/params"][()]
         stderr = f["entry/analysis/chosen/stderr"][()]

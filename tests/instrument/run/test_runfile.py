@@ -67,5 +67,5 @@ def test_a_file_without_the_layout_is_named_not_a_keyerror(tmp_path, run_file):
         read_run(bare)
     empty = tmp_path / "empty.h5"
     h5py.File(empty, "w").close()
-    with pytest.raises(RunFileError, match="no /entry group"):
+    with pytest.raises(RunFileError, match="not a scatterlab run file"):
         read_plan_kind(empty)
