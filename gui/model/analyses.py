@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from instrument.run.paths import results_dir
+
 __all__ = ["ANALYSES", "AnalysisOutcome", "RunDetails", "Table", "analyses_for",
            "run_analysis", "run_details"]
 
@@ -116,8 +118,9 @@ def _fmt(x: Any) -> str:
 
 
 def run_analysis(name: str, path: str | Path) -> AnalysisOutcome:
-    """Run analysis ``name`` (:data:`ANALYSES`) on the run file ``path``, writing its
-    results into the file and its figures and report beside it, as the CLI does.
+    """Run analysis ``name`` (:data:`ANALYSES`) on the run file ``path`` as the CLI does:
+    its results file, figures and report go next to the run, into ``DIR/RUN/<pipeline>/``
+    (ADR 0013); the run file is only read.
 
     Raises
     ------
@@ -150,20 +153,20 @@ def _fit(path: Path, t0: float) -> AnalysisOutcome:
                 ("model", "k", "χ²", "BIC"),
                 tuple((r.name, str(r.n_params), f"{r.chi2:.2f}", f"{r.bic:.2f}")
                       for r in result.selection.table))
-    warnings = [f"{k}: {v}" for k, v in reduced.provenance.items()
-                if isinstance(v, str) and any(w in v for w in ("assumed", "unknown",
-                                                               "not homed"))]
-    folder = done.report.parent if done.report is not None else path.parent
+    warnings = list(reduced.warnings)
+    if not result.adequate:  # the goodness-of-fit gate (ADR 0051)
+        warnings.append(f"{result.verdict}; the σ are inflated")
+    folder = done.report.parent if done.report is not None else results_dir(path, "fit")
     return AnalysisOutcome(
         "fit", path, f"{reduced.points.n} points ({reduced.points.method}); chosen model "
-        f"{result.chosen} ({result.selection.rule})", (params, sel),
+        f"{result.chosen} ({result.selection.rule}); {result.verdict}", (params, sel),
         _figures(folder, t0), done.report, tuple(result.notes), tuple(warnings))
 
 
 def _reconstruct(path: Path, t0: float) -> AnalysisOutcome:
     from instrument.pipelines.lightfield.reconstruct import reconstruct_run
 
-    folder = path.with_suffix(".lightfield")
+    folder = results_dir(path, "lightfield")
     r = reconstruct_run(path, figures_dir=folder)
     rec = r.reconstruction
     lf = r.measured.field
@@ -180,7 +183,7 @@ def _reconstruct(path: Path, t0: float) -> AnalysisOutcome:
 def _locate(path: Path, t0: float) -> AnalysisOutcome:
     from instrument.pipelines.lightfield.locate import locate_run
 
-    folder = path.with_suffix(".lightfield")
+    folder = results_dir(path, "lightfield")
     r = locate_run(path, figures_dir=folder)
     det = r.detection
     rows = []
@@ -201,7 +204,8 @@ def _spheres(path: Path, t0: float) -> AnalysisOutcome:
 
     from instrument.pipelines.spheres.pipeline import analyse_run
 
-    figure = Path(str(path.with_suffix("")) + ".spheres.png")
+    figure = results_dir(path, "spheres") / "relighting.png"
+    figure.parent.mkdir(parents=True, exist_ok=True)
     capture, res = analyse_run(path, figure=figure)
     ident = []
     for name, e in res.identities.items():

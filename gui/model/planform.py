@@ -128,6 +128,18 @@ IN_PLANE = [
        "leave out (and report) points with the detector in the beam", default=True,
        absent=False),
 ]
+#: A two-pass lobe plan (``[scan] lobe``, ADR 0052): this plan is the coarse first pass.
+LOBE = [
+    _f("scan.lobe.points", "lobe: second-pass points", "integer",
+       "placed by Fisher information after the first pass (empty: one pass)"),
+    _f("scan.lobe.step_deg", "lobe: placement grid (deg)", "number"),
+    _f("scan.lobe.search_half_width_deg", "lobe: search half-width (deg)", "number",
+       "first pass: extra points around specular"),
+    _f("scan.lobe.search_step_deg", "lobe: search step (deg)", "number"),
+    _f("scan.lobe.prior", "lobe: model", "text", "the model fitted to the first pass"),
+    _f("scan.lobe.target", "lobe: target parameter", "text",
+       "the parameter whose σ the second pass reduces"),
+]
 HEMISPHERE = [
     _f("scan.theta_i", "θi (deg)", "list", default="30"),
     _f("scan.phi_i", "φi (deg)", "list", default="0"),
@@ -148,7 +160,7 @@ FRAMES_AT = [
     _f("scan.positions", "axis positions", "positions", "role = value, …"),
 ]
 SCAN_FIELDS: dict[str, list[FieldSpec]] = {
-    "brdf_in_plane": IN_PLANE,
+    "brdf_in_plane": [*IN_PLANE, *LOBE],
     "reference": [*IN_PLANE, _f("scan.reference_name", "standard", "text"),
                   _f("scan.reflectance", "reflectance", "number")],
     "signature": IN_PLANE,

@@ -36,7 +36,8 @@ def test_five_seconds_of_streaming_grow_nothing_without_bound(qtbot, make_window
     qtbot.wait(4000)
     rss1 = _rss_mb()
     shown, received = cam.shown - shown0, cam.slot.received - received0
-    assert shown > 10 and received >= shown
+    # the two counters are read one after the other: a frame may arrive in between
+    assert shown > 10 and received >= shown - 1
     # what the display skipped is counted, not queued: the slot holds one frame
     received, taken, skipped, waiting = cam.slot.counts()
     assert received == taken + skipped + int(waiting)

@@ -8,7 +8,10 @@ import pytest
 
 from tests.gui.conftest import connect
 
-EXAMPLES = sorted(Path(__file__).resolve().parents[2].joinpath("examples").glob("*.toml"))
+#: The example plan files (examples/ also holds bench profiles and a geometry file).
+_EXAMPLE_DIR = Path(__file__).resolve().parents[2] / "examples"
+EXAMPLES = sorted(p for p in _EXAMPLE_DIR.glob("*.toml")
+                  if "[plan]" in p.read_text(encoding="utf-8"))
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
          "sphere_capture": "sim-spheres"}
 

@@ -121,11 +121,14 @@ def test_filters_and_fit_from_the_browser(qtbot, make_window, glossy_run_in_cata
     params = browser.result_table_widgets[0]
     names = [params.item(r, 0).text() for r in range(params.rowCount())]
     assert params.rowCount() >= 2 and all(names)
-    # the parameters shown are those written into the run file
+    # the parameters shown are those written into the results file next to the run
+    # (ADR 0013), and the run file is only read
     import h5py
 
-    with h5py.File(path) as f:
+    with h5py.File(path.parent / path.stem / "fit" / "results.h5") as f:
         assert "analysis" in f["entry"]
+    with h5py.File(path) as f:
+        assert "analysis" not in f["entry"]
     value = float(params.item(0, 1).text())
     assert value == pytest.approx(float(out.tables[0].rows[0][1]))
     assert browser.open_report.isEnabled()

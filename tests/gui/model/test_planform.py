@@ -13,7 +13,10 @@ from instrument.bench.profile import load_profile
 from instrument.plans.build import build_plan
 from instrument.plans.planfile import KINDS, load_plan, parse_plan
 
-EXAMPLES = sorted(Path(__file__).resolve().parents[3].joinpath("examples").glob("*.toml"))
+#: The example plan files (examples/ also holds bench profiles and a geometry file).
+_EXAMPLE_DIR = Path(__file__).resolve().parents[3] / "examples"
+EXAMPLES = sorted(p for p in _EXAMPLE_DIR.glob("*.toml")
+                  if "[plan]" in p.read_text(encoding="utf-8"))
 #: The bench each example plan is written for (its comment says so).
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
          "sphere_capture": "sim-spheres"}
