@@ -181,11 +181,12 @@ def run(args: argparse.Namespace) -> int:
     print("model comparison (χ²/dof ≈ 1: the model fits within the uncertainties; "
           f"lower {result.selection.criterion.upper()} is better):")
     best = min(row.score(result.selection.criterion) for row in result.selection.table)
+    width = max(len(row.name) for row in result.selection.table)
     for row in result.selection.table:
         dof = max(n - row.n_params, 1)
         delta = row.score(result.selection.criterion) - best
-        print(f"  {row.name:<22} {row.n_params} parameter(s)  χ²/dof {row.chi2 / dof:10.4g}"
-              f"  Δ{result.selection.criterion.upper()} {delta:10.4g}")
+        print(f"  {row.name:<{width}} {row.n_params} parameter(s)  χ²/dof "
+              f"{row.chi2 / dof:10.4g}  Δ{result.selection.criterion.upper()} {delta:10.4g}")
     for note in result.notes:
         print(f"  note: {note}")
     print(f"report: {page}")
