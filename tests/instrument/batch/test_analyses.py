@@ -24,6 +24,11 @@ from instrument.run.results import read_results_attrs, results_dir
 
 ROOT = Path(__file__).resolve().parents[3]
 
+def parse_cli(argv: list[str]):
+    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
+    return build_parser(argv).parse_args(argv)
+
+
 
 def _scan(out: Path, plan: str, bench: str) -> Path:
     assert main(["run", str(ROOT / "examples" / plan), "--bench", bench, "--out", str(out),
@@ -49,7 +54,7 @@ def test_batch_reconstruct_and_locate_give_the_single_run_answers(lightfield_run
     assert main(["batch", "reconstruct", str(run), "--n-theta", "96", "--workers", "0",
                  "--summary-dir", str(tmp_path)]) == 0
     (row,) = _rows(tmp_path, "reconstruct")
-    args = build_parser().parse_args(["reconstruct", str(run), "--n-theta", "96"])
+    args = parse_cli(["reconstruct", str(run), "--n-theta", "96"])
     from instrument.batch.analyses import reconstruct_arguments
 
     ref = reconstruct_run(run, write=False, **reconstruct_arguments(reconstruction_options(args)))
@@ -63,7 +68,7 @@ def test_batch_reconstruct_and_locate_give_the_single_run_answers(lightfield_run
     assert main(["batch", "locate", str(run), "--workers", "0", "--no-report",
                  "--summary-dir", str(tmp_path)]) == 0
     (row,) = _rows(tmp_path, "locate")
-    largs = build_parser().parse_args(["locate", str(run)])
+    largs = parse_cli(["locate", str(run)])
     from instrument.batch.analyses import locate_arguments
 
     loc = locate_run(run, write=False, **locate_arguments(locate_options(largs)))
@@ -83,7 +88,7 @@ def test_batch_reconstruct_and_locate_give_the_single_run_answers(lightfield_run
 def test_batch_spheres_gives_the_single_run_answer(tmp_path):
     run = _scan(tmp_path / "sp", "sphere_capture.toml",
                 str(ROOT / "instrument" / "bench" / "profiles" / "sim-spheres.toml"))
-    args = build_parser().parse_args(["spheres", str(run), "--lmax", "12", "--lmax-check", "8"])
+    args = parse_cli(["spheres", str(run), "--lmax", "12", "--lmax-check", "8"])
     opts = sphere_options(args)
     o = run_task("spheres", run, opts, report=True)
     _, res = analyse_run(run, write=False, **opts)

@@ -45,6 +45,11 @@ from tests.instrument.batch.runs import fresh_copy, make_brdf_runs
 ROOT = Path(__file__).resolve().parents[3]
 N_RUNS = 6
 
+def parse_cli(argv: list[str]):
+    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
+    return build_parser(argv).parse_args(argv)
+
+
 
 @pytest.fixture(scope="module")
 def runs_dir(tmp_path_factory):
@@ -55,7 +60,7 @@ def runs_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def options():
-    return fit_options(build_parser().parse_args(["fit", "x.h5", "--no-cv"]))
+    return fit_options(parse_cli(["fit", "x.h5", "--no-cv"]))
 
 
 @pytest.fixture(scope="module")

@@ -25,6 +25,12 @@ from instrument.run.results import already_done, read_results_attrs, results_pat
 from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run
 
 
+def parse_cli(argv: list[str]):
+    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
+    return build_parser(argv).parse_args(argv)
+
+
+
 @pytest.fixture(scope="module")
 def runs_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("batch-runs")
@@ -40,7 +46,7 @@ def runs(runs_dir, tmp_path):
 
 def _options(*argv: str) -> dict:
     """The fit options of a command line (the single-run command's own parser)."""
-    args = build_parser().parse_args(["fit", "x.h5", *argv])
+    args = parse_cli(["fit", "x.h5", *argv])
     return fit_options(args)
 
 
