@@ -36,3 +36,10 @@ def fresh_copy(src: Path, dst: Path) -> Path:
     for p in src.glob("*.h5"):
         shutil.copy2(p, dst / p.name)
     return dst
+
+
+def parse_cli(argv: list[str]):
+    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
+    from instrument.cli import build_parser
+
+    return build_parser(argv).parse_args(argv)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from instrument.batch.task import run_task
-from instrument.cli import build_parser, main
+from instrument.cli import main
 from instrument.cli.locate import locate_options
 from instrument.cli.reconstruct import reconstruction_options
 from instrument.cli.spheres import sphere_options
@@ -23,11 +23,6 @@ from instrument.pipelines.spheres.pipeline import analyse_run
 from instrument.run.results import read_results_attrs, results_dir
 
 ROOT = Path(__file__).resolve().parents[3]
-
-def parse_cli(argv: list[str]):
-    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
-    return build_parser(argv).parse_args(argv)
-
 
 
 def _scan(out: Path, plan: str, bench: str) -> Path:

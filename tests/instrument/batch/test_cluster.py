@@ -36,19 +36,14 @@ from instrument.batch.cluster import (
     worker_notes,
 )
 from instrument.batch.task import Outcome, run_serial
-from instrument.cli import build_parser, main
+from instrument.cli import main
 from instrument.cli.fit import fit_options
 from instrument.run.results import read_results_attrs, results_dir
 from instrument.run.runfile import read_run
-from tests.instrument.batch.runs import fresh_copy, make_brdf_runs
+from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, parse_cli
 
 ROOT = Path(__file__).resolve().parents[3]
 N_RUNS = 6
-
-def parse_cli(argv: list[str]):
-    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
-    return build_parser(argv).parse_args(argv)
-
 
 
 @pytest.fixture(scope="module")

@@ -18,17 +18,11 @@ import pytest
 from instrument.batch.analyses import ANALYSES, Analysed, Analysis, AnalysisFailed, analyse_fit
 from instrument.batch.summary import summary_columns, write_csv, write_html
 from instrument.batch.task import Outcome, record_options, run_lock, run_serial, run_task
-from instrument.cli import build_parser, main
+from instrument.cli import main
 from instrument.cli.fit import fit_options
 from instrument.pipelines.brdf.pipeline import fit_run
 from instrument.run.results import already_done, read_results_attrs, results_path
-from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run
-
-
-def parse_cli(argv: list[str]):
-    """The arguments as ``scatterlab`` parses them (the named subcommand in full)."""
-    return build_parser(argv).parse_args(argv)
-
+from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run, parse_cli
 
 
 @pytest.fixture(scope="module")
