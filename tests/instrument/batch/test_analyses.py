@@ -21,6 +21,7 @@ from instrument.pipelines.lightfield.locate import locate_run
 from instrument.pipelines.lightfield.reconstruct import reconstruct_run
 from instrument.pipelines.spheres.pipeline import analyse_run
 from instrument.run.results import read_results_attrs, results_dir
+from tests.instrument.batch.runs import parse_cli
 
 ROOT = Path(__file__).resolve().parents[3]
 
