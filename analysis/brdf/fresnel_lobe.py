@@ -38,8 +38,8 @@ from analysis.brdf.model import BRDFModel, ParamSpec
 
 __all__ = ["fresnel_microfacet"]
 
-#: The lowest index fitted: at n → 1 the interface vanishes (R → 0) and below 1 total
-#: internal reflection makes ∂R/∂n singular at the critical angle.
+#: The lowest real index fitted without absorption: at n → 1 the interface vanishes
+#: (R → 0) and below 1 total internal reflection makes ∂R/∂n singular at the critical angle.
 N_MIN = 1.001
 
 
@@ -92,7 +92,8 @@ def fresnel_microfacet(*, absorbing: bool = False) -> BRDFModel:
         cols = [dn * dv] + ([dk * dv] if absorbing else []) + [r * ddv]
         return np.stack(np.broadcast_arrays(*cols), axis=-1)
 
-    params = [ParamSpec("n", "1", N_MIN, 6.0, 1.5,
+    # an absorber may have n < 1 (metals); without absorption n ≥ N_MIN
+    params = [ParamSpec("n", "1", 0.01 if absorbing else N_MIN, 6.0, 1.5,
                         description="real part of the relative refractive index")]
     if absorbing:
         params.append(ParamSpec("k", "1", 0.0, 20.0, 1.0,

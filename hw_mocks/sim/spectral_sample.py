@@ -190,7 +190,8 @@ class SpectralSample:
             if "index_n" not in config or "index_nm" not in config:
                 raise ValueError("[simulation.scene.spectral] the table form needs index_nm "
                                  "and index_n (and optionally index_k)")
-            n_tab = _table("index_n", config["index_n"], config["index_nm"], low=1.0,
+            # metals have n < 1 (aluminium 0.96, silver 0.05 in the visible): n > 0 only
+            n_tab = _table("index_n", config["index_n"], config["index_nm"], low=1e-3,
                            high=50.0, wl_key="index_nm")
             k_vals = config.get("index_k", [0.0] * len(n_tab.values))
             k_tab = _table("index_k", k_vals, config["index_nm"], low=0.0, high=50.0,
@@ -232,6 +233,11 @@ class SpectralSample:
         m = np.asarray(index, dtype=complex)
         sin2 = 1.0 - c * c
         cos_t = np.sqrt(1.0 - sin2 / (m * m))
+        # the transmitted wave must decay into the medium: Im(n̂ cos θt) ≥ 0 (and, without
+        # absorption, propagate forwards): flip the root where the principal one does not
+        mct = m * cos_t
+        flip = (mct.imag < 0) | ((mct.imag == 0) & (mct.real < 0))
+        cos_t = np.where(flip, -cos_t, cos_t)
         rs = (c - m * cos_t) / (c + m * cos_t)
         rp = (m * c - cos_t) / (m * c + cos_t)
         return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
