@@ -88,6 +88,36 @@ def fresnel_unpolarized(cos_theta_i: ArrayLike, n: complex | ArrayLike) -> NDArr
     return fresnel(cos_theta_i, n).R
 
 
+def fresnel_unpolarized_dn(
+    cos_theta_i: ArrayLike, n: complex | ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(R, ∂R/∂n, ∂R/∂k) of the unpolarised reflectance for n̂ = n + ik (analytic).
+
+    With u = n̂ cos θt = √(n̂² − sin²θi) and du/dn̂ = n̂/u, the amplitude coefficients of
+    :func:`fresnel` are holomorphic in n̂ away from u = 0:
+
+        dr_s/dn̂ = −2 cos θi n̂ / (u (cos θi + u)²),
+        dr_p/dn̂ = 2 n̂ cos θi (2u² − n̂²) / (u (n̂² cos θi + u)²),
+
+    (derived by hand from Born & Wolf §1.5.2, eqs. (20)–(21); checked against finite
+    differences in the tests), so for |r|² with n̂ = n + ik: ∂|r|²/∂n = 2 Re(r̄ dr/dn̂) and
+    ∂|r|²/∂k = 2 Re(r̄ · i dr/dn̂) = −2 Im(r̄ dr/dn̂). Singular only at u = 0 (n̂² = sin²θi,
+    an index below 1 at the critical angle); callers keep n ≥ 1.
+    """
+    c = np.clip(np.asarray(cos_theta_i, dtype=float), 0.0, 1.0)
+    nn = np.asarray(n, dtype=complex)
+    u = np.sqrt(nn * nn - (1.0 - c * c))
+    res = fresnel(c, nn)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        drs = -2.0 * c * nn / (u * (c + u) ** 2)
+        drp = 2.0 * nn * c * (2.0 * u * u - nn * nn) / (u * (nn * nn * c + u) ** 2)
+    gs = np.conj(res.rs) * drs
+    gp = np.conj(res.rp) * drp
+    dn = np.real(gs + gp)  # ½(2 Re ḡs + 2 Re ḡp)
+    dk = -np.imag(gs + gp)
+    return res.R, np.nan_to_num(dn), np.nan_to_num(dk)
+
+
 def normal_incidence_reflectance(n: complex | ArrayLike) -> NDArray[np.float64]:
     """R₀ = |(n̂ − 1)/(n̂ + 1)|² = ((n−1)² + k²)/((n+1)² + k²)."""
     nn = np.asarray(n, dtype=complex)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from analysis.brdf.diffuse import hapke, lambertian, lommel_seeliger, oren_nayar
+from analysis.brdf.fresnel_lobe import fresnel_microfacet
 from analysis.brdf.lightfield import separable_specular
 from analysis.brdf.model import BRDFModel, sum_models
 from analysis.brdf.rough_surface import beckmann_kirchhoff, rayleigh_rice
@@ -26,6 +27,9 @@ _FACTORIES: dict[str, Callable[[], BRDFModel]] = {
     "beckmann": lambda: cook_torrance(distribution="beckmann", masking="smith"),
     "ggx_vcavity": lambda: cook_torrance(distribution="ggx", masking="vcavity"),
     "beckmann_vcavity": lambda: cook_torrance(distribution="beckmann", masking="vcavity"),
+    # the index as a fitted parameter (absolute BRDF data; spectral fits per wavelength)
+    "ggx_fresnel": fresnel_microfacet,
+    "ggx_conductor": lambda: fresnel_microfacet(absorbing=True),
     "ward": ward,
     "ward_aniso": lambda: ward(anisotropic=True),
     "beckmann_kirchhoff": beckmann_kirchhoff,

@@ -130,8 +130,11 @@ class GoniometerScene:
 
     Attributes
     ----------
-    brdf : BrdfFunction
-        Ground truth of the sample, f(θi, φi, θr, φr) in 1/sr.
+    brdf : BrdfFunction or SpectralSample
+        Ground truth of the sample, f(θi, φi, θr, φr) in 1/sr; an object with
+        ``at_light(wavelength_nm, bandwidth_nm)`` (a
+        :class:`~hw_mocks.sim.spectral_sample.SpectralSample`) gives the BRDF under the
+        light that reaches the sample (camera, power meter and photodiode alike).
     sample_radius_mm : float
     target : {"sample", "reference", "none"}
     reference_brdf : BrdfFunction
@@ -169,10 +172,22 @@ class GoniometerScene:
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> GoniometerScene:
         """From a plain dict: ``brdf`` (registry name, default "lambert"), ``params``
-        (list or table), ``reference_reflectance``, and the dataclass fields by name."""
+        (list or table), ``reference_reflectance``, and the dataclass fields by name.
+
+        ``brdf = "spectral"`` with a ``spectral`` table makes the sample's BRDF depend on
+        the light's wavelength (:meth:`hw_mocks.sim.spectral_sample.SpectralSample.
+        from_config` lists its keys); a ``spectral`` table alone implies it.
+        """
         cfg = dict(config)
-        name = cfg.pop("brdf", "lambert")
+        spectral = cfg.pop("spectral", None)
+        name = cfg.pop("brdf", "spectral" if spectral is not None else "lambert")
         params = cfg.pop("params", None)
+        if (name == "spectral") != (spectral is not None):
+            raise ValueError('[simulation.scene] brdf = "spectral" goes with a '
+                             "[simulation.scene.spectral] table (and that table with it)")
+        if spectral is not None and params is not None:
+            raise ValueError("[simulation.scene] a spectral sample takes its parameters from "
+                             "[simulation.scene.spectral], not params")
         if params is None and name == "lambert":
             params = [0.5]
         reference = float(cfg.pop("reference_reflectance", 0.99))
@@ -181,8 +196,13 @@ class GoniometerScene:
         unknown = set(cfg) - allowed
         if unknown:
             raise ValueError(f"unknown scene keys {sorted(unknown)}")
-        return cls(brdf=brdf_from_model(name, params),
-                   reference_brdf=lambertian_brdf(reference), **cfg)
+        if spectral is not None:
+            from hw_mocks.sim.spectral_sample import SpectralSample
+
+            sample: Any = SpectralSample.from_config(spectral)
+        else:
+            sample = brdf_from_model(name, params)
+        return cls(brdf=sample, reference_brdf=lambertian_brdf(reference), **cfg)
 
     @property
     def depth_extent_mm(self) -> float:
@@ -191,8 +211,13 @@ class GoniometerScene:
         return self.sample_radius_mm
 
     # helpers ------------------------------------------------------------------
-    def _active_brdf(self) -> BrdfFunction | None:
+    def _active_brdf(self, state: WorldState) -> BrdfFunction | None:
         if self.target == "sample":
+            at_light = getattr(self.brdf, "at_light", None)
+            if at_light is not None:
+                # a spectral sample: its BRDF under the light that reaches it now
+                # (centre and width of the band through the filter)
+                return at_light(state.source.wavelength_nm, state.source.bandwidth_nm)
             return self.brdf
         if self.target == "reference":
             return self.reference_brdf
@@ -234,7 +259,7 @@ class GoniometerScene:
         peak = state.source.peak_intensity_w_m2()
         veil = self.ambient_radiance + self._signature(observer_dir, state) * peak
         out = np.full(d.shape[:-1], veil, dtype=float)
-        brdf = self._active_brdf()
+        brdf = self._active_brdf(state)
         cos_i = float(n @ pose.source_dir)
         height = float(o @ n)
         if brdf is None or cos_i <= 0.0 or peak == 0.0 or height <= 0.0:
@@ -317,7 +342,7 @@ class GoniometerScene:
 
         n = pose.normal
         cos_i = float(n @ pose.source_dir)
-        brdf = self._active_brdf()
+        brdf = self._active_brdf(state)
         # Direct beam: aperture points whose ray back towards the source misses the sample.
         if float(f @ pose.source_dir) > 0.0:
             # The beam is narrow: sample the aperture finely enough to resolve it (w/8).

@@ -42,7 +42,15 @@ def add_fit_options(p: argparse.ArgumentParser,
     p.add_argument("--criterion", default="bic", choices=("bic", "aic", "aicc", "cv"),
                    help="model-selection rule (default: bic)")
     p.add_argument("--method", default="absolute", choices=("absolute", "relative"))
-    p.add_argument("--detector", default="camera", choices=("camera", "power_meter"))
+    p.add_argument("--detector", default=None, choices=("camera", "power_meter", "lockin"),
+                   help="detector to reduce (default: camera; a spectral run: the plan's, "
+                   "lock-in when it lists one)")
+    p.add_argument("--per-wavelength", default="auto", choices=("auto", "yes", "no"),
+                   help="reduce and fit each filter's wavelength separately and plot the "
+                   "parameters against λ (default auto: when the run has a wavelength axis)")
+    p.add_argument("--route", default="absolute", choices=("absolute", "ratio"),
+                   help="lock-in: through the photodiode responsivity and the incident power, "
+                   "or the ratio to a direct-beam reading (responsivity cancels)")
     p.add_argument("--reference", default=None,
                    help="reference-standard run at the same geometry (relative method)")
     p.add_argument("--reference-table", default=None,
@@ -108,7 +116,7 @@ def fit_options(args: argparse.Namespace) -> dict:
 
     reduction = {
         **reduction_defaults(),
-        "method": args.method, "detector": args.detector,
+        "method": args.method, "detector": args.detector or "camera",
         "cosine_corrected": args.cosine_corrected, "incident_power_w": args.incident_power_w,
         "u_incident_power_rel": args.incident_power_u, "sigma_theta_deg": args.sigma_theta_deg,
         "receiver_distance_mm": args.distance_mm, "u_distance_mm": args.distance_u_mm,
@@ -131,6 +139,15 @@ def run(args: argparse.Namespace) -> int:
     from instrument.pipelines.brdf.pipeline import fit_run
     from instrument.pipelines.brdf.report import unit_text
 
+    spectral = _spectral_wanted(args)
+    if spectral is None:
+        return 2
+    if spectral:
+        return _run_spectral(args)
+    if args.detector == "lockin":
+        print("error: --detector lockin is reduced per wavelength (a run with a filter "
+              "wheel); give --per-wavelength yes")
+        return 2
     try:
         options = fit_options(args)
     except ValueError as err:
@@ -195,3 +212,68 @@ def run(args: argparse.Namespace) -> int:
     if args.into_run:
         print(f"results also written into {args.run} (/entry/analysis)")
     return 0
+
+
+def _spectral_wanted(args: argparse.Namespace) -> bool | None:
+    """Whether to fit per wavelength (None: an error was printed)."""
+    if args.per_wavelength != "auto":
+        return args.per_wavelength == "yes"
+    from instrument.pipelines.brdf.spectral import has_wavelength_axis
+    from instrument.run.runfile import RunFileError, read_run
+
+    try:
+        return has_wavelength_axis(read_run(args.run))
+    except (RunFileError, OSError, KeyError):
+        return False  # the ordinary path reports the run file's problem in its words
+
+
+def _run_spectral(args: argparse.Namespace) -> int:
+    from instrument.pipelines.brdf.reduce import ReductionOptions
+    from instrument.pipelines.brdf.spectral import SpectralOptions, fit_spectral
+
+    models = tuple(m.strip() for m in args.models.split(",") if m.strip())
+    if args.models == p_default_models():
+        from instrument.pipelines.brdf.spectral import DEFAULT_SPECTRAL_MODELS
+
+        models = DEFAULT_SPECTRAL_MODELS
+    detector = None if args.detector in (None, "power_meter") else args.detector
+    opts = SpectralOptions(
+        detector=detector, route=args.route, u_incident_power_rel=args.incident_power_u,
+        receiver_distance_mm=args.distance_mm, sigma_theta_deg=args.sigma_theta_deg or 0.0,
+        models=models,
+        reduction=ReductionOptions(camera_calibration=args.camera_calibration,
+                                   flat_run=args.flat, beam_radius_mm=args.beam_radius_mm,
+                                   receiver_geometry=not args.point_receiver))
+    try:
+        done = fit_spectral(args.run, opts, report_dir=args.out, write=not args.no_write,
+                            criterion=args.criterion)
+    except (KeyError, ValueError) as err:
+        print(f"error: {err.args[0] if err.args else err}")
+        return 2
+    names = done.parameter_names()
+    print(f"{len(done.fits)} wavelengths ({done.detector}); chosen model per wavelength, "
+          "parameters ± standard uncertainty:")
+    print("  " + f"{'λ (nm)':>8}  {'model':<22}" + "".join(f"{n:>20}" for n in names))
+    for wf in done.fits:
+        cells = []
+        for n in names:
+            val, err = done.parameter(n)
+            k = done.fits.index(wf)
+            cells.append(f"{val[k]:11.5g} ± {err[k]:<6.2g}")
+        print(f"  {wf.group.wavelength_nm:8.1f}  {wf.result.chosen:<22}" + "".join(cells))
+        for warning in wf.reduced.warnings:
+            print(f"    warning: {warning}")
+        if not wf.result.adequate:
+            print(f"    {wf.result.verdict}")
+    print(f"report: {done.report}")
+    if done.results is not None:
+        print(f"results: {done.results}")
+    return 0
+
+
+def p_default_models() -> str:
+    """The --models default (the general candidate set); a spectral fit replaces it with
+    the Fresnel model whose index is a parameter."""
+    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+
+    return ",".join(DEFAULT_MODELS)

@@ -37,6 +37,8 @@ PARAMS = {
     "beckmann": [1.0, 0.25],
     "ggx_vcavity": [1.0, 0.25],
     "beckmann_vcavity": [1.0, 0.25],
+    "ggx_fresnel": [2.5, 0.25],  # R(0) = 0.18: above the test's 0.05 floor
+    "ggx_conductor": [1.37, 7.6, 0.25],
     "ward": [1.0, 0.2],
     "ward_aniso": [1.0, 0.1, 0.3],
     "beckmann_kirchhoff": [1.0, 0.3],

@@ -380,3 +380,12 @@ def test_a_model_the_data_reject_is_flagged_everywhere(glossy_run, tmp_path, cap
     assert abs(red.points.theta_r[worst] - red.points.theta_i[worst]) <= math.radians(4.5)
     nominal = res["fits"][res["selection"]["chosen"]]["stderr"]
     assert all(s > 0 for s in nominal)
+
+
+def test_per_wavelength_fit_needs_a_wavelength_axis(glossy_run, capsys) -> None:
+    # a run without filters: asked for per-wavelength, it says so and what to use instead
+    assert main(["fit", str(glossy_run), "--per-wavelength", "yes", "--no-write"]) == 2
+    assert "no wavelength axis" in capsys.readouterr().out
+    assert main(["fit", str(glossy_run), "--detector", "lockin", "--per-wavelength", "no",
+                 "--no-write"]) == 2
+    assert "--per-wavelength yes" in capsys.readouterr().out
