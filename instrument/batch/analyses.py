@@ -4,16 +4,19 @@
 in whatever process Dask chose, so what crosses processes is plain data: the options come
 in as JSON-able dictionaries (built from the command line by the single-run commands' own
 option functions, :func:`instrument.cli.fit.fit_options` and its siblings), and an adapter
-returns an :class:`Analysed` — the run's line of the summary table and the details kept in
-the results file. Each adapter opens the run file itself, by path.
+returns an :class:`Analysed` — the run's line of the summary table. Each adapter opens the
+run file itself, by path.
 
 The ``*_arguments`` functions turn the plain options into the pipelines' keyword arguments;
 the single-run commands use them too, so a run analysed in a batch and on its own is
 analysed with the same arguments.
 
-The raw run file is not written (the pipelines are called with ``write=False``), except by
-``locate``, which stores the reconstruction it needs in the run when the run has none, as
-``scatterlab locate`` does. Reports and figures go to the folder the caller names.
+Each adapter lets its pipeline write the results file, exactly as the single-run command
+does (ADR 0013: ``results.h5`` in ``folder``, normally ``DIR/RUN/<pipeline>/``; the raw
+run file is only read; ``locate`` reads the reconstruction from the light-field results
+file and makes one first when it holds none). One writer per file: a run analysed alone
+and in a batch has the same results file. Reports and figures go to ``folder`` too when
+``report`` is true.
 """
 
 from __future__ import annotations
@@ -79,7 +82,8 @@ class Analysed:
         return {"result": self.result, "values": dict(self.values), "flags": list(self.flags)}
 
 
-#: The adapter signature: run path, plain options, folder for report/figures (None: none).
+#: The adapter signature: run path, plain options; keywords ``folder`` (results, report and
+#: figures) and ``report`` (draw the report and figures).
 Adapter = Callable[..., Analysed]
 
 
@@ -138,8 +142,8 @@ def _param_text(name: str, value: float, err: float, unit: str) -> str:
 
 
 def analyse_fit(path: str | Path, options: Mapping[str, Any], *,
-                out_dir: str | Path | None = None) -> Analysed:
-    """Reduce, fit and select (``scatterlab fit``); the report goes to ``out_dir``.
+                folder: str | Path, report: bool = True) -> Analysed:
+    """Reduce, fit and select (``scatterlab fit``); results (and the report) in ``folder``.
 
     Raises
     ------
@@ -148,8 +152,8 @@ def analyse_fit(path: str | Path, options: Mapping[str, Any], *,
     """
     from instrument.pipelines.brdf.pipeline import fit_run
 
-    done = fit_run(path, **fit_arguments(options), report_dir=out_dir,
-                   report=out_dir is not None, write=False)
+    done = fit_run(path, **fit_arguments(options), report_dir=folder, report=report,
+                   write=True)
     res = done.result
     fit = res.chosen_fit
     pts = done.reduced.points
@@ -190,11 +194,12 @@ def reconstruct_arguments(options: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def analyse_reconstruct(path: str | Path, options: Mapping[str, Any], *,
-                        out_dir: str | Path | None = None) -> Analysed:
+                        folder: str | Path, report: bool = True) -> Analysed:
     """The hidden object's light field at the wall (``scatterlab reconstruct``)."""
     from instrument.pipelines.lightfield.reconstruct import reconstruct_run
 
-    r = reconstruct_run(path, write=False, figures_dir=out_dir,
+    r = reconstruct_run(path, write=True, out_dir=folder,
+                        figures_dir=folder if report else None,
                         **reconstruct_arguments(options))
     rec = r.reconstruction
     reg = rec.regularization
@@ -235,11 +240,12 @@ def locate_arguments(options: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def analyse_locate(path: str | Path, options: Mapping[str, Any], *,
-                   out_dir: str | Path | None = None) -> Analysed:
+                   folder: str | Path, report: bool = True) -> Analysed:
     """The hidden objects' positions, brightness and resolution (``scatterlab locate``)."""
     from instrument.pipelines.lightfield.locate import locate_run
 
-    r = locate_run(path, write=False, figures_dir=out_dir, **locate_arguments(options))
+    r = locate_run(path, write=True, out_dir=folder, figures_dir=folder if report else None,
+                   **locate_arguments(options))
     det = r.detection
     values: dict[str, Any] = {"objects": int(det.count), "highest_order": float(r.p_hat)}
     parts, flags = [], []
@@ -268,14 +274,15 @@ def analyse_locate(path: str | Path, options: Mapping[str, Any], *,
 
 # ------------------------------------------------------------------------------ spheres
 def analyse_spheres(path: str | Path, options: Mapping[str, Any], *,
-                    out_dir: str | Path | None = None) -> Analysed:
+                    folder: str | Path, report: bool = True) -> Analysed:
     """Spherical-harmonic analysis, relighting and consistency (``scatterlab spheres``);
     ``options`` are :func:`instrument.pipelines.spheres.analyse.analyse_capture`'s."""
     from instrument.pipelines.spheres.pipeline import analyse_run
     from instrument.pipelines.spheres.results import summary
 
-    figure = None if out_dir is None else Path(out_dir) / "relighting.png"
-    capture, res = analyse_run(path, write=False, figure=figure, **dict(options))
+    figure = Path(folder) / "relighting.png" if report else None
+    capture, res = analyse_run(path, write=True, out_dir=folder, figure=figure,
+                               **dict(options))
     rep = res.consistency
     values = {
         "relighting_error": float(res.relight_l1),

@@ -10,13 +10,16 @@ returns plain data. In order, it
 3. takes the run's lock (``DIR/RUN/.lock``, an exclusive ``flock``), so no two analyses of
    one run — from this batch, another batch or a retry — run at once; the kernel drops it
    when the process dies, so a killed worker leaves no stale lock;
-4. skips the run if its results file says it was analysed with the same options
-   (:func:`instrument.run.results.already_done`), unless ``force``;
-5. runs the analysis (:mod:`.analyses`); any exception becomes a failed outcome naming
-   its cause, so one bad run never stops the batch;
-6. writes the results file atomically (:func:`instrument.run.results.write_results_file`:
-   temporary file, fsync, rename): a task killed at any moment leaves the previous results
-   file or the new one, never a torn one.
+4. skips the run if its batch summary (``DIR/RUN/<pipeline>/batch_summary.json``) says it
+   was analysed with the same options and the results file is there, unless ``force``;
+5. runs the analysis (:mod:`.analyses`): the pipeline writes the results file itself,
+   exactly as the single-run command does (ADR 0013, ADR 0070 "One writer per file"),
+   atomically (:func:`instrument.run.results.write_results_file`: temporary file, fsync,
+   rename); any exception becomes a failed outcome naming its cause, so one bad run never
+   stops the batch;
+6. writes the run's summary row next to the results file, atomically too: a task killed at
+   any moment leaves the previous files or the new ones, never a torn one (and a results
+   file without its summary row is analysed again).
 """
 
 from __future__ import annotations
@@ -33,26 +36,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import h5py
-
 from instrument.batch.analyses import AnalysisFailed, get_analysis
-from instrument.run.results import (
-    RESULTS_NAME,
-    already_done,
-    put_json,
-    results_dir,
-    results_path,
-    write_results_file,
-)
-from instrument.run.runfile import as_text, read_summary
+from instrument.run.results import RESULTS_NAME, options_fingerprint, results_dir, results_path
+from instrument.run.runfile import read_summary
 
-__all__ = ["LOCK_NAME", "STATUSES", "Outcome", "RunBusy", "record_options", "run_lock",
+__all__ = ["LOCK_NAME", "STATUSES", "SUMMARY_NAME", "Outcome", "RunBusy", "record_options", "run_lock",
            "run_serial", "run_task"]
 
 #: What became of a task.
 STATUSES = ("analysed", "skipped", "not applicable", "failed")
-#: The lock file in the run's folder (``DIR/RUN/``).
+#: The lock file in the run's folder (``DIR/RUN/.lock``).
 LOCK_NAME = ".lock"
+#: The batch's summary row of a run, next to the pipeline's results file.
+SUMMARY_NAME = "batch_summary.json"
 #: Seconds a task waits for another analysis of the same run to finish.
 LOCK_WAIT_S = 600.0
 
@@ -178,22 +174,46 @@ def _detail(err: BaseException, limit: int = 4000) -> str:
 
 
 def _remove_stale_temporaries(folder: Path) -> None:
-    """Delete temporary results files left by a task killed while writing (called with the
-    run's lock held, so no live writer owns one)."""
+    """Delete temporary files left by a task killed while writing (called with the run's
+    lock held, so no live writer owns one)."""
     if folder.is_dir():
-        for tmp in folder.glob(f".{RESULTS_NAME}.*.tmp"):
-            with contextlib.suppress(OSError):
-                tmp.unlink()
+        for pattern in (f".{RESULTS_NAME}.*.tmp", f".{SUMMARY_NAME}.*.tmp"):
+            for tmp in folder.glob(pattern):
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
 
 
-def _previous(run_path: str | Path, pipeline: str) -> dict[str, Any]:
-    """The summary row an earlier analysis stored in the results file ({} if none)."""
+def _write_summary(folder: Path, run_id: str, record: Mapping[str, Any],
+                   row: Mapping[str, Any]) -> None:
+    """The summary row with the run id and the options' fingerprint, written atomically
+    (temporary file, fsync, rename)."""
+    final = folder / SUMMARY_NAME
+    tmp = folder / f".{SUMMARY_NAME}.{os.getpid()}.tmp"
+    text = json.dumps({"run_id": run_id, "options_sha256": options_fingerprint(record),
+                       "options": record, "row": row}, default=str, allow_nan=True)
+    with open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, final)
+
+
+def _previous(run_path: str | Path, pipeline: str, run_id: str,
+              record: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The summary row an earlier task stored for the same run and options, when its
+    results file is still there (None otherwise: analyse again)."""
+    folder = results_dir(run_path, pipeline)
+    if not results_path(run_path, pipeline).is_file():
+        return None
     try:
-        with h5py.File(results_path(run_path, pipeline), "r") as f:
-            g = f.get("entry/analysis/summary_json")
-            return {} if g is None else json.loads(as_text(g[()]))
+        stored = json.loads((folder / SUMMARY_NAME).read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return {}
+        return None
+    if (not isinstance(stored, dict) or stored.get("run_id") != run_id
+            or stored.get("options_sha256") != options_fingerprint(record)):
+        return None
+    row = stored.get("row")
+    return row if isinstance(row, dict) else None
 
 
 def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
@@ -227,27 +247,21 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
                            "process was killed")
         record = record_options(analysis, options, report)
         with run_lock(run, wait_s=lock_wait_s):
-            _remove_stale_temporaries(results_dir(run, spec.pipeline))
-            if not force and already_done(run, spec.pipeline, run_id=s.run_id,
-                                          options=record):
-                prev = _previous(run, spec.pipeline)
+            folder = results_dir(run, spec.pipeline)
+            _remove_stale_temporaries(folder)
+            prev = None if force else _previous(run, spec.pipeline, s.run_id, record)
+            if prev is not None:
                 return outcome("skipped", result=prev.get("result", ""),
                                values=prev.get("values"), flags=tuple(prev.get("flags", ())),
                                cause="already analysed with the same options (--force "
                                      "analyses it again)")
-            out_dir = results_dir(run, spec.pipeline) if report else None
-            if out_dir is not None:
-                out_dir.mkdir(parents=True, exist_ok=True)
-            done = spec.adapter(run, options, out_dir=out_dir)
+            folder.mkdir(parents=True, exist_ok=True)
+            done = spec.adapter(run, options, folder=folder, report=report)
             flags = list(done.flags)
             if s.status != "finished":
                 flags.append(f"run status {s.status!r}: not every planned point was measured")
             row = {**done.row(), "flags": flags, **ident}
-            with write_results_file(run, spec.pipeline, run_id=s.run_id,
-                                    program=f"scatterlab batch {analysis}",
-                                    options=record) as g:
-                put_json(g, "summary_json", row)
-                put_json(g, "results_json", done.details)
+            _write_summary(folder, s.run_id, record, row)
         return outcome("analysed", result=done.result, values=done.values, flags=tuple(flags))
     except Exception as err:  # one run's problem is reported, the batch goes on
         row = err.row if isinstance(err, AnalysisFailed) and err.row else {}

@@ -90,7 +90,7 @@ def test_two_workers_give_the_serial_answers_and_report_a_bad_run(client, runs_d
     assert [o.run for o in out] == [str(r) for r in runs] and len(seen) == len(runs)
     by = {Path(o.run).name: o for o in out}
     bad = by.pop("bad.h5")
-    assert bad.status == "failed" and "bad.h5" in bad.cause and "cannot read" in bad.cause
+    assert bad.status == "failed" and "bad.h5" in bad.cause and "cannot be read" in bad.cause
     for name, o in by.items():
         _same_answer(o, serial[name])
         assert int(o.worker.rsplit(":", 1)[1]) != os.getpid()  # done by a worker process

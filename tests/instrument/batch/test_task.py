@@ -15,13 +15,32 @@ import h5py
 import numpy as np
 import pytest
 
-from instrument.batch.analyses import ANALYSES, Analysed, Analysis, AnalysisFailed, analyse_fit
+from instrument.batch.analyses import (
+    ANALYSES,
+    Analysed,
+    Analysis,
+    AnalysisFailed,
+    analyse_fit,
+    fit_arguments,
+)
 from instrument.batch.summary import summary_columns, write_csv, write_html
-from instrument.batch.task import Outcome, record_options, run_lock, run_serial, run_task
+from instrument.batch.task import (
+    SUMMARY_NAME,
+    Outcome,
+    record_options,
+    run_lock,
+    run_serial,
+    run_task,
+)
 from instrument.cli import main
 from instrument.cli.fit import fit_options
+from instrument.pipelines.brdf.pipeline import fit_options as pipeline_fit_options
 from instrument.pipelines.brdf.pipeline import fit_run
-from instrument.run.results import already_done, read_results_attrs, results_path
+from instrument.run.results import (
+    options_fingerprint,
+    read_results_attrs,
+    results_path,
+)
 from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run, parse_cli
 
 
@@ -56,15 +75,21 @@ def test_a_task_analyses_a_run_as_the_single_run_command_does(runs):
     for name, value, err, _ in fit.table():  # value for value
         assert o.values[name] == value and o.values[f"{name}_sigma"] == err
     assert o.values["n_points"] == 39 and o.values["dof"] == fit.dof
-    # the results file names the run, the program and the options; the raw run is untouched
+    # the results file is the one `scatterlab fit` writes (one writer per file: the
+    # pipeline), with the same options recorded; the raw run is untouched
     attrs = read_results_attrs(runs / "run-00.h5", "fit")
-    assert attrs["run_id"] == "run-00" and attrs["program"] == "scatterlab batch fit"
-    assert json.loads(attrs["options_json"]) == record_options("fit", opts, False)
+    assert attrs["run_id"] == "run-00" and attrs["program"] == "scatterlab fit"
+    assert attrs["options_sha256"] == options_fingerprint(
+        pipeline_fit_options(**fit_arguments(opts)))
     with h5py.File(results_path(runs / "run-00.h5", "fit"), "r") as f:
-        row = json.loads(f["entry/analysis/summary_json"][()])
         details = json.loads(f["entry/analysis/results_json"][()])
-    assert row["values"] == dict(o.values) and row["run_id"] == "run-00"
-    assert details["analysis"]["selection"]["chosen"] == "lambert+ggx"
+        assert {"reduced", "chosen"} <= set(f["entry/analysis"])
+    assert details["selection"]["chosen"] == "lambert+ggx"
+    # the batch's summary row next to it, with the batch's options
+    stored = json.loads((results_path(runs / "run-00.h5", "fit").parent
+                         / SUMMARY_NAME).read_text())
+    assert stored["row"]["values"] == dict(o.values) and stored["run_id"] == "run-00"
+    assert stored["options"] == record_options("fit", opts, False)
     with h5py.File(runs / "run-00.h5", "r") as f:
         assert "analysis" not in f["entry"]
 
@@ -108,9 +133,11 @@ def test_bad_foreign_and_unfinished_runs_are_reported_with_their_cause(runs):
     by = {o.run.rsplit("/", 1)[-1]: o for o in out}
     assert [o.status for o in out] == ["failed", "analysed", "failed", "failed",
                                        "not applicable", "failed", "analysed"]
-    assert "cannot read" in by["garbage.h5"].cause and "garbage.h5" in by["garbage.h5"].cause
+    # the words every command uses for a file that is not a run (instrument.run.runfile)
+    assert "not a scatterlab run file" in by["garbage.h5"].cause
+    assert "garbage.h5" in by["garbage.h5"].cause
     assert "truncated.h5" in by["truncated.h5"].cause
-    assert by["missing.h5"].cause.startswith("no such file")
+    assert by["missing.h5"].cause.endswith("no such run file")
     assert "flat_field run" in by["flat.h5"].cause
     assert "still being written" in by["live.h5"].cause
     assert by["garbage.h5"].detail  # the traceback, for the HTML table
@@ -140,8 +167,8 @@ def test_a_run_busy_with_another_analysis_is_not_analysed_twice_at_once(runs):
 
 
 def test_a_fit_that_does_not_converge_fails_with_what_it_found(runs, monkeypatch):
-    def not_converged(path, options, *, out_dir=None):
-        row = analyse_fit(path, options, out_dir=out_dir)
+    def not_converged(path, options, *, folder, report=True):
+        row = analyse_fit(path, options, folder=folder, report=report)
         raise AnalysisFailed("the fit of the chosen model lambert+ggx did not converge "
                              "(maximum evaluations)", row.row())
 
@@ -150,8 +177,8 @@ def test_a_fit_that_does_not_converge_fails_with_what_it_found(runs, monkeypatch
     o = run_task("fit", runs / "run-00.h5", _options("--no-cv"), report=False)
     assert o.status == "failed" and o.cause.startswith("not usable: the fit of the chosen")
     assert o.values["model"] == "lambert+ggx"  # what it found is kept for the table
-    # a failed analysis is not a finished one: the rerun tries again
-    assert not results_path(runs / "run-00.h5", "fit").exists()
+    # a failed analysis is not a finished one: no summary row, so the rerun tries again
+    assert not (results_path(runs / "run-00.h5", "fit").parent / SUMMARY_NAME).exists()
 
 
 def test_summary_csv_reads_back_value_for_value_and_html_names_every_run(tmp_path):
@@ -191,8 +218,10 @@ def test_cli_batch_fit_here_then_again(runs, tmp_path, capsys):
     assert rows["run-01"]["ggx.alpha"] == ""  # a column of the other runs' model
     for k, v in direct.values.items():
         assert rows["run-01"][k] == (repr(v) if isinstance(v, float) else str(v)), k
-    assert already_done(runs / "run-00.h5", "fit", run_id="run-00",
-                        options=record_options("fit", _options("--no-cv"), False))
+    stored = json.loads((results_path(runs / "run-00.h5", "fit").parent
+                         / SUMMARY_NAME).read_text())
+    assert stored["options_sha256"] == options_fingerprint(
+        record_options("fit", _options("--no-cv"), False))
     shutil.rmtree(tmp_path / "s")
     assert main(argv) == 0
     assert "3 skipped" in capsys.readouterr().out
@@ -212,11 +241,13 @@ def test_a_bad_run_makes_the_exit_status_1_and_is_named(runs, tmp_path, capsys):
     assert main(["batch", "fit", str(runs), "--workers", "0", "--no-report", "--no-cv",
                  "--summary-dir", str(tmp_path)]) == 1
     out = capsys.readouterr().out
-    assert f"FAILED {runs / 'bad.h5'}: cannot read" in out and "3 analysed" in out
+    assert f"FAILED {runs / 'bad.h5'}: {runs / 'bad.h5'} is not a scatterlab run file" in out
+    assert "3 analysed" in out
 
 
 def test_adapter_rows_are_plain_data(runs):
-    a = analyse_fit(runs / "run-00.h5", _options("--no-cv"))
+    a = analyse_fit(runs / "run-00.h5", _options("--no-cv"), folder=runs / "run-00" / "fit",
+                    report=False)
     assert isinstance(a, Analysed)
     json.dumps(a.row(), allow_nan=True)  # no numpy scalars: JSON and pickling stay exact
     assert all(type(v) in (str, int, float, bool) for v in a.values.values())
