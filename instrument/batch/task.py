@@ -37,7 +37,12 @@ from pathlib import Path
 from typing import Any
 
 from instrument.batch.analyses import AnalysisFailed, get_analysis
-from instrument.run.results import RESULTS_NAME, options_fingerprint, results_dir, results_path
+from instrument.run.results import (
+    RESULTS_NAME,
+    options_fingerprint,
+    results_dir,
+    results_path,
+)
 from instrument.run.runfile import read_summary
 
 __all__ = ["LOCK_NAME", "STATUSES", "SUMMARY_NAME", "Outcome", "RunBusy", "record_options", "run_lock",
