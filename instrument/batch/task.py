@@ -45,8 +45,8 @@ from instrument.run.results import (
 )
 from instrument.run.runfile import read_summary
 
-__all__ = ["LOCK_NAME", "STATUSES", "SUMMARY_NAME", "Outcome", "RunBusy", "record_options", "run_lock",
-           "run_serial", "run_task"]
+__all__ = ["LOCK_NAME", "STATUSES", "SUMMARY_NAME", "Outcome", "RunBusy", "record_options",
+           "run_lock", "run_serial", "run_task"]
 
 #: What became of a task.
 STATUSES = ("analysed", "skipped", "not applicable", "failed")
