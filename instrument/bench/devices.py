@@ -4,7 +4,9 @@ Real drivers are imported from :mod:`drivers` by driver name. Devices that exist
 simulation (camera, source) and the emulated USB backend live in :mod:`hw_mocks`; they are
 reached *only* through the URL scheme in the profile (``simcam://``, ``simsource://``,
 ``simusb://``), by a string import, so no code path that real hardware takes imports the
-mocks. Likewise the pyserial handlers for ``simapt://``/``simsmc://`` are registered by
+mocks. Likewise the pyserial handlers of the emulated serial controllers
+(:data:`~instrument.bench.profile.SIM_SERIAL_SCHEMES`: ``simapt://``, ``simsmc://``,
+``simzaber://``, ``simsr830://``, ``simsc10://``, ``simfw102c://``) are registered by
 package name only when a profile uses those schemes.
 """
 
@@ -16,10 +18,26 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.base import AxisKind, Camera, Device, LightSource, MotionAxis, PowerMeter
+from drivers.base import (
+    AxisKind,
+    Camera,
+    Device,
+    FilterWheel,
+    LightSource,
+    LockIn,
+    MotionAxis,
+    PowerMeter,
+    Shutter,
+)
 from drivers.errors import ConnectionFailed, DeviceError
 from drivers.transport import add_url_handler_package
-from instrument.bench.profile import BenchProfile, DeviceSpec, FieldError, ProfileError
+from instrument.bench.profile import (
+    SIM_SERIAL_SCHEMES,
+    BenchProfile,
+    DeviceSpec,
+    FieldError,
+    ProfileError,
+)
 
 __all__ = ["DRIVERS", "Bench", "open_bench", "open_device"]
 
@@ -67,14 +85,48 @@ def _open_apt(spec: DeviceSpec) -> Device:
     return AptMotor(spec.url, stage=spec.stage or "K10CR1", **_axis_kwargs(spec))
 
 
-def _open_smc100(spec: DeviceSpec) -> Device:
-    from drivers.newport_smc100 import Smc100Axis
-
+def _kind_kwargs(spec: DeviceSpec) -> dict[str, Any]:
+    """The axis options with ``kind`` defaulted from the role (``camera_z`` is linear)."""
     kw = _axis_kwargs(spec)
     kw.setdefault("kind", AxisKind.LINEAR if spec.role == "camera_z" else AxisKind.ROTARY)
     if isinstance(kw["kind"], str):
         kw["kind"] = AxisKind.LINEAR if kw["kind"] == "linear" else AxisKind.ROTARY
-    return Smc100Axis(spec.url, **kw)
+    return kw
+
+
+def _open_smc100(spec: DeviceSpec) -> Device:
+    from drivers.newport_smc100 import Smc100Axis
+
+    return Smc100Axis(spec.url, **_kind_kwargs(spec))
+
+
+def _open_zaber(spec: DeviceSpec) -> Device:
+    from drivers.zaber_ascii import ZaberAxis
+
+    kw = _kind_kwargs(spec)
+    if "microstep_size" not in kw:
+        raise ConnectionFailed("a Zaber axis needs options.microstep_size (degrees or mm per "
+                               "microstep, from the product's specification)",
+                               device=spec.role, command="open")
+    return ZaberAxis(spec.url, **kw)
+
+
+def _open_sr830(spec: DeviceSpec) -> Device:
+    from drivers.stanford_sr830 import Sr830LockIn
+
+    return Sr830LockIn(spec.url, name=spec.role, **spec.options)
+
+
+def _open_sc10(spec: DeviceSpec) -> Device:
+    from drivers.thorlabs_sc10 import Sc10Shutter
+
+    return Sc10Shutter(spec.url, name=spec.role, **spec.options)
+
+
+def _open_fw102c(spec: DeviceSpec) -> Device:
+    from drivers.thorlabs_fw102c import Fw102cWheel
+
+    return Fw102cWheel(spec.url, name=spec.role, **spec.options)
 
 
 def _open_pm100(spec: DeviceSpec) -> Device:
@@ -114,12 +166,16 @@ DRIVERS: dict[str, Callable[[DeviceSpec], Device]] = {
     "opencv_camera": _open_opencv,
     "sim_camera": _open_simulated,
     "sim_source": _open_simulated,
+    "zaber": _open_zaber,
+    "sr830": _open_sr830,
+    "sc10": _open_sc10,
+    "fw102c": _open_fw102c,
 }
 
 
 def open_device(spec: DeviceSpec) -> Device:
     """Open one device and apply the profile's motion settings."""
-    if _scheme(spec.url) in ("simapt", "simsmc"):
+    if _scheme(spec.url) in SIM_SERIAL_SCHEMES:
         add_url_handler_package(SIM_URL_HANDLERS)
     try:
         device = DRIVERS[spec.driver](spec)
@@ -167,7 +223,29 @@ class Bench:
 
     @property
     def source(self) -> LightSource | None:
-        return self._one(LightSource)
+        """The light source proper (a shutter is a light source too: it is the source only
+        on a bench with no other)."""
+        found = [d for d in self.devices.values()
+                 if isinstance(d, LightSource) and not isinstance(d, Shutter)]
+        return found[0] if found else self.shutter
+
+    @property
+    def shutter(self) -> Shutter | None:
+        return self._one(Shutter)
+
+    @property
+    def light_switch(self) -> LightSource | None:
+        """What the engine switches for light and dark frames: the shutter when the bench
+        has one (the source stays on, as a laser would), else the source."""
+        return self.shutter or self.source
+
+    @property
+    def lockin(self) -> LockIn | None:
+        return self._one(LockIn)
+
+    @property
+    def filter_wheel(self) -> FilterWheel | None:
+        return self._one(FilterWheel)
 
     def make_safe(self) -> list[str]:
         """Stop every axis and turn the light off; return what could not be done."""

@@ -52,6 +52,7 @@ Schema (all lengths in mm, angles in degrees)::
 
 from __future__ import annotations
 
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -83,8 +84,21 @@ AXIS_ROLES = (
     "camera_z",
 )
 #: Motion drivers and the kind of axis they drive by default.
-MOTION_DRIVERS = ("thorlabs_apt", "newport_smc100")
-OTHER_DRIVERS = ("pm100usb", "opencv_camera", "sim_camera", "sim_source")
+MOTION_DRIVERS = ("thorlabs_apt", "newport_smc100", "zaber")
+OTHER_DRIVERS = ("pm100usb", "opencv_camera", "sim_camera", "sim_source", "sr830", "sc10",
+                 "fw102c")
+#: URL schemes of the emulated serial controllers (each a pyserial URL handler in
+#: ``hw_mocks.urlhandler``): registered when a profile uses one, served by ``serve-sim``.
+SIM_SERIAL_SCHEMES = ("simapt", "simsmc", "simzaber", "simsr830", "simsc10", "simfw102c")
+#: ``[photodiode]``: the chopped photodiode a lock-in reads (its transimpedance amplifier
+#: and chopper), key → (low, high); ``responsivity_a_per_w`` may be a table over
+#: ``responsivity_nm``.
+PHOTODIODE_KEYS = {
+    "responsivity_a_per_w": (1e-6, 10.0), "u_responsivity_rel": (0.0, 1.0),
+    "transimpedance_v_per_a": (1.0, 1e12), "u_transimpedance_rel": (0.0, 1.0),
+    "aperture_diameter_mm": (0.01, 1000.0), "distance_mm": (1.0, 1e5),
+    "chopper_hz": (0.01, 1e5),
+}
 CAMERA_DRIVERS = ("opencv_camera", "sim_camera")
 #: Camera timing keys (seconds, for duration estimates) and their upper bound.
 CAMERA_TIMING = {"frame_overhead_s": 60.0, "scene_change_s": 600.0}
@@ -217,6 +231,9 @@ class BenchProfile:
     geometry: GeometrySpec
     simulation: dict[str, Any] | None
     source_text: str  # the TOML as read, stored with every run for provenance
+    #: ``[photodiode]`` as validated (plain data; the lock-in reduction reads it from the
+    #: profile stored with each run), or None.
+    photodiode: dict[str, Any] | None = None
 
     @property
     def axes(self) -> dict[str, DeviceSpec]:
@@ -287,10 +304,52 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
     if simulation is not None and not isinstance(simulation, dict):
         v.error("simulation", "must be a table")
         simulation = None
-    v.unknown(data, "", {"bench", "devices", "geometry", "simulation"})
+    photodiode = _photodiode(v, data.get("photodiode"))
+    if photodiode is not None and not any(d.driver == "sr830" for d in devices.values()):
+        v.error("photodiode", "describes the lock-in's detector: the bench needs a device "
+                "with driver 'sr830'")
+    v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode"})
     if v.errors:
         raise ProfileError(source, v.errors)
-    return BenchProfile(name, description, devices, geometry, simulation, text)
+    return BenchProfile(name, description, devices, geometry, simulation, text, photodiode)
+
+
+def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
+    """``[photodiode]`` (:data:`PHOTODIODE_KEYS`): every number finite and in range; a
+    responsivity table needs ``responsivity_nm`` of the same length, increasing."""
+    if t is None:
+        return None
+    if not isinstance(t, dict):
+        v.error("photodiode", "must be a table")
+        return None
+    v.unknown(t, "photodiode", {*PHOTODIODE_KEYS, "responsivity_nm"})
+    for key in ("responsivity_a_per_w", "transimpedance_v_per_a"):
+        if key not in t:
+            v.error(f"photodiode.{key}", "is required")
+    out: dict[str, Any] = {}
+    for key, (low, high) in PHOTODIODE_KEYS.items():
+        if key not in t:
+            continue
+        raw = t[key]
+        values = raw if key == "responsivity_a_per_w" and isinstance(raw, list) else [raw]
+        if not values or not all(_is_number(x) and low <= x <= high for x in values):
+            what = "numbers" if len(values) > 1 else "a number"
+            v.error(f"photodiode.{key}", f"must be {what} from {low:g} to {high:g}")
+            continue
+        out[key] = [float(x) for x in raw] if isinstance(raw, list) else float(raw)
+    resp = out.get("responsivity_a_per_w")
+    if isinstance(resp, list):
+        nm = t.get("responsivity_nm")
+        if (not isinstance(nm, list) or len(nm) != len(resp)
+                or not all(_is_number(x) and 100 <= x <= 25000 for x in nm)
+                or any(b <= a for a, b in itertools.pairwise(nm))):
+            v.error("photodiode.responsivity_nm", f"must list {len(resp)} increasing "
+                    "wavelengths in nm (100 to 25000), one per responsivity value")
+        else:
+            out["responsivity_nm"] = [float(x) for x in nm]
+    elif "responsivity_nm" in t:
+        v.error("photodiode.responsivity_nm", "goes with a table of responsivities only")
+    return out
 
 
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:

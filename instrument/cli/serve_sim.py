@@ -18,8 +18,6 @@ import time
 from pathlib import Path
 
 PTY_ENTRY = ("hw_mocks.pty_server", "serve_url")
-#: URL schemes of the emulated serial controllers (each has a pyserial URL handler).
-SERIAL_SCHEMES = ("simapt", "simsmc", "simzaber", "simsr830")
 HELP = "serve the emulated serial controllers on ptys"
 
 
@@ -35,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from instrument.bench.profile import load_profile
+    from instrument.bench.profile import SIM_SERIAL_SCHEMES, load_profile
 
     profile = load_profile(args.bench)
     module, func = PTY_ENTRY
@@ -44,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     links: list[Path] = []
     try:
         for role, spec in profile.devices.items():
-            if spec.url.split("://", 1)[0] in SERIAL_SCHEMES:
+            if spec.url.split("://", 1)[0] in SIM_SERIAL_SCHEMES:
                 server = serve_url(spec.url)
                 servers.append(server)
                 where = server.path

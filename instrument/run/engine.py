@@ -170,7 +170,13 @@ class RunEngine:
         # The bench's devices do not change during a run: look them up once.
         self._camera = bench.camera
         self._pm = bench.power_meter
-        self._source = bench.source
+        # Light and dark frames switch the shutter when the bench has one, else the source;
+        # with a shutter in front of a switchable source, the source is turned on with the
+        # first light and left on (a laser is not cycled for every dark frame).
+        self._source = getattr(bench, "light_switch", bench.source)
+        lamp = bench.source
+        self._lamp = lamp if lamp is not None and lamp is not self._source else None
+        self._lamp_on = False
         self._roles = {id(d): r for r, d in bench.devices.items()}
         self._policies = {r: self._policy(r) for r in bench.devices}
         self._light: bool | None = None
@@ -742,6 +748,10 @@ class RunEngine:
         if src is None:
             self._light = on
             return
+        if on and self._lamp is not None and not self._lamp_on:
+            lamp_role = self._roles[id(self._lamp)]
+            self._retry(lamp_role, self._policies[lamp_role], "turn on", self._lamp.turn_on)
+            self._lamp_on = True
         role = self._roles[id(src)]
         self._retry(role, self._policies[role], "turn on" if on else "turn off",
                     src.turn_on if on else src.turn_off)

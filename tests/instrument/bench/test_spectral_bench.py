@@ -1,0 +1,162 @@
+"""The lock-in, shutter, filter-wheel and Zaber drivers in bench profiles: the factory opens
+them by driver name over their emulators' URLs, the shutter switches the light for dark
+frames, and the virtual world's light follows the shutter and the filter wheel."""
+
+from __future__ import annotations
+
+import statistics
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from drivers.base import FilterWheel, LockIn, MotionAxis, Shutter, ShutterState
+from drivers.zaber_ascii import ZaberAxis
+from instrument.bench.devices import open_bench
+from instrument.bench.profile import ProfileError, load_profile, parse_profile
+from instrument.cli import main
+
+ROOT = Path(__file__).resolve().parents[3]
+
+PLAN = """
+[plan]
+kind = "brdf_in_plane"
+name = "shutter darks"
+[sample]
+name = "spectral"
+[scan]
+theta_i = [20]
+theta_r = [-30, 10]
+[acquisition]
+detectors = ["camera"]
+dark = "per_point"
+hdr = false
+max_brackets = 1
+"""
+
+
+def _lockin_r(lockin: LockIn, n: int = 5) -> float:
+    """Mean R (V rms) of ``n`` snapshots after the output has settled."""
+    lockin.settle()
+    return statistics.fmean(lockin.snapshot().r_v for _ in range(n))
+
+
+def test_the_spectral_sim_bench_opens_every_kind_by_driver_name():
+    profile = load_profile("sim-spectral")
+    assert profile.photodiode == {"responsivity_a_per_w": 0.4, "u_responsivity_rel": 0.02,
+                                  "transimpedance_v_per_a": 1e6, "chopper_hz": 137.0}
+    with open_bench(profile) as bench:
+        assert isinstance(bench.lockin, LockIn) and isinstance(bench.filter_wheel, FilterWheel)
+        assert isinstance(bench.shutter, Shutter)
+        # the shutter gates the light for dark frames; the source proper stays the source
+        assert bench.light_switch is bench.shutter and bench.source is not bench.shutter
+        stage = bench.devices["camera_z"]
+        assert isinstance(stage, ZaberAxis) and isinstance(stage, MotionAxis)
+        stage.home(wait=True)
+        stage.move_to(12.5, wait=True)
+        assert stage.position == pytest.approx(12.5, abs=0.001)
+
+
+def test_the_lock_in_sees_the_light_through_the_shutter_and_the_filter():
+    """Shutter closed: R is the amplifier's noise; open: the chopped signal. The sample's
+    albedo doubles from 450 to 650 nm (0.30 → 0.60): away from specular the signal
+    follows it."""
+    with open_bench(load_profile("sim-spectral")) as bench:
+        for axis in bench.axes.values():
+            axis.home(wait=True)
+        bench.axes["sample_theta"].move_to(20.0, wait=True)
+        bench.axes["detector_theta"].move_to(-40.0, wait=True)
+        bench.source.turn_on()
+        lockin, wheel, shutter = bench.lockin, bench.filter_wheel, bench.shutter
+        lockin.reference_source = "external"  # REF IN from the chopper
+        assert lockin.reference_frequency_hz == pytest.approx(137.0)
+        r = {}
+        for slot in (1, 3):
+            wheel.move_to(slot)
+            shutter.close_shutter()
+            lockin.auto_range()
+            r[slot, "closed"] = _lockin_r(lockin)
+            shutter.open_shutter()
+            lockin.auto_range()
+            r[slot, "open"] = _lockin_r(lockin)
+        bench.make_safe()
+        assert shutter.shutter_state is ShutterState.CLOSED
+    # open: ~64 µV at 450 nm ((√2/π)·R·G·P with P ≈ 0.1/sr × 33 µW × cos θr × Ω); closed:
+    # the input noise, 10⁻⁸ V
+    for slot in (1, 3):
+        assert r[slot, "open"] > 1000 * r[slot, "closed"], r
+    # diffuse geometry: the signal follows the albedo, 0.60/0.30, within the lobe's share
+    # and the noise (a few per cent)
+    assert r[3, "open"] / r[1, "open"] == pytest.approx(2.0, rel=0.1), r
+
+
+def test_the_engine_takes_darks_with_the_shutter_and_leaves_it_closed(tmp_path):
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN, encoding="utf-8")
+    assert main(["run", str(plan), "--bench", "sim-spectral", "--out", str(tmp_path / "runs"),
+                 "--no-fsync", "--quiet"]) == 0
+    (path,) = (tmp_path / "runs").glob("*.h5")
+    with h5py.File(path, "r") as f:
+        light = f["entry/data/frame_light"][()]
+        frames = f["entry/data/frames"]
+        means = np.array([float(frames[k].mean()) for k in range(frames.shape[0])])
+    assert light.sum() == 2 and (~light).sum() == 2
+    # a dark frame has no light at all: the lit frames are brighter by several DN, where
+    # the mean of 10⁶ pixels scatters by ~0.01 DN
+    assert means[light].min() > means[~light].max() + 1.0
+    # the bench was left safe: the shutter emulator (the same named controller) is closed
+    with open_bench(load_profile("sim-spectral"), roles=["shutter"]) as bench:
+        assert bench.shutter.shutter_state is ShutterState.CLOSED
+
+
+def test_the_real_lock_in_example_profile_validates():
+    profile = load_profile(ROOT / "examples" / "bench_lockin_real.toml")
+    drivers = {role: spec.driver for role, spec in profile.devices.items()}
+    assert drivers == {"sample_theta": "zaber", "detector_theta": "thorlabs_apt",
+                       "camera_z": "zaber", "shutter": "sc10", "filter_wheel": "fw102c",
+                       "lockin": "sr830", "power_meter": "pm100usb"}
+    assert all(spec.url.startswith(("/dev/ttyUSB", "usb://"))
+               for spec in profile.devices.values())
+    assert len(profile.photodiode["responsivity_nm"]) == 7
+
+
+BASE = """
+[bench]
+name = "x"
+[devices.lockin]
+driver = "sr830"
+url = "/dev/ttyUSB0"
+"""
+
+
+@pytest.mark.parametrize(("table", "field"), [
+    ("[photodiode]\nresponsivity_a_per_w = 0.4\n", "photodiode.transimpedance_v_per_a"),
+    ("[photodiode]\nresponsivity_a_per_w = [0.1, 0.2]\ntransimpedance_v_per_a = 1e6\n",
+     "photodiode.responsivity_nm"),
+    ("[photodiode]\nresponsivity_a_per_w = [0.1, 0.2]\nresponsivity_nm = [500, 400]\n"
+     "transimpedance_v_per_a = 1e6\n", "photodiode.responsivity_nm"),
+    ("[photodiode]\nresponsivity_a_per_w = -1\ntransimpedance_v_per_a = 1e6\n",
+     "photodiode.responsivity_a_per_w"),
+    ("[photodiode]\nresponsivity_a_per_w = 0.4\ntransimpedance_v_per_a = 1e6\ngain = 3\n",
+     "photodiode.gain"),
+])
+def test_a_bad_photodiode_table_names_its_field(table, field):
+    with pytest.raises(ProfileError) as err:
+        parse_profile(BASE + table)
+    assert any(e.path == field for e in err.value.errors), err.value
+
+
+def test_a_photodiode_without_a_lock_in_is_refused():
+    text = BASE.replace('driver = "sr830"', 'driver = "sc10"') + (
+        "[photodiode]\nresponsivity_a_per_w = 0.4\ntransimpedance_v_per_a = 1e6\n")
+    with pytest.raises(ProfileError, match="needs a device with driver 'sr830'"):
+        parse_profile(text)
+
+
+def test_serve_sim_serves_every_emulated_serial_controller(capsys):
+    assert main(["serve-sim", "--bench", "sim-spectral", "--duration", "0.2"]) == 0
+    out = capsys.readouterr().out
+    for role in ("sample_theta", "detector_theta", "camera_z", "shutter", "filter_wheel",
+                 "lockin"):
+        assert f"{role}: sim" in out and "/dev/pts/" in out, role
