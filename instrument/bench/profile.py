@@ -426,6 +426,9 @@ DEVICE_SETTINGS: dict[str, dict[str, tuple[type, float, float]]] = {
     "sim_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0)},
     "opencv_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 1000.0)},
     "sim_source": {"power_w": (float, 0.0, 10.0)},
+    # the SR830's ranges (manual, Rev. 2.5, ch. 5: SENS 2 nV…1 V, OFLT 10 µs…30 ks)
+    "sr830": {"time_constant_s": (float, 1e-5, 3e4), "sensitivity_v": (float, 2e-9, 1.0),
+              "reference_source": (str, "internal", "external")},
 }
 
 
@@ -441,7 +444,11 @@ def _settings(v: _Validator, t: Any, driver: str | None, path: str) -> dict[str,
             v.error(f"{path}.{key}", f"not a setting of driver {driver!r} (settings: {names})")
             continue
         kind, low, high = allowed[key]
-        if kind is bool:
+        if kind is str:  # a choice of the two words low and high
+            if value not in (low, high):
+                v.error(f"{path}.{key}", f"must be {low!r} or {high!r}")
+                continue
+        elif kind is bool:
             if not isinstance(value, bool):
                 v.error(f"{path}.{key}", "must be true or false")
                 continue

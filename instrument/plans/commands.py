@@ -27,7 +27,7 @@ __all__ = [
 LABELS = ("sample", "dark", "reference", "signature", "flat", "ptc", "lightfield", "sphere")
 DARK_POLICIES = ("none", "per_point", "start")
 MODES = ("fixed", "auto")
-DETECTORS = ("camera", "power_meter")
+DETECTORS = ("camera", "power_meter", "lockin")
 
 
 @dataclass(frozen=True)
@@ -67,6 +67,10 @@ class AcquisitionPolicy:
     @property
     def uses_power_meter(self) -> bool:
         return "power_meter" in self.detectors
+
+    @property
+    def uses_lockin(self) -> bool:
+        return "lockin" in self.detectors
 
     def estimated_seconds(self, exposure_us: float | None = None) -> float:
         """Time one point's acquisition takes (no brackets), for dry-run estimates."""

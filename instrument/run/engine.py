@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drivers.base import AxisStatus, Camera, Frame, MotionAxis
-from drivers.errors import DeviceError, LimitError, MotionError
+from drivers.errors import ControllerError, DeviceError, LimitError, MotionError
 from instrument.bench.devices import Bench
 from instrument.bench.dynamics import move_time
 from instrument.bench.kinematics import kinematics_for
@@ -117,6 +117,7 @@ class _PointState:
     signal: float = math.nan
     retries: int = 0
     main: FrameData | None = None  # the longest unsaturated light bracket (live views)
+    extra: dict[str, float] = field(default_factory=dict)  # lock-in and filter readings
 
 
 class RunEngine:
@@ -170,6 +171,8 @@ class RunEngine:
         # The bench's devices do not change during a run: look them up once.
         self._camera = bench.camera
         self._pm = bench.power_meter
+        self._lockin = getattr(bench, "lockin", None)
+        self._wheel = getattr(bench, "filter_wheel", None)
         # Light and dark frames switch the shutter when the bench has one, else the source;
         # with a shutter in front of a switchable source, the source is turned on with the
         # first light and left on (a laser is not cycled for every dark frame).
@@ -556,7 +559,7 @@ class RunEngine:
         rec = PointRecord(st.index, st.label, st.t_start, time.time(), positions, angles,
                           st.exposure_us, st.power_w, st.signal,
                           STATUS_SKIPPED if skipped else STATUS_OK, st.retries,
-                          skipped or "", st.frames)
+                          skipped or "", st.frames, dict(st.extra))
         if st.frames:
             self._writer.submit(rec)  # frames: written while the next move runs
         else:
@@ -771,6 +774,12 @@ class RunEngine:
             role = self._roles[id(pm)]
             st.power_w = float(self._retry(role, self._policies[role], "read power",
                                            pm.read_power_w, st))
+        if self._wheel is not None:
+            st.extra.update(self._filter_in_beam())
+        if policy.uses_lockin and self._lockin is not None:
+            role = self._roles[id(self._lockin)]
+            st.extra.update(self._retry(role, self._policies[role], "read lock-in",
+                                        lambda: self._read_lockin(policy.frames), st))
         if cam is None:
             return
         role = self._roles[id(cam)]
@@ -792,6 +801,57 @@ class RunEngine:
                     dark_level = float(dark.data.mean())
             self._set_light(True)
         st.signal = (float(best.data.mean()) - dark_level) / best.exposure_us
+
+    #: Overloads tolerated while reading one point before the point fails (each one makes
+    #: the lock-in choose its range again and settle).
+    LOCKIN_OVERLOAD_RETRIES = 3
+
+    def _read_lockin(self, n: int) -> dict[str, float]:
+        """The lock-in at this point: settle the output filter (the 99 % wait of its slope),
+        choose the range, then ``n`` (at least 4) snapshots one settle time apart; their
+        mean R and its standard error, with the range and time constant they were read
+        at. An overload during the readings re-ranges and starts again; one that persists
+        raises :class:`~drivers.errors.ControllerError`, which the device's retry policy
+        handles like any failed reading (retry, then pause, skip or abort)."""
+        li = self._lockin
+        n = max(int(n), 4)
+        for _ in range(self.LOCKIN_OVERLOAD_RETRIES + 1):
+            li.settle()
+            li.auto_range()
+            li.overload_status()  # clear the latched flags of the ranging
+            readings = []
+            for k in range(n):
+                if k:
+                    li.settle()
+                readings.append(li.snapshot())
+            if not li.overload_status().overloaded:
+                break
+        else:
+            raise ControllerError("the input stays overloaded at every range (too much "
+                                  "light, or the dynamic reserve is too low)",
+                                  device=self._roles[id(li)], command="read lock-in")
+        r = np.array([x.r_v for x in readings])
+        return {"lockin_r_v": float(r.mean()),
+                "lockin_u_r_v": float(r.std(ddof=1) / math.sqrt(r.size)),
+                "lockin_x_v": float(np.mean([x.x_v for x in readings])),
+                "lockin_y_v": float(np.mean([x.y_v for x in readings])),
+                "lockin_theta_deg": float(np.mean([x.theta_deg for x in readings])),
+                "lockin_sensitivity_v": float(li.sensitivity_v),
+                "lockin_time_constant_s": float(li.time_constant_s),
+                "lockin_overload": 0.0}
+
+    def _filter_in_beam(self) -> dict[str, float]:
+        """The filter-wheel slot in the beam and its band (NaN for an empty slot)."""
+        wheel = self._wheel
+        role = self._roles[id(wheel)]
+        slot = int(self._retry(role, self._policies[role], "read position",
+                               lambda: wheel.position))
+        spec = wheel.filter_at(slot) if hasattr(wheel, "filter_at") else None
+        centre = getattr(spec, "center_nm", None)
+        width = getattr(spec, "bandwidth_nm", None)
+        return {"filter_position": float(slot),
+                "wavelength_nm": math.nan if centre is None else float(centre),
+                "bandwidth_nm": math.nan if width is None else float(width)}
 
     def _frame(self, cam: Camera, exposure_us: float, n: int, light: bool) -> FrameData:
         if cam.exposure_us != exposure_us:

@@ -38,6 +38,7 @@ for writes that never came can be given back.
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,15 +47,36 @@ from typing import Any
 import h5py
 import numpy as np
 
-__all__ = ["FRAMES_LOST", "FRAMES_LOST_NOTE", "REMEASURED_NOTE", "STATUS_OK", "STATUS_SKIPPED",
-           "RunHeader", "StorageError", "end_of_allocation", "header_from_file",
-           "journal_path", "new_run_file", "table_chunk_rows"]
+__all__ = [
+    "DETECTOR_FIELDS",
+    "FRAMES_LOST",
+    "FRAMES_LOST_NOTE",
+    "REMEASURED_NOTE",
+    "STATUS_OK",
+    "STATUS_SKIPPED",
+    "RunHeader",
+    "StorageError",
+    "detector_columns",
+    "end_of_allocation",
+    "header_from_file",
+    "journal_path",
+    "new_run_file",
+    "table_chunk_rows",
+]
 
 SCHEMA_VERSION = 1
 FLOAT_FIELDS = ("t_start", "t_end", "theta_i", "phi_i", "theta_r", "phi_r", "exposure_us",
                 "power_w", "signal")
 INT_FIELDS = ("index", "status", "n_frames", "frame_start", "retries")
 STR_FIELDS = ("label", "note")
+#: Per-point readings of the optional detectors and of the light's band, NaN where the bench
+#: has no such device (and in files written before they existed: readers must not require
+#: them): the lock-in's mean R over the point's readings and its standard error (V rms), X,
+#: Y (V), θ (deg), its full-scale range (V rms) and time constant (s) at the reading, 1 if
+#: it overloaded; the filter in the beam (slot, centre wavelength and FWHM in nm).
+DETECTOR_FIELDS = ("lockin_r_v", "lockin_u_r_v", "lockin_x_v", "lockin_y_v",
+                   "lockin_theta_deg", "lockin_sensitivity_v", "lockin_time_constant_s",
+                   "lockin_overload", "filter_position", "wavelength_nm", "bandwidth_nm")
 FRAME_FIELDS = ("frame_point", "frame_exposure_us", "frame_light", "frame_timestamp",
                 "frame_saturated")
 STATUS_OK, STATUS_SKIPPED = 0, 1
@@ -159,7 +181,10 @@ def _ext(grp: h5py.Group, name: str, dtype: Any, *, chunk: int, width: int | Non
 
 
 _UNITS = {"t_start": "s", "t_end": "s", "theta_i": "deg", "phi_i": "deg", "theta_r": "deg",
-          "phi_r": "deg", "exposure_us": "us", "power_w": "W", "signal": "DN/us"}
+          "phi_r": "deg", "exposure_us": "us", "power_w": "W", "signal": "DN/us",
+          "lockin_r_v": "V", "lockin_u_r_v": "V", "lockin_x_v": "V", "lockin_y_v": "V",
+          "lockin_theta_deg": "deg", "lockin_sensitivity_v": "V",
+          "lockin_time_constant_s": "s", "wavelength_nm": "nm", "bandwidth_nm": "nm"}
 
 
 def new_run_file(path: Path, h: RunHeader) -> h5py.File:
@@ -214,7 +239,7 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
             cal.attrs[k] = v
         rows = table_chunk_rows(n)
         pts = _group(entry, "points", "NXcollection")
-        for name in FLOAT_FIELDS:
+        for name in (*FLOAT_FIELDS, *DETECTOR_FIELDS):
             _ext(pts, name, "f8", chunk=rows, units=_UNITS.get(name))
         for name in INT_FIELDS:
             _ext(pts, name, "i8", chunk=rows)
@@ -236,6 +261,14 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         f.close()
         raise
     return f
+
+
+def detector_columns(grp: h5py.Group, extras: list[dict[str, float]]
+                     ) -> dict[str, list[float]]:
+    """The :data:`DETECTOR_FIELDS` columns of rows whose readings are ``extras``, for the
+    columns the points table ``grp`` has (a file of an older layout has none)."""
+    return {name: [float(e.get(name, math.nan)) for e in extras]
+            for name in DETECTOR_FIELDS if name in grp}
 
 
 def put_rows(grp: h5py.Group, n0: int, n1: int, cols: dict[str, list[Any]],

@@ -48,6 +48,7 @@ from instrument.run.health import (
 )
 from instrument.run.journal import Journal, read_journal
 from instrument.run.layout import (
+    DETECTOR_FIELDS,
     FLOAT_FIELDS,
     FRAME_FIELDS,
     FRAMES_LOST,
@@ -56,6 +57,7 @@ from instrument.run.layout import (
     STR_FIELDS,
     RunHeader,
     StorageError,
+    detector_columns,
     header_from_file,
     journal_path,
     new_run_file,
@@ -449,7 +451,8 @@ def _reconcile(f: h5py.File, j: _Journalled, rebuilt: bool, check_all: bool
         cols["label"].append(p["label"])
         cols["note"].append(p["note"])
         pos[k, :len(p["positions"])] = p["positions"]
-    put_rows(pts, 0, n, cols, pos)
+    put_rows(pts, 0, n, {**cols, **detector_columns(pts, [p.get("extra", {}) for p in points])},
+             pos)
     nf = len(j.frames)
     frame_cols = {
         "frame_point": j.owners,
@@ -585,6 +588,7 @@ def _salvageable(path: Path, cut: tuple[int, int] | None):
         p = e["points"]
         col = {name: _read_or_none(p[name], at) for name in
                (*FLOAT_FIELDS, *INT_FIELDS, *STR_FIELDS, "positions")}
+        xcol = {name: _read_or_none(p[name], at) for name in DETECTOR_FIELDS if name in p}
         if any(v is None for c, v in col.items() if c not in OPTIONAL_COLUMNS):
             order = []  # a column the rows need did not read after all: none is readable
         d = e["data"]
@@ -633,7 +637,8 @@ def _salvageable(path: Path, cut: tuple[int, int] | None):
                                                       "phi_r")],
                 "exposure_us": float(col["exposure_us"][k]),
                 "power_w": float(col["power_w"][k]), "signal": float(col["signal"][k]),
-                "retries": int(value("retries", 0)), "frame_start": 0, "frames": fr})
+                "retries": int(value("retries", 0)), "frame_start": 0, "frames": fr,
+                "extra": {name: float(v[k]) for name, v in xcol.items() if v is not None}})
         events = []
         with contextlib.suppress(KeyError, OSError, RuntimeError, ValueError):
             for line in e["events/log"].asstr()[()]:

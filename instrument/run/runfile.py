@@ -37,7 +37,7 @@ import numpy as np
 from instrument.bench.camera_calibration import CameraCalibration, camera_calibration_for
 from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.run.health import inspect_run_file
-from instrument.run.layout import FRAMES_LOST, STATUS_OK, STATUS_SKIPPED
+from instrument.run.layout import DETECTOR_FIELDS, FRAMES_LOST, STATUS_OK, STATUS_SKIPPED
 
 __all__ = ["ANALYSES", "PlannedPoints", "RunData", "RunFileError", "RunSummary", "as_text",
            "check_run_file", "open_run", "read_attributes", "read_events", "read_plan_kind",
@@ -171,6 +171,15 @@ class RunData:
     identities: dict[str, dict[str, str]] = field(default_factory=dict)
     frame_saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     frame_shape: tuple[int, ...] | None = None
+    #: :data:`~instrument.run.layout.DETECTOR_FIELDS` columns the file has, also readable
+    #: as attributes (``run.lockin_r_v``; ``None`` for a file without them).
+    #: ``filter_position`` is an integer slot (-1: none), ``lockin_overload`` 0 or 1.
+    detectors: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __getattr__(self, name: str) -> Any:
+        if name in DETECTOR_FIELDS:
+            return self.__dict__.get("detectors", {}).get(name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     @property
     def n_points(self) -> int:
@@ -292,6 +301,12 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
     def col(name: str, grp: h5py.Group = p) -> np.ndarray:
         return np.asarray(grp[name][()])
 
+    detectors = {name: col(name) for name in DETECTOR_FIELDS if name in p}
+    for name, missing in (("filter_position", -1), ("lockin_overload", 0)):
+        if name in detectors:
+            v = detectors[name]
+            detectors[name] = np.where(np.isfinite(v), v, missing).astype(np.int64)
+
     return RunData(
         path=path,
         run_id=as_text(e.attrs.get("run_id", path.stem)),
@@ -317,6 +332,7 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
         identities=identities,
         frame_saturated=col("frame_saturated", d),
         frame_shape=None if frames is None else tuple(frames.shape[1:]),
+        detectors=detectors,
     )
 
 

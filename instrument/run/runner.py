@@ -154,6 +154,9 @@ def check_bench_for_plan(plan: Plan, bench: Bench) -> None:
     if pol.uses_power_meter and bench.power_meter is None:
         errors.append(FieldError("acquisition.detectors",
                                  f"bench {bench.profile.name!r} has no power meter"))
+    if pol.uses_lockin and getattr(bench, "lockin", None) is None:
+        errors.append(FieldError("acquisition.detectors",
+                                 f"bench {bench.profile.name!r} has no lock-in amplifier"))
     needs_dark = pol.dark != "none" or any(not p.light for p in plan.points)
     if needs_dark and bench.source is None:
         errors.append(FieldError("acquisition.dark", f"bench {bench.profile.name!r} has no "

@@ -51,6 +51,7 @@ from instrument.run.layout import (
     RunHeader,
     StorageError,
     clean_error,
+    detector_columns,
     end_of_allocation,
     iso_time,
     journal_path,
@@ -92,6 +93,8 @@ class PointRecord:
     retries: int = 0
     note: str = ""
     frames: list[FrameData] = field(default_factory=list)
+    #: Readings of :data:`~instrument.run.layout.DETECTOR_FIELDS` (missing: NaN).
+    extra: dict[str, float] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- writer
@@ -414,7 +417,7 @@ def _point_json(rec: PointRecord, frame_start: int) -> dict[str, Any]:
         "note": rec.note, "t_start": rec.t_start, "t_end": rec.t_end,
         "positions": list(rec.positions), "angles": list(rec.angles),
         "exposure_us": rec.exposure_us, "power_w": rec.power_w, "signal": rec.signal,
-        "retries": rec.retries, "frame_start": frame_start,
+        "retries": rec.retries, "frame_start": frame_start, "extra": dict(rec.extra),
         "frames": [[f.exposure_us, bool(f.light), f.timestamp, f.saturated,
                     zlib.crc32(np.ascontiguousarray(f.data).tobytes())] for f in rec.frames],
     }
@@ -441,4 +444,5 @@ def _write_rows(grp: h5py.Group, n0: int, recs: list[tuple[PointRecord, int, int
         cols["label"].append(r.label)
         cols["note"].append(r.note)
         pos[k, :len(r.positions)] = r.positions
-    put_rows(grp, n0, n1, cols, pos, shrink=False)
+    put_rows(grp, n0, n1, {**cols, **detector_columns(grp, [r.extra for r, _, _ in recs])},
+             pos, shrink=False)
