@@ -375,5 +375,83 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
         st = None if start is None else np.array([start.get(r, 0.0) for r in axes])
         order = optimise_order(t, axes, dynamics_of(profile, axes), start=st)
         body = [body[int(j)] for j in order]
+    _check_power_meter_wavelength(spec, profile)
+    if spec.spectral is not None:
+        body = _wavelength_axis(spec, profile, body)
+        if len(head) + len(body) > MAX_POINTS:
+            raise PlanError(f"plan {spec.name!r}", [FieldError(
+                "spectral.filters", f"expands to {len(head) + len(body)} points; at most "
+                f"{MAX_POINTS}")])
     points = tuple(replace(p, index=k) for k, p in enumerate(head + body))
     return Plan(spec, profile, axes, points, dropped)
+
+
+def filter_bands(profile: BenchProfile) -> dict[int, tuple[float, float]] | None:
+    """Slot → (centre, FWHM) in nm of the bench's filter wheel (``options.filters`` of
+    its ``fw102c`` device); None when the bench has no filter wheel."""
+    wheels = [d for d in profile.devices.values() if d.driver == "fw102c"]
+    if not wheels:
+        return None
+    out = {}
+    for key, spec in dict(wheels[0].options.get("filters", {})).items():
+        if isinstance(spec, dict) and "center_nm" in spec and "bandwidth_nm" in spec:
+            out[int(key)] = (float(spec["center_nm"]), float(spec["bandwidth_nm"]))
+    return out
+
+
+def _check_power_meter_wavelength(spec: PlanSpec, profile: BenchProfile) -> None:
+    """A power meter set to another wavelength than the light it reads corrects it with the
+    wrong responsivity: refused before the run where the profile states both (a simulated
+    source's wavelength; with a wavelength axis the engine sets the meter per filter)."""
+    if not spec.acquisition.uses_power_meter or spec.spectral is not None:
+        return
+    src = dict((profile.simulation or {}).get("source", {}))
+    meters = [(role, d) for role, d in profile.devices.items() if d.driver == "pm100usb"]
+    if "wavelength_nm" not in src or not meters:
+        return
+    lam, width = float(src["wavelength_nm"]), float(src.get("bandwidth_nm", 0.0))
+    role, meter = meters[0]
+    set_nm = meter.settings.get("wavelength_nm")
+    if set_nm is not None and abs(float(set_nm) - lam) > max(1.0, 0.5 * width):
+        raise PlanError(f"plan {spec.name!r} on bench {profile.name!r}", [FieldError(
+            f"devices.{role}.settings.wavelength_nm", f"the power meter is set to "
+            f"{float(set_nm):g} nm but the source emits at {lam:g} nm: set the meter to the "
+            "source's wavelength (its responsivity correction depends on it)")])
+
+
+def _wavelength_axis(spec: PlanSpec, profile: BenchProfile, body: list[ScanPoint]
+                     ) -> list[ScanPoint]:
+    """``body`` once per filter of ``[spectral]`` (meta ``filter``), in its order.
+
+    Refuses, naming the field, a bench without a filter wheel, a slot whose band the
+    profile does not give, and (on a simulated bench, whose source spectrum is known) a
+    filter outside the source's band: its points would be dark.
+    """
+    sp = spec.spectral or {}
+    bands = filter_bands(profile)
+    errors = []
+    if bands is None:
+        errors.append(FieldError("spectral", f"bench {profile.name!r} has no filter wheel "
+                                 "(a device with driver 'fw102c')"))
+        bands = {}
+    missing = [f for f in sp["filters"] if f not in bands]
+    if missing and not errors:
+        errors.append(FieldError("spectral.filters", f"slot(s) {missing} have no band in the "
+                                 "bench profile: give center_nm and bandwidth_nm in the "
+                                 "filter wheel's options.filters"))
+    src = dict((profile.simulation or {}).get("source", {}))
+    if "wavelength_nm" in src and not errors:
+        lam, width = float(src["wavelength_nm"]), float(src.get("bandwidth_nm", 0.0))
+        for f in sp["filters"]:
+            centre, fwhm = bands[f]
+            if abs(centre - lam) > 0.5 * (width + fwhm):
+                errors.append(FieldError("spectral.filters", f"slot {f} ({centre:g} nm) is "
+                                         f"outside the source's band ({lam:g} ± "
+                                         f"{width / 2:g} nm): its points would be dark"))
+    if errors:
+        raise PlanError(f"plan {spec.name!r}", errors)
+    out = []
+    for k, f in enumerate(sp["filters"]):
+        block = body[::-1] if sp["order"] == "motion" and k % 2 else body
+        out += [replace(p, meta=(*p.meta, ("filter", f))) for p in block]
+    return out

@@ -103,6 +103,9 @@ class PlanSpec:
     acquisition: AcquisitionPolicy
     calibration: dict[str, str] = field(default_factory=dict)
     source_text: str = ""
+    #: ``[spectral]``: the wavelength axis, ``{"filters": (slots…), "order": …}`` (see
+    #: :data:`SPECTRAL_ORDERS`), or None.
+    spectral: dict[str, Any] | None = None
 
 
 def load_plan(path: str | Path) -> PlanSpec:
@@ -122,7 +125,7 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
     except tomllib.TOMLDecodeError as err:
         raise PlanError(source, [FieldError("toml", f"not valid TOML: {err}")]) from err
     v = _Validator()
-    v.unknown(data, "", {"plan", "sample", "scan", "acquisition", "calibration"})
+    v.unknown(data, "", {"plan", "sample", "scan", "acquisition", "calibration", "spectral"})
     plan = v.table(data, "plan", required=True)
     v.unknown(plan, "plan", {"kind", "name", "order"})
     kind = v.string(plan, "kind", "plan", required=True)
@@ -151,10 +154,45 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
         val = v.string(calib, key, "calibration")
         if val is not None:
             calibration[key] = val
+    spectral = _spectral(v, data.get("spectral"), kind)
     if v.errors or kind is None:
         raise PlanError(source, v.errors or [FieldError("plan.kind", "is required")])
     return PlanSpec(kind, name, order, sample_name, sample_desc, dict(scan), acq,
-                    calibration, text)
+                    calibration, text, spectral)
+
+
+#: Point orders of a wavelength axis: every angle with one filter, then the next filter
+#: (``per_filter``); or the same, with the angles run forwards and backwards in turn so the
+#: axes never travel back between filters (``motion``, cheaper by the motion model).
+SPECTRAL_ORDERS = ("per_filter", "motion")
+#: Plan kinds that take a wavelength axis.
+SPECTRAL_KINDS = ("brdf_in_plane", "brdf_hemisphere", "reference")
+
+
+def _spectral(v: _Validator, t: Any, kind: str | None) -> dict[str, Any] | None:
+    """``[spectral] filters = [slots…]`` (1-based filter-wheel slots, each once, their
+    wavelengths from the bench profile) and ``order``."""
+    if t is None:
+        return None
+    if not isinstance(t, dict):
+        v.error("spectral", "must be a table")
+        return None
+    v.unknown(t, "spectral", {"filters", "order"})
+    if kind is not None and kind not in SPECTRAL_KINDS:
+        v.error("spectral", f"a {kind} plan has no wavelength axis; only "
+                f"{', '.join(SPECTRAL_KINDS)} plans take one")
+    raw = t.get("filters")
+    if (not isinstance(raw, list) or not raw
+            or not all(isinstance(x, int) and not isinstance(x, bool) and 1 <= x <= 12
+                       for x in raw)):
+        v.error("spectral.filters", "must list filter-wheel slots, integers from 1 to 12")
+        return None
+    if len(set(raw)) != len(raw):
+        v.error("spectral.filters", f"lists a slot twice: {raw}")
+    order = t.get("order", "per_filter")
+    if order not in SPECTRAL_ORDERS:
+        v.error("spectral.order", f"must be one of {', '.join(SPECTRAL_ORDERS)}")
+    return {"filters": tuple(raw), "order": order}
 
 
 # --------------------------------------------------------------------------- helpers

@@ -173,6 +173,7 @@ class RunEngine:
         self._pm = bench.power_meter
         self._lockin = getattr(bench, "lockin", None)
         self._wheel = getattr(bench, "filter_wheel", None)
+        self._wheel_slot: int | None = None  # the slot this engine last put in the beam
         # Light and dark frames switch the shutter when the bench has one, else the source;
         # with a shutter in front of a switchable source, the source is turned on with the
         # first light and left on (a laser is not cycled for every dark frame).
@@ -766,6 +767,9 @@ class RunEngine:
 
     def _acquire(self, acq: Acquire, st: _PointState) -> None:
         policy = acq.policy
+        slot = dict(self.plan.points[acq.index].meta).get("filter")
+        if slot is not None and self._wheel is not None:
+            self._select_filter(int(slot), st)
         cam = self._camera if policy.uses_camera else None
         pm = self._pm if policy.uses_power_meter else None
         if acq.light != self._light and self._source is not None:
@@ -839,6 +843,26 @@ class RunEngine:
                 "lockin_sensitivity_v": float(li.sensitivity_v),
                 "lockin_time_constant_s": float(li.time_constant_s),
                 "lockin_overload": 0.0}
+
+    def _select_filter(self, slot: int, st: _PointState) -> None:
+        """Put ``slot`` in the beam (a wavelength axis): the wheel moves only when the slot
+        changes; then the camera's buffered frames are of the other band (dropped) and the
+        power meter's responsivity correction follows the filter's centre wavelength."""
+        if slot == self._wheel_slot:
+            return
+        wheel = self._wheel
+        role = self._roles[id(wheel)]
+        self._retry(role, self._policies[role], f"move to filter {slot}",
+                    lambda: wheel.move_to(slot), st)
+        self._wheel_slot = slot
+        if self._camera is not None:
+            self._camera.invalidate()
+        centre = getattr(wheel.filter_at(slot), "center_nm", None)
+        if self._pm is not None and centre is not None:
+            pm = self._pm
+            pm_role = self._roles[id(pm)]
+            self._retry(pm_role, self._policies[pm_role], "set wavelength",
+                        lambda: setattr(pm, "wavelength_nm", float(centre)), st)
 
     def _filter_in_beam(self) -> dict[str, float]:
         """The filter-wheel slot in the beam and its band (NaN for an empty slot)."""
