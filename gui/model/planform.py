@@ -35,6 +35,8 @@ from instrument.plans.planfile import (
     KINDS,
     KNOWN_BRDF_MODELS,
     ORDERS,
+    SPECTRAL_KINDS,
+    SPECTRAL_ORDERS,
     SPHERE_ROLES,
     PlanError,
     PlanSpec,
@@ -191,10 +193,22 @@ SCAN_FIELDS: dict[str, list[FieldSpec]] = {
 }
 
 
+#: The wavelength axis of BRDF plans (``[spectral]``); no filters: one wavelength.
+SPECTRAL = [
+    _f("spectral.filters", "filters (wavelength axis)", "list",
+       "filter-wheel slots, e.g. 1, 2, 3; empty: no wavelength axis"),
+    _f("spectral.order", "filter order", "choice",
+       "per_filter: every angle per filter; motion: back and forth", SPECTRAL_ORDERS,
+       "per_filter"),
+]
+
+
 def fields_for(kind: str) -> list[FieldSpec]:
-    """Every field of a plan of ``kind``: common, scan, acquisition, calibration."""
+    """Every field of a plan of ``kind``: common, scan, acquisition, calibration (and the
+    wavelength axis where the kind takes one)."""
+    spectral = SPECTRAL if kind in SPECTRAL_KINDS else []
     return [_f("plan.kind", "kind", "choice", choices=KINDS, default=kind), *COMMON,
-            *SCAN_FIELDS[kind], *ACQUISITION, *CALIBRATION]
+            *SCAN_FIELDS[kind], *ACQUISITION, *CALIBRATION, *spectral]
 
 
 # --------------------------------------------------------------------------- text → values
@@ -544,6 +558,8 @@ class PlanForm:
             data.setdefault(section, {})
         if not data["sample"]:
             del data["sample"]
+        if "filters" not in data.get("spectral", {}):
+            data.pop("spectral", None)  # an order alone is no wavelength axis
         return data, errors
 
     def to_toml(self) -> str:
@@ -551,7 +567,7 @@ class PlanForm:
         data, _ = self.to_data()
         lines = [f"# {KIND_TITLES.get(self.kind, self.kind)} plan, written by the "
                  "scatterlab plan editor"]
-        for section in ("plan", "sample", "scan", "acquisition", "calibration"):
+        for section in ("plan", "sample", "scan", "acquisition", "calibration", "spectral"):
             table = data.get(section)
             if not table and section not in ("plan", "scan"):
                 continue

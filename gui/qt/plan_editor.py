@@ -47,7 +47,8 @@ from instrument.plans.planfile import KINDS, PlanError
 __all__ = ["PlanEditor"]
 
 SECTIONS = (("plan", "Plan"), ("sample", "Sample"), ("scan", "Scan"),
-            ("acquisition", "Acquisition"), ("calibration", "Calibration runs"))
+            ("acquisition", "Acquisition"), ("calibration", "Calibration runs"),
+            ("spectral", "Wavelength axis"))
 
 
 class PlanEditor(QWidget):

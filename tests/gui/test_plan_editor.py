@@ -13,7 +13,7 @@ _EXAMPLE_DIR = Path(__file__).resolve().parents[2] / "examples"
 EXAMPLES = sorted(p for p in _EXAMPLE_DIR.glob("*.toml")
                   if "[plan]" in p.read_text(encoding="utf-8"))
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
-         "sphere_capture": "sim-spheres"}
+         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
 
 
 def _validated(qtbot, editor):

@@ -19,7 +19,7 @@ EXAMPLES = sorted(p for p in _EXAMPLE_DIR.glob("*.toml")
                   if "[plan]" in p.read_text(encoding="utf-8"))
 #: The bench each example plan is written for (its comment says so).
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
-         "sphere_capture": "sim-spheres"}
+         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
@@ -28,7 +28,7 @@ def test_every_example_round_trips_and_validates(path):
     form = PlanForm.from_toml(path.read_text())
     again = parse_plan(form.to_toml())
     for attr in ("kind", "name", "order", "sample_name", "sample_description",
-                 "acquisition", "calibration"):
+                 "acquisition", "calibration", "spectral"):
         assert getattr(again, attr) == getattr(original, attr), attr
     # the same scan; switches equal to their default (reciprocity = false) may be left
     # out, so they are compared through the points they give (below)
