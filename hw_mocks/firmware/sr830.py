@@ -397,7 +397,10 @@ class Sr830Emulator(FirmwareEmulator):
     def _number(text: str) -> float:
         if not _NUMBER_RE.fullmatch(text):
             raise _BadCommand(_ESR_CMD)
-        return float(text)
+        value = float(text)
+        if not math.isfinite(value):  # "1e999": a number the instrument cannot hold
+            raise _BadCommand(_ESR_EXE)
+        return value
 
     def _index(self, args: list[str], high: int, position: int = 0) -> int:
         if len(args) <= position:

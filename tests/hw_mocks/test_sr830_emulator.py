@@ -83,6 +83,7 @@ def test_syntax_case_spaces_separators_and_terminators(emu):
     ("XXXX", 32), ("SENS 27", 16), ("SENS -1", 16), ("SENS 2.5", 16), ("SENS", 32),
     ("SENS abc", 32), ("SNAP? 1", 32), ("SNAP? 0,1", 16), ("OUTP? 5", 16), ("OFSL 4", 16),
     ("*IDN", 32), ("FREQ 200000", 16), ("PHAS 800", 16), ("SNAP 1,2", 32),
+    ("SENS 1E999", 16), ("FREQ 9E999", 16),  # beyond a double: refused, not a crash
 ])
 def test_errors_latch_cmd_or_exe_and_failed_queries_answer_nothing(emu, request_, bit):
     one(emu, "*ESR?")
