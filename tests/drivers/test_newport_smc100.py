@@ -275,11 +275,6 @@ def test_errors_pickle_with_code():
 # --------------------------------------------------------------------------- contract
 
 
-@pytest.fixture(params=["url", "pty"])
-def transport(request):
-    return request.param
-
-
 def open_axis(transport: str, name: str, *, kind: str = "rotary", cleanup: list,
               **kw) -> Smc100Axis:
     if transport == "url":
@@ -295,14 +290,6 @@ def open_axis(transport: str, name: str, *, kind: str = "rotary", cleanup: list,
 
 def emulator_of(axis: Smc100Axis) -> Smc100Emulator:
     return getattr(axis, "emulator", None) or registry.get("simsmc", axis.name)
-
-
-@pytest.fixture
-def servers():
-    started: list[PtyServer] = []
-    yield started
-    for server in started:
-        server.close()
 
 
 class TestContractRotary(MotionAxisContract):

@@ -206,19 +206,6 @@ def test_errors_pickle_with_code():
 # --------------------------------------------------------------------------- contract
 
 
-@pytest.fixture(params=["url", "pty"])
-def transport(request):
-    return request.param
-
-
-@pytest.fixture
-def servers():
-    started: list[PtyServer] = []
-    yield started
-    for server in started:
-        server.close()
-
-
 def open_lockin(transport: str, name: str, *, cleanup: list, options: str = "",
                 **kw) -> Sr830LockIn:
     kw.setdefault("reply_timeout", 0.3)

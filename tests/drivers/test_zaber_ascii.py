@@ -389,11 +389,6 @@ def test_errors_pickle_with_code():
 # --------------------------------------------------------------------------- contract
 
 
-@pytest.fixture(params=["url", "pty"])
-def transport(request):
-    return request.param
-
-
 @pytest.fixture
 def cleanup():
     """Servers and axes to close after the test, whatever happened."""
