@@ -23,7 +23,16 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.base import Camera, Device, LightSource, MotionAxis, PowerMeter
+from drivers.base import (
+    Camera,
+    Device,
+    FilterWheel,
+    LightSource,
+    LockIn,
+    MotionAxis,
+    PowerMeter,
+    Shutter,
+)
 from drivers.errors import ConnectionFailed, DeviceError
 
 __all__ = [
@@ -93,11 +102,13 @@ def kinds() -> list[DeviceKind]:
 
 
 def kind_of(device: Device) -> DeviceKind | None:
-    """The registered kind whose ABC ``device`` implements (the first registered wins)."""
-    for kind in _KINDS:
-        if isinstance(device, kind.base):
-            return kind
-    return None
+    """The registered kind whose ABC ``device`` implements; of several (a shutter is a light
+    source), the most derived one."""
+    matches = [kind for kind in _KINDS if isinstance(device, kind.base)]
+    if not matches:
+        return None
+    mro = type(device).__mro__
+    return min(matches, key=lambda kind: mro.index(kind.base))
 
 
 def identity_info(device: Device) -> dict[str, Any]:
@@ -191,6 +202,48 @@ register_kind(DeviceKind("camera", "Camera", Camera, _camera_info, _camera_value
                          poll_s=1.0, settings=("exposure_us", "gain")))
 register_kind(DeviceKind("light_source", "Light source", LightSource, _source_info,
                          _source_values, poll_s=0.5, settings=("power_w",)))
+def _lockin_info(li: LockIn) -> dict[str, Any]:
+    return {"sensitivities_v": tuple(li.sensitivities_v),
+            "time_constants_s": tuple(li.time_constants_s)}
+
+
+def _lockin_values(li: LockIn) -> dict[str, Any]:
+    r = li.snapshot()
+    flags = li.overload_status()  # latched since the last poll
+    return {"r_v": r.r_v, "theta_deg": r.theta_deg, "x_v": r.x_v, "y_v": r.y_v,
+            "sensitivity_v": li.sensitivity_v, "time_constant_s": li.time_constant_s,
+            "reference": li.reference_source.value,
+            "frequency_hz": li.reference_frequency_hz, "overload": flags.overloaded}
+
+
+def _auto_range(li: LockIn) -> None:
+    li.auto_range()
+
+
+def _shutter_values(shutter: Shutter) -> dict[str, Any]:
+    return {"state": shutter.shutter_state.value}
+
+
+def _wheel_info(wheel: FilterWheel) -> dict[str, Any]:
+    return {"count": wheel.position_count,
+            "filters": {slot: (spec.center_nm, spec.bandwidth_nm, spec.label)
+                        for slot, spec in wheel.filters.items()}}
+
+
+def _wheel_values(wheel: FilterWheel) -> dict[str, Any]:
+    return {"position": wheel.position}
+
+
+register_kind(DeviceKind("lockin", "Lock-in amplifier", LockIn, _lockin_info,
+                         _lockin_values, poll_s=0.5,
+                         settings=("sensitivity_v", "time_constant_s", "reference_source"),
+                         actions={"auto_range": _auto_range}))
+register_kind(DeviceKind("shutter", "Shutter", Shutter, lambda s: {}, _shutter_values,
+                         poll_s=0.5, actions={"open": lambda s: s.open_shutter(),
+                                              "close": lambda s: s.close_shutter()}))
+register_kind(DeviceKind("filter_wheel", "Filter wheel", FilterWheel, _wheel_info,
+                         _wheel_values, poll_s=0.5,
+                         actions={"move_to": lambda w, slot: w.move_to(int(slot))}))
 register_kind(DeviceKind("power_meter", "Power meter", PowerMeter, _meter_info,
                          _meter_values, poll_s=0.5,
                          settings=("wavelength_nm", "averaging", "auto_range"),

@@ -134,10 +134,12 @@ class SetSetting:
 
 @dataclass(frozen=True)
 class Action:
-    """Call one of the kind's named actions (a power meter's dark zero)."""
+    """Call one of the kind's named actions (a power meter's dark zero; a filter wheel's
+    ``move_to`` with the slot in ``args``)."""
 
     role: str
     name: str
+    args: tuple[Any, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -497,12 +499,12 @@ class BenchSession:
                 return self._set_light(cmd, bool(on))
             case SetSetting(role=role, name=name, value=value):
                 return self._set_setting(cmd, role, name, value)
-            case Action(role=role, name=name):
+            case Action(role=role, name=name, args=args):
                 device = self._device(role)
                 kind = kind_of(device)
                 if kind is None or name not in kind.actions:
                     raise ValueError(f"{role}: no action {name!r}")
-                kind.actions[name](device)
+                kind.actions[name](device, *args)
                 self._info_dirty.add(role)
                 return CommandResult(cmd, True, f"{role}: {name} done")
             case StartStream():

@@ -19,6 +19,7 @@ from typing import Any
 
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
+    QComboBox,
     QDoubleSpinBox,
     QFormLayout,
     QGridLayout,
@@ -364,7 +365,140 @@ class PowerMeterPanel(DevicePanel):
         self.status.setText(badge("connected", state.connected))
 
 
+class LockInPanel(DevicePanel):
+    """A lock-in amplifier: R and θ (X, Y), its range and time constant (chosen from the
+    instrument's tables, set through the driver), the reference, overload; auto-range."""
+
+    def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
+                 ) -> None:
+        super().__init__(role, session, parent)
+        self.reading = QLabel("—")
+        self.reading.setObjectName("reading")
+        self.reading.setStyleSheet("font-size: 15pt; font-weight: 600")
+        self.detail = QLabel("")
+        self.detail.setObjectName("detail")
+        self.sensitivity = QComboBox()
+        self.sensitivity.setObjectName("sensitivity")
+        self.time_constant = QComboBox()
+        self.time_constant.setObjectName("time_constant")
+        self.auto = QPushButton("Auto-range")
+        self.auto.setObjectName("auto_range")
+        form = QFormLayout(self.body)
+        form.setContentsMargins(0, 0, 0, 0)
+        form.addRow(self.reading)
+        form.addRow(self.detail)
+        form.addRow("range", self.sensitivity)
+        form.addRow("time constant", self.time_constant)
+        form.addRow(self.auto)
+        self._tables: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
+        self.sensitivity.activated.connect(lambda k: self.session.submit(SetSetting(
+            self.role, "sensitivity_v", self.sensitivity.itemData(k))))
+        self.time_constant.activated.connect(lambda k: self.session.submit(SetSetting(
+            self.role, "time_constant_s", self.time_constant.itemData(k))))
+        self.auto.clicked.connect(lambda: self.session.submit(Action(self.role, "auto_range")))
+        self.controls(self.sensitivity, self.time_constant, self.auto)
+
+    def _fill(self, box: QComboBox, values: tuple[float, ...], unit: str) -> None:
+        box.clear()
+        for v in values:
+            box.addItem(fmt.si(v, unit, 3), v)
+
+    def show_state(self, state: DeviceState) -> None:
+        v, info = state.values, state.info
+        tables = (tuple(info.get("sensitivities_v", ())), tuple(info.get("time_constants_s", ())))
+        if tables != self._tables:
+            self._tables = tables
+            self._fill(self.sensitivity, tables[0], "V")
+            self._fill(self.time_constant, tables[1], "s")
+        for box, key in ((self.sensitivity, "sensitivity_v"),
+                         (self.time_constant, "time_constant_s")):
+            k = box.findData(v.get(key))
+            if k >= 0:
+                box.setCurrentIndex(k)
+        self.reading.setText(f"R {fmt.si(v.get('r_v'), 'V')} rms, θ "
+                             f"{v.get('theta_deg', math.nan):.1f}°")
+        self.detail.setText(f"X {fmt.si(v.get('x_v'), 'V')}, Y {fmt.si(v.get('y_v'), 'V')}; "
+                            f"reference {v.get('reference', '?')} "
+                            f"{v.get('frequency_hz', math.nan):.4g} Hz")
+        over = bool(v.get("overload"))
+        self.status.setText(badge("connected", state.connected) + " "
+                            + badge("OVERLOAD" if over else "in range", over, good=False))
+
+
+class ShutterPanel(DevicePanel):
+    """A shutter: its blade's state; open and close. *Close* stays available whenever
+    the bench is manual (making safe is never refused)."""
+
+    def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
+                 ) -> None:
+        super().__init__(role, session, parent)
+        self.open = QPushButton("Open")
+        self.open.setObjectName("open")
+        self.close_button = QPushButton("Close")
+        self.close_button.setObjectName("close")
+        lay = QHBoxLayout(self.body)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addWidget(self.open)
+        lay.addWidget(self.close_button)
+        self.open.clicked.connect(lambda: self.session.submit(Action(self.role, "open")))
+        self.close_button.clicked.connect(
+            lambda: self.session.submit(Action(self.role, "close")))
+        self.controls(self.open)
+        self.controls(self.close_button)
+
+    def show_state(self, state: DeviceState) -> None:
+        is_open = state.values.get("state") == "open"
+        self.status.setText(badge("connected", state.connected) + " "
+                            + badge("OPEN" if is_open else "closed", is_open, good=False))
+
+
+class FilterWheelPanel(DevicePanel):
+    """A filter wheel: the slot in the beam and its band; move to another slot."""
+
+    def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
+                 ) -> None:
+        super().__init__(role, session, parent)
+        self.position = QLabel("—")
+        self.position.setObjectName("position")
+        self.slot = QComboBox()
+        self.slot.setObjectName("slot")
+        self.go = QPushButton("Move")
+        self.go.setObjectName("go")
+        form = QFormLayout(self.body)
+        form.setContentsMargins(0, 0, 0, 0)
+        form.addRow("in the beam", self.position)
+        row = QHBoxLayout()
+        row.addWidget(self.slot, 1)
+        row.addWidget(self.go)
+        form.addRow("slot", row)
+        self._count = 0
+        self.go.clicked.connect(lambda: self.session.submit(
+            Action(self.role, "move_to", (self.slot.currentData(),))))
+        self.controls(self.slot, self.go)
+
+    @staticmethod
+    def band(filters: dict, slot: int | None) -> str:
+        """``"slot 2: 550 nm ± 5 nm"`` (FWHM/2), or ``"slot 4: empty"``."""
+        centre, width, label = filters.get(slot, (None, None, ""))
+        what = "empty" if centre is None else f"{centre:g} nm, FWHM {width:g} nm"
+        return f"slot {slot}: {what}" + (f" ({label})" if label else "")
+
+    def show_state(self, state: DeviceState) -> None:
+        filters = dict(state.info.get("filters", {}))
+        count = int(state.info.get("count", 0))
+        if count != self._count:
+            self._count = count
+            self.slot.clear()
+            for k in range(1, count + 1):
+                self.slot.addItem(self.band(filters, k), k)
+        self.position.setText(self.band(filters, state.values.get("position")))
+        self.status.setText(badge("connected", state.connected))
+
+
 register_panel("motion_axis", AxisPanel)
 register_panel("camera", CameraPanel)
 register_panel("light_source", SourcePanel)
 register_panel("power_meter", PowerMeterPanel)
+register_panel("lockin", LockInPanel)
+register_panel("shutter", ShutterPanel)
+register_panel("filter_wheel", FilterWheelPanel)
