@@ -852,8 +852,12 @@ class RunEngine:
             return
         wheel = self._wheel
         role = self._roles[id(wheel)]
-        self._retry(role, self._policies[role], f"move to filter {slot}",
-                    lambda: wheel.move_to(slot), st)
+        if self._wheel_slot is None:  # first filter of the run: the wheel may be there
+            self._wheel_slot = int(self._retry(role, self._policies[role], "read position",
+                                               lambda: wheel.position, st))
+        if slot != self._wheel_slot:
+            self._retry(role, self._policies[role], f"move to filter {slot}",
+                        lambda: wheel.move_to(slot), st)
         self._wheel_slot = slot
         if self._camera is not None:
             self._camera.invalidate()

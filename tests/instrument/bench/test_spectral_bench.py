@@ -214,3 +214,39 @@ def test_a_lock_in_scan_records_its_readings_and_the_filter_per_point(tmp_path):
     recover(path)
     again = read_run(path)
     assert np.array_equal(again.lockin_r_v, r) and list(again.filter_position) == [1, 1, 1]
+
+
+def test_a_jammed_filter_wheel_mid_scan_ends_in_the_retry_policy_with_the_bench_safe(
+        tmp_path):
+    """The FW102C emulator's wheel stalls at the slot before the one asked for (it prompts
+    as if done; the driver reads the position back and raises WheelJammed). With the
+    wheel's policy ``attempts = 1, on_failure = "abort"`` the run aborts at the second
+    filter, the fault is in the run's event log with the device and the cause, the points
+    of the first filter are kept, and the shutter is closed."""
+    from hw_mocks import registry
+    from instrument.run.runfile import read_events, read_run
+
+    text = load_profile("sim-spectral").source_text.replace(
+        'url = "simfw102c://filter_wheel?world=sim-spectral"\noptions',
+        'url = "simfw102c://filter_wheel?world=sim-spectral"\n'
+        'retry = { attempts = 1, on_failure = "abort" }\noptions')
+    assert 'on_failure = "abort"' in text
+    bench = tmp_path / "bench.toml"
+    bench.write_text(text, encoding="utf-8")
+    plan = tmp_path / "plan.toml"
+    plan.write_text(LOCKIN_PLAN.replace("theta_r = [-50, 0, 50]", "theta_r = [-50, 50]")
+                    + "[spectral]\nfilters = [1, 3]\n", encoding="utf-8")
+    with open_bench(load_profile(str(bench)), roles=["filter_wheel"]) as wheel_bench:
+        wheel_bench.filter_wheel.move_to(1)  # the first filter needs no move
+    registry.get("simfw102c", "filter_wheel").jam("stall")  # the next move: to slot 3
+    assert main(["run", str(plan), "--bench", str(bench), "--out", str(tmp_path / "runs"),
+                 "--no-fsync", "--quiet"]) == 1
+    (path,) = (tmp_path / "runs").glob("*.h5")
+    run = read_run(path)
+    assert run.status == "aborted" and run.n_points == 2
+    assert list(run.filter_position) == [1, 1]
+    faults = [e for e in read_events(path) if e.get("kind") == "fault"]
+    assert faults and faults[-1]["device"] == "filter_wheel"
+    assert "filter_wheel" in faults[-1]["cause"] and faults[-1]["action"] == "abort"
+    with open_bench(load_profile(str(bench)), roles=["shutter"]) as after:
+        assert after.shutter.shutter_state is ShutterState.CLOSED
