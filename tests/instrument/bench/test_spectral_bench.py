@@ -250,3 +250,63 @@ def test_a_jammed_filter_wheel_mid_scan_ends_in_the_retry_policy_with_the_bench_
     assert "filter_wheel" in faults[-1]["cause"] and faults[-1]["action"] == "abort"
     with open_bench(load_profile(str(bench)), roles=["shutter"]) as after:
         assert after.shutter.shutter_state is ShutterState.CLOSED
+
+
+def _abort_profile(tmp_path, role: str) -> Path:
+    """sim-spectral with ``role``'s retry policy one attempt, then abort."""
+    text = load_profile("sim-spectral").source_text
+    head = f"[devices.{role}]\n"
+    assert head in text
+    text = text.replace(head, head + 'retry = { attempts = 1, on_failure = "abort" }\n', 1)
+    path = tmp_path / "bench.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _run_aborted(tmp_path, bench: Path, plan_text: str) -> tuple[Path, dict]:
+    from instrument.run.runfile import read_events, read_run
+
+    plan = tmp_path / "plan.toml"
+    plan.write_text(plan_text, encoding="utf-8")
+    assert main(["run", str(plan), "--bench", str(bench), "--out", str(tmp_path / "runs"),
+                 "--no-fsync", "--quiet"]) == 1
+    (path,) = (tmp_path / "runs").glob("*.h5")
+    assert read_run(path).status == "aborted"
+    faults = [e for e in read_events(path) if e.get("kind") == "fault"]
+    return path, faults[-1]
+
+
+def test_a_lock_in_that_stays_overloaded_ends_in_its_retry_policy(tmp_path):
+    """An input of 2 V rms overloads the SR830's input stage at every range: the engine
+    re-ranges three times, then the point fails as a device error of the lock-in and its
+    policy (abort) ends the run; nothing is recorded as a reading."""
+    from hw_mocks import registry
+
+    bench = _abort_profile(tmp_path, "lockin")
+    with open_bench(load_profile(str(bench)), roles=["lockin"]):
+        registry.get("simsr830", "lockin").set_input(2.0)
+    _path, fault = _run_aborted(tmp_path, bench, LOCKIN_PLAN)
+    assert fault["device"] == "lockin" and fault["action"] == "abort"
+    assert "overload" in fault["cause"].lower()
+
+
+def test_a_shutter_that_does_not_answer_is_a_typed_error_before_anything_moves(tmp_path,
+                                                                             capsys):
+    """The SC10 is off (no answer): opening the bench fails with a typed error naming the
+    shutter and what to check, before any axis moves or any file is written (mid-run, the
+    same timeout goes to the shutter's retry policy like any device error)."""
+    from hw_mocks import registry
+
+    bench = _abort_profile(tmp_path, "shutter")
+    with open_bench(load_profile(str(bench)), roles=["shutter"]):
+        registry.get("simsc10", "shutter").power_off()
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN, encoding="utf-8")
+    try:
+        assert main(["run", str(plan), "--bench", str(bench), "--out",
+                     str(tmp_path / "runs"), "--no-fsync", "--quiet"]) == 3
+    finally:
+        registry.get("simsc10", "shutter").power_on()  # closed at power-up
+    err = capsys.readouterr().err
+    assert err.startswith("device error: shutter:")
+    assert not list((tmp_path / "runs").glob("*.h5"))
