@@ -120,24 +120,27 @@ def _fmt(x: Any) -> str:
 def run_analysis(name: str, path: str | Path) -> AnalysisOutcome:
     """Run analysis ``name`` (:data:`ANALYSES`) on the run file ``path`` as the CLI does:
     its results file, figures and report go next to the run, into ``DIR/RUN/<pipeline>/``
-    (ADR 0013); the run file is only read.
+    (ADR 0013); the run file is only read. Like the CLI it holds the run's lock while it
+    analyses and writes (ADR 0070), so it waits for a batch analysing the same run.
 
     Raises
     ------
     ValueError, KeyError, OSError, RuntimeError
-        As the pipeline raises them (their messages say what is missing).
+        As the pipeline raises them (their messages say what is missing); RunBusy (a
+        RuntimeError) when another analysis held the run for the lock's whole wait.
     """
+    from instrument.run.results import run_lock
+    from instrument.run.runfile import check_run_file
+
+    analyses = {"fit": _fit, "reconstruct": _reconstruct, "locate": _locate,
+                "spheres": _spheres}
+    if name not in analyses:
+        raise ValueError(f"unknown analysis {name!r}; known: fit, reconstruct, locate, "
+                         "spheres")
     path = Path(path)
-    t0 = time.time()
-    if name == "fit":
-        return _fit(path, t0)
-    if name == "reconstruct":
-        return _reconstruct(path, t0)
-    if name == "locate":
-        return _locate(path, t0)
-    if name == "spheres":
-        return _spheres(path, t0)
-    raise ValueError(f"unknown analysis {name!r}; known: fit, reconstruct, locate, spheres")
+    check_run_file(path, name)  # first, so a wrong path creates no folder for the lock
+    with run_lock(path):
+        return analyses[name](path, time.time())
 
 
 def _fit(path: Path, t0: float) -> AnalysisOutcome:

@@ -7,16 +7,19 @@ option functions, :func:`instrument.cli.fit.fit_options` and its siblings), and 
 returns an :class:`Analysed` — the run's line of the summary table. Each adapter opens the
 run file itself, by path.
 
-The ``*_arguments`` functions turn the plain options into the pipelines' keyword arguments;
-the single-run commands use them too, so a run analysed in a batch and on its own is
-analysed with the same arguments.
+An adapter calls its pipeline exactly as the single-run command does — the same keyword
+arguments (the ``*_arguments`` functions, which the single-run commands use too), and
+``write=True``: the pipeline writes ``DIR/RUN/<pipeline>/results.h5`` (ADR 0013) and, when
+asked, its report or figures into the same folder. So a run's results file is the same
+whether it was analysed alone or in a batch, with one writer, the pipeline. The raw run
+file is only read. The ``*_record`` functions give the options dict the pipeline records
+in that file (its fingerprint decides whether a run is already done), computed from the
+plain options without running anything.
 
-Each adapter lets its pipeline write the results file, exactly as the single-run command
-does (ADR 0013: ``results.h5`` in ``folder``, normally ``DIR/RUN/<pipeline>/``; the raw
-run file is only read; ``locate`` reads the reconstruction from the light-field results
-file and makes one first when it holds none). One writer per file: a run analysed alone
-and in a batch has the same results file. Reports and figures go to ``folder`` too when
-``report`` is true.
+The ``*_row`` functions turn a pipeline's result into the summary row; :func:`keep_row`
+stores that row next to the results file (:func:`instrument.run.results.write_record`), so
+a later batch that skips the run still has its line of the table. The single-run commands
+keep the row too, which is what lets a batch skip a run analysed by ``scatterlab fit``.
 """
 
 from __future__ import annotations
@@ -25,11 +28,19 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from instrument.pipelines.brdf.reduce import ReductionOptions
+from instrument.run.results import write_record
+from instrument.run.runfile import read_summary
+
+if TYPE_CHECKING:
+    from instrument.pipelines.brdf.pipeline import FitRun
+    from instrument.pipelines.lightfield.results import LocalisationResult, ReconstructionResult
+    from instrument.pipelines.spheres.analyse import SphereAnalysis
+    from instrument.pipelines.spheres.capture import SphereCapture
 
 __all__ = [
     "ANALYSES",
@@ -41,10 +52,19 @@ __all__ = [
     "analyse_reconstruct",
     "analyse_spheres",
     "fit_arguments",
+    "fit_record",
+    "fit_row",
     "get_analysis",
+    "keep_row",
     "locate_arguments",
+    "locate_record",
+    "locate_row",
     "reconstruct_arguments",
+    "reconstruct_record",
+    "reconstruct_row",
     "reduction_defaults",
+    "sphere_record",
+    "spheres_row",
 ]
 
 
@@ -69,22 +89,23 @@ class Analysed:
         The same as named columns (parameters and their σ, located objects, errors).
     flags : list of str
         What a reader must know before trusting the result (notes of the analysis).
-    details : dict
-        The analysis's plain-data results, stored in the results file.
     """
 
     result: str
     values: dict[str, Any]
     flags: list[str] = field(default_factory=list)
-    details: dict[str, Any] = field(default_factory=dict)
 
     def row(self) -> dict[str, Any]:
         return {"result": self.result, "values": dict(self.values), "flags": list(self.flags)}
 
 
-#: The adapter signature: run path, plain options; keywords ``folder`` (results, report and
-#: figures) and ``report`` (draw the report and figures).
+#: The adapter signature: ``(run path, plain options, *, folder, report) → Analysed``;
+#: ``folder`` is where the pipeline writes (None: ``DIR/RUN/<pipeline>/``), ``report``
+#: whether it also draws its report or figures there.
 Adapter = Callable[..., Analysed]
+#: The record signature: ``(run path, plain options) → the options dict the pipeline
+#: records in its results file``.
+Record = Callable[[str | Path, Mapping[str, Any]], dict[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -100,8 +121,12 @@ class Analysis:
     kinds : tuple of str
         The plan kinds it analyses; runs of other kinds are not applicable.
     program : str
-        Recorded in the results file.
+        The single-run command (its pipeline records it in the results file).
     adapter : callable
+        Runs the pipeline, writing its results file; returns the summary row.
+    record : callable
+        The options the pipeline records, to compare with a results file's
+        (:func:`instrument.run.results.already_done`).
     """
 
     name: str
@@ -109,6 +134,7 @@ class Analysis:
     kinds: tuple[str, ...]
     program: str
     adapter: Adapter
+    record: Record
 
 
 def _num(x: Any) -> Any:
@@ -141,19 +167,38 @@ def _param_text(name: str, value: float, err: float, unit: str) -> str:
     return f"{name} = {value:.5g} ± {err:.2g}{u}"
 
 
+def fit_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
+    """What :func:`instrument.pipelines.brdf.pipeline.fit_run` records for these options."""
+    from instrument.pipelines.brdf.pipeline import fit_options
+
+    return fit_options(**fit_arguments(options))
+
+
 def analyse_fit(path: str | Path, options: Mapping[str, Any], *,
-                folder: str | Path, report: bool = True) -> Analysed:
-    """Reduce, fit and select (``scatterlab fit``); results (and the report) in ``folder``.
+                folder: str | Path | None = None, report: bool = True) -> Analysed:
+    """Reduce, fit and select (``scatterlab fit``): ``results.h5`` and, with ``report``,
+    the report go to ``folder`` (default ``DIR/RUN/fit/``).
 
     Raises
     ------
     AnalysisFailed
-        The chosen model's fit did not converge.
+        The chosen model's fit did not converge (the results file is written, as by
+        ``scatterlab fit``).
     """
     from instrument.pipelines.brdf.pipeline import fit_run
 
-    done = fit_run(path, **fit_arguments(options), report_dir=folder, report=report,
-                   write=True)
+    return fit_row(fit_run(path, **fit_arguments(options), report_dir=folder, report=report,
+                           write=True))
+
+
+def fit_row(done: FitRun) -> Analysed:
+    """The summary row of a fit: the chosen model, χ², dof, every parameter and its σ.
+
+    Raises
+    ------
+    AnalysisFailed
+        The chosen model's fit did not converge (``row``: what it found).
+    """
     res = done.result
     fit = res.chosen_fit
     pts = done.reduced.points
@@ -167,8 +212,7 @@ def analyse_fit(path: str | Path, options: Mapping[str, Any], *,
     if bound:
         flags.append(f"{res.chosen}: {', '.join(bound)} at a bound (σ unreliable)")
     text = f"{res.chosen}: " + ", ".join(_param_text(*r) for r in fit.table())
-    out = Analysed(text, values, flags, {"analysis": res.to_dict(),
-                                          "provenance": done.reduced.provenance})
+    out = Analysed(text, values, flags)
     if not fit.converged:
         raise AnalysisFailed(f"the fit of the chosen model {res.chosen} did not converge "
                              f"({fit.message})", out.row())
@@ -193,14 +237,31 @@ def reconstruct_arguments(options: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def analyse_reconstruct(path: str | Path, options: Mapping[str, Any], *,
-                        folder: str | Path, report: bool = True) -> Analysed:
-    """The hidden object's light field at the wall (``scatterlab reconstruct``)."""
-    from instrument.pipelines.lightfield.reconstruct import reconstruct_run
+def reconstruct_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
+    """What :func:`instrument.pipelines.lightfield.reconstruct.reconstruct_run` records
+    for these options."""
+    from instrument.pipelines.lightfield.reconstruct import reconstruct_options
 
-    r = reconstruct_run(path, write=True, out_dir=folder,
-                        figures_dir=folder if report else None,
-                        **reconstruct_arguments(options))
+    return {"reconstruct": reconstruct_options(**reconstruct_arguments(options))}
+
+
+def analyse_reconstruct(path: str | Path, options: Mapping[str, Any], *,
+                        folder: str | Path | None = None, report: bool = True) -> Analysed:
+    """The hidden object's light field at the wall (``scatterlab reconstruct``):
+    ``results.h5`` and, with ``report``, the figures go to ``folder`` (default
+    ``DIR/RUN/lightfield/``)."""
+    from instrument.pipelines.lightfield.reconstruct import reconstruct_run
+    from instrument.run.paths import results_dir
+
+    figures = (Path(folder) if folder is not None else results_dir(path, "lightfield")
+               ) if report else None
+    return reconstruct_row(reconstruct_run(path, write=True, out_dir=folder,
+                                           figures_dir=figures,
+                                           **reconstruct_arguments(options)))
+
+
+def reconstruct_row(r: ReconstructionResult) -> Analysed:
+    """The summary row of a reconstruction: recoverable, highest order, noise."""
     rec = r.reconstruction
     reg = rec.regularization
     noise = rec.diagnostics.noise
@@ -219,9 +280,7 @@ def analyse_reconstruct(path: str | Path, options: Mapping[str, Any], *,
         flags.append(f"no object information recovered: {rec.message}")
     text = (f"{rec.message}; highest recovered angular order {r.p_hat:.3g} on "
             f"{values['wall_points']} wall points")
-    details = {"values": values, "message": rec.message, "notes": list(r.notes),
-               "geometry": r.geometry.as_dict(), "brdf": r.brdf.name or "custom"}
-    return Analysed(text, values, flags, details)
+    return Analysed(text, values, flags)
 
 
 def locate_arguments(options: Mapping[str, Any]) -> dict[str, Any]:
@@ -239,13 +298,44 @@ def locate_arguments(options: Mapping[str, Any]) -> dict[str, Any]:
     return kw
 
 
-def analyse_locate(path: str | Path, options: Mapping[str, Any], *,
-                   folder: str | Path, report: bool = True) -> Analysed:
-    """The hidden objects' positions, brightness and resolution (``scatterlab locate``)."""
-    from instrument.pipelines.lightfield.locate import locate_run
+def locate_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
+    """What :func:`instrument.pipelines.lightfield.locate.locate_run` records for these
+    options: its own, and those of the reconstruction it uses — the one it makes when
+    ``reconstruct`` is given, else the one the run's results file holds, else the
+    default one it would make."""
+    from instrument.pipelines.lightfield.locate import locate_options
+    from instrument.pipelines.lightfield.reconstruct import reconstruct_options
+    from instrument.pipelines.lightfield.results import stored_options
+    from instrument.run.paths import results_path
 
-    r = locate_run(path, write=True, out_dir=folder, figures_dir=folder if report else None,
-                   **locate_arguments(options))
+    kw = locate_arguments(options)
+    own = locate_options(y_range_mm=kw["y_range_mm"], z_range_mm=kw["z_range_mm"],
+                         threshold_rel=kw["threshold_rel"])
+    if options.get("reconstruct") is not None:
+        rec = reconstruct_options(**reconstruct_arguments(options["reconstruct"]))
+    else:
+        rec = (stored_options(results_path(path, "lightfield")).get("reconstruct")
+               or reconstruct_options())
+    return {"reconstruct": rec, "locate": own}
+
+
+def analyse_locate(path: str | Path, options: Mapping[str, Any], *,
+                   folder: str | Path | None = None, report: bool = True) -> Analysed:
+    """The hidden objects' positions, brightness and resolution (``scatterlab locate``):
+    ``results.h5`` and, with ``report``, the figures go to ``folder`` (default
+    ``DIR/RUN/lightfield/``, where the reconstruction is read from)."""
+    from instrument.pipelines.lightfield.locate import locate_run
+    from instrument.run.paths import results_dir
+
+    figures = (Path(folder) if folder is not None else results_dir(path, "lightfield")
+               ) if report else None
+    return locate_row(locate_run(path, write=True, out_dir=folder, figures_dir=figures,
+                                 **locate_arguments(options)))
+
+
+def locate_row(r: LocalisationResult) -> Analysed:
+    """The summary row of a localisation: each object's position, blur, depth quality and
+    brightness."""
     det = r.detection
     values: dict[str, Any] = {"objects": int(det.count), "highest_order": float(r.p_hat)}
     parts, flags = [], []
@@ -265,24 +355,40 @@ def analyse_locate(path: str | Path, options: Mapping[str, Any], *,
     if not r.recoverable:
         flags.append(r.message)
     text = f"{det.count} object(s)" + (": " + "; ".join(parts) if parts else f" ({r.message})")
-    details = {"values": values, "message": r.message,
-               "positions_mm": np.asarray(det.positions_mm).tolist(),
-               "depth_interval_mm": np.asarray(det.depth_interval_mm).tolist(),
-               "quality": list(det.quality)}
-    return Analysed(text, values, flags, details)
+    return Analysed(text, values, flags)
 
 
 # ------------------------------------------------------------------------------ spheres
-def analyse_spheres(path: str | Path, options: Mapping[str, Any], *,
-                    folder: str | Path, report: bool = True) -> Analysed:
-    """Spherical-harmonic analysis, relighting and consistency (``scatterlab spheres``);
-    ``options`` are :func:`instrument.pipelines.spheres.analyse.analyse_capture`'s."""
-    from instrument.pipelines.spheres.pipeline import analyse_run
-    from instrument.pipelines.spheres.results import summary
+#: The sphere analysis's figure in its folder (as ``scatterlab spheres`` names it).
+SPHERE_FIGURE = "relighting.png"
 
-    figure = Path(folder) / "relighting.png" if report else None
-    capture, res = analyse_run(path, write=True, out_dir=folder, figure=figure,
+
+def sphere_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
+    """What :func:`instrument.pipelines.spheres.pipeline.analyse_run` records for these
+    options."""
+    from instrument.pipelines.spheres.pipeline import sphere_options
+
+    return sphere_options(**dict(options))
+
+
+def analyse_spheres(path: str | Path, options: Mapping[str, Any], *,
+                    folder: str | Path | None = None, report: bool = True) -> Analysed:
+    """Spherical-harmonic analysis, relighting and consistency (``scatterlab spheres``);
+    ``options`` are :func:`instrument.pipelines.spheres.analyse.analyse_capture`'s.
+    ``results.h5`` and, with ``report``, ``relighting.png`` go to ``folder`` (default
+    ``DIR/RUN/spheres/``)."""
+    from instrument.pipelines.spheres.pipeline import analyse_run
+    from instrument.run.paths import results_dir
+
+    where = Path(folder) if folder is not None else results_dir(path, "spheres")
+    capture, res = analyse_run(path, write=True, out_dir=folder,
+                               figure=where / SPHERE_FIGURE if report else None,
                                **dict(options))
+    return spheres_row(capture, res)
+
+
+def spheres_row(capture: SphereCapture, res: SphereAnalysis) -> Analysed:
+    """The summary row of a sphere analysis: relighting error and the consistency check."""
     rep = res.consistency
     values = {
         "relighting_error": float(res.relight_l1),
@@ -300,20 +406,47 @@ def analyse_spheres(path: str | Path, options: Mapping[str, Any], *,
                      f"{rep.threshold:.3g} at α = {rep.false_alarm:g})")
     text = (f"relighting error {100 * res.relight_l1:.2f} % (L1); {verdict} "
             f"(T = {rep.statistic:.3g}, threshold {rep.threshold:.3g})")
-    return Analysed(text, values, flags, summary(capture, res))
+    return Analysed(text, values, flags)
+
+
+# ------------------------------------------------------------------------------ the row kept
+def keep_row(run_path: str | Path, analysis: str, make: Callable[[], Analysed], *,
+             report: bool, folder: str | Path | None = None) -> dict[str, Any]:
+    """Make the run's summary row (``make``: one of the ``*_row`` functions on the result
+    the pipeline just wrote) and keep it next to the results file
+    (:func:`instrument.run.results.write_record`); returns what was kept.
+
+    Call it holding the run's lock, right after the pipeline wrote ``results.h5``. The
+    record holds the analysis, ``status`` (``"analysed"``, or ``"failed"`` with ``cause``
+    when the answer is not usable), the row (``result``, ``values``, ``flags``, with a flag
+    for a run that did not finish) and whether the report was made.
+    """
+    try:
+        row, status, cause = make().row(), "analysed", ""
+    except AnalysisFailed as err:
+        row, status, cause = dict(err.row or {}), "failed", f"not usable: {err}"
+    flags = list(row.get("flags", ()))
+    run_status = read_summary(run_path).status
+    if run_status != "finished":
+        flags.append(f"run status {run_status!r}: not every planned point was measured")
+    kept = {"analysis": analysis, "status": status, "cause": cause,
+            "result": row.get("result", ""), "values": dict(row.get("values") or {}),
+            "flags": flags, "report": bool(report)}
+    write_record(run_path, get_analysis(analysis).pipeline, kept, folder=folder)
+    return kept
 
 
 # ------------------------------------------------------------------------------ registry
 ANALYSES: dict[str, Analysis] = {
     a.name: a for a in (
         Analysis("fit", "fit", ("brdf_in_plane", "brdf_hemisphere", "reference"),
-                 "scatterlab fit", analyse_fit),
+                 "scatterlab fit", analyse_fit, fit_record),
         Analysis("reconstruct", "lightfield", ("lightfield",), "scatterlab reconstruct",
-                 analyse_reconstruct),
+                 analyse_reconstruct, reconstruct_record),
         Analysis("locate", "lightfield", ("lightfield",), "scatterlab locate",
-                 analyse_locate),
+                 analyse_locate, locate_record),
         Analysis("spheres", "spheres", ("sphere_capture",), "scatterlab spheres",
-                 analyse_spheres),
+                 analyse_spheres, sphere_record),
     )
 }
 

@@ -7,59 +7,49 @@ returns plain data. In order, it
 1. reads what the run is (id, sample, plan kind, status) read-only; a file that is not a
    readable run, or a run still being written, is a failed task;
 2. skips a run of a plan kind the analysis does not take ("not applicable");
-3. takes the run's lock (``DIR/RUN/.lock``, an exclusive ``flock``), so no two analyses of
-   one run — from this batch, another batch or a retry — run at once; the kernel drops it
-   when the process dies, so a killed worker leaves no stale lock;
-4. skips the run if its batch summary (``DIR/RUN/<pipeline>/batch_summary.json``) says it
-   was analysed with the same options and the results file is there, unless ``force``;
-5. runs the analysis (:mod:`.analyses`): the pipeline writes the results file itself,
-   exactly as the single-run command does (ADR 0013, ADR 0070 "One writer per file"),
-   atomically (:func:`instrument.run.results.write_results_file`: temporary file, fsync,
-   rename); any exception becomes a failed outcome naming its cause, so one bad run never
-   stops the batch;
-6. writes the run's summary row next to the results file, atomically too: a task killed at
-   any moment leaves the previous files or the new ones, never a torn one (and a results
-   file without its summary row is analysed again).
+3. takes the run's lock (:func:`instrument.run.results.run_lock`, an exclusive ``flock``
+   on ``DIR/RUN/.lock``, the lock the single-run commands take too), so no two analyses
+   of one run — from this batch, another batch, a retry or ``scatterlab fit`` — write at
+   once; the kernel drops it when the process dies, so a killed worker leaves no stale
+   lock, and the task clears the temporary files a killed writer left;
+4. skips the run if its results file says it was analysed with the same options
+   (:func:`instrument.run.results.already_done` with exactly the options the pipeline
+   records, so a run analysed by ``scatterlab fit`` counts too) and the row kept next to
+   it (:func:`instrument.batch.analyses.keep_row`) says the answer was usable and the
+   report was made if one is asked for; unless ``force``;
+5. runs the analysis (:mod:`.analyses`): the pipeline writes ``DIR/RUN/<pipeline>/
+   results.h5`` itself, atomically (temporary file, fsync, rename), and the report or
+   figures when asked; then the task keeps the run's summary row next to it. Any
+   exception becomes a failed outcome naming its cause, so one bad run never stops the
+   batch.
 """
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
-import json
 import os
 import socket
 import time
 import traceback
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from instrument.batch.analyses import AnalysisFailed, get_analysis
+from instrument.batch.analyses import AnalysisFailed, get_analysis, keep_row
 from instrument.run.results import (
-    RESULTS_NAME,
-    options_fingerprint,
+    LOCK_WAIT_S,
+    already_done,
+    read_record,
+    remove_stale_temporaries,
     results_dir,
-    results_path,
+    run_lock,
 )
 from instrument.run.runfile import read_summary
 
-__all__ = ["LOCK_NAME", "STATUSES", "SUMMARY_NAME", "Outcome", "RunBusy", "record_options",
-           "run_lock", "run_serial", "run_task"]
+__all__ = ["STATUSES", "Outcome", "run_serial", "run_task"]
 
 #: What became of a task.
 STATUSES = ("analysed", "skipped", "not applicable", "failed")
-#: The lock file in the run's folder (``DIR/RUN/.lock``).
-LOCK_NAME = ".lock"
-#: The batch's summary row of a run, next to the pipeline's results file.
-SUMMARY_NAME = "batch_summary.json"
-#: Seconds a task waits for another analysis of the same run to finish.
-LOCK_WAIT_S = 600.0
-
-
-class RunBusy(RuntimeError):
-    """Another analysis held the run's lock for longer than the task would wait."""
 
 
 @dataclass(frozen=True)
@@ -113,45 +103,6 @@ class Outcome:
         return self.status != "failed"
 
 
-def record_options(analysis: str, options: Mapping[str, Any], report: bool) -> dict[str, Any]:
-    """What the results file's fingerprint covers: the analysis, its options, and whether
-    the report and figures were made."""
-    return {"analysis": analysis, "options": dict(options), "report": bool(report)}
-
-
-@contextlib.contextmanager
-def run_lock(run_path: str | Path, *, wait_s: float = LOCK_WAIT_S,
-             poll_s: float = 0.2) -> Iterator[Path]:
-    """Hold the run's exclusive lock (``DIR/RUN/.lock``) for the block.
-
-    Raises
-    ------
-    RunBusy
-        Another process held it for ``wait_s``.
-    """
-    folder = results_dir(run_path, "fit").parent
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        deadline = time.monotonic() + wait_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() >= deadline:
-                    raise RunBusy(f"another analysis of {run_path} held its lock {path} for "
-                                  f"{wait_s:g} s") from None
-                time.sleep(poll_s)
-        try:
-            yield path
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-    finally:
-        os.close(fd)
-
-
 def _worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
@@ -178,47 +129,18 @@ def _detail(err: BaseException, limit: int = 4000) -> str:
     return text[-limit:]
 
 
-def _remove_stale_temporaries(folder: Path) -> None:
-    """Delete temporary files left by a task killed while writing (called with the run's
-    lock held, so no live writer owns one)."""
-    if folder.is_dir():
-        for pattern in (f".{RESULTS_NAME}.*.tmp", f".{SUMMARY_NAME}.*.tmp"):
-            for tmp in folder.glob(pattern):
-                with contextlib.suppress(OSError):
-                    tmp.unlink()
-
-
-def _write_summary(folder: Path, run_id: str, record: Mapping[str, Any],
-                   row: Mapping[str, Any]) -> None:
-    """The summary row with the run id and the options' fingerprint, written atomically
-    (temporary file, fsync, rename)."""
-    final = folder / SUMMARY_NAME
-    tmp = folder / f".{SUMMARY_NAME}.{os.getpid()}.tmp"
-    text = json.dumps({"run_id": run_id, "options_sha256": options_fingerprint(record),
-                       "options": record, "row": row}, default=str, allow_nan=True)
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, final)
-
-
-def _previous(run_path: str | Path, pipeline: str, run_id: str,
-              record: Mapping[str, Any]) -> dict[str, Any] | None:
-    """The summary row an earlier task stored for the same run and options, when its
-    results file is still there (None otherwise: analyse again)."""
-    folder = results_dir(run_path, pipeline)
-    if not results_path(run_path, pipeline).is_file():
+def _done_before(spec_name: str, run: str, pipeline: str, run_id: str,
+                 record: Mapping[str, Any], report: bool) -> dict[str, Any] | None:
+    """The row kept by an earlier analysis that makes this one unnecessary, or None: the
+    results file was made with the same options, and its row says the answer was usable
+    and the report was made if one is wanted now."""
+    if not already_done(run, pipeline, run_id=run_id, options=record):
         return None
-    try:
-        stored = json.loads((folder / SUMMARY_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    row = read_record(run, pipeline)
+    if (row is None or row.get("analysis") != spec_name or row.get("status") != "analysed"
+            or (report and not row.get("report"))):
         return None
-    if (not isinstance(stored, dict) or stored.get("run_id") != run_id
-            or stored.get("options_sha256") != options_fingerprint(record)):
-        return None
-    row = stored.get("row")
-    return row if isinstance(row, dict) else None
+    return row
 
 
 def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
@@ -250,24 +172,26 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
             return outcome("failed", cause="the run is still being written (status "
                            "'running'); analyse it when it ends, or resume it if its "
                            "process was killed")
-        record = record_options(analysis, options, report)
         with run_lock(run, wait_s=lock_wait_s):
             folder = results_dir(run, spec.pipeline)
-            _remove_stale_temporaries(folder)
-            prev = None if force else _previous(run, spec.pipeline, s.run_id, record)
-            if prev is not None:
-                return outcome("skipped", result=prev.get("result", ""),
-                               values=prev.get("values"), flags=tuple(prev.get("flags", ())),
-                               cause="already analysed with the same options (--force "
-                                     "analyses it again)")
-            folder.mkdir(parents=True, exist_ok=True)
-            done = spec.adapter(run, options, folder=folder, report=report)
-            flags = list(done.flags)
-            if s.status != "finished":
-                flags.append(f"run status {s.status!r}: not every planned point was measured")
-            row = {**done.row(), "flags": flags, **ident}
-            _write_summary(folder, s.run_id, record, row)
-        return outcome("analysed", result=done.result, values=done.values, flags=tuple(flags))
+            remove_stale_temporaries(folder)
+            if not force:
+                prev = _done_before(analysis, run, spec.pipeline, s.run_id,
+                                    spec.record(run, options), report)
+                if prev is not None:
+                    return outcome("skipped", result=prev.get("result", ""),
+                                   values=prev.get("values"),
+                                   flags=tuple(prev.get("flags", ())),
+                                   cause="already analysed with the same options (--force "
+                                         "analyses it again)")
+            kept = keep_row(run, analysis,
+                            lambda: spec.adapter(run, options, folder=folder, report=report),
+                            report=report)
+        if kept["status"] != "analysed":
+            return outcome("failed", result=kept["result"], values=kept["values"],
+                           flags=tuple(kept["flags"]), cause=kept["cause"])
+        return outcome("analysed", result=kept["result"], values=kept["values"],
+                       flags=tuple(kept["flags"]))
     except Exception as err:  # one run's problem is reported, the batch goes on
         row = err.row if isinstance(err, AnalysisFailed) and err.row else {}
         return outcome("failed", result=row.get("result", ""), values=row.get("values"),

@@ -135,9 +135,11 @@ def fit_options(args: argparse.Namespace) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from instrument.batch.analyses import fit_arguments
+    from instrument.batch.analyses import fit_arguments, fit_row, keep_row
+    from instrument.cli._writing import writing_outputs
     from instrument.pipelines.brdf.pipeline import fit_run
     from instrument.pipelines.brdf.report import unit_text
+    from instrument.run.results import RunBusy
 
     spectral = _spectral_wanted(args)
     if spectral is None:
@@ -154,12 +156,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {err}")
         return 2
     try:
-        done = fit_run(args.run, **fit_arguments(options), report_dir=args.out,
-                       write=not args.no_write, into_run=args.into_run)
+        with writing_outputs(args.run, "fit", "fit", args.out):
+            done = fit_run(args.run, **fit_arguments(options), report_dir=args.out,
+                           write=not args.no_write, into_run=args.into_run)
+            if not args.no_write:  # the summary row, as `scatterlab batch fit` keeps it
+                keep_row(args.run, "fit", lambda: fit_row(done), report=True,
+                         folder=args.out)
     except KeyError as err:
         print(f"error: {err.args[0] if err.args else err}")
         return 2
-    except ValueError as err:
+    except (ValueError, RunBusy) as err:
         print(f"error: {err}")
         return 2
     except OSError as err:  # a companion file (table, calibration) that cannot be read
@@ -244,10 +250,14 @@ def _run_spectral(args: argparse.Namespace) -> int:
         reduction=ReductionOptions(camera_calibration=args.camera_calibration,
                                    flat_run=args.flat, beam_radius_mm=args.beam_radius_mm,
                                    receiver_geometry=not args.point_receiver))
+    from instrument.cli._writing import writing_outputs
+    from instrument.run.results import RunBusy
+
     try:
-        done = fit_spectral(args.run, opts, report_dir=args.out, write=not args.no_write,
-                            criterion=args.criterion)
-    except (KeyError, ValueError) as err:
+        with writing_outputs(args.run, "fit", "fit", args.out):
+            done = fit_spectral(args.run, opts, report_dir=args.out, write=not args.no_write,
+                                criterion=args.criterion)
+    except (KeyError, ValueError, RunBusy) as err:
         print(f"error: {err.args[0] if err.args else err}")
         return 2
     names = done.parameter_names()

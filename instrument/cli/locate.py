@@ -73,14 +73,19 @@ def locate_options(args: argparse.Namespace) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from instrument.batch.analyses import locate_arguments
+    from instrument.batch.analyses import keep_row, locate_arguments, locate_row
+    from instrument.cli._writing import writing_outputs
     from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
     from instrument.pipelines.lightfield.locate import locate_run
     from instrument.run.paths import RESULTS_NAME
 
     try:
-        r = locate_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
-                       into_run=args.into_run, **locate_arguments(locate_options(args)))
+        options = locate_options(args)
+        with writing_outputs(args.run, "locate", "lightfield", args.out):
+            r = locate_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
+                           into_run=args.into_run, **locate_arguments(options))
+            keep_row(args.run, "locate", lambda: locate_row(r),
+                     report=not args.no_figures, folder=args.out)
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2

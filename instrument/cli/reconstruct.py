@@ -144,15 +144,19 @@ def reconstruction_summary(r: ReconstructionResult, *, brdf_given: bool) -> list
 
 
 def run(args: argparse.Namespace) -> int:
-    from instrument.batch.analyses import reconstruct_arguments
+    from instrument.batch.analyses import keep_row, reconstruct_arguments, reconstruct_row
+    from instrument.cli._writing import writing_outputs
     from instrument.pipelines.lightfield.figures import RADIANCE_UNIT
     from instrument.pipelines.lightfield.reconstruct import reconstruct_run
     from instrument.run.paths import RESULTS_NAME
 
     try:
-        r = reconstruct_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
-                            into_run=args.into_run,
-                            **reconstruct_arguments(reconstruction_options(args)))
+        options = reconstruction_options(args)
+        with writing_outputs(args.run, "reconstruct", "lightfield", args.out):
+            r = reconstruct_run(args.run, figures_dir=figures_dir(args), out_dir=args.out,
+                                into_run=args.into_run, **reconstruct_arguments(options))
+            keep_row(args.run, "reconstruct", lambda: reconstruct_row(r),
+                     report=not args.no_figures, folder=args.out)
     except (ValueError, OSError, RuntimeError) as err:
         print(f"error: {err}")
         return 2

@@ -24,7 +24,6 @@ if TYPE_CHECKING:
     from instrument.pipelines.spheres.capture import SphereCapture
 
 HELP = "relight and check a sphere capture (SH analysis)"
-FIGURE_NAME = "relighting.png"
 
 
 def unit_words(units: str) -> str:
@@ -128,9 +127,12 @@ def sphere_options(args: argparse.Namespace) -> dict:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from instrument.batch.analyses import SPHERE_FIGURE, keep_row, spheres_row
+    from instrument.cli._writing import writing_outputs
     from instrument.pipelines.spheres.analyse import CONSISTENCY_LIMIT
     from instrument.pipelines.spheres.pipeline import analyse_run
     from instrument.run.paths import RESULTS_NAME, results_dir
+    from instrument.run.results import RunBusy
 
     try:
         options = sphere_options(args)
@@ -138,11 +140,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {err}")
         return 2
     folder = Path(args.out) if args.out else results_dir(args.run, "spheres")
-    fig = None if args.no_figures else folder / FIGURE_NAME
+    fig = None if args.no_figures else folder / SPHERE_FIGURE
     try:
-        capture, res = analyse_run(args.run, write=not args.no_write, figure=fig,
-                                   into_run=args.into_run, out_dir=args.out, **options)
-    except (ValueError, OSError, KeyError) as err:
+        with writing_outputs(args.run, "spheres", "spheres", args.out):
+            capture, res = analyse_run(args.run, write=not args.no_write, figure=fig,
+                                       into_run=args.into_run, out_dir=args.out, **options)
+            if not args.no_write:  # the batch summary row, as `scatterlab batch` keeps
+                keep_row(args.run, "spheres", lambda: spheres_row(capture, res),
+                         report=fig is not None, folder=args.out)
+    except (ValueError, OSError, KeyError, RunBusy) as err:
         print(f"error: {err}")
         return 2
     r, s = capture.radiance.shape[:2]

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DEFAULT_RUNS_DIR", "PIPELINES", "RESULTS_NAME", "results_dir", "results_path"]
+__all__ = ["DEFAULT_RUNS_DIR", "PIPELINES", "RESULTS_NAME", "results_dir", "results_path",
+           "run_folder"]
 
 #: Where runs (and their catalog) go unless ``--out`` says otherwise.
 DEFAULT_RUNS_DIR = Path("runs")
@@ -19,12 +20,18 @@ PIPELINES = ("fit", "lightfield", "spheres")
 RESULTS_NAME = "results.h5"
 
 
+def run_folder(run_path: str | Path) -> Path:
+    """``DIR/RUN/`` for the run file ``DIR/RUN.h5``: its analyses' folders and its lock
+    (not created here)."""
+    p = Path(run_path)
+    return p.parent / p.stem
+
+
 def results_dir(run_path: str | Path, pipeline: str) -> Path:
     """``DIR/RUN/<pipeline>/`` for the run file ``DIR/RUN.h5`` (not created here)."""
     if pipeline not in PIPELINES:
         raise ValueError(f"unknown pipeline {pipeline!r}; one of {', '.join(PIPELINES)}")
-    p = Path(run_path)
-    return p.parent / p.stem / pipeline
+    return run_folder(run_path) / pipeline
 
 
 def results_path(run_path: str | Path, pipeline: str, folder: str | Path | None = None

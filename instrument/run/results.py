@@ -9,6 +9,14 @@ rename), so a killed analysis leaves the previous results or none; :func:`alread
 tells whether a run was analysed with the same options. The raw run file is written only
 when the user asks (:func:`open_for_results`).
 
+One writer at a time: every analysis that writes a run's outputs holds the run's lock
+(:func:`run_lock`, an exclusive ``flock`` on ``DIR/RUN/.lock``) while it analyses and
+writes, whether it is a single-run command or a batch task on a cluster; under it,
+:func:`remove_stale_temporaries` clears what a killed writer left. Next to ``results.h5``
+an analysis may keep a small JSON record (:func:`write_record`, atomic like the results
+file; the batch summary row of the run, ADR 0070), trusted only while it names the run id
+and options fingerprint of the results file beside it (:func:`read_record`).
+
 The group helpers are the one way the pipelines build their groups: a group is replaced
 whole (writing again supersedes an earlier analysis), text goes in as variable-length
 UTF-8 strings, and plain-data results as JSON that any HDF5 reader can parse.
@@ -17,6 +25,7 @@ UTF-8 strings, and plain-data results as JSON that any HDF5 reader can parse.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import json
 import os
@@ -28,13 +37,17 @@ from typing import Any
 import h5py
 import numpy as np
 
-from instrument.run.paths import PIPELINES, RESULTS_NAME, results_dir, results_path
+from instrument.run.paths import PIPELINES, RESULTS_NAME, results_dir, results_path, run_folder
 from instrument.run.runfile import as_text
 from instrument.version import software_version
 
 __all__ = [
+    "LOCK_NAME",
+    "LOCK_WAIT_S",
     "PIPELINES",
+    "RECORD_NAME",
     "RESULTS_NAME",
+    "RunBusy",
     "RunStillRunning",
     "already_done",
     "analysis_group",
@@ -43,15 +56,31 @@ __all__ = [
     "options_fingerprint",
     "put",
     "put_json",
+    "read_record",
     "read_results_attrs",
+    "remove_stale_temporaries",
     "replace_group",
     "results_dir",
     "results_path",
+    "run_lock",
+    "write_record",
     "write_results_file",
 ]
 
+#: The lock file in the run's folder (``DIR/RUN/``), or in the folder an analysis was told
+#: to write into.
+LOCK_NAME = ".lock"
+#: Seconds an analysis waits for another analysis of the same run to finish.
+LOCK_WAIT_S = 600.0
+#: The analysis record kept next to ``results.h5`` (:func:`write_record`).
+RECORD_NAME = "batch_summary.json"
+
 class RunStillRunning(RuntimeError):
     """The run file is still being written by a run; analyse it when the run ends."""
+
+
+class RunBusy(RuntimeError):
+    """Another analysis held the run's lock for longer than this one would wait."""
 
 
 def replace_group(parent: h5py.Group, name: str, nx_class: str) -> h5py.Group:
@@ -183,3 +212,109 @@ def already_done(run_path: str | Path, pipeline: str, *, run_id: str,
     attrs = read_results_attrs(run_path, pipeline, folder)
     return (attrs is not None and attrs.get("run_id") == run_id
             and attrs.get("options_sha256") == options_fingerprint(options))
+
+
+# ------------------------------------------------------------------------------ one writer
+@contextlib.contextmanager
+def run_lock(run_path: str | Path, *, folder: str | Path | None = None,
+             wait_s: float = LOCK_WAIT_S, poll_s: float = 0.2) -> Iterator[Path]:
+    """Hold the run's exclusive lock for the block: ``DIR/RUN/.lock`` for the run file
+    ``DIR/RUN.h5``, or ``.lock`` in ``folder`` (an analysis told to write elsewhere, e.g. a
+    read-only run folder, locks what it writes).
+
+    It is an ``flock`` on a descriptor of its own: it excludes other processes and other
+    threads of this one (and a nested call in the same thread would wait for itself, so
+    the pipelines do not take it; the commands and batch tasks that call them do). The
+    kernel drops it when the holder's process dies, so a killed analysis leaves no stale
+    lock.
+
+    Raises
+    ------
+    RunBusy
+        Another analysis held it for ``wait_s``.
+    """
+    where = Path(folder) if folder is not None else run_folder(run_path)
+    where.mkdir(parents=True, exist_ok=True)
+    path = where / LOCK_NAME
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    raise RunBusy(f"another analysis of {run_path} held its lock {path} for "
+                                  f"{wait_s:g} s; run this one again when it has ended"
+                                  ) from None
+                time.sleep(poll_s)
+        try:
+            yield path
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+def remove_stale_temporaries(folder: str | Path) -> None:
+    """Delete the temporary files a writer killed mid-write left in ``folder`` (results
+    files and records). Call it holding the run's lock, so no live writer owns one."""
+    folder = Path(folder)
+    if folder.is_dir():
+        for name in (RESULTS_NAME, RECORD_NAME):
+            for tmp in folder.glob(f".{name}.*.tmp"):
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+
+
+# ------------------------------------------------------------------------------ the record
+def write_record(run_path: str | Path, pipeline: str, record: Mapping[str, Any], *,
+                 folder: str | Path | None = None) -> Path:
+    """Keep ``record`` (plain data) as JSON next to the pipeline's ``results.h5``, tied to
+    it: the file also holds the results file's ``run_id`` and ``options_sha256``, so
+    :func:`read_record` returns it only while that results file stands. Written like the
+    results file (temporary name, fsync, rename). Returns its path.
+
+    Raises
+    ------
+    FileNotFoundError
+        There is no results file to tie it to.
+    """
+    attrs = read_results_attrs(run_path, pipeline, folder)
+    final = results_path(run_path, pipeline, folder).with_name(RECORD_NAME)
+    if attrs is None:
+        raise FileNotFoundError(f"no results file {final.with_name(RESULTS_NAME)} to keep a "
+                                "record of")
+    body = {**dict(record), "run_id": attrs.get("run_id"),
+            "options_sha256": attrs.get("options_sha256")}
+    tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(body, fh, default=jsonable, sort_keys=True)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, final)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+    return final
+
+
+def read_record(run_path: str | Path, pipeline: str,
+                folder: str | Path | None = None) -> dict[str, Any] | None:
+    """The record kept next to the pipeline's results file, or ``None`` when there is none
+    or it belongs to another results file than the one there now (another run id or other
+    options: written before the analysis that replaced it, or never completed)."""
+    path = results_path(run_path, pipeline, folder).with_name(RECORD_NAME)
+    attrs = read_results_attrs(run_path, pipeline, folder)
+    if attrs is None or not path.is_file():
+        return None
+    try:
+        body = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(body, dict) or (body.get("run_id"), body.get("options_sha256")) != (
+            attrs.get("run_id"), attrs.get("options_sha256")):
+        return None
+    return body

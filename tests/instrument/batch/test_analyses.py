@@ -60,7 +60,7 @@ def test_batch_reconstruct_and_locate_give_the_single_run_answers(lightfield_run
     assert float(row["noise_per_sample"]) == ref.reconstruction.diagnostics.noise.sigma_per_sample
     figures = results_dir(run, "lightfield")
     assert (figures / "results.h5").is_file() and list(figures.glob("*.png"))
-    # locate, reconstructing with the default options (the run holds no reconstruction)
+    # locate, from the reconstruction the results file holds (the one just made)
     assert main(["batch", "locate", str(run), "--workers", "0", "--no-report",
                  "--summary-dir", str(tmp_path)]) == 0
     (row,) = _rows(tmp_path, "locate")
@@ -79,6 +79,15 @@ def test_batch_reconstruct_and_locate_give_the_single_run_answers(lightfield_run
     assert main(["batch", "reconstruct", str(run), "--n-theta", "96", "--workers", "0",
                  "--summary-dir", str(tmp_path / "again")]) == 0
     assert "1 analysed" in capsys.readouterr().out
+    # a localisation by the single-run command counts as done for the batch, and the
+    # batch answers from the row the command kept
+    assert main(["locate", str(run), "--no-figures"]) == 0
+    capsys.readouterr()
+    assert main(["batch", "locate", str(run), "--workers", "0", "--no-report",
+                 "--summary-dir", str(tmp_path / "third")]) == 0
+    assert "1 skipped" in capsys.readouterr().out
+    (again,) = _rows(tmp_path / "third", "locate")
+    assert again["status"] == "skipped" and again["object0_y_mm"] == row["object0_y_mm"]
 
 
 @pytest.mark.slow  # a sphere capture through the engine: about 10 s

@@ -10,6 +10,7 @@ import shutil
 import subprocess
 import sys
 import threading
+import time
 
 import h5py
 import numpy as np
@@ -22,24 +23,21 @@ from instrument.batch.analyses import (
     AnalysisFailed,
     analyse_fit,
     fit_arguments,
+    fit_record,
 )
 from instrument.batch.summary import summary_columns, write_csv, write_html
-from instrument.batch.task import (
-    SUMMARY_NAME,
-    Outcome,
-    record_options,
-    run_lock,
-    run_serial,
-    run_task,
-)
+from instrument.batch.task import Outcome, run_serial, run_task
 from instrument.cli import main
 from instrument.cli.fit import fit_options
 from instrument.pipelines.brdf.pipeline import fit_options as pipeline_fit_options
 from instrument.pipelines.brdf.pipeline import fit_run
 from instrument.run.results import (
+    already_done,
     options_fingerprint,
+    read_record,
     read_results_attrs,
     results_path,
+    run_lock,
 )
 from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run, parse_cli
 
@@ -85,11 +83,13 @@ def test_a_task_analyses_a_run_as_the_single_run_command_does(runs):
         details = json.loads(f["entry/analysis/results_json"][()])
         assert {"reduced", "chosen"} <= set(f["entry/analysis"])
     assert details["selection"]["chosen"] == "lambert+ggx"
-    # the batch's summary row next to it, with the batch's options
-    stored = json.loads((results_path(runs / "run-00.h5", "fit").parent
-                         / SUMMARY_NAME).read_text())
-    assert stored["row"]["values"] == dict(o.values) and stored["run_id"] == "run-00"
-    assert stored["options"] == record_options("fit", opts, False)
+    assert fit_record(runs / "run-00.h5", opts) == pipeline_fit_options(**fit_arguments(opts))
+    # the summary row kept next to it, tied to that results file
+    stored = read_record(runs / "run-00.h5", "fit")
+    assert stored["values"] == dict(o.values) and stored["run_id"] == "run-00"
+    assert stored["options_sha256"] == attrs["options_sha256"]
+    assert (stored["analysis"], stored["status"], stored["report"]) == ("fit", "analysed",
+                                                                        False)
     with h5py.File(runs / "run-00.h5", "r") as f:
         assert "analysis" not in f["entry"]
 
@@ -167,18 +167,27 @@ def test_a_run_busy_with_another_analysis_is_not_analysed_twice_at_once(runs):
 
 
 def test_a_fit_that_does_not_converge_fails_with_what_it_found(runs, monkeypatch):
-    def not_converged(path, options, *, folder, report=True):
+    calls = []
+
+    def not_converged(path, options, *, folder=None, report=True):
+        calls.append(path)
         row = analyse_fit(path, options, folder=folder, report=report)
         raise AnalysisFailed("the fit of the chosen model lambert+ggx did not converge "
                              "(maximum evaluations)", row.row())
 
     monkeypatch.setitem(ANALYSES, "fit", Analysis("fit", "fit", ("brdf_in_plane",),
-                                                  "scatterlab fit", not_converged))
-    o = run_task("fit", runs / "run-00.h5", _options("--no-cv"), report=False)
+                                                  "scatterlab fit", not_converged,
+                                                  fit_record))
+    opts = _options("--no-cv")
+    o = run_task("fit", runs / "run-00.h5", opts, report=False)
     assert o.status == "failed" and o.cause.startswith("not usable: the fit of the chosen")
     assert o.values["model"] == "lambert+ggx"  # what it found is kept for the table
-    # a failed analysis is not a finished one: no summary row, so the rerun tries again
-    assert not (results_path(runs / "run-00.h5", "fit").parent / SUMMARY_NAME).exists()
+    # the pipeline wrote its results file (as `scatterlab fit` does); the row kept beside
+    # it says the answer is not usable, so it is not a finished analysis: the rerun tries
+    # again
+    assert read_record(runs / "run-00.h5", "fit")["status"] == "failed"
+    again = run_task("fit", runs / "run-00.h5", opts, report=False)
+    assert again.status == "failed" and len(calls) == 2
 
 
 def test_summary_csv_reads_back_value_for_value_and_html_names_every_run(tmp_path):
@@ -218,10 +227,8 @@ def test_cli_batch_fit_here_then_again(runs, tmp_path, capsys):
     assert rows["run-01"]["ggx.alpha"] == ""  # a column of the other runs' model
     for k, v in direct.values.items():
         assert rows["run-01"][k] == (repr(v) if isinstance(v, float) else str(v)), k
-    stored = json.loads((results_path(runs / "run-00.h5", "fit").parent
-                         / SUMMARY_NAME).read_text())
-    assert stored["options_sha256"] == options_fingerprint(
-        record_options("fit", _options("--no-cv"), False))
+    assert already_done(runs / "run-00.h5", "fit", run_id="run-00",
+                        options=fit_record(runs / "run-00.h5", _options("--no-cv")))
     shutil.rmtree(tmp_path / "s")
     assert main(argv) == 0
     assert "3 skipped" in capsys.readouterr().out
@@ -288,3 +295,63 @@ def test_an_aborted_run_is_analysed_and_flagged_also_when_skipped(runs):
     assert (first.status, again.status) == ("analysed", "skipped")
     assert "run status 'aborted'" in first.flags[-1]
     assert again.flags == first.flags
+
+
+def _layout(path) -> dict[str, tuple]:
+    """Every group and dataset of an HDF5 file, with each dataset's shape and dtype kind."""
+    out: dict[str, tuple] = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: out.__setitem__(
+            name, (obj.shape, obj.dtype.kind) if isinstance(obj, h5py.Dataset) else ()))
+    return out
+
+
+def test_a_run_fitted_alone_is_skipped_by_the_batch_and_both_write_the_same_file(runs,
+                                                                                tmp_path,
+                                                                                capsys):
+    run = runs / "run-00.h5"
+    assert main(["fit", str(run), "--no-cv"]) == 0
+    single = results_path(run, "fit")
+    alone = _layout(single)
+    stamp = single.stat().st_mtime_ns
+    capsys.readouterr()
+    # the same options through the batch: already done, answered from the row kept beside
+    argv = ["batch", "fit", str(run), "--no-cv", "--workers", "0", "--summary-dir",
+            str(tmp_path / "s")]
+    assert main(argv) == 0
+    assert "1 skipped" in capsys.readouterr().out
+    assert single.stat().st_mtime_ns == stamp  # not written again
+    skipped = run_task("fit", run, _options("--no-cv"))
+    assert skipped.status == "skipped" and skipped.values["model"] == "lambert+ggx"
+    # forced through the batch: the same results file, group for group, dataset for
+    # dataset, with the same options recorded (so `scatterlab fit` counts it as done too)
+    forced = run_task("fit", run, _options("--no-cv"), force=True)
+    assert forced.status == "analysed" and dict(forced.values) == dict(skipped.values)
+    assert single.stat().st_mtime_ns != stamp
+    assert _layout(single) == alone and "entry/analysis/chosen/params" in alone
+    assert already_done(run, "fit", run_id="run-00",
+                        options=pipeline_fit_options(models=_options("--no-cv")["models"],
+                                                     run_cv=False))
+    # other options are other work
+    assert run_task("fit", run, _options("--no-cv", "--criterion", "aic")).status == "analysed"
+
+
+def test_a_single_run_command_waits_for_the_batch_holding_the_run(runs, capsys):
+    run = runs / "run-01.h5"
+    order: list[str] = []
+    held = threading.Event()
+
+    def batch_task_holding_the_run() -> None:
+        with run_lock(run):
+            held.set()
+            time.sleep(0.5)  # long enough for the command below to reach the lock
+            order.append("lock released")
+
+    t = threading.Thread(target=batch_task_holding_the_run)
+    t.start()
+    assert held.wait(30)
+    assert main(["fit", str(run), "--no-cv"]) == 0
+    order.append("fit written")
+    t.join(30)
+    assert order == ["lock released", "fit written"]
+    assert read_record(run, "fit")["status"] == "analysed"
