@@ -1,18 +1,20 @@
 """Device kinds the GUI knows, and how to read a device's state (Qt-free).
 
 A kind is one abstract class of :mod:`drivers.base` (motion axis, camera, light source,
-power meter). For each, a :class:`DeviceKind` says how to read the device's static
-information (once, after connecting or after a setting changed) and its live values (on
-every poll), and how often to poll it. Every function here calls the driver, so it runs
-on the thread that owns the bench (the device worker), never on the GUI thread.
+shutter, power meter, lock-in amplifier, filter wheel); a device takes the most derived
+kind it implements (a shutter is also a light source). For each, a :class:`DeviceKind`
+says how to read the device's static information (once, after connecting or after a
+setting changed) and its live values (on every poll), and how often to poll it. Every
+function here calls the driver, so it runs on the thread that owns the bench (the device
+worker), never on the GUI thread.
 
-**Adding a kind** (a lock-in amplifier, a filter wheel): write its ABC in
-``drivers/base.py``, then register it here with :func:`register_kind` — a name, the ABC,
-``read_info`` and ``read_values`` functions and a poll interval — and give it a panel in
-``gui.qt.panels`` (:func:`gui.qt.panels.register_panel` with the same name). A driver of
-an existing kind (a Zaber axis, a shutter that is a ``LightSource``) needs nothing: it is
-shown and commanded through its kind. A device whose kind is not registered still
-appears, with its identity and an "unknown kind" state.
+**Adding a kind**: write its ABC in ``drivers/base.py``, then register it here with
+:func:`register_kind` — a name, the ABC, ``read_info`` and ``read_values`` functions and a
+poll interval — and give it a panel in ``gui.qt.panels``
+(:func:`gui.qt.panels.register_panel` with the same name). A driver of an existing kind
+(a Zaber axis, another shutter) needs nothing: it is shown and commanded through its
+kind. A device whose kind is not registered still appears, with its identity and an
+"unknown kind" state.
 """
 
 from __future__ import annotations
@@ -31,11 +33,15 @@ from drivers.base import (
     LockIn,
     MotionAxis,
     PowerMeter,
+    ReferenceSource,
     Shutter,
+    ShutterState,
+    WheelSpeed,
 )
 from drivers.errors import ConnectionFailed, DeviceError
 
 __all__ = [
+    "AUTO_RANGE_TIMEOUT_S",
     "UNKNOWN_KIND",
     "DeviceKind",
     "DeviceState",
@@ -66,6 +72,9 @@ class DeviceKind:
     settings: tuple[str, ...] = ()
     #: Named operations without arguments beyond ``args`` (``name → fn(device, *args)``).
     actions: Mapping[str, Callable[..., Any]] = field(default_factory=dict)
+    #: Actions that hold the device worker for seconds (a wheel's move, an auto-range):
+    #: the session refuses them while an axis moves, so a stop never waits behind them.
+    slow_actions: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -202,48 +211,73 @@ register_kind(DeviceKind("camera", "Camera", Camera, _camera_info, _camera_value
                          poll_s=1.0, settings=("exposure_us", "gain")))
 register_kind(DeviceKind("light_source", "Light source", LightSource, _source_info,
                          _source_values, poll_s=0.5, settings=("power_w",)))
+
+
+# The lock-in, the shutter and the filter wheel (issue 15). What their values mean and how
+# they are written for the operator is gui.model.readouts; the profile's filter bands are
+# gui.model.filters.
+
+#: Longest auto-range the device worker runs (s): it holds the worker, so it is bounded,
+#: and refused while an axis moves (``slow_actions``) so that it never delays a stop.
+AUTO_RANGE_TIMEOUT_S = 20.0
+
+
 def _lockin_info(li: LockIn) -> dict[str, Any]:
     return {"sensitivities_v": tuple(li.sensitivities_v),
-            "time_constants_s": tuple(li.time_constants_s)}
+            "time_constants_s": tuple(li.time_constants_s),
+            "reference_sources": tuple(s.value for s in ReferenceSource),
+            "filter_slope_db_per_oct": li.filter_slope_db_per_oct}
 
 
 def _lockin_values(li: LockIn) -> dict[str, Any]:
     r = li.snapshot()
-    flags = li.overload_status()  # latched since the last poll
+    flags = li.overload_status()  # latched since the last poll, cleared by reading
     return {"r_v": r.r_v, "theta_deg": r.theta_deg, "x_v": r.x_v, "y_v": r.y_v,
             "sensitivity_v": li.sensitivity_v, "time_constant_s": li.time_constant_s,
             "reference": li.reference_source.value,
-            "frequency_hz": li.reference_frequency_hz, "overload": flags.overloaded}
+            "frequency_hz": li.reference_frequency_hz, "overload": flags.overloaded,
+            "input_overload": flags.input_overload, "filter_overload": flags.filter_overload,
+            "output_overload": flags.output_overload,
+            "reference_unlocked": flags.reference_unlocked}
 
 
 def _auto_range(li: LockIn) -> None:
-    li.auto_range()
+    li.auto_range(timeout=AUTO_RANGE_TIMEOUT_S)
 
 
 def _shutter_values(shutter: Shutter) -> dict[str, Any]:
-    return {"state": shutter.shutter_state.value}
+    state = shutter.shutter_state
+    return {"state": state.value, "on": state is ShutterState.OPEN}
 
 
 def _wheel_info(wheel: FilterWheel) -> dict[str, Any]:
     return {"count": wheel.position_count,
+            "speeds": tuple(s.value for s in WheelSpeed),
             "filters": {slot: (spec.center_nm, spec.bandwidth_nm, spec.label)
                         for slot, spec in wheel.filters.items()}}
 
 
 def _wheel_values(wheel: FilterWheel) -> dict[str, Any]:
-    return {"position": wheel.position}
+    return {"position": wheel.position, "speed": wheel.speed.value}
+
+
+def _wheel_move(wheel: FilterWheel, slot: Any) -> None:
+    if isinstance(slot, bool) or not isinstance(slot, int | float) or slot != int(slot):
+        raise TypeError(f"{wheel.name}: a slot number is an integer, got {slot!r}")
+    wheel.move_to(int(slot))  # the driver checks the slot against its count
 
 
 register_kind(DeviceKind("lockin", "Lock-in amplifier", LockIn, _lockin_info,
                          _lockin_values, poll_s=0.5,
                          settings=("sensitivity_v", "time_constant_s", "reference_source"),
-                         actions={"auto_range": _auto_range}))
+                         actions={"auto_range": _auto_range}, slow_actions=("auto_range",)))
+# A shutter is a light source: the GUI opens and closes it as one (SetLight with its role),
+# so that opening it passes the same beam check as turning a source on.
 register_kind(DeviceKind("shutter", "Shutter", Shutter, lambda s: {}, _shutter_values,
-                         poll_s=0.5, actions={"open": lambda s: s.open_shutter(),
-                                              "close": lambda s: s.close_shutter()}))
+                         poll_s=0.5))
 register_kind(DeviceKind("filter_wheel", "Filter wheel", FilterWheel, _wheel_info,
-                         _wheel_values, poll_s=0.5,
-                         actions={"move_to": lambda w, slot: w.move_to(int(slot))}))
+                         _wheel_values, poll_s=0.5, settings=("speed",),
+                         actions={"move_to": _wheel_move}, slow_actions=("move_to",)))
 register_kind(DeviceKind("power_meter", "Power meter", PowerMeter, _meter_info,
                          _meter_values, poll_s=0.5,
                          settings=("wavelength_nm", "averaging", "auto_range"),

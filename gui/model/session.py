@@ -35,7 +35,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from drivers.base import Camera, Device, MotionAxis
+from drivers.base import Camera, Device, LightSource, MotionAxis
 from drivers.errors import DeviceError
 from gui.model.camera import FramePump, FrameSlot
 from gui.model.devices import DeviceState, kind_of, read_state
@@ -120,7 +120,11 @@ class StopAll:
 
 @dataclass(frozen=True)
 class SetLight:
+    """Turn a light source on or off; ``role`` names one (a shutter is one), else the
+    bench's first. On is refused while the detector stands in the beam."""
+
     on: bool
+    role: str | None = None
 
 
 @dataclass(frozen=True)
@@ -495,8 +499,8 @@ class BenchSession:
                 base = axis.target if axis.is_moving and axis.target is not None \
                     else axis.position
                 return self._move(cmd, role, base + float(delta))
-            case SetLight(on=on):
-                return self._set_light(cmd, bool(on))
+            case SetLight(on=on, role=role):
+                return self._set_light(cmd, bool(on), role)
             case SetSetting(role=role, name=name, value=value):
                 return self._set_setting(cmd, role, name, value)
             case Action(role=role, name=name, args=args):
@@ -504,6 +508,10 @@ class BenchSession:
                 kind = kind_of(device)
                 if kind is None or name not in kind.actions:
                     raise ValueError(f"{role}: no action {name!r}")
+                if name in kind.slow_actions and self._axes_moving():
+                    return CommandResult(cmd, False, f"{role}: {name} waits until every "
+                                         "axis is at rest (it holds the bench for seconds)",
+                                         refused=True)
                 kind.actions[name](device, *args)
                 self._info_dirty.add(role)
                 return CommandResult(cmd, True, f"{role}: {name} done")
@@ -544,6 +552,10 @@ class BenchSession:
             if s.is_homed:
                 pose[role] = s.position
         return pose
+
+    def _axes_moving(self) -> list[str]:
+        assert self._bench is not None
+        return [role for role, axis in self._bench.axes.items() if axis.is_moving]
 
     def _light_on(self) -> bool:
         src = self._bench.source if self._bench is not None else None
@@ -629,24 +641,27 @@ class BenchSession:
         self._last_poll.pop(role, None)
         return CommandResult(cmd, True, f"{move.describe()}: moving")
 
-    def _set_light(self, cmd: SetLight, on: bool) -> CommandResult:
+    def _set_light(self, cmd: SetLight, on: bool, role: str | None) -> CommandResult:
         assert self._bench is not None
-        src = self._bench.source
+        src = self._bench.source if role is None else self._device(role)
         if src is None:
             raise ValueError(f"bench {self._bench.profile.name!r} has no light source")
+        if not isinstance(src, LightSource):
+            raise ValueError(f"{role} is not a light source or shutter")
+        name = self._role_of(src)
         if on:
             bad = check_light_on(self._bench.profile, self._pose())
             if bad:
                 reasons = "; ".join(v.detail for v in bad)
-                return CommandResult(cmd, False, f"light on refused: {reasons}; move the "
-                                     "detector out of the beam first", refused=True,
+                return CommandResult(cmd, False, f"{name}: light on refused: {reasons}; "
+                                     "move the detector out of the beam first", refused=True,
                                      violations=tuple(bad))
             src.turn_on()
         else:
             src.turn_off()
-        self._last_poll.pop(self._role_of(src), None)
+        self._last_poll.pop(name, None)
         self._poll(force=False)
-        return CommandResult(cmd, True, f"light {'on' if on else 'off'}")
+        return CommandResult(cmd, True, f"{name}: light {'on' if on else 'off'}")
 
     def _role_of(self, device: Device) -> str:
         assert self._bench is not None

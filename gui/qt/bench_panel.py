@@ -161,6 +161,9 @@ class BenchPanel(QWidget):
         return sum(1 for r in present if roles.index(r) < k)
 
     def on_result(self, result: CommandResult) -> None:
+        panel = self.panels.get(getattr(result.command, "role", None) or "")
+        if panel is not None:
+            panel.show_result(result)
         if result.refused or not result.ok:
             self.show_message(result.message, error=True)
         else:

@@ -32,11 +32,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from gui.model import filters, readouts
 from gui.model import format as fmt
-from gui.model.devices import DeviceState
+from gui.model.devices import AUTO_RANGE_TIMEOUT_S, DeviceState
 from gui.model.session import (
     Action,
     BenchSession,
+    CommandResult,
     Home,
     Jog,
     MoveTo,
@@ -105,6 +107,13 @@ class DevicePanel(QGroupBox):
         self._outer.addWidget(self.body)
         self._outer.addWidget(self.error)
         self.error.hide()
+        self.outcome = QLabel("")
+        self.outcome.setObjectName("outcome")
+        self.outcome.setWordWrap(True)
+        self.outcome.setStyleSheet("color: #b71c1c")
+        self.outcome.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self._outer.addWidget(self.outcome)
+        self.outcome.hide()
         self._controls: list[QWidget] = []
         self._editing = False
 
@@ -134,6 +143,13 @@ class DevicePanel(QGroupBox):
 
     def show_state(self, state: DeviceState) -> None:
         """Draw the kind's live values (subclasses)."""
+
+    def show_result(self, result: CommandResult) -> None:
+        """A command of this device ended: a refusal or the driver's error (a setting it
+        rejected) stays shown under the panel until a command of this device succeeds."""
+        failed = result.refused or not result.ok
+        self.outcome.setText(result.message if failed else "")
+        self.outcome.setVisible(failed)
 
 
 class GenericPanel(DevicePanel):
@@ -311,8 +327,8 @@ class SourcePanel(DevicePanel):
         lay.addWidget(self.on)
         lay.addWidget(self.off)
         lay.addWidget(self.power, 1)
-        self.on.clicked.connect(lambda: self.session.submit(SetLight(True)))
-        self.off.clicked.connect(lambda: self.session.submit(SetLight(False)))
+        self.on.clicked.connect(lambda: self.session.submit(SetLight(True, self.role)))
+        self.off.clicked.connect(lambda: self.session.submit(SetLight(False, self.role)))
         self.controls(self.on)
         # "Light off" stays available whenever the bench is manual: making safe is
         # never refused.
@@ -366,8 +382,9 @@ class PowerMeterPanel(DevicePanel):
 
 
 class LockInPanel(DevicePanel):
-    """A lock-in amplifier: R and θ (X, Y), its range and time constant (chosen from the
-    instrument's tables, set through the driver), the reference, overload; auto-range."""
+    """A lock-in amplifier: R and θ (X, Y), the reference and its frequency, the latched
+    overload flags with what to do; range, time constant and reference source chosen from
+    the instrument's own tables and set through the driver; auto-range."""
 
     def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
                  ) -> None:
@@ -377,57 +394,71 @@ class LockInPanel(DevicePanel):
         self.reading.setStyleSheet("font-size: 15pt; font-weight: 600")
         self.detail = QLabel("")
         self.detail.setObjectName("detail")
+        self.advice = QLabel("")
+        self.advice.setObjectName("advice")
+        self.advice.setWordWrap(True)
+        self.advice.setStyleSheet("color: #e65100")
         self.sensitivity = QComboBox()
         self.sensitivity.setObjectName("sensitivity")
         self.time_constant = QComboBox()
         self.time_constant.setObjectName("time_constant")
+        self.reference = QComboBox()
+        self.reference.setObjectName("reference")
         self.auto = QPushButton("Auto-range")
         self.auto.setObjectName("auto_range")
+        self.auto.setToolTip("let the lock-in choose its range (only while the axes are at "
+                             f"rest; at most {AUTO_RANGE_TIMEOUT_S:g} s)")
         form = QFormLayout(self.body)
         form.setContentsMargins(0, 0, 0, 0)
         form.addRow(self.reading)
         form.addRow(self.detail)
-        form.addRow("range", self.sensitivity)
+        form.addRow(self.advice)
+        row = QHBoxLayout()
+        row.addWidget(self.sensitivity, 1)
+        row.addWidget(self.auto)
+        form.addRow("range", row)
         form.addRow("time constant", self.time_constant)
-        form.addRow(self.auto)
-        self._tables: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
-        self.sensitivity.activated.connect(lambda k: self.session.submit(SetSetting(
-            self.role, "sensitivity_v", self.sensitivity.itemData(k))))
-        self.time_constant.activated.connect(lambda k: self.session.submit(SetSetting(
-            self.role, "time_constant_s", self.time_constant.itemData(k))))
+        form.addRow("reference", self.reference)
+        self._tables: tuple = ()
+        for box, name in ((self.sensitivity, "sensitivity_v"),
+                          (self.time_constant, "time_constant_s"),
+                          (self.reference, "reference_source")):
+            box.activated.connect(lambda k, box=box, name=name: self.session.submit(
+                SetSetting(self.role, name, box.itemData(k))))
         self.auto.clicked.connect(lambda: self.session.submit(Action(self.role, "auto_range")))
-        self.controls(self.sensitivity, self.time_constant, self.auto)
-
-    def _fill(self, box: QComboBox, values: tuple[float, ...], unit: str) -> None:
-        box.clear()
-        for v in values:
-            box.addItem(fmt.si(v, unit, 3), v)
+        self.controls(self.sensitivity, self.time_constant, self.reference, self.auto)
 
     def show_state(self, state: DeviceState) -> None:
         v, info = state.values, state.info
-        tables = (tuple(info.get("sensitivities_v", ())), tuple(info.get("time_constants_s", ())))
+        tables = (tuple(info.get("sensitivities_v", ())), tuple(info.get("time_constants_s", ())),
+                  tuple(info.get("reference_sources", ())))
         if tables != self._tables:
             self._tables = tables
-            self._fill(self.sensitivity, tables[0], "V")
-            self._fill(self.time_constant, tables[1], "s")
-        for box, key in ((self.sensitivity, "sensitivity_v"),
-                         (self.time_constant, "time_constant_s")):
-            k = box.findData(v.get(key))
-            if k >= 0:
+            fill(self.sensitivity, readouts.choices(tables[0], "V"))
+            fill(self.time_constant, readouts.choices(tables[1], "s"))
+            fill(self.reference, [(s, s) for s in tables[2]])
+        for box, table, key in ((self.sensitivity, tables[0], "sensitivity_v"),
+                                (self.time_constant, tables[1], "time_constant_s")):
+            k = readouts.nearest(table, v.get(key))
+            if k is not None and not box.view().isVisible():  # not while choosing
                 box.setCurrentIndex(k)
-        self.reading.setText(f"R {fmt.si(v.get('r_v'), 'V')} rms, θ "
-                             f"{v.get('theta_deg', math.nan):.1f}°")
-        self.detail.setText(f"X {fmt.si(v.get('x_v'), 'V')}, Y {fmt.si(v.get('y_v'), 'V')}; "
-                            f"reference {v.get('reference', '?')} "
-                            f"{v.get('frequency_hz', math.nan):.4g} Hz")
-        over = bool(v.get("overload"))
-        self.status.setText(badge("connected", state.connected) + " "
-                            + badge("OVERLOAD" if over else "in range", over, good=False))
+        k = self.reference.findData(v.get("reference"))
+        if k >= 0 and not self.reference.view().isVisible():
+            self.reference.setCurrentIndex(k)
+        self.reading.setText(readouts.lockin_reading(v))
+        self.detail.setText(readouts.lockin_detail(v))
+        faults = readouts.lockin_faults(v)
+        self.advice.setText("; ".join(f.advice for f in faults))
+        self.advice.setVisible(bool(faults))
+        flags = [badge("connected", state.connected)]
+        flags += [badge(f.badge, True, good=False) for f in faults] or [badge("in range", True)]
+        self.status.setText(" ".join(flags))
 
 
 class ShutterPanel(DevicePanel):
-    """A shutter: its blade's state; open and close. *Close* stays available whenever
-    the bench is manual (making safe is never refused)."""
+    """A shutter (a light source): its blade's state; open and close. Opening passes the
+    beam check of *Light on*; *Close* stays available whenever the bench is manual
+    (making safe is never refused)."""
 
     def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
                  ) -> None:
@@ -440,59 +471,91 @@ class ShutterPanel(DevicePanel):
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addWidget(self.open)
         lay.addWidget(self.close_button)
-        self.open.clicked.connect(lambda: self.session.submit(Action(self.role, "open")))
+        self.open.clicked.connect(lambda: self.session.submit(SetLight(True, self.role)))
         self.close_button.clicked.connect(
-            lambda: self.session.submit(Action(self.role, "close")))
-        self.controls(self.open)
-        self.controls(self.close_button)
+            lambda: self.session.submit(SetLight(False, self.role)))
+        self.controls(self.open, self.close_button)
 
     def show_state(self, state: DeviceState) -> None:
-        is_open = state.values.get("state") == "open"
+        is_open = readouts.shutter_open(state.values)
+        text = "?" if is_open is None else "OPEN" if is_open else "closed"
         self.status.setText(badge("connected", state.connected) + " "
-                            + badge("OPEN" if is_open else "closed", is_open, good=False))
+                            + badge(text, bool(is_open), good=False))
 
 
 class FilterWheelPanel(DevicePanel):
-    """A filter wheel: the slot in the beam and its band; move to another slot."""
+    """A filter wheel: the slot in the beam and its band (from the driver's configuration
+    or the profile's ``[[filter_wheel.filters]]``), the slot count and speed; move to a
+    slot, change the speed."""
 
     def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
                  ) -> None:
         super().__init__(role, session, parent)
         self.position = QLabel("—")
         self.position.setObjectName("position")
+        self.position.setStyleSheet("font-size: 13pt; font-weight: 600")
+        self.count = QLabel("—")
+        self.count.setObjectName("count")
         self.slot = QComboBox()
         self.slot.setObjectName("slot")
         self.go = QPushButton("Move")
         self.go.setObjectName("go")
+        self.go.setToolTip("put this slot in the beam (only while the axes are at rest)")
+        self.speed = QComboBox()
+        self.speed.setObjectName("speed")
         form = QFormLayout(self.body)
         form.setContentsMargins(0, 0, 0, 0)
         form.addRow("in the beam", self.position)
+        form.addRow("slots", self.count)
         row = QHBoxLayout()
         row.addWidget(self.slot, 1)
         row.addWidget(self.go)
-        form.addRow("slot", row)
-        self._count = 0
+        form.addRow("move to", row)
+        form.addRow("speed", self.speed)
+        self._shown: tuple = ()
+        self._profile_bands: tuple[Any, dict] = (None, {})
         self.go.clicked.connect(lambda: self.session.submit(
             Action(self.role, "move_to", (self.slot.currentData(),))))
-        self.controls(self.slot, self.go)
+        self.speed.activated.connect(lambda k: self.session.submit(
+            SetSetting(self.role, "speed", self.speed.itemData(k))))
+        self.controls(self.slot, self.go, self.speed)
 
-    @staticmethod
-    def band(filters: dict, slot: int | None) -> str:
-        """``"slot 2: 550 nm ± 5 nm"`` (FWHM/2), or ``"slot 4: empty"``."""
-        centre, width, label = filters.get(slot, (None, None, ""))
-        what = "empty" if centre is None else f"{centre:g} nm, FWHM {width:g} nm"
-        return f"slot {slot}: {what}" + (f" ({label})" if label else "")
+    def bands(self, state: DeviceState) -> dict:
+        """The driver's bands, completed from the connected profile's filter list."""
+        profile = self.session.profile
+        if self._profile_bands[0] is not profile:
+            found, _ = filters.bands_from_profile(
+                getattr(profile, "source_text", None), self.role)
+            self._profile_bands = (profile, found)
+        return filters.merge_bands(filters.bands_from_info(state.info.get("filters")),
+                                   self._profile_bands[1])
 
     def show_state(self, state: DeviceState) -> None:
-        filters = dict(state.info.get("filters", {}))
-        count = int(state.info.get("count", 0))
-        if count != self._count:
-            self._count = count
-            self.slot.clear()
-            for k in range(1, count + 1):
-                self.slot.addItem(self.band(filters, k), k)
-        self.position.setText(self.band(filters, state.values.get("position")))
+        v, info = state.values, state.info
+        bands = self.bands(state)
+        count = int(info.get("count", 0))
+        shown = (count, tuple(sorted(bands.items())), tuple(info.get("speeds", ())))
+        if shown != self._shown:
+            self._shown = shown
+            fill(self.slot, [(filters.slot_label(bands, k), k) for k in range(1, count + 1)])
+            fill(self.speed, [(s, s) for s in shown[2]])
+        self.position.setText(filters.slot_label(bands, v.get("position")))
+        self.count.setText(str(count) if count else "—")
+        k = self.speed.findData(v.get("speed"))
+        if k >= 0 and not self.speed.view().isVisible():
+            self.speed.setCurrentIndex(k)
         self.status.setText(badge("connected", state.connected))
+
+
+def fill(box: QComboBox, items: list[tuple[str, Any]]) -> None:
+    """Replace a choice box's items, keeping the selected value where it is still there."""
+    current = box.currentData()
+    box.clear()
+    for text, data in items:
+        box.addItem(text, data)
+    k = box.findData(current)
+    if k >= 0:
+        box.setCurrentIndex(k)
 
 
 register_panel("motion_axis", AxisPanel)
