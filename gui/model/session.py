@@ -81,7 +81,7 @@ class Connect:
 
 @dataclass(frozen=True)
 class Disconnect:
-    pass
+    """Close every device (the bench made safe first)."""
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ class Stop:
 
 @dataclass(frozen=True)
 class StopAll:
-    pass
+    """Stop every axis now (Esc, the Stop all button)."""
 
 
 @dataclass(frozen=True)
@@ -148,12 +148,12 @@ class Action:
 
 @dataclass(frozen=True)
 class StartStream:
-    pass
+    """Start the camera's live stream (frames to the camera view)."""
 
 
 @dataclass(frozen=True)
 class StopStream:
-    pass
+    """Stop the camera's live stream."""
 
 
 @dataclass(frozen=True)
@@ -174,7 +174,7 @@ class _RunEnded:
 
 @dataclass(frozen=True)
 class _Shutdown:
-    pass
+    """Ends the device worker's loop (the session closing)."""
 
 
 Command = (Connect | Disconnect | Reconnect | Home | MoveTo | Jog | Stop | StopAll | SetLight
@@ -227,17 +227,20 @@ class SessionListener(Protocol):
 
 
 class NullListener:
+    """A listener that ignores every report (a session driven without a GUI, in tests and
+    scripts); the Qt bridge is the listener that forwards them as signals."""
+
     def states(self, states: dict[str, DeviceState]) -> None:
-        pass
+        """Ignored."""
 
     def result(self, result: CommandResult) -> None:
-        pass
+        """Ignored."""
 
     def connection(self, status: ConnectionStatus) -> None:
-        pass
+        """Ignored."""
 
     def run_changed(self, run: RunHandle | None) -> None:
-        pass
+        """Ignored."""
 
 
 #: Bound on the GUI's engine-event queue: live values beyond it are dropped (the live
