@@ -3,8 +3,9 @@
 Convention: :data:`analysis.sh.convention.PROJECT_CONVENTION` (real, orthonormal, no
 Condon–Shortley phase, θ colatitude); coefficients in the flat layout ``l*l + l + m``.
 
-Grid: L+1 Gauss–Legendre rings in θ (:func:`analysis.sh.legendre.gauss_legendre`) by
-2L+1 equispaced longitudes φ_k = 2πk/(2L+1). For a function band-limited to degree L the
+Grid: L+1 Gauss–Legendre rings in θ (ducc0's nodes and weights,
+:func:`analysis.sh.ducc.gl_nodes`, shared by both backends) by 2L+1 equispaced longitudes
+φ_k = 2πk/(2L+1). For a function band-limited to degree L the
 analysis on this grid is exact (the product of two degree-L harmonics has degree ≤ 2L, which
 L+1 Gauss nodes integrate exactly in cos θ, and 2L+1 points exactly in φ) — an exact
 quadrature, as high orders need (approximate ones leave a bias that iterations do not
@@ -45,13 +46,20 @@ from analysis.sh.convention import (
     lmax_from_size,
     n_coeffs,
 )
+from analysis.sh.ducc import (
+    ducc_analysis,
+    ducc_synthesis,
+    gl_nodes,
+    resolve,
+    transform_defaults,
+)
 from analysis.sh.legendre import (
     chunk_scales,
     degree_chunks,
-    gauss_legendre,
     iterate_degrees,
     sectoral_seeds,
 )
+from analysis.sh.validation import SHInputError, check_degree, check_finite
 
 __all__ = [
     "GLGrid",
@@ -147,19 +155,22 @@ def gl_grid(lmax: int, *, precompute: bool | None = None) -> GLGrid:
     Parameters
     ----------
     lmax : int
+        Band limit L ≥ 0.
     precompute : bool, optional
-        Store the Legendre table with the grid (memory ≈ L³/4 · 8 bytes, twice that for
-        L ≲ 64). Default: when it needs at most :data:`PLAN_MAX_BYTES`.
+        Store the reference transform's Legendre table with the grid (memory ≈ L³/4 · 8
+        bytes, twice that for L ≲ 64). Default: when the module's default backend is the
+        reference (ducc0 needs no table) and the table needs at most
+        :data:`PLAN_MAX_BYTES`.
     """
-    if lmax < 0:
-        raise ValueError("lmax must be ≥ 0")
-    theta, w = gauss_legendre(lmax + 1)
+    lmax = check_degree("lmax", lmax)
+    theta, w = gl_nodes(lmax + 1)
     nphi = 2 * lmax + 1
     phi = 2.0 * np.pi * np.arange(nphi) / nphi
     nh = (lmax + 2) // 2
     table_bytes = 8 * nh * (lmax + 1) * (lmax + 2) // 2
     if precompute is None:
-        precompute = table_bytes <= PLAN_MAX_BYTES
+        precompute = (transform_defaults().backend == "reference"
+                      and table_bytes <= PLAN_MAX_BYTES)
     plan = None
     if precompute:
         grid = GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi)
@@ -272,30 +283,54 @@ def _layout(lmax: int, dense: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def synthesis(
-    coeffs: np.ndarray, *, grid: GLGrid, convention: SHConvention = PROJECT_CONVENTION
+    coeffs: np.ndarray,
+    *,
+    grid: GLGrid,
+    convention: SHConvention = PROJECT_CONVENTION,
+    backend: str | None = None,
+    nthreads: int | None = None,
 ) -> np.ndarray:
     """Evaluate a real SH expansion on a Gauss–Legendre grid (inverse transform).
 
     Parameters
     ----------
     coeffs : ndarray of shape ((L+1)²,)
-        Coefficients of a real function, ``L == grid.lmax``, in ``convention``.
+        Coefficients of a real function, ``L == grid.lmax``, in ``convention``; finite.
     grid : GLGrid
     convention : SHConvention
         Convention of ``coeffs`` (converted at the boundary; the project's by default).
+    backend : {"ducc0", "reference"}, optional
+        ducc0's compiled transform or the project's own (the reference it is tested
+        against); default the module setting (:func:`analysis.sh.ducc.set_transform_defaults`,
+        "ducc0" unless changed).
+    nthreads : int, optional
+        ducc0's threads (default the module setting, 1); the reference is single-threaded.
 
     Returns
     -------
     ndarray of shape (L+1, 2L+1)
         f(θ_j, φ_k).
     """
-    c = np.asarray(coeffs)
+    if not isinstance(grid, GLGrid):
+        raise SHInputError("grid", f"must be a GLGrid (gl_grid(L)), got {type(grid).__name__}")
+    how, threads = resolve(backend, nthreads)
+    dtype = complex if np.iscomplexobj(coeffs) else float
+    c = check_finite("coeffs", coeffs, dtype=dtype)
     if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
         c = convert(c, source=convention, target=PROJECT_CONVENTION)
     c = np.asarray(c, dtype=float)
     lmax = grid.lmax
     if c.shape != ((lmax + 1) ** 2,):
-        raise ValueError(f"expected {(n_coeffs(lmax),)} coefficients, got {c.shape}")
+        raise SHInputError("coeffs", f"must have shape {(n_coeffs(lmax),)} for the grid's "
+                           f"L = {lmax}, got {c.shape}")
+    if how == "ducc0":
+        return ducc_synthesis(c, lmax, threads)
+    return _reference_synthesis(c, grid)
+
+
+def _reference_synthesis(c: np.ndarray, grid: GLGrid) -> np.ndarray:
+    """The project's own synthesis (semi-naive, module docstring) of checked coefficients."""
+    lmax = grid.lmax
     nlat, nphi = grid.shape
     nh = (nlat + 1) // 2
     plan = grid.legendre
@@ -342,27 +377,49 @@ def synthesis(
 
 
 def analysis(
-    values: np.ndarray, *, grid: GLGrid, convention: SHConvention = PROJECT_CONVENTION
+    values: np.ndarray,
+    *,
+    grid: GLGrid,
+    convention: SHConvention = PROJECT_CONVENTION,
+    backend: str | None = None,
+    nthreads: int | None = None,
 ) -> np.ndarray:
     """SH coefficients of a real map on a Gauss–Legendre grid (forward transform).
 
     Parameters
     ----------
     values : ndarray of shape (L+1, 2L+1)
+        Finite map values.
     grid : GLGrid
     convention : SHConvention
         Convention of the returned coefficients (the project's by default).
+    backend, nthreads
+        As for :func:`synthesis`.
 
     Returns
     -------
     ndarray of shape ((L+1)²,)
         Exact for maps band-limited to ``grid.lmax``; complex for a complex convention.
     """
-    f = np.asarray(values, dtype=float)
+    if not isinstance(grid, GLGrid):
+        raise SHInputError("grid", f"must be a GLGrid (gl_grid(L)), got {type(grid).__name__}")
+    how, threads = resolve(backend, nthreads)
+    f = check_finite("values", values)
     lmax = grid.lmax
     nlat, nphi = grid.shape
     if f.shape != (nlat, nphi):
-        raise ValueError(f"expected a map of shape {(nlat, nphi)}, got {f.shape}")
+        raise SHInputError("values", f"must be a map of shape {(nlat, nphi)} for the grid's "
+                           f"L = {lmax}, got {f.shape}")
+    out = ducc_analysis(f, lmax, threads) if how == "ducc0" else _reference_analysis(f, grid)
+    if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
+        return convert(out, source=PROJECT_CONVENTION, target=convention)
+    return out
+
+
+def _reference_analysis(f: np.ndarray, grid: GLGrid) -> np.ndarray:
+    """The project's own analysis (semi-naive, module docstring) of a checked map."""
+    lmax = grid.lmax
+    nlat, nphi = grid.shape
     nh = (nlat + 1) // 2
     plan = grid.legendre
     # (ring, m) complex; n_φ // 2 + 1 = L + 1 columns
@@ -402,8 +459,6 @@ def analysis(
                 z[m0 : m0 + n, p, h0 : h0 + nq] = prod * sc[:, p::2, None]
         pos, _, fac = _layout(lmax, False)
         out = z.ravel()[pos] * fac
-    if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
-        return convert(out, source=PROJECT_CONVENTION, target=convention)
     return out
 
 
