@@ -43,7 +43,6 @@ from analysis.sh.convention import (
     convert,
     degrees_orders,
     lm_index,
-    lmax_from_size,
     n_coeffs,
 )
 from analysis.sh.ducc import (
@@ -59,7 +58,13 @@ from analysis.sh.legendre import (
     iterate_degrees,
     sectoral_seeds,
 )
-from analysis.sh.validation import SHInputError, check_degree, check_finite
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
+)
 
 __all__ = [
     "GLGrid",
@@ -464,13 +469,15 @@ def _reference_analysis(f: np.ndarray, grid: GLGrid) -> np.ndarray:
 
 def directions_to_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (..., 3) → (θ colatitude from +z, φ azimuth from +x in [0, 2π))."""
-    d = np.asarray(directions, dtype=float)
+    d = check_finite("directions", directions)
+    if d.ndim == 0 or d.shape[-1] != 3:
+        raise SHInputError("directions", f"must have shape (..., 3), got {d.shape}")
     norm = np.linalg.norm(d, axis=-1)
     # arctan2 keeps θ accurate near the poles, unlike arccos(z).
     theta = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
     phi = np.mod(np.arctan2(d[..., 1], d[..., 0]), 2.0 * np.pi)
     if np.any(norm == 0):
-        raise ValueError("zero-length direction")
+        raise SHInputError("directions", "holds a zero-length vector")
     return theta, phi
 
 
@@ -503,10 +510,11 @@ def real_sh_matrix(lmax: int, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
     ndarray of shape (N, (lmax+1)²)
         Column ``l*l + l + m`` holds Y_lm (:mod:`analysis.sh.convention`).
     """
-    th = np.atleast_1d(np.asarray(theta, dtype=float)).ravel()
-    ph = np.atleast_1d(np.asarray(phi, dtype=float)).ravel()
+    lmax = check_degree("lmax", lmax)
+    th = np.atleast_1d(check_finite("theta", theta)).ravel()
+    ph = np.atleast_1d(check_finite("phi", phi)).ravel()
     if th.shape != ph.shape:
-        raise ValueError("theta and phi must have the same shape")
+        raise SHInputError("phi", f"must have the shape of theta {th.shape}, got {ph.shape}")
     table = _legendre_all_orders(lmax, th)
     y = np.empty((th.size, n_coeffs(lmax)))
     l_all, m_all = degrees_orders(lmax)
@@ -534,11 +542,15 @@ def evaluate(coeffs: np.ndarray, theta: np.ndarray, phi: np.ndarray) -> np.ndarr
     -------
     ndarray of shape S (or S + (K,))
     """
-    c = np.asarray(coeffs, dtype=float)
-    lmax = lmax_from_size(c.shape[0])
-    th = np.asarray(theta, dtype=float)
+    c, lmax = check_coefficients("coeffs", coeffs)
+    th = check_finite("theta", theta)
     t_flat = th.ravel()
-    p_flat = np.broadcast_to(np.asarray(phi, dtype=float), th.shape).ravel()
+    ph = check_finite("phi", phi)
+    try:
+        p_flat = np.broadcast_to(ph, th.shape).ravel()
+    except ValueError:
+        raise SHInputError("phi", f"must broadcast to the shape of theta {th.shape}, got "
+                           f"{ph.shape}") from None
     out = np.empty((t_flat.size, *c.shape[1:]))
     # Points in chunks: the design matrix of a large image would not fit in memory.
     step = max(1, (1 << 21) // (lmax + 1) ** 2)
@@ -601,6 +613,26 @@ def _tikhonov_svd(a: np.ndarray, ridge: float
     return u, filt, vt, rank, condition, dof
 
 
+def _samples(theta, phi, weights, n: int | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Checked flat θ, φ and weights (≥ 0, default 1) of n samples (n: θ's size if None)."""
+    th = check_finite("theta", theta).ravel()
+    n = th.size if n is None else n
+    if th.size != n:
+        raise SHInputError("theta", f"must have {n} entries (one per value), got {th.size}")
+    ph = check_finite("phi", phi).ravel()
+    if ph.size != n:
+        raise SHInputError("phi", f"must have {n} entries, got {ph.size}")
+    if weights is None:
+        return th, ph, np.ones(n)
+    w = check_finite("weights", weights).ravel()
+    if w.size != n:
+        raise SHInputError("weights", f"must have {n} entries, got {w.size}")
+    if np.any(w < 0):
+        raise SHInputError("weights", "must be ≥ 0")
+    return th, ph, w
+
+
 def fit_scattered(
     values: np.ndarray,
     theta: np.ndarray,
@@ -632,19 +664,21 @@ def fit_scattered(
     -------
     SHFit
     """
+    lmax = check_degree("lmax", lmax)
     f = np.asarray(values, dtype=float).ravel()
-    th = np.asarray(theta, dtype=float).ravel()
-    ph = np.asarray(phi, dtype=float).ravel()
+    th, ph, w = _samples(theta, phi, weights, f.size)
+    ridge = check_scalar("ridge", ridge, low=0.0)
+    # Non-finite sample values mark unusable data (documented): left out, not an error.
     use = np.isfinite(f)
     if mask is not None:
-        use &= np.asarray(mask, dtype=bool).ravel()
-    w = np.ones_like(f) if weights is None else np.asarray(weights, dtype=float).ravel()
+        m = np.asarray(mask, dtype=bool).ravel()
+        if m.size != f.size:
+            raise SHInputError("mask", f"must have {f.size} entries, got {m.size}")
+        use &= m
     use &= w > 0
-    if ridge < 0:
-        raise ValueError("ridge must be ≥ 0")
 
     if use.sum() == 0:
-        raise ValueError("no usable samples")
+        raise SHInputError("values", "has no usable sample (finite, in mask, weight > 0)")
     y = real_sh_matrix(lmax, th[use], ph[use])
     sw = np.sqrt(w[use])
     a = y * sw[:, None]
@@ -698,7 +732,10 @@ class ScatteredFitOperator:
 
     def apply(self, values: np.ndarray) -> np.ndarray:
         """Coefficients for samples of shape (N,) or (N, K) → ((L+1)²,) or ((L+1)², K)."""
-        v = np.asarray(values, dtype=float)
+        v = check_finite("values", values)
+        if v.ndim not in (1, 2) or v.shape[0] != self.sqrt_weights.size:
+            raise SHInputError("values", f"must have shape ({self.sqrt_weights.size},) or "
+                               f"({self.sqrt_weights.size}, K), got {v.shape}")
         sw = self.sqrt_weights if v.ndim == 1 else self.sqrt_weights[:, None]
         return self.pinv @ (v * sw)
 
@@ -721,11 +758,9 @@ def scattered_fit_operator(
     weights : ndarray of shape (N,), optional
     ridge : float
     """
-    th = np.asarray(theta, dtype=float).ravel()
-    ph = np.asarray(phi, dtype=float).ravel()
-    w = np.ones_like(th) if weights is None else np.asarray(weights, dtype=float).ravel()
-    if ridge < 0:
-        raise ValueError("ridge must be ≥ 0")
+    lmax = check_degree("lmax", lmax)
+    th, ph, w = _samples(theta, phi, weights, None)
+    ridge = check_scalar("ridge", ridge, low=0.0)
     sw = np.sqrt(w)
     a = real_sh_matrix(lmax, th, ph) * sw[:, None]
     u, filt, vt, rank, condition, dof = _tikhonov_svd(a, ridge)

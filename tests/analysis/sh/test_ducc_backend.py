@@ -1,9 +1,16 @@
 """The ducc0 backend of the transforms against the project's own (reference) transform.
 
-Both compute the same Gauss–Legendre quadrature, so they agree to rounding: the bound
-1e-11 relative to the largest value is ~10³ ε at L = 2048 (the round trips themselves are
-≤ 1.6e-12, BENCHMARKS.md sht). A convention mismatch (a lost (−1)^m, a √2, a ring order)
-would show as differences of order 1.
+Both compute the same Gauss–Legendre quadrature on the same nodes, so they agree to
+rounding: 1e-11 relative at L = 2048 for the coefficients, the maps in rms and the cross
+round trips (ducc0 synthesis → reference analysis and back). A convention mismatch (a lost
+(−1)^m, a √2, a ring order) would show as differences of order 1.
+
+The one place where the maps differ more is the few rings nearest each pole: there a map
+of degree L changes by |∂f/∂θ| ≈ L·max|f| per radian, and one rounding of cos θ_j moves the
+ring by ε/θ_j, so any evaluation through cos θ is uncertain by ≈ L·max|f|·ε/θ_1 —
+8e-8 of max|f| ≈ 3000 (2.7e-11 relative) at L = 2048 against a bound of 2.5e-7. The
+max-norm comparison of maps therefore uses 1e-10; the quadrature weights of those rings
+(~θ_1²) make it invisible in the coefficients.
 """
 
 from __future__ import annotations
@@ -26,8 +33,8 @@ def restore_defaults():
     set_transform_defaults(backend=old.backend, nthreads=old.nthreads)
 
 
-def _agreement(lmax: int) -> tuple[float, float]:
-    """(map, coefficient) difference ducc0 vs reference, relative to the largest value."""
+def _agreement(lmax: int) -> dict[str, float]:
+    """Differences ducc0 vs reference, relative to the largest (rms: to the rms) value."""
     rng = np.random.default_rng(1000 + lmax)
     grid = gl_grid(lmax, precompute=False)
     c = rng.standard_normal((lmax + 1) ** 2)
@@ -38,20 +45,29 @@ def _agreement(lmax: int) -> tuple[float, float]:
     g = rng.standard_normal(grid.shape)
     a_ref = analysis(g, grid=grid, backend="reference")
     a_duc = analysis(g, grid=grid, backend="ducc0", nthreads=1)
-    return (float(np.max(np.abs(f_duc - f_ref)) / np.max(np.abs(f_ref))),
-            float(np.max(np.abs(a_duc - a_ref)) / np.max(np.abs(a_ref))))
+    cross = max(np.max(np.abs(analysis(f_duc, grid=grid, backend="reference") - c)),
+                np.max(np.abs(analysis(f_ref, grid=grid, backend="ducc0") - c)))
+    return {
+        "map_max": float(np.max(np.abs(f_duc - f_ref)) / np.max(np.abs(f_ref))),
+        "map_rms": float(np.sqrt(np.mean((f_duc - f_ref) ** 2) / np.mean(f_ref**2))),
+        "coeffs": float(np.max(np.abs(a_duc - a_ref)) / np.max(np.abs(a_ref))),
+        "cross_round_trip": float(cross / np.max(np.abs(c))),
+    }
 
 
 @pytest.mark.parametrize("lmax", [0, 1, 2, 3, 16, 41, 64, 130])
 def test_ducc0_agrees_with_the_reference(lmax: int) -> None:
-    map_err, coeff_err = _agreement(lmax)
-    assert map_err <= 1e-12 and coeff_err <= 1e-12, (map_err, coeff_err)
+    err = _agreement(lmax)
+    assert max(err.values()) <= 1e-12, err
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # the reference takes ~30 s at L = 2048 on an idle dev box
 def test_ducc0_agrees_with_the_reference_at_l_2048() -> None:
-    map_err, coeff_err = _agreement(2048)
-    assert map_err <= 1e-11 and coeff_err <= 1e-11, (map_err, coeff_err)
+    err = _agreement(2048)
+    assert err["coeffs"] <= 1e-11 and err["map_rms"] <= 1e-11, err
+    assert err["cross_round_trip"] <= 1e-11, err
+    assert err["map_max"] <= 1e-10, err  # polar rings: module docstring
 
 
 def test_single_harmonics_have_the_project_convention() -> None:
@@ -113,7 +129,8 @@ def _first_root(n: int, guess: float) -> float:
         return float(mp.findroot(lambda a: mp.legendre(n, mp.cos(a)), mp.mpf(guess)))
 
 
-@pytest.mark.parametrize("n", [65, pytest.param(2049, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("n", [65, pytest.param(2049, marks=[pytest.mark.slow,
+                                                              pytest.mark.timeout(900)])])
 def test_grid_nodes_are_the_roots_to_rounding(n: int) -> None:
     """The grids' (ducc0's) polar nodes against mpmath roots of P_n; our own
     gauss_legendre agrees to its documented ε/θ."""

@@ -186,6 +186,7 @@ def test_synthesis_matches_pointwise_evaluation(backend: str) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # the reference at L = 2048 on a loaded shared box
 @pytest.mark.parametrize("backend", ["ducc0", "reference"])
 @pytest.mark.parametrize("lmax", [1024, 2048])
 def test_round_trip_high_degree(lmax: int, backend: str) -> None:
