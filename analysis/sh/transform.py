@@ -11,7 +11,13 @@ L+1 Gauss nodes integrate exactly in cos θ, and 2L+1 points exactly in φ) — 
 quadrature, as high orders need (approximate ones leave a bias that iterations do not
 remove).
 
-Algorithm (the standard "semi-naive" SHT, e.g. Reinecke 2011 arXiv:1010.2084 §2):
+Backends: :func:`synthesis` and :func:`analysis` run on ducc0 by default
+(:mod:`analysis.sh.ducc`: conventions matched at the boundary, ``nthreads`` explicit);
+``backend="reference"`` runs the project's own transform described below, kept as the
+reference the ducc0 path is tested against. The scattered-point functions (``evaluate``,
+``real_sh_matrix``, the fits) always use the own recurrences.
+
+Algorithm of the reference (the standard "semi-naive" SHT, e.g. Reinecke 2011 arXiv:1010.2084 §2):
 synthesis G_m(θ_j) = Σ_l Z_lm λ_l^m(cos θ_j) followed by an inverse real FFT per ring;
 analysis by a real FFT per ring followed by the weighted Legendre sums. Rings come in
 mirror pairs (θ, π−θ), and λ_l^m(−x) = (−1)^{l+m} λ_l^m(x), so the Legendre work is done on
@@ -24,7 +30,8 @@ are left out, as libsharp skips them (Reinecke 2011 §3.1.1).
 
 Cached per grid: the sectoral seeds and recurrence coefficients (:func:`_recurrence_setup`,
 ≈ 16·L²·(1/2 + 1) bytes, 67 MB at L = 2048, two grids kept). Stored with the grid on
-request (``gl_grid(precompute=...)``, by default up to L ≈ 400): for L ≲ 64 one dense
+request (``gl_grid(precompute=...)``, by default up to L ≈ 400 when the reference is the
+module's backend): for L ≲ 64 one dense
 λ table on all rings, so that each transform is one batched product and two FFT calls
 (numpy call overhead dominates there), else the recurrence's chunks on the northern rings.
 """
