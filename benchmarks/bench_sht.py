@@ -1,19 +1,24 @@
 """Spherical-harmonic transform benchmark and inverse-rendering validation figures.
 
 Forward + inverse transform time and round-trip error of ``analysis.sh.transform`` on its
-Gauss–Legendre grid, in the same run as ducc0 (``ducc0.sht.synthesis_2d``/``analysis_2d``,
-GL grid) and pyshtools (``MakeGridGLQ``/``SHExpandGLQ`` with the Fortran "shtools" backend
-and, where installed, the "ducc" backend), all single-threaded. A band-limited random signal
+Gauss–Legendre grid — with its default ducc0 backend and with its own numpy reference
+transform (``backend="reference"``) — in the same run as ducc0 called directly
+(``ducc0.sht.synthesis_2d``/``analysis_2d``, GL grid) and pyshtools
+(``MakeGridGLQ``/``SHExpandGLQ`` with the Fortran "shtools" backend and, where installed,
+the "ducc" backend), all single-threaded. ``--overhead`` times the default (ducc0) path
+against ducc0 called directly, interleaved, best CPU time of each: what the layout and
+convention conversion at the boundary cost. A band-limited random signal
 (standard-normal coefficients) goes coefficients → grid → coefficients; the error is
 max|c_out − c_in| / max|c_in|; times are the best of several runs (``BEST_OF``; the
 median under ``BEST_OF = False``). Grid/plan setup is timed separately and excluded.
 
-ducc0 and pyshtools are benchmark-only dependencies (install them in a separate
+ducc0 is a project dependency; pyshtools is benchmark-only (install it in a separate
 environment, e.g. ``benchvenv/``); what is not installed is reported as such.
 
 Usage::
 
     python benchmarks/bench_sht.py [--quick] [--validation] [--skip-transforms] [--before DIR]
+                                   [--overhead]
 
 ``--validation`` adds the validation figures: relighting L1 error, tamper detection rates, the
 Wiener K curve and inverse rendering on simulated spheres.
@@ -55,21 +60,26 @@ def _median_time(fn: Callable[[], object], repeats: int) -> tuple[float, object]
 BEST_OF = True
 
 
-def bench_ours(lmax: int, repeats: int, precompute: bool | None = None) -> dict:
+def bench_ours(lmax: int, repeats: int, precompute: bool | None = None,
+               backend: str = "reference") -> dict:
     rng = np.random.default_rng(lmax)
     t0 = time.perf_counter()
     grid = gl_grid(lmax, precompute=precompute)
     c = rng.standard_normal((lmax + 1) ** 2)
+    kw = dict(grid=grid, backend=backend, nthreads=1)
     # The first call also builds the per-grid recurrence constants (seeds, coefficients),
-    # cached like the table: counted as setup.
-    synthesis(c, grid=grid)
+    # or the ducc0 layout indices, cached like the table: counted as setup.
+    synthesis(c, **kw)
     setup = time.perf_counter() - t0
-    t_syn, f = _median_time(lambda: synthesis(c, grid=grid), repeats)
-    t_ana, c2 = _median_time(lambda: analysis(f, grid=grid), repeats)
+    t_syn, f = _median_time(lambda: synthesis(c, **kw), repeats)
+    t_ana, c2 = _median_time(lambda: analysis(f, **kw), repeats)
     finite = bool(np.all(np.isfinite(f)) and np.all(np.isfinite(c2)))
     err = float(np.max(np.abs(c2 - c)) / np.max(np.abs(c)))
-    name = "scatterlab GL" + (" (stored table)" if grid.legendre is not None
-                              else " (recurrence each call)")
+    if backend == "ducc0":
+        name = "scatterlab GL (ducc0 backend, default)"
+    else:
+        name = "scatterlab GL reference" + (" (stored table)" if grid.legendre is not None
+                                            else " (recurrence each call)")
     return dict(name=name, setup=setup, syn=t_syn, ana=t_ana, err=err,
                 finite=finite, grid=f"{grid.shape[0]}x{grid.shape[1]}")
 
@@ -130,7 +140,7 @@ def convention_cross_check(lmax: int = 32) -> list[str]:
     rng = np.random.default_rng(0)
     c = rng.standard_normal((lmax + 1) ** 2)
     grid = gl_grid(lmax)
-    ours = synthesis(c, grid=grid)
+    ours = synthesis(c, grid=grid, backend="reference")
     try:
         import ducc0
 
@@ -170,9 +180,9 @@ def run_transforms(quick: bool) -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for lmax in sizes:
         reps = 9 if lmax <= 256 else 3
-        rows = [bench_ours(lmax, reps)]
-        if rows[0]["name"].endswith("(stored table)"):
-            rows.append(bench_ours(lmax, reps, precompute=False))
+        rows = [bench_ours(lmax, reps, backend="ducc0"), bench_ours(lmax, reps, precompute=False)]
+        if lmax <= 400:
+            rows.append(bench_ours(lmax, reps, precompute=True))
         rows += [bench_ducc(lmax, reps),
                 bench_pyshtools(lmax, reps, "shtools"), bench_pyshtools(lmax, reps, "ducc")]
         for r in rows:
@@ -187,11 +197,11 @@ def run_transforms(quick: bool) -> None:
                   f"| {r['finite']} |")
         sys.stdout.flush()
     if not quick:
-        r = bench_ours(2048, 1)
-        print(f"| {r['name']} (accuracy) | 2048 | {r['grid']} | {r['setup']:.2e} "
-              f"| {r['syn']:.2e} | {r['ana']:.2e} | **{r['syn'] + r['ana']:.2e}** "
-              f"| {r['err']:.1e} | {r['finite']} |")
-        d = bench_ducc(2048, 1)
+        for r in (bench_ours(2048, 3, backend="ducc0"), bench_ours(2048, 1)):
+            print(f"| {r['name']} (accuracy) | 2048 | {r['grid']} | {r['setup']:.2e} "
+                  f"| {r['syn']:.2e} | {r['ana']:.2e} | **{r['syn'] + r['ana']:.2e}** "
+                  f"| {r['err']:.1e} | {r['finite']} |")
+        d = bench_ducc(2048, 3)
         if d is not None:
             print(f"| {d['name']} (accuracy) | 2048 | {d['grid']} | — | {d['syn']:.2e} "
                   f"| {d['ana']:.2e} | **{d['syn'] + d['ana']:.2e}** | {d['err']:.1e} "
@@ -231,6 +241,42 @@ def run_before_after(before: str, quick: bool) -> None:
                 best[k] = min(best[k], time.process_time() - t0)
         print(f"| {lmax} | {best['before']:.3g} | {best['after']:.3g} "
               f"| {best['before'] / best['after']:.2f}× |", flush=True)
+
+
+def run_overhead(quick: bool) -> None:
+    """syn+ana through scatterlab (default ducc0 backend, real project-convention
+    coefficients) against ducc0 called directly on its own complex a_lm, alternated call by
+    call, best CPU time (``time.process_time``) of each, so that other jobs' load cancels."""
+    import ducc0
+
+    sizes = [(64, 200), (256, 40), (1024, 5)] + ([] if quick else [(2048, 3)])
+    print("| L | ducc0 direct [s] | ducc0 through scatterlab [s] | ratio |")
+    print("|---|---|---|---|")
+    for lmax, reps in sizes:
+        rng = np.random.default_rng(lmax)
+        c = rng.standard_normal((lmax + 1) ** 2)
+        grid = gl_grid(lmax)
+        nalm = (lmax + 1) * (lmax + 2) // 2
+        alm = (rng.standard_normal(nalm) + 1j * rng.standard_normal(nalm))[None]
+        alm[0, : lmax + 1] = alm[0, : lmax + 1].real
+        kw = dict(spin=0, lmax=lmax, geometry="GL", nthreads=1)
+
+        def direct(alm=alm, kw=kw, lmax=lmax):
+            m = ducc0.sht.synthesis_2d(alm=alm, ntheta=lmax + 1, nphi=2 * lmax + 1, **kw)
+            return ducc0.sht.analysis_2d(map=m, **kw)
+
+        def ours(c=c, grid=grid):
+            return analysis(synthesis(c, grid=grid, nthreads=1), grid=grid, nthreads=1)
+
+        ours()  # layout indices, cached per L
+        best = {"direct": np.inf, "ours": np.inf}
+        for _ in range(reps):
+            for name, fn in (("direct", direct), ("ours", ours)):
+                t0 = time.process_time()
+                fn()
+                best[name] = min(best[name], time.process_time() - t0)
+        print(f"| {lmax} | {best['direct']:.3g} | {best['ours']:.3g} "
+              f"| {best['ours'] / best['direct']:.2f}× |", flush=True)
 
 
 def run_validation(quick: bool) -> None:
@@ -308,11 +354,15 @@ def main() -> None:
                     help="only the validation figures (they need pytest and scipy, not ducc0)")
     ap.add_argument("--before", metavar="DIR",
                     help="also time the analysis package under DIR against this tree's")
+    ap.add_argument("--overhead", action="store_true",
+                    help="time the default (ducc0) path against ducc0 called directly")
     args = ap.parse_args()
     print(f"python {platform.python_version()}, numpy {np.__version__}, "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} cpus, 1 thread")
     if not args.skip_transforms:
         run_transforms(args.quick)
+    if args.overhead:
+        run_overhead(args.quick)
     if args.before:
         run_before_after(args.before, args.quick)
     if args.validation:

@@ -6,6 +6,8 @@ that paper's equation numbers).
 
 Submodules: :mod:`convention` (the SH convention object), :mod:`legendre` (stable normalised
 Legendre recurrences), :mod:`transform` (Gauss–Legendre SHT and scattered fits),
+:mod:`ducc` (the transforms' default ducc0 backend and the backend setting),
+:mod:`validation` (the input checks and ``SHInputError`` every public function uses),
 :mod:`filters` (BRDF filters A_l), :mod:`convolve` (convolution and Wiener deconvolution),
 :mod:`identities` (Mahajan–Ramamoorthi–Curless identities and transfer), :mod:`consistency`
 (calibrated image-consistency checker), :mod:`sphere_image` (camera image of a sphere →

@@ -37,10 +37,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from analysis.sh.convention import band_slice, lmax_from_size
+from analysis.sh.convention import band_slice
 from analysis.sh.transform import real_sh_matrix
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
+)
 
 __all__ = [
+    "NO_TEST",
     "ConsistencyCalibration",
     "ConsistencyReport",
     "KnownLightingResidual",
@@ -71,6 +79,10 @@ class ConsistencyCalibration:
         The target false-alarm rate α.
     n_cases : int
         Number of consistent cases the calibration rests on.
+    informative : ndarray of bool, shape (n,)
+        Orders whose error varies over the consistent cases (MAD > 0). An order whose
+        error is the same on all (most) consistent cases — an identity that holds
+        whatever the data — cannot tell anything apart.
     """
 
     orders: np.ndarray
@@ -79,6 +91,7 @@ class ConsistencyCalibration:
     threshold: float
     false_alarm: float
     n_cases: int
+    informative: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -100,8 +113,12 @@ class ConsistencyReport:
         T = Σ max(z, 0)².
     threshold : float
     inconsistent : bool
-        T > threshold.
+        T > threshold (never when ``testable`` is False).
     false_alarm : float
+    testable : bool
+        Whether the test can flag anything at these orders (:func:`check`).
+    no_test_reason : str
+        Why not ("" when testable).
     """
 
     orders: np.ndarray
@@ -113,6 +130,19 @@ class ConsistencyReport:
     threshold: float
     inconsistent: bool
     false_alarm: float
+    testable: bool = True
+    no_test_reason: str = ""
+
+    @property
+    def verdict(self) -> str:
+        """"inconsistent", "consistent" or :data:`NO_TEST`."""
+        if not self.testable:
+            return NO_TEST
+        return "inconsistent" if self.inconsistent else "consistent"
+
+
+#: The verdict of a check that cannot flag anything at the chosen orders.
+NO_TEST = "no test possible at this L"
 
 
 def _z(errors: np.ndarray, centre: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -121,7 +151,7 @@ def _z(errors: np.ndarray, centre: np.ndarray, scale: np.ndarray) -> np.ndarray:
 
 def statistic(z: np.ndarray) -> np.ndarray:
     """T = Σ_l max(z_l, 0)² along the last axis."""
-    zz = np.maximum(np.asarray(z, dtype=float), 0.0)
+    zz = np.maximum(check_finite("z", z), 0.0)
     return np.sum(zz * zz, axis=-1)
 
 
@@ -141,28 +171,38 @@ def calibrate(
     false_alarm : float
         Target false-alarm rate α, 0 < α < 1; needs n_cases ≥ 1/α − 1.
     """
-    e = np.asarray(consistent_errors, dtype=float)
-    if e.ndim != 2:
-        raise ValueError("consistent_errors must have shape (n_cases, n_orders)")
+    e = check_finite("consistent_errors", consistent_errors, ndim=2)
+    if e.shape[1] == 0:
+        raise SHInputError("consistent_errors", "must hold at least one order")
     rank = _conformal_rank(e.shape[0], false_alarm)
     centre = np.median(e, axis=0)
-    scale = 1.4826 * np.median(np.abs(e - centre), axis=0)
+    raw = 1.4826 * np.median(np.abs(e - centre), axis=0)
     # An order with no spread (exact identity, noise-free) must not divide by zero.
-    floor = max(float(np.max(scale)) * 1e-3, np.finfo(float).tiny)
-    scale = np.maximum(scale, floor)
-    t = np.sort(statistic(_z(e, centre, scale)))
+    floor = max(float(np.max(raw)) * 1e-3, np.finfo(float).tiny)
+    scale = np.maximum(raw, floor)
+    # Orders without spread carry no information; check() leaves them out of T too.
+    t = np.sort(statistic(np.where(raw > 0, _z(e, centre, scale), 0.0)))
     thr = float(t[rank - 1])
-    ords = np.arange(e.shape[1]) if orders is None else np.asarray(orders)
-    return ConsistencyCalibration(ords, centre, scale, thr, float(false_alarm), e.shape[0])
+    if orders is None:
+        ords = np.arange(e.shape[1])
+    else:
+        ords = check_finite("orders", orders, ndim=1)
+        if ords.size != e.shape[1]:
+            raise SHInputError("orders", f"must name the {e.shape[1]} orders of "
+                               f"consistent_errors, got {ords.size}")
+        ords = ords.astype(int)
+    return ConsistencyCalibration(ords, centre, scale, thr, float(false_alarm), e.shape[0],
+                                  raw > 0)
 
 
 def _conformal_rank(n: int, false_alarm: float) -> int:
     """⌈(n + 1)(1 − α)⌉, the order statistic of n cases that bounds the false alarms by α."""
-    if not 0 < false_alarm < 1:
-        raise ValueError("false_alarm must lie in (0, 1)")
+    false_alarm = check_scalar("false_alarm", false_alarm, low=0.0, high=1.0, low_open=True,
+                               high_open=True)
     rank = int(np.ceil((n + 1) * (1.0 - false_alarm)))
     if rank > n:
-        raise ValueError(f"{n} cases cannot calibrate α = {false_alarm}: need ≥ {rank}")
+        raise SHInputError("false_alarm", f"= {false_alarm:g} cannot be calibrated on {n} "
+                           f"cases: that needs ≥ {rank}")
     return rank
 
 
@@ -181,9 +221,9 @@ def threshold_factor(normalised_statistics: np.ndarray, *, false_alarm: float) -
     float
         The ⌈(n + 1)(1 − α)⌉-th smallest u.
     """
-    u = np.sort(np.asarray(normalised_statistics, dtype=float).ravel())
-    if u.size == 0 or not np.all(np.isfinite(u)) or np.any(u < 0):
-        raise ValueError("normalised_statistics must be finite, ≥ 0 and not empty")
+    u = np.sort(check_finite("normalised_statistics", normalised_statistics).ravel())
+    if u.size == 0 or np.any(u < 0):
+        raise SHInputError("normalised_statistics", "must be ≥ 0 and not empty")
     return float(u[_conformal_rank(u.size, false_alarm) - 1])
 
 
@@ -191,9 +231,9 @@ def scale_threshold(calibration: ConsistencyCalibration, factor: float,
                     *, false_alarm: float | None = None) -> ConsistencyCalibration:
     """The calibration with its threshold multiplied by ``factor`` (> 0), e.g. the
     :func:`threshold_factor` of the instrument, and the α that factor was calibrated for."""
-    if not factor > 0:
-        raise ValueError("factor must be > 0")
-    alpha = calibration.false_alarm if false_alarm is None else float(false_alarm)
+    factor = check_scalar("factor", factor, low=0.0, low_open=True)
+    alpha = calibration.false_alarm if false_alarm is None else check_scalar(
+        "false_alarm", false_alarm, low=0.0, high=1.0, low_open=True, high_open=True)
     return replace(calibration, threshold=calibration.threshold * float(factor),
                    false_alarm=alpha)
 
@@ -229,28 +269,77 @@ def bootstrap_consistent_errors(
     -------
     ndarray of shape (n_cases, n_orders)
     """
-    model = np.asarray(consistent_model, dtype=float)
-    sig = np.broadcast_to(np.asarray(noise_sigma, dtype=float), model.shape)
+    model = check_finite("consistent_model", consistent_model)
+    noise = check_finite("noise_sigma", noise_sigma)
+    if np.any(noise < 0):
+        raise SHInputError("noise_sigma", "must be ≥ 0")
+    try:
+        sig = np.broadcast_to(noise, model.shape)
+    except ValueError:
+        raise SHInputError("noise_sigma", f"must be a scalar or of shape {model.shape}, got "
+                           f"{noise.shape}") from None
+    n_cases = check_degree("n_cases", n_cases, minimum=1)
     return np.array([
         np.asarray(errors_of(model + sig * rng.standard_normal(model.shape)), dtype=float)
         for _ in range(n_cases)
     ])
 
 
-def check(errors: np.ndarray, calibration: ConsistencyCalibration) -> ConsistencyReport:
+def check(
+    errors: np.ndarray,
+    calibration: ConsistencyCalibration,
+    *,
+    defined: np.ndarray | None = None,
+    max_error: float | None = None,
+) -> ConsistencyReport:
     """Report per-order errors against the calibrated noise level, and the decision.
+
+    The test is possible only where it could flag something. It is not (``testable``
+    False, verdict :data:`NO_TEST`, never "inconsistent" nor "consistent") when no order
+    is informative — every order's identity is undefined for these images (``defined``)
+    or shows no spread over the consistent cases (it holds whatever the data) — or when
+    even the largest error the identity admits (``max_error``, 1 for the normalised
+    identity errors of :mod:`analysis.sh.identities`) at every informative order would
+    not reach the threshold: a "consistent" there would say nothing.
 
     Parameters
     ----------
     errors : ndarray of shape (n_orders,)
         The image's normalised identity errors, same orders as the calibration.
     calibration : ConsistencyCalibration
+    defined : bool ndarray of shape (n_orders,), optional
+        Orders where the identity has content for these images (``IdentityError.defined``);
+        default all.
+    max_error : float, optional
+        Largest possible error per order (> 0); default: no bound known (the power
+        condition is not tested).
     """
-    e = np.asarray(errors, dtype=float)
+    if not isinstance(calibration, ConsistencyCalibration):
+        raise SHInputError("calibration", "must be a ConsistencyCalibration (calibrate())")
+    e = check_finite("errors", errors)
     if e.shape != calibration.noise_error.shape:
-        raise ValueError("errors and calibration cover different orders")
+        raise SHInputError("errors", f"must have one value per calibrated order "
+                           f"{calibration.noise_error.shape}, got {e.shape}")
+    ok = np.ones(e.shape, dtype=bool) if defined is None else np.asarray(defined, dtype=bool)
+    if ok.shape != e.shape:
+        raise SHInputError("defined", f"must have shape {e.shape}, got {ok.shape}")
+    if calibration.informative is not None:
+        ok = ok & calibration.informative
+    if max_error is not None:
+        max_error = check_scalar("max_error", max_error, low=0.0, low_open=True)
     z = _z(e, calibration.noise_error, calibration.noise_scale)
-    t = float(statistic(z))
+    t = float(statistic(np.where(ok, z, 0.0)))
+    reason = ""
+    if not ok.any():
+        reason = ("no order carries information: the identity is undefined for these images "
+                  "or holds whatever the data at every order tested")
+    elif max_error is not None:
+        z_max = _z(np.full(e.shape, max_error), calibration.noise_error,
+                   calibration.noise_scale)
+        t_max = float(statistic(np.where(ok, z_max, 0.0)))
+        if t_max <= calibration.threshold:
+            reason = (f"even the largest possible errors would give a statistic of "
+                      f"{t_max:.3g}, not above the threshold {calibration.threshold:.3g}")
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(calibration.noise_error > 0, e / calibration.noise_error, np.inf)
     return ConsistencyReport(
@@ -261,8 +350,10 @@ def check(errors: np.ndarray, calibration: ConsistencyCalibration) -> Consistenc
         z=z,
         statistic=t,
         threshold=calibration.threshold,
-        inconsistent=t > calibration.threshold,
+        inconsistent=not reason and t > calibration.threshold,
         false_alarm=calibration.false_alarm,
+        testable=not reason,
+        no_test_reason=reason,
     )
 
 
@@ -303,10 +394,14 @@ def known_lighting_residual(
         Known lighting coefficients; L must exceed the BRDF's band limit, since the image
         holds every band the filter passes.
     """
-    v = np.asarray(values, dtype=float)
-    lig = np.asarray(lighting, dtype=float)
-    lmax = lmax_from_size(lig.size)
-    y = real_sh_matrix(lmax, np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
+    v = check_finite("values", values, ndim=1)
+    lig, lmax = check_coefficients("lighting", lighting)
+    th = check_finite("theta", theta, ndim=1)
+    ph = check_finite("phi", phi, ndim=1)
+    if not v.size == th.size == ph.size:
+        raise SHInputError("values", f"must have one value per direction: {v.size} values, "
+                           f"{th.size} theta, {ph.size} phi")
+    y = real_sh_matrix(lmax, th, ph)
     basis = np.stack([y[:, band_slice(l)] @ lig[band_slice(l)] for l in range(lmax + 1)], 1)
     a, *_ = np.linalg.lstsq(basis, v, rcond=None)
     res = v - basis @ a

@@ -23,10 +23,13 @@ Conventions (the project's canonical one is :data:`PROJECT_CONVENTION`):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+
+from analysis.sh.validation import SHInputError, check_coefficients, check_degree
 
 __all__ = [
     "PROJECT_CONVENTION",
@@ -77,16 +80,15 @@ PROJECT_CONVENTION = SHConvention()
 
 def n_coeffs(lmax: int) -> int:
     """Number of coefficients (L+1)² up to degree ``lmax``."""
-    if lmax < 0:
-        raise ValueError("lmax must be ≥ 0")
-    return (lmax + 1) ** 2
+    return (check_degree("lmax", lmax) + 1) ** 2
 
 
 def lmax_from_size(size: int) -> int:
     """Inverse of :func:`n_coeffs`; raises if ``size`` is not a perfect square."""
-    lmax = round(np.sqrt(size)) - 1
-    if lmax < 0 or (lmax + 1) ** 2 != size:
-        raise ValueError(f"{size} coefficients is not (L+1)² for any L")
+    size = check_degree("size", size, minimum=1)
+    lmax = math.isqrt(size) - 1
+    if (lmax + 1) ** 2 != size:
+        raise SHInputError("size", f"must be (L+1)² for some L, got {size} coefficients")
     return lmax
 
 
@@ -97,11 +99,13 @@ def lm_index(l: int | np.ndarray, m: int | np.ndarray) -> int | np.ndarray:
 
 def band_slice(l: int) -> slice:
     """Slice of the flat vector holding the 2l+1 coefficients of degree l (m = −l … l)."""
+    l = check_degree("l", l)
     return slice(l * l, (l + 1) * (l + 1))
 
 
 def degrees_orders(lmax: int) -> tuple[np.ndarray, np.ndarray]:
     """Arrays (l, m) of shape ((L+1)²,) giving the degree and order of each flat index."""
+    lmax = check_degree("lmax", lmax)
     l = np.repeat(np.arange(lmax + 1), 2 * np.arange(lmax + 1) + 1)
     m = np.arange(l.size) - l * l - l
     return l, m
@@ -134,8 +138,11 @@ def convert(
     harmonics of odd |m| by −1, and the complex ones of odd m > 0 only (since then
     Y^{−m} = (−1)^m conj(Y^m) is unchanged).
     """
-    c = np.asarray(coeffs)
-    lmax = lmax_from_size(c.shape[0])
+    c, lmax = check_coefficients("coeffs", coeffs,
+                                 dtype=complex if np.iscomplexobj(coeffs) else float)
+    for name, conv in (("source", source), ("target", target)):
+        if not isinstance(conv, SHConvention):
+            raise SHInputError(name, f"must be an SHConvention, got {type(conv).__name__}")
     _, m = degrees_orders(lmax)
     shape = (-1,) + (1,) * (c.ndim - 1)
     m_b = m.reshape(shape)

@@ -16,7 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.sh.convention import band_slice, degrees_orders, lmax_from_size
+from analysis.sh.convention import band_slice, degrees_orders
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
+)
 
 __all__ = [
     "NoiseEstimate",
@@ -31,9 +38,11 @@ __all__ = [
 
 def per_coefficient(per_band: np.ndarray, lmax: int) -> np.ndarray:
     """Expand a per-degree array (≥ lmax+1 entries) to the flat (L+1)² layout."""
-    v = np.asarray(per_band)
-    if v.shape[0] < lmax + 1:
-        raise ValueError(f"need {lmax + 1} per-band values, got {v.shape[0]}")
+    lmax = check_degree("lmax", lmax)
+    v = check_finite("per_band", per_band)
+    if v.ndim == 0 or v.shape[0] < lmax + 1:
+        raise SHInputError("per_band", f"must hold ≥ {lmax + 1} per-band values, got shape "
+                           f"{v.shape}")
     l, _ = degrees_orders(lmax)
     return v[l]
 
@@ -51,17 +60,27 @@ def convolve(lighting: np.ndarray, filt: np.ndarray) -> np.ndarray:
     -------
     ndarray of the shape of ``lighting``
     """
-    c = np.asarray(lighting, dtype=float)
-    lmax = lmax_from_size(c.shape[0])
-    a = per_coefficient(np.asarray(filt, dtype=float), lmax)
+    c, lmax = check_coefficients("lighting", lighting)
+    a = per_coefficient(_filter(filt, lmax, nonzero=False), lmax)
     return c * a.reshape((-1,) + (1,) * (c.ndim - 1))
 
 
 def band_power(coeffs: np.ndarray) -> np.ndarray:
     """Mean power per degree, P(l) = (1/(2l+1)) Σ_m c_lm², shape (L+1,)."""
-    c = np.asarray(coeffs, dtype=float)
-    lmax = lmax_from_size(c.shape[0])
+    c, lmax = check_coefficients("coeffs", coeffs)
     return np.array([np.mean(c[band_slice(l)] ** 2) for l in range(lmax + 1)])
+
+
+def _filter(filt: np.ndarray, lmax: int, *, nonzero: bool = True) -> np.ndarray:
+    """The first L+1 values of a finite filter A_l (SHInputError naming ``filt``); with
+    ``nonzero``, one that passes some band (a deconvolution needs one)."""
+    a = check_finite("filt", filt, ndim=1)
+    if a.size < lmax + 1:
+        raise SHInputError("filt", f"must hold A_l for l = 0 … {lmax} ({lmax + 1} values), "
+                           f"got {a.size}")
+    if nonzero and not np.any(a[: lmax + 1] != 0):
+        raise SHInputError("filt", "is zero in every band: nothing is observable")
+    return a[: lmax + 1]
 
 
 def _unobservable(filt: np.ndarray, tol: float) -> np.ndarray:
@@ -99,14 +118,16 @@ def estimate_coefficient_noise(
     ValueError
         When no band is signal-free: pass the noise level explicitly then.
     """
-    c = np.asarray(coeffs, dtype=float)
-    lmax = lmax_from_size(c.size)
-    a = np.asarray(filt, dtype=float)[: lmax + 1]
+    c, lmax = check_coefficients("coeffs", coeffs)
+    a = _filter(filt, lmax)
+    null_tol = check_scalar("null_tol", null_tol, low=0.0, high=1.0, high_open=True)
+    negligible = check_scalar("negligible", negligible, low=0.0, high=1.0, high_open=True)
     null = _unobservable(a, null_tol)
     if not null.any():
         null = np.abs(a) < negligible * np.abs(a).max()
     if not null.any():
-        raise ValueError("no signal-free band to estimate the noise from; pass noise_sigma")
+        raise SHInputError("filt", "leaves no signal-free band to estimate the noise from; "
+                           "pass noise_sigma")
     vals = np.concatenate([c[band_slice(l)] for l in np.nonzero(null)[0]])
     return NoiseEstimate(float(1.4826 * np.median(np.abs(vals))), int(vals.size))
 
@@ -128,8 +149,8 @@ class WienerResult:
     dof : float
         Effective recovered degrees of freedom Σ (2l+1) A_l²/(A_l² + K_l).
     noise_sigma : float
-        Noise floor σ used to choose K: the larger of the given or estimated noise level
-        and the floor fitted to the band powers (nan when K was given).
+        Noise σ used to choose K: the given one as it is, else the larger of the estimated
+        level and the floor fitted to the band powers (nan when K was given).
     spectrum_slope : float
         Exponent p of the fitted lighting spectrum P_L(l) ∝ (l+1)^−p (nan when K was given).
     """
@@ -144,16 +165,20 @@ class WienerResult:
 
 
 def _fit_lighting_spectrum(
-    b: np.ndarray, a: np.ndarray, sigma_min: float, observable: np.ndarray
+    b: np.ndarray, a: np.ndarray, sigma_min: float, observable: np.ndarray,
+    *, fixed_floor: bool = False,
 ) -> tuple[np.ndarray, float, float]:
     """Fit P_B(l) = A_l² c (l+1)^−p + n² to the band powers of the image.
 
     The noise floor n² is fitted too (bounded below by ``sigma_min``²): what stops the
     inverse filter in practice is every error that does not follow the convolution model
     (noise, and in a real image the departures of the sphere from the ideal kernel), and
-    the band powers show it as the floor they level off to where A_l² P_L is small. The
-    slope is bounded to 0 ≤ p ≤ 8 (lighting power does not grow with l). Least squares
-    on log P_B with weights 2l+1, the number of coefficients per band.
+    the band powers show it as the floor they level off to where A_l² P_L is small. With
+    ``fixed_floor`` (a noise level the caller knows) n = ``sigma_min`` exactly and only c
+    and p are fitted: with a few bands a free floor can absorb all the power and call the
+    whole image noise. The slope is bounded to 0 ≤ p ≤ 8 (lighting power does not grow
+    with l). Least squares on log P_B with weights 2l+1, the number of coefficients per
+    band.
 
     Returns
     -------
@@ -171,16 +196,24 @@ def _fit_lighting_spectrum(
     use = observable & (pb > 0)
     tiny = np.finfo(float).tiny
     if use.sum() < 3:
-        level = max(float(np.mean(pb[use])) if use.any() else float(np.mean(pb)), tiny)
+        # Too few bands for a spectrum: a flat lighting power, the band power above the
+        # noise (the known noise when given).
+        pool = pb[use] if use.any() else pb
+        if fixed_floor:
+            a2 = a[use] ** 2 if use.any() else np.ones(1)
+            level = max(float(np.mean(np.maximum(pool - sigma_min**2, 0.0) / a2)), tiny)
+            return np.full(lmax + 1, level), 0.0, sigma_min
+        level = max(float(np.mean(pool)), tiny)
         return np.full(lmax + 1, level), 0.0, max(sigma_min, np.sqrt(tiny))
     a2 = a[use] ** 2
     x = np.log(l[use] + 1.0)
     y = np.log(pb[use])
     w = np.sqrt(2.0 * l[use] + 1.0)
     floor_min = max(sigma_min**2, tiny)
+    log_fixed = np.log(sigma_min**2) if fixed_floor and sigma_min > 0 else -np.inf
 
     def model(q: np.ndarray) -> np.ndarray:
-        log_c, slope, log_n2 = q
+        log_c, slope, log_n2 = (*q, log_fixed) if fixed_floor else q
         return np.logaddexp(np.log(a2) + log_c - slope * x, log_n2)
 
     start = np.array([
@@ -190,11 +223,14 @@ def _fit_lighting_spectrum(
     ])
     lo = [-np.inf, 0.0, np.log(floor_min)]
     hi = [np.inf, 8.0, np.inf]
+    n_free = 2 if fixed_floor else 3
+    lo, hi, start = lo[:n_free], hi[:n_free], start[:n_free]
     start = np.clip(start, np.array(lo) + 1e-9, np.array(hi) - 1e-9)
     sol = least_squares(lambda q: w * (model(q) - y), start, bounds=(lo, hi))
-    log_c, slope, log_n2 = sol.x
+    log_c, slope = sol.x[:2]
     p_l = np.exp(log_c - slope * np.log(l + 1.0))
-    return p_l, float(slope), float(np.sqrt(np.exp(log_n2)))
+    floor = sigma_min if fixed_floor else float(np.sqrt(np.exp(sol.x[2])))
+    return p_l, float(slope), floor
 
 
 def wiener_deconvolve(
@@ -216,11 +252,13 @@ def wiener_deconvolve(
     filt : ndarray of shape (≥ L+1,)
         A_l of the BRDF (:mod:`analysis.sh.filters`).
     noise_sigma : float, optional
-        Noise σ of one coefficient of B, a lower bound for the noise floor fitted to the
-        band powers (see ``_fit_lighting_spectrum``). Estimated from signal-free bands with
-        :func:`estimate_coefficient_noise` when neither this nor ``k`` is given.
+        Noise σ ≥ 0 of one coefficient of B, when known: used as it is for K_l = σ²/P_L(l)
+        (only the lighting spectrum is fitted). When not given it is estimated from
+        signal-free bands with :func:`estimate_coefficient_noise` and serves as a lower
+        bound for a noise floor fitted to the band powers (see ``_fit_lighting_spectrum``).
     k : float or ndarray of shape (L+1,), optional
-        Explicit regularisation (scalar or per band), > 0. Overrides the automatic choice.
+        Explicit regularisation (scalar or per band), finite and > 0 in observable bands.
+        Overrides the automatic choice.
     null_tol : float
         |A_l| ≤ null_tol·max|A| counts as an exact zero (unobservable band).
 
@@ -228,28 +266,35 @@ def wiener_deconvolve(
     -------
     WienerResult
     """
-    b = np.asarray(image_coeffs, dtype=float)
-    lmax = lmax_from_size(b.size)
-    a = np.asarray(filt, dtype=float)[: lmax + 1]
-    if a.size < lmax + 1:
-        raise ValueError("filter shorter than the coefficient band limit")
+    b, lmax = check_coefficients("image_coeffs", image_coeffs)
+    if b.ndim != 1:
+        raise SHInputError("image_coeffs", f"must be one vector of (L+1)² coefficients, got "
+                           f"shape {b.shape}")
+    a = _filter(filt, lmax)
+    null_tol = check_scalar("null_tol", null_tol, low=0.0, high=1.0, high_open=True)
+    if noise_sigma is not None:
+        noise_sigma = check_scalar("noise_sigma", noise_sigma, low=0.0)
     unobs = _unobservable(a, null_tol)
     observable = ~unobs
     slope = float("nan")
     sigma_used = float("nan")
     if k is not None:
-        k_arr = np.broadcast_to(np.asarray(k, dtype=float), (lmax + 1,)).copy()
+        k_in = check_finite("k", k)
+        if k_in.ndim > 1 or (k_in.ndim == 1 and k_in.size != lmax + 1):
+            raise SHInputError("k", f"must be a scalar or {lmax + 1} per-band values, got "
+                               f"shape {k_in.shape}")
+        k_arr = np.broadcast_to(k_in, (lmax + 1,)).copy()
         if np.any(k_arr[observable] <= 0):
-            raise ValueError("K must be > 0 (K = 0 is the unstable inverse filter)")
+            raise SHInputError("k", "must be > 0 (K = 0 is the unstable inverse filter)")
     else:
-        if noise_sigma is None:
+        known = noise_sigma is not None
+        if not known:
             try:
                 noise_sigma = estimate_coefficient_noise(b, a, null_tol=null_tol).sigma
-            except ValueError:
+            except SHInputError:
                 noise_sigma = 0.0  # the fitted floor alone sets the level
-        if noise_sigma < 0:
-            raise ValueError("noise_sigma must be ≥ 0")
-        p_l, slope, sigma_used = _fit_lighting_spectrum(b, a, float(noise_sigma), observable)
+        p_l, slope, sigma_used = _fit_lighting_spectrum(b, a, float(noise_sigma), observable,
+                                                        fixed_floor=known)
         k_arr = sigma_used**2 / p_l
     gain = np.zeros(lmax + 1)
     gain[observable] = a[observable] / (a[observable] ** 2 + k_arr[observable])

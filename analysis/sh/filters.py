@@ -25,9 +25,16 @@ from typing import Literal
 import numpy as np
 from scipy.special import gammaln, gammasgn
 
-from analysis.sh.convention import lmax_from_size
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
+)
 
 __all__ = [
+    "PHONG_EXACT_MAX",
     "SHFilter",
     "band_limit",
     "irradiance_9",
@@ -68,9 +75,16 @@ class SHFilter:
 
 def band_limit(values: np.ndarray, *, tol: float = 1e-2) -> int:
     """Last degree l with |A_l| ≥ tol·|A_0| (0 when none beyond l = 0 qualifies)."""
-    a = np.abs(np.asarray(values, dtype=float))
+    a = np.abs(check_finite("values", values, ndim=1))
+    tol = _tol(tol)
+    if a.size == 0:
+        raise SHInputError("values", "must hold A_0 at least, got an empty array")
     keep = np.nonzero(a >= tol * a[0])[0]
     return int(keep.max()) if keep.size else 0
+
+
+def _tol(tol: float) -> float:
+    return check_scalar("tol", tol, low=0.0, high=1.0)
 
 
 def lambertian_filter(lmax: int, *, tol: float = 1e-2) -> SHFilter:
@@ -81,6 +95,8 @@ def lambertian_filter(lmax: int, *, tol: float = 1e-2) -> SHFilter:
     These multiply lighting coefficients to give irradiance E_lm = Â_l L_lm; for radiance of
     albedo ρ multiply by ρ/π.
     """
+    lmax = check_degree("lmax", lmax)
+    tol = _tol(tol)
     l = np.arange(lmax + 1, dtype=float)
     a = np.zeros(lmax + 1)
     a[0] = np.pi
@@ -100,9 +116,15 @@ def kernel_energy_fraction(values: np.ndarray, total: float) -> np.ndarray:
     For the clamped cosine ``total`` is 2π/3 (87.50 % at l ≤ 1,
     99.22 % at l ≤ 2).
     """
-    a = np.asarray(values, dtype=float)
+    a = check_finite("values", values, ndim=1)
+    total = check_scalar("total", total, low=0.0, low_open=True)
     l = np.arange(a.size)
     return np.cumsum((2 * l + 1) * a**2 / (4.0 * np.pi)) / total
+
+
+#: Largest Phong exponent of the exact filter: its log-Γ terms (≈ s ln s) cancel, leaving
+#: a relative error ≈ s ln s · ε (4e-8 here); beyond, use ``exact=False`` (a near-mirror).
+PHONG_EXACT_MAX = 1e7
 
 
 def phong_filter(lmax: int, s: float, *, exact: bool = True, tol: float = 1e-2) -> SHFilter:
@@ -118,11 +140,13 @@ def phong_filter(lmax: int, s: float, *, exact: bool = True, tol: float = 1e-2) 
     ----------
     lmax : int
     s : float
-        Phong exponent > 0.
+        Phong exponent > 0; at most :data:`PHONG_EXACT_MAX` for the exact filter.
     exact : bool
     """
-    if s <= 0:
-        raise ValueError("Phong exponent must be positive")
+    lmax = check_degree("lmax", lmax)
+    s = check_scalar("s", s, low=0.0, low_open=True,
+                     high=PHONG_EXACT_MAX if exact else None)
+    tol = _tol(tol)
     l = np.arange(lmax + 1, dtype=float)
     if not exact:
         a = np.exp(-l * (l + 1.0) / (2.0 * s))
@@ -150,10 +174,12 @@ def torrance_sparrow_filter(lmax: int, sigma: float, *, tol: float = 1e-2) -> SH
     l = 2, 5, 10 for σ = 0.1 against 0.942, 0.741, 0.333); the lobe is not isotropic away from
     it, so this is an approximation by construction.
     """
-    if sigma <= 0:
-        raise ValueError("sigma must be positive")
+    lmax = check_degree("lmax", lmax)
+    sigma = check_scalar("sigma", sigma, low=0.0, low_open=True)
+    tol = _tol(tol)
     l = np.arange(lmax + 1, dtype=float)
-    a = np.exp(-(sigma**2) * l * (l + 1.0))
+    a = np.ones(lmax + 1)
+    a[1:] = np.exp(-(sigma * sigma) * (l[1:] * (l[1:] + 1.0)))  # l = 0 apart: σ² may be inf
     return SHFilter(f"torrance-sparrow(σ={sigma:g})", a, band_limit(a, tol=tol), tol,
                     "reflected", False)
 
@@ -186,11 +212,13 @@ def irradiance_9(lighting: np.ndarray, normals: np.ndarray) -> np.ndarray:
     ndarray of shape (...)
         Irradiance; multiply by ρ/π for the radiance of a Lambertian surface of albedo ρ.
     """
-    c = np.asarray(lighting, dtype=float)
-    lmax_from_size(c.size)
-    if c.size < 9:
-        raise ValueError("need at least the 9 coefficients of l ≤ 2")
-    n = np.asarray(normals, dtype=float)
+    c, _ = check_coefficients("lighting", lighting)
+    if c.ndim != 1 or c.size < 9:
+        raise SHInputError("lighting", "must be one vector holding at least the 9 "
+                           f"coefficients of l ≤ 2, got shape {c.shape}")
+    n = check_finite("normals", normals)
+    if n.ndim == 0 or n.shape[-1] != 3:
+        raise SHInputError("normals", f"must have shape (..., 3), got {n.shape}")
     x, y, z = n[..., 0], n[..., 1], n[..., 2]
     c1, c2, c3, c4, c5 = irradiance_constants()
     l00, l1m1, l10, l11, l2m2, l2m1, l20, l21, l22 = c[:9]

@@ -18,9 +18,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.sh.convention import band_slice, lmax_from_size
+from analysis.sh.convention import band_slice
 from analysis.sh.filters import lambertian_filter
 from analysis.sh.transform import analysis, directions_to_angles, evaluate, gl_grid
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
+)
 
 __all__ = [
     "AlbedoRatio",
@@ -66,11 +73,21 @@ class IdentityError:
     estimate: np.ndarray
 
 
-def _lmax_of(*coeffs: np.ndarray) -> int:
-    sizes = {np.asarray(c).shape[0] for c in coeffs}
-    if len(sizes) != 1:
-        raise ValueError("all coefficient vectors must have the same band limit")
-    return lmax_from_size(sizes.pop())
+def _checked(**coeffs: np.ndarray) -> tuple[int, list[np.ndarray]]:
+    """The band limit shared by finite coefficient vectors, and the vectors as float arrays.
+
+    Raises SHInputError naming the first non-finite, malformed or mismatched argument.
+    """
+    out, lmax = [], None
+    for name, value in coeffs.items():
+        arr, l = check_coefficients(name, value)
+        if lmax is not None and l != lmax:
+            first = next(iter(coeffs))
+            raise SHInputError(name, f"has band limit L = {l}, {first} has L = {lmax}: all "
+                               "coefficient vectors must have the same band limit")
+        lmax = l
+        out.append(arr)
+    return int(lmax), out
 
 
 def _normalised(x: np.ndarray, y: np.ndarray) -> tuple[float, bool]:
@@ -95,11 +112,11 @@ def _collect(name: str, lmin: int, lmax: int, per_l) -> IdentityError:
     return IdentityError(name, orders, err, ok, est)
 
 
-def _product_identity(name: str, left: tuple[np.ndarray, np.ndarray],
-                      right: tuple[np.ndarray, np.ndarray], lmin: int) -> IdentityError:
-    """Per-order normalised error of X_lm Y_lm = U_lm V_lm (the form of M19 and M21)."""
-    x, y, u, v = (np.asarray(a, dtype=float) for a in (*left, *right))
-    lmax = _lmax_of(x, y, u, v)
+def _product_identity(name: str, arrays: dict[str, np.ndarray], lmin: int) -> IdentityError:
+    """Per-order normalised error of X_lm Y_lm = U_lm V_lm (the form of M19 and M21);
+    ``arrays`` holds X, Y, U, V under their argument names."""
+    lmax, (x, y, u, v) = _checked(**arrays)
+    check_degree("lmin", lmin)
 
     def per_l(l: int):
         s = band_slice(l)
@@ -114,9 +131,8 @@ def known_lighting(image: np.ndarray, lighting: np.ndarray, *, lmin: int = 1) ->
 
     Also returns the least-squares A_l = Σ_m B_lm L_lm / Σ_m L_lm² as ``estimate``.
     """
-    lmax = _lmax_of(image, lighting)
-    b = np.asarray(image, dtype=float)
-    lig = np.asarray(lighting, dtype=float)
+    lmax, (b, lig) = _checked(image=image, lighting=lighting)
+    check_degree("lmin", lmin)
 
     def per_l(l: int):
         bl, ll = b[band_slice(l)], lig[band_slice(l)]
@@ -145,8 +161,8 @@ def diffuse_plus_specular(
         D_lm, the irradiance in the reflected parameterisation
         (:func:`irradiance_reflected` or its image-space counterpart).
     """
-    lmax = _lmax_of(image, lighting, irradiance)
-    b, lig, d = (np.asarray(v, dtype=float) for v in (image, lighting, irradiance))
+    lmax, (b, lig, d) = _checked(image=image, lighting=lighting, irradiance=irradiance)
+    check_degree("lmin", lmin)
 
     def per_l(l: int):
         s = band_slice(l)
@@ -171,8 +187,8 @@ def two_objects_one_lighting(
 
     ``estimate`` is the BRDF transfer γ_l = A²_l/A¹_l averaged over m (M15).
     """
-    lmax = _lmax_of(image1, image2)
-    b1, b2 = np.asarray(image1, dtype=float), np.asarray(image2, dtype=float)
+    lmax, (b1, b2) = _checked(image1=image1, image2=image2)
+    check_degree("lmin", lmin)
 
     def per_l(l: int):
         s = band_slice(l)
@@ -195,7 +211,8 @@ def one_object_two_lightings(
 ) -> IdentityError:
     """One object in two known lightings: B²_lm L¹_lm − B¹_lm L²_lm = 0 (M19)."""
     return _product_identity("M19 one object, two lightings",
-                             (image2, lighting1), (image1, lighting2), lmin)
+                             {"image2": image2, "lighting1": lighting1, "image1": image1,
+                              "lighting2": lighting2}, lmin)
 
 
 def four_images(
@@ -205,7 +222,8 @@ def four_images(
 
     Superscripts are (lighting, material); the identity needs neither lighting nor BRDF.
     """
-    return _product_identity("M21 two objects x two lightings", (b11, b22), (b12, b21), lmin)
+    return _product_identity("M21 two objects x two lightings",
+                             {"b11": b11, "b22": b22, "b12": b12, "b21": b21}, lmin)
 
 
 def rank_one(images: np.ndarray, *, lmin: int = 0) -> IdentityError:
@@ -222,10 +240,12 @@ def rank_one(images: np.ndarray, *, lmin: int = 0) -> IdentityError:
     rank 1. The error is √(Σ_{k≥2} σ_k²) / σ_1 (0 for an exact rank-1 matrix), and
     ``estimate`` is σ_2/σ_1.
     """
-    imgs = np.asarray(images, dtype=float)
-    if imgs.ndim != 3:
-        raise ValueError("images must have shape (r, s, (L+1)²)")
-    lmax = lmax_from_size(imgs.shape[2])
+    imgs = check_finite("images", images, ndim=3)
+    n = imgs.shape[2]
+    lmax = int(np.sqrt(n)) - 1
+    if lmax < 0 or (lmax + 1) ** 2 != n:
+        raise SHInputError("images", f"must have shape (r, s, (L+1)²), got {imgs.shape}")
+    check_degree("lmin", lmin)
 
     def per_l(l: int):
         blk = imgs[:, :, band_slice(l)]  # (r, s, 2l+1)
@@ -265,8 +285,8 @@ def brdf_transfer(image1: np.ndarray, image2: np.ndarray, *, k: float = 0.0) -> 
     γ_l = Σ_m B²_lm B¹_lm / (Σ_m (B¹_lm)² + k): the least-squares average over m, which
     weights orders by their signal.
     """
-    lmax = _lmax_of(image1, image2)
-    b1, b2 = np.asarray(image1, dtype=float), np.asarray(image2, dtype=float)
+    lmax, (b1, b2) = _checked(image1=image1, image2=image2)
+    k = check_scalar("k", k, low=0.0)
     g = np.zeros(lmax + 1)
     ok = np.zeros(lmax + 1, dtype=bool)
     for l in range(lmax + 1):
@@ -285,8 +305,8 @@ def lighting_transfer(
 
     Evaluated as B²B¹/((B¹)² + k) so that a vanishing B¹_lm gives 0, never inf/NaN.
     """
-    b1, b2 = np.asarray(image1, dtype=float), np.asarray(image2, dtype=float)
-    _lmax_of(b1, b2)
+    _, (b1, b2) = _checked(image1=image1, image2=image2)
+    k = check_scalar("k", k, low=0.0)
     den = b1 * b1 + k
     vals = np.divide(b2 * b1, den, out=np.zeros_like(b1), where=den > 0)
     return TransferResult(vals, b1 * b1 > k, float(k))
@@ -310,14 +330,14 @@ def render_missing_image(
     -------
     ndarray of shape ((L+1)²,)
     """
-    lmax = _lmax_of(b11, b12, b21)
+    lmax, (b11, b12, b21) = _checked(b11=b11, b12=b12, b21=b21)
     if route == "brdf":
         gamma = brdf_transfer(b11, b12, k=k).values
         l = np.repeat(np.arange(lmax + 1), 2 * np.arange(lmax + 1) + 1)
-        return np.asarray(b21, dtype=float) * gamma[l]
+        return b21 * gamma[l]
     if route == "lighting":
-        return lighting_transfer(b11, b21, k=k).values * np.asarray(b12, dtype=float)
-    raise ValueError("route must be 'brdf' or 'lighting'")
+        return lighting_transfer(b11, b21, k=k).values * b12
+    raise SHInputError("route", f"must be 'brdf' or 'lighting', got {route!r}")
 
 
 def irradiance_reflected(
@@ -339,10 +359,15 @@ def irradiance_reflected(
     -------
     ndarray of shape ((lmax+1)²,)
     """
-    lig = np.asarray(lighting, dtype=float)
-    ll = lmax_from_size(lig.size)
+    lig, ll = check_coefficients("lighting", lighting)
+    lmax = check_degree("lmax", lmax)
+    if grid_lmax is not None:
+        check_degree("grid_lmax", grid_lmax, minimum=lmax)
     gl = grid_lmax if grid_lmax is not None else max(4 * lmax, 2 * ll, 8)
-    v = np.asarray(view, dtype=float) / np.linalg.norm(view)
+    v = check_finite("view", view)
+    if v.shape != (3,) or not np.linalg.norm(v) > 0:
+        raise SHInputError("view", f"must be a non-zero 3-vector, got {view!r}")
+    v = v / np.linalg.norm(v)
     grid = gl_grid(gl)
     tt, pp = np.meshgrid(grid.theta, grid.phi, indexing="ij")
     r = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], axis=-1)
@@ -389,9 +414,8 @@ def separate_diffuse_specular(
     (Mahajan et al. §6). The specular lobe's own l ≤ 2 content is assigned to the diffuse part: the
     standard approximation of the method.
     """
-    c = np.asarray(image_normal, dtype=float)
-    lmax_from_size(c.size)
-    cut = (lmax_diffuse + 1) ** 2
+    c, _ = check_coefficients("image_normal", image_normal)
+    cut = (check_degree("lmax_diffuse", lmax_diffuse) + 1) ** 2
     diffuse = np.zeros_like(c)
     diffuse[:cut] = c[:cut]
     specular = c - diffuse
@@ -423,13 +447,17 @@ def albedo_ratio(
     """
     i1 = np.asarray(diffuse1, dtype=float)
     i2 = np.asarray(diffuse2, dtype=float)
+    if i1.shape != i2.shape:
+        raise SHInputError("diffuse2", f"must have the shape of diffuse1 {i1.shape}, got "
+                           f"{i2.shape}")
+    # Non-finite pixels mark unusable data in an image: left out by design.
     use = np.isfinite(i1) & np.isfinite(i2)
     if mask is not None:
         use &= np.asarray(mask, dtype=bool)
     x, y = i1[use], i2[use]
     den = float(x @ x)
     if den == 0.0 or x.size < 2:
-        raise ValueError("no signal in the first image")
+        raise SHInputError("diffuse1", "holds no signal in the usable pixels")
     ratio = float(x @ y) / den
     resid = y - ratio * x
     std = float(np.sqrt(resid @ resid / (x.size - 1) / den))

@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from analysis.sh.convention import band_slice, lmax_from_size
-from analysis.sh.filters import lambertian_filter, phong_filter
+from analysis.sh.convention import band_slice
+from analysis.sh.filters import PHONG_EXACT_MAX, lambertian_filter, phong_filter
 from analysis.sh.transform import real_sh_matrix
+from analysis.sh.validation import SHInputError, check_coefficients, check_finite, check_scalar
 
 __all__ = ["PhongFit", "fit_diffuse_phong"]
 
@@ -85,11 +86,25 @@ def fit_diffuse_phong(
     -------
     PhongFit
     """
-    v = np.asarray(values, dtype=float)
-    lig = np.asarray(lighting, dtype=float)
-    lmax = lmax_from_size(lig.size)
-    yn = real_sh_matrix(lmax, *normal_dirs)
-    yr = real_sh_matrix(lmax, *reflected_dirs)
+    v = check_finite("values", values, ndim=1)
+    lig, lmax = check_coefficients("lighting", lighting)
+    dirs = {}
+    for name, pair in (("normal_dirs", normal_dirs), ("reflected_dirs", reflected_dirs)):
+        try:
+            th, ph = pair
+        except (TypeError, ValueError):
+            raise SHInputError(name, "must be a pair (theta, phi)") from None
+        th, ph = check_finite(name, th, ndim=1), check_finite(name, ph, ndim=1)
+        if not th.size == ph.size == v.size:
+            raise SHInputError(name, f"must hold one direction per value ({v.size}), got "
+                               f"{th.size} theta and {ph.size} phi")
+        dirs[name] = (th, ph)
+    s_lo = check_scalar("s_bounds", s_bounds[0], low=0.0, low_open=True)
+    s_hi = check_scalar("s_bounds", s_bounds[1], low=s_lo, high=PHONG_EXACT_MAX,
+                        low_open=True)
+    s0 = check_scalar("s0", s0, low=s_lo, high=s_hi)
+    yn = real_sh_matrix(lmax, *dirs["normal_dirs"])
+    yr = real_sh_matrix(lmax, *dirs["reflected_dirs"])
     ahat = lambertian_filter(lmax).values
     l_idx = np.repeat(np.arange(lmax + 1), 2 * np.arange(lmax + 1) + 1)
     diffuse = yn @ (ahat[l_idx] * lig) / np.pi
@@ -107,7 +122,7 @@ def fit_diffuse_phong(
         return design(p[2]) @ p[:2] - v
 
     kd0, ks0 = linear(np.log(s0))
-    lo, hi = np.log(s_bounds[0]), np.log(s_bounds[1])
+    lo, hi = np.log(s_lo), np.log(s_hi)
     # Variable projection start: scan log s for the best linear fit, then polish jointly.
     grid = np.linspace(lo, hi, 25)
     costs = [np.sum((design(g) @ linear(g) - v) ** 2) for g in grid]

@@ -32,7 +32,6 @@ from typing import Literal
 
 import numpy as np
 
-from analysis.sh.convention import lmax_from_size
 from analysis.sh.filters import lambertian_filter
 from analysis.sh.transform import (
     ScatteredFitOperator,
@@ -41,6 +40,13 @@ from analysis.sh.transform import (
     evaluate,
     fit_scattered,
     scattered_fit_operator,
+)
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
 )
 
 __all__ = [
@@ -56,6 +62,18 @@ __all__ = [
 ]
 
 Parameterisation = Literal["reflected", "normal"]
+
+
+def _parameterisation(value: str) -> str:
+    if value not in ("reflected", "normal"):
+        raise SHInputError("parameterisation", f"must be 'reflected' or 'normal', got {value!r}")
+    return value
+
+
+def _geometry(geometry) -> SphereGeometry:
+    if not isinstance(geometry, SphereGeometry):
+        raise SHInputError("geometry", "must be a SphereGeometry (sphere_geometry())")
+    return geometry
 
 
 @dataclass(frozen=True)
@@ -108,11 +126,24 @@ def sphere_geometry(
     max_view_angle_deg : float
         Pixels with angle(n, v) above this are not "observed" (grazing, unreliable).
     """
-    h, w = shape
-    if radius <= 0:
-        raise ValueError("radius must be positive")
+    try:
+        h, w = shape
+    except (TypeError, ValueError):
+        raise SHInputError("shape", f"must be (H, W), got {shape!r}") from None
+    h, w = check_degree("shape", h, minimum=1), check_degree("shape", w, minimum=1)
+    cen = check_finite("center", center)
+    if cen.shape != (2,):
+        raise SHInputError("center", f"must be (x, y) in pixels, got {center!r}")
+    radius = check_scalar("radius", radius, low=0.0, low_open=True)
+    max_view_angle_deg = check_scalar("max_view_angle_deg", max_view_angle_deg, low=0.0,
+                                      high=90.0, low_open=True)
+    if intrinsics is not None:
+        intrinsics = check_finite("intrinsics", intrinsics)
+        if intrinsics.shape != (3, 3) or intrinsics[0, 0] <= 0 or intrinsics[1, 1] <= 0:
+            raise SHInputError("intrinsics", "must be a 3 × 3 pinhole matrix with focal "
+                               "lengths > 0")
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
-    cx, cy = center
+    cx, cy = cen
     if intrinsics is None:
         u = (xx - cx) / radius
         t = -(yy - cy) / radius
@@ -149,12 +180,19 @@ def sphere_geometry(
 
 
 def _valid(image: np.ndarray, geometry: SphereGeometry, valid: np.ndarray | None) -> np.ndarray:
+    geometry = _geometry(geometry)
     img = np.asarray(image, dtype=float)
     if img.shape != geometry.on_sphere.shape:
-        raise ValueError(f"image shape {img.shape} != geometry {geometry.on_sphere.shape}")
+        raise SHInputError("image", f"must have the geometry's shape "
+                           f"{geometry.on_sphere.shape}, got {img.shape}")
+    # Non-finite pixels mark unusable data (saturated, outside the HDR range): left out.
     use = geometry.observed & np.isfinite(img)
     if valid is not None:
-        use &= np.asarray(valid, dtype=bool)
+        v = np.asarray(valid, dtype=bool)
+        if v.shape != img.shape:
+            raise SHInputError("valid", f"must have the image's shape {img.shape}, got "
+                               f"{v.shape}")
+        use &= v
     return use
 
 
@@ -181,7 +219,8 @@ def sphere_samples(
     theta, phi, values : ndarray of shape (N,)
     """
     use = _valid(image, geometry, valid)
-    dirs = geometry.reflected if parameterisation == "reflected" else geometry.normals
+    dirs = (geometry.reflected if _parameterisation(parameterisation) == "reflected"
+            else geometry.normals)
     th, ph = directions_to_angles(dirs[use])
     return th, ph, np.asarray(image, dtype=float)[use]
 
@@ -221,7 +260,8 @@ def image_to_sh(
     if variance is not None:
         var = np.asarray(variance, dtype=float)
         if var.shape != geometry.on_sphere.shape:
-            raise ValueError("variance must have the image's shape")
+            raise SHInputError("variance", f"must have the image's shape "
+                               f"{geometry.on_sphere.shape}, got {var.shape}")
         use = _valid(image, geometry, valid)
         v = var[use]
         weights = np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
@@ -240,10 +280,13 @@ def sh_to_image(
     -------
     ndarray of shape (H, W)
     """
+    geometry = _geometry(geometry)
+    c, _ = check_coefficients("coeffs", coeffs)
     out = np.full(geometry.on_sphere.shape, np.nan)
-    dirs = geometry.reflected if parameterisation == "reflected" else geometry.normals
+    dirs = (geometry.reflected if _parameterisation(parameterisation) == "reflected"
+            else geometry.normals)
     th, ph = directions_to_angles(dirs[geometry.on_sphere])
-    out[geometry.on_sphere] = evaluate(np.asarray(coeffs, dtype=float), th, ph)
+    out[geometry.on_sphere] = evaluate(c, th, ph)
     return out
 
 
@@ -253,8 +296,7 @@ def irradiance_image(lighting: np.ndarray, geometry: SphereGeometry) -> np.ndarr
     E_lm = Â_l L_lm with the exact clamped-cosine filter up to the lighting's band limit;
     fitted in the reflected parameterisation this gives the D_lm of M12. NaN off the sphere.
     """
-    lig = np.asarray(lighting, dtype=float)
-    lmax = lmax_from_size(lig.size)
+    lig, lmax = check_coefficients("lighting", lighting)
     a = lambertian_filter(lmax).values
     l_idx = np.repeat(np.arange(lmax + 1), 2 * np.arange(lmax + 1) + 1)
     return sh_to_image(lig * a[l_idx], geometry, parameterisation="normal")
@@ -276,8 +318,7 @@ def mirror_sphere_lighting(
     image/reflectance. Directions near −v (behind the sphere) are unobserved; ``ridge``
     keeps the fit bounded there.
     """
-    if reflectance <= 0:
-        raise ValueError("reflectance must be positive")
+    reflectance = check_scalar("reflectance", reflectance, low=0.0, low_open=True)
     img = np.asarray(image, dtype=float) / reflectance
     return image_to_sh(img, geometry, lmax=lmax, parameterisation="reflected", valid=valid,
                        ridge=ridge)
@@ -295,7 +336,9 @@ def image_fit_operator(
     For stacks of images of one geometry with no per-image invalid pixels
     (:func:`images_to_sh`).
     """
-    dirs = geometry.reflected if parameterisation == "reflected" else geometry.normals
+    geometry = _geometry(geometry)
+    dirs = (geometry.reflected if _parameterisation(parameterisation) == "reflected"
+            else geometry.normals)
     th, ph = directions_to_angles(dirs[geometry.observed])
     return scattered_fit_operator(th, ph, lmax=lmax, ridge=ridge)
 
@@ -306,8 +349,13 @@ def images_to_sh(images: np.ndarray, operator: ScatteredFitOperator,
 
     Raises if an observed pixel is not finite (use :func:`image_to_sh` per image then).
     """
+    geometry = _geometry(geometry)
     imgs = np.asarray(images, dtype=float)
+    if imgs.ndim != 3 or imgs.shape[1:] != geometry.on_sphere.shape:
+        raise SHInputError("images", f"must have shape (K, *{geometry.on_sphere.shape}), got "
+                           f"{imgs.shape}")
     vals = imgs[:, geometry.observed].T  # (N, K)
     if not np.all(np.isfinite(vals)):
-        raise ValueError("non-finite observed pixels: fit these images one by one")
+        raise SHInputError("images", "has non-finite observed pixels: fit these images one "
+                           "by one with image_to_sh, which leaves them out")
     return operator.apply(vals)

@@ -3,14 +3,21 @@
 Convention: :data:`analysis.sh.convention.PROJECT_CONVENTION` (real, orthonormal, no
 Condon–Shortley phase, θ colatitude); coefficients in the flat layout ``l*l + l + m``.
 
-Grid: L+1 Gauss–Legendre rings in θ (:func:`analysis.sh.legendre.gauss_legendre`) by
-2L+1 equispaced longitudes φ_k = 2πk/(2L+1). For a function band-limited to degree L the
+Grid: L+1 Gauss–Legendre rings in θ (ducc0's nodes and weights,
+:func:`analysis.sh.ducc.gl_nodes`, shared by both backends) by 2L+1 equispaced longitudes
+φ_k = 2πk/(2L+1). For a function band-limited to degree L the
 analysis on this grid is exact (the product of two degree-L harmonics has degree ≤ 2L, which
 L+1 Gauss nodes integrate exactly in cos θ, and 2L+1 points exactly in φ) — an exact
 quadrature, as high orders need (approximate ones leave a bias that iterations do not
 remove).
 
-Algorithm (the standard "semi-naive" SHT, e.g. Reinecke 2011 arXiv:1010.2084 §2):
+Backends: :func:`synthesis` and :func:`analysis` run on ducc0 by default
+(:mod:`analysis.sh.ducc`: conventions matched at the boundary, ``nthreads`` explicit);
+``backend="reference"`` runs the project's own transform described below, kept as the
+reference the ducc0 path is tested against. The scattered-point functions (``evaluate``,
+``real_sh_matrix``, the fits) always use the own recurrences.
+
+Algorithm of the reference (the standard "semi-naive" SHT, e.g. Reinecke 2011 arXiv:1010.2084 §2):
 synthesis G_m(θ_j) = Σ_l Z_lm λ_l^m(cos θ_j) followed by an inverse real FFT per ring;
 analysis by a real FFT per ring followed by the weighted Legendre sums. Rings come in
 mirror pairs (θ, π−θ), and λ_l^m(−x) = (−1)^{l+m} λ_l^m(x), so the Legendre work is done on
@@ -23,7 +30,8 @@ are left out, as libsharp skips them (Reinecke 2011 §3.1.1).
 
 Cached per grid: the sectoral seeds and recurrence coefficients (:func:`_recurrence_setup`,
 ≈ 16·L²·(1/2 + 1) bytes, 67 MB at L = 2048, two grids kept). Stored with the grid on
-request (``gl_grid(precompute=...)``, by default up to L ≈ 400): for L ≲ 64 one dense
+request (``gl_grid(precompute=...)``, by default up to L ≈ 400 when the reference is the
+module's backend): for L ≲ 64 one dense
 λ table on all rings, so that each transform is one batched product and two FFT calls
 (numpy call overhead dominates there), else the recurrence's chunks on the northern rings.
 """
@@ -42,15 +50,27 @@ from analysis.sh.convention import (
     convert,
     degrees_orders,
     lm_index,
-    lmax_from_size,
     n_coeffs,
+)
+from analysis.sh.ducc import (
+    ducc_analysis,
+    ducc_synthesis,
+    gl_nodes,
+    resolve,
+    transform_defaults,
 )
 from analysis.sh.legendre import (
     chunk_scales,
     degree_chunks,
-    gauss_legendre,
     iterate_degrees,
     sectoral_seeds,
+)
+from analysis.sh.validation import (
+    SHInputError,
+    check_coefficients,
+    check_degree,
+    check_finite,
+    check_scalar,
 )
 
 __all__ = [
@@ -147,19 +167,22 @@ def gl_grid(lmax: int, *, precompute: bool | None = None) -> GLGrid:
     Parameters
     ----------
     lmax : int
+        Band limit L ≥ 0.
     precompute : bool, optional
-        Store the Legendre table with the grid (memory ≈ L³/4 · 8 bytes, twice that for
-        L ≲ 64). Default: when it needs at most :data:`PLAN_MAX_BYTES`.
+        Store the reference transform's Legendre table with the grid (memory ≈ L³/4 · 8
+        bytes, twice that for L ≲ 64). Default: when the module's default backend is the
+        reference (ducc0 needs no table) and the table needs at most
+        :data:`PLAN_MAX_BYTES`.
     """
-    if lmax < 0:
-        raise ValueError("lmax must be ≥ 0")
-    theta, w = gauss_legendre(lmax + 1)
+    lmax = check_degree("lmax", lmax)
+    theta, w = gl_nodes(lmax + 1)
     nphi = 2 * lmax + 1
     phi = 2.0 * np.pi * np.arange(nphi) / nphi
     nh = (lmax + 2) // 2
     table_bytes = 8 * nh * (lmax + 1) * (lmax + 2) // 2
     if precompute is None:
-        precompute = table_bytes <= PLAN_MAX_BYTES
+        precompute = (transform_defaults().backend == "reference"
+                      and table_bytes <= PLAN_MAX_BYTES)
     plan = None
     if precompute:
         grid = GLGrid(lmax=lmax, theta=theta, weights=w, phi=phi)
@@ -272,30 +295,54 @@ def _layout(lmax: int, dense: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def synthesis(
-    coeffs: np.ndarray, *, grid: GLGrid, convention: SHConvention = PROJECT_CONVENTION
+    coeffs: np.ndarray,
+    *,
+    grid: GLGrid,
+    convention: SHConvention = PROJECT_CONVENTION,
+    backend: str | None = None,
+    nthreads: int | None = None,
 ) -> np.ndarray:
     """Evaluate a real SH expansion on a Gauss–Legendre grid (inverse transform).
 
     Parameters
     ----------
     coeffs : ndarray of shape ((L+1)²,)
-        Coefficients of a real function, ``L == grid.lmax``, in ``convention``.
+        Coefficients of a real function, ``L == grid.lmax``, in ``convention``; finite.
     grid : GLGrid
     convention : SHConvention
         Convention of ``coeffs`` (converted at the boundary; the project's by default).
+    backend : {"ducc0", "reference"}, optional
+        ducc0's compiled transform or the project's own (the reference it is tested
+        against); default the module setting (:func:`analysis.sh.ducc.set_transform_defaults`,
+        "ducc0" unless changed).
+    nthreads : int, optional
+        ducc0's threads (default the module setting, 1); the reference is single-threaded.
 
     Returns
     -------
     ndarray of shape (L+1, 2L+1)
         f(θ_j, φ_k).
     """
-    c = np.asarray(coeffs)
+    if not isinstance(grid, GLGrid):
+        raise SHInputError("grid", f"must be a GLGrid (gl_grid(L)), got {type(grid).__name__}")
+    how, threads = resolve(backend, nthreads)
+    dtype = complex if np.iscomplexobj(coeffs) else float
+    c = check_finite("coeffs", coeffs, dtype=dtype)
     if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
         c = convert(c, source=convention, target=PROJECT_CONVENTION)
     c = np.asarray(c, dtype=float)
     lmax = grid.lmax
     if c.shape != ((lmax + 1) ** 2,):
-        raise ValueError(f"expected {(n_coeffs(lmax),)} coefficients, got {c.shape}")
+        raise SHInputError("coeffs", f"must have shape {(n_coeffs(lmax),)} for the grid's "
+                           f"L = {lmax}, got {c.shape}")
+    if how == "ducc0":
+        return ducc_synthesis(c, lmax, threads)
+    return _reference_synthesis(c, grid)
+
+
+def _reference_synthesis(c: np.ndarray, grid: GLGrid) -> np.ndarray:
+    """The project's own synthesis (semi-naive, module docstring) of checked coefficients."""
+    lmax = grid.lmax
     nlat, nphi = grid.shape
     nh = (nlat + 1) // 2
     plan = grid.legendre
@@ -342,27 +389,49 @@ def synthesis(
 
 
 def analysis(
-    values: np.ndarray, *, grid: GLGrid, convention: SHConvention = PROJECT_CONVENTION
+    values: np.ndarray,
+    *,
+    grid: GLGrid,
+    convention: SHConvention = PROJECT_CONVENTION,
+    backend: str | None = None,
+    nthreads: int | None = None,
 ) -> np.ndarray:
     """SH coefficients of a real map on a Gauss–Legendre grid (forward transform).
 
     Parameters
     ----------
     values : ndarray of shape (L+1, 2L+1)
+        Finite map values.
     grid : GLGrid
     convention : SHConvention
         Convention of the returned coefficients (the project's by default).
+    backend, nthreads
+        As for :func:`synthesis`.
 
     Returns
     -------
     ndarray of shape ((L+1)²,)
         Exact for maps band-limited to ``grid.lmax``; complex for a complex convention.
     """
-    f = np.asarray(values, dtype=float)
+    if not isinstance(grid, GLGrid):
+        raise SHInputError("grid", f"must be a GLGrid (gl_grid(L)), got {type(grid).__name__}")
+    how, threads = resolve(backend, nthreads)
+    f = check_finite("values", values)
     lmax = grid.lmax
     nlat, nphi = grid.shape
     if f.shape != (nlat, nphi):
-        raise ValueError(f"expected a map of shape {(nlat, nphi)}, got {f.shape}")
+        raise SHInputError("values", f"must be a map of shape {(nlat, nphi)} for the grid's "
+                           f"L = {lmax}, got {f.shape}")
+    out = ducc_analysis(f, lmax, threads) if how == "ducc0" else _reference_analysis(f, grid)
+    if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
+        return convert(out, source=PROJECT_CONVENTION, target=convention)
+    return out
+
+
+def _reference_analysis(f: np.ndarray, grid: GLGrid) -> np.ndarray:
+    """The project's own analysis (semi-naive, module docstring) of a checked map."""
+    lmax = grid.lmax
+    nlat, nphi = grid.shape
     nh = (nlat + 1) // 2
     plan = grid.legendre
     # (ring, m) complex; n_φ // 2 + 1 = L + 1 columns
@@ -402,20 +471,20 @@ def analysis(
                 z[m0 : m0 + n, p, h0 : h0 + nq] = prod * sc[:, p::2, None]
         pos, _, fac = _layout(lmax, False)
         out = z.ravel()[pos] * fac
-    if convention is not PROJECT_CONVENTION and convention != PROJECT_CONVENTION:
-        return convert(out, source=PROJECT_CONVENTION, target=convention)
     return out
 
 
 def directions_to_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (..., 3) → (θ colatitude from +z, φ azimuth from +x in [0, 2π))."""
-    d = np.asarray(directions, dtype=float)
+    d = check_finite("directions", directions)
+    if d.ndim == 0 or d.shape[-1] != 3:
+        raise SHInputError("directions", f"must have shape (..., 3), got {d.shape}")
     norm = np.linalg.norm(d, axis=-1)
     # arctan2 keeps θ accurate near the poles, unlike arccos(z).
     theta = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
     phi = np.mod(np.arctan2(d[..., 1], d[..., 0]), 2.0 * np.pi)
     if np.any(norm == 0):
-        raise ValueError("zero-length direction")
+        raise SHInputError("directions", "holds a zero-length vector")
     return theta, phi
 
 
@@ -448,10 +517,11 @@ def real_sh_matrix(lmax: int, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
     ndarray of shape (N, (lmax+1)²)
         Column ``l*l + l + m`` holds Y_lm (:mod:`analysis.sh.convention`).
     """
-    th = np.atleast_1d(np.asarray(theta, dtype=float)).ravel()
-    ph = np.atleast_1d(np.asarray(phi, dtype=float)).ravel()
+    lmax = check_degree("lmax", lmax)
+    th = np.atleast_1d(check_finite("theta", theta)).ravel()
+    ph = np.atleast_1d(check_finite("phi", phi)).ravel()
     if th.shape != ph.shape:
-        raise ValueError("theta and phi must have the same shape")
+        raise SHInputError("phi", f"must have the shape of theta {th.shape}, got {ph.shape}")
     table = _legendre_all_orders(lmax, th)
     y = np.empty((th.size, n_coeffs(lmax)))
     l_all, m_all = degrees_orders(lmax)
@@ -479,11 +549,15 @@ def evaluate(coeffs: np.ndarray, theta: np.ndarray, phi: np.ndarray) -> np.ndarr
     -------
     ndarray of shape S (or S + (K,))
     """
-    c = np.asarray(coeffs, dtype=float)
-    lmax = lmax_from_size(c.shape[0])
-    th = np.asarray(theta, dtype=float)
+    c, lmax = check_coefficients("coeffs", coeffs)
+    th = check_finite("theta", theta)
     t_flat = th.ravel()
-    p_flat = np.broadcast_to(np.asarray(phi, dtype=float), th.shape).ravel()
+    ph = check_finite("phi", phi)
+    try:
+        p_flat = np.broadcast_to(ph, th.shape).ravel()
+    except ValueError:
+        raise SHInputError("phi", f"must broadcast to the shape of theta {th.shape}, got "
+                           f"{ph.shape}") from None
     out = np.empty((t_flat.size, *c.shape[1:]))
     # Points in chunks: the design matrix of a large image would not fit in memory.
     step = max(1, (1 << 21) // (lmax + 1) ** 2)
@@ -546,6 +620,26 @@ def _tikhonov_svd(a: np.ndarray, ridge: float
     return u, filt, vt, rank, condition, dof
 
 
+def _samples(theta, phi, weights, n: int | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Checked flat θ, φ and weights (≥ 0, default 1) of n samples (n: θ's size if None)."""
+    th = check_finite("theta", theta).ravel()
+    n = th.size if n is None else n
+    if th.size != n:
+        raise SHInputError("theta", f"must have {n} entries (one per value), got {th.size}")
+    ph = check_finite("phi", phi).ravel()
+    if ph.size != n:
+        raise SHInputError("phi", f"must have {n} entries, got {ph.size}")
+    if weights is None:
+        return th, ph, np.ones(n)
+    w = check_finite("weights", weights).ravel()
+    if w.size != n:
+        raise SHInputError("weights", f"must have {n} entries, got {w.size}")
+    if np.any(w < 0):
+        raise SHInputError("weights", "must be ≥ 0")
+    return th, ph, w
+
+
 def fit_scattered(
     values: np.ndarray,
     theta: np.ndarray,
@@ -577,19 +671,21 @@ def fit_scattered(
     -------
     SHFit
     """
+    lmax = check_degree("lmax", lmax)
     f = np.asarray(values, dtype=float).ravel()
-    th = np.asarray(theta, dtype=float).ravel()
-    ph = np.asarray(phi, dtype=float).ravel()
+    th, ph, w = _samples(theta, phi, weights, f.size)
+    ridge = check_scalar("ridge", ridge, low=0.0)
+    # Non-finite sample values mark unusable data (documented): left out, not an error.
     use = np.isfinite(f)
     if mask is not None:
-        use &= np.asarray(mask, dtype=bool).ravel()
-    w = np.ones_like(f) if weights is None else np.asarray(weights, dtype=float).ravel()
+        m = np.asarray(mask, dtype=bool).ravel()
+        if m.size != f.size:
+            raise SHInputError("mask", f"must have {f.size} entries, got {m.size}")
+        use &= m
     use &= w > 0
-    if ridge < 0:
-        raise ValueError("ridge must be ≥ 0")
 
     if use.sum() == 0:
-        raise ValueError("no usable samples")
+        raise SHInputError("values", "has no usable sample (finite, in mask, weight > 0)")
     y = real_sh_matrix(lmax, th[use], ph[use])
     sw = np.sqrt(w[use])
     a = y * sw[:, None]
@@ -643,7 +739,10 @@ class ScatteredFitOperator:
 
     def apply(self, values: np.ndarray) -> np.ndarray:
         """Coefficients for samples of shape (N,) or (N, K) → ((L+1)²,) or ((L+1)², K)."""
-        v = np.asarray(values, dtype=float)
+        v = check_finite("values", values)
+        if v.ndim not in (1, 2) or v.shape[0] != self.sqrt_weights.size:
+            raise SHInputError("values", f"must have shape ({self.sqrt_weights.size},) or "
+                               f"({self.sqrt_weights.size}, K), got {v.shape}")
         sw = self.sqrt_weights if v.ndim == 1 else self.sqrt_weights[:, None]
         return self.pinv @ (v * sw)
 
@@ -666,11 +765,9 @@ def scattered_fit_operator(
     weights : ndarray of shape (N,), optional
     ridge : float
     """
-    th = np.asarray(theta, dtype=float).ravel()
-    ph = np.asarray(phi, dtype=float).ravel()
-    w = np.ones_like(th) if weights is None else np.asarray(weights, dtype=float).ravel()
-    if ridge < 0:
-        raise ValueError("ridge must be ≥ 0")
+    lmax = check_degree("lmax", lmax)
+    th, ph, w = _samples(theta, phi, weights, None)
+    ridge = check_scalar("ridge", ridge, low=0.0)
     sw = np.sqrt(w)
     a = real_sh_matrix(lmax, th, ph) * sw[:, None]
     u, filt, vt, rank, condition, dof = _tikhonov_svd(a, ridge)

@@ -395,12 +395,15 @@ def spheres_row(capture: SphereCapture, res: SphereAnalysis) -> Analysed:
         "consistency_statistic": float(rep.statistic),
         "consistency_threshold": float(rep.threshold),
         "inconsistent": bool(rep.inconsistent),
+        "consistency_verdict": rep.verdict,
         "objects": len(capture.objects),
         "lightings": len(capture.lighting_deg),
         "lmax": int(res.lmax),
     }
-    verdict = "INCONSISTENT" if rep.inconsistent else "consistent"
+    verdict = "INCONSISTENT" if rep.inconsistent else rep.verdict
     flags = []
+    if not rep.testable:
+        flags.append(f"no consistency test possible at this L: {rep.no_test_reason}")
     if rep.inconsistent:
         flags.append(f"the capture fails the consistency check (T = {rep.statistic:.3g} > "
                      f"{rep.threshold:.3g} at α = {rep.false_alarm:g})")

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from analysis.sh.consistency import ConsistencyReport
     from instrument.pipelines.spheres.capture import SphereCapture
 
 HELP = "relight and check a sphere capture (SH analysis)"
@@ -52,6 +53,17 @@ def identity_words(name: str, capture: SphereCapture) -> tuple[str, str]:
     if tag == "M19":
         return f"{rest}, two lightings", "19"
     return name, tag.lstrip("M")
+
+
+def verdict_words(rep: ConsistencyReport) -> str:
+    """The consistency verdict as printed: inconsistent, consistent, or no test possible
+    (with the reason: then neither of the other two may be claimed)."""
+    if not rep.testable:
+        return f"{rep.verdict.upper()} ({rep.no_test_reason})"
+    if rep.inconsistent:
+        return ("INCONSISTENT: the images are not one set of objects under one set of "
+                "lightings")
+    return "consistent within the noise"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -175,11 +187,10 @@ def run(args: argparse.Namespace) -> int:
           f"{100 * res.relight_l1:.2f} % (Σ|rendered − measured| / Σ|measured|; Mahajan et "
           "al. report 6.5 % and 9.5 % on real spheres)")
     rep = res.consistency
-    verdict = ("INCONSISTENT: the images are not one set of objects under one set of "
-               "lightings" if rep.inconsistent else "consistent within the noise")
     print(f"  consistency test (two objects × two lightings, eq. 21, SH orders "
           f"0..{int(rep.orders[-1])}): statistic {rep.statistic:.3g} against the threshold "
-          f"{rep.threshold:.3g} at a false-alarm rate of {rep.false_alarm:g}: {verdict}")
+          f"{rep.threshold:.3g} at a false-alarm rate of {rep.false_alarm:g}: "
+          f"{verdict_words(rep)}")
     if res.threshold_scale == 1.0:
         print(f"  note: {CONSISTENCY_LIMIT}")
     else:

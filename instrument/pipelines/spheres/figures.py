@@ -62,7 +62,7 @@ def relighting_figure(capture: SphereCapture, result: SphereAnalysis,
     ax.semilogy(rep.orders, rep.noise_error, "k--", label="noise level")
     ax.set_xlabel("SH order l")
     ax.set_ylabel("normalised error |X − Y|/(|X| + |Y|)")
-    verdict = "inconsistent" if rep.inconsistent else "consistent"
+    verdict = rep.verdict
     ax.set_title(f"consistency: T = {rep.statistic:.3g} (threshold {rep.threshold:.3g}),\n"
                  f"{verdict} at false-alarm rate {rep.false_alarm:g}", fontsize=9)
     ax.legend(fontsize=8)

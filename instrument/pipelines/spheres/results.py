@@ -62,6 +62,8 @@ def summary(capture: SphereCapture, result: SphereAnalysis) -> dict[str, Any]:
             "threshold": rep.threshold,
             "false_alarm": rep.false_alarm,
             "inconsistent": bool(rep.inconsistent),
+            "verdict": rep.verdict,
+            "no_test_reason": rep.no_test_reason,
             "calibration": "parametric bootstrap at the images' fit-residual level",
             "threshold_scale": result.threshold_scale,
             "limit": CONSISTENCY_LIMIT if result.threshold_scale == 1.0 else None,

@@ -161,36 +161,41 @@ def test_convention_conversion_round_trip_and_values() -> None:
         lmax_from_size(15)
 
 
-@pytest.mark.parametrize("precompute", [True, False])
+@pytest.mark.parametrize(("precompute", "backend"),
+                         [(True, "reference"), (False, "reference"), (False, "ducc0")])
 @pytest.mark.parametrize("lmax", [0, 1, 2, 7, 32, 128])
-def test_round_trip_small(lmax: int, precompute: bool) -> None:
+def test_round_trip_small(lmax: int, precompute: bool, backend: str) -> None:
     rng = np.random.default_rng(lmax)
     grid = gl_grid(lmax, precompute=precompute)
     assert (grid.legendre is not None) == precompute
     c = rng.standard_normal((lmax + 1) ** 2)
-    f = synthesis(c, grid=grid)
+    f = synthesis(c, grid=grid, backend=backend)
     assert f.shape == grid.shape
-    err = np.max(np.abs(analysis(f, grid=grid) - c)) / np.max(np.abs(c))
+    err = np.max(np.abs(analysis(f, grid=grid, backend=backend) - c)) / np.max(np.abs(c))
     assert err < 1e-13
 
 
-def test_synthesis_matches_pointwise_evaluation() -> None:
+@pytest.mark.parametrize("backend", ["ducc0", "reference"])
+def test_synthesis_matches_pointwise_evaluation(backend: str) -> None:
     rng = np.random.default_rng(5)
     grid = gl_grid(12)
     c = rng.standard_normal(169)
     th, ph = np.meshgrid(grid.theta, grid.phi, indexing="ij")
-    np.testing.assert_allclose(synthesis(c, grid=grid), evaluate(c, th, ph), atol=1e-12)
+    np.testing.assert_allclose(synthesis(c, grid=grid, backend=backend), evaluate(c, th, ph),
+                               atol=1e-12)
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # the reference at L = 2048 on a loaded shared box
+@pytest.mark.parametrize("backend", ["ducc0", "reference"])
 @pytest.mark.parametrize("lmax", [1024, 2048])
-def test_round_trip_high_degree(lmax: int) -> None:
+def test_round_trip_high_degree(lmax: int, backend: str) -> None:
     rng = np.random.default_rng(11)
     grid = gl_grid(lmax)
     c = rng.standard_normal((lmax + 1) ** 2)
-    f = synthesis(c, grid=grid)
+    f = synthesis(c, grid=grid, backend=backend)
     assert np.all(np.isfinite(f))
-    c2 = analysis(f, grid=grid)
+    c2 = analysis(f, grid=grid, backend=backend)
     assert np.all(np.isfinite(c2))
     assert np.max(np.abs(c2 - c)) / np.max(np.abs(c)) <= 1e-10
 
@@ -216,16 +221,18 @@ def test_scattered_fit_recovers_band_limited_signal_with_mask() -> None:
     assert 0.7 < np.sqrt(np.mean(z**2)) < 1.3
 
 
-def test_transforms_accept_an_explicit_convention() -> None:
+@pytest.mark.parametrize("backend", ["ducc0", "reference"])
+def test_transforms_accept_an_explicit_convention(backend: str) -> None:
     rng = np.random.default_rng(8)
     grid = gl_grid(6)
     c = rng.standard_normal(49)
     cs_complex = SHConvention(kind="complex", condon_shortley=True)
-    a = analysis(synthesis(c, grid=grid), grid=grid, convention=cs_complex)
+    a = analysis(synthesis(c, grid=grid, backend=backend), grid=grid, convention=cs_complex,
+                 backend=backend)
     np.testing.assert_allclose(a, convert(c, source=PROJECT_CONVENTION, target=cs_complex),
                                atol=1e-13)
-    np.testing.assert_allclose(synthesis(a, grid=grid, convention=cs_complex),
-                               synthesis(c, grid=grid), atol=1e-13)
+    np.testing.assert_allclose(synthesis(a, grid=grid, convention=cs_complex, backend=backend),
+                               synthesis(c, grid=grid, backend=backend), atol=1e-13)
 
 
 def test_vectorised_recurrence_matches_per_order_values_near_the_poles() -> None:
@@ -280,6 +287,8 @@ def test_stored_table_and_recurrence_give_the_same_transforms(lmax: int) -> None
     rng = np.random.default_rng(lmax + 1)
     c = rng.standard_normal((lmax + 1) ** 2)
     stored, plain = gl_grid(lmax, precompute=True), gl_grid(lmax, precompute=False)
-    f = synthesis(c, grid=stored)
-    np.testing.assert_allclose(f, synthesis(c, grid=plain), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(analysis(f, grid=stored), analysis(f, grid=plain), atol=1e-13)
+    ref = {"backend": "reference"}
+    f = synthesis(c, grid=stored, **ref)
+    np.testing.assert_allclose(f, synthesis(c, grid=plain, **ref), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(analysis(f, grid=stored, **ref), analysis(f, grid=plain, **ref),
+                               atol=1e-13)

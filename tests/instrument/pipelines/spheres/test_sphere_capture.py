@@ -419,3 +419,32 @@ def test_cli_spheres_names_an_unreadable_file(tmp_path, capsys):
     assert main(["spheres", str(bad), "--no-write"]) == 2
     out = capsys.readouterr().out
     assert out == f"error: {bad} is not a scatterlab run file (not an HDF5 file)\n", out
+
+
+def test_the_check_at_l_1_is_a_test_and_says_so(capture_run, capsys):
+    """At --lmax 1 --lmax-check 1 the check still has power on this bench (a top-half
+    splice is flagged, T ≈ 45 against ≈ 14), so the untampered capture's statistic of 0
+    (both orders below their consistent median) is a real 'consistent' and is printed as
+    one; where no test is possible the verdict says that instead (next test)."""
+    rc = main(["spheres", str(capture_run), "--lmax", "1", "--lmax-check", "1",
+               "--no-write", "--no-figures"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "SH orders 0..1" in out and "consistent within the noise" in out
+    capture = read_capture(capture_run)
+    rad = capture.radiance.copy()
+    rad[1, 1, :36] = rad[0, 1, :36]
+    res = analyse_capture(dataclasses.replace(capture, radiance=rad), lmax=1, lmax_check=1)
+    assert res.consistency.testable and res.consistency.inconsistent
+
+
+def test_a_check_without_power_is_reported_as_no_test():
+    from analysis.sh.consistency import NO_TEST, calibrate, check
+    from instrument.cli.spheres import verdict_words
+
+    errors = np.random.default_rng(5).uniform(0.5, 1.0, (60, 2))
+    errors[:10] = 1.0  # noise as large as the identity's largest error
+    rep = check(np.array([0.7, 0.7]), calibrate(errors, false_alarm=0.05), max_error=1.0)
+    words = verdict_words(rep)
+    assert words.startswith(NO_TEST.upper()) and "largest possible" in words
+    assert "consistent" not in words.lower()
