@@ -65,8 +65,10 @@ The measurement model (documented emulator choices, not calibrations)
 
 from __future__ import annotations
 
+import copy
 import math
 import re
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -75,6 +77,12 @@ from scipy.linalg import solve_discrete_lyapunov
 
 from hw_mocks.clock import Clock
 from hw_mocks.emulator import FirmwareEmulator
+from hw_mocks.firmware.sr830_storage import (
+    BUFFER_POINTS,
+    STRD_DELAY_S,
+    TRIGGERED_RATE,
+    DataStorage,
+)
 
 __all__ = ["INPUT_LIMIT_V", "InputSignal", "Sr830Emulator"]
 
@@ -91,12 +99,25 @@ _MAX_LINE = 256
 _MEMORY_TAUS = 50.0
 _SUBSTEPS_PER_TAU = 16
 
+#: Highest detection frequency (``HARM i`` × ``FREQ``), Hz.
+MAX_DETECTION_HZ = 102000.0
+MAX_HARMONIC = 19999
+#: Time constants above 30 s need a detection frequency at or below 200 Hz.
+_LONG_TC_INDEX = TIME_CONSTANTS_S.index(30.0)
+_RANGE_HZ = 200.0
+_SETUP_SLOTS = 9
+
 _CMD_RE = re.compile(r"(\*[A-Z]{3}|[A-Z]{4})(\?)?(.*)", re.DOTALL)
 _NUMBER_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:E[+-]?\d+)?")
 
 # Status bits.
 _ESR_INP, _ESR_EXE, _ESR_CMD, _ESR_PON = 0x01, 0x10, 0x20, 0x80
 _LIA_INPUT, _LIA_OUTPUT, _LIA_UNLOCK = 0x01, 0x04, 0x08
+_LIA_RANGE, _LIA_TC, _LIA_TRIG = 0x10, 0x20, 0x40
+#: Settings saved by ``SSET`` and restored by ``RSET`` / ``*RST`` (not the interface).
+_SETUP_FIELDS = ("fmod", "freq", "phase", "harm", "rslp", "slvl", "isrc", "ignd", "icpl",
+                 "ilin", "sens", "rmod", "oflt", "ofsl", "sync", "ddef", "fpop", "oexp",
+                 "auxv", "kclk", "alrm")
 
 
 @dataclass(frozen=True)
@@ -114,6 +135,10 @@ class InputSignal:
     frequency_hz: float | None = None
     dc_v: float = 0.0
     noise_v_per_rthz: float | None = None
+    #: Further components ``(n, rms V, phase deg)`` at n × the fundamental (the
+    #: fundamental being ``frequency_hz``, or the reference frequency when that is
+    #: ``None``): what ``HARM n`` detects, e.g. the 2f term of a modulated polarimeter.
+    harmonics: tuple[tuple[int, float, float], ...] = ()
 
 
 class _BadCommand(Exception):
@@ -150,6 +175,18 @@ def _noise_model(poles: int) -> tuple[np.ndarray, float]:
         p = solve_discrete_lyapunov(a, np.outer(b, b))
         _NOISE_GAIN[poles] = (a, float(p[-1, -1]))
     return _NOISE_GAIN[poles]
+
+
+def _non_normalised(value: float) -> bytes:
+    """One ``TRCL?`` point: mantissa in [−32767, 32767] and the exponent + 124."""
+    if value == 0.0 or not math.isfinite(value):
+        return struct.pack("<hh", 0, 124)
+    mantissa, exponent = math.frexp(value)  # value = mantissa · 2**exponent, |m| in [0.5, 1)
+    m = round(mantissa * 2**15)
+    if abs(m) > 32767:
+        m //= 2
+        exponent += 1
+    return struct.pack("<hh", m, exponent - 15 + 124)
 
 
 def _fmt(value: float) -> str:
@@ -220,6 +257,14 @@ class Sr830Emulator(FirmwareEmulator):
         self._constant = InputSignal()
         self._rng = np.random.default_rng(seed)
         self._rx_lines: list[bytes] = []
+        #: Voltages at the rear-panel Aux In 1…4 (``OAUX?``, ``SNAP?`` 5…8, ratios).
+        self.aux_inputs_v = [0.0, 0.0, 0.0, 0.0]
+        self.storage = DataStorage()
+        self._setups: dict[int, dict[str, object]] = {}
+        self.psc = 1
+        self.locl = 0  # LOCL: 0 local, 1 remote, 2 local lockout
+        self.ovrm = 0
+        self.fast = 0
         self._busy_until = -math.inf
         #: Replies the SR830 sent to its GPIB connector instead (``OUTX 1``), for tests.
         self.replies_to_gpib = 0
@@ -227,6 +272,7 @@ class Sr830Emulator(FirmwareEmulator):
         self.esr = _ESR_PON
         self.errs = 0
         self.lias = 0
+        self.kclk = self.alrm = 1
         self._standard_settings()
         self._d = np.zeros((2, 4))  # noiseless stage outputs (X chain, Y chain)
         self._z = np.zeros((2, 4))  # noise part of the stage outputs
@@ -257,7 +303,8 @@ class Sr830Emulator(FirmwareEmulator):
         return SENSITIVITIES_V[self.sens]
 
     def detection_frequency_hz(self) -> float:
-        """The reference frequency (0 when the external reference is missing)."""
+        """The reference frequency (0 when the external reference is missing); ``FREQ?``.
+        The lock-in detects at :attr:`harm` times this."""
         if self.fmod == 1:
             return self.freq
         return float(self.reference_input_hz or 0.0)
@@ -270,11 +317,17 @@ class Sr830Emulator(FirmwareEmulator):
         signal = self._signal() if signal is None else signal
         if not self.locked():
             return 0.0, 0.0
-        f_det = self.detection_frequency_hz()
-        if signal.frequency_hz is not None and abs(signal.frequency_hz - f_det) > 1e-6 * f_det:
-            return 0.0, 0.0  # modulated at another frequency: averaged away
-        phi = math.radians(signal.phase_deg - self.phase)
-        return signal.ac_rms_v * math.cos(phi), signal.ac_rms_v * math.sin(phi)
+        f_ref = self.detection_frequency_hz()
+        f_det = self.harm * f_ref
+        fundamental = f_ref if signal.frequency_hz is None else signal.frequency_hz
+        x = y = 0.0
+        for n, rms, phase in ((1, signal.ac_rms_v, signal.phase_deg), *signal.harmonics):
+            if abs(n * fundamental - f_det) > 1e-6 * f_det:
+                continue  # modulated at another frequency: averaged away
+            phi = math.radians(phase - self.phase)
+            x += rms * math.cos(phi)
+            y += rms * math.sin(phi)
+        return x, y
 
     def outputs(self) -> tuple[float, float]:
         """X, Y now (noise included, not clipped)."""
@@ -318,6 +371,8 @@ class Sr830Emulator(FirmwareEmulator):
         with self.lock:
             if code == "power_cycle":
                 self._standard_settings()
+                if self.psc:  # *PSC 1: the enable registers are cleared at power-on
+                    self.ese = self.sre = self.erre = self.liae = 0
                 self._d[:] = 0.0
                 self._z[:] = 0.0
                 self._t_last = self.clock.now()
@@ -336,13 +391,28 @@ class Sr830Emulator(FirmwareEmulator):
 
     # interpreter ------------------------------------------------------------------
     def _standard_settings(self) -> None:
+        """``*RST`` and power-up: the manual's standard settings (p. 4-4) as far as they
+        were checked; the communication settings (OUTX, OVRM, baud rate) are kept."""
         self.fmod = 1
         self.freq = 1000.0
         self.phase = 0.0
+        self.harm = 1
+        self.rslp = 0  # sine
+        self.slvl = 1.0
+        self.isrc = 0  # A
+        self.ignd = 0  # float
         self.icpl = 0
+        self.ilin = 0  # no line notch
         self.sens = 26
+        self.rmod = 1  # normal reserve
         self.oflt = 8
         self.ofsl = 1
+        self.sync = 0
+        self.ddef = [[0, 0], [0, 0]]  # CH1 X, CH2 Y, no ratio
+        self.fpop = [0, 0]  # front-panel outputs follow the displays
+        self.oexp = [[0.0, 0], [0.0, 0], [0.0, 0]]  # X, Y, R: offset %, expand index
+        self.auxv = [0.0, 0.0, 0.0, 0.0]
+        self.storage = DataStorage()
 
     def _run_queue(self) -> list[bytes]:
         replies: list[bytes] = []
@@ -350,18 +420,20 @@ class Sr830Emulator(FirmwareEmulator):
             line = self._rx_lines.pop(0)
             for text in self._execute_line(line):
                 if self.outx == 0:
-                    replies.append(text.encode("ascii") + b"\r")
+                    # Binary traces (TRCB?, TRCL?) go out as they are, without terminator.
+                    replies.append(text if isinstance(text, bytes)
+                                   else text.encode("ascii") + b"\r")
                 else:
                     self.replies_to_gpib += 1
         return replies
 
-    def _execute_line(self, line: bytes) -> list[str]:
+    def _execute_line(self, line: bytes) -> list[str | bytes]:
         try:
             text = line.decode("ascii")
         except UnicodeDecodeError:
             self.esr |= _ESR_CMD
             return []
-        answers: list[str] = []
+        answers: list[str | bytes] = []
         parts = text.split(";")
         for position, part in enumerate(parts):
             command = "".join(part.split()).upper()
@@ -380,7 +452,7 @@ class Sr830Emulator(FirmwareEmulator):
                 answers.append(answer)
         return answers
 
-    def _execute(self, command: str) -> str | None:
+    def _execute(self, command: str) -> str | bytes | None:
         match = _CMD_RE.fullmatch(command)
         if match is None:
             raise _BadCommand(_ESR_CMD)
@@ -459,7 +531,7 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_star_RST(self, query: bool, args: list[str]) -> None:
         if query or args:
             raise _BadCommand(_ESR_CMD)
-        self._standard_settings()
+        self._standard_settings()  # also resets the data buffer
 
     def _cmd_star_CLS(self, query: bool, args: list[str]) -> None:
         if query or args:
@@ -478,8 +550,8 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_star_STB(self, query: bool, args: list[str]) -> str:
         if not query or len(args) > 1:
             raise _BadCommand(_ESR_CMD)
-        # SCN (no scan: storage is not modelled) and IFC (answering means idle).
-        byte = 0x01 | 0x02
+        # SCN (no scan in progress) and IFC (answering means idle).
+        byte = 0x02 | (0 if self.storage.scanning else 0x01)
         if self.errs & self.erre:
             byte |= 0x04
         if self.lias & self.liae:
@@ -519,9 +591,11 @@ class Sr830Emulator(FirmwareEmulator):
         if len(args) != 1:
             raise _BadCommand(_ESR_CMD)
         value = self._number(args[0])
-        if self.fmod != 1 or not 0.001 <= value <= 102000.0:
-            raise _BadCommand(_ESR_EXE)  # allowed only with the internal reference
+        if self.fmod != 1 or not 0.001 <= value <= MAX_DETECTION_HZ / self.harm:
+            raise _BadCommand(_ESR_EXE)  # internal reference only; i·f ≤ 102 kHz
+        before = self.harm * self.detection_frequency_hz()
         self.freq = float(f"{value:.5g}") if value >= 1.0 else round(value, 4)
+        self._detection_changed(before)
         return None
 
     def _cmd_PHAS(self, query: bool, args: list[str]) -> str | None:
@@ -563,21 +637,46 @@ class Sr830Emulator(FirmwareEmulator):
 
     # data
     def _reading(self) -> dict[int, float]:
+        """The ``SNAP?`` codes' values now: X, Y, R less their offsets (``OEXP``), θ from
+        the unoffset X and Y, Aux In 1…4, the reference frequency, the two displays."""
         n = self.poles
         x = float(self._d[0, n - 1] + self._z[0, n - 1])
         y = float(self._d[1, n - 1] + self._z[1, n - 1])
-        clip = OUTPUT_CLIP * self.full_scale_v
+        full_scale = self.full_scale_v
+        clip = OUTPUT_CLIP * full_scale
         theta = math.degrees(math.atan2(y, x)) if (x or y) else 0.0
-        return {
-            1: max(-clip, min(clip, x)),
-            2: max(-clip, min(clip, y)),
-            3: min(clip, math.hypot(x, y)),
+        offset = [percent / 100.0 * full_scale for percent, _ in self.oexp]
+        values = {
+            1: max(-clip, min(clip, x - offset[0])),
+            2: max(-clip, min(clip, y - offset[1])),
+            3: max(-clip, min(clip, math.hypot(x, y) - offset[2])),
             4: theta,
-            5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0,
+            5: self.aux_inputs_v[0], 6: self.aux_inputs_v[1],
+            7: self.aux_inputs_v[2], 8: self.aux_inputs_v[3],
             9: self.detection_frequency_hz(),
-            10: max(-clip, min(clip, x)),
-            11: max(-clip, min(clip, y)),
         }
+        values[10], values[11] = self._displays(values)
+        return values
+
+    def _displays(self, values: dict[int, float] | None = None) -> tuple[float, float]:
+        """CH1 and CH2 as ``DDEF`` selects them: X, R, X noise, Aux In 1, 2 (CH1); Y, θ,
+        Y noise, Aux In 3, 4 (CH2); divided by the ratio input in volts if one is set."""
+        values = self._reading() if values is None else values
+        signal = self._signal()
+        noise = (self.input_noise_v_per_rthz if signal.noise_v_per_rthz is None
+                 else signal.noise_v_per_rthz)
+        clip = OUTPUT_CLIP * self.full_scale_v
+        shown = []
+        for channel, (quantity, ratio) in enumerate(self.ddef):
+            first_aux = 5 + 2 * channel
+            sources = (values[1 + channel], values[3 + channel], noise,
+                       values[first_aux], values[first_aux + 1])
+            value = sources[quantity]
+            if ratio:
+                divisor = values[first_aux + ratio - 1]
+                value = value / divisor if abs(divisor) >= 1e-3 else math.copysign(clip, value)
+            shown.append(value)
+        return shown[0], shown[1]
 
     def _cmd_SNAP(self, query: bool, args: list[str]) -> str:
         if not query or not 2 <= len(args) <= 6:
@@ -607,6 +706,286 @@ class Sr830Emulator(FirmwareEmulator):
                          len(SENSITIVITIES_V) - 1)
         self._busy_until = self.clock.now() + max(self.agan_time_constants * tau, 0.05)
 
+    def _cmd_OUTR(self, query: bool, args: list[str]) -> str:
+        if not query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._index(args, 2)
+        if channel == 0:
+            raise _BadCommand(_ESR_EXE)
+        return _fmt(self._displays()[channel - 1])
+
+    def _cmd_OAUX(self, query: bool, args: list[str]) -> str:
+        if not query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        return _fmt(self.aux_inputs_v[self._channel_arg(args, 4) - 1])
+
+    def _cmd_AUXV(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if len(args) != 1:
+                raise _BadCommand(_ESR_CMD)
+            return _fmt(self.auxv[self._channel_arg(args, 4) - 1])
+        if len(args) != 2:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 4)
+        volts = self._number(args[1])
+        if not -10.5 <= volts <= 10.5:
+            raise _BadCommand(_ESR_EXE)
+        self.auxv[channel - 1] = round(volts, 3)  # 1 mV resolution
+        return None
+
+    # reference, input and gain settings that the measurement model does not use
+    def _cmd_HARM(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            return self._setting(query, args, "harm", MAX_HARMONIC)
+        before = self.harm * self.detection_frequency_hz()
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        harm = self._index(args, MAX_HARMONIC)
+        if harm < 1 or harm * self.detection_frequency_hz() > MAX_DETECTION_HZ:
+            raise _BadCommand(_ESR_EXE)
+        self.harm = harm
+        self._detection_changed(before)
+        return None
+
+    def _detection_changed(self, before_hz: float) -> None:
+        """RANGE when the detection frequency crosses 200 Hz; above it a time constant
+        over 30 s is cut to 30 s, latching TC (LIA status bits 4 and 5)."""
+        now_hz = self.harm * self.detection_frequency_hz()
+        if (before_hz > _RANGE_HZ) != (now_hz > _RANGE_HZ):
+            self.lias |= _LIA_RANGE
+        if now_hz > _RANGE_HZ and self.oflt > _LONG_TC_INDEX:
+            self.oflt = _LONG_TC_INDEX
+            self.lias |= _LIA_TC
+
+    def _cmd_SLVL(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if args:
+                raise _BadCommand(_ESR_CMD)
+            return _fmt(self.slvl)
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        volts = self._number(args[0])
+        if not 0.004 <= volts <= 5.0:
+            raise _BadCommand(_ESR_EXE)
+        self.slvl = round(round(volts / 0.002) * 0.002, 3)  # 2 mV resolution
+        return None
+
+    def _cmd_RSLP(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "rslp", 2)
+
+    def _cmd_ISRC(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "isrc", 3)
+
+    def _cmd_IGND(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "ignd", 1)
+
+    def _cmd_ILIN(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "ilin", 3)
+
+    def _cmd_RMOD(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "rmod", 2)
+
+    def _cmd_SYNC(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "sync", 1)
+
+    # displays and outputs
+    def _channel_arg(self, args: list[str], high: int) -> int:
+        channel = self._index(args, high)
+        if channel == 0:
+            raise _BadCommand(_ESR_EXE)
+        return channel
+
+    def _cmd_DDEF(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if len(args) != 1:
+                raise _BadCommand(_ESR_CMD)
+            quantity, ratio = self.ddef[self._channel_arg(args, 2) - 1]
+            return f"{quantity},{ratio}"
+        if len(args) != 3:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 2)
+        self.ddef[channel - 1] = [self._index(args, 4, 1), self._index(args, 2, 2)]
+        return None
+
+    def _cmd_FPOP(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if len(args) != 1:
+                raise _BadCommand(_ESR_CMD)
+            return str(self.fpop[self._channel_arg(args, 2) - 1])
+        if len(args) != 2:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 2)
+        self.fpop[channel - 1] = self._index(args, 1, 1)
+        return None
+
+    def _cmd_OEXP(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            if len(args) != 1:
+                raise _BadCommand(_ESR_CMD)
+            percent, expand = self.oexp[self._channel_arg(args, 3) - 1]
+            return f"{percent:.2f},{expand}"
+        if len(args) != 3:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 3)
+        percent = self._number(args[1])
+        if not -105.0 <= percent <= 105.0:
+            raise _BadCommand(_ESR_EXE)
+        self.oexp[channel - 1] = [round(percent, 2), self._index(args, 2, 2)]
+        return None
+
+    def _cmd_AOFF(self, query: bool, args: list[str]) -> None:
+        if query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 3)
+        expand = self.oexp[channel - 1][1]
+        self.oexp[channel - 1] = [0.0, expand]
+        raw = self._reading()[channel]  # X, Y or R with no offset
+        percent = max(-105.0, min(105.0, 100.0 * raw / self.full_scale_v))
+        self.oexp[channel - 1] = [round(percent, 2), expand]
+
+    def _cmd_APHS(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        theta = self._reading()[4]
+        wrapped = (round(self.phase + theta, 2) + 180.0) % 360.0 - 180.0
+        self.phase = 180.0 if wrapped == -180.0 else wrapped
+
+    def _cmd_ARSV(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        # The dynamic reserve is not modelled: nothing to adjust.
+
+    # setup
+    def _cmd_OVRM(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "ovrm", 1)
+
+    def _cmd_LOCL(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "locl", 2)
+
+    def _cmd_KCLK(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "kclk", 1)
+
+    def _cmd_ALRM(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "alrm", 1)
+
+    def _cmd_SSET(self, query: bool, args: list[str]) -> None:
+        if query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        slot = self._channel_arg(args, _SETUP_SLOTS)
+        self._setups[slot] = {name: copy.deepcopy(getattr(self, name))
+                              for name in _SETUP_FIELDS}
+
+    def _cmd_RSET(self, query: bool, args: list[str]) -> None:
+        if query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        slot = self._channel_arg(args, _SETUP_SLOTS)
+        if slot not in self._setups:
+            raise _BadCommand(_ESR_EXE)  # nothing saved there
+        for name, value in self._setups[slot].items():
+            setattr(self, name, copy.deepcopy(value))
+
+    def _cmd_star_PSC(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "psc", 1)
+
+    # data storage
+    def _storage_setting(self, query: bool, args: list[str], name: str,
+                         high: int) -> str | None:
+        if query:
+            if args:
+                raise _BadCommand(_ESR_CMD)
+            return str(getattr(self.storage, name))
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        value = self._index(args, high)
+        if value != getattr(self.storage, name) and name != "tstr":
+            self.storage.reset()
+        setattr(self.storage, name, value)
+        return None
+
+    def _cmd_SRAT(self, query: bool, args: list[str]) -> str | None:
+        return self._storage_setting(query, args, "srat", TRIGGERED_RATE)
+
+    def _cmd_SEND(self, query: bool, args: list[str]) -> str | None:
+        return self._storage_setting(query, args, "send", 1)
+
+    def _cmd_TSTR(self, query: bool, args: list[str]) -> str | None:
+        return self._storage_setting(query, args, "tstr", 1)
+
+    def _start_storage(self, at: float) -> None:
+        self.storage.start(at)
+        for t in self.storage.due(self.clock.now()):  # a point at the start itself
+            self._filter_to(t, self._signal())
+            self.storage.store(*self._displays())
+
+    def _cmd_STRT(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self._start_storage(self.clock.now())
+
+    def _cmd_STRD(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.storage.reset()
+        self._start_storage(self.clock.now() + STRD_DELAY_S)
+
+    def _cmd_PAUS(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.storage.pause()
+
+    def _cmd_REST(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.storage.reset()
+
+    def _cmd_TRIG(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        storage = self.storage
+        acted = False
+        if storage.tstr and storage.state in ("idle", "paused"):
+            self._start_storage(self.clock.now())
+            acted = True
+        if storage.scanning and storage.srat == TRIGGERED_RATE:
+            storage.store(*self._displays())
+            acted = True
+        if acted:
+            self.lias |= _LIA_TRIG
+
+    def _cmd_FAST(self, query: bool, args: list[str]) -> str | None:
+        return self._setting(query, args, "fast", 2)
+
+    # data transfer
+    def _cmd_SPTS(self, query: bool, args: list[str]) -> str:
+        if not query or args:
+            raise _BadCommand(_ESR_CMD)
+        return str(len(self.storage.points))
+
+    def _trace(self, query: bool, args: list[str]) -> list[float]:
+        if not query or len(args) != 3:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 2)
+        start = self._index(args, BUFFER_POINTS, 1)
+        count = self._index(args, BUFFER_POINTS, 2)
+        points = self.storage.trace(channel, start, count)
+        if points is None:
+            raise _BadCommand(_ESR_EXE)  # beyond the points stored
+        return points
+
+    def _cmd_TRCA(self, query: bool, args: list[str]) -> str:
+        # Every point is followed by a comma, the last one included.
+        return "".join(_fmt(value) + "," for value in self._trace(query, args))
+
+    def _cmd_TRCB(self, query: bool, args: list[str]) -> bytes:
+        # IEEE 754 single precision, little-endian (PC byte order), no terminator.
+        points = self._trace(query, args)
+        return struct.pack(f"<{len(points)}f", *points)
+
+    def _cmd_TRCL(self, query: bool, args: list[str]) -> bytes:
+        # Non-normalised: a 16-bit mantissa m and a 16-bit exponent e (both little-endian
+        # integers), value = m · 2**(e − 124).
+        return b"".join(_non_normalised(value) for value in self._trace(query, args))
+
     # physics ------------------------------------------------------------------------
     def _signal(self) -> InputSignal:
         return self.input_signal() if self.input_signal is not None else self._constant
@@ -614,12 +993,22 @@ class Sr830Emulator(FirmwareEmulator):
     def _advance(self) -> None:
         """Run the output filters from the last update to now; latch overloads."""
         now = self.clock.now()
+        if now < self._t_last:
+            return
+        signal = self._signal()
+        for t in self.storage.due(now):  # buffer points fall due on the way to now
+            self._filter_to(t, signal)
+            self.storage.store(*self._displays())
+        self._filter_to(now, signal)
+        self._latch_overloads(signal)
+
+    def _filter_to(self, now: float, signal: InputSignal) -> None:
+        """Advance the output filters to ``now`` with ``signal`` held constant."""
         dt = now - self._t_last
         if dt < 0:
             return
         self._t_last = now
         n, tau = self.poles, self.time_constant_s
-        signal = self._signal()
         ux, uy = self.target_xy(signal)
         u = np.array([[ux], [uy]])
         if dt > 0:
@@ -628,8 +1017,12 @@ class Sr830Emulator(FirmwareEmulator):
             density = (self.input_noise_v_per_rthz if signal.noise_v_per_rthz is None
                        else signal.noise_v_per_rthz)
             self._advance_noise(dt, n, tau, density)
-        # overloads, latched until read (LIAS?) or cleared (*CLS)
-        peak = math.sqrt(2.0) * abs(signal.ac_rms_v) + (abs(signal.dc_v) if self.icpl else 0.0)
+
+    def _latch_overloads(self, signal: InputSignal) -> None:
+        """Overloads and unlock, latched until read (LIAS?) or cleared (*CLS)."""
+        n = self.poles
+        ac = abs(signal.ac_rms_v) + sum(abs(rms) for _, rms, _ in signal.harmonics)
+        peak = math.sqrt(2.0) * ac + (abs(signal.dc_v) if self.icpl else 0.0)
         if peak > INPUT_LIMIT_V:
             self.lias |= _LIA_INPUT
         x = self._d[0, n - 1] + self._z[0, n - 1]
