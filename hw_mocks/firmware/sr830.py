@@ -17,11 +17,41 @@ query answers nothing. ``AGAN`` keeps the interpreter busy (IFC clear); lines re
 meanwhile wait in the input queue and run afterwards (p. 5-2), so an RS-232 ``*STB?``
 asked during an auto gain is answered when it is over.
 
-Implemented: ``*IDN? *RST *CLS *ESE(?) *SRE(?) *ESR? *STB? ERRE(?) ERRS? LIAE(?) LIAS?
-OUTX(?) FMOD(?) FREQ(?) PHAS(?) ICPL(?) SENS(?) OFLT(?) OFSL(?) SNAP? OUTP? AGAN``
-(status queries take the optional bit number). Tables: ``SENS`` 0…26 = 2 nV … 1 V rms in
-1-2-5 steps, ``OFLT`` 0…19 = 10 µs … 30 ks in 1-3 steps (> 30 s refused above a 200 Hz
-detection frequency), ``OFSL`` 0…3 = 6…24 dB/oct (p. 5-6).
+The whole remote command set of the manual's command list (pp. 5-4 to 5-23) is
+interpreted; a mnemonic not in it sets CMD and answers nothing, as the instrument does.
+
+* Reference and phase: ``PHAS FMOD FREQ RSLP HARM SLVL``. ``HARM i``: 1 ≤ i ≤ 19999 with
+  i·f ≤ 102 kHz (both ``HARM`` and ``FREQ`` refuse what breaks it, EXE); the emulator
+  detects the input component at i × the reference. ``SLVL`` 4 mV…5 V in 2 mV steps.
+* Input and filter: ``ISRC IGND ICPL ILIN``. Gain and time constant: ``SENS RMOD OFLT
+  OFSL SYNC`` — ``SENS`` 0…26 = 2 nV … 1 V rms in 1-2-5 steps, ``OFLT`` 0…19 = 10 µs …
+  30 ks in 1-3 steps (> 30 s refused above a 200 Hz detection frequency; a frequency or
+  harmonic change that crosses 200 Hz latches RANGE, and one that leaves τ > 30 s above
+  it cuts τ to 30 s and latches TC), ``OFSL`` 0…3 = 6…24 dB/oct (p. 5-6).
+* Display and output: ``DDEF`` (CH1: X, R, X noise, Aux In 1, 2; CH2: Y, θ, Y noise, Aux
+  In 3, 4; ratio none or by an Aux In in volts), ``FPOP``, ``OEXP`` (offset −105…105 %,
+  expand ×1/×10/×100 as index 0…2), ``AOFF``. Aux I/O: ``OAUX?`` (the rear inputs,
+  :attr:`Sr830Emulator.aux_inputs_v`), ``AUXV`` (±10.5 V, 1 mV).
+* Setup: ``OUTX OVRM KCLK ALRM SSET RSET`` (nine setups; recalling an empty one is
+  refused). Auto functions: ``AGAN ARSV APHS AOFF``.
+* Data storage (:mod:`hw_mocks.firmware.sr830_storage`, on the emulator clock): ``SRAT
+  SEND TRIG TSTR STRT PAUS REST STRD``. Data transfer: ``OUTP? OUTR? SNAP? OAUX? SPTS?
+  TRCA? TRCB? TRCL? FAST``. ``TRCA?`` ends every point with a comma; ``TRCB?`` sends IEEE
+  single floats (little-endian) and ``TRCL?`` 16-bit mantissa + 16-bit exponent pairs,
+  both without a terminator.
+* Interface and status: ``*RST *IDN? LOCL OVRM *CLS *ESE *ESR? *SRE *STB? *PSC ERRE
+  ERRS? LIAE LIAS?`` (status queries take the optional bit number). The serial poll
+  byte's SCN bit is clear while a scan stores points; IFC is clear only while ``AGAN``
+  runs (then nothing is answered); ``*PSC 1`` clears the enable registers at power-on.
+
+Not emulated (accepted and kept, without effect on the measurement): the dynamic reserve
+(``RMOD``, ``ARSV`` changes nothing), the synchronous filter, line notches, input
+grounding and the current inputs' gain (``ISRC 2/3`` read the same input in the units of
+the selected input), the expand's effect (only the rear analog outputs would show it),
+front-panel outputs, key click and alarm, local/remote lockout. ``FAST`` streaming goes
+to the GPIB connector on a real unit, so on this RS-232 line it sends nothing. The QRY
+(output queue overflow), URQ (front panel) and MAV bits are never set, and FILTR
+overloads are not modelled.
 
 The measurement model (documented emulator choices, not calibrations)
 -------------------------------------------------------------------
@@ -53,8 +83,10 @@ The measurement model (documented emulator choices, not calibrations)
   output, and keeps the interpreter busy for ``agan_time_constants`` × τ (at least 50 ms);
   above τ = 1 s it does nothing, as the manual says (p. 5-11).
 * Power-up and ``*RST`` settings (1 V, 100 ms, 12 dB/oct, internal 1 kHz, phase 0, AC
-  coupling) follow the manual's standard settings (p. 4-4) as far as they could be
-  checked; the output interface is a retained setting and powers up as
+  coupling, harmonic 1, sine trigger, 1 V sine out, input A floating, no notch, normal
+  reserve, CH1 X and CH2 Y with no ratio, no offsets, storage at 1 Hz in loop mode, an
+  empty buffer) follow the manual's standard settings (p. 4-4) as far as they could be
+  checked (the reserve and the storage defaults could not be, and are emulator choices); the output interface is a retained setting and powers up as
   ``output_interface`` (default GPIB, the quirk that makes a program that skips ``OUTX 0``
   hear nothing).
 * Fault injection: :meth:`Sr830Emulator.enter_error_state` latches an ``ERRS?`` bit (code
