@@ -41,6 +41,13 @@ Rules this driver follows
   when the auto gain is over. The manual says ``AGAN`` does nothing above τ = 1 s; the
   driver refuses it there.
 
+Beyond the LockIn interface (the bench's needs): :attr:`Sr830LockIn.harmonic` (``HARM``,
+1f/2f detection for polarimetry), :attr:`Sr830LockIn.reference_slope` (``RSLP``),
+:meth:`Sr830LockIn.configure_input` (``ISRC``, ``IGND``, ``ICPL``, ``ILIN``) and the data
+buffer for fast scans (:meth:`Sr830LockIn.start_buffer`, ``trigger``, ``pause_buffer``,
+``buffer_points``, :meth:`Sr830LockIn.read_buffer`: ``SRAT``/``SEND``/``STRT``, then binary
+``TRCB?`` in chunks, manual pp. 5-13 to 5-17).
+
 SR860/SR865 are not supported: their command set uses other index tables for sensitivity
 and time constant and other status bits (not confirmed against their manual here), so the
 constructor refuses them with :class:`~drivers.errors.UnsupportedFeature` rather than
