@@ -86,7 +86,8 @@ The measurement model (documented emulator choices, not calibrations)
   coupling, harmonic 1, sine trigger, 1 V sine out, input A floating, no notch, normal
   reserve, CH1 X and CH2 Y with no ratio, no offsets, storage at 1 Hz in loop mode, an
   empty buffer) follow the manual's standard settings (p. 4-4) as far as they could be
-  checked (the reserve and the storage defaults could not be, and are emulator choices); the output interface is a retained setting and powers up as
+  checked (the reserve and the storage defaults could not be, and are emulator
+  choices); the output interface is a retained setting and powers up as
   ``output_interface`` (default GPIB, the quirk that makes a program that skips ``OUTX 0``
   hear nothing).
 * Fault injection: :meth:`Sr830Emulator.enter_error_state` latches an ``ERRS?`` bit (code

@@ -103,7 +103,7 @@ def test_an_error_report_decodes_with_the_clients_unpacker(bench):
 
 
 def test_power_up_state_settings_and_a_move(client):
-    model, emulator, device = client
+    _, emulator, device = client
     profile = emulator.profile
     # Power-up as the emulator documents it: channel disabled, zero home velocity.
     assert device.status["channel_enabled"] is False

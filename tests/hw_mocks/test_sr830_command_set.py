@@ -84,7 +84,7 @@ def test_harmonic_limits_the_frequency_and_detects_the_nth_component(emu, clock)
     emu.set_input(2e-3, phase_deg=20.0)
     emu.input_signal = lambda: InputSignal(2e-3, 20.0, harmonics=((2, 5e-4, 45.0),))
     clock.advance(1.0)
-    x, y, r, theta = (float(v) for v in one(emu, "SNAP? 1,2,3,4").split(","))
+    _, _, r, theta = (float(v) for v in one(emu, "SNAP? 1,2,3,4").split(","))
     assert r == pytest.approx(5e-4, rel=1e-9) and theta == pytest.approx(45.0, abs=1e-6)
     ask(emu, "PHAS 45")  # the phase shifts the harmonic's reference
     clock.advance(1.0)
