@@ -147,6 +147,25 @@ _NUMBER_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:E[+-]?\d+)?")
 _ESR_INP, _ESR_EXE, _ESR_CMD, _ESR_PON = 0x01, 0x10, 0x20, 0x80
 _LIA_INPUT, _LIA_OUTPUT, _LIA_UNLOCK = 0x01, 0x04, 0x08
 _LIA_RANGE, _LIA_TC, _LIA_TRIG = 0x10, 0x20, 0x40
+#: Plain index settings: mnemonic → (attribute, highest index); query and set alike.
+_INDEX_SETTINGS = {
+    "OUTX": ("outx", 1),
+    "FMOD": ("fmod", 1),
+    "ICPL": ("icpl", 1),
+    "SENS": ("sens", len(SENSITIVITIES_V) - 1),
+    "RSLP": ("rslp", 2),
+    "ISRC": ("isrc", 3),
+    "IGND": ("ignd", 1),
+    "ILIN": ("ilin", 3),
+    "RMOD": ("rmod", 2),
+    "SYNC": ("sync", 1),
+    "OVRM": ("ovrm", 1),
+    "LOCL": ("locl", 2),
+    "KCLK": ("kclk", 1),
+    "ALRM": ("alrm", 1),
+    "*PSC": ("psc", 1),
+    "FAST": ("fast", 2),
+}
 #: Settings saved by ``SSET`` and restored by ``RSET`` / ``*RST`` (not the interface).
 _SETUP_FIELDS = ("fmod", "freq", "phase", "harm", "rslp", "slvl", "isrc", "ignd", "icpl",
                  "ilin", "sens", "rmod", "oflt", "ofsl", "sync", "ddef", "fpop", "oexp",
@@ -492,6 +511,10 @@ class Sr830Emulator(FirmwareEmulator):
         mnemonic, query, rest = match.group(1), bool(match.group(2)), match.group(3)
         args = rest.split(",") if rest else []
         handler = getattr(self, "_cmd_" + mnemonic.replace("*", "star_"), None)
+        if handler is None and mnemonic in _INDEX_SETTINGS:
+            attribute, high = _INDEX_SETTINGS[mnemonic]
+            self._advance()
+            return self._setting(query, args, attribute, high)
         if handler is None:
             raise _BadCommand(_ESR_CMD)
         self._advance()
@@ -609,13 +632,7 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_LIAE(self, query: bool, args: list[str]) -> str | None:
         return self._enable(query, args, "liae")
 
-    def _cmd_OUTX(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "outx", 1)
-
     # reference
-    def _cmd_FMOD(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "fmod", 1)
-
     def _cmd_FREQ(self, query: bool, args: list[str]) -> str | None:
         if query:
             if args:
@@ -646,12 +663,6 @@ class Sr830Emulator(FirmwareEmulator):
         return None
 
     # input, gain and filter
-    def _cmd_ICPL(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "icpl", 1)
-
-    def _cmd_SENS(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "sens", len(SENSITIVITIES_V) - 1)
-
     def _cmd_OFLT(self, query: bool, args: list[str]) -> str | None:
         if not query and len(args) == 1:
             index = self._index(args, len(TIME_CONSTANTS_S) - 1)
@@ -753,20 +764,14 @@ class Sr830Emulator(FirmwareEmulator):
         return _fmt(self.aux_inputs_v[self._channel_arg(args, 4) - 1])
 
     def _cmd_AUXV(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            if len(args) != 1:
-                raise _BadCommand(_ESR_CMD)
-            return _fmt(self.auxv[self._channel_arg(args, 4) - 1])
-        if len(args) != 2:
-            raise _BadCommand(_ESR_CMD)
-        channel = self._channel_arg(args, 4)
-        volts = self._number(args[1])
-        if not -10.5 <= volts <= 10.5:
-            raise _BadCommand(_ESR_EXE)
-        self.auxv[channel - 1] = round(volts, 3)  # 1 mV resolution
-        return None
+        def parse(a: list[str]) -> float:
+            volts = self._number(a[1])
+            if not -10.5 <= volts <= 10.5:
+                raise _BadCommand(_ESR_EXE)
+            return round(volts, 3)  # 1 mV resolution
+        return self._per_channel(query, args, self.auxv, 4, 2, show=_fmt, parse=parse)
 
-    # reference, input and gain settings that the measurement model does not use
+    # harmonic and sine output
     def _cmd_HARM(self, query: bool, args: list[str]) -> str | None:
         if query:
             return self._setting(query, args, "harm", MAX_HARMONIC)
@@ -803,24 +808,6 @@ class Sr830Emulator(FirmwareEmulator):
         self.slvl = round(round(volts / 0.002) * 0.002, 3)  # 2 mV resolution
         return None
 
-    def _cmd_RSLP(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "rslp", 2)
-
-    def _cmd_ISRC(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "isrc", 3)
-
-    def _cmd_IGND(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "ignd", 1)
-
-    def _cmd_ILIN(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "ilin", 3)
-
-    def _cmd_RMOD(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "rmod", 2)
-
-    def _cmd_SYNC(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "sync", 1)
-
     # displays and outputs
     def _channel_arg(self, args: list[str], high: int) -> int:
         channel = self._index(args, high)
@@ -828,43 +815,37 @@ class Sr830Emulator(FirmwareEmulator):
             raise _BadCommand(_ESR_EXE)
         return channel
 
-    def _cmd_DDEF(self, query: bool, args: list[str]) -> str | None:
+    def _per_channel(self, query: bool, args: list[str], values: list, channels: int,
+                     set_count: int, parse, show) -> str | None:
+        """``XXXX? i`` answers ``show(values[i − 1])``; ``XXXX i,…`` (``set_count``
+        parameters) stores ``parse(args)`` there; i = 1…``channels``."""
         if query:
             if len(args) != 1:
                 raise _BadCommand(_ESR_CMD)
-            quantity, ratio = self.ddef[self._channel_arg(args, 2) - 1]
-            return f"{quantity},{ratio}"
-        if len(args) != 3:
+            return show(values[self._channel_arg(args, channels) - 1])
+        if len(args) != set_count:
             raise _BadCommand(_ESR_CMD)
-        channel = self._channel_arg(args, 2)
-        self.ddef[channel - 1] = [self._index(args, 4, 1), self._index(args, 2, 2)]
+        channel = self._channel_arg(args, channels)
+        values[channel - 1] = parse(args)
         return None
+
+    def _cmd_DDEF(self, query: bool, args: list[str]) -> str | None:
+        return self._per_channel(
+            query, args, self.ddef, 2, 3, show=lambda v: f"{v[0]},{v[1]}",
+            parse=lambda a: [self._index(a, 4, 1), self._index(a, 2, 2)])
 
     def _cmd_FPOP(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            if len(args) != 1:
-                raise _BadCommand(_ESR_CMD)
-            return str(self.fpop[self._channel_arg(args, 2) - 1])
-        if len(args) != 2:
-            raise _BadCommand(_ESR_CMD)
-        channel = self._channel_arg(args, 2)
-        self.fpop[channel - 1] = self._index(args, 1, 1)
-        return None
+        return self._per_channel(query, args, self.fpop, 2, 2, show=str,
+                                 parse=lambda a: self._index(a, 1, 1))
 
     def _cmd_OEXP(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            if len(args) != 1:
-                raise _BadCommand(_ESR_CMD)
-            percent, expand = self.oexp[self._channel_arg(args, 3) - 1]
-            return f"{percent:.2f},{expand}"
-        if len(args) != 3:
-            raise _BadCommand(_ESR_CMD)
-        channel = self._channel_arg(args, 3)
-        percent = self._number(args[1])
-        if not -105.0 <= percent <= 105.0:
-            raise _BadCommand(_ESR_EXE)
-        self.oexp[channel - 1] = [round(percent, 2), self._index(args, 2, 2)]
-        return None
+        def parse(a: list[str]) -> list:
+            percent = self._number(a[1])
+            if not -105.0 <= percent <= 105.0:
+                raise _BadCommand(_ESR_EXE)
+            return [round(percent, 2), self._index(a, 2, 2)]
+        return self._per_channel(query, args, self.oexp, 3, 3,
+                                 show=lambda v: f"{v[0]:.2f},{v[1]}", parse=parse)
 
     def _cmd_AOFF(self, query: bool, args: list[str]) -> None:
         if query or len(args) != 1:
@@ -889,18 +870,6 @@ class Sr830Emulator(FirmwareEmulator):
         # The dynamic reserve is not modelled: nothing to adjust.
 
     # setup
-    def _cmd_OVRM(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "ovrm", 1)
-
-    def _cmd_LOCL(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "locl", 2)
-
-    def _cmd_KCLK(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "kclk", 1)
-
-    def _cmd_ALRM(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "alrm", 1)
-
     def _cmd_SSET(self, query: bool, args: list[str]) -> None:
         if query or len(args) != 1:
             raise _BadCommand(_ESR_CMD)
@@ -916,9 +885,6 @@ class Sr830Emulator(FirmwareEmulator):
             raise _BadCommand(_ESR_EXE)  # nothing saved there
         for name, value in self._setups[slot].items():
             setattr(self, name, copy.deepcopy(value))
-
-    def _cmd_star_PSC(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "psc", 1)
 
     # data storage
     def _storage_setting(self, query: bool, args: list[str], name: str,
@@ -984,9 +950,6 @@ class Sr830Emulator(FirmwareEmulator):
             acted = True
         if acted:
             self.lias |= _LIA_TRIG
-
-    def _cmd_FAST(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "fast", 2)
 
     # data transfer
     def _cmd_SPTS(self, query: bool, args: list[str]) -> str:

@@ -16,8 +16,6 @@ SMC100 (their conformance rests on the manuals' tables, see their emulator tests
 
 from __future__ import annotations
 
-import math
-
 import pytest
 
 thorlabs_pm100 = pytest.importorskip("ThorlabsPM100", reason="ThorlabsPM100 not installed")
