@@ -633,31 +633,37 @@ class Sr830Emulator(FirmwareEmulator):
         return self._enable(query, args, "liae")
 
     # reference
-    def _cmd_FREQ(self, query: bool, args: list[str]) -> str | None:
+    def _real(self, query: bool, args: list[str], now: float, low: float,
+              high: float) -> str | float:
+        """A real-valued setting: its query's reply (text), or the value asked for (a
+        float within ``low``…``high``; EXE otherwise)."""
         if query:
             if args:
                 raise _BadCommand(_ESR_CMD)
-            return _fmt(self.detection_frequency_hz())
+            return _fmt(now)
         if len(args) != 1:
             raise _BadCommand(_ESR_CMD)
         value = self._number(args[0])
-        if self.fmod != 1 or not 0.001 <= value <= MAX_DETECTION_HZ / self.harm:
-            raise _BadCommand(_ESR_EXE)  # internal reference only; i·f ≤ 102 kHz
+        if not low <= value <= high:
+            raise _BadCommand(_ESR_EXE)
+        return value
+
+    def _cmd_FREQ(self, query: bool, args: list[str]) -> str | None:
+        value = self._real(query, args, self.detection_frequency_hz(), 0.001,
+                           MAX_DETECTION_HZ / self.harm)  # i·f ≤ 102 kHz
+        if isinstance(value, str):
+            return value
+        if self.fmod != 1:
+            raise _BadCommand(_ESR_EXE)  # set only with the internal reference
         before = self.harm * self.detection_frequency_hz()
         self.freq = float(f"{value:.5g}") if value >= 1.0 else round(value, 4)
         self._detection_changed(before)
         return None
 
     def _cmd_PHAS(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            if args:
-                raise _BadCommand(_ESR_CMD)
-            return _fmt(self.phase)
-        if len(args) != 1:
-            raise _BadCommand(_ESR_CMD)
-        value = self._number(args[0])
-        if not -360.0 <= value <= 729.99:
-            raise _BadCommand(_ESR_EXE)
+        value = self._real(query, args, self.phase, -360.0, 729.99)
+        if isinstance(value, str):
+            return value
         wrapped = (round(value, 2) + 180.0) % 360.0 - 180.0
         self.phase = 180.0 if wrapped == -180.0 else wrapped
         return None
@@ -796,15 +802,9 @@ class Sr830Emulator(FirmwareEmulator):
             self.lias |= _LIA_TC
 
     def _cmd_SLVL(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            if args:
-                raise _BadCommand(_ESR_CMD)
-            return _fmt(self.slvl)
-        if len(args) != 1:
-            raise _BadCommand(_ESR_CMD)
-        volts = self._number(args[0])
-        if not 0.004 <= volts <= 5.0:
-            raise _BadCommand(_ESR_EXE)
+        volts = self._real(query, args, self.slvl, 0.004, 5.0)
+        if isinstance(volts, str):
+            return volts
         self.slvl = round(round(volts / 0.002) * 0.002, 3)  # 2 mV resolution
         return None
 
