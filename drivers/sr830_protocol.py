@@ -42,6 +42,17 @@ Error status (``ERRS?``): 1 battery backup failed, 2 RAM, 4 ROM, 5 GPIB fast tra
 aborted, 6 DSP, 7 internal math error. The event, LIA and error bits stay set until they
 are read or cleared by ``*CLS``.
 
+Reference, input and storage tables (pp. 5-4 to 5-14)
+----------------------------------------------------
+``HARM i``: detect at the i-th harmonic, 1 ≤ i ≤ 19999 with i·f ≤ 102 kHz. ``RSLP i``:
+reference trigger sine (0), TTL rising (1), TTL falling (2). ``ISRC i``: input A (0),
+A−B (1), current 1 MΩ (2), current 100 MΩ (3). ``IGND i``: shield floating (0) or
+grounded (1). ``ICPL i``: AC (0) or DC (1). ``ILIN i``: line notch filters none (0),
+line (1), 2× line (2), both (3). ``SRAT i``: buffer sample rate 62.5 mHz × 2**i for
+i = 0…13, 14 for one point per trigger. ``SPTS?``: points stored. ``TRCB? i,j,k``: k
+points of display i from point j, as IEEE single-precision floats, little-endian, four
+bytes each and no terminator.
+
 ``SNAP? i,j[,k…]`` (p. 5-15) returns 2 to 6 values taken at one instant, in the order
 asked, separated by commas; codes 1 X, 2 Y, 3 R, 4 θ, 5–8 Aux In 1–4, 9 reference
 frequency, 10/11 CH1/CH2 display.
@@ -51,6 +62,7 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 from dataclasses import dataclass
 
 from drivers.errors import ProtocolError
@@ -60,8 +72,14 @@ __all__ = [
     "ERROR_STATUS_BITS",
     "EVENT_STATUS_BITS",
     "FILTER_SLOPES_DB",
+    "INPUT_SOURCES",
     "LIA_STATUS_BITS",
+    "LINE_FILTERS",
+    "MAX_DETECTION_HZ",
+    "MAX_HARMONIC",
+    "REFERENCE_SLOPES",
     "REPLY_TERMINATOR",
+    "SAMPLE_RATES_HZ",
     "SENSITIVITIES_V",
     "SERIAL_POLL_BITS",
     "SNAP_CODES",
@@ -78,6 +96,7 @@ __all__ = [
     "parse_identity",
     "parse_int",
     "parse_status_byte",
+    "parse_trace_binary",
     "reply_text",
 ]
 
@@ -133,6 +152,18 @@ _MNEMONIC_RE = re.compile(r"(?:\*[A-Z]{3}|[A-Z]{4})\??")
 _FLOAT_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 _INT_RE = re.compile(r"[+-]?\d+", re.ASCII)
 _MAX_ARGS = 6
+
+#: ``HARM`` limits: harmonic number and the highest detection frequency i·f.
+MAX_HARMONIC = 19999
+MAX_DETECTION_HZ = 102_000.0
+#: ``RSLP`` index → reference trigger.
+REFERENCE_SLOPES = ("sine", "rising", "falling")
+#: ``ISRC`` index → input configuration.
+INPUT_SOURCES = ("A", "A-B", "I1M", "I100M")
+#: ``ILIN`` index → line notch filters in.
+LINE_FILTERS = ("none", "line", "2xline", "both")
+#: ``SRAT`` 0…13 → sample rate, Hz (14 is "per trigger").
+SAMPLE_RATES_HZ = tuple(0.0625 * 2.0**i for i in range(14))
 
 
 # --------------------------------------------------------------------------- requests
@@ -321,3 +352,17 @@ def parse_identity(text: str) -> Sr830Identity:
     if firmware.lower().startswith("ver"):
         firmware = firmware[3:]
     return Sr830Identity(vendor, model, serial, firmware)
+
+
+def parse_trace_binary(data: bytes, count: int) -> tuple[float, ...]:
+    """``count`` points of a ``TRCB?`` reply: little-endian IEEE single floats.
+
+    >>> parse_trace_binary(b"\\x00\\x00\\x80\\x3f\\x00\\x00\\x00\\xc0", 2)
+    (1.0, -2.0)
+    """
+    if len(data) != 4 * count:
+        raise ProtocolError(f"a trace of {count} points is {4 * count} bytes, got {len(data)}")
+    values = struct.unpack(f"<{count}f", data)
+    if not all(math.isfinite(v) for v in values):
+        raise ProtocolError("non-finite value in a trace")
+    return values

@@ -41,6 +41,13 @@ Rules this driver follows
   when the auto gain is over. The manual says ``AGAN`` does nothing above τ = 1 s; the
   driver refuses it there.
 
+Beyond the LockIn interface (the bench's needs): :attr:`Sr830LockIn.harmonic` (``HARM``,
+1f/2f detection for polarimetry), :attr:`Sr830LockIn.reference_slope` (``RSLP``),
+:meth:`Sr830LockIn.configure_input` (``ISRC``, ``IGND``, ``ICPL``, ``ILIN``) and the data
+buffer for fast scans (:meth:`Sr830LockIn.start_buffer`, ``trigger``, ``pause_buffer``,
+``buffer_points``, :meth:`Sr830LockIn.read_buffer`: ``SRAT``/``SEND``/``STRT``, then binary
+``TRCB?`` in chunks, manual pp. 5-13 to 5-17).
+
 SR860/SR865 are not supported: their command set uses other index tables for sensitivity
 and time constant and other status bits (not confirmed against their manual here), so the
 constructor refuses them with :class:`~drivers.errors.UnsupportedFeature` rather than
@@ -53,9 +60,12 @@ seconds, hertz.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
+from dataclasses import dataclass
 
+import numpy as np
 import serial
 
 from drivers.base import (
@@ -76,7 +86,12 @@ from drivers.errors import (
 )
 from drivers.sr830_protocol import (
     FILTER_SLOPES_DB,
+    INPUT_SOURCES,
+    LINE_FILTERS,
+    MAX_HARMONIC,
+    REFERENCE_SLOPES,
     REPLY_TERMINATOR,
+    SAMPLE_RATES_HZ,
     SENSITIVITIES_V,
     TIME_CONSTANTS_S,
     EventStatus,
@@ -91,11 +106,12 @@ from drivers.sr830_protocol import (
     parse_identity,
     parse_int,
     parse_status_byte,
+    parse_trace_binary,
     reply_text,
 )
 from drivers.transport import SerialChannel, open_serial
 
-__all__ = ["CommandRejected", "Sr830LockIn"]
+__all__ = ["CommandRejected", "Sr830Input", "Sr830LockIn"]
 
 #: Models that speak the SR830 command set.
 SUPPORTED_MODELS = ("SR830", "SR810")
@@ -103,10 +119,30 @@ SUPPORTED_MODELS = ("SR830", "SR810")
 _MAX_LINE = 512
 #: The manual: "AGAN does nothing if the time constant is greater than 1 second".
 _AGAN_MAX_TIME_CONSTANT_S = 1.0
+#: Points the buffer holds per channel.
+_BUFFER_POINTS = 16383
+#: Points per ``TRCB?`` request (4 kB: a few seconds at 9600 baud).
+_TRACE_CHUNK = 1024
 
 
 class CommandRejected(ControllerError, StateError):
     """The SR830 flagged a command as illegal (CMD) or unable to execute (EXE)."""
+
+
+@dataclass(frozen=True)
+class Sr830Input:
+    """The signal input's configuration (``ISRC``, ``IGND``, ``ICPL``, ``ILIN``)."""
+
+    source: str  # "A", "A-B", "I1M", "I100M"
+    grounded: bool
+    dc_coupled: bool
+    line_filters: str  # "none", "line", "2xline", "both"
+
+
+def _choice(value: str, table: tuple[str, ...], what: str) -> int:
+    if not isinstance(value, str) or value not in table:
+        raise ValueError(f"{what} must be one of {table}, got {value!r}")
+    return table.index(value)
 
 
 class Sr830LockIn(LockIn):
@@ -175,6 +211,8 @@ class Sr830LockIn(LockIn):
         self.model: Sr830Identity | None = None
         self._channel: SerialChannel | None = None
         raw = open_serial(port, device=name, baudrate=baudrate)
+        #: For the wire time of long binary replies (an open port keeps its own rate).
+        self._baudrate = int(getattr(raw, "baudrate", None) or baudrate)
         try:
             self._channel = SerialChannel(raw, device=name)
             self._connect()
@@ -265,8 +303,11 @@ class Sr830LockIn(LockIn):
                 return
             time.sleep(min(0.005, quiet / 10))
 
-    def _ask(self, mnemonic: str, *args: int | float, parse=str, attempts: int | None = None):
-        """A query that changes nothing, retried after a timeout or an unusable reply."""
+    def _ask(self, mnemonic: str, *args: int | float, parse=str, attempts: int | None = None,
+             read=None):
+        """A query that changes nothing, retried after a timeout or an unusable reply.
+        ``read(text)`` reads the raw reply (default: one reply line)."""
+        read = self._read_reply if read is None else read
         attempts = self.retries + 1 if attempts is None else attempts
         text = command_text(mnemonic, *args)
         last: DeviceError | None = None
@@ -274,7 +315,7 @@ class Sr830LockIn(LockIn):
             with self._io_lock:
                 try:
                     self._write(mnemonic, *args)
-                    reply = self._read_reply(text)
+                    reply = read(text)
                     try:
                         return parse(reply)
                     except ProtocolError as err:
@@ -383,6 +424,136 @@ class Sr830LockIn(LockIn):
                     break
             self._check(text)
         return self._do_get_sensitivity_v()
+
+    # harmonic, reference trigger, input ------------------------------------------
+    @property
+    def harmonic(self) -> int:
+        """Detection harmonic ``HARM`` (1 = the reference frequency itself)."""
+        self._check_open("harmonic")
+        return self._ask("HARM?", parse=lambda t: parse_int(t, 1, MAX_HARMONIC))
+
+    @harmonic.setter
+    def harmonic(self, value: int) -> None:
+        self._check_open("harmonic")
+        if isinstance(value, bool) or not isinstance(value, int) or not (
+                1 <= value <= MAX_HARMONIC):
+            raise ValueError(f"harmonic must be an integer 1 to {MAX_HARMONIC}, got {value!r}")
+        # i·f > 102 kHz is refused by the SR830 itself (CommandRejected naming HARM).
+        self._command("HARM", value)
+
+    @property
+    def reference_slope(self) -> str:
+        """What the external reference triggers on: ``"sine"``, ``"rising"`` or
+        ``"falling"`` (TTL edges) — ``RSLP``."""
+        self._check_open("reference_slope")
+        index = self._ask("RSLP?", parse=lambda t: parse_int(t, 0, len(REFERENCE_SLOPES) - 1))
+        return REFERENCE_SLOPES[index]
+
+    @reference_slope.setter
+    def reference_slope(self, value: str) -> None:
+        self._check_open("reference_slope")
+        self._command("RSLP", _choice(value, REFERENCE_SLOPES, "reference_slope"))
+
+    @property
+    def input_configuration(self) -> Sr830Input:
+        """Input source, shield grounding, coupling and line notch filters."""
+        self._check_open("input_configuration")
+        return Sr830Input(
+            source=INPUT_SOURCES[self._ask("ISRC?", parse=lambda t: parse_int(t, 0, 3))],
+            grounded=bool(self._ask("IGND?", parse=lambda t: parse_int(t, 0, 1))),
+            dc_coupled=bool(self._ask("ICPL?", parse=lambda t: parse_int(t, 0, 1))),
+            line_filters=LINE_FILTERS[self._ask("ILIN?", parse=lambda t: parse_int(t, 0, 3))],
+        )
+
+    def configure_input(self, *, source: str | None = None, grounded: bool | None = None,
+                        dc_coupled: bool | None = None,
+                        line_filters: str | None = None) -> Sr830Input:
+        """Set what is given (all validated before anything is sent); return the result.
+
+        ``source``: ``"A"``, ``"A-B"``, ``"I1M"``, ``"I100M"`` (current input, 10⁶ or
+        10⁸ V/A); ``line_filters``: ``"none"``, ``"line"``, ``"2xline"``, ``"both"``.
+        """
+        self._check_open("configure_input")
+        settings: list[tuple[str, int]] = []
+        if source is not None:
+            settings.append(("ISRC", _choice(source, INPUT_SOURCES, "source")))
+        for mnemonic, flag, what in (("IGND", grounded, "grounded"),
+                                     ("ICPL", dc_coupled, "dc_coupled")):
+            if flag is not None:
+                if not isinstance(flag, bool):
+                    raise TypeError(f"{what} must be True or False, got {flag!r}")
+                settings.append((mnemonic, int(flag)))
+        if line_filters is not None:
+            settings.append(("ILIN", _choice(line_filters, LINE_FILTERS, "line_filters")))
+        for mnemonic, index in settings:
+            self._command(mnemonic, index)
+        return self.input_configuration
+
+    # data buffer ----------------------------------------------------------------
+    def start_buffer(self, sample_rate_hz: float | None, *, loop: bool = False) -> None:
+        """Clear the buffer and start storing CH1 and CH2 (X and Y unless the displays
+        were changed on the instrument) at ``sample_rate_hz`` (one of
+        :data:`~drivers.sr830_protocol.SAMPLE_RATES_HZ`, 62.5 mHz to 512 Hz) or, with
+        ``None``, one point per :meth:`trigger`. One shot (stops when 16383 points are
+        stored) unless ``loop``."""
+        self._check_open("start_buffer")
+        if sample_rate_hz is None:
+            rate = 14
+        else:
+            matches = [i for i, r in enumerate(SAMPLE_RATES_HZ)
+                       if math.isclose(r, sample_rate_hz, rel_tol=1e-9)]
+            if not matches:
+                raise ValueError(f"sample_rate_hz must be one of {SAMPLE_RATES_HZ} Hz or "
+                                 f"None (per trigger), got {sample_rate_hz!r}")
+            rate = matches[0]
+        for mnemonic, *args in (("REST",), ("SRAT", rate), ("SEND", int(bool(loop))),
+                                ("STRT",)):
+            self._command(mnemonic, *args)
+
+    def trigger(self) -> None:
+        """``TRIG``: one buffer point (at a per-trigger rate)."""
+        self._check_open("trigger")
+        self._command("TRIG")
+
+    def pause_buffer(self) -> None:
+        self._check_open("pause_buffer")
+        self._command("PAUS")
+
+    def buffer_points(self) -> int:
+        """Points stored so far (``SPTS?``)."""
+        self._check_open("buffer_points")
+        return self._ask("SPTS?", parse=lambda t: parse_int(t, 0, _BUFFER_POINTS))
+
+    def read_buffer(self, channel: int, start: int = 0,
+                    count: int | None = None) -> np.ndarray:
+        """Points ``start`` … ``start + count − 1`` of display ``channel`` (1 or 2; all
+        stored from ``start`` if ``count`` is None), read as binary (``TRCB?``) in
+        chunks of :data:`_TRACE_CHUNK` points, each retried like any query."""
+        self._check_open("read_buffer")
+        if channel not in (1, 2) or isinstance(channel, bool):
+            raise ValueError(f"channel must be 1 or 2, got {channel!r}")
+        stored = self.buffer_points()
+        if count is None:
+            count = stored - start
+        if not 0 <= start <= stored or not 0 <= count <= stored - start:
+            raise ValueError(f"points {start} to {start + (count or 0) - 1} are not all "
+                             f"stored ({stored} points)")
+        out = np.empty(count)
+        channel_port = self._chan("TRCB?")
+        done = 0
+        while done < count:
+            n = min(_TRACE_CHUNK, count - done)
+            # The wire time of 4n bytes at 10 bits a byte, with a factor two to spare.
+            timeout = self.reply_timeout + 2 * 40 * n / self._baudrate
+
+            def read(text: str, n: int = n, timeout: float = timeout) -> bytes:
+                return channel_port.read_exact(4 * n, timeout=timeout, command=text)
+
+            out[done:done + n] = self._ask(
+                "TRCB?", channel, start + done, n, read=read,
+                parse=lambda data, n=n: parse_trace_binary(data, n))
+            done += n
+        return out
 
     # LockIn hooks ---------------------------------------------------------------
     def _do_identity(self) -> DeviceIdentity:

@@ -14,6 +14,12 @@ Default behaviour, declared once in :data:`PROFILES` and :class:`AptDefaults`:
 - Motion: trapezoidal profiles on a :class:`~hw_mocks.motion.StageMechanics` (``.stage``,
   physical units: degrees or millimetres); counts and device velocity units are
   converted here. The controller powers up with its channel *disabled* and not homed.
+  Source of the disabled channel: field practice, not the protocol document (which does
+  not state the power-up state): hosts written against the hardware enable the channel
+  before they move (PnPQ's K10CR1 driver sends MOD_SET_CHANENABLESTATE at start;
+  thorlabs_apt_device's KDC101 users call ``set_enabled(True)``). It is modelled in the
+  pessimistic state on purpose, so that a host that forgets to enable fails here and not
+  on a bench that a previous program left disabled.
 - Quirks seen in the field, modelled on purpose:
 
   * home velocity is zero at power-up, so MOT_MOVE_HOME never completes until the host

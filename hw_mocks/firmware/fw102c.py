@@ -31,6 +31,10 @@ Jam (what a real unit reports is not documented; two behaviours for the driver t
 :meth:`Fw102cEmulator.jam` arms a jam for the next move (or the one running);
 ``ERROR_STATE`` faults arm a ``silent`` jam (``code="stall"`` for the other). The
 unsolicited frame is a stray prompt.
+
+Command set: every keyword of the FW102C manual's table, ``?`` (the keyword list) included
+(:mod:`hw_mocks.firmware.thorlabs_prompt`); nothing of it is left out, and anything else is
+answered ``Command error CMD_NOT_DEFINED`` as the unit answers an unknown keyword.
 """
 
 from __future__ import annotations

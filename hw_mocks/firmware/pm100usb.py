@@ -19,6 +19,18 @@ QMI ``pm100d.py``, pylablib ``GenericPM``)::
     MEASure[:SCALar]:POWer?   READ?   CONFigure[:SCALar]:POWer   CONFigure?
     INITiate[:IMMediate]      FETCh?  MEASure[:SCALar]:CURRent?
 
+Not emulated (the rest of the manual's ch. 7 command list; each answered as the console
+answers a header it does not know: error -113 "Undefined header" queued, nothing sent,
+listed in :data:`NOT_EMULATED_HEADERS`): ``*ESE *ESR? *SRE *STB? *TST? *WAI`` (the status
+byte is kept for the USBTMC layer's READ_STATUS_BYTE only), the ``STATus`` subsystem,
+``SYSTem:BEEPer``, ``SYSTem:DATE``/``TIME``, ``SYSTem:LFRequency``, ``SYSTem:VERSion?``,
+``DISPlay`` brightness and contrast, ``CALibration:STRing?``, ``ABORt``, the input
+filter (``INPut:PDIode:FILTer``), beam diameter and loss corrections
+(``CORRection:BEAMdiameter``, ``CORRection:LOSS``), the photodiode responsivity query
+(``CORRection:POWer:PDIode:RESPonse?``), current/voltage/energy/frequency/density/
+resistance/temperature measurements and their ``CONFigure``/``MEASure`` forms, the peak
+detector and the thermopile accelerator (a photodiode head has neither).
+
 Syntax follows SCPI-99 §6 as far as a bench needs it: keywords in short or long form,
 case-insensitive, ``[SENSe]`` optional, numeric suffix ``1`` accepted, several commands
 per message separated by ``;`` (each parsed from the root), numbers in NR1/NR2/NR3.
@@ -62,12 +74,22 @@ from hw_mocks.emulator import FirmwareEmulator
 
 __all__ = [
     "ERROR_MESSAGES",
+    "NOT_EMULATED_HEADERS",
     "Pm100usbFirmware",
     "ScpiError",
     "SensorHead",
     "parse_scpi_number",
     "silicon_responsivity_a_per_w",
 ]
+
+#: Examples of the manual's headers this model answers as undefined (see the module).
+NOT_EMULATED_HEADERS = (
+    "*ESE 4", "*ESR?", "*SRE 16", "*STB?", "*TST?", "*WAI", "STAT:OPER?", "SYST:BEEP",
+    "SYST:DATE?", "SYST:TIME?", "SYST:LFR?", "SYST:VERS?", "DISP:BRIG?", "CAL:STR?",
+    "ABOR", "INP:PDI:FILT:LPAS:STAT?", "CORR:BEAM?", "CORR:LOSS?",
+    "CORR:POW:PDI:RESP?", "MEAS:VOLT?", "MEAS:ENER?", "MEAS:FREQ?", "MEAS:PDEN?",
+    "MEAS:TEMP?", "CONF:ENER", "PEAK:THR?", "INP:THER:ACC?",
+)
 
 #: Standard SCPI-99 error messages used by this model (SCPI-99 Vol. 2, §21.8).
 ERROR_MESSAGES: dict[int, str] = {

@@ -34,6 +34,10 @@ Default behaviour, declared once:
 Faults: the injector's rules (drop, delay, garbage...) act on the answers; "does not
 answer" is :meth:`power_off` or a ``DROP`` rule; ``ERROR_STATE`` trips the interlock; the
 unsolicited frame is a stray prompt.
+
+Command set: every keyword of the SC10 manual's table, ``?`` (the keyword list) included
+(:mod:`hw_mocks.firmware.thorlabs_prompt`); nothing of it is left out, and anything else is
+answered ``Command error CMD_NOT_DEFINED`` as the unit answers an unknown keyword.
 """
 
 from __future__ import annotations

@@ -40,6 +40,14 @@ Default behaviour, declared once (see :data:`STAGE_MODELS` and :class:`Smc100Emu
   (``3C``/``3D``), or aborts a homing run (``0B``).
 - Requests for another address are ignored (another controller on the RS-485 chain);
   the "unsolicited" frame used for fault injection is such a neighbour's ``TS`` reply.
+
+Command set. Emulated: ``AC ID MM OH OR OT PA PR PW RS SL SR ST TE TH TP TS VA VE``.
+Not emulated (:data:`NOT_EMULATED`, the rest of the manual's command list): tuning and
+drive parameters (``BA BH DV FD FE FF HT JR KD KI KP KV QIL QIR QIT SU``), jogging
+(``JD JM``), analog/TTL I/O (``RA RB SB``), addressing and configuration dumps (``SA ZT
+ZX``), the control-loop state ``SC``, simultaneous start ``SE``, the motion-time query
+``PT`` and the error text ``TB``. Each is answered as the controller answers a command
+it does not know: nothing, with ``A`` (unknown message code) latched for ``TE``.
 """
 
 from __future__ import annotations
@@ -52,7 +60,12 @@ from hw_mocks.clock import Clock
 from hw_mocks.emulator import FirmwareEmulator
 from hw_mocks.motion import StageMechanics
 
-__all__ = ["STAGE_MODELS", "Smc100Emulator", "StageModel"]
+__all__ = ["NOT_EMULATED", "STAGE_MODELS", "Smc100Emulator", "StageModel"]
+
+#: Commands of the manual's list this emulator answers as unknown (see the module).
+NOT_EMULATED = ("BA", "BH", "DV", "FD", "FE", "FF", "HT", "JD", "JM", "JR", "KD", "KI",
+                "KP", "KV", "PT", "QIL", "QIR", "QIT", "RA", "RB", "SA", "SB", "SC", "SE",
+                "SU", "TB", "ZT", "ZX")
 
 
 @dataclass(frozen=True)

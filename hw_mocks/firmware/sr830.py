@@ -17,11 +17,41 @@ query answers nothing. ``AGAN`` keeps the interpreter busy (IFC clear); lines re
 meanwhile wait in the input queue and run afterwards (p. 5-2), so an RS-232 ``*STB?``
 asked during an auto gain is answered when it is over.
 
-Implemented: ``*IDN? *RST *CLS *ESE(?) *SRE(?) *ESR? *STB? ERRE(?) ERRS? LIAE(?) LIAS?
-OUTX(?) FMOD(?) FREQ(?) PHAS(?) ICPL(?) SENS(?) OFLT(?) OFSL(?) SNAP? OUTP? AGAN``
-(status queries take the optional bit number). Tables: ``SENS`` 0…26 = 2 nV … 1 V rms in
-1-2-5 steps, ``OFLT`` 0…19 = 10 µs … 30 ks in 1-3 steps (> 30 s refused above a 200 Hz
-detection frequency), ``OFSL`` 0…3 = 6…24 dB/oct (p. 5-6).
+The whole remote command set of the manual's command list (pp. 5-4 to 5-23) is
+interpreted; a mnemonic not in it sets CMD and answers nothing, as the instrument does.
+
+* Reference and phase: ``PHAS FMOD FREQ RSLP HARM SLVL``. ``HARM i``: 1 ≤ i ≤ 19999 with
+  i·f ≤ 102 kHz (both ``HARM`` and ``FREQ`` refuse what breaks it, EXE); the emulator
+  detects the input component at i × the reference. ``SLVL`` 4 mV…5 V in 2 mV steps.
+* Input and filter: ``ISRC IGND ICPL ILIN``. Gain and time constant: ``SENS RMOD OFLT
+  OFSL SYNC`` — ``SENS`` 0…26 = 2 nV … 1 V rms in 1-2-5 steps, ``OFLT`` 0…19 = 10 µs …
+  30 ks in 1-3 steps (> 30 s refused above a 200 Hz detection frequency; a frequency or
+  harmonic change that crosses 200 Hz latches RANGE, and one that leaves τ > 30 s above
+  it cuts τ to 30 s and latches TC), ``OFSL`` 0…3 = 6…24 dB/oct (p. 5-6).
+* Display and output: ``DDEF`` (CH1: X, R, X noise, Aux In 1, 2; CH2: Y, θ, Y noise, Aux
+  In 3, 4; ratio none or by an Aux In in volts), ``FPOP``, ``OEXP`` (offset −105…105 %,
+  expand ×1/×10/×100 as index 0…2), ``AOFF``. Aux I/O: ``OAUX?`` (the rear inputs,
+  :attr:`Sr830Emulator.aux_inputs_v`), ``AUXV`` (±10.5 V, 1 mV).
+* Setup: ``OUTX OVRM KCLK ALRM SSET RSET`` (nine setups; recalling an empty one is
+  refused). Auto functions: ``AGAN ARSV APHS AOFF``.
+* Data storage (:mod:`hw_mocks.firmware.sr830_storage`, on the emulator clock): ``SRAT
+  SEND TRIG TSTR STRT PAUS REST STRD``. Data transfer: ``OUTP? OUTR? SNAP? OAUX? SPTS?
+  TRCA? TRCB? TRCL? FAST``. ``TRCA?`` ends every point with a comma; ``TRCB?`` sends IEEE
+  single floats (little-endian) and ``TRCL?`` 16-bit mantissa + 16-bit exponent pairs,
+  both without a terminator.
+* Interface and status: ``*RST *IDN? LOCL OVRM *CLS *ESE *ESR? *SRE *STB? *PSC ERRE
+  ERRS? LIAE LIAS?`` (status queries take the optional bit number). The serial poll
+  byte's SCN bit is clear while a scan stores points; IFC is clear only while ``AGAN``
+  runs (then nothing is answered); ``*PSC 1`` clears the enable registers at power-on.
+
+Not emulated (accepted and kept, without effect on the measurement): the dynamic reserve
+(``RMOD``, ``ARSV`` changes nothing), the synchronous filter, line notches, input
+grounding and the current inputs' gain (``ISRC 2/3`` read the same input in the units of
+the selected input), the expand's effect (only the rear analog outputs would show it),
+front-panel outputs, key click and alarm, local/remote lockout. ``FAST`` streaming goes
+to the GPIB connector on a real unit, so on this RS-232 line it sends nothing. The QRY
+(output queue overflow), URQ (front panel) and MAV bits are never set, and FILTR
+overloads are not modelled.
 
 The measurement model (documented emulator choices, not calibrations)
 -------------------------------------------------------------------
@@ -53,8 +83,11 @@ The measurement model (documented emulator choices, not calibrations)
   output, and keeps the interpreter busy for ``agan_time_constants`` × τ (at least 50 ms);
   above τ = 1 s it does nothing, as the manual says (p. 5-11).
 * Power-up and ``*RST`` settings (1 V, 100 ms, 12 dB/oct, internal 1 kHz, phase 0, AC
-  coupling) follow the manual's standard settings (p. 4-4) as far as they could be
-  checked; the output interface is a retained setting and powers up as
+  coupling, harmonic 1, sine trigger, 1 V sine out, input A floating, no notch, normal
+  reserve, CH1 X and CH2 Y with no ratio, no offsets, storage at 1 Hz in loop mode, an
+  empty buffer) follow the manual's standard settings (p. 4-4) as far as they could be
+  checked (the reserve and the storage defaults could not be, and are emulator
+  choices); the output interface is a retained setting and powers up as
   ``output_interface`` (default GPIB, the quirk that makes a program that skips ``OUTX 0``
   hear nothing).
 * Fault injection: :meth:`Sr830Emulator.enter_error_state` latches an ``ERRS?`` bit (code
@@ -65,8 +98,10 @@ The measurement model (documented emulator choices, not calibrations)
 
 from __future__ import annotations
 
+import copy
 import math
 import re
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -75,6 +110,12 @@ from scipy.linalg import solve_discrete_lyapunov
 
 from hw_mocks.clock import Clock
 from hw_mocks.emulator import FirmwareEmulator
+from hw_mocks.firmware.sr830_storage import (
+    BUFFER_POINTS,
+    STRD_DELAY_S,
+    TRIGGERED_RATE,
+    DataStorage,
+)
 
 __all__ = ["INPUT_LIMIT_V", "InputSignal", "Sr830Emulator"]
 
@@ -91,12 +132,44 @@ _MAX_LINE = 256
 _MEMORY_TAUS = 50.0
 _SUBSTEPS_PER_TAU = 16
 
+#: Highest detection frequency (``HARM i`` × ``FREQ``), Hz.
+MAX_DETECTION_HZ = 102000.0
+MAX_HARMONIC = 19999
+#: Time constants above 30 s need a detection frequency at or below 200 Hz.
+_LONG_TC_INDEX = TIME_CONSTANTS_S.index(30.0)
+_RANGE_HZ = 200.0
+_SETUP_SLOTS = 9
+
 _CMD_RE = re.compile(r"(\*[A-Z]{3}|[A-Z]{4})(\?)?(.*)", re.DOTALL)
 _NUMBER_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:E[+-]?\d+)?")
 
 # Status bits.
 _ESR_INP, _ESR_EXE, _ESR_CMD, _ESR_PON = 0x01, 0x10, 0x20, 0x80
 _LIA_INPUT, _LIA_OUTPUT, _LIA_UNLOCK = 0x01, 0x04, 0x08
+_LIA_RANGE, _LIA_TC, _LIA_TRIG = 0x10, 0x20, 0x40
+#: Plain index settings: mnemonic → (attribute, highest index); query and set alike.
+_INDEX_SETTINGS = {
+    "OUTX": ("outx", 1),
+    "FMOD": ("fmod", 1),
+    "ICPL": ("icpl", 1),
+    "SENS": ("sens", len(SENSITIVITIES_V) - 1),
+    "RSLP": ("rslp", 2),
+    "ISRC": ("isrc", 3),
+    "IGND": ("ignd", 1),
+    "ILIN": ("ilin", 3),
+    "RMOD": ("rmod", 2),
+    "SYNC": ("sync", 1),
+    "OVRM": ("ovrm", 1),
+    "LOCL": ("locl", 2),
+    "KCLK": ("kclk", 1),
+    "ALRM": ("alrm", 1),
+    "*PSC": ("psc", 1),
+    "FAST": ("fast", 2),
+}
+#: Settings saved by ``SSET`` and restored by ``RSET`` / ``*RST`` (not the interface).
+_SETUP_FIELDS = ("fmod", "freq", "phase", "harm", "rslp", "slvl", "isrc", "ignd", "icpl",
+                 "ilin", "sens", "rmod", "oflt", "ofsl", "sync", "ddef", "fpop", "oexp",
+                 "auxv", "kclk", "alrm")
 
 
 @dataclass(frozen=True)
@@ -114,6 +187,10 @@ class InputSignal:
     frequency_hz: float | None = None
     dc_v: float = 0.0
     noise_v_per_rthz: float | None = None
+    #: Further components ``(n, rms V, phase deg)`` at n × the fundamental (the
+    #: fundamental being ``frequency_hz``, or the reference frequency when that is
+    #: ``None``): what ``HARM n`` detects, e.g. the 2f term of a modulated polarimeter.
+    harmonics: tuple[tuple[int, float, float], ...] = ()
 
 
 class _BadCommand(Exception):
@@ -150,6 +227,18 @@ def _noise_model(poles: int) -> tuple[np.ndarray, float]:
         p = solve_discrete_lyapunov(a, np.outer(b, b))
         _NOISE_GAIN[poles] = (a, float(p[-1, -1]))
     return _NOISE_GAIN[poles]
+
+
+def _non_normalised(value: float) -> bytes:
+    """One ``TRCL?`` point: mantissa in [−32767, 32767] and the exponent + 124."""
+    if value == 0.0 or not math.isfinite(value):
+        return struct.pack("<hh", 0, 124)
+    mantissa, exponent = math.frexp(value)  # value = mantissa · 2**exponent, |m| in [0.5, 1)
+    m = round(mantissa * 2**15)
+    if abs(m) > 32767:
+        m //= 2
+        exponent += 1
+    return struct.pack("<hh", m, exponent - 15 + 124)
 
 
 def _fmt(value: float) -> str:
@@ -220,6 +309,14 @@ class Sr830Emulator(FirmwareEmulator):
         self._constant = InputSignal()
         self._rng = np.random.default_rng(seed)
         self._rx_lines: list[bytes] = []
+        #: Voltages at the rear-panel Aux In 1…4 (``OAUX?``, ``SNAP?`` 5…8, ratios).
+        self.aux_inputs_v = [0.0, 0.0, 0.0, 0.0]
+        self.storage = DataStorage()
+        self._setups: dict[int, dict[str, object]] = {}
+        self.psc = 1
+        self.locl = 0  # LOCL: 0 local, 1 remote, 2 local lockout
+        self.ovrm = 0
+        self.fast = 0
         self._busy_until = -math.inf
         #: Replies the SR830 sent to its GPIB connector instead (``OUTX 1``), for tests.
         self.replies_to_gpib = 0
@@ -227,6 +324,7 @@ class Sr830Emulator(FirmwareEmulator):
         self.esr = _ESR_PON
         self.errs = 0
         self.lias = 0
+        self.kclk = self.alrm = 1
         self._standard_settings()
         self._d = np.zeros((2, 4))  # noiseless stage outputs (X chain, Y chain)
         self._z = np.zeros((2, 4))  # noise part of the stage outputs
@@ -257,7 +355,8 @@ class Sr830Emulator(FirmwareEmulator):
         return SENSITIVITIES_V[self.sens]
 
     def detection_frequency_hz(self) -> float:
-        """The reference frequency (0 when the external reference is missing)."""
+        """The reference frequency (0 when the external reference is missing); ``FREQ?``.
+        The lock-in detects at :attr:`harm` times this."""
         if self.fmod == 1:
             return self.freq
         return float(self.reference_input_hz or 0.0)
@@ -270,11 +369,17 @@ class Sr830Emulator(FirmwareEmulator):
         signal = self._signal() if signal is None else signal
         if not self.locked():
             return 0.0, 0.0
-        f_det = self.detection_frequency_hz()
-        if signal.frequency_hz is not None and abs(signal.frequency_hz - f_det) > 1e-6 * f_det:
-            return 0.0, 0.0  # modulated at another frequency: averaged away
-        phi = math.radians(signal.phase_deg - self.phase)
-        return signal.ac_rms_v * math.cos(phi), signal.ac_rms_v * math.sin(phi)
+        f_ref = self.detection_frequency_hz()
+        f_det = self.harm * f_ref
+        fundamental = f_ref if signal.frequency_hz is None else signal.frequency_hz
+        x = y = 0.0
+        for n, rms, phase in ((1, signal.ac_rms_v, signal.phase_deg), *signal.harmonics):
+            if abs(n * fundamental - f_det) > 1e-6 * f_det:
+                continue  # modulated at another frequency: averaged away
+            phi = math.radians(phase - self.phase)
+            x += rms * math.cos(phi)
+            y += rms * math.sin(phi)
+        return x, y
 
     def outputs(self) -> tuple[float, float]:
         """X, Y now (noise included, not clipped)."""
@@ -318,6 +423,8 @@ class Sr830Emulator(FirmwareEmulator):
         with self.lock:
             if code == "power_cycle":
                 self._standard_settings()
+                if self.psc:  # *PSC 1: the enable registers are cleared at power-on
+                    self.ese = self.sre = self.erre = self.liae = 0
                 self._d[:] = 0.0
                 self._z[:] = 0.0
                 self._t_last = self.clock.now()
@@ -336,13 +443,28 @@ class Sr830Emulator(FirmwareEmulator):
 
     # interpreter ------------------------------------------------------------------
     def _standard_settings(self) -> None:
+        """``*RST`` and power-up: the manual's standard settings (p. 4-4) as far as they
+        were checked; the communication settings (OUTX, OVRM, baud rate) are kept."""
         self.fmod = 1
         self.freq = 1000.0
         self.phase = 0.0
+        self.harm = 1
+        self.rslp = 0  # sine
+        self.slvl = 1.0
+        self.isrc = 0  # A
+        self.ignd = 0  # float
         self.icpl = 0
+        self.ilin = 0  # no line notch
         self.sens = 26
+        self.rmod = 1  # normal reserve
         self.oflt = 8
         self.ofsl = 1
+        self.sync = 0
+        self.ddef = [[0, 0], [0, 0]]  # CH1 X, CH2 Y, no ratio
+        self.fpop = [0, 0]  # front-panel outputs follow the displays
+        self.oexp = [[0.0, 0], [0.0, 0], [0.0, 0]]  # X, Y, R: offset %, expand index
+        self.auxv = [0.0, 0.0, 0.0, 0.0]
+        self.storage = DataStorage()
 
     def _run_queue(self) -> list[bytes]:
         replies: list[bytes] = []
@@ -350,18 +472,20 @@ class Sr830Emulator(FirmwareEmulator):
             line = self._rx_lines.pop(0)
             for text in self._execute_line(line):
                 if self.outx == 0:
-                    replies.append(text.encode("ascii") + b"\r")
+                    # Binary traces (TRCB?, TRCL?) go out as they are, without terminator.
+                    replies.append(text if isinstance(text, bytes)
+                                   else text.encode("ascii") + b"\r")
                 else:
                     self.replies_to_gpib += 1
         return replies
 
-    def _execute_line(self, line: bytes) -> list[str]:
+    def _execute_line(self, line: bytes) -> list[str | bytes]:
         try:
             text = line.decode("ascii")
         except UnicodeDecodeError:
             self.esr |= _ESR_CMD
             return []
-        answers: list[str] = []
+        answers: list[str | bytes] = []
         parts = text.split(";")
         for position, part in enumerate(parts):
             command = "".join(part.split()).upper()
@@ -380,13 +504,17 @@ class Sr830Emulator(FirmwareEmulator):
                 answers.append(answer)
         return answers
 
-    def _execute(self, command: str) -> str | None:
+    def _execute(self, command: str) -> str | bytes | None:
         match = _CMD_RE.fullmatch(command)
         if match is None:
             raise _BadCommand(_ESR_CMD)
         mnemonic, query, rest = match.group(1), bool(match.group(2)), match.group(3)
         args = rest.split(",") if rest else []
         handler = getattr(self, "_cmd_" + mnemonic.replace("*", "star_"), None)
+        if handler is None and mnemonic in _INDEX_SETTINGS:
+            attribute, high = _INDEX_SETTINGS[mnemonic]
+            self._advance()
+            return self._setting(query, args, attribute, high)
         if handler is None:
             raise _BadCommand(_ESR_CMD)
         self._advance()
@@ -459,7 +587,7 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_star_RST(self, query: bool, args: list[str]) -> None:
         if query or args:
             raise _BadCommand(_ESR_CMD)
-        self._standard_settings()
+        self._standard_settings()  # also resets the data buffer
 
     def _cmd_star_CLS(self, query: bool, args: list[str]) -> None:
         if query or args:
@@ -478,8 +606,8 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_star_STB(self, query: bool, args: list[str]) -> str:
         if not query or len(args) > 1:
             raise _BadCommand(_ESR_CMD)
-        # SCN (no scan: storage is not modelled) and IFC (answering means idle).
-        byte = 0x01 | 0x02
+        # SCN (no scan in progress) and IFC (answering means idle).
+        byte = 0x02 | (0 if self.storage.scanning else 0x01)
         if self.errs & self.erre:
             byte |= 0x04
         if self.lias & self.liae:
@@ -504,47 +632,43 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_LIAE(self, query: bool, args: list[str]) -> str | None:
         return self._enable(query, args, "liae")
 
-    def _cmd_OUTX(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "outx", 1)
-
     # reference
-    def _cmd_FMOD(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "fmod", 1)
-
-    def _cmd_FREQ(self, query: bool, args: list[str]) -> str | None:
+    def _real(self, query: bool, args: list[str], now: float, low: float,
+              high: float) -> str | float:
+        """A real-valued setting: its query's reply (text), or the value asked for (a
+        float within ``low``…``high``; EXE otherwise)."""
         if query:
             if args:
                 raise _BadCommand(_ESR_CMD)
-            return _fmt(self.detection_frequency_hz())
+            return _fmt(now)
         if len(args) != 1:
             raise _BadCommand(_ESR_CMD)
         value = self._number(args[0])
-        if self.fmod != 1 or not 0.001 <= value <= 102000.0:
-            raise _BadCommand(_ESR_EXE)  # allowed only with the internal reference
+        if not low <= value <= high:
+            raise _BadCommand(_ESR_EXE)
+        return value
+
+    def _cmd_FREQ(self, query: bool, args: list[str]) -> str | None:
+        value = self._real(query, args, self.detection_frequency_hz(), 0.001,
+                           MAX_DETECTION_HZ / self.harm)  # i·f ≤ 102 kHz
+        if isinstance(value, str):
+            return value
+        if self.fmod != 1:
+            raise _BadCommand(_ESR_EXE)  # set only with the internal reference
+        before = self.harm * self.detection_frequency_hz()
         self.freq = float(f"{value:.5g}") if value >= 1.0 else round(value, 4)
+        self._detection_changed(before)
         return None
 
     def _cmd_PHAS(self, query: bool, args: list[str]) -> str | None:
-        if query:
-            if args:
-                raise _BadCommand(_ESR_CMD)
-            return _fmt(self.phase)
-        if len(args) != 1:
-            raise _BadCommand(_ESR_CMD)
-        value = self._number(args[0])
-        if not -360.0 <= value <= 729.99:
-            raise _BadCommand(_ESR_EXE)
+        value = self._real(query, args, self.phase, -360.0, 729.99)
+        if isinstance(value, str):
+            return value
         wrapped = (round(value, 2) + 180.0) % 360.0 - 180.0
         self.phase = 180.0 if wrapped == -180.0 else wrapped
         return None
 
     # input, gain and filter
-    def _cmd_ICPL(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "icpl", 1)
-
-    def _cmd_SENS(self, query: bool, args: list[str]) -> str | None:
-        return self._setting(query, args, "sens", len(SENSITIVITIES_V) - 1)
-
     def _cmd_OFLT(self, query: bool, args: list[str]) -> str | None:
         if not query and len(args) == 1:
             index = self._index(args, len(TIME_CONSTANTS_S) - 1)
@@ -563,21 +687,46 @@ class Sr830Emulator(FirmwareEmulator):
 
     # data
     def _reading(self) -> dict[int, float]:
+        """The ``SNAP?`` codes' values now: X, Y, R less their offsets (``OEXP``), θ from
+        the unoffset X and Y, Aux In 1…4, the reference frequency, the two displays."""
         n = self.poles
         x = float(self._d[0, n - 1] + self._z[0, n - 1])
         y = float(self._d[1, n - 1] + self._z[1, n - 1])
-        clip = OUTPUT_CLIP * self.full_scale_v
+        full_scale = self.full_scale_v
+        clip = OUTPUT_CLIP * full_scale
         theta = math.degrees(math.atan2(y, x)) if (x or y) else 0.0
-        return {
-            1: max(-clip, min(clip, x)),
-            2: max(-clip, min(clip, y)),
-            3: min(clip, math.hypot(x, y)),
+        offset = [percent / 100.0 * full_scale for percent, _ in self.oexp]
+        values = {
+            1: max(-clip, min(clip, x - offset[0])),
+            2: max(-clip, min(clip, y - offset[1])),
+            3: max(-clip, min(clip, math.hypot(x, y) - offset[2])),
             4: theta,
-            5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0,
+            5: self.aux_inputs_v[0], 6: self.aux_inputs_v[1],
+            7: self.aux_inputs_v[2], 8: self.aux_inputs_v[3],
             9: self.detection_frequency_hz(),
-            10: max(-clip, min(clip, x)),
-            11: max(-clip, min(clip, y)),
         }
+        values[10], values[11] = self._displays(values)
+        return values
+
+    def _displays(self, values: dict[int, float] | None = None) -> tuple[float, float]:
+        """CH1 and CH2 as ``DDEF`` selects them: X, R, X noise, Aux In 1, 2 (CH1); Y, θ,
+        Y noise, Aux In 3, 4 (CH2); divided by the ratio input in volts if one is set."""
+        values = self._reading() if values is None else values
+        signal = self._signal()
+        noise = (self.input_noise_v_per_rthz if signal.noise_v_per_rthz is None
+                 else signal.noise_v_per_rthz)
+        clip = OUTPUT_CLIP * self.full_scale_v
+        shown = []
+        for channel, (quantity, ratio) in enumerate(self.ddef):
+            first_aux = 5 + 2 * channel
+            sources = (values[1 + channel], values[3 + channel], noise,
+                       values[first_aux], values[first_aux + 1])
+            value = sources[quantity]
+            if ratio:
+                divisor = values[first_aux + ratio - 1]
+                value = value / divisor if abs(divisor) >= 1e-3 else math.copysign(clip, value)
+            shown.append(value)
+        return shown[0], shown[1]
 
     def _cmd_SNAP(self, query: bool, args: list[str]) -> str:
         if not query or not 2 <= len(args) <= 6:
@@ -607,6 +756,232 @@ class Sr830Emulator(FirmwareEmulator):
                          len(SENSITIVITIES_V) - 1)
         self._busy_until = self.clock.now() + max(self.agan_time_constants * tau, 0.05)
 
+    def _cmd_OUTR(self, query: bool, args: list[str]) -> str:
+        if not query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._index(args, 2)
+        if channel == 0:
+            raise _BadCommand(_ESR_EXE)
+        return _fmt(self._displays()[channel - 1])
+
+    def _cmd_OAUX(self, query: bool, args: list[str]) -> str:
+        if not query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        return _fmt(self.aux_inputs_v[self._channel_arg(args, 4) - 1])
+
+    def _cmd_AUXV(self, query: bool, args: list[str]) -> str | None:
+        def parse(a: list[str]) -> float:
+            volts = self._number(a[1])
+            if not -10.5 <= volts <= 10.5:
+                raise _BadCommand(_ESR_EXE)
+            return round(volts, 3)  # 1 mV resolution
+        return self._per_channel(query, args, self.auxv, 4, 2, show=_fmt, parse=parse)
+
+    # harmonic and sine output
+    def _cmd_HARM(self, query: bool, args: list[str]) -> str | None:
+        if query:
+            return self._setting(query, args, "harm", MAX_HARMONIC)
+        before = self.harm * self.detection_frequency_hz()
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        harm = self._index(args, MAX_HARMONIC)
+        if harm < 1 or harm * self.detection_frequency_hz() > MAX_DETECTION_HZ:
+            raise _BadCommand(_ESR_EXE)
+        self.harm = harm
+        self._detection_changed(before)
+        return None
+
+    def _detection_changed(self, before_hz: float) -> None:
+        """RANGE when the detection frequency crosses 200 Hz; above it a time constant
+        over 30 s is cut to 30 s, latching TC (LIA status bits 4 and 5)."""
+        now_hz = self.harm * self.detection_frequency_hz()
+        if (before_hz > _RANGE_HZ) != (now_hz > _RANGE_HZ):
+            self.lias |= _LIA_RANGE
+        if now_hz > _RANGE_HZ and self.oflt > _LONG_TC_INDEX:
+            self.oflt = _LONG_TC_INDEX
+            self.lias |= _LIA_TC
+
+    def _cmd_SLVL(self, query: bool, args: list[str]) -> str | None:
+        volts = self._real(query, args, self.slvl, 0.004, 5.0)
+        if isinstance(volts, str):
+            return volts
+        self.slvl = round(round(volts / 0.002) * 0.002, 3)  # 2 mV resolution
+        return None
+
+    # displays and outputs
+    def _channel_arg(self, args: list[str], high: int) -> int:
+        channel = self._index(args, high)
+        if channel == 0:
+            raise _BadCommand(_ESR_EXE)
+        return channel
+
+    def _per_channel(self, query: bool, args: list[str], values: list, channels: int,
+                     set_count: int, parse, show) -> str | None:
+        """``XXXX? i`` answers ``show(values[i − 1])``; ``XXXX i,…`` (``set_count``
+        parameters) stores ``parse(args)`` there; i = 1…``channels``."""
+        if query:
+            if len(args) != 1:
+                raise _BadCommand(_ESR_CMD)
+            return show(values[self._channel_arg(args, channels) - 1])
+        if len(args) != set_count:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, channels)
+        values[channel - 1] = parse(args)
+        return None
+
+    def _cmd_DDEF(self, query: bool, args: list[str]) -> str | None:
+        return self._per_channel(
+            query, args, self.ddef, 2, 3, show=lambda v: f"{v[0]},{v[1]}",
+            parse=lambda a: [self._index(a, 4, 1), self._index(a, 2, 2)])
+
+    def _cmd_FPOP(self, query: bool, args: list[str]) -> str | None:
+        return self._per_channel(query, args, self.fpop, 2, 2, show=str,
+                                 parse=lambda a: self._index(a, 1, 1))
+
+    def _cmd_OEXP(self, query: bool, args: list[str]) -> str | None:
+        def parse(a: list[str]) -> list:
+            percent = self._number(a[1])
+            if not -105.0 <= percent <= 105.0:
+                raise _BadCommand(_ESR_EXE)
+            return [round(percent, 2), self._index(a, 2, 2)]
+        return self._per_channel(query, args, self.oexp, 3, 3,
+                                 show=lambda v: f"{v[0]:.2f},{v[1]}", parse=parse)
+
+    def _cmd_AOFF(self, query: bool, args: list[str]) -> None:
+        if query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 3)
+        expand = self.oexp[channel - 1][1]
+        self.oexp[channel - 1] = [0.0, expand]
+        raw = self._reading()[channel]  # X, Y or R with no offset
+        percent = max(-105.0, min(105.0, 100.0 * raw / self.full_scale_v))
+        self.oexp[channel - 1] = [round(percent, 2), expand]
+
+    def _cmd_APHS(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        theta = self._reading()[4]
+        wrapped = (round(self.phase + theta, 2) + 180.0) % 360.0 - 180.0
+        self.phase = 180.0 if wrapped == -180.0 else wrapped
+
+    def _cmd_ARSV(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        # The dynamic reserve is not modelled: nothing to adjust.
+
+    # setup
+    def _cmd_SSET(self, query: bool, args: list[str]) -> None:
+        if query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        slot = self._channel_arg(args, _SETUP_SLOTS)
+        self._setups[slot] = {name: copy.deepcopy(getattr(self, name))
+                              for name in _SETUP_FIELDS}
+
+    def _cmd_RSET(self, query: bool, args: list[str]) -> None:
+        if query or len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        slot = self._channel_arg(args, _SETUP_SLOTS)
+        if slot not in self._setups:
+            raise _BadCommand(_ESR_EXE)  # nothing saved there
+        for name, value in self._setups[slot].items():
+            setattr(self, name, copy.deepcopy(value))
+
+    # data storage
+    def _storage_setting(self, query: bool, args: list[str], name: str,
+                         high: int) -> str | None:
+        if query:
+            if args:
+                raise _BadCommand(_ESR_CMD)
+            return str(getattr(self.storage, name))
+        if len(args) != 1:
+            raise _BadCommand(_ESR_CMD)
+        value = self._index(args, high)
+        if value != getattr(self.storage, name) and name != "tstr":
+            self.storage.reset()
+        setattr(self.storage, name, value)
+        return None
+
+    def _cmd_SRAT(self, query: bool, args: list[str]) -> str | None:
+        return self._storage_setting(query, args, "srat", TRIGGERED_RATE)
+
+    def _cmd_SEND(self, query: bool, args: list[str]) -> str | None:
+        return self._storage_setting(query, args, "send", 1)
+
+    def _cmd_TSTR(self, query: bool, args: list[str]) -> str | None:
+        return self._storage_setting(query, args, "tstr", 1)
+
+    def _start_storage(self, at: float) -> None:
+        self.storage.start(at)
+        for t in self.storage.due(self.clock.now()):  # a point at the start itself
+            self._filter_to(t, self._signal())
+            self.storage.store(*self._displays())
+
+    def _cmd_STRT(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self._start_storage(self.clock.now())
+
+    def _cmd_STRD(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.storage.reset()
+        self._start_storage(self.clock.now() + STRD_DELAY_S)
+
+    def _cmd_PAUS(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.storage.pause()
+
+    def _cmd_REST(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        self.storage.reset()
+
+    def _cmd_TRIG(self, query: bool, args: list[str]) -> None:
+        if query or args:
+            raise _BadCommand(_ESR_CMD)
+        storage = self.storage
+        acted = False
+        if storage.tstr and storage.state in ("idle", "paused"):
+            self._start_storage(self.clock.now())
+            acted = True
+        if storage.scanning and storage.srat == TRIGGERED_RATE:
+            storage.store(*self._displays())
+            acted = True
+        if acted:
+            self.lias |= _LIA_TRIG
+
+    # data transfer
+    def _cmd_SPTS(self, query: bool, args: list[str]) -> str:
+        if not query or args:
+            raise _BadCommand(_ESR_CMD)
+        return str(len(self.storage.points))
+
+    def _trace(self, query: bool, args: list[str]) -> list[float]:
+        if not query or len(args) != 3:
+            raise _BadCommand(_ESR_CMD)
+        channel = self._channel_arg(args, 2)
+        start = self._index(args, BUFFER_POINTS, 1)
+        count = self._index(args, BUFFER_POINTS, 2)
+        points = self.storage.trace(channel, start, count)
+        if points is None:
+            raise _BadCommand(_ESR_EXE)  # beyond the points stored
+        return points
+
+    def _cmd_TRCA(self, query: bool, args: list[str]) -> str:
+        # Every point is followed by a comma, the last one included.
+        return "".join(_fmt(value) + "," for value in self._trace(query, args))
+
+    def _cmd_TRCB(self, query: bool, args: list[str]) -> bytes:
+        # IEEE 754 single precision, little-endian (PC byte order), no terminator.
+        points = self._trace(query, args)
+        return struct.pack(f"<{len(points)}f", *points)
+
+    def _cmd_TRCL(self, query: bool, args: list[str]) -> bytes:
+        # Non-normalised: a 16-bit mantissa m and a 16-bit exponent e (both little-endian
+        # integers), value = m · 2**(e − 124).
+        return b"".join(_non_normalised(value) for value in self._trace(query, args))
+
     # physics ------------------------------------------------------------------------
     def _signal(self) -> InputSignal:
         return self.input_signal() if self.input_signal is not None else self._constant
@@ -614,12 +989,22 @@ class Sr830Emulator(FirmwareEmulator):
     def _advance(self) -> None:
         """Run the output filters from the last update to now; latch overloads."""
         now = self.clock.now()
+        if now < self._t_last:
+            return
+        signal = self._signal()
+        for t in self.storage.due(now):  # buffer points fall due on the way to now
+            self._filter_to(t, signal)
+            self.storage.store(*self._displays())
+        self._filter_to(now, signal)
+        self._latch_overloads(signal)
+
+    def _filter_to(self, now: float, signal: InputSignal) -> None:
+        """Advance the output filters to ``now`` with ``signal`` held constant."""
         dt = now - self._t_last
         if dt < 0:
             return
         self._t_last = now
         n, tau = self.poles, self.time_constant_s
-        signal = self._signal()
         ux, uy = self.target_xy(signal)
         u = np.array([[ux], [uy]])
         if dt > 0:
@@ -628,8 +1013,12 @@ class Sr830Emulator(FirmwareEmulator):
             density = (self.input_noise_v_per_rthz if signal.noise_v_per_rthz is None
                        else signal.noise_v_per_rthz)
             self._advance_noise(dt, n, tau, density)
-        # overloads, latched until read (LIAS?) or cleared (*CLS)
-        peak = math.sqrt(2.0) * abs(signal.ac_rms_v) + (abs(signal.dc_v) if self.icpl else 0.0)
+
+    def _latch_overloads(self, signal: InputSignal) -> None:
+        """Overloads and unlock, latched until read (LIAS?) or cleared (*CLS)."""
+        n = self.poles
+        ac = abs(signal.ac_rms_v) + sum(abs(rms) for _, rms, _ in signal.harmonics)
+        peak = math.sqrt(2.0) * ac + (abs(signal.dc_v) if self.icpl else 0.0)
         if peak > INPUT_LIMIT_V:
             self.lias |= _LIA_INPUT
         x = self._d[0, n - 1] + self._z[0, n - 1]

@@ -10,7 +10,10 @@ open-source drivers record of the real units, independently of ``drivers/``:
   (unknown keyword, bad format, upper case, an empty line) or ``Command error
   CMD_ARG_INVALID`` (argument out of range), each followed by LF CR as Odemis records it;
 - a line longer than :attr:`PromptFirmware.max_line` characters overflows the input buffer
-  and is answered as undefined.
+  and is answered as undefined;
+- ``?`` answers the list of keywords (both manuals' tables start with it). With it, every
+  keyword of the SC10's and the FW102C's tables is implemented; anything else is answered
+  ``CMD_NOT_DEFINED``, as the units answer an unknown keyword.
 
 A subclass declares its keywords in :meth:`PromptFirmware._handlers` and may hold the
 prompt back (a filter-wheel move answers only when the wheel has arrived): while
@@ -130,7 +133,9 @@ class PromptFirmware(FirmwareEmulator):
             keyword, _, arg = text.partition("=")
         else:
             keyword, arg = text, None
-        handler = self._handlers().get(keyword)
+        handlers = self._handlers()
+        handlers.setdefault("?", lambda arg: self._command_list(handlers))
+        handler = handlers.get(keyword)
         if handler is None or (arg is not None and not arg):
             return self._error("CMD_NOT_DEFINED")
         try:
@@ -144,6 +149,14 @@ class PromptFirmware(FirmwareEmulator):
     @staticmethod
     def _error(code: str) -> bytes:
         return f"Command error {code}".encode("ascii") + b"\n" + CR
+
+    @staticmethod
+    def _command_list(handlers: dict[str, Handler]) -> str:
+        """``?``: the keywords the unit takes, setters written ``name=n``, on one line
+        (the manuals list ``?`` as "returns a list of available commands"; the layout of
+        that list is not documented and is this emulator's choice)."""
+        return " ".join(k if k.endswith("?") or k in ("ens", "save", "savp", "resp")
+                        else f"{k}=n" for k in handlers if k != "?")
 
     def _handlers(self) -> dict[str, Handler]:
         """Keyword (``"pos?"``, ``"pos"`` for ``pos=n``, ``"ens"``) → handler."""

@@ -351,3 +351,23 @@ def test_fw102c_arbitrary_input_never_crashes(steps):
     emu.receive(b"\r")
     count = int(value(emu, "pcount?"))
     assert count in (6, 12) and 1 <= int(value(emu, "pos?")) <= count
+
+
+# The manuals' keyword tables (SC10 8654-D02 §5; FW102C rev H §5.2.3), "?" included: every
+# keyword is implemented and anything else is answered as an undefined command.
+SC10_KEYWORDS = ["id?", "ens", "ens?", "rep=n", "rep?", "mode=n", "mode?", "trig=n", "trig?",
+                 "xto=n", "xto?", "open=n", "open?", "shut=n", "shut?", "closed?",
+                 "interlock?", "baud=n", "baud?", "save", "savp", "resp"]
+FW102C_KEYWORDS = ["*idn?", "pos=n", "pos?", "pcount=n", "pcount?", "trig=n", "trig?",
+                   "speed=n", "speed?", "sensors=n", "sensors?", "baud=n", "baud?", "save"]
+
+
+@pytest.mark.parametrize("make, keywords", [
+    (lambda clock: Sc10Emulator("kw", clock=clock), SC10_KEYWORDS),
+    (lambda clock: Fw102cEmulator("kw", clock=clock), FW102C_KEYWORDS),
+])
+def test_question_mark_lists_every_keyword_of_the_manual(clock, make, keywords):
+    emu = make(clock)
+    listed = value(emu, "?").split()
+    assert set(keywords) <= set(listed)
+    assert talk(emu, "help") == b"help\rCommand error CMD_NOT_DEFINED\n\r> "
