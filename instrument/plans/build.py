@@ -382,8 +382,25 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
             raise PlanError(f"plan {spec.name!r}", [FieldError(
                 "spectral.filters", f"expands to {len(head) + len(body)} points; at most "
                 f"{MAX_POINTS}")])
+    if spec.acquisition.dark == "per_row":
+        body = _dark_per_row(body)
     points = tuple(replace(p, index=k) for k, p in enumerate(head + body))
     return Plan(spec, profile, axes, points, dropped)
+
+
+def _dark_per_row(body: list[ScanPoint]) -> list[ScanPoint]:
+    """A dark point (light off, no move) before every row: each run of points at one θi
+    and one filter, in execution order."""
+    out: list[ScanPoint] = []
+    row: tuple | None = None
+    for p in body:
+        key = (None if p.angles is None else round(p.angles.theta_i, 6),
+               dict(p.meta).get("filter"))
+        if p.light and key != row:
+            out.append(ScanPoint(0, (), None, "dark", False, None))
+            row = key
+        out.append(p)
+    return out
 
 
 def filter_bands(profile: BenchProfile) -> dict[int, tuple[float, float]] | None:

@@ -38,6 +38,7 @@ from analysis.brdf.reduction import (
 )
 from analysis.radiometry import FlatField, flat_field
 from instrument.bench.camera_calibration import CameraCalibration
+from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
 
 __all__ = ["Reduced", "ReductionOptions", "flat_from_run", "load_reference_table", "reduce_run"]
@@ -204,24 +205,45 @@ class _Signals:
     profiles: list[np.ndarray]
     sq_sums: list[float]
     block: int
+    #: Covariance (W²) of errors shared between rows (a power-meter dark read once for
+    #: several points), or None.
+    cov_shared_w2: np.ndarray | None = None
+    #: What was subtracted as the detector's dark (power meter), for the provenance.
+    dark: PointDark | None = None
 
     @staticmethod
     def join(parts: list[_Signals]) -> _Signals:
+        cov = None
+        if any(p.cov_shared_w2 is not None for p in parts):
+            blocks = [p.cov_shared_w2 if p.cov_shared_w2 is not None
+                      else np.zeros((p.power_w.size, p.power_w.size)) for p in parts]
+            n = sum(b.shape[0] for b in blocks)
+            cov = np.zeros((n, n))
+            k = 0
+            for b in blocks:  # two runs never share a dark reading
+                cov[k:k + b.shape[0], k:k + b.shape[0]] = b
+                k += b.shape[0]
         return _Signals(np.concatenate([p.power_w for p in parts]),
                         np.concatenate([p.u_power_w for p in parts]),
                         np.concatenate([p.clipped for p in parts]),
                         [x for p in parts for x in p.profiles],
                         [x for p in parts for x in p.sq_sums],
-                        max(p.block for p in parts))
+                        max(p.block for p in parts), cov, parts[0].dark)
 
     def covariance(self, u_response_rel: float) -> np.ndarray | None:
-        """Relative covariance of the pixel-response error between rows (None without
-        profiles): :func:`analysis.brdf.reduction.pixel_response_covariance`."""
-        if not self.block or not self.profiles:
-            return None
-        return pixel_response_covariance(np.array(self.profiles),
-                                         u_response_rel=u_response_rel, block=self.block,
-                                         sq_sums=self.sq_sums)
+        """Relative covariance of the errors shared between rows (None without any): the
+        pixel-response error (:func:`analysis.brdf.reduction.pixel_response_covariance`)
+        and a shared dark reading."""
+        cov = None
+        if self.block and self.profiles:
+            cov = pixel_response_covariance(np.array(self.profiles),
+                                            u_response_rel=u_response_rel,
+                                            block=self.block, sq_sums=self.sq_sums)
+        if self.cov_shared_w2 is not None and np.any(self.cov_shared_w2):
+            p = np.where(self.power_w != 0, self.power_w, np.inf)
+            shared = self.cov_shared_w2 / np.outer(p, p)
+            cov = shared if cov is None else cov + shared
+        return cov
 
 
 def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
@@ -229,11 +251,7 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
              *, u_response_rel: float = 0.0) -> _Signals:
     """The camera's or the power meter's signals of ``rows`` (:class:`_Signals`)."""
     if opts.detector == "power_meter":
-        p = run.power_w[rows].astype(float)
-        if not np.all(np.isfinite(p)):
-            raise ValueError("the run has no power-meter readings at every point")
-        return _Signals(p, np.abs(p) * opts.u_power_meter_rel,
-                        np.zeros(rows.size, dtype=int), [], [], 0)
+        return _power_meter_signals(run, rows, opts)
     assert cal is not None
     n_avg = int(run.acquisition.get("frames", 1))
     rate = np.empty(rows.size)
@@ -257,6 +275,27 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
     return _Signals(camera_power_w(rate, **conv), camera_power_w(sd, **conv), clipped,
                     profiles, sq_sums, block)
+
+
+def _power_meter_signals(run: RunData, rows: np.ndarray, opts: ReductionOptions
+                         ) -> _Signals:
+    """The power meter's readings less its dark (:mod:`instrument.pipelines.brdf.dark`).
+
+    σ of a reading: the noise floor measured from the dark readings' spread combined with
+    ``u_power_meter_rel`` of the signal; the subtracted dark adds its own σ (independent
+    for a dark of its own, a covariance for a dark shared between points).
+    """
+    p = run.power_w[rows].astype(float)
+    if not np.all(np.isfinite(p)):
+        raise ValueError("the run has no power-meter readings at every point")
+    dark = power_meter_dark(run, rows)
+    floor = dark.noise_floor or 0.0
+    net = p - dark.level
+    u = np.hypot(floor, np.abs(p) * opts.u_power_meter_rel)
+    shared = dark.group >= 0
+    u = np.where(shared, u, np.hypot(u, dark.u_level))
+    cov = dark.shared_covariance() if shared.any() else None
+    return _Signals(net, u, np.zeros(rows.size, dtype=int), [], [], 0, cov, dark)
 
 
 def _first_pass(run: RunData) -> Path | None:
@@ -473,6 +512,9 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     receiver, rinfo = _receiver(run, rows, opts, cal)
     prov.update(rinfo)
     warnings = _receiver_warnings(rinfo)
+    if sig.dark is not None:
+        prov["detector_dark"] = sig.dark.describe("nW", 1e9)
+        warnings.extend(_dark_warnings(sig.dark, opts))
     scale_unknown: list[str] = []
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
@@ -547,6 +589,20 @@ def _receiver_warnings(rinfo: dict[str, Any]) -> list[str]:
     if rinfo["beam_radius_mm"] is None:
         out.append(f"beam radius {rinfo['beam_radius_source']}")
     return out
+
+
+def _dark_warnings(dark: PointDark, opts: ReductionOptions) -> list[str]:
+    """The power meter's dark in words when it was not measured, or its noise not."""
+    if not dark.measured:
+        return ["power-meter dark not measured: every reading still holds the photodiode's "
+                "dark current and any ambient light; set [acquisition] dark = \"per_point\" "
+                "(or \"start\") in the plan so that it is read with the light off and "
+                "subtracted"]
+    if dark.noise_floor is None:
+        return [f"power-meter noise floor not measured ({dark.n_readings} dark reading(s), "
+                "fewer than 3): each reading's σ is its relative noise alone "
+                f"({opts.u_power_meter_rel:.2%}); dark = \"per_point\" measures it"]
+    return []
 
 
 def _match_rows(run: RunData, rows: np.ndarray, other: RunData, *, tol_deg: float = 0.05
