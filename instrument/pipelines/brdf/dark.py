@@ -80,14 +80,16 @@ class PointDark:
     def measured(self) -> bool:
         return self.policy != "none"
 
-    def shared_covariance(self) -> np.ndarray:
+    def shared_covariance(self, u_level: np.ndarray | None = None) -> np.ndarray:
         """Covariance (detector units²) of the subtracted darks between points: the
-        variance of a shared dark for every pair of points that used it."""
+        variance of a shared dark for every pair of points that used it (``u_level``: the
+        darks' σ, default :attr:`u_level`)."""
+        u = self.u_level if u_level is None else np.asarray(u_level, dtype=float)
         n = self.group.size
         cov = np.zeros((n, n))
         for g in np.unique(self.group[self.group >= 0]):
             members = np.flatnonzero(self.group == g)
-            cov[np.ix_(members, members)] = self.u_level[members[0]] ** 2
+            cov[np.ix_(members, members)] = u[members[0]] ** 2
         return cov
 
     def describe(self, unit: str, scale: float) -> str:

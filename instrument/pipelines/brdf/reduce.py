@@ -292,9 +292,12 @@ def _power_meter_signals(run: RunData, rows: np.ndarray, opts: ReductionOptions
     floor = dark.noise_floor or 0.0
     net = p - dark.level
     u = np.hypot(floor, np.abs(p) * opts.u_power_meter_rel)
+    # a dark whose noise was not measured: the relative noise of a reading (and a warning)
+    u_dark = (dark.u_level if dark.noise_floor is not None
+              else np.abs(dark.level) * opts.u_power_meter_rel)
     shared = dark.group >= 0
-    u = np.where(shared, u, np.hypot(u, dark.u_level))
-    cov = dark.shared_covariance() if shared.any() else None
+    u = np.where(shared, u, np.hypot(u, u_dark))
+    cov = dark.shared_covariance(u_dark) if shared.any() else None
     return _Signals(net, u, np.zeros(rows.size, dtype=int), [], [], 0, cov, dark)
 
 
