@@ -37,6 +37,7 @@ from analysis.brdf.reduction import (
     subtract_signature,
 )
 from analysis.radiometry import FlatField, flat_field
+from instrument.bench.angles import AngularModel, angular_model
 from instrument.bench.camera_calibration import CameraCalibration
 from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
@@ -63,7 +64,8 @@ class ReductionOptions:
         Standard uncertainties of the receiver distance and aperture (mm); ``None``: not
         known (taken as 0 and reported as an unknown part of the common scale).
     sigma_theta_deg : float or None
-        Angular standard uncertainty; default the stages' position tolerance.
+        Angular standard uncertainty of θi and θr; default from the stages' read-back
+        resolution and repeatability (:mod:`instrument.bench.angles`).
     u_power_meter_rel : float
         Relative noise of one power-meter reading (power-meter detector).
     camera_calibration : path or None
@@ -425,7 +427,7 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
     w, w_src = _beam_radius(run, opts)
     div, div_src = _beam_divergence_rad(run, opts)
     radius, radius_src = _sample_radius(run, opts)
-    sig_t = _sigma_theta_rad(run, opts)
+    ang = _angular(run, opts)
     info: dict[str, Any] = {"solid_angle_sr": omega, "u_solid_angle_sr": u_omega,
                             "receiver_aperture_mm": aperture, "receiver_distance_mm": distance,
                             "receiver_distance_source": dist_src, "beam_radius_mm": w,
@@ -437,25 +439,26 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
         return None, info
     rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled,
                           beam_divergence_rad=div, sample_radius_mm=radius,
-                          sigma_theta_i_rad=sig_t, sigma_theta_r_rad=sig_t)
+                          sigma_theta_i_rad=ang.sigma_theta_i_rad,
+                          sigma_theta_r_rad=ang.sigma_theta_r_rad)
     info["receiver_model"] = (
         "instrument function: Gaussian footprint"
         + (" clipped by the sample's edge" if radius is not None else "")
         + (" × aperture integrated" if sampled else " × chief ray through the pupil centre")
         + (f" × beam divergence {1e3 * div:g} mrad" if div > 0 else "")
-        + f" × set-point spread σθ = {math.degrees(sig_t):.3g}°"
+        + f" × read-back spread σθi = {math.degrees(ang.sigma_theta_i_rad):.2g}°, "
+        f"σθr = {math.degrees(ang.sigma_theta_r_rad):.2g}°"
         + "; quadrature refined per point until below 0.1σ")
     return rg, info
 
 
-def _sigma_theta_rad(run: RunData, opts: ReductionOptions) -> float:
+def _angular(run: RunData, opts: ReductionOptions) -> AngularModel:
+    """σθi, σθr of the recorded (read-back) angles: the option, or the stages' read-back
+    resolution and repeatability (:mod:`instrument.bench.angles`)."""
     if opts.sigma_theta_deg is not None:
-        return math.radians(opts.sigma_theta_deg)
-    devices = run.profile().get("devices", {})
-    tol = [float(devices.get(r, {}).get("position_tolerance", 0.0))
-           for r in ("sample_theta", "detector_theta")]
-    # a reading within ±tol of the target, uniform: σ = tol/√3 (GUM type B)
-    return math.radians(max(tol) / math.sqrt(3.0))
+        s = math.radians(opts.sigma_theta_deg)
+        return AngularModel(s, s, (), ())
+    return angular_model(run.profile())
 
 
 def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Reduced:
@@ -490,7 +493,8 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
 
     ti, pi_ = rad(joined("theta_i")), rad(joined("phi_i"))
     tr, pr = rad(joined("theta_r")), rad(joined("phi_r"))
-    sig_t = _sigma_theta_rad(run, opts)
+    ang = _angular(run, opts)
+    sig_i, sig_r = ang.sigma_theta_i_rad, ang.sigma_theta_r_rad
     flat, flat_src, n_flat = _flat_for(run, opts) if cal is not None else (None, "none", 0)
     # the pixel-response error left in the summed signal: PRNU without a flat, the flat's
     # own noise with one (shared between points that image the spot onto the same pixels,
@@ -504,7 +508,11 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     p_s, u_s, cov_rel, n_clipped = (sig.power_w, sig.u_power_w, sig.covariance(u_resp),
                                     sig.clipped)
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
-                            "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
+                            "detector": opts.detector,
+                            "sigma_theta_i_deg": math.degrees(sig_i),
+                            "sigma_theta_r_deg": math.degrees(sig_r),
+                            "angular_model": (ang.describe() if ang.stages else
+                                              "option --sigma-theta-deg"),
                             "options": asdict(opts)}
     if first is not None:
         prov["first_pass"] = f"{parts[1][0].run_id} ({parts[1][1].size} points, {first})"
@@ -514,7 +522,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         prov["pixel_response_u_rel"] = u_resp
     receiver, rinfo = _receiver(run, rows, opts, cal)
     prov.update(rinfo)
-    warnings = _receiver_warnings(rinfo)
+    warnings = _receiver_warnings(rinfo) + list(ang.warnings)
     if sig.dark is not None:
         prov["detector_dark"] = sig.dark.describe("nW", 1e9)
         warnings.extend(_dark_warnings(sig.dark, opts))
@@ -532,7 +540,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             solid_angle=rinfo["solid_angle_sr"],
             u_solid_angle=rinfo["u_solid_angle_sr"],
             u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
-            sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected,
+            sigma_theta_i=sig_i, sigma_theta_r=sig_r, cosine_corrected=opts.cosine_corrected,
             receiver=receiver, cov_power_rel=cov_rel)
         prov.update(incident_power_w=p_i, incident_power_source=src)
     else:
@@ -547,7 +555,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
                              for r, rw in parts])
         std = _reference_standard(ref_run, opts)
         pts = relative_brdf(p_s, u_s, ref.power_w, ref.u_power_w, ti, pi_, tr, pr,
-                            reference=std, sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                            reference=std, sigma_theta_i=sig_i, sigma_theta_r=sig_r,
                             cosine_corrected=opts.cosine_corrected)
         # the ratio to a diffuse standard read through the same receiver is already the
         # normalised average of f over it: keep the geometry for the fit
