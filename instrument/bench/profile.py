@@ -163,6 +163,8 @@ class DeviceSpec:
     scene_change_s: float = 0.0
     #: Motion: seconds homing takes on the real stage (estimates only).
     home_s: float = 0.0
+    #: The timing keys the profile gave (the others are defaults: estimates say so).
+    timing_declared: frozenset[str] = frozenset()
 
     @property
     def is_axis(self) -> bool:
@@ -425,7 +427,8 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     if driver is None or url is None:
         return None
     return DeviceSpec(role, driver, url, stage, limits, velocity, acceleration, tolerance,
-                      dict(options), retry, float(settle), settings, **timing)
+                      dict(options), retry, float(settle), settings, **timing,
+                      timing_declared=frozenset(timing))
 
 
 #: Settings a profile may apply after opening, per driver: name → (type, low, high).
