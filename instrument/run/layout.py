@@ -40,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +139,10 @@ class RunHeader:
     calibration: dict[str, str]
     software_version: str
     created: float
+    #: Per planned point, what else it carries (``ScanPoint.meta`` as JSON ``[[key,
+    #: value], …]``: the filter slot of a wavelength axis), so that a resumed run acquires
+    #: each point as planned; empty in files written before it (points without meta).
+    planned_meta: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         d = dict(vars(self))
@@ -240,6 +244,9 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         plan.create_dataset("planned_light", data=np.array(h.planned_light, dtype=bool))
         plan.create_dataset("planned_exposure_us",
                             data=np.array(h.planned_exposure_us, dtype=float))
+        if h.planned_meta:
+            plan.create_dataset("planned_meta", data=np.array(h.planned_meta, dtype=object),
+                                dtype=_STR)
         cal = _group(entry, "calibration", "NXcollection")
         for k, v in h.calibration.items():
             cal.attrs[k] = v
@@ -339,6 +346,8 @@ def header_from_file(f: h5py.File) -> RunHeader:
         planned_label=[_text(s) for s in plan["planned_label"][()]],
         planned_light=[bool(x) for x in plan["planned_light"][()]],
         planned_exposure_us=[float(x) for x in plan["planned_exposure_us"][()]],
+        planned_meta=([_text(x) for x in plan["planned_meta"][()]]
+                      if "planned_meta" in plan else []),
         acquisition_policy=_text(plan["acquisition_policy"][()]),
         retry_policies=json.dumps(retry), identities=identities, device_kinds=kinds,
         geometry=geometry,

@@ -337,3 +337,26 @@ def test_the_power_meter_sees_the_filter_s_colour_not_the_source_s():
         assert bench.power_meter.read_power_w() == pytest.approx(
             truth * resp(450.0) / resp(550.0), rel=0.02)
         bench.shutter.turn_off()
+
+
+def test_a_resumed_run_keeps_each_point_s_planned_filter(tmp_path):
+    """The filter slot is part of a planned point (its meta): the run file stores it with
+    the planned points, so ``resume`` (which continues the stored plan, not a rebuilt one)
+    puts the same filter in the beam for every remaining point."""
+    from types import SimpleNamespace
+
+    from instrument.plans import build_plan, parse_plan
+    from instrument.run.runner import plan_from_run
+
+    plan = tmp_path / "plan.toml"
+    plan.write_text(LOCKIN_PLAN.replace('detectors = ["lockin"]',
+                                        'detectors = ["power_meter"]')
+                    + '[spectral]\nfilters = [1, 2]\norder = "motion"\n', encoding="utf-8")
+    profile = load_profile("sim-spectral")
+    built = build_plan(parse_plan(plan.read_text(encoding="utf-8"), source="plan"), profile)
+    assert main(["run", str(plan), "--bench", "sim-spectral", "--out", str(tmp_path / "runs"),
+                 "--no-fsync", "--quiet"]) == 0
+    (path,) = (tmp_path / "runs").glob("*.h5")
+    again = plan_from_run(path, SimpleNamespace(profile=profile))
+    assert [dict(p.meta).get("filter") for p in again.points] == \
+        [dict(p.meta).get("filter") for p in built.points] == [1, 1, 1, 2, 2, 2]
