@@ -184,26 +184,14 @@ def test_a_camera_without_cost_keys_takes_its_driver_default_and_says_so():
     assert est_bare.assumed == t_bare.assumed
 
 
-LOCKIN_PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "lock-in estimate"
-[sample]
-name = "spectral"
-[scan]
-theta_i = [20]
-theta_r = [-50, 0, 50]
-[acquisition]
-detectors = ["lockin"]
-dark = "{dark}"
-frames = 4
-[spectral]
-filters = {filters}
-"""
 
 
 def _lockin_estimate(dark: str = "none", filters: str = "[1]"):
-    spec_ = parse_plan(LOCKIN_PLAN.format(dark=dark, filters=filters), source="plan")
+    from tests.instrument.bench.test_spectral_bench import LOCKIN_PLAN
+
+    text = (LOCKIN_PLAN.replace('dark = "none"', f'dark = "{dark}"')
+            + f"[spectral]\nfilters = {filters}\n")
+    spec_ = parse_plan(text, source="plan")
     return build_plan(spec_, load_profile("sim-spectral")).estimate()
 
 

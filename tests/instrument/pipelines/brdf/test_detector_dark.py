@@ -203,20 +203,6 @@ def test_the_offset_pattern_is_found_and_a_model_shape_is_not_taken_for_one():
     assert not pat.looks_like_offset()
 
 
-LOCKIN_PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "lock-in scan with darks"
-[sample]
-name = "spectral"
-[scan]
-theta_i = [20]
-theta_r = [-50, 50]
-[acquisition]
-detectors = ["lockin"]
-dark = "per_point"
-frames = 4
-"""
 
 
 def test_the_lock_in_reads_its_dark_with_the_shutter_closed_at_every_point(tmp_path):
@@ -229,9 +215,11 @@ def test_the_lock_in_reads_its_dark_with_the_shutter_closed_at_every_point(tmp_p
         reduce_group,
         wavelength_groups,
     )
+    from tests.instrument.bench.test_spectral_bench import LOCKIN_PLAN
 
     plan = tmp_path / "plan.toml"
-    plan.write_text(LOCKIN_PLAN, encoding="utf-8")
+    plan.write_text(LOCKIN_PLAN.replace("theta_r = [-50, 0, 50]", "theta_r = [-50, 50]")
+                    .replace('dark = "none"', 'dark = "per_point"'), encoding="utf-8")
     assert main(["run", str(plan), "--bench", "sim-spectral", "--out", str(tmp_path / "runs"),
                  "--no-fsync", "--quiet"]) == 0
     (path,) = (tmp_path / "runs").glob("*.h5")
