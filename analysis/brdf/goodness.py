@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.stats import chi2 as chi2_dist
 
-__all__ = ["DEFAULT_ALPHA", "GoodnessOfFit", "goodness_of_fit"]
+__all__ = ["DEFAULT_ALPHA", "GoodnessOfFit", "OffsetPattern", "goodness_of_fit", "offset_pattern"]
 
 #: p-value below which a model is rejected.
 DEFAULT_ALPHA = 1e-3
@@ -139,3 +139,57 @@ def goodness_of_fit(residuals: ArrayLike, n_params: int, *,
         big = [int(i) for i in order[:5]]
     return GoodnessOfFit(chi2, dof, p, float(alpha), tuple(big),
                          tuple(float(r[i]) for i in big))
+
+
+@dataclass(frozen=True)
+class OffsetPattern:
+    """How much of a fit's misfit a constant offset of the detector reading explains
+    (:func:`offset_pattern`).
+
+    ``amplitude`` is the offset in the template's units, ``z`` its significance (σ),
+    ``chi2_drop`` the χ² it removes (z²) and ``fraction`` that drop as a fraction of the
+    excess χ² − ν (0 when there is no excess).
+    """
+
+    amplitude: float
+    z: float
+    chi2_drop: float
+    fraction: float
+
+    def looks_like_offset(self, *, min_z: float = 5.0, min_fraction: float = 0.5) -> bool:
+        """Significant, and the larger part of the excess χ²."""
+        return bool(abs(self.z) >= min_z and self.fraction >= min_fraction)
+
+
+def offset_pattern(residuals: ArrayLike, sigma: ArrayLike, template: ArrayLike, *,
+                   jacobian: ArrayLike | None = None, dof: int | None = None
+                   ) -> OffsetPattern:
+    """Project a fit's normalised residuals r = (y − F)/σ on an offset's signature.
+
+    ``template`` (shape (n,)) is what a unit offset of the detector reading adds to each
+    data value (for an absolute BRDF from a power reading, 1/(P_i Ω cos θr) up to a
+    constant: ∝ 1/cos θr). The part of it the model's parameters can absorb (the columns
+    of ``jacobian``, shape (n, k), unnormalised) is removed first, so that only what the
+    model cannot mimic is counted: the least-squares amplitude of the normalised
+    template t̃ = t/σ (made orthogonal to J/σ) in r is a = t̃·r / t̃·t̃, its χ² drop
+    (t̃·r)²/t̃·t̃ (the linear F-test's numerator; Bevington & Robinson, *Data Reduction and
+    Error Analysis*, 3rd ed., §11.4).
+    """
+    r = np.asarray(residuals, dtype=float).reshape(-1)
+    s = np.asarray(sigma, dtype=float).reshape(-1)
+    t = np.asarray(template, dtype=float).reshape(-1) / s
+    if jacobian is not None:
+        j = np.asarray(jacobian, dtype=float).reshape(r.size, -1) / s[:, None]
+        j = j[:, np.all(np.isfinite(j), axis=0)]
+        if j.size:
+            coef, *_ = np.linalg.lstsq(j, t, rcond=None)
+            t = t - j @ coef
+    tt = float(t @ t)
+    if not (np.isfinite(tt) and tt > 1e-300 * max(1.0, float(np.sum(r**2)))):
+        return OffsetPattern(0.0, 0.0, 0.0, 0.0)
+    a = float(t @ r) / tt
+    drop = float(t @ r) ** 2 / tt
+    nu = r.size if dof is None else dof
+    excess = float(np.sum(r**2)) - nu
+    return OffsetPattern(a, float(np.sign(a) * np.sqrt(drop)), drop,
+                         float(min(drop / excess, 1.0)) if excess > 0 else 0.0)

@@ -108,8 +108,9 @@ ACQUISITION = [
     _f("acquisition.hdr_factor", "HDR factor", "number"),
     _f("acquisition.max_brackets", "max brackets", "integer"),
     _f("acquisition.frames", "frames averaged", "integer"),
-    _f("acquisition.dark", "dark frames", "choice", "none, after every point, or at the "
-       "start", DARK_POLICIES, _POL.dark),
+    _f("acquisition.dark", "darks", "choice", "every detector with the light off: none, "
+       "after every point, before every row of θi, or at the start", DARK_POLICIES,
+       _POL.dark),
     _f("acquisition.detectors", "detectors", "detectors", ", ".join(DETECTORS),
        default="camera, power_meter"),
     _f("acquisition.readout_s", "readout (s)", "number", "per-frame overhead (estimates)"),

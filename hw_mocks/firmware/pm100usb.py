@@ -44,8 +44,8 @@ Measurement model (documented emulator choices, not a calibration):
 
 * The light comes from the virtual bench through :attr:`Pm100usbFirmware.optical_power_w`,
   a callable ``f(wavelength_nm) -> W`` asked for the power of the light at its own
-  wavelength :attr:`light_wavelength_nm` (``None``: the light is at the wavelength the
-  meter is set to).
+  wavelength :attr:`light_wavelength_nm` (a number, a callable the bench answers at each
+  reading, or ``None``: the light is at the wavelength the meter is set to).
 * The photodiode converts it to current ``I = R(λ_light)·P + I_dark`` with a silicon-like
   responsivity ``R(λ) = η(λ)·λ/1239.84 A/W`` (photon energy hc/λ; ``η`` a smooth
   illustrative quantum efficiency). The console displays ``(I − I_zero)/R(λ_set)``, so a
@@ -245,8 +245,10 @@ class Pm100usbFirmware(FirmwareEmulator):
         self._rng = np.random.default_rng(seed)
         #: The virtual bench's light: ``f(wavelength_nm) -> power in W at the sensor``.
         self.optical_power_w: Callable[[float], float] = lambda _wl: 0.0
-        #: Wavelength of the incident light; ``None``: whatever the meter is set to.
-        self.light_wavelength_nm: float | None = None
+        #: Wavelength of the incident light (nm), or a callable giving it at each reading
+        #: (a bench whose light changes colour: a filter wheel); ``None``: whatever the
+        #: meter is set to.
+        self.light_wavelength_nm: float | Callable[[], float] | None = None
         #: Dark current of the photodiode (A): the offset that zeroing removes.
         self.dark_current_a = 2.0e-9
         #: Per-sample current noise floor (A) and relative (signal-proportional) noise.
@@ -284,9 +286,12 @@ class Pm100usbFirmware(FirmwareEmulator):
         return float(self.optical_power_w(self._light_wavelength()))
 
     def _light_wavelength(self) -> float:
-        if self.light_wavelength_nm is None:
+        wl = self.light_wavelength_nm
+        if callable(wl):
+            wl = wl()
+        if wl is None:
             return self.wavelength_nm
-        return self.light_wavelength_nm
+        return float(wl)
 
     def _sample_current_a(self, n: int) -> float:
         """Mean photocurrent of ``n`` samples (A), with the noise model."""

@@ -282,16 +282,14 @@ class VirtualBench:
     def update_source(self, **changes: Any) -> SourceState:
         """Change source fields (``on``, ``power_w``, ...); returns the new state.
 
-        A bound power meter learns a new wavelength too: its head's responsivity is
-        evaluated at the light's wavelength.
+        A bound power meter follows the light's wavelength at every reading
+        (:meth:`light_wavelength_nm`).
         """
         with self._lock:
             new = replace(self._source, **changes)
             if not 0.0 <= new.power_w <= new.max_power_w:
                 raise ValueError(f"power {new.power_w:g} W outside [0, {new.max_power_w:g}] W")
             self._source = new
-            if self._bound_meter is not None:
-                self._bound_meter.light_wavelength_nm = new.wavelength_nm
             return new
 
     def position(self, role: str) -> float:
@@ -361,6 +359,13 @@ class VirtualBench:
             self._light_path = replace(self._light_path, **changes)
             self._version += 1
 
+    def light_wavelength_nm(self) -> float:
+        """Centre wavelength (nm) of the light reaching the detectors now: the filter's in
+        the beam, else the source's (with the light off, the source's: a dark reading has
+        no colour)."""
+        light = self.light_at_sample()
+        return float(light.wavelength_nm if light.on else self._source.wavelength_nm)
+
     def light_at_sample(self) -> SourceState:
         """The light as it reaches the sample now.
 
@@ -418,7 +423,7 @@ class VirtualBench:
         ``target`` is the firmware object, a ``simusb://name`` URL (the device is created
         through :func:`hw_mocks.usb.backend_from_url` if needed), or ``None`` for
         ``power_meter.url``. Sets its ``optical_power_w`` callable and the light's
-        wavelength (the source's).
+        wavelength (followed at every reading: :meth:`light_wavelength_nm`).
         """
         target = self.power_meter.url if target is None else target
         if target is None:
@@ -430,7 +435,7 @@ class VirtualBench:
             usb.backend_from_url(target)
             target = usb.get_firmware(name)
         target.optical_power_w = self.optical_power_w
-        target.light_wavelength_nm = self._source.wavelength_nm
+        target.light_wavelength_nm = self.light_wavelength_nm
         target.bound_world = self.name
         self._bound_meter = target
         return target

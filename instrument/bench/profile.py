@@ -19,6 +19,10 @@ Schema (all lengths in mm, angles in degrees)::
     velocity = 10.0                    # motion: units/s (written to the controller)
     acceleration = 20.0                # motion: units/s²
     position_tolerance = 0.01          # motion: arrival tolerance in axis units
+    readback_resolution = 7.3e-6       # motion: read-back quantum (axis units; default
+                                       # from the driver's stage, instrument.bench.angles)
+    repeatability = 0.005              # motion: ± bidirectional repeatability (axis
+                                       # units; emulated stages 0, else not known)
     settle_s = 0.01                    # motion: settling after each move (planning, s)
     home_s = 20.0                      # motion: time homing takes (estimates, s)
     frame_overhead_s = 0.02            # camera: time per frame beyond the exposure (s)
@@ -159,6 +163,8 @@ class DeviceSpec:
     scene_change_s: float = 0.0
     #: Motion: seconds homing takes on the real stage (estimates only).
     home_s: float = 0.0
+    #: The timing keys the profile gave (the others are defaults: estimates say so).
+    timing_declared: frozenset[str] = frozenset()
 
     @property
     def is_axis(self) -> bool:
@@ -355,7 +361,7 @@ def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
              "position_tolerance", "options", "retry", "settle_s", "settings",
-             "home_s", *CAMERA_TIMING}
+             "home_s", "readback_resolution", "repeatability", *CAMERA_TIMING}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
     if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
@@ -382,12 +388,17 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
             limits = (float(raw[0]), float(raw[1]))
     if not is_axis:
         for key in ("limits", "velocity", "acceleration", "position_tolerance", "stage",
-                    "settle_s", "home_s"):
+                    "settle_s", "home_s", "readback_resolution", "repeatability"):
             if key in t and driver is not None:
                 v.error(f"{path}.{key}", f"only motion devices take {key!r}")
     velocity = v.positive(t, "velocity", path)
     acceleration = v.positive(t, "acceleration", path)
     tolerance = v.positive(t, "position_tolerance", path)
+    # the angular error model of the recorded angles (instrument.bench.angles)
+    v.positive(t, "readback_resolution", path)
+    if "repeatability" in t and not (_is_number(t["repeatability"])
+                                     and 0 <= t["repeatability"] < math.inf):
+        v.error(f"{path}.repeatability", "must be a number ≥ 0 (± half-width, axis units)")
     options = t.get("options", {})
     if not isinstance(options, dict):
         v.error(f"{path}.options", "must be a table")
@@ -416,7 +427,8 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     if driver is None or url is None:
         return None
     return DeviceSpec(role, driver, url, stage, limits, velocity, acceleration, tolerance,
-                      dict(options), retry, float(settle), settings, **timing)
+                      dict(options), retry, float(settle), settings, **timing,
+                      timing_declared=frozenset(timing))
 
 
 #: Settings a profile may apply after opening, per driver: name → (type, low, high).

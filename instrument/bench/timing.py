@@ -14,6 +14,16 @@ came on, when a real camera's queue is flushed and the simulated one renders the
 view). Homing an axis takes ``home_s`` of its own time (the profile says how long; an
 emulated axis takes that divided by its speed-up). :func:`bench_timing` collects these from
 a profile so that an estimate says what *this* bench will take.
+
+No cost counts as zero because a profile left it out: a camera without
+``frame_overhead_s`` or ``scene_change_s`` takes its driver kind's default
+(:data:`CAMERA_DEFAULTS`) and the estimate says which it assumed. A lock-in waits its
+output filter's 99 % settling time (τ from the profile's settings, else the SR830's
+power-up 100 ms; the slope's wait in time constants from the driver's table,
+:attr:`drivers.base.LockIn.SETTLE_TIME_CONSTANTS`) once per snapshot and twice more to
+choose its range. A filter wheel turns the shorter way round at the FW102C's high speed,
+half a turn in 3 s, and settles on the slot sensor for 0.1 s (Thorlabs FW102C manual,
+as the emulator models it: hw_mocks/firmware/fw102c.py).
 """
 
 from __future__ import annotations
@@ -22,10 +32,26 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from urllib.parse import parse_qs, urlsplit
 
+from drivers.base import LockIn
 from instrument.bench.profile import BenchProfile, DeviceSpec
 
-__all__ = ["POINT_OVERHEAD_S", "BenchTiming", "bench_timing", "clock_speed",
-           "exposes_in_wall_time"]
+__all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "BenchTiming", "bench_timing",
+           "clock_speed", "exposes_in_wall_time"]
+
+#: A camera's costs when the profile does not give them, by driver: seconds per frame
+#: beyond the exposure and seconds of the first frame after the scene changed. The
+#: simulated camera's are those measured for the sim profile (1024² px: synthesising the
+#: noise, rendering the view through the pupil); a USB camera's one frame period at
+#: 30 frames/s, and two after a change (its queue flushed).
+CAMERA_DEFAULTS: dict[str, dict[str, float]] = {
+    "sim_camera": {"frame_overhead_s": 0.11, "scene_change_s": 0.85},
+    "opencv_camera": {"frame_overhead_s": 1 / 30, "scene_change_s": 2 / 30},
+}
+#: The SR830's output filter at power-up (time constant, slope): 100 ms, 12 dB/oct.
+LOCKIN_POWER_UP = (0.1, 12)
+#: FW102C at high speed: seconds per degree of the wheel's turn, settling on the slot.
+WHEEL_S_PER_DEG = 3.0 / 180.0
+WHEEL_SETTLE_S = 0.1
 
 #: The speed-up taken for an emulator clock that steps per reading (``step=``).
 STEPPING_SPEEDUP = 1e9
@@ -79,11 +105,31 @@ class BenchTiming:
     frame_overhead_s: float = 0.0
     scene_change_s: float = 0.0
     point_overhead_s: float = POINT_OVERHEAD_S
+    #: One settling wait of the lock-in's output filter (s; 0 without a lock-in).
+    lockin_settle_s: float = 0.0
+    #: The filter wheel's slots (0: no wheel).
+    wheel_slots: int = 0
+    #: What the estimate assumed because the profile did not say (in words).
+    assumed: tuple[str, ...] = ()
 
     @property
     def emulated(self) -> bool:
         """True when some axis runs faster than real time."""
         return any(s != 1.0 for s in self.axis_speed.values())
+
+    def lockin_reading_s(self, frames: int) -> float:
+        """Seconds one lock-in reading takes: a settling wait per snapshot (at least four,
+        as the engine reads) and two to choose the range."""
+        return self.lockin_settle_s * (max(int(frames), 4) + 2)
+
+    def wheel_move_s(self, start: int, end: int) -> float:
+        """Seconds the filter wheel takes from slot ``start`` to ``end`` (the shorter way
+        round); 0 for the same slot or without a wheel."""
+        if start == end or self.wheel_slots <= 0:
+            return 0.0
+        steps = abs(end - start) % self.wheel_slots
+        steps = min(steps, self.wheel_slots - steps)
+        return steps * 360.0 / self.wheel_slots * WHEEL_S_PER_DEG + WHEEL_SETTLE_S
 
 
 def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming:
@@ -93,9 +139,31 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
         spec = profile.devices.get(role)
         speed[role] = 1.0 if spec is None else clock_speed(spec)
         home[role] = 0.0 if spec is None else spec.home_s / speed[role]
+    assumed: list[str] = []
     camera = next((d for d in profile.devices.values()
                    if d.driver in ("sim_camera", "opencv_camera")), None)
-    if camera is None:
-        return BenchTiming(speed, home)
-    return BenchTiming(speed, home, 1.0 if exposes_in_wall_time(camera) else 0.0,
-                       camera.frame_overhead_s, camera.scene_change_s)
+    costs = {"frame_overhead_s": 0.0, "scene_change_s": 0.0}
+    if camera is not None:
+        for key in costs:
+            costs[key] = getattr(camera, key)
+            if key not in camera.timing_declared:
+                costs[key] = CAMERA_DEFAULTS[camera.driver][key]
+                assumed.append(f"{camera.role}.{key} not in the profile: {costs[key]:.3g} s "
+                               f"assumed (the {camera.driver} default)")
+    lockin = next((d for d in profile.devices.values() if d.driver == "sr830"), None)
+    settle = 0.0
+    if lockin is not None:
+        tau = float(lockin.settings.get("time_constant_s", LOCKIN_POWER_UP[0]))
+        slope = int(lockin.settings.get("filter_slope_db_per_oct", LOCKIN_POWER_UP[1]))
+        settle = LockIn.SETTLE_TIME_CONSTANTS.get(slope, 10.0) * tau
+        if "time_constant_s" not in lockin.settings:
+            assumed.append(f"{lockin.role}: no time constant in its settings; the SR830's "
+                           f"power-up {tau:g} s at {slope} dB/oct assumed")
+    wheel = next((d for d in profile.devices.values() if d.driver == "fw102c"), None)
+    slots = 0
+    if wheel is not None:
+        slots = 12 if "slots=12" in wheel.url or wheel.options.get("slots") == 12 else 6
+    return BenchTiming(speed, home,
+                       1.0 if camera is None or exposes_in_wall_time(camera) else 0.0,
+                       costs["frame_overhead_s"], costs["scene_change_s"],
+                       lockin_settle_s=settle, wheel_slots=slots, assumed=tuple(assumed))

@@ -205,8 +205,9 @@ def run(args: argparse.Namespace) -> int:
           f"lower {result.selection.criterion.upper()} is better):")
     best = min(row.score(result.selection.criterion) for row in result.selection.table)
     width = max(len(row.name) for row in result.selection.table)
+    n_fitted = int(result.fitted_index.size)  # clipped readings were left out of the fits
     for row in result.selection.table:
-        dof = max(n - row.n_params, 1)
+        dof = max(n_fitted - row.n_params, 1)
         delta = row.score(result.selection.criterion) - best
         print(f"  {row.name:<{width}} {row.n_params} parameter(s)  χ²/dof "
               f"{row.chi2 / dof:10.4g}  Δ{result.selection.criterion.upper()} {delta:10.4g}")

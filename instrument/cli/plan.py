@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
           f"{fmt_s(est.bench_motion_s)}, acquisition and storage "
           f"{fmt_s(est.bench_acquisition_s)})"
           + (f", and {fmt_s(homing)} before it to home axes not homed yet" if homing else ""))
+    for what in est.assumed:
+        print(f"  warning: {what}; set it in the bench profile for a true estimate")
     if est.speedup > 1.001:
         print(f"  its emulated stages run {est.speedup:.3g}× faster than real ones: on real "
               f"stages at the profile's speeds the motion alone takes {fmt_s(est.motion_s)}")

@@ -59,6 +59,8 @@ class PlanEstimate:
     bench_acquisition_s: float | None = None
     speedup: float = 1.0
     homing_s: dict[str, float] = field(default_factory=dict)
+    #: Costs the profile does not give and the estimate assumed (in words).
+    assumed: tuple[str, ...] = ()
 
     @property
     def total_s(self) -> float:
@@ -123,7 +125,8 @@ class Plan:
         bench_motion, _ = route_time(t, self.axes, fast)
         speedup = motion / bench_motion if bench_motion > 0 else 1.0
         return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
-                            self._acquisition_on(timing), speedup, dict(timing.home_s))
+                            self._acquisition_on(timing), speedup, dict(timing.home_s),
+                            timing.assumed)
 
     def _acquisition_on(self, timing: BenchTiming) -> float:
         """Wall-clock seconds of every point's acquisition and storage on a bench.
@@ -133,16 +136,27 @@ class Plan:
         frames with ``dark = "per_point"``, each of ``frames`` averaged frames costing the
         exposure (when the camera exposes in wall time) and the camera's per-frame time;
         the camera's scene-change time for a lit point after a move or after the light came
-        on; the engine's and storage's time per point.
+        on; the lock-in's settling for its readings (twice with per-point darks); the
+        filter wheel's turn where the slot changes; the engine's and storage's time per
+        point.
         """
         pol = self.spec.acquisition
         total = 0.0
         lit: bool | None = None
         where: tuple | None = None
+        slot: int | None = None
         for p in self.points:
             moved = bool(p.targets) and p.targets != where
             if p.targets:
                 where = p.targets
+            want = dict(p.meta).get("filter")
+            if want is not None:
+                # the first filter: the wheel may stand anywhere; count a turn from slot 1
+                total += timing.wheel_move_s(1 if slot is None else slot, int(want))
+                slot = int(want)
+            if pol.uses_lockin and timing.lockin_settle_s > 0:
+                reads = 2 if pol.dark == "per_point" and p.light else 1
+                total += reads * timing.lockin_reading_s(pol.frames)
             if not pol.uses_camera:
                 total += timing.point_overhead_s / 4  # a journal line, no frames
                 lit = p.light
@@ -382,8 +396,25 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
             raise PlanError(f"plan {spec.name!r}", [FieldError(
                 "spectral.filters", f"expands to {len(head) + len(body)} points; at most "
                 f"{MAX_POINTS}")])
+    if spec.acquisition.dark == "per_row":
+        body = _dark_per_row(body)
     points = tuple(replace(p, index=k) for k, p in enumerate(head + body))
     return Plan(spec, profile, axes, points, dropped)
+
+
+def _dark_per_row(body: list[ScanPoint]) -> list[ScanPoint]:
+    """A dark point (light off, no move) before every row: each run of points at one θi
+    and one filter, in execution order."""
+    out: list[ScanPoint] = []
+    row: tuple | None = None
+    for p in body:
+        key = (None if p.angles is None else round(p.angles.theta_i, 6),
+               dict(p.meta).get("filter"))
+        if p.light and key != row:
+            out.append(ScanPoint(0, (), None, "dark", False, None))
+            row = key
+        out.append(p)
+    return out
 
 
 def filter_bands(profile: BenchProfile) -> dict[int, tuple[float, float]] | None:

@@ -25,7 +25,7 @@ __all__ = [
 
 #: Labels a point may carry (what the frames at that point are).
 LABELS = ("sample", "dark", "reference", "signature", "flat", "ptc", "lightfield", "sphere")
-DARK_POLICIES = ("none", "per_point", "start")
+DARK_POLICIES = ("none", "per_point", "per_row", "start")
 MODES = ("fixed", "auto")
 DETECTORS = ("camera", "power_meter", "lockin")
 
@@ -40,8 +40,9 @@ class AcquisitionPolicy:
     brightest pixel is below ``target_fraction``/``hdr_factor`` of saturation; with
     ``hdr=true`` every saturated bracket is kept as well (down to ``max_brackets``
     exposures), so an HDR merge can use them. ``dark`` chooses when dark frames (light
-    off) are taken: never, after every point at the same exposure(s), or once per
-    exposure at the start of the run.
+    off) are taken: never, after every point at the same exposure(s), before every row of
+    θi (a dark point where the axes are), or once at the start of the run; the power meter
+    and the lock-in read their dark at the same times as the camera.
     """
 
     mode: str = "fixed"

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drivers.base import AxisStatus, Camera, Frame, MotionAxis
+from drivers.base import AxisStatus, Camera, Frame, MotionAxis, PowerMeter
 from drivers.errors import ControllerError, DeviceError, LimitError, MotionError
 from instrument.bench.devices import Bench
 from instrument.bench.dynamics import move_time
@@ -772,39 +772,54 @@ class RunEngine:
             self._select_filter(int(slot), st)
         cam = self._camera if policy.uses_camera else None
         pm = self._pm if policy.uses_power_meter else None
+        lockin = self._lockin if policy.uses_lockin else None
         if acq.light != self._light and self._source is not None:
             self._set_light(acq.light)
         if pm is not None:
-            role = self._roles[id(pm)]
-            st.power_w = float(self._retry(role, self._policies[role], "read power",
-                                           pm.read_power_w, st))
+            st.power_w = self._read_power(pm, st)
         if self._wheel is not None:
             st.extra.update(self._filter_in_beam())
-        if policy.uses_lockin and self._lockin is not None:
-            role = self._roles[id(self._lockin)]
+        if lockin is not None:
+            role = self._roles[id(lockin)]
             st.extra.update(self._retry(role, self._policies[role], "read lock-in",
                                         lambda: self._read_lockin(policy.frames), st))
-        if cam is None:
-            return
-        role = self._roles[id(cam)]
-        brackets = self._retry(role, self._policy(role), "acquire",
-                               lambda: self._brackets(cam, policy, acq), st)
-        st.frames.extend(brackets)
-        best = _best_bracket(brackets)
-        st.main = best
-        st.exposure_us = best.exposure_us
+        brackets: list[FrameData] = []
+        if cam is not None:
+            role = self._roles[id(cam)]
+            brackets = self._retry(role, self._policy(role), "acquire",
+                                   lambda: self._brackets(cam, policy, acq), st)
+            st.frames.extend(brackets)
+            st.main = _best_bracket(brackets)
+            st.exposure_us = st.main.exposure_us
         dark_level = 0.0
         if policy.dark == "per_point" and acq.light and self._source is not None:
+            # One dark phase for every detector of the point (light off: the shutter
+            # closed or the source off), read as the light was: the power meter's and the
+            # lock-in's offsets are subtracted by the reduction like the camera's frames.
             self._set_light(False)
-            for b in list(brackets):
+            if pm is not None:
+                st.extra["power_dark_w"] = self._read_power(pm, st)
+            if lockin is not None:
+                role = self._roles[id(lockin)]
+                st.extra.update(self._retry(role, self._policies[role], "read lock-in dark",
+                                            lambda: self._read_lockin_dark(policy.frames),
+                                            st))
+            for b in brackets:
+                role = self._roles[id(cam)]
                 dark = self._retry(role, self._policy(role), "dark",
                                    lambda e=b.exposure_us: self._frame(cam, e, policy.frames,
                                                                        False), st)
                 st.frames.append(dark)
-                if b is best:
+                if b is st.main:
                     dark_level = float(dark.data.mean())
             self._set_light(True)
-        st.signal = (float(best.data.mean()) - dark_level) / best.exposure_us
+        if st.main is not None:
+            st.signal = (float(st.main.data.mean()) - dark_level) / st.main.exposure_us
+
+    def _read_power(self, pm: PowerMeter, st: _PointState) -> float:
+        role = self._roles[id(pm)]
+        return float(self._retry(role, self._policies[role], "read power", pm.read_power_w,
+                                 st))
 
     #: Overloads tolerated while reading one point before the point fails (each one makes
     #: the lock-in choose its range again and settle).
@@ -818,6 +833,21 @@ class RunEngine:
         raises :class:`~drivers.errors.ControllerError`, which the device's retry policy
         handles like any failed reading (retry, then pause, skip or abort)."""
         li = self._lockin
+        readings = self._lockin_snapshots(n)
+        r = np.array([x.r_v for x in readings])
+        return {"lockin_r_v": float(r.mean()),
+                "lockin_u_r_v": float(r.std(ddof=1) / math.sqrt(r.size)),
+                "lockin_x_v": float(np.mean([x.x_v for x in readings])),
+                "lockin_y_v": float(np.mean([x.y_v for x in readings])),
+                "lockin_theta_deg": float(np.mean([x.theta_deg for x in readings])),
+                "lockin_sensitivity_v": float(li.sensitivity_v),
+                "lockin_time_constant_s": float(li.time_constant_s),
+                "lockin_overload": 0.0}
+
+    def _lockin_snapshots(self, n: int) -> list:
+        """``max(n, 4)`` settled snapshots of the lock-in on a range that does not overload
+        (:meth:`_read_lockin`)."""
+        li = self._lockin
         n = max(int(n), 4)
         for _ in range(self.LOCKIN_OVERLOAD_RETRIES + 1):
             li.settle()
@@ -829,20 +859,21 @@ class RunEngine:
                     li.settle()
                 readings.append(li.snapshot())
             if not li.overload_status().overloaded:
-                break
-        else:
-            raise ControllerError("the input stays overloaded at every range (too much "
-                                  "light, or the dynamic reserve is too low)",
-                                  device=self._roles[id(li)], command="read lock-in")
-        r = np.array([x.r_v for x in readings])
-        return {"lockin_r_v": float(r.mean()),
-                "lockin_u_r_v": float(r.std(ddof=1) / math.sqrt(r.size)),
-                "lockin_x_v": float(np.mean([x.x_v for x in readings])),
-                "lockin_y_v": float(np.mean([x.y_v for x in readings])),
-                "lockin_theta_deg": float(np.mean([x.theta_deg for x in readings])),
-                "lockin_sensitivity_v": float(li.sensitivity_v),
-                "lockin_time_constant_s": float(li.time_constant_s),
-                "lockin_overload": 0.0}
+                return readings
+        raise ControllerError("the input stays overloaded at every range (too much "
+                              "light, or the dynamic reserve is too low)",
+                              device=self._roles[id(li)], command="read lock-in")
+
+    def _read_lockin_dark(self, n: int) -> dict[str, float]:
+        """The lock-in with the light off, read as :meth:`_read_lockin` reads the light:
+        the mean X and Y (a coherent offset, e.g. pickup at the chopper frequency, is a
+        vector; the reduction subtracts it from the light's X, Y) and the standard error
+        of one component from the spread of the snapshots."""
+        readings = self._lockin_snapshots(n)
+        xy = np.array([[x.x_v for x in readings], [x.y_v for x in readings]])
+        return {"lockin_dark_x_v": float(xy[0].mean()), "lockin_dark_y_v": float(xy[1].mean()),
+                "lockin_dark_u_v": float(np.sqrt(np.mean(xy.var(axis=1, ddof=1))
+                                                 / xy.shape[1]))}
 
     def _select_filter(self, slot: int, st: _PointState) -> None:
         """Put ``slot`` in the beam (a wavelength axis): the wheel moves only when the slot

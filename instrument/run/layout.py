@@ -40,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -73,10 +73,14 @@ STR_FIELDS = ("label", "note")
 #: has no such device (and in files written before they existed: readers must not require
 #: them): the lock-in's mean R over the point's readings and its standard error (V rms), X,
 #: Y (V), θ (deg), its full-scale range (V rms) and time constant (s) at the reading, 1 if
-#: it overloaded; the filter in the beam (slot, centre wavelength and FWHM in nm).
+#: it overloaded; the filter in the beam (slot, centre wavelength and FWHM in nm); with
+#: ``dark = "per_point"``, the point's dark readings (light off: shutter closed or source
+#: off): the power meter's (W) and the lock-in's mean X, Y (V) and the standard error of
+#: one component (V rms).
 DETECTOR_FIELDS = ("lockin_r_v", "lockin_u_r_v", "lockin_x_v", "lockin_y_v",
                    "lockin_theta_deg", "lockin_sensitivity_v", "lockin_time_constant_s",
-                   "lockin_overload", "filter_position", "wavelength_nm", "bandwidth_nm")
+                   "lockin_overload", "filter_position", "wavelength_nm", "bandwidth_nm",
+                   "power_dark_w", "lockin_dark_x_v", "lockin_dark_y_v", "lockin_dark_u_v")
 FRAME_FIELDS = ("frame_point", "frame_exposure_us", "frame_light", "frame_timestamp",
                 "frame_saturated")
 STATUS_OK, STATUS_SKIPPED = 0, 1
@@ -135,6 +139,10 @@ class RunHeader:
     calibration: dict[str, str]
     software_version: str
     created: float
+    #: Per planned point, what else it carries (``ScanPoint.meta`` as JSON ``[[key,
+    #: value], …]``: the filter slot of a wavelength axis), so that a resumed run acquires
+    #: each point as planned; empty in files written before it (points without meta).
+    planned_meta: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         d = dict(vars(self))
@@ -184,7 +192,9 @@ _UNITS = {"t_start": "s", "t_end": "s", "theta_i": "deg", "phi_i": "deg", "theta
           "phi_r": "deg", "exposure_us": "us", "power_w": "W", "signal": "DN/us",
           "lockin_r_v": "V", "lockin_u_r_v": "V", "lockin_x_v": "V", "lockin_y_v": "V",
           "lockin_theta_deg": "deg", "lockin_sensitivity_v": "V",
-          "lockin_time_constant_s": "s", "wavelength_nm": "nm", "bandwidth_nm": "nm"}
+          "lockin_time_constant_s": "s", "wavelength_nm": "nm", "bandwidth_nm": "nm",
+          "power_dark_w": "W", "lockin_dark_x_v": "V", "lockin_dark_y_v": "V",
+          "lockin_dark_u_v": "V"}
 
 
 def new_run_file(path: Path, h: RunHeader) -> h5py.File:
@@ -234,6 +244,9 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         plan.create_dataset("planned_light", data=np.array(h.planned_light, dtype=bool))
         plan.create_dataset("planned_exposure_us",
                             data=np.array(h.planned_exposure_us, dtype=float))
+        if h.planned_meta:
+            plan.create_dataset("planned_meta", data=np.array(h.planned_meta, dtype=object),
+                                dtype=_STR)
         cal = _group(entry, "calibration", "NXcollection")
         for k, v in h.calibration.items():
             cal.attrs[k] = v
@@ -333,6 +346,8 @@ def header_from_file(f: h5py.File) -> RunHeader:
         planned_label=[_text(s) for s in plan["planned_label"][()]],
         planned_light=[bool(x) for x in plan["planned_light"][()]],
         planned_exposure_us=[float(x) for x in plan["planned_exposure_us"][()]],
+        planned_meta=([_text(x) for x in plan["planned_meta"][()]]
+                      if "planned_meta" in plan else []),
         acquisition_policy=_text(plan["acquisition_policy"][()]),
         retry_policies=json.dumps(retry), identities=identities, device_kinds=kinds,
         geometry=geometry,

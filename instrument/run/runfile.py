@@ -353,6 +353,8 @@ class PlannedPoints:
     label: tuple[str, ...]
     light: np.ndarray
     exposure_us: np.ndarray
+    #: Per point, its meta as JSON (empty for files written before it).
+    meta: tuple[str, ...] = ()
 
 
 def read_planned(path: str | Path) -> PlannedPoints:
@@ -364,7 +366,8 @@ def read_planned(path: str | Path) -> PlannedPoints:
             tuple(as_text(a) for a in p["axes"][()]),
             p["planned_targets"][()], p["planned_angles"][()],
             tuple(as_text(s) for s in p["planned_label"][()]),
-            p["planned_light"][()], p["planned_exposure_us"][()])
+            p["planned_light"][()], p["planned_exposure_us"][()],
+            tuple(as_text(x) for x in p["planned_meta"][()]) if "planned_meta" in p else ())
 
 
 # ------------------------------------------------------------------------------ summary

@@ -102,6 +102,8 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
         planned_label=[p.label for p in pts], planned_light=[p.light for p in pts],
         planned_exposure_us=[math.nan if p.exposure_us is None else p.exposure_us
                              for p in pts],
+        planned_meta=([json.dumps([list(kv) for kv in p.meta]) for p in pts]
+                      if any(p.meta for p in pts) else []),
         acquisition_policy=plan.spec.acquisition.as_json(),
         retry_policies=json.dumps({r: d.retry.as_dict()
                                    for r, d in bench.profile.devices.items()}),
@@ -203,7 +205,9 @@ def plan_from_run(path: str | Path, bench: Bench) -> Plan:
                    if not math.isnan(stored.targets[k, j]))
         a = None if math.isnan(stored.angles[k, 0]) else Angles(*map(float, stored.angles[k]))
         e = None if math.isnan(stored.exposure_us[k]) else float(stored.exposure_us[k])
-        points.append(ScanPoint(k, tg, a, label, bool(stored.light[k]), e))
+        meta = (tuple(tuple(kv) for kv in json.loads(stored.meta[k])) if stored.meta
+                else ())
+        points.append(ScanPoint(k, tg, a, label, bool(stored.light[k]), e, meta))
     return Plan(replace(spec), bench.profile, stored.axes, tuple(points))
 
 

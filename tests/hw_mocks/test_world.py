@@ -192,10 +192,10 @@ def test_power_meter_emulator_reads_the_world():
     firmware = usb.get_firmware("power_meter")
     expected = 0.5 / math.pi * 1e-3 * math.cos(math.radians(30.0)) * OMEGA
     assert firmware.true_power_w() == pytest.approx(expected, rel=5e-3)
-    assert firmware.light_wavelength_nm == 633.0
+    assert firmware._light_wavelength() == 633.0
     # A source opened later with another wavelength re-tunes the light the head sees.
     open_source("simsource://laser?world=sim&wavelength_nm=532").close()
-    assert firmware.light_wavelength_nm == 532.0
+    assert firmware._light_wavelength() == 532.0
 
 
 def test_simulated_source_drives_the_world():

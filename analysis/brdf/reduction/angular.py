@@ -34,6 +34,7 @@ def angular_uncertainty(
     phi_i: ArrayLike | None = None,
     phi_r: ArrayLike | None = None,
     tol_rad: float = 1e-3,
+    max_step_i_rad: float = np.radians(5.0),
 ) -> NDArray[np.float64]:
     """|∂f/∂θr| σθr ⊕ |∂f/∂θi| σθi from the local slope of the measured values.
 
@@ -47,6 +48,13 @@ def angular_uncertainty(
     side. The slope of noisy data overestimates the true slope slightly, which errs on the
     safe side (angular errors matter through steep BRDF slopes: Basic et al., Applied Optics 62(13),
     2023).
+
+    Along θi a difference is taken only between set angles at most ``max_step_i_rad``
+    apart (default 5°): incidence grids are coarse (20–30° steps), and a difference across
+    them is not the local slope (a glossy lobe moves with θi by more than its width). A
+    point without a near neighbour in θi gets no θi term here; the instrument-aware fit
+    takes the θi slope from the model (effective variance,
+    :func:`analysis.brdf.reduction.fit_forward`).
 
     Returns
     -------
@@ -69,7 +77,7 @@ def angular_uncertainty(
         azimuth = np.zeros(f.shape, dtype=np.int64)
         coord_r = tr
 
-    def slopes(groups: NDArray, coord: NDArray) -> NDArray:
+    def slopes(groups: NDArray, coord: NDArray, max_step: float = np.inf) -> NDArray:
         out = np.zeros_like(f)
         for k in np.unique(groups):
             sel = np.flatnonzero(groups == k)
@@ -83,13 +91,21 @@ def angular_uncertainty(
             cnt = np.bincount(inv)
             ym = np.bincount(inv, weights=f[order]) / cnt
             xm = np.bincount(inv, weights=x) / cnt
-            out[order] = np.gradient(ym, xm, edge_order=1)[inv]
+            grad = np.gradient(ym, xm, edge_order=1)
+            if np.isfinite(max_step):
+                gap = np.diff(xm)
+                near = np.zeros(xm.size, dtype=bool)
+                near[:-1] |= gap <= max_step
+                near[1:] |= gap <= max_step
+                grad = np.where(near, grad, 0.0)
+            out[order] = grad[inv]
         return out
 
     ti_lab = _cluster(ti, tol_rad)
     d_r = (slopes(_combine(ti_lab, azimuth), coord_r) if sigma_theta_r
            else np.zeros_like(f))
-    d_i = (slopes(_combine(_cluster(coord_r, tol_rad), azimuth), ti) if sigma_theta_i
+    d_i = (slopes(_combine(_cluster(coord_r, tol_rad), azimuth), ti, max_step_i_rad)
+           if sigma_theta_i
            else np.zeros_like(f))
     return np.hypot(d_r * sigma_theta_r, d_i * sigma_theta_i)
 

@@ -240,7 +240,9 @@ def select_forward(
                    cv_stderr=_mean_se(cv[n])[1] if n in cv else float("nan"),
                    converged=fitted[n].fit.converged)
         for n in names)
-    chosen, rule = _choose(rows, ic, criterion, delta, plausible, cv)
+    why_no_cv = ("cross-validation not asked for" if not (run_cv or criterion == "cv")
+                 else "fewer than two θi")
+    chosen, rule = _choose(rows, ic, criterion, delta, plausible, cv, why_no_cv)
     sel = SelectionResult(chosen, criterion, rule, rows,
                           {n: fitted[n].fit for n in names})
     return ForwardSelection(sel, fitted, tuple(plausible))
@@ -275,7 +277,8 @@ def _cross_validate(ff: ForwardFit, y, angles, folds) -> np.ndarray:
 
 
 def _choose(rows: Sequence[ModelScore], ic: str, criterion: str, delta: float,
-            plausible: list[str], cv: dict[str, np.ndarray]) -> tuple[str, str]:
+            plausible: list[str], cv: dict[str, np.ndarray],
+            why_no_cv: str = "fewer than two θi") -> tuple[str, str]:
     by = {r.name: r for r in rows}
 
     def ic_score(r: ModelScore) -> float:
@@ -291,7 +294,7 @@ def _choose(rows: Sequence[ModelScore], ic: str, criterion: str, delta: float,
     if not cvs:
         if criterion == "cv":
             raise ValueError("cross-validation needs at least two incidence angles")
-        return ic_pick.name, rule_ic + " (no cross-validation: fewer than two θi)"
+        return ic_pick.name, rule_ic + f" (no cross-validation: {why_no_cv})"
     c_best = min(cvs, key=lambda n: float(np.mean(cvs[n])))
 
     def beaten(name: str, by: str) -> bool:

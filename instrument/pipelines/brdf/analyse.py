@@ -42,7 +42,12 @@ import numpy as np
 from analysis.brdf import get_model
 from analysis.brdf.fit import FitResult, fit_brdf
 from analysis.brdf.geometry import make_geometry
-from analysis.brdf.goodness import DEFAULT_ALPHA, GoodnessOfFit, goodness_of_fit
+from analysis.brdf.goodness import (
+    DEFAULT_ALPHA,
+    GoodnessOfFit,
+    goodness_of_fit,
+    offset_pattern,
+)
 from analysis.brdf.integrate import dhr
 from analysis.brdf.model import BRDFModel
 from analysis.brdf.reduction import (
@@ -276,6 +281,10 @@ def analyse(
                                      np.radians(_DHR_THETA_DEG), n_mu=48, n_phi=96))
                 for name in shown if fits[name].converged}
     notes = _notes(points, sel, fits, goodness, dhr_vals, by_name, excluded, quad_notes)
+    offset = _offset_note(sel.chosen, sel.fits[sel.chosen], base[sel.chosen], a,
+                          sigma_of[sel.chosen], goodness[sel.chosen])
+    if offset:
+        notes.append(offset)
     return AnalysisResult(sel, fits, by_name, _DHR_THETA_DEG.copy(), dhr_vals,
                           reciprocity_check(points.take(idx)), tuple(notes), goodness,
                           inflation, idx, excluded, plausible)
@@ -323,6 +332,27 @@ def _notes(points: BRDFPoints, sel: SelectionResult, fits: dict[str, FitResult],
                          "parameters and scores are not reliable")
     notes.extend(quad_notes)
     return notes
+
+
+def _offset_note(name: str, fit: FitResult, model: BRDFModel, angles: tuple[np.ndarray, ...],
+                 sigma: np.ndarray, gof: GoodnessOfFit) -> str | None:
+    """A rejected fit whose residuals are mostly a constant offset of the detector reading
+    (:func:`analysis.brdf.goodness.offset_pattern`; in BRDF units such an offset goes as
+    1/cos θr): the note names the likely cause and the fix."""
+    if gof.adequate or not fit.converged:
+        return None
+    template = 1.0 / np.maximum(np.cos(angles[2]), 1e-3)
+    jac = model.jacobian_geometry(fit.params, make_geometry(*angles)).reshape(
+        -1, fit.n_params)
+    pat = offset_pattern(fit.residuals, sigma, template, jacobian=jac, dof=gof.dof)
+    if not pat.looks_like_offset():
+        return None
+    return (f"{name}: the residuals look like a constant offset of every detector reading "
+            f"(a term ∝ 1/cos θr, {pat.z:+.1f}σ, explains {pat.fraction:.0%} of the excess "
+            "χ²): a dark reading (the photodiode's dark current, ambient light, a lock-in's "
+            "pickup) was probably not subtracted — set [acquisition] dark = \"per_point\" "
+            "(or \"start\") in the plan so that every detector is read with the light off, "
+            "and fit again; until then the parameters are biased by it")
 
 
 def model_band(model: BRDFModel, fit: FitResult, theta_i: np.ndarray, phi_i: np.ndarray,

@@ -37,7 +37,9 @@ from analysis.brdf.reduction import (
     subtract_signature,
 )
 from analysis.radiometry import FlatField, flat_field
+from instrument.bench.angles import AngularModel, angular_model
 from instrument.bench.camera_calibration import CameraCalibration
+from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
 
 __all__ = ["Reduced", "ReductionOptions", "flat_from_run", "load_reference_table", "reduce_run"]
@@ -62,7 +64,8 @@ class ReductionOptions:
         Standard uncertainties of the receiver distance and aperture (mm); ``None``: not
         known (taken as 0 and reported as an unknown part of the common scale).
     sigma_theta_deg : float or None
-        Angular standard uncertainty; default the stages' position tolerance.
+        Angular standard uncertainty of θi and θr; default from the stages' read-back
+        resolution and repeatability (:mod:`instrument.bench.angles`).
     u_power_meter_rel : float
         Relative noise of one power-meter reading (power-meter detector).
     camera_calibration : path or None
@@ -204,24 +207,45 @@ class _Signals:
     profiles: list[np.ndarray]
     sq_sums: list[float]
     block: int
+    #: Covariance (W²) of errors shared between rows (a power-meter dark read once for
+    #: several points), or None.
+    cov_shared_w2: np.ndarray | None = None
+    #: What was subtracted as the detector's dark (power meter), for the provenance.
+    dark: PointDark | None = None
 
     @staticmethod
     def join(parts: list[_Signals]) -> _Signals:
+        cov = None
+        if any(p.cov_shared_w2 is not None for p in parts):
+            blocks = [p.cov_shared_w2 if p.cov_shared_w2 is not None
+                      else np.zeros((p.power_w.size, p.power_w.size)) for p in parts]
+            n = sum(b.shape[0] for b in blocks)
+            cov = np.zeros((n, n))
+            k = 0
+            for b in blocks:  # two runs never share a dark reading
+                cov[k:k + b.shape[0], k:k + b.shape[0]] = b
+                k += b.shape[0]
         return _Signals(np.concatenate([p.power_w for p in parts]),
                         np.concatenate([p.u_power_w for p in parts]),
                         np.concatenate([p.clipped for p in parts]),
                         [x for p in parts for x in p.profiles],
                         [x for p in parts for x in p.sq_sums],
-                        max(p.block for p in parts))
+                        max(p.block for p in parts), cov, parts[0].dark)
 
     def covariance(self, u_response_rel: float) -> np.ndarray | None:
-        """Relative covariance of the pixel-response error between rows (None without
-        profiles): :func:`analysis.brdf.reduction.pixel_response_covariance`."""
-        if not self.block or not self.profiles:
-            return None
-        return pixel_response_covariance(np.array(self.profiles),
-                                         u_response_rel=u_response_rel, block=self.block,
-                                         sq_sums=self.sq_sums)
+        """Relative covariance of the errors shared between rows (None without any): the
+        pixel-response error (:func:`analysis.brdf.reduction.pixel_response_covariance`)
+        and a shared dark reading."""
+        cov = None
+        if self.block and self.profiles:
+            cov = pixel_response_covariance(np.array(self.profiles),
+                                            u_response_rel=u_response_rel,
+                                            block=self.block, sq_sums=self.sq_sums)
+        if self.cov_shared_w2 is not None and np.any(self.cov_shared_w2):
+            p = np.where(self.power_w != 0, self.power_w, np.inf)
+            shared = self.cov_shared_w2 / np.outer(p, p)
+            cov = shared if cov is None else cov + shared
+        return cov
 
 
 def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
@@ -229,11 +253,7 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
              *, u_response_rel: float = 0.0) -> _Signals:
     """The camera's or the power meter's signals of ``rows`` (:class:`_Signals`)."""
     if opts.detector == "power_meter":
-        p = run.power_w[rows].astype(float)
-        if not np.all(np.isfinite(p)):
-            raise ValueError("the run has no power-meter readings at every point")
-        return _Signals(p, np.abs(p) * opts.u_power_meter_rel,
-                        np.zeros(rows.size, dtype=int), [], [], 0)
+        return _power_meter_signals(run, rows, opts)
     assert cal is not None
     n_avg = int(run.acquisition.get("frames", 1))
     rate = np.empty(rows.size)
@@ -257,6 +277,30 @@ def _signals(run: RunData, rows: np.ndarray, opts: ReductionOptions,
             "quantum_efficiency": cal.quantum_efficiency, "wavelength_nm": cal.wavelength_nm}
     return _Signals(camera_power_w(rate, **conv), camera_power_w(sd, **conv), clipped,
                     profiles, sq_sums, block)
+
+
+def _power_meter_signals(run: RunData, rows: np.ndarray, opts: ReductionOptions
+                         ) -> _Signals:
+    """The power meter's readings less its dark (:mod:`instrument.pipelines.brdf.dark`).
+
+    σ of a reading: the noise floor measured from the dark readings' spread combined with
+    ``u_power_meter_rel`` of the signal; the subtracted dark adds its own σ (independent
+    for a dark of its own, a covariance for a dark shared between points).
+    """
+    p = run.power_w[rows].astype(float)
+    if not np.all(np.isfinite(p)):
+        raise ValueError("the run has no power-meter readings at every point")
+    dark = power_meter_dark(run, rows)
+    floor = dark.noise_floor or 0.0
+    net = p - dark.level
+    u = np.hypot(floor, np.abs(p) * opts.u_power_meter_rel)
+    # a dark whose noise was not measured: the relative noise of a reading (and a warning)
+    u_dark = (dark.u_level if dark.noise_floor is not None
+              else np.abs(dark.level) * opts.u_power_meter_rel)
+    shared = dark.group >= 0
+    u = np.where(shared, u, np.hypot(u, u_dark))
+    cov = dark.shared_covariance(u_dark) if shared.any() else None
+    return _Signals(net, u, np.zeros(rows.size, dtype=int), [], [], 0, cov, dark)
 
 
 def _first_pass(run: RunData) -> Path | None:
@@ -383,7 +427,7 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
     w, w_src = _beam_radius(run, opts)
     div, div_src = _beam_divergence_rad(run, opts)
     radius, radius_src = _sample_radius(run, opts)
-    sig_t = _sigma_theta_rad(run, opts)
+    ang = _angular(run, opts)
     info: dict[str, Any] = {"solid_angle_sr": omega, "u_solid_angle_sr": u_omega,
                             "receiver_aperture_mm": aperture, "receiver_distance_mm": distance,
                             "receiver_distance_source": dist_src, "beam_radius_mm": w,
@@ -395,25 +439,26 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
         return None, info
     rg = ReceiverGeometry(w, distance, aperture, omega, sample_aperture=sampled,
                           beam_divergence_rad=div, sample_radius_mm=radius,
-                          sigma_theta_i_rad=sig_t, sigma_theta_r_rad=sig_t)
+                          sigma_theta_i_rad=ang.sigma_theta_i_rad,
+                          sigma_theta_r_rad=ang.sigma_theta_r_rad)
     info["receiver_model"] = (
         "instrument function: Gaussian footprint"
         + (" clipped by the sample's edge" if radius is not None else "")
         + (" × aperture integrated" if sampled else " × chief ray through the pupil centre")
         + (f" × beam divergence {1e3 * div:g} mrad" if div > 0 else "")
-        + f" × set-point spread σθ = {math.degrees(sig_t):.3g}°"
+        + f" × read-back spread σθi = {math.degrees(ang.sigma_theta_i_rad):.2g}°, "
+        f"σθr = {math.degrees(ang.sigma_theta_r_rad):.2g}°"
         + "; quadrature refined per point until below 0.1σ")
     return rg, info
 
 
-def _sigma_theta_rad(run: RunData, opts: ReductionOptions) -> float:
+def _angular(run: RunData, opts: ReductionOptions) -> AngularModel:
+    """σθi, σθr of the recorded (read-back) angles: the option, or the stages' read-back
+    resolution and repeatability (:mod:`instrument.bench.angles`)."""
     if opts.sigma_theta_deg is not None:
-        return math.radians(opts.sigma_theta_deg)
-    devices = run.profile().get("devices", {})
-    tol = [float(devices.get(r, {}).get("position_tolerance", 0.0))
-           for r in ("sample_theta", "detector_theta")]
-    # a reading within ±tol of the target, uniform: σ = tol/√3 (GUM type B)
-    return math.radians(max(tol) / math.sqrt(3.0))
+        s = math.radians(opts.sigma_theta_deg)
+        return AngularModel(s, s, (), ())
+    return angular_model(run.profile())
 
 
 def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Reduced:
@@ -448,7 +493,8 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
 
     ti, pi_ = rad(joined("theta_i")), rad(joined("phi_i"))
     tr, pr = rad(joined("theta_r")), rad(joined("phi_r"))
-    sig_t = _sigma_theta_rad(run, opts)
+    ang = _angular(run, opts)
+    sig_i, sig_r = ang.sigma_theta_i_rad, ang.sigma_theta_r_rad
     flat, flat_src, n_flat = _flat_for(run, opts) if cal is not None else (None, "none", 0)
     # the pixel-response error left in the summed signal: PRNU without a flat, the flat's
     # own noise with one (shared between points that image the spot onto the same pixels,
@@ -462,7 +508,11 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
     p_s, u_s, cov_rel, n_clipped = (sig.power_w, sig.u_power_w, sig.covariance(u_resp),
                                     sig.clipped)
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
-                            "detector": opts.detector, "sigma_theta_deg": math.degrees(sig_t),
+                            "detector": opts.detector,
+                            "sigma_theta_i_deg": math.degrees(sig_i),
+                            "sigma_theta_r_deg": math.degrees(sig_r),
+                            "angular_model": (ang.describe() if ang.stages else
+                                              "option --sigma-theta-deg"),
                             "options": asdict(opts)}
     if first is not None:
         prov["first_pass"] = f"{parts[1][0].run_id} ({parts[1][1].size} points, {first})"
@@ -472,7 +522,10 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         prov["pixel_response_u_rel"] = u_resp
     receiver, rinfo = _receiver(run, rows, opts, cal)
     prov.update(rinfo)
-    warnings = _receiver_warnings(rinfo)
+    warnings = _receiver_warnings(rinfo) + list(ang.warnings)
+    if sig.dark is not None:
+        prov["detector_dark"] = sig.dark.describe("nW", 1e9)
+        warnings.extend(_dark_warnings(sig.dark, opts))
     scale_unknown: list[str] = []
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
@@ -487,7 +540,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             solid_angle=rinfo["solid_angle_sr"],
             u_solid_angle=rinfo["u_solid_angle_sr"],
             u_responsivity_rel=cal.u_responsivity_rel if cal is not None else 0.0,
-            sigma_theta_i=sig_t, sigma_theta_r=sig_t, cosine_corrected=opts.cosine_corrected,
+            sigma_theta_i=sig_i, sigma_theta_r=sig_r, cosine_corrected=opts.cosine_corrected,
             receiver=receiver, cov_power_rel=cov_rel)
         prov.update(incident_power_w=p_i, incident_power_source=src)
     else:
@@ -502,7 +555,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
                              for r, rw in parts])
         std = _reference_standard(ref_run, opts)
         pts = relative_brdf(p_s, u_s, ref.power_w, ref.u_power_w, ti, pi_, tr, pr,
-                            reference=std, sigma_theta_i=sig_t, sigma_theta_r=sig_t,
+                            reference=std, sigma_theta_i=sig_i, sigma_theta_r=sig_r,
                             cosine_corrected=opts.cosine_corrected)
         # the ratio to a diffuse standard read through the same receiver is already the
         # normalised average of f over it: keep the geometry for the fit
@@ -547,6 +600,20 @@ def _receiver_warnings(rinfo: dict[str, Any]) -> list[str]:
     if rinfo["beam_radius_mm"] is None:
         out.append(f"beam radius {rinfo['beam_radius_source']}")
     return out
+
+
+def _dark_warnings(dark: PointDark, opts: ReductionOptions) -> list[str]:
+    """The power meter's dark in words when it was not measured, or its noise not."""
+    if not dark.measured:
+        return ["power-meter dark not measured: every reading still holds the photodiode's "
+                "dark current and any ambient light; set [acquisition] dark = \"per_point\" "
+                "(or \"start\") in the plan so that it is read with the light off and "
+                "subtracted"]
+    if dark.noise_floor is None:
+        return [f"power-meter noise floor not measured ({dark.n_readings} dark reading(s), "
+                "fewer than 3): each reading's σ is its relative noise alone "
+                f"({opts.u_power_meter_rel:.2%}); dark = \"per_point\" measures it"]
+    return []
 
 
 def _match_rows(run: RunData, rows: np.ndarray, other: RunData, *, tol_deg: float = 0.05

@@ -46,6 +46,7 @@ from analysis.brdf.reduction.lockin import (
     photodiode_from_profile,
 )
 from instrument.pipelines.brdf.analyse import AnalysisResult, analyse
+from instrument.pipelines.brdf.dark import lockin_dark, net_lockin_r
 from instrument.pipelines.brdf.reduce import Reduced, ReductionOptions, reduce_run
 from instrument.pipelines.brdf.report import write_report
 from instrument.pipelines.brdf.results import PROGRAM, fill_analysis
@@ -323,6 +324,12 @@ def _lockin_points(run: RunData, group: WavelengthGroup, opts: SpectralOptions,
     rows = group.rows
     r, u, s, o = (_column(run, c, np.nan if c != "lockin_overload" else 0).astype(float)[rows]
                   for c in _LOCKIN_COLUMNS)
+    # the lock-in's reading with the light off (a coherent offset), subtracted as a phasor
+    dark = lockin_dark(run, rows)
+    if dark.measured:
+        x = _column(run, "lockin_x_v", np.nan).astype(float)[rows]
+        y = _column(run, "lockin_y_v", np.nan).astype(float)[rows]
+        r, u = net_lockin_r(x, y, u, dark)
     rad = np.radians
     angles = (rad(run.theta_i[rows]), rad(run.phi_i[rows]), rad(run.theta_r[rows]),
               rad(run.phi_r[rows]))
@@ -334,6 +341,7 @@ def _lockin_points(run: RunData, group: WavelengthGroup, opts: SpectralOptions,
     sig = math.radians(opts.sigma_theta_deg)
     common = {"solid_angle": omega, "u_solid_angle": u_omega, "overload": o > 0,
               "sigma_theta_i": sig, "sigma_theta_r": sig, "receiver": receiver}
+    prov["detector_dark"] = dark.describe("µV", 1e6)
     if opts.route == "absolute":
         p_i, src = _incident_power(run, group, opts)
         u_rel = opts.u_incident_power_rel
@@ -378,6 +386,11 @@ def reduce_group(run: RunData, group: WavelengthGroup, opts: SpectralOptions, *,
                                              where="the bench profile's [photodiode]")
         pts, extra = _lockin_points(run, group, opts, photodiode)
         prov.update(extra, method=pts.method, route=opts.route)
+        if extra["detector_dark"].startswith("none"):
+            warnings.append(f"{group.label}: lock-in dark not measured (a coherent offset at "
+                            "the chopper frequency stays in every reading); set "
+                            "[acquisition] dark = \"per_point\" to read it with the shutter "
+                            "closed and subtract it")
     else:
         assert camera is not None
         idx = np.flatnonzero(np.isin(camera.rows, group.rows) & (camera.source == 0))

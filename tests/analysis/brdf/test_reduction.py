@@ -235,7 +235,12 @@ def test_angular_uncertainty_from_local_slope() -> None:
     f = 0.1 + 0.5 * tr + 0.2 * ti  # slopes: 0.5 /rad in θr, 0.2 /rad in θi
     u = angular_uncertainty(f, ti, tr, sigma_theta_r=0.01)
     np.testing.assert_allclose(u, 0.005, rtol=1e-9)
-    u2 = angular_uncertainty(f, ti, tr, sigma_theta_r=0.01, sigma_theta_i=0.02)
+    # θi 20° apart: not differenced by default (a coarse grid's difference is no local
+    # slope; the instrument-aware fit takes it from the model), but when allowed
+    u_coarse = angular_uncertainty(f, ti, tr, sigma_theta_r=0.01, sigma_theta_i=0.02)
+    np.testing.assert_allclose(u_coarse, 0.005, rtol=1e-9)
+    u2 = angular_uncertainty(f, ti, tr, sigma_theta_r=0.01, sigma_theta_i=0.02,
+                             max_step_i_rad=math.radians(25.0))
     np.testing.assert_allclose(u2[:3], math.hypot(0.005, 0.004), rtol=1e-9)
     assert u2[3] == pytest.approx(0.005)  # θr = 40° measured at one θi only
     assert np.all(angular_uncertainty(f, ti, tr) == 0.0)

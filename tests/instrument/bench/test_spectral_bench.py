@@ -310,3 +310,53 @@ def test_a_shutter_that_does_not_answer_is_a_typed_error_before_anything_moves(t
     err = capsys.readouterr().err
     assert err.startswith("device error: shutter:")
     assert not list((tmp_path / "runs").glob("*.h5"))
+
+
+def test_the_power_meter_sees_the_filter_s_colour_not_the_source_s():
+    """The PM100 emulator's photodiode responds at the wavelength of the light that reaches
+    it: behind the 450 nm filter, not the broadband source's nominal 550 nm. With the meter
+    set to the filter's centre (as the engine sets it) the reading is the true power; set
+    to 550 nm it is off by the responsivity ratio R(450)/R(550)."""
+    from hw_mocks import usb
+    from hw_mocks.firmware.pm100usb import silicon_responsivity_a_per_w as resp
+
+    with open_bench(load_profile("sim-spectral"),
+                    roles=["shutter", "filter_wheel", "power_meter", "source",
+                           "sample_theta", "detector_theta"]) as bench:
+        bench.filter_wheel.move_to(1)
+        bench.source.turn_on()
+        bench.shutter.turn_on()
+        firmware = usb.get_firmware("power_meter")
+        firmware.dark_current_a = firmware.noise_floor_a = 0.0  # the light alone
+        assert firmware._light_wavelength() == pytest.approx(450.0)
+        truth = firmware.true_power_w()
+        assert truth > 0
+        bench.power_meter.wavelength_nm = 450.0
+        assert bench.power_meter.read_power_w() == pytest.approx(truth, rel=0.02)
+        bench.power_meter.wavelength_nm = 550.0
+        assert bench.power_meter.read_power_w() == pytest.approx(
+            truth * resp(450.0) / resp(550.0), rel=0.02)
+        bench.shutter.turn_off()
+
+
+def test_a_resumed_run_keeps_each_point_s_planned_filter(tmp_path):
+    """The filter slot is part of a planned point (its meta): the run file stores it with
+    the planned points, so ``resume`` (which continues the stored plan, not a rebuilt one)
+    puts the same filter in the beam for every remaining point."""
+    from types import SimpleNamespace
+
+    from instrument.plans import build_plan, parse_plan
+    from instrument.run.runner import plan_from_run
+
+    plan = tmp_path / "plan.toml"
+    plan.write_text(LOCKIN_PLAN.replace('detectors = ["lockin"]',
+                                        'detectors = ["power_meter"]')
+                    + '[spectral]\nfilters = [1, 2]\norder = "motion"\n', encoding="utf-8")
+    profile = load_profile("sim-spectral")
+    built = build_plan(parse_plan(plan.read_text(encoding="utf-8"), source="plan"), profile)
+    assert main(["run", str(plan), "--bench", "sim-spectral", "--out", str(tmp_path / "runs"),
+                 "--no-fsync", "--quiet"]) == 0
+    (path,) = (tmp_path / "runs").glob("*.h5")
+    again = plan_from_run(path, SimpleNamespace(profile=profile))
+    assert [dict(p.meta).get("filter") for p in again.points] == \
+        [dict(p.meta).get("filter") for p in built.points] == [1, 1, 1, 2, 2, 2]

@@ -160,3 +160,55 @@ def test_a_run_on_freshly_powered_emulated_stages_counts_their_homing(tmp_path):
         engine.subscribe(lambda ev: started.append(ev) if isinstance(ev, RunStarted) else None)
         engine.run()
     assert started[0].estimated_s == pytest.approx(est.total_s + est.homing_s["camera_z"])
+
+
+def _no_camera_costs(text: str) -> str:
+    return "\n".join(line for line in text.splitlines()
+                     if not line.startswith(("frame_overhead_s", "scene_change_s")))
+
+
+def test_a_camera_without_cost_keys_takes_its_driver_default_and_says_so():
+    """A profile without the camera's costs used to count them as zero (1.8 s estimated
+    for a 272 s scan): the simulated camera's measured defaults are assumed, and named."""
+    full = load_profile("sim")
+    bare = parse_profile(_no_camera_costs(full.source_text), source="bare")
+    t_full, t_bare = bench_timing(full), bench_timing(bare)
+    assert t_full.assumed == ()
+    assert t_bare.frame_overhead_s == pytest.approx(t_full.frame_overhead_s)
+    assert t_bare.scene_change_s == pytest.approx(t_full.scene_change_s)
+    assert len(t_bare.assumed) == 2 and "camera.frame_overhead_s" in t_bare.assumed[0]
+    plan = load_plan(ROOT / "examples" / "brdf_inplane.toml")
+    est_full = build_plan(plan, full).estimate()
+    est_bare = build_plan(plan, bare).estimate()
+    assert est_bare.total_s == pytest.approx(est_full.total_s)
+    assert est_bare.assumed == t_bare.assumed
+
+
+
+
+def _lockin_estimate(dark: str = "none", filters: str = "[1]"):
+    from tests.instrument.bench.test_spectral_bench import LOCKIN_PLAN
+
+    text = (LOCKIN_PLAN.replace('dark = "none"', f'dark = "{dark}"')
+            + f"[spectral]\nfilters = {filters}\n")
+    spec_ = parse_plan(text, source="plan")
+    return build_plan(spec_, load_profile("sim-spectral")).estimate()
+
+
+def test_lock_in_settling_and_filter_turns_are_in_the_estimate():
+    timing = bench_timing(load_profile("sim-spectral"))
+    # 30 ms at the SR830's power-up 12 dB/oct: 7 τ per wait; 4 snapshots and 2 to range
+    assert timing.lockin_settle_s == pytest.approx(7 * 0.03)
+    reading = timing.lockin_reading_s(4)
+    assert reading == pytest.approx(6 * 0.21)
+    one = _lockin_estimate()
+    assert one.bench_acquisition_s >= 3 * reading
+    # with per-point darks every point is read twice
+    dark = _lockin_estimate("per_point")
+    assert dark.bench_acquisition_s - one.bench_acquisition_s == pytest.approx(3 * reading)
+    # the wheel: 1 → 3 on a six-slot wheel is 120° at 3 s per half turn, + 0.1 s to settle
+    assert timing.wheel_move_s(1, 3) == pytest.approx(2.1)
+    assert timing.wheel_move_s(1, 6) == pytest.approx(1.1)  # the shorter way round
+    assert timing.wheel_move_s(2, 2) == 0.0
+    two = _lockin_estimate(filters="[1, 3]")
+    assert two.bench_acquisition_s - 2 * one.bench_acquisition_s == pytest.approx(2.1, abs=0.01)

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -110,11 +110,16 @@ class MatrixStats:
     clipped: float              # mean clipped readings left out per scan
     seconds_per_fit: float
     chosen: tuple[str, ...]     # per seed
+    #: (estimate − truth)/σ of the true model's fit, shape (seeds, k), and its χ² p-value
+    #: per seed: the pulls' RMS is 1 and the p-values uniform when σ match the scatter
+    pulls: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    p_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def matrix_seed(seed: int, *, r, sample: Sample, models: tuple[str, ...]) -> tuple:
     """One seed of the validation matrix: (right model, right or an indistinguishable twin,
-    flagged, truth inside 2σ per parameter, χ²/dof, clipped readings, chosen, fit seconds)."""
+    flagged, truth inside 2σ per parameter, χ²/dof, clipped readings, chosen, fit seconds,
+    the true model's pulls and its χ² p-value)."""
     import time
 
     from instrument.pipelines.brdf.analyse import analyse
@@ -130,8 +135,10 @@ def matrix_seed(seed: int, *, r, sample: Sample, models: tuple[str, ...]) -> tup
                      and abs(rows[sample.model].bic - rows[res.chosen].bic) <= 2.0)
     fit = res.fits[sample.model]
     inside = np.abs(fit.params - np.array(sample.params)) <= 2.0 * fit.stderr
+    pull = (fit.params - np.array(sample.params)) / fit.stderr
     return (right, twin, not res.adequate, inside, res.chosen_goodness.reduced_chi2,
-            int(res.excluded_index.size), res.chosen, seconds)
+            int(res.excluded_index.size), res.chosen, seconds, pull,
+            res.goodness[sample.model].p_value)
 
 
 def matrix_stats(sample: Sample, seeds: range, setup: ScanSetup | None = None,
@@ -148,11 +155,13 @@ def matrix_stats(sample: Sample, seeds: range, setup: ScanSetup | None = None,
         per = [matrix_seed(seed, r=r, sample=sample, models=models) for seed in seeds]
     else:
         per = mapper(matrix_seed, seeds, r=r, sample=sample, models=models)
-    right, twin, flagged, inside, chi, clipped, chosen, seconds = zip(*per, strict=True)
+    right, twin, flagged, inside, chi, clipped, chosen, seconds, pull, pv = zip(
+        *per, strict=True)
     n = len(seeds)
     return MatrixStats(sample.name, n, float(np.mean(right)), float(np.mean(twin)),
                        float(np.mean(flagged)), np.mean(inside, axis=0), np.array(chi),
-                       float(np.mean(clipped)), sum(seconds) / n, tuple(chosen))
+                       float(np.mean(clipped)), sum(seconds) / n, tuple(chosen),
+                       np.array(pull), np.array(pv))
 
 
 @pytest.mark.slow

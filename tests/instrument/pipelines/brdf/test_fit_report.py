@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import replace
 
 import h5py
@@ -389,3 +390,21 @@ def test_per_wavelength_fit_needs_a_wavelength_axis(glossy_run, capsys) -> None:
     assert main(["fit", str(glossy_run), "--detector", "lockin", "--per-wavelength", "no",
                  "--no-write"]) == 2
     assert "--per-wavelength yes" in capsys.readouterr().out
+
+
+def test_the_comparison_table_counts_only_the_fitted_readings(tmp_path, capsys) -> None:
+    """A sharp lobe (GGX α = 0.05) loses its peak readings to clipping: they are left out
+    of the fits, so the comparison table's χ²/dof uses the same degrees of freedom as the
+    verdict line; ``--no-cv`` is named as the reason there is no cross-validation (the
+    scan has three θi)."""
+    sharp = Sample("sharp", "lambert+ggx", (0.3, 0.5, 0.05))
+    path = write_run_file(render(ScanSetup(theta_i_deg=(20.0, 50.0, 80.0)), sharp), 5,
+                          tmp_path / "sharp.h5")
+    capsys.readouterr()
+    assert main(["fit", str(path), "--models", "lambert+ggx", "--no-cv", "--no-write"]) == 0
+    out = capsys.readouterr().out
+    assert "clipped reading(s) left out" in out
+    assert "(no cross-validation: cross-validation not asked for)" in out
+    verdict = float(re.search(r"χ²/dof = ([\d.]+) for", out).group(1))
+    table = float(re.search(r"lambert\+ggx +3 parameter\(s\) +χ²/dof +([\d.]+)", out).group(1))
+    assert table == pytest.approx(verdict, rel=1e-3)

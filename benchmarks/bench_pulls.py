@@ -1,0 +1,155 @@
+"""Do the reported σ match the scatter? Pulls and χ² p-values per detector.
+
+For every scan of a known sample the true model's fit gives pulls z = (estimate − truth)/σ
+per parameter and a χ² p-value. When the σ are right, the RMS of the pulls is 1 and the
+p-values are uniform on [0, 1] (Kolmogorov–Smirnov test against U(0, 1),
+:func:`scipy.stats.kstest`; p_KS > 0.01 asked). RMS < 1 means σ too large, > 1 too small.
+
+* ``camera``: the closed-loop validation matrix (tests/instrument/sim_scan.py ``MATRIX``:
+  ten samples, θi = 20°, 50°, 80°, the camera rendered without the motion emulators),
+  every scan analysed as ``scatterlab fit`` does (default candidates, forward model, gate).
+* ``power_meter``: scans through the engine on the emulated bench (PM100USB firmware over
+  the pyusb backend, real drivers), one seed of the meter's noise per run, with per-point
+  darks, reduced and fitted as ``scatterlab fit --detector power_meter`` does.
+
+Run: ``python benchmarks/bench_pulls.py [--camera N] [--power-meter N] [--samples a,b]``
+(N seeds per sample; 0 skips the detector).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.instrument.pipelines.brdf.test_closed_loop import matrix_stats  # noqa: E402
+from tests.instrument.sim_scan import MATRIX  # noqa: E402
+
+#: Samples of the power-meter runs: (name, scene brdf, its parameters as profile TOML,
+#: the registry model, truth).
+PM_SAMPLES = (
+    ("lambert-0.5", "lambert", "{ rho = 0.5 }", "lambert", (0.5,)),
+    ("glossy-ggx", "lambert+ggx",
+     '{ "lambert.rho" = 0.3, "ggx.ks" = 0.5, "ggx.alpha" = 0.2 }', "lambert+ggx",
+     (0.3, 0.5, 0.2)),
+)
+
+PM_PLAN = """
+[plan]
+kind = "brdf_in_plane"
+name = "pulls"
+[sample]
+name = "{name}"
+[scan]
+skip_beam_points = true
+theta_i = [20, 50]
+theta_r = {{ start = -70, stop = 80, step = 10 }}
+specular = {{ half_width_deg = 4, step_deg = 2 }}
+[acquisition]
+detectors = ["power_meter"]
+dark = "per_point"
+"""
+
+
+def summary(label: str, pulls: list[np.ndarray], p_values: np.ndarray, seconds: float
+            ) -> str:
+    z = np.concatenate([np.ravel(x) for x in pulls])
+    z = z[np.isfinite(z)]
+    ks = stats.kstest(p_values[np.isfinite(p_values)], "uniform").pvalue
+    return (f"| {label} | {len(p_values)} | {z.size} | {np.sqrt(np.mean(z**2)):.2f} | "
+            f"{np.mean(z):+.2f} | {np.mean(np.abs(z) <= 2):.0%} | {np.median(p_values):.2f} | "
+            f"{ks:.3g} | {seconds:.0f} |")
+
+
+HEADER = ("| detector / sample | scans | pulls | RMS pull | mean pull | |z| ≤ 2 | median "
+          "χ² p | KS p (χ² p-values uniform) | time (s) |\n|---|---:|---:|---:|---:|---:|"
+          "---:|---:|---:|")
+
+
+def camera(n: int, names: list[str] | None) -> None:
+    print(HEADER)
+    all_z, all_p = [], []
+    t_all = time.perf_counter()
+    for s in MATRIX:
+        if names and s.name not in names:
+            continue
+        t0 = time.perf_counter()
+        st = matrix_stats(s, range(n))
+        all_z.append(st.pulls)
+        all_p.append(st.p_values)
+        print(summary(f"camera / {s.name}", [st.pulls], st.p_values,
+                      time.perf_counter() - t0), flush=True)
+    print(summary("**camera, all**", all_z, np.concatenate(all_p),
+                  time.perf_counter() - t_all), flush=True)
+
+
+def _pm_profile(brdf: str, params: str, seed: int) -> str:
+    text = (ROOT / "instrument" / "bench" / "profiles" / "sim.toml").read_text("utf-8")
+    text = re.sub(r'brdf = "lambert\+ggx"\nparams = \{[^}]*\}',
+                  f'brdf = "{brdf}"\nparams = {params}', text)
+    return text.replace("world=sim&seed=2", f"world=sim&seed={100 + seed}")
+
+
+def power_meter(n: int, names: list[str] | None) -> None:
+    from instrument.cli import main as cli
+    from instrument.pipelines.brdf.analyse import analyse
+    from instrument.pipelines.brdf.reduce import ReductionOptions, reduce_run
+
+    print(HEADER)
+    all_z, all_p = [], []
+    t_all = time.perf_counter()
+    for name, brdf, params, model, truth in PM_SAMPLES:
+        if names and name not in names:
+            continue
+        t0 = time.perf_counter()
+        zs, ps = [], []
+        for seed in range(n):
+            with tempfile.TemporaryDirectory() as tmp:
+                tmp_p = Path(tmp)
+                (tmp_p / "bench.toml").write_text(_pm_profile(brdf, params, seed), "utf-8")
+                (tmp_p / "plan.toml").write_text(PM_PLAN.format(name=name), "utf-8")
+                assert cli(["run", str(tmp_p / "plan.toml"), "--bench",
+                            str(tmp_p / "bench.toml"), "--out", str(tmp_p / "runs"),
+                            "--no-fsync", "--quiet"]) == 0
+                (path,) = (tmp_p / "runs").glob("*.h5")
+                red = reduce_run(path, ReductionOptions(detector="power_meter"))
+                res = analyse(red.points, (model,), run_cv=False, seed=seed)
+                fit = res.fits[model]
+                zs.append((fit.params - np.array(truth)) / fit.stderr)
+                ps.append(res.goodness[model].p_value)
+        all_z.append(np.array(zs))
+        all_p.append(np.array(ps))
+        print(summary(f"power meter / {name}", [np.array(zs)], np.array(ps),
+                      time.perf_counter() - t0), flush=True)
+    print(summary("**power meter, all**", all_z, np.concatenate(all_p),
+                  time.perf_counter() - t_all), flush=True)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--camera", type=int, default=10, metavar="N")
+    ap.add_argument("--power-meter", type=int, default=10, metavar="N")
+    ap.add_argument("--samples", default=None, help="comma-separated sample names")
+    args = ap.parse_args()
+    names = args.samples.split(",") if args.samples else None
+    if args.camera:
+        camera(args.camera, names)
+    if args.power_meter:
+        power_meter(args.power_meter, names)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
