@@ -27,9 +27,9 @@ import numpy as np
 
 from instrument.run.layout import header_from_file
 
-__all__ = ["OPTIONAL_COLUMNS", "SALVAGE_WORDS", "FileState", "Readable", "ZeroPadded", "held_by_this_process",
-           "inspect_run_file", "is_lock_refusal",
-           "open_damaged", "readable_points", "recorded_length", "row_count", "unrecoverable_message"]
+__all__ = ["OPTIONAL_COLUMNS", "SALVAGE_WORDS", "FileState", "Readable", "ZeroPadded",
+           "held_by_this_process", "inspect_run_file", "is_lock_refusal", "open_damaged",
+           "readable_points", "recorded_length", "row_count", "unrecoverable_message"]
 
 #: HDF5's word for a file shorter than its superblock says (the library's message text).
 _TRUNCATED = re.compile(r"truncated file: eof = (\d+).*stored_eof = (\d+)")
