@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import functools
 import importlib.util
+import io
 import os
 import signal
 import threading
@@ -37,6 +38,7 @@ from instrument.batch.cluster import (
 )
 from instrument.batch.task import Outcome, run_serial
 from instrument.cli import main
+from instrument.cli.batch import BatchProgress
 from instrument.cli.fit import fit_options
 from instrument.run.results import read_results_attrs, results_dir
 from instrument.run.runfile import read_run
@@ -149,6 +151,20 @@ def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries)
             assert "worker process analysing it died" in o.cause
         else:
             _same_answer(o, serial[name])  # (retried on another worker:) the same answer
+    # a run whose worker died and that another worker finished says it was redone (and
+    # only then: without retries the dead worker's runs failed instead)
+    redone = [o for o in out if o.redone]
+    assert all(o.status != "failed" and o.redone == 1 for o in redone)
+    assert bool(redone) == bool(retries)
+    # the console says so, in one line per run that was redone
+    progress = BatchProgress(len(out), stream=io.StringIO())
+    for o in out:
+        progress(o)
+    lines = [line for line in progress.stream.getvalue().splitlines()
+             if line.startswith("  redone: ")]
+    assert lines == [f"  redone: {o.run}: the worker process analysing it died (killed, "
+                     "crashed or out of memory); another worker analysed it again from the "
+                     "start" for o in out if o.redone]
     if not retries:
         assert any(by[n].status == "failed" for n in held)
     # no file damaged: every run reads whole, every results file is complete, no debris

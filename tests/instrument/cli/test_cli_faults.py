@@ -6,9 +6,11 @@ without its journal, read the same way by every analysis and by ``resume``."""
 from __future__ import annotations
 
 import os
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -19,6 +21,7 @@ from instrument.bench.profile import load_profile
 from instrument.cli import main
 from instrument.run.layout import journal_path
 from instrument.run.paths import writer_lock_path
+from instrument.run.results import LOCK_WAIT_S, RunBusy, run_lock
 from instrument.run.runfile import read_events, read_summary
 from instrument.run.storage import free_space_probe
 
@@ -144,8 +147,10 @@ def test_a_run_on_a_disk_below_the_margin_is_refused_in_one_line(tmp_path, capsy
     assert not list(out.glob("*.h5*"))  # no run file, so nothing to resume
 
 
-def test_a_disk_full_pause_and_its_resolution_are_in_the_event_log(tmp_path, capsys,
-                                                                   small_camera_bench):
+@pytest.fixture
+def paused_run(tmp_path, capsys, small_camera_bench):
+    """A run that a disk filling after three points paused: (its file, the options of
+    ``run``/``resume`` here, what ``run`` printed)."""
     plan = tmp_path / "p.toml"
     plan.write_text(FRAME_PLAN)
     out = tmp_path / "runs"
@@ -153,8 +158,12 @@ def test_a_disk_full_pause_and_its_resolution_are_in_the_event_log(tmp_path, cap
     with free_space_probe(SmallDisk(calls=4)):  # creation and three points fit
         assert main(["run", str(plan), *argv]) == 1
     text = capsys.readouterr().out
+    return next(out.glob("*.h5")).resolve(), argv, text
+
+
+def test_a_disk_full_pause_and_its_resolution_are_in_the_event_log(paused_run, capsys):
+    path, argv, text = paused_run
     assert "run paused: 3 of 21 points" in text and "disk nearly full" in text
-    path = next(out.glob("*.h5"))
     events = read_events(path)
     (fault,) = [e for e in events if e["kind"] == "fault"]
     assert fault["device"] == "storage" and fault["action"] == "pause"
@@ -175,16 +184,8 @@ def _wait_for(condition, what: str, timeout_s: float = 120.0) -> None:
         time.sleep(0.05)
 
 
-def test_the_second_of_two_resumes_says_who_continues_the_run(tmp_path, capsys,
-                                                              small_camera_bench):
-    plan = tmp_path / "p.toml"
-    plan.write_text(FRAME_PLAN)
-    out = tmp_path / "runs"
-    argv = ["--out", str(out), "--bench", str(small_camera_bench), "--quiet", "--no-fsync"]
-    with free_space_probe(SmallDisk(calls=4)):
-        assert main(["run", str(plan), *argv]) == 1  # paused: 3 of 21 points
-    capsys.readouterr()
-    path = next(out.glob("*.h5")).resolve()
+def test_the_second_of_two_resumes_says_who_continues_the_run(paused_run):
+    path, argv, _text = paused_run  # 3 of 21 points
     lock = writer_lock_path(path)
     first = subprocess.Popen([sys.executable, "-m", "instrument.cli", "resume", str(path),
                               *argv[:2], "--quiet", "--no-fsync"], cwd=ROOT,
@@ -215,3 +216,31 @@ def test_the_second_of_two_resumes_says_who_continues_the_run(tmp_path, capsys,
     with h5py.File(path) as f:
         index = list(f["entry/points/index"][()])
     assert sorted(index) == list(range(21))  # none twice: the loser wrote nothing
+
+
+def test_a_fit_on_a_locked_run_says_at_once_who_holds_it_and_how_long_it_waits(scalar_run):
+    path, _out = scalar_run
+    path = path.resolve()
+    with run_lock(path, what="scatterlab batch fit") as lock:
+        fit = subprocess.Popen([sys.executable, "-m", "instrument.cli", "fit", str(path)],
+                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: lines.put(fit.stdout.readline()), daemon=True).start()
+        try:
+            first = lines.get(timeout=120)  # said while the lock is still held
+        except queue.Empty:
+            fit.kill()
+            raise
+        assert first == (f"waiting: another analysis of {path.name} (process {os.getpid()}: "
+                         f"scatterlab batch fit) is writing its results; this one starts "
+                         f"when it ends (at most {LOCK_WAIT_S:g} s)\n")
+        assert fit.poll() is None  # still waiting for the lock
+        # another thread of this process is refused at once, naming the holder
+        with (pytest.raises(RunBusy, match=f"process {os.getpid()}: scatterlab batch fit"),
+              run_lock(path, wait_s=0)):
+            pass
+    rest, err = fit.communicate(timeout=300)  # the lock is free: the fit goes on
+    assert "Traceback" not in err + rest
+    assert fit.returncode == 2 and rest == "error: point 0 has no frames\n"  # its own end
+    assert lock.read_text() == ""  # nobody holds it now
