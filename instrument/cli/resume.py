@@ -51,6 +51,7 @@ def print_repairs(report, path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.run.health import inspect_run_file
     from instrument.run.locks import LockHeld, hold
     from instrument.run.paths import writer_lock_path
 
@@ -59,8 +60,8 @@ def run(args: argparse.Namespace) -> int:
     except FileNotFoundError as err:
         print(f"error: {err.strerror or err}")
         return 2
-    if not path.is_file():
-        return _resume(args, path)  # recovery names what is wrong with it
+    if not path.is_file() or not inspect_run_file(path).is_run:
+        return _resume(args, path)  # recovery names what is wrong with it (no lock file)
     lock = writer_lock_path(path)
     try:
         # One process continues a run: a second resume is told who, instead of meeting

@@ -244,3 +244,12 @@ def test_a_fit_on_a_locked_run_says_at_once_who_holds_it_and_how_long_it_waits(s
     assert "Traceback" not in err + rest
     assert fit.returncode == 2 and rest == "error: point 0 has no frames\n"  # its own end
     assert lock.read_text() == ""  # nobody holds it now
+
+
+def test_resuming_a_file_that_is_no_run_leaves_no_lock_beside_it(tmp_path, capsys):
+    notes = tmp_path / "notes.h5"
+    notes.write_text("not an HDF5 file")
+    assert main(["resume", str(notes), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().out == (f"error: {notes} is not a scatterlab run file (not an "
+                                       "HDF5 file)\n")
+    assert not writer_lock_path(notes).exists()
