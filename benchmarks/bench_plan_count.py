@@ -5,8 +5,8 @@ A plan of 10 × 10⁶ in-plane angles (10⁷ points, ten times the limit) is ref
 (:mod:`instrument.plans.count`). Reported: the wall time of the refusal (best of
 ``--repeat``) and its peak of traced Python memory (``tracemalloc``); and, for scale, what
 generating points costs (``_raw_points``, what ``build_plan`` did before counting, for a
-plan of ``--generate`` points: its time untraced and its peak traced, and both extrapolated linearly to
-10⁷ points).
+plan of ``--generate`` points: its time untraced and its peak traced, and both extrapolated
+linearly to 10⁷ points).
 
     python benchmarks/bench_plan_count.py
     python benchmarks/bench_plan_count.py --generate 100000 --repeat 5
