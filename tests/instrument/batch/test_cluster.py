@@ -31,6 +31,7 @@ pytest.importorskip("distributed")
 
 from instrument.batch.cluster import (
     BLAS_ENV,
+    _worker_deaths,
     cluster_map,
     connect,
     run_on_cluster,
@@ -204,6 +205,26 @@ def test_cli_batch_on_a_local_cluster_prints_the_dashboard_and_writes_the_table(
         for k, v in ref.values.items():
             assert row[k] == (repr(v) if isinstance(v, float) else str(v)), k
     assert (tmp_path / "table" / table.with_suffix(".html").name).is_file()
+
+
+def _dies_the_first_time(marker: str) -> str:
+    """A task whose worker process is killed the first time it runs it (as by the OOM
+    killer), and that completes on the worker Dask gives it to next."""
+    m = Path(marker)
+    if not m.exists():
+        m.write_text("tried")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return "done"
+
+
+def test_a_task_given_to_another_worker_counts_the_death(client, tmp_path):
+    """What ``Outcome.redone`` reads (the cheap part of the killed-worker test above)."""
+    fut = client.submit(_dies_the_first_time, str(tmp_path / "marker"), pure=False)
+    assert fut.result(timeout=120) == "done"
+    assert client.run_on_scheduler(_worker_deaths, key=fut.key) == 1
+    again = client.submit(_dies_the_first_time, str(tmp_path / "marker"), pure=False)
+    assert again.result(timeout=120) == "done"
+    assert client.run_on_scheduler(_worker_deaths, key=again.key) == 0
 
 
 def test_the_planner_sweep_on_the_cluster_equals_the_loop(client):
