@@ -69,8 +69,9 @@ def hold(path: str | Path, what: str, *, wait_s: float = 0.0, poll_s: float = 0.
                     told = True
                 time.sleep(poll_s)
         try:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"process {os.getpid()}: {what}\n".encode(), 0)
+            with contextlib.suppress(OSError):  # a full disk: held all the same, unnamed
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"process {os.getpid()}: {what}\n".encode(), 0)
             yield path
         finally:
             with contextlib.suppress(OSError):
