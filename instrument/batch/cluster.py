@@ -8,7 +8,9 @@
 * :func:`run_on_cluster` submits one :func:`instrument.batch.task.run_task` per run and
   collects the outcomes as they finish. A task catches its run's own problems; what is left
   is a worker process that died under it (killed, crashed, out of memory): Dask gives the
-  task to another worker up to ``retries`` times, then it is reported as failed.
+  task to another worker up to ``retries`` times, then it is reported as failed. A task
+  that was given to another worker says so (``Outcome.redone``: the scheduler's count of
+  the workers that died holding it), and ``scatterlab batch`` prints one line for it.
 * :func:`cluster_map` is an ordered map for sweeps: the same function on many inputs, the
   results in input order, equal to a loop here because every input carries its own seed.
 
@@ -23,6 +25,7 @@ import logging
 import os
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -147,6 +150,9 @@ def run_on_cluster(client: Client, analysis: str, runs: Sequence[str | Path],
         run = str(runs[i])
         try:
             o = fut.result()
+            deaths = client.run_on_scheduler(_worker_deaths, key=fut.key)
+            if deaths:
+                o = replace(o, redone=int(deaths))
         except KilledWorker as err:
             o = Outcome(run, analysis, "failed",
                         cause=f"the worker process analysing it died each time it was tried "
@@ -158,6 +164,13 @@ def run_on_cluster(client: Client, analysis: str, runs: Sequence[str | Path],
         if on_outcome is not None:
             on_outcome(o)
     return [o for o in out if o is not None]
+
+
+def _worker_deaths(key: str, dask_scheduler=None) -> int:
+    """On the scheduler: how many worker processes died while they held task ``key``
+    (Dask's count of them, which it gives the task to another worker after each)."""
+    ts = dask_scheduler.tasks.get(key) if dask_scheduler is not None else None
+    return int(getattr(ts, "suspicious", 0) or 0)
 
 
 def cluster_map(client: Client, fn: Callable[..., Any], items: Iterable[Any],

@@ -81,6 +81,9 @@ class Outcome:
         ``host:pid`` of the process that ran it.
     detail : str
         The traceback of a failure (its last lines), for the HTML table.
+    redone : int
+        How many times the task was given to another worker because the worker process
+        analysing it died (killed, crashed, out of memory); 0 when it never was.
     """
 
     run: str
@@ -97,6 +100,7 @@ class Outcome:
     cpu_seconds: float = 0.0
     worker: str = ""
     detail: str = ""
+    redone: int = 0
 
     @property
     def ok(self) -> bool:
@@ -172,7 +176,7 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
             return outcome("failed", cause="the run is still being written (status "
                            "'running'); analyse it when it ends, or resume it if its "
                            "process was killed")
-        with run_lock(run, wait_s=lock_wait_s):
+        with run_lock(run, wait_s=lock_wait_s, what=f"scatterlab batch {analysis}"):
             folder = results_dir(run, spec.pipeline)
             remove_stale_temporaries(folder)
             if not force:

@@ -32,11 +32,18 @@ def writing_outputs(run: str | Path, command: str, pipeline: str,
         Another analysis of the run held its lock too long.
     """
     from instrument.run.paths import results_dir
-    from instrument.run.results import remove_stale_temporaries, run_lock
+    from instrument.run.results import LOCK_WAIT_S, remove_stale_temporaries, run_lock
     from instrument.run.runfile import check_run_file
 
     check_run_file(run, command)
-    with run_lock(run, folder=out):
+
+    def waiting(holder: str) -> None:  # said at once, not after the wait
+        print(f"waiting: another analysis of {Path(run).name} ({holder}) is writing its "
+              f"results; this one starts when it ends (at most {LOCK_WAIT_S:g} s)",
+              flush=True)
+
+    with run_lock(run, folder=out, what=f"scatterlab {command} {Path(run).name}",
+                  on_wait=waiting):
         remove_stale_temporaries(out if out is not None else results_dir(run, pipeline))
         yield
 

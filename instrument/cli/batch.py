@@ -119,6 +119,11 @@ class BatchProgress:
 
     def __call__(self, o: Outcome) -> None:
         self.outcomes.append(o)
+        if o.redone:
+            times = "" if o.redone == 1 else f" ({o.redone} times)"
+            self._line(f"  redone: {o.run}: the worker process analysing it died (killed, "
+                       f"crashed or out of memory){times}; another worker analysed it "
+                       "again from the start")
         if o.status == "failed":
             self._line(f"  failed: {o.run}: {o.cause}")
         now = time.monotonic()

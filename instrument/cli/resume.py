@@ -51,14 +51,39 @@ def print_repairs(report, path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from instrument.run.health import inspect_run_file
+    from instrument.run.locks import LockHeld, hold
+    from instrument.run.paths import writer_lock_path
+
+    try:
+        path = find_run(args.run, args.out)
+    except FileNotFoundError as err:
+        print(f"error: {err.strerror or err}")
+        return 2
+    if not path.is_file() or not inspect_run_file(path).is_run:
+        return _resume(args, path)  # recovery names what is wrong with it (no lock file)
+    lock = writer_lock_path(path)
+    try:
+        # One process continues a run: a second resume is told who, instead of meeting
+        # the first one's open file somewhere inside recovery.
+        with hold(lock, f"scatterlab resume {path.name}"):
+            return _resume(args, path)
+    except LockHeld as err:
+        if err.path != lock:
+            raise
+        print(f"error: run {path.name} is being continued by {err.holder} (lock {lock}); "
+              "wait for it to end, or stop it, then resume again")
+        return 2
+
+
+def _resume(args: argparse.Namespace, path: Path) -> int:
     from instrument.run.recovery import describe_points
     from instrument.run.runner import recover_run
     from instrument.run.storage import StorageError
 
     try:
-        path = find_run(args.run, args.out)
         report = recover_run(path)
-    except (FileNotFoundError, StorageError) as err:
+    except StorageError as err:
         print(f"error: {err.strerror or err}")  # the message, without "[Errno N]"
         return 2
     path = Path(path).resolve()

@@ -93,7 +93,6 @@ def run(args: argparse.Namespace) -> int:
     from instrument.bench.profile import load_profile
     from instrument.plans import build_plan, load_plan
     from instrument.plans.lobe import lobe_of
-    from instrument.run.runner import start_run
 
     spec = load_plan(args.plan)
     profile = load_profile(args.bench or "sim")
@@ -112,11 +111,26 @@ def run(args: argparse.Namespace) -> int:
               f"({err.strerror or err})")
         return 2
     with open_bench(profile) as bench:
-        engine = start_run(plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
+        engine = _start(plan, bench, args)
+        if engine is None:
+            return 2
         code = drive(engine, args.quiet)
         if code != 0 or lobe_of(spec) is None:
             return code
         return _second_pass(Path(engine.store.path), spec, profile, bench, args)
+
+
+def _start(plan, bench, args: argparse.Namespace) -> RunEngine | None:
+    """The engine of a new run file, or None with the reason printed in one line (a disk
+    below the free-space margin: no run file was made)."""
+    from instrument.run.runner import start_run
+    from instrument.run.storage import StorageError
+
+    try:
+        return start_run(plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
+    except StorageError as err:
+        print(f"error: {err.strerror or err}")  # the message, without "[Errno 28]"
+        return None
 
 
 def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) -> int:
@@ -124,7 +138,6 @@ def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) ->
     points by Fisher information and run them (:mod:`instrument.plans.lobe`)."""
     from instrument.bench.guard import GuardError
     from instrument.cli._lobe import second_pass_plan
-    from instrument.run.runner import start_run
 
     try:
         second = second_pass_plan(first, spec, profile)
@@ -137,7 +150,9 @@ def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) ->
     for name in pl.sigma_first:
         print(f"  predicted σ({name}): {pl.sigma_first[name]:.3g} after the first pass, "
               f"{pl.sigma_both[name]:.3g} with the second")
-    engine = start_run(second.plan, bench, runs_dir=args.out, fsync=not args.no_fsync)
+    engine = _start(second.plan, bench, args)
+    if engine is None:
+        return 2
     code = drive(engine, args.quiet)
     print(f"fit both passes: scatterlab fit {engine.store.path}")
     return code

@@ -9,7 +9,7 @@ typed commands the engine runs; it skips points already done (resume).
 from __future__ import annotations
 
 import math
-from collections.abc import Container, Iterator
+from collections.abc import Container, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,9 +27,11 @@ from instrument.plans.commands import (
     ScanPoint,
     SetLight,
 )
+from instrument.plans.count import check_point_count
 from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, specular_cone
 from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
+from instrument.plans.ranges import float_range
 
 __all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points"]
 
@@ -211,6 +213,7 @@ def dynamics_of(profile: BenchProfile, axes) -> dict[str, AxisDynamics]:
 
 
 def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
+    check_point_count(spec)  # from the axes, before a single point is made
     s = spec.scan
     kind = spec.kind
     kin = kinematics_for(profile.geometry.kind,
@@ -328,11 +331,9 @@ def _in_plane_angles(theta_i: float, theta_r_signed: float) -> Angles:
     return Angles(abs(theta_i), phi_i, abs(theta_r_signed), phi_r)
 
 
-def _expand(x) -> list[float]:
+def _expand(x) -> Sequence[float]:
     if isinstance(x, dict):
-        start, stop, step = float(x["start"]), float(x["stop"]), float(x["step"])
-        n = math.floor((stop - start) / step + 1e-9) + 1
-        return [start + k * step for k in range(n)]
+        return float_range(x)
     return [float(e) for e in x]
 
 

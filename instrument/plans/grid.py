@@ -17,7 +17,8 @@ import numpy as np
 
 from instrument.bench.kinematics import Angles, direction
 
-__all__ = ["dedupe_reciprocal", "equal_solid_angle_grid", "specular_cone"]
+__all__ = ["dedupe_reciprocal", "equal_solid_angle_count", "equal_solid_angle_grid",
+           "specular_cone"]
 
 
 def equal_solid_angle_grid(n: int, theta_max_deg: float = 85.0) -> tuple[np.ndarray, float]:
@@ -26,15 +27,9 @@ def equal_solid_angle_grid(n: int, theta_max_deg: float = 85.0) -> tuple[np.ndar
     N equals ``n`` exactly unless rounding the rings forces a different count; every cell
     has the same solid angle, returned as the second value.
     """
-    if n < 1:
-        raise ValueError("n must be >= 1")
+    counts = _ring_counts(n, theta_max_deg)
     cmin = math.cos(math.radians(theta_max_deg))
     omega_total = 2.0 * math.pi * (1.0 - cmin)
-    omega = omega_total / n
-    rings = max(1, round(math.radians(theta_max_deg) / math.sqrt(omega)))
-    edges = np.linspace(0.0, math.radians(theta_max_deg), rings + 1)
-    areas = 2.0 * math.pi * (np.cos(edges[:-1]) - np.cos(edges[1:]))
-    counts = np.maximum(1, np.round(areas / omega)).astype(int)
     # First ring of a cap is one cell (the pole) when it is small enough.
     total = int(counts.sum())
     omega = omega_total / total
@@ -49,6 +44,25 @@ def equal_solid_angle_grid(n: int, theta_max_deg: float = 85.0) -> tuple[np.ndar
             out.append((theta_c, (j + 0.5) * 360.0 / nk if nk > 1 else 0.0))
         c_top = c_bot
     return np.array(out), omega
+
+
+def equal_solid_angle_count(n: int, theta_max_deg: float = 85.0) -> int:
+    """How many directions :func:`equal_solid_angle_grid` gives for ``n``, without making
+    them (a plan's point count before generation)."""
+    return int(_ring_counts(n, theta_max_deg).sum())
+
+
+def _ring_counts(n: int, theta_max_deg: float) -> np.ndarray:
+    """Cells per ring of the equal-solid-angle grid of about ``n`` cells (module docstring:
+    n_k ≈ A_k/ω over M ≈ θmax/√ω bands of equal polar width)."""
+    if n < 1:
+        raise ValueError("n must be >= 1")
+    cmin = math.cos(math.radians(theta_max_deg))
+    omega = 2.0 * math.pi * (1.0 - cmin) / n
+    rings = max(1, round(math.radians(theta_max_deg) / math.sqrt(omega)))
+    edges = np.linspace(0.0, math.radians(theta_max_deg), rings + 1)
+    areas = 2.0 * math.pi * (np.cos(edges[:-1]) - np.cos(edges[1:]))
+    return np.maximum(1, np.round(areas / omega)).astype(int)
 
 
 def specular_cone(theta_i: float, phi_i: float, *, half_width_deg: float, rings: int,

@@ -68,12 +68,14 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from instrument.bench.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
+from instrument.plans.ranges import FloatRange
 
 __all__ = ["KINDS", "PlanError", "PlanSpec", "load_plan", "parse_plan"]
 
@@ -220,8 +222,9 @@ def number(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
 
 
 def values(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
-           required: bool = True, allow_range: bool = True) -> list[float] | None:
-    """An explicit list of numbers, or an inclusive range table {start, stop, step}."""
+           required: bool = True, allow_range: bool = True) -> Sequence[float] | None:
+    """An explicit list of numbers, or an inclusive range table {start, stop, step} (a
+    lazy :class:`~instrument.plans.ranges.FloatRange`)."""
     where = f"{path}.{key}"
     if key not in t:
         if required:
@@ -246,11 +249,11 @@ def values(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
         if stop < start:
             v.error(where, f"stop ({stop:g}) must be >= start ({start:g})")
             return None
-        n = math.floor((stop - start) / step + 1e-9) + 1
-        if n > MAX_POINTS:
-            v.error(f"{where}.step", f"gives {n} values; at most {MAX_POINTS}")
+        values = FloatRange(start, stop, step)  # not expanded: it may be long
+        if len(values) > MAX_POINTS:
+            v.error(f"{where}.step", f"gives {len(values)} values; at most {MAX_POINTS}")
             return None
-        return [float(start + k * step) for k in range(n)]
+        return values
     v.error(where, "must be a list of numbers" + (" or {start, stop, step}" if allow_range
                                                  else ""))
     return None

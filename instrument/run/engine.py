@@ -525,18 +525,38 @@ class RunEngine:
                 # Close the damaged handle now: while paused the file on disk is closed
                 # and valid (recover() makes it agree with the journal).
                 self._writer.stop()
-                if getattr(err, "clean", False):
-                    # Nothing was written: close the file properly (status "paused").
-                    try:
-                        self.store.close("paused")
-                    except Exception:
-                        self.store.abandon()
-                else:
-                    self.store.abandon()
+                self._log_storage_pause(err, index)
                 self._emit(Fault("storage", str(err), "pause", index))
                 self._enter_pause(f"storage: {err}", index)
                 # Recovered from the journal: the lost point is not in done any more.
                 raise _Restart from err
+
+    def _log_storage_pause(self, err: StorageError, index: int | None) -> None:
+        """Close the store after a storage error, with the fault and the pause in the run
+        file's event log like any other fault's (docs/guide/recovery.md).
+
+        After a clean error (nothing written: the free-space check or the space
+        reservation refused the point) the file is intact and the events go in as usual,
+        into the free-space margin; after a failed write the store is abandoned and they
+        go into the journal, from which the recovery before the run continues rewrites
+        the log. Its resolution is the "resumed" event of the continued run."""
+        todo = [{"kind": "fault", "device": "storage", "cause": str(err),
+                 "action": "pause", "index": index},
+                {"kind": "paused", "reason": f"storage: {err}", "index": index}]
+        if getattr(err, "clean", False):
+            try:
+                while todo:
+                    self.store.event(todo[0])
+                    todo.pop(0)
+                self.store.close("paused")
+                return
+            except Exception:
+                self.store.abandon()
+        else:
+            self.store.abandon()
+        with contextlib.suppress(StorageError):
+            for record in todo:
+                self.store.journal_event(record)
 
     def _storage_stalled(self, index: int | None) -> None:
         """The previous point's write is taking too long: make the bench safe (the axes

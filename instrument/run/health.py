@@ -25,9 +25,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-__all__ = ["OPTIONAL_COLUMNS", "FileState", "Readable", "ZeroPadded", "held_by_this_process",
-           "inspect_run_file", "is_lock_refusal",
-           "open_damaged", "readable_points", "recorded_length"]
+from instrument.run.layout import header_from_file
+
+__all__ = ["OPTIONAL_COLUMNS", "SALVAGE_WORDS", "FileState", "Readable", "ZeroPadded",
+           "held_by_this_process", "inspect_run_file", "is_lock_refusal", "open_damaged",
+           "readable_points", "recorded_length", "row_count", "unrecoverable_message"]
 
 #: HDF5's word for a file shorter than its superblock says (the library's message text).
 _TRUNCATED = re.compile(r"truncated file: eof = (\d+).*stored_eof = (\d+)")
@@ -243,7 +245,7 @@ def _read_rows(ds: h5py.Dataset | None, rows: np.ndarray) -> np.ndarray | None:
         return None
 
 
-def _row_count(f: h5py.File) -> int:
+def row_count(f: h5py.File) -> int:
     """Rows the points table says it holds (its shape is in the object header)."""
     try:
         return int(f["entry/points/index"].shape[0])
@@ -256,6 +258,21 @@ def _points_text(indices) -> str:
     if len(idx) > 12:
         return ", ".join(map(str, idx[:10])) + f" … ({len(idx)} in all)"
     return ", ".join(map(str, idx))
+
+
+#: What ``scatterlab resume`` does with a damaged run file that has no journal but whose
+#: run record (plan, bench profile) reads (:func:`instrument.run.recovery.salvage`).
+SALVAGE_WORDS = ("`scatterlab resume {path}` makes a new run file of the readable points "
+                 "(the damaged one is kept beside it as .corrupt) and measures the rest")
+
+
+def unrecoverable_message(path: Path, cut: str) -> str:
+    """The one sentence for a damaged file without a journal whose run record cannot be
+    read: every command (the analyses through :func:`inspect_run_file`, ``resume`` through
+    :func:`instrument.run.recovery.salvage`) says it in these words."""
+    return (f"{path} is a damaged HDF5 file ({cut}) with no run journal next to it, and its "
+            "run record (plan and bench profile) cannot be read: nothing in it can be "
+            "recovered")
 
 
 def _damaged(path: Path, size: int, recorded: int, has_journal: bool) -> FileState:
@@ -274,16 +291,16 @@ def _damaged(path: Path, size: int, recorded: int, has_journal: bool) -> FileSta
                 found = readable_points(f, end)
                 rows, intact, n_rows = found.rows, found.intact, found.n_rows
             except (KeyError, OSError, RuntimeError, ValueError):
-                rows, intact, n_rows = {}, set(), _row_count(f)
+                rows, intact, n_rows = {}, set(), row_count(f)
+            if not has_journal:
+                header_from_file(f)  # what a salvage needs first (recovery.salvage)
     except (KeyError, OSError, RuntimeError, ValueError):
         if has_journal:
             return FileState(path, "damaged", (
                 f"{path} is a damaged scatterlab run file ({cut}); `scatterlab resume "
                 f"{path}` rebuilds it from its journal"), True, True, size, recorded)
-        return FileState(path, "damaged", (
-            f"{path} is a damaged HDF5 file ({cut}) that cannot be read, and has no run "
-            "journal next to it: nothing in it can be recovered"), False, False, size,
-            recorded)
+        return FileState(path, "damaged", unrecoverable_message(path, cut), False, False,
+                         size, recorded)
     readable = tuple(sorted(intact))
     lost = tuple(sorted(set(rows) - intact))
     parts = [f"points {_points_text(readable)} readable" if readable
@@ -300,8 +317,7 @@ def _damaged(path: Path, size: int, recorded: int, has_journal: bool) -> FileSta
                f"resume {path}` repairs it from its journal")
     else:
         msg = (f"{path} is a damaged scatterlab run file ({cut}) with no journal to rebuild "
-               f"it from; {what} (of {n_planned} planned); `scatterlab resume {path}` "
-               "recovers what is readable")
+               f"it from; {what} (of {n_planned} planned); {SALVAGE_WORDS.format(path=path)}")
     return FileState(path, "damaged", msg, True, has_journal, size, recorded, n_planned,
                      readable, lost, kind)
 

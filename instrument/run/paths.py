@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 __all__ = ["DEFAULT_RUNS_DIR", "PIPELINES", "RESULTS_NAME", "results_dir", "results_path",
-           "run_folder"]
+           "run_folder", "writer_lock_path"]
 
 #: Where runs (and their catalog) go unless ``--out`` says otherwise.
 DEFAULT_RUNS_DIR = Path("runs")
@@ -40,3 +40,11 @@ def results_path(run_path: str | Path, pipeline: str, folder: str | Path | None 
     if folder is not None:
         return Path(folder) / RESULTS_NAME
     return results_dir(run_path, pipeline) / RESULTS_NAME
+
+
+def writer_lock_path(run_path: str | Path) -> Path:
+    """``DIR/RUN.h5.lock``, beside the run's journal: held by the one process that
+    continues the run (``scatterlab resume``), so a second one is told who it is."""
+    p = Path(run_path)
+    return p.with_name(p.name + ".lock")
+

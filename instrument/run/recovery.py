@@ -40,11 +40,14 @@ import numpy as np
 
 from instrument.run.health import (
     OPTIONAL_COLUMNS,
+    Readable,
     inspect_run_file,
     is_lock_refusal,
     open_damaged,
     readable_points,
     recorded_length,
+    row_count,
+    unrecoverable_message,
 )
 from instrument.run.journal import Journal, read_journal
 from instrument.run.layout import (
@@ -519,9 +522,9 @@ def salvage(path: str | Path) -> RecoveryReport:
     try:
         content = _salvageable(path, cut)
     except (KeyError, OSError, RuntimeError, ValueError) as err:
-        raise StorageError(errno.EIO, f"{path} is a damaged scatterlab run file whose plan "
-                           "and bench record cannot be read: nothing can be recovered "
-                           f"({type(err).__name__})") from err
+        how = (f"cut short: {cut[0]} of its {cut[1]} bytes on disk"
+               if cut and cut[1] > cut[0] else "its HDF5 structure is damaged")
+        raise StorageError(errno.EIO, unrecoverable_message(path, how)) from err
     header, records, lost, events, status, sources, n_rows = content
     original = path.with_suffix(path.suffix + (".corrupt" if damaged else ".orig"))
     jp = journal_path(path)
@@ -579,9 +582,13 @@ def _salvageable(path: Path, cut: tuple[int, int] | None):
             end = path.stat().st_size
         else:
             f, end = stack.enter_context(open_damaged(path, cut[1]))
-        header = header_from_file(f)
+        header = header_from_file(f)  # without it nothing can be rebuilt: the caller says so
         e = f["entry"]
-        found = readable_points(f, end)
+        try:
+            found = readable_points(f, end)
+        except (KeyError, OSError, RuntimeError, ValueError):
+            # as inspect_run_file says: no point readable, the run is measured again
+            found = Readable({}, {}, set(), row_count(f))
         rows, n_rows = found.rows, found.n_rows
         order = sorted(rows, key=rows.get)
         at = np.array([rows[i] for i in order], dtype=np.int64)
@@ -646,8 +653,9 @@ def _salvageable(path: Path, cut: tuple[int, int] | None):
                     ev = json.loads(line)
                     if isinstance(ev, dict) and ev.get("t") == "event":
                         events.append(ev)
-        status = e.attrs.get("status", "interrupted")
-        status = status.decode() if isinstance(status, bytes) else str(status)
+        status = "interrupted"  # written at the end of a run: often beyond the cut
+        with contextlib.suppress(KeyError, OSError, RuntimeError, ValueError):
+            status = _text_of(e.attrs.get("status", status))
     return header, records, lost, events, status, sources, n_rows
 
 

@@ -25,18 +25,18 @@ UTF-8 strings, and plain-data results as JSON that any HDF5 reader can parse.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import json
 import os
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
 
+from instrument.run.locks import LockHeld, hold
 from instrument.run.paths import PIPELINES, RESULTS_NAME, results_dir, results_path, run_folder
 from instrument.run.runfile import as_text
 from instrument.version import software_version
@@ -217,16 +217,19 @@ def already_done(run_path: str | Path, pipeline: str, *, run_id: str,
 # ------------------------------------------------------------------------------ one writer
 @contextlib.contextmanager
 def run_lock(run_path: str | Path, *, folder: str | Path | None = None,
-             wait_s: float = LOCK_WAIT_S, poll_s: float = 0.2) -> Iterator[Path]:
+             wait_s: float = LOCK_WAIT_S, poll_s: float = 0.2, what: str = "an analysis",
+             on_wait: Callable[[str], None] | None = None) -> Iterator[Path]:
     """Hold the run's exclusive lock for the block: ``DIR/RUN/.lock`` for the run file
     ``DIR/RUN.h5``, or ``.lock`` in ``folder`` (an analysis told to write elsewhere, e.g. a
     read-only run folder, locks what it writes).
 
-    It is an ``flock`` on a descriptor of its own: it excludes other processes and other
-    threads of this one (and a nested call in the same thread would wait for itself, so
-    the pipelines do not take it; the commands and batch tasks that call them do). The
-    kernel drops it when the holder's process dies, so a killed analysis leaves no stale
-    lock.
+    It is an ``flock`` on a descriptor of its own (:func:`instrument.run.locks.hold`): it
+    excludes other processes and other threads of this one (and a nested call in the same
+    thread would wait for itself, so the pipelines do not take it; the commands and batch
+    tasks that call them do). The kernel drops it when the holder's process dies, so a
+    killed analysis leaves no stale lock. The holder writes its process id and ``what``
+    it does into the lock file; when the lock is taken, ``on_wait`` is told that (``process
+    123: scatterlab fit RUN.h5``) at once, before the wait of up to ``wait_s`` seconds.
 
     Raises
     ------
@@ -236,25 +239,14 @@ def run_lock(run_path: str | Path, *, folder: str | Path | None = None,
     where = Path(folder) if folder is not None else run_folder(run_path)
     where.mkdir(parents=True, exist_ok=True)
     path = where / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
-        deadline = time.monotonic() + wait_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() >= deadline:
-                    raise RunBusy(f"another analysis of {run_path} held its lock {path} for "
-                                  f"{wait_s:g} s; run this one again when it has ended"
-                                  ) from None
-                time.sleep(poll_s)
-        try:
+        with hold(path, what, wait_s=wait_s, poll_s=poll_s, on_wait=on_wait):
             yield path
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-    finally:
-        os.close(fd)
+    except LockHeld as err:
+        if err.path != path:
+            raise
+        raise RunBusy(f"another analysis of {run_path} ({err.holder}) held its lock {path} "
+                      f"for {wait_s:g} s; run this one again when it has ended") from None
 
 
 def remove_stale_temporaries(folder: str | Path) -> None:

@@ -31,6 +31,7 @@ import re
 import shutil
 import time
 import zlib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,7 +63,7 @@ from instrument.run.recovery import RecoveryReport, recover, salvage
 
 __all__ = ["FRAMES_LOST", "FRAMES_LOST_NOTE", "STATUS_OK", "STATUS_SKIPPED", "FrameData",
            "PointRecord", "RecoveryReport", "RunHeader", "RunStore", "StorageError",
-           "journal_path", "recover", "salvage"]
+           "free_space_probe", "journal_path", "recover", "salvage"]
 
 #: Disk space reserved per point besides its frames: new chunks of the scalar tables
 #: (at most 1024 rows × 8 B × ~20 datasets) and metadata.
@@ -138,7 +139,9 @@ class RunStore:
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.exists() or journal_path(path).exists():
             raise FileExistsError(f"run file {path} already exists")
-        _check_free(path.parent, min_free_bytes, 0)
+        # No run file yet: there is nothing to resume, the run is started again.
+        _check_free(path.parent, min_free_bytes, 0, then="free space or choose another "
+                    "folder for run files, then start the run again")
         h5 = new_run_file(path, header)
         h5.attrs["durability"] = "fsync" if fsync else "process"
         h5.flush()
@@ -234,6 +237,29 @@ class RunStore:
                 raise
             raise StorageError(_errno_of(err), f"logging an event in {self.path} failed: "
                                f"{_first_line(err)}") from err
+
+    def journal_event(self, record: dict[str, Any]) -> None:
+        """Log an event after a storage error closed or abandoned the store: the journal
+        alone (a journal line is a few hundred bytes), from which every recovery, and so
+        every ``resume``, rewrites the file's event log.
+
+        Raises
+        ------
+        StorageError
+            Even the journal could not be written.
+        """
+        if not self._closed:
+            raise ValueError("the store is open: use event()")
+        try:
+            journal = Journal(journal_path(self.path), fsync=self.fsync)
+            try:
+                journal.append({"t": "event", "time": time.time(), **record})
+            finally:
+                journal.close()
+        except OSError as err:
+            raise StorageError(_errno_of(err), f"logging an event in "
+                               f"{journal_path(self.path)} failed: {_first_line(err)}"
+                               ) from err
 
     def sync(self) -> None:
         """Write buffered rows to the HDF5 file and flush it (pause, finish)."""
@@ -400,14 +426,36 @@ def _fsync_path(path: Path) -> None:
         os.close(fd)
 
 
-def _check_free(folder: Path, min_free: int, needed: int) -> None:
-    free = shutil.disk_usage(folder).free
+def _disk_free(folder: Path) -> int:
+    return shutil.disk_usage(folder).free
+
+
+#: Bytes free on the file system of a folder; :func:`free_space_probe` puts another
+#: measure in its place (an emulated small disk), the way the emulators inject faults.
+_free_bytes: Callable[[Path], int] = _disk_free
+
+
+@contextlib.contextmanager
+def free_space_probe(probe: Callable[[Path], int]) -> Iterator[None]:
+    """Measure free space with ``probe(folder) -> bytes`` for the block (every run of this
+    process): a disk nearly full without filling one."""
+    global _free_bytes
+    old, _free_bytes = _free_bytes, probe
+    try:
+        yield
+    finally:
+        _free_bytes = old
+
+
+def _check_free(folder: Path, min_free: int, needed: int, *,
+                then: str = "free space, then `scatterlab resume`") -> None:
+    free = _free_bytes(folder)
     if free < min_free + needed:
+        need = f" (point needs {needed / 2**20:.2f} MiB)" if needed else ""
         raise clean_error(
             errno.ENOSPC,
             f"disk nearly full: {free / 2**20:.1f} MiB free in {folder}, the run keeps "
-            f"at least {min_free / 2**20:.1f} MiB free (point needs {needed / 2**20:.2f} MiB)"
-            "; free space, then `scatterlab resume`",
+            f"at least {min_free / 2**20:.1f} MiB free{need}; {then}",
         )
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import functools
 import importlib.util
+import io
 import os
 import signal
 import threading
@@ -30,6 +31,7 @@ pytest.importorskip("distributed")
 
 from instrument.batch.cluster import (
     BLAS_ENV,
+    _worker_deaths,
     cluster_map,
     connect,
     run_on_cluster,
@@ -37,6 +39,7 @@ from instrument.batch.cluster import (
 )
 from instrument.batch.task import Outcome, run_serial
 from instrument.cli import main
+from instrument.cli.batch import BatchProgress
 from instrument.cli.fit import fit_options
 from instrument.run.results import read_results_attrs, results_dir
 from instrument.run.runfile import read_run
@@ -149,6 +152,20 @@ def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries)
             assert "worker process analysing it died" in o.cause
         else:
             _same_answer(o, serial[name])  # (retried on another worker:) the same answer
+    # a run whose worker died and that another worker finished says it was redone (and
+    # only then: without retries the dead worker's runs failed instead)
+    redone = [o for o in out if o.redone]
+    assert all(o.status != "failed" and o.redone == 1 for o in redone)
+    assert bool(redone) == bool(retries)
+    # the console says so, in one line per run that was redone
+    progress = BatchProgress(len(out), stream=io.StringIO())
+    for o in out:
+        progress(o)
+    lines = [line for line in progress.stream.getvalue().splitlines()
+             if line.startswith("  redone: ")]
+    assert lines == [f"  redone: {o.run}: the worker process analysing it died (killed, "
+                     "crashed or out of memory); another worker analysed it again from the "
+                     "start" for o in out if o.redone]
     if not retries:
         assert any(by[n].status == "failed" for n in held)
     # no file damaged: every run reads whole, every results file is complete, no debris
@@ -188,6 +205,26 @@ def test_cli_batch_on_a_local_cluster_prints_the_dashboard_and_writes_the_table(
         for k, v in ref.values.items():
             assert row[k] == (repr(v) if isinstance(v, float) else str(v)), k
     assert (tmp_path / "table" / table.with_suffix(".html").name).is_file()
+
+
+def _dies_the_first_time(marker: str) -> str:
+    """A task whose worker process is killed the first time it runs it (as by the OOM
+    killer), and that completes on the worker Dask gives it to next."""
+    m = Path(marker)
+    if not m.exists():
+        m.write_text("tried")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return "done"
+
+
+def test_a_task_given_to_another_worker_counts_the_death(client, tmp_path):
+    """What ``Outcome.redone`` reads (the cheap part of the killed-worker test above)."""
+    fut = client.submit(_dies_the_first_time, str(tmp_path / "marker"), pure=False)
+    assert fut.result(timeout=120) == "done"
+    assert client.run_on_scheduler(_worker_deaths, key=fut.key) == 1
+    again = client.submit(_dies_the_first_time, str(tmp_path / "marker"), pure=False)
+    assert again.result(timeout=120) == "done"
+    assert client.run_on_scheduler(_worker_deaths, key=again.key) == 0
 
 
 def test_the_planner_sweep_on_the_cluster_equals_the_loop(client):

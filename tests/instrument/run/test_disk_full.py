@@ -9,6 +9,7 @@ from pathlib import Path
 
 import h5py
 
+from instrument.run.runfile import read_events
 from instrument.run.runner import resume_run
 from instrument.run.storage import recover
 from tests.instrument.helpers import ideal_bench
@@ -32,6 +33,8 @@ def test_write_error_pauses_with_clear_error_and_file_stays_valid(tmp_path):
     with h5py.File(path, "r") as f:
         assert f["entry"].attrs["status"] == "paused"
         n_rows = f["entry/points/index"].shape[0]
+    # ... with the storage fault and the pause in its event log, like any fault's
+    assert _storage_pause_logged(path)
     report = recover(path)
     assert 0 < report.n_points < len(report.header.planned_label)
     assert report.n_points == n_rows and report.frames_lost == 0 and not report.rebuilt
@@ -56,6 +59,8 @@ def test_write_failing_inside_hdf5_leaves_a_repairable_file(tmp_path):
     end = next(line for line in lines if line.startswith("END"))
     report = recover(path)  # pads what the failed write cut off, keeps committed rows
     assert f"END paused {report.n_points}/" in end
+    # the fault and the pause went into the journal; the recovery put them into the log
+    assert _storage_pause_logged(path)
     assert report.n_points > 0 and report.frames_lost == 0
     with h5py.File(path, "r") as f:
         assert list(f["entry/points/index"][:]) == sorted(report.done)
@@ -64,3 +69,10 @@ def test_write_failing_inside_hdf5_leaves_a_repairable_file(tmp_path):
     with h5py.File(path, "r") as f:
         idx = list(f["entry/points/index"][:])
     assert sorted(idx) == list(range(len(report.header.planned_label)))
+
+
+def _storage_pause_logged(path: Path) -> bool:
+    """The run's event log holds a storage fault whose action is a pause, then a pause."""
+    kinds = [(e["kind"], e.get("device"), e.get("action")) for e in read_events(path)]
+    return (("fault", "storage", "pause") in kinds and ("paused", None, None) in kinds
+            and kinds.index(("fault", "storage", "pause")) < kinds.index(("paused", None, None)))
