@@ -260,7 +260,10 @@ def test_a_stalled_write_turns_the_light_off_reports_and_the_run_goes_on(tmp_pat
     from instrument.run import engine as engine_mod
     from instrument.run.events import Fault
 
-    monkeypatch.setattr(engine_mod, "STORAGE_STALL_S", 0.05)
+    # The stall limit is far above any healthy write on a loaded machine (a 0.05 s limit
+    # reported ordinary writes as stalls there); the stalled write waits until the fault is
+    # seen, so the test takes the limit's time and no more.
+    monkeypatch.setattr(engine_mod, "STORAGE_STALL_S", 5.0)
     engine, q, plan, bench = _run(tmp_path)
     store = engine.store
     real_append = store.append
@@ -268,7 +271,7 @@ def test_a_stalled_write_turns_the_light_off_reports_and_the_run_goes_on(tmp_pat
 
     def stalling_append(rec):  # the disk stops answering while point 1 is written
         if rec.index == 1:
-            assert release.wait(10)
+            assert release.wait(120)
         real_append(rec)
 
     monkeypatch.setattr(store, "append", stalling_append)
@@ -282,7 +285,7 @@ def test_a_stalled_write_turns_the_light_off_reports_and_the_run_goes_on(tmp_pat
     engine.subscribe(on)
     assert engine.run() is EngineState.FINISHED
     faults = [e for e in q.drain() if isinstance(e, Fault)]
-    assert len(faults) == 1 and "taken over 0.05 s" in faults[0].cause
+    assert len(faults) == 1 and "taken over 5 s" in faults[0].cause
     assert faults[0].action == "light off, waiting for the write"
     assert light_during_stall == [False]
     with h5py.File(engine.store.path) as f:
