@@ -368,7 +368,7 @@ def test_cli_bad_input_names_the_file_or_option(scan_run, tmp_path, capsys):
         (["reconstruct", str(scan_run), "--domain", "50", "-50"], "--domain 50 -50"),
         (["locate", str(scan_run), "--domain", "-95", "10"], "-90 < A < B < 90"),
         (["locate", str(scan_run), "--z-range", "-100", "-400"], "z_range_mm"),
-        (["locate", str(scan_run), "--threshold", "2"], "threshold_rel 2"),
+        (["locate", str(scan_run), "--false-alarm", "2"], "false_alarm 2"),
     ]
     for argv, fragment in cases:
         assert main([*argv, "--no-figures"]) == 2, argv
