@@ -27,6 +27,7 @@ QUALITY_WORDS = {
     "resolved": "resolved (the three depth estimates agree)",
     "two_estimates_agree": "likely (two of the three depth estimates agree)",
     "unresolved": "unresolved (the data support only an interval)",
+    "extended": "of an extended object (larger than the blur)",
 }
 
 
@@ -116,6 +117,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"  object {k} ({det.significance[k]:.1f}σ, false-alarm probability "
               f"{det.false_alarm[k]:.2g} per scan), depth "
               f"{QUALITY_WORDS.get(quality, quality)}: y = {y:.2f} mm, {depth}")
+        if quality == "extended":
+            across, deep = det.extent_mm[k]
+            print(f"    one extended object, not {len(det.components_mm[k])} points: size "
+                  f"{across:.1f} ± {res.transverse_mm:.1f} mm across, {deep:.1f} ± "
+                  f"{res.depth_mm:.1f} mm in depth")
         print(f"    theoretical blur ±{res.transverse_mm:.1f} mm across, ±{res.depth_mm:.1f} "
               f"mm in depth; brightness {det.brightness_rp[k]:.4g} {RADIANCE_UNIT} "
               f"(radiance-preserving refocusing; conventional refocusing gives "

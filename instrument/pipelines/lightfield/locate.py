@@ -16,7 +16,9 @@ import numpy as np
 
 from analysis.lightfield import (
     LightField2D,
+    at_far_edge,
     detect_objects,
+    detect_widening,
     theoretical_resolution,
 )
 from instrument.pipelines.lightfield.figures import localisation_figures
@@ -107,14 +109,20 @@ def locate_run(
     solvable = tuple(float(x) for x in stored["solvable_domain_rad"])
     recoverable = bool(stored["recoverable"])
     if recoverable:
-        det = detect_objects(field_, p_max=p_hat, y_mm=ys, z_mm=zs,
-                             solvable_domain_rad=solvable,  # type: ignore[arg-type]
-                             filter_factors=stored["filter_factors"],
-                             noise_power=stored["noise_power"], false_alarm=false_alarm,
-                             min_measure_fraction=min_measure_fraction)
+        det, searched = detect_widening(
+            field_, z_mm=zs, p_max=p_hat, y_mm=ys,
+            solvable_domain_rad=solvable, filter_factors=stored["filter_factors"],
+            noise_power=stored["noise_power"], false_alarm=false_alarm,
+            min_measure_fraction=min_measure_fraction)
         message = (f"{det.count} object(s) found above {det.threshold_sigma:.1f}σ (false-alarm "
                    f"probability {false_alarm:g} per scan over {det.resolution_cells:.0f} "
                    f"resolution cells; highest recovered angular order {p_hat:g})")
+        if searched[0] < zs[0]:
+            message += (f"; the depth range was widened to {searched[0]:.0f} mm: an object sat "
+                        f"at its far end ({zs[0]:.0f} mm)")
+        if det.count and at_far_edge(det, float(searched[0])).any():
+            message += (f"; an object still sits at the far end ({searched[0]:.0f} mm): it may "
+                        f"lie beyond, widen --z-range")
         if det.below_significance.size:
             yb, zb = det.below_positions_mm[0]
             message += (f"; {det.below_significance.size} more candidate(s) below the "

@@ -284,6 +284,8 @@ def _fill_localisation(g: h5py.Group, det: Detection, p_hat: float, message: str
     loc["depth_interval_open"].attrs["columns"] = "far_open, near_open"
     loc["quality"] = np.array(det.quality, dtype=h5py.string_dtype())
     # how far each object stands out of the noise, and what did not (never dropped silently)
+    loc["extent_mm"] = det.extent_mm
+    loc["extent_mm"].attrs["columns"] = "across_mm, depth_mm"
     loc["significance"] = det.significance
     loc["significance"].attrs["units"] = "standard deviations"
     loc["false_alarm"] = det.false_alarm
