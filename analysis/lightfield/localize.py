@@ -913,6 +913,18 @@ def detect_objects(
         iz, iy = np.unravel_index(int(np.argmax(residual.num)), residual.num.shape)
         if residual.num[iz, iy] <= 0 or residual.num[iz, iy] < threshold_rel * first:
             break
+        if noise is not None:
+            # judged at the raw peak first: a candidate below the threshold is counted and
+            # its cell masked, without the cost of refining and subtracting its response
+            peak = (float(y[iy]), float(zs[iz]))
+            _, sig, _ = assess(np.asarray([(c.y, c.z) for c in cands] + [peak]))
+            if sig[-1] < s_star:
+                below.append((as_cand(np.asarray(peak)), float(sig[-1])))
+                core = cell(*peak, 0.5)
+                core[iz, iy] = True
+                residual = _Stacks(residual.mf, np.where(core, np.minimum(residual.num, 0.0),
+                                                         residual.num), residual.rp)
+                continue
         cand = refine(residual, float(y[iy]), float(zs[iz]))
         if unresolvable(cand, cands):
             core = cell(float(y[iy]), float(zs[iz]), 0.5)

@@ -135,6 +135,8 @@ def test_a_dim_object_beside_a_bright_one_is_found_with_the_right_sign():
     assert 30 < det.brightness_rp[0] / det.brightness_rp[1] < 300
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(600)  # three searches, the first fitting the edge's pile-up
 def test_an_object_beyond_the_depth_range_is_open_then_found_by_widening():
     """An object at −600 mm searched to −400 mm: every detection at the far edge says its
     interval is open there, none is "resolved" with an interval excluding the truth; the
