@@ -432,3 +432,20 @@ def test_bench_scene_config_errors_name_the_key():
         with pytest.raises(ValueError) as exc:
             LightFieldBenchScene.from_config(cfg)
         assert fragment in str(exc.value), (change, str(exc.value))
+
+
+def test_the_n_theta_note_recommends_only_what_the_camera_allows():
+    """At one camera pixel per angle cell (n_theta 1024 on the 1024-pixel sensor) more
+    angles cannot be had: the note names the wall's angular sampling as the limit instead
+    of asking for a larger n_theta; below it, it says how far n_theta can go."""
+    from instrument.pipelines.lightfield.reconstruct import _noise_disagreement
+
+    (at_limit,) = _noise_disagreement(6.2e-3, 1e-4, 1024, pixels_per_cell=1.0,
+                                      specular_width_rad=np.deg2rad(0.01),
+                                      cell_rad=np.deg2rad(0.066))
+    assert "raise n_theta" not in at_limit
+    assert "angular resolution of the wall is the limit" in at_limit
+    assert "specular lobe (0.01°)" in at_limit
+    (coarse,) = _noise_disagreement(1e-3, 1e-4, 8, pixels_per_cell=128.0)
+    assert "raise n_theta (now 8 (at most 1024" in coarse
+    assert _noise_disagreement(1e-4, 1e-4, 128, pixels_per_cell=8.0) == ()
