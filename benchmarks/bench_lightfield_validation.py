@@ -16,9 +16,9 @@ ratios 10, 100 and 1000.  Each scene × wall × seed is scored:
   holds it;
 * phantom — a reported object that explains no true object;
 * position within blur — a detected object within δy across and δz in depth;
-* confidently wrong — a reported object marked "resolved" that is a phantom or a split
-  (two reported objects explaining one true one), whose interval excludes the truth, or
-  with a brightness ≤ 0;
+* confidently wrong — a reported object marked "resolved" that is a phantom, a split (more
+  reported objects explaining the true ones than there are), or with a brightness ≤ 0 (an
+  interval excluding the truth makes the object a phantom or undetected);
 * false alarm per scan — a scan with at least one phantom.
 
 Run: ``python benchmarks/bench_lightfield_validation.py`` (reduced: 2 seeds, 3 walls);
@@ -112,8 +112,11 @@ def score(det, objects, s: Score) -> None:
             if (abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm
                     and abs(det.positions_mm[k, 1] - o.z_mm) < r.depth_mm):
                 s.within_blur += 1
-        if hits.size > 1 and any(det.quality[k] == "resolved" for k in hits):
-            s.confidently_wrong += 1  # a split
+    # a split: more reported objects explain the true ones than there are, marked resolved
+    explaining = np.nonzero(explains.any(axis=1))[0]
+    extra = explaining.size - len(objects)
+    if extra > 0:
+        s.confidently_wrong += min(extra, sum(det.quality[k] == "resolved" for k in explaining))
     phantom = ~explains.any(axis=1)
     s.phantoms += int(phantom.sum())
     s.scans_with_phantom += int(phantom.any())

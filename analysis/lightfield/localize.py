@@ -420,7 +420,9 @@ EXTENDED_CELLS = 1.4
 #: 0.1 puts them below 1.4σ of systematic error alone.
 MODEL_MISMATCH = 0.1
 
-#: Candidates below the threshold examined (and counted) before the search stops.
+#: Candidates below the threshold examined (and counted) before the search stops; each is
+#: refined and its response subtracted, so that the search moves past a bright object's
+#: residual (masking its cell alone left the peak picker on that residual's ridge).
 MAX_BELOW = 8
 
 #: Residual power over the noise's beyond which the point-source model is not trusted for
@@ -913,18 +915,6 @@ def detect_objects(
         iz, iy = np.unravel_index(int(np.argmax(residual.num)), residual.num.shape)
         if residual.num[iz, iy] <= 0 or residual.num[iz, iy] < threshold_rel * first:
             break
-        if noise is not None:
-            # judged at the raw peak first: a candidate below the threshold is counted and
-            # its cell masked, without the cost of refining and subtracting its response
-            peak = (float(y[iy]), float(zs[iz]))
-            _, sig, _ = assess(np.asarray([(c.y, c.z) for c in cands] + [peak]))
-            if sig[-1] < s_star:
-                below.append((as_cand(np.asarray(peak)), float(sig[-1])))
-                core = cell(*peak, 0.5)
-                core[iz, iy] = True
-                residual = _Stacks(residual.mf, np.where(core, np.minimum(residual.num, 0.0),
-                                                         residual.num), residual.rp)
-                continue
         cand = refine(residual, float(y[iy]), float(zs[iz]))
         if unresolvable(cand, cands):
             core = cell(float(y[iy]), float(zs[iz]), 0.5)

@@ -199,6 +199,10 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
         interval = loc["depth_interval_mm"][()]
         quality = [q.decode() if isinstance(q, bytes) else q for q in loc["quality"][()]]
         estimates = loc["depth_estimates_mm"][()]
+        extent = loc["extent_mm"][()]
+        significance = loc["significance"][()]
+        threshold = float(loc.attrs["threshold_sigma"])
+        assert loc["depth_interval_open"].shape == (len(pos), 2)
         meas = g["measured/radiance"][()]
         wall_c = rec["points_mm"][()]
         sigma_rows = float(g["measured"].attrs["sigma_rows"])
@@ -207,7 +211,7 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
     assert interval.shape == (len(pos), 2) and estimates.shape == (len(pos), 3)
     assert np.all(interval[:, 0] <= pos[:, 1] + 1e-9)
     assert np.all(pos[:, 1] <= interval[:, 1] + 1e-9)
-    assert set(quality) <= {"resolved", "two_estimates_agree", "unresolved"}
+    assert set(quality) <= {"resolved", "two_estimates_agree", "unresolved", "extended"}
     assert "depth resolved" in out or "depth likely" in out
     # the brushed-metal wall keeps ~18 angular orders at this SNR (≥ the thesis' 10)
     assert 10 <= p_hat <= 30
@@ -231,6 +235,14 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
     half = 0.5 * (TRUTH_BAR_Y[1] - TRUTH_BAR_Y[0])
     assert abs(pos[j, 0] - bar_centre) < half + dy[j]
     assert abs(pos[j, 1] - TRUTH_BAR_Z) < dz[j]
+    # the bar is larger than the blur: one extended object whose size holds its 15 mm,
+    # never several "resolved" points
+    assert quality[j] in ("extended", "unresolved")
+    if quality[j] == "extended":
+        assert abs(extent[j, 0] - 2 * half) < dy[j]
+    # every object carries its significance, above the threshold, strongest first
+    assert np.all(significance > threshold) and np.all(np.diff(significance) <= 0)
+    assert "σ" in out and "false-alarm probability" in out
     assert wall_c.size > 40  # the wall points whose curves the 100 mm scan covers
 
 
