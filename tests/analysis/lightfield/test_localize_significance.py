@@ -162,3 +162,18 @@ def test_an_object_beyond_the_depth_range_is_open_then_found_by_widening():
     assert _within_blur(wide, 0, *truth)
     far, near = wide.depth_interval_mm[0]
     assert far <= truth[1] <= near and not at_far_edge(wide, float(searched[0])).any()
+
+
+def test_saturated_points_are_counted_from_the_scans_own_note():
+    """The count locate reports comes from the note the scan assembly writes."""
+    import inspect
+
+    from instrument.pipelines.lightfield import scan
+    from instrument.pipelines.lightfield.results import SATURATED_NOTE, saturated_points
+
+    assert SATURATED_NOTE in inspect.getsource(scan)
+    notes = ("point 3: every exposure saturated; used the shortest (its brightest pixels are "
+             "clipped)", "point 4: no dark frame at 10 µs; used the one at 5 µs",
+             "point 9: every exposure saturated; used the shortest")
+    assert saturated_points(notes) == 2
+    assert saturated_points(()) == 0
