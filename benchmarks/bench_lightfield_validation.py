@@ -147,12 +147,16 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--walls", choices=("reduced", "all"), default="reduced")
     ap.add_argument("--scenes", nargs="*", default=None, help="scene names (default all)")
+    ap.add_argument("--only-walls", nargs="*", default=None,
+                    help="wall names of the chosen set to run (default all of them)")
     args = ap.parse_args()
     total = Score()
     print("| wall | scene | truths | detected | within blur | phantoms | scans w/ phantom "
           "| confidently wrong | s/scan |")
     print("|---|---|---|---|---|---|---|---|---|")
     for wname, brdf in walls(args.walls).items():
+        if args.only_walls and wname not in args.only_walls:
+            continue
         for sname, objects in scenes(brdf).items():
             if args.scenes and sname not in args.scenes:
                 continue
