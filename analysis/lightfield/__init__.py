@@ -44,6 +44,7 @@ from .propagate import (
 from .reconstruct import CurveSolution, Reconstruction, reconstruct, solve_curves
 from .regularize import RegularizationResult, regularize, truncation_level_mse
 from .scatter import scatter
+from .search_range import at_far_edge, detect_widening
 from .spectral import (
     SeparableSpectra,
     brdf_fourier_matrix,
@@ -70,12 +71,14 @@ __all__ = [
     "SeparableSpectra",
     "SpatiallyVaryingBRDF",
     "UnfoldedScene",
+    "at_far_edge",
     "brdf_fourier_matrix",
     "coefficients",
     "degree_of_specularity",
     "depth_interval",
     "depth_profile",
     "detect_objects",
+    "detect_widening",
     "effective_p_max",
     "fourier_orders",
     "material",

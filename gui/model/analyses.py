@@ -195,10 +195,11 @@ def _locate(path: Path, t0: float) -> AnalysisOutcome:
         res = det.resolutions[k]
         rows.append((str(k), det.quality[k], f"{y:.2f}", f"{z:.2f}",
                      f"±{res.transverse_mm:.1f}", f"±{res.depth_mm:.1f}",
-                     f"{det.brightness_rp[k]:.4g}"))
+                     f"{det.brightness_rp[k]:.4g}", f"{det.significance[k]:.1f}σ"))
     return AnalysisOutcome("locate", path, r.message,
                            (Table("objects", ("#", "quality", "y (mm)", "z (mm)",
-                                              "across", "depth", "brightness"), tuple(rows)),),
+                                              "across", "depth", "brightness", "significance"),
+                                  tuple(rows)),),
                            tuple(Path(p) for p in r.figures) or _figures(folder, t0))
 
 

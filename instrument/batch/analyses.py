@@ -291,7 +291,7 @@ def locate_arguments(options: Mapping[str, Any]) -> dict[str, Any]:
     kw: dict[str, Any] = {
         "y_range_mm": None if y is None else (float(y[0]), float(y[1])),
         "z_range_mm": tuple(float(z) for z in options["z_range_mm"]),
-        "threshold_rel": float(options["threshold_rel"]),
+        "false_alarm": float(options["false_alarm"]),
     }
     if options.get("reconstruct") is not None:
         kw.update(reconstruct_arguments(options["reconstruct"]))
@@ -310,7 +310,7 @@ def locate_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any
 
     kw = locate_arguments(options)
     own = locate_options(y_range_mm=kw["y_range_mm"], z_range_mm=kw["z_range_mm"],
-                         threshold_rel=kw["threshold_rel"])
+                         false_alarm=kw["false_alarm"])
     if options.get("reconstruct") is not None:
         rec = reconstruct_options(**reconstruct_arguments(options["reconstruct"]))
     else:
@@ -334,8 +334,10 @@ def analyse_locate(path: str | Path, options: Mapping[str, Any], *,
 
 
 def locate_row(r: LocalisationResult) -> Analysed:
-    """The summary row of a localisation: each object's position, blur, depth quality and
-    brightness."""
+    """The summary row of a localisation: each object's position, blur, depth quality,
+    brightness and significance."""
+    from instrument.pipelines.lightfield.results import saturated_points
+
     det = r.detection
     values: dict[str, Any] = {"objects": int(det.count), "highest_order": float(r.p_hat)}
     parts, flags = [], []
@@ -347,11 +349,22 @@ def locate_row(r: LocalisationResult) -> Analysed:
                        f"object{k}_blur_y_mm": float(res.transverse_mm),
                        f"object{k}_blur_z_mm": float(res.depth_mm),
                        f"object{k}_quality": q,
-                       f"object{k}_brightness": float(det.brightness_rp[k])})
+                       f"object{k}_brightness": float(det.brightness_rp[k]),
+                       f"object{k}_significance": float(det.significance[k])})
         depth = f"z {z:.1f} ± {res.depth_mm:.1f} mm" if q != "unresolved" else "z unresolved"
         parts.append(f"y {y:.1f} ± {res.transverse_mm:.1f} mm, {depth} [{q}]")
-        if q == "unresolved":
+        if det.depth_open[k].any():
+            flags.append(f"object {k}: the depth interval runs out of the searched range "
+                         f"(the object may lie beyond it; widen the z range)")
+        elif q == "unresolved":
             flags.append(f"object {k}: depth not resolved (best guess z = {z:.1f} mm)")
+    if det.below_significance.size:
+        values["candidates_below_threshold"] = int(det.below_significance.size)
+    n_sat = saturated_points(det.notes)
+    if n_sat:
+        flags.append(f"{n_sat} scan point(s) saturated in every exposure: brightness is "
+                     f"underestimated")
+    flags.extend(n for n in det.notes if "residual" in n)
     if not r.recoverable:
         flags.append(r.message)
     text = f"{det.count} object(s)" + (": " + "; ".join(parts) if parts else f" ({r.message})")

@@ -27,6 +27,7 @@ QUALITY_WORDS = {
     "resolved": "resolved (the three depth estimates agree)",
     "two_estimates_agree": "likely (two of the three depth estimates agree)",
     "unresolved": "unresolved (the data support only an interval)",
+    "extended": "of an extended object (larger than the blur)",
 }
 
 
@@ -45,8 +46,9 @@ def add_locate_options(p: argparse.ArgumentParser) -> None:
                    help="trial y range in mm (default: the wall points ± 60 mm)")
     p.add_argument("--z-range", type=float, nargs=2, metavar=("Z0", "Z1"),
                    default=(-400.0, -60.0), help="trial z range in mm, < 0 (default -400 -60)")
-    p.add_argument("--threshold", type=float, default=0.3,
-                   help="drop detections weaker than this fraction of the strongest")
+    p.add_argument("--false-alarm", type=float, default=0.01,
+                   help="probability per scan that noise alone yields a reported object "
+                        "(default 0.01); weaker candidates are counted, not reported")
     p.add_argument("--again", action="store_true",
                    help="reconstruct again even if the results file holds a reconstruction")
     add_reconstruction_options(p)
@@ -68,8 +70,24 @@ def locate_options(args: argparse.Namespace) -> dict:
              or args.method != "wiener")
     return {"y_range_mm": None if args.y_range is None else [float(v) for v in args.y_range],
             "z_range_mm": [float(v) for v in args.z_range],
-            "threshold_rel": float(args.threshold),
+            "false_alarm": float(args.false_alarm),
             "reconstruct": reconstruction_options(args) if again else None}
+
+
+def depth_text(z: float, interval: object, open_ends: object, quality: str) -> str:
+    """A detection's depth in words: an open end of its interval is the search range's
+    edge, not a measured bound, and is said so."""
+    far, near = (float(v) for v in interval)  # type: ignore[attr-defined]
+    open_far, open_near = (bool(v) for v in open_ends)  # type: ignore[attr-defined]
+    if open_far:
+        return (f"z beyond {far:.1f} mm (nearer than {near:.1f} mm; the object may lie past "
+                f"the searched range: widen --z-range)")
+    if open_near:
+        return (f"z between {far:.1f} mm and the near end of the searched range "
+                f"({near:.1f} mm; widen --z-range)")
+    if quality == "unresolved":
+        return f"z between {far:.1f} and {near:.1f} mm (best guess {z:.1f} mm)"
+    return f"z = {z:.2f} mm (interval {far:.1f} to {near:.1f} mm)"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -94,14 +112,16 @@ def run(args: argparse.Namespace) -> int:
     for k in range(det.count):
         y, z = det.positions_mm[k]
         res = det.resolutions[k]
-        far, near = det.depth_interval_mm[k]
         quality = det.quality[k]
-        if quality == "unresolved":
-            depth = f"z between {far:.1f} and {near:.1f} mm (best guess {z:.1f} mm)"
-        else:
-            depth = f"z = {z:.2f} mm (interval {far:.1f} to {near:.1f} mm)"
-        print(f"  object {k}, depth {QUALITY_WORDS.get(quality, quality)}: y = {y:.2f} mm, "
-              f"{depth}")
+        depth = depth_text(float(z), det.depth_interval_mm[k], det.depth_open[k], quality)
+        print(f"  object {k} ({det.significance[k]:.1f}σ, false-alarm probability "
+              f"{det.false_alarm[k]:.2g} per scan), depth "
+              f"{QUALITY_WORDS.get(quality, quality)}: y = {y:.2f} mm, {depth}")
+        if quality == "extended":
+            across, deep = det.extent_mm[k]
+            print(f"    one extended object, not {len(det.components_mm[k])} points: size "
+                  f"{across:.1f} ± {res.transverse_mm:.1f} mm across, {deep:.1f} ± "
+                  f"{res.depth_mm:.1f} mm in depth")
         print(f"    theoretical blur ±{res.transverse_mm:.1f} mm across, ±{res.depth_mm:.1f} "
               f"mm in depth; brightness {det.brightness_rp[k]:.4g} {RADIANCE_UNIT} "
               f"(radiance-preserving refocusing; conventional refocusing gives "

@@ -86,7 +86,10 @@ def reconstruct_run(
                       method=method)  # type: ignore[arg-type]
     p_hat = effective_p_max(rec.regularization.filter_factors, rec.orders)
     notes = scan.notes + _noise_disagreement(rec.diagnostics.noise.sigma_per_sample,
-                                             measured.sigma_rows, n_theta)
+                                             measured.sigma_rows, n_theta,
+                                             pixels_per_cell=float(np.min(measured.cell_pixels)),
+                                             specular_width_rad=brdf.specular_width_rad,
+                                             cell_rad=lf.dtheta_rad)
     result = ReconstructionResult(measured, rec, p_hat, geometry, brdf, notes)
     if write:
         write_reconstruction(path, result, run_id=read_summary(path).run_id,
@@ -118,16 +121,31 @@ def reconstruct_options(*, geometry: LightFieldGeometry | None = None,
 NOISE_DISAGREEMENT_FACTOR = 3.0
 
 
-def _noise_disagreement(sigma_tail: float, sigma_rows: float, n_theta: int) -> tuple[str, ...]:
+def _noise_disagreement(sigma_tail: float, sigma_rows: float, n_theta: int, *,
+                        pixels_per_cell: float = np.inf, specular_width_rad: float = 0.0,
+                        cell_rad: float = 0.0) -> tuple[str, ...]:
     """A note when the high-frequency tail is dominated by signal, not noise.
 
     The Wiener/GCV/discrepancy parameters use the tail estimate; if the angular grid is too
     coarse for the signal, the tail holds signal, the noise is overestimated and the
-    reconstruction over-smoothed (or declared unrecoverable).
+    reconstruction over-smoothed (or declared unrecoverable).  The remedy it names must be
+    possible: an angle cell cannot be narrower than a camera pixel, so n_theta can grow only
+    by ``pixels_per_cell`` (the fewest pixels in a cell); at that limit, and when the wall's
+    specular lobe is narrower than one cell, the camera's angular sampling of the wall is
+    the limit, and the note says so instead of asking for more angles.
     """
-    if sigma_rows > 0 and sigma_tail > NOISE_DISAGREEMENT_FACTOR * sigma_rows:
-        return (f"the noise estimated from the high-frequency tail ({sigma_tail:.3g}) is "
-                f"{sigma_tail / sigma_rows:.0f}× the sensor-row prediction ({sigma_rows:.3g}): "
-                f"the tail holds signal, so the reconstruction is over-regularised; raise "
-                f"n_theta (now {n_theta}) until the two agree",)
-    return ()
+    if not (sigma_rows > 0 and sigma_tail > NOISE_DISAGREEMENT_FACTOR * sigma_rows):
+        return ()
+    head = (f"the noise estimated from the high-frequency tail ({sigma_tail:.3g}) is "
+            f"{sigma_tail / sigma_rows:.0f}× the sensor-row prediction ({sigma_rows:.3g}): "
+            f"the tail holds signal, so the reconstruction is over-regularised; ")
+    n_max = int(n_theta * pixels_per_cell) if np.isfinite(pixels_per_cell) else None
+    if n_max is not None and n_max < 2 * n_theta:
+        lobe = (f"the wall's specular lobe ({np.degrees(specular_width_rad):.3g}°) is "
+                f"narrower than one angle cell ({np.degrees(cell_rad):.3g}°) at the camera's "
+                f"pixel limit, " if specular_width_rad < cell_rad else "")
+        return (head + f"n_theta {n_theta} already samples about one camera pixel per angle "
+                f"(at most {n_max}): {lobe}the camera's angular resolution of the wall is the "
+                f"limit, not n_theta — trust positions, not fine angular detail",)
+    hint = f" (at most {n_max}, one camera pixel per angle)" if n_max is not None else ""
+    return (head + f"raise n_theta (now {n_theta}{hint}) until the two agree",)

@@ -14,7 +14,12 @@ file; a localisation writes one holding the stored reconstruction and its own gr
                      solvable_domain_rad, noise_sigma, noise_method
     localisation/    positions_mm (K, 2), brightness_rp, brightness_conventional,
                      transverse_mm, depth_mm, depth_profiles (K, N_z), stack_y_mm,
-                     stack_z_mm, stack_conventional, stack_rp ; attrs count, p_hat
+                     stack_z_mm, stack_conventional, stack_rp, depth_interval_mm (K, 2)
+                     with depth_interval_open (K, 2) (an open end is the search edge, not
+                     a measured bound), significance (K,) in σ, false_alarm (K,) per scan,
+                     below_positions_mm (M, 2), below_significance (M,) (candidates that
+                     did not clear the threshold) ; attrs count, p_hat, threshold_sigma,
+                     resolution_cells, saturated_points, notes
     attrs: program, version, date, geometry (JSON), brdf (JSON)
 """
 
@@ -180,10 +185,11 @@ def read_reconstruction(path: str | Path) -> dict[str, Any] | None:
         c = f[f"{GROUP}/reconstruction"]
         g = f[GROUP]
         out = {k: c[k][()] for k in ("incident_radiance", "points_mm", "theta_rad",
-                                     "filter_factors", "orders")}
+                                     "filter_factors", "orders", "noise_power")}
         out.update({k: c.attrs[k] for k in ("p_hat", "solvable_domain_rad", "domain_rad",
                                             "recoverable", "message")})
         out["geometry"] = json.loads(as_text(g.attrs["geometry"]))
+        out["notes"] = tuple(json.loads(as_text(g.attrs.get("notes", "[]"))))
     return out
 
 
@@ -207,6 +213,15 @@ class LocalisationResult:
     recoverable: bool
     message: str
     figures: tuple[Path, ...] = ()
+
+
+#: How :mod:`.scan` notes a point whose every exposure saturated.
+SATURATED_NOTE = "every exposure saturated"
+
+
+def saturated_points(notes: tuple[str, ...]) -> int:
+    """How many scan points the notes say were saturated in every exposure."""
+    return sum(SATURATED_NOTE in n for n in notes)
 
 
 def stored_options(path: str | Path) -> dict[str, Any]:
@@ -265,10 +280,24 @@ def _fill_localisation(g: h5py.Group, det: Detection, p_hat: float, message: str
     loc["depth_estimates_mm"] = det.depth_estimates_mm
     loc["depth_estimates_mm"].attrs["columns"] = (
         "depth_filter_mm, matched_filter_mm, radiance_preserving_mm")
+    loc["depth_interval_open"] = det.depth_open
+    loc["depth_interval_open"].attrs["columns"] = "far_open, near_open"
     loc["quality"] = np.array(det.quality, dtype=h5py.string_dtype())
+    # how far each object stands out of the noise, and what did not (never dropped silently)
+    loc["extent_mm"] = det.extent_mm
+    loc["extent_mm"].attrs["columns"] = "across_mm, depth_mm"
+    loc["significance"] = det.significance
+    loc["significance"].attrs["units"] = "standard deviations"
+    loc["false_alarm"] = det.false_alarm
+    loc["below_positions_mm"] = det.below_positions_mm
+    loc["below_positions_mm"].attrs["columns"] = "y_mm, z_mm"
+    loc["below_significance"] = det.below_significance
     loc["stack_y_mm"] = det.stack.y_mm
     loc["stack_z_mm"] = det.stack.z_mm
     loc["stack_conventional"] = det.stack.conventional
     loc["stack_rp"] = det.stack.radiance_preserving
     loc.attrs.update({"count": det.count, "p_hat": p_hat, "message": message,
-                      "signal": "stack_rp"})
+                      "saturated_points": saturated_points(det.notes),
+                      "signal": "stack_rp", "threshold_sigma": det.threshold_sigma,
+                      "resolution_cells": det.resolution_cells,
+                      "notes": json.dumps(list(det.notes))})

@@ -96,7 +96,8 @@ def read_scan(path: str | Path, geometry: LightFieldGeometry) -> MeasuredScan:
             unsat = [k for k in light if fsat[k] == 0]
             best = max(unsat, key=lambda k: fexp[k]) if unsat else min(light, key=lambda k: fexp[k])
             if not unsat:
-                notes.append(f"point {int(pidx)}: every exposure saturated; used the shortest")
+                notes.append(f"point {int(pidx)}: every exposure saturated; used the shortest "
+                             f"(its brightest pixels are clipped)")
             t = float(fexp[best])
             own = [k for k in mine if not flight[k] and fexp[k] == t]
             other = [k for k in dark_frames if fexp[k] == t]

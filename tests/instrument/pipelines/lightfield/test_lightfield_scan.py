@@ -199,6 +199,10 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
         interval = loc["depth_interval_mm"][()]
         quality = [q.decode() if isinstance(q, bytes) else q for q in loc["quality"][()]]
         estimates = loc["depth_estimates_mm"][()]
+        extent = loc["extent_mm"][()]
+        significance = loc["significance"][()]
+        threshold = float(loc.attrs["threshold_sigma"])
+        assert loc["depth_interval_open"].shape == (len(pos), 2)
         meas = g["measured/radiance"][()]
         wall_c = rec["points_mm"][()]
         sigma_rows = float(g["measured"].attrs["sigma_rows"])
@@ -207,7 +211,7 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
     assert interval.shape == (len(pos), 2) and estimates.shape == (len(pos), 3)
     assert np.all(interval[:, 0] <= pos[:, 1] + 1e-9)
     assert np.all(pos[:, 1] <= interval[:, 1] + 1e-9)
-    assert set(quality) <= {"resolved", "two_estimates_agree", "unresolved"}
+    assert set(quality) <= {"resolved", "two_estimates_agree", "unresolved", "extended"}
     assert "depth resolved" in out or "depth likely" in out
     # the brushed-metal wall keeps ~18 angular orders at this SNR (≥ the thesis' 10)
     assert 10 <= p_hat <= 30
@@ -231,6 +235,14 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
     half = 0.5 * (TRUTH_BAR_Y[1] - TRUTH_BAR_Y[0])
     assert abs(pos[j, 0] - bar_centre) < half + dy[j]
     assert abs(pos[j, 1] - TRUTH_BAR_Z) < dz[j]
+    # the bar is larger than the blur: one extended object whose size holds its 15 mm,
+    # never several "resolved" points
+    assert quality[j] in ("extended", "unresolved")
+    if quality[j] == "extended":
+        assert abs(extent[j, 0] - 2 * half) < dy[j]
+    # every object carries its significance, above the threshold, strongest first
+    assert np.all(significance > threshold) and np.all(np.diff(significance) <= 0)
+    assert "σ" in out and "false-alarm probability" in out
     assert wall_c.size > 40  # the wall points whose curves the 100 mm scan covers
 
 
@@ -368,7 +380,7 @@ def test_cli_bad_input_names_the_file_or_option(scan_run, tmp_path, capsys):
         (["reconstruct", str(scan_run), "--domain", "50", "-50"], "--domain 50 -50"),
         (["locate", str(scan_run), "--domain", "-95", "10"], "-90 < A < B < 90"),
         (["locate", str(scan_run), "--z-range", "-100", "-400"], "z_range_mm"),
-        (["locate", str(scan_run), "--threshold", "2"], "threshold_rel 2"),
+        (["locate", str(scan_run), "--false-alarm", "2"], "false_alarm 2"),
     ]
     for argv, fragment in cases:
         assert main([*argv, "--no-figures"]) == 2, argv
@@ -432,3 +444,20 @@ def test_bench_scene_config_errors_name_the_key():
         with pytest.raises(ValueError) as exc:
             LightFieldBenchScene.from_config(cfg)
         assert fragment in str(exc.value), (change, str(exc.value))
+
+
+def test_the_n_theta_note_recommends_only_what_the_camera_allows():
+    """At one camera pixel per angle cell (n_theta 1024 on the 1024-pixel sensor) more
+    angles cannot be had: the note names the wall's angular sampling as the limit instead
+    of asking for a larger n_theta; below it, it says how far n_theta can go."""
+    from instrument.pipelines.lightfield.reconstruct import _noise_disagreement
+
+    (at_limit,) = _noise_disagreement(6.2e-3, 1e-4, 1024, pixels_per_cell=1.0,
+                                      specular_width_rad=np.deg2rad(0.01),
+                                      cell_rad=np.deg2rad(0.066))
+    assert "raise n_theta" not in at_limit
+    assert "angular resolution of the wall is the limit" in at_limit
+    assert "specular lobe (0.01°)" in at_limit
+    (coarse,) = _noise_disagreement(1e-3, 1e-4, 8, pixels_per_cell=128.0)
+    assert "raise n_theta (now 8 (at most 1024" in coarse
+    assert _noise_disagreement(1e-4, 1e-4, 128, pixels_per_cell=8.0) == ()

@@ -1,0 +1,114 @@
+"""Significance of located objects from the reconstruction's own noise model.
+
+The localiser (:mod:`.localize`) fits point responses ``a_k K(θ − θ*_k(c))`` to the
+reconstructed rays ``g(c, θ) = L cos θ`` of the solvable domain.  Their amplitudes are
+linear in the data, so their noise follows from the noise of ``g``:
+
+* Noise of the reconstruction (closed form, Sasaki 2020 eqs. 2-32/33 and ADR 0030): the
+  Fourier coefficient of order p of a wall point's ``g`` carries the measured coefficient's
+  noise divided by the gain and passed through the filter, variance ``v_p = φ_p² N_p`` with
+  ``N_p = σ_p²/|S_pp|²`` (``RegularizationResult.noise_power``).  The noise is stationary
+  in θ, so ``Cov(g_i, g_j) = Σ_p v_p e_p(θ_i) e_p*(θ_j)`` and a real weight ``m`` on the
+  samples has ``mᵀ C m = n² Σ_p v_p |M_p|²`` with ``M_p`` its coefficients
+  (:func:`.spectral.coefficients`, ``X_p = (1/n) Σ_j x_j e_p*(θ_j)``).  Different wall
+  points see disjoint camera samples and are taken as independent (interpolation along the
+  curves correlates neighbours slightly; the empirical false-alarm rate is measured in
+  ``benchmarks/bench_lightfield_validation.py``).
+* Amplitudes of K responses at fixed positions, least squares on the rays with design
+  ``X`` (n_rays, K): ``â = (XᵀX)⁻¹ Xᵀ g`` and ``Cov(â) = (XᵀX)⁻¹ XᵀCX (XᵀX)⁻¹``
+  (generalised least squares' sandwich form for an unweighted fit).  Where the fit's
+  residual exceeds what the noise explains (model mismatch: extended objects, light from
+  outside the domain), the covariance is scaled by the ratio (the Birge ratio, the usual
+  reduced-χ² scaling), so a mismatch artefact is judged against the mismatch, not the noise.
+* Significance ``s_k = â_k / sd(â_k)`` in standard deviations; one-sided (a radiance is
+  not negative).  A scan searches many independent resolution cells: the false-alarm
+  probability *per scan* of a pure-noise peak above s is ``≈ N_cells Q(s)`` (Bonferroni,
+  conservative for correlated cells), ``Q`` the Gaussian upper tail, and the threshold for
+  a per-scan false-alarm rate α is ``s* = Q⁻¹(α / N_cells)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import ndtr, ndtri
+
+from .spectral import coefficients
+
+__all__ = [
+    "AmplitudeFit",
+    "amplitude_fit",
+    "false_alarm_probability",
+    "snr_threshold",
+]
+
+
+@dataclass(frozen=True)
+class AmplitudeFit:
+    """Linear amplitudes of fixed point responses and their noise.
+
+    Attributes
+    ----------
+    amplitudes : (K,) — least-squares amplitudes (radiance units)
+    sigma : (K,) — their standard deviations (noise model × mismatch scaling)
+    significance : (K,) — ``amplitudes / sigma`` in standard deviations
+    mismatch : float — residual over its noise expectation (≥ 1; 1: noise explains it)
+    """
+
+    amplitudes: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    significance: NDArray[np.float64]
+    mismatch: float
+
+
+def amplitude_fit(
+    g_rays: NDArray, responses: NDArray, use: NDArray[np.bool_], phi: ArrayLike,
+    noise_power: ArrayLike,
+) -> AmplitudeFit:
+    """Amplitudes of ``responses`` (K, R, n_use) in the data ``g_rays`` (R, n_use) with the
+    noise of the reconstruction (module doc).
+
+    ``use`` (N,) marks the rays of the solvable domain on the full angle grid, ``phi`` (N,)
+    the filter factors and ``noise_power`` (N,) the ``σ_p²/|S_pp|²`` of the reconstruction
+    (both in fftfreq order; infinite noise power where the filter passes nothing counts 0).
+    """
+    k = responses.shape[0]
+    n = use.size
+    x = responses.reshape(k, -1).T
+    gram = x.T @ x
+    ginv = np.linalg.pinv(gram)
+    amp = ginv @ (x.T @ g_rays.ravel())
+    phi_ = np.asarray(phi, dtype=float)
+    npw = np.asarray(noise_power, dtype=float)
+    v = np.where((phi_ > 0) & np.isfinite(npw), phi_**2 * np.where(np.isfinite(npw), npw, 0.0),
+                 0.0)
+    full = np.zeros((*responses.shape[:2], n))
+    full[..., use] = responses
+    m = coefficients(full, axis=-1)  # (K, R, N)
+    weighted = m * v
+    xcx = (n * n) * np.einsum("krp,lrp->kl", weighted, m.conj()).real
+    cov = ginv @ xcx @ ginv
+    resid = g_rays.ravel() - x @ amp
+    expected = g_rays.size * float(v.sum())  # trace of C over the fitted rays
+    mismatch = max(1.0, float(resid @ resid) / expected) if expected > 0 else 1.0
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None) * mismatch)
+    signif = np.where(sigma > 0, amp / np.where(sigma > 0, sigma, 1.0), np.inf)
+    return AmplitudeFit(amp, sigma, signif, mismatch)
+
+
+def snr_threshold(false_alarm_per_scan: float, n_cells: float) -> float:
+    """The significance (σ) a pure-noise peak exceeds with probability
+    ``false_alarm_per_scan`` somewhere among ``n_cells`` independent cells (one-sided)."""
+    if not 0.0 < false_alarm_per_scan < 1.0:
+        raise ValueError(f"false_alarm {false_alarm_per_scan:g} must be in (0, 1): a "
+                         f"probability per scan")
+    return float(-ndtri(false_alarm_per_scan / max(float(n_cells), 1.0)))
+
+
+def false_alarm_probability(significance: ArrayLike, n_cells: float) -> NDArray[np.float64]:
+    """Per-scan probability that noise alone gives a peak this significant:
+    ``min(1, N_cells Q(s))``."""
+    s = np.asarray(significance, dtype=float)
+    return np.minimum(1.0, max(float(n_cells), 1.0) * ndtr(-s))
