@@ -292,6 +292,12 @@ def emulator_of(axis: Smc100Axis) -> Smc100Emulator:
     return getattr(axis, "emulator", None) or registry.get("simsmc", axis.name)
 
 
+@pytest.fixture
+def clock_of():
+    """The contract's handle on emulated time."""
+    return lambda axis: emulator_of(axis).clock
+
+
 class TestContractRotary(MotionAxisContract):
     @pytest.fixture
     def axis_factory(self, transport, servers):
@@ -312,8 +318,8 @@ class TestContractSteppingClock(MotionAxisContract):
 
     @pytest.fixture
     def axis_factory(self):
-        count = iter(range(100))
-        return lambda: Smc100Axis(f"simsmc://step{next(count)}?step=0.005", name="stepper")
+        names = (f"step{n}" for n in range(100))  # the axis is named as its emulator
+        return lambda: Smc100Axis(f"simsmc://{(name := next(names))}?step=0.005", name=name)
 
 
 # --------------------------------------------------------------------------- behaviour

@@ -304,9 +304,21 @@ def driver_options(stage: str) -> dict:
     return {"home_offset": 12.5} if stage == "MTS25-Z8" else {}
 
 
+@pytest.fixture
+def served() -> dict[str, AptEmulator]:
+    """Emulators behind pseudo-terminals, by axis name (those of URLs are in the registry)."""
+    return {}
+
+
+@pytest.fixture
+def clock_of(served):
+    """The contract's handle on emulated time."""
+    return lambda axis: (served.get(axis.name) or registry.get("simapt", axis.name)).clock
+
+
 @pytest.fixture(params=[(s, t) for s in QUERIES for t in ("url", "pty")],
                 ids=lambda p: f"{p[0]}-{p[1]}")
-def axis_factory(request):
+def axis_factory(request, served):
     stage, transport = request.param
     servers: list[PtyServer] = []
 
@@ -317,8 +329,8 @@ def axis_factory(request):
             return AptMotor(f"simapt://{name}?{QUERIES[stage]}&speed={SPEED}", name=name,
                             stage=stage, **options)
         model = "K10CR1" if stage == "K10CR1" else "KDC101"
-        server = PtyServer(AptEmulator(name, model=model, stage=stage,
-                                       clock=ScaledClock(SPEED)))
+        served[name] = AptEmulator(name, model=model, stage=stage, clock=ScaledClock(SPEED))
+        server = PtyServer(served[name])
         servers.append(server)
         return AptMotor(server.path, name=name, stage=stage, **options)
 

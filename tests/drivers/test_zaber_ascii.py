@@ -420,6 +420,12 @@ def emulator_of(axis: ZaberAxis) -> ZaberEmulator:
     return registry.get("simzaber", axis.name)
 
 
+@pytest.fixture
+def clock_of():
+    """The contract's handle on emulated time (every axis here is named as its emulator)."""
+    return lambda axis: emulator_of(axis).clock
+
+
 class TestContractRotary(MotionAxisContract):
     @pytest.fixture
     def axis_factory(self, transport, cleanup):
@@ -443,7 +449,8 @@ class TestContractSteppingClock(MotionAxisContract):
         count = iter(range(100))
 
         def make():
-            axis = ZaberAxis(f"simzaber://step{next(count)}?step=0.005", name="stepper",
+            name = f"step{next(count)}"
+            axis = ZaberAxis(f"simzaber://{name}?step=0.005", name=name,
                              microstep_size=MS, flush_s=0.0)
             cleanup.append(axis)
             return axis
