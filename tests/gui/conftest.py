@@ -52,7 +52,7 @@ def make_window(qtbot, tmp_path, settings):
     for w in windows:
         w.confirm_close_during_run(True)
         w.close()
-        qtbot.waitUntil(lambda w=w: not w.session.run, timeout=30000)
+        qtbot.waitUntil(lambda w=w: not w.session.run, timeout=60000)
         w.session.close(20)
         w.deleteLater()
     flush_deleted()

@@ -38,13 +38,13 @@ def start(qtbot, w, tmp_path, step=10.0):
     path.write_text(PLAN.format(step=step))
     editor = w.plan_editor
     assert editor.open_plan(path)
-    qtbot.waitUntil(editor.start.isEnabled, timeout=20000)
+    qtbot.waitUntil(editor.start.isEnabled, timeout=60000)
     editor.start.click()
-    qtbot.waitUntil(lambda: w.current_run is not None, timeout=20000)
+    qtbot.waitUntil(lambda: w.current_run is not None, timeout=60000)
     return w.current_run
 
 
-def wait_points(qtbot, run, n, timeout=30000):
+def wait_points(qtbot, run, n, timeout=60000):
     qtbot.waitUntil(lambda: run.live.n_received >= n, timeout=timeout)
 
 
@@ -60,7 +60,7 @@ def test_pause_resume_and_abort(qtbot, make_window, fast_bench_file, tmp_path):
     run = start(qtbot, w, tmp_path)
     wait_points(qtbot, run, 2)
     w.run_control.pause.click()
-    qtbot.waitUntil(lambda: w.run_control.pause_state is not None, timeout=20000)
+    qtbot.waitUntil(lambda: w.run_control.pause_state is not None, timeout=60000)
     assert w.run_control.pause_state.kind is PauseKind.OPERATOR
     assert run.engine.state is EngineState.PAUSED
     assert not w.run_control.recovery.isVisible()  # no fault: resume or abort
@@ -92,7 +92,7 @@ def test_a_device_fault_pauses_the_run_and_the_operator_chooses(
     faults = registry.get("simsmc", "detector_theta").faults
     faults.schedule(FaultKind.DISCONNECT, nth=1)  # the cable is pulled
     rc = w.run_control
-    qtbot.waitUntil(lambda: rc.pause_state is not None, timeout=30000)
+    qtbot.waitUntil(lambda: rc.pause_state is not None, timeout=60000)
     assert rc.pause_state.kind is PauseKind.DEVICE_FAULT
     assert rc.recovery.isVisible() and "detector_theta" in rc.question.text()
     rows = w.fault_panel.rows()
@@ -126,7 +126,7 @@ def test_closing_during_a_run_asks_then_makes_everything_safe(qtbot, make_window
     wait_points(qtbot, run, 2)
     w.confirm_close_during_run(True)  # the operator answers "Yes" to the question
     w.close()
-    qtbot.waitUntil(lambda: not w.isVisible(), timeout=30000)
+    qtbot.waitUntil(lambda: not w.isVisible(), timeout=60000)
     assert w.session.run is None and not run.engine.alive
     data = read_run(run.path)  # a valid, finalised file
     assert data.status == "aborted" and 2 <= data.n_points < len(run.plan.points)
@@ -151,7 +151,7 @@ def test_a_small_scan_to_completion_file_catalog_and_live_plot(qtbot, make_windo
     assert (row.status, row.n_points, row.n_planned) == ("finished", ev.n_done, ev.n_done)
     assert row.sample == "gui-sample" and row.path == str(run.path)
     # the live plot shows every point done, one curve for the one θi
-    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=5000)
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=60000)
     assert w.live_plot.kind == "in_plane" and list(w.live_plot._curves) == [20.0]
     x, y = w.live_plot._curves[20.0].getData()
     assert len(x) == ev.n_done and np.all(np.diff(x) > 0)
@@ -171,7 +171,7 @@ def test_space_pauses_and_resumes_but_not_while_typing(qtbot, make_window, fast_
     run = start(qtbot, w, tmp_path, step=5.0)
     wait_points(qtbot, run, 1)
     w.activateWindow()
-    qtbot.waitUntil(w.isActiveWindow, timeout=5000)
+    qtbot.waitUntil(w.isActiveWindow, timeout=60000)
     field = w.plan_editor.field("plan.name")  # a text field: Space is typed, not a pause
     field.setFocus()
     qtbot.keyClick(field, Qt.Key_Space)
@@ -179,8 +179,8 @@ def test_space_pauses_and_resumes_but_not_while_typing(qtbot, make_window, fast_
     w.run_control.state.setFocus()
     w.run_control.pause.setFocus()
     qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
-    qtbot.waitUntil(lambda: run.engine.state is EngineState.PAUSED, timeout=20000)
+    qtbot.waitUntil(lambda: run.engine.state is EngineState.PAUSED, timeout=60000)
     qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
-    qtbot.waitUntil(lambda: run.engine.state is EngineState.RUNNING, timeout=20000)
+    qtbot.waitUntil(lambda: run.engine.state is EngineState.RUNNING, timeout=60000)
     w.run_control.abort.click()
     assert wait_end(qtbot, w).status == "aborted"
