@@ -9,7 +9,7 @@ import pytest
 from PySide6.QtCore import Qt
 
 from hw_mocks import registry
-from tests.gui.conftest import connect
+from tests.gui.conftest import connect, mouse_click
 
 
 def _stage(scheme: str, role: str) -> float:
@@ -41,15 +41,15 @@ def test_launch_connect_home_jog(qtbot, make_window, fast_bench_file):
     axis = panels["detector_theta"]
     assert "homed" in axis.status.text()
     axis.step.setValue(25.0)
-    qtbot.mouseClick(axis.plus, Qt.LeftButton)
+    mouse_click(qtbot, axis.plus)
     qtbot.waitUntil(lambda: axis.position.text() == "25.000 deg", timeout=60000)
     assert _stage("simsmc", "detector_theta") == pytest.approx(25.0, abs=0.005)
     assert axis.velocity.text() == "20 deg/s"
-    qtbot.mouseClick(axis.minus, Qt.LeftButton)
+    mouse_click(qtbot, axis.minus)
     qtbot.waitUntil(lambda: axis.position.text() == "0.000 deg", timeout=60000)
     sample = panels["sample_theta"]
     sample.target.setValue(-12.5)
-    qtbot.mouseClick(sample.go, Qt.LeftButton)
+    mouse_click(qtbot, sample.go)
     qtbot.waitUntil(lambda: sample.position.text() == "-12.500 deg", timeout=60000)
     assert _stage("simapt", "sample_theta") == pytest.approx(-12.5, abs=0.01)
     # the power meter's reading comes with its wavelength
