@@ -141,20 +141,29 @@ def test_a_rejected_setting_reports_the_drivers_error(session):
 def test_a_run_takes_the_bench_refuses_manual_moves_and_gives_it_back(tmp_path):
     rec = Recorder()
     bench: list[Bench] = []
+    gate = threading.Event()  # the camera's first exposure waits for it
 
     def opener(profile):
         bench.append(ideal_bench())
+        camera = bench[-1].devices["camera"]
+        expose = camera._do_acquire_one
+
+        def gated(timeout: float):
+            # Holds the run at its first point, so that it still owns the bench when the
+            # manual move arrives, however fast the run or slow the test.
+            assert gate.wait(60), "the test never opened the gate"
+            return expose(timeout)
+
+        camera._do_acquire_one = gated
         return bench[-1]
 
     s = BenchSession(rec, opener=opener, fsync=False)
     try:
         _connect(s, rec, bench_profile := ideal_bench().profile)
         plan = build_plan(parse_plan(inplane_plan(step=15.0)), bench_profile)
-        gate = threading.Event()
         s.submit(StartRun(plan, tmp_path))
         wait_for(lambda: s.run is not None, 60, "run")
         run = s.run
-        run.engine.subscribe(lambda ev: gate.wait(5))  # hold the run at its first event
         s.submit(MoveTo("sample_theta", 10.0))
         assert s.wait_idle(60)
         gate.set()
