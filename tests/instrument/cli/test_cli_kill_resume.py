@@ -36,7 +36,7 @@ exposure_us = 2000
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(300)  # two runs on a bench at 5× real time
+@pytest.mark.timeout(900)  # two runs on a bench at 5× real time
 def test_cli_run_killed_then_resumed(tmp_path, capsys):
     plan = tmp_path / "p.toml"
     plan.write_text(PLAN)
