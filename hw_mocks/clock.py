@@ -9,15 +9,23 @@ monotonic) whenever it processes a command or is polled, and computes motion fro
 - :class:`ManualClock` moves only when told (unit tests of motion profiles).
 - :class:`SteppingClock` advances a fixed step on every reading, so a driver's poll loop
   makes simulated time pass deterministically and without real waiting.
+
+Every clock can be *held* (:meth:`~_Holdable.held`): while held, emulated time stands still
+except for explicit :meth:`~_Holdable.advance` calls, and on release it runs on from where
+it stood, without a jump. A test that must observe a state in the middle of a motion ("the
+axis is still moving", "the stop came before the target") holds the clock around the
+observation instead of hoping that the machine is fast enough to look in time.
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
+from collections.abc import Iterator
 from typing import Protocol
 
-__all__ = ["Clock", "ManualClock", "ScaledClock", "SteppingClock"]
+__all__ = ["Clock", "HoldableClock", "ManualClock", "ScaledClock", "SteppingClock"]
 
 
 class Clock(Protocol):
@@ -26,21 +34,98 @@ class Clock(Protocol):
         ...
 
 
-class ScaledClock:
+class HoldableClock(Protocol):
+    """A clock a test can stop and advance by hand (every clock of this module is one)."""
+
+    def now(self) -> float: ...
+
+    def advance(self, dt: float) -> float: ...
+
+    def held(self) -> contextlib.AbstractContextManager[HoldableClock]: ...
+
+
+class _Holdable:
+    """Holding for the clocks: a count of holds, and time that only :meth:`advance` moves.
+
+    Subclasses keep their reading in ``_t`` while held and implement :meth:`_freeze`
+    (take the present reading into ``_t``) and :meth:`_thaw` (run on from ``_t``).
+    """
+
+    _lock: threading.Lock
+    _t: float
+    _holds: int = 0
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[_Holdable]:
+        """Stop emulated time for the ``with`` block (holds nest; time runs on after the
+        outermost). Thread-safe: emulator threads reading the clock meanwhile see it stand."""
+        with self._lock:
+            if self._holds == 0:
+                self._freeze()
+            self._holds += 1
+        try:
+            yield self
+        finally:
+            with self._lock:
+                self._holds -= 1
+                if self._holds == 0:
+                    self._thaw()
+
+    @property
+    def is_held(self) -> bool:
+        with self._lock:
+            return self._holds > 0
+
+    def advance(self, dt: float) -> float:
+        """Move time forward by ``dt`` seconds at once; return the new reading."""
+        if dt < 0:
+            raise ValueError("time cannot run backwards")
+        with self._lock:
+            if self._holds == 0:
+                self._freeze()
+                self._t += dt
+                self._thaw()
+            else:
+                self._t += dt
+            return self._t
+
+    def _freeze(self) -> None:
+        raise NotImplementedError
+
+    def _thaw(self) -> None:
+        raise NotImplementedError
+
+
+class ScaledClock(_Holdable):
     """Wall-clock time multiplied by ``speed`` (1.0 = real time)."""
 
     def __init__(self, speed: float = 1.0) -> None:
         if not speed > 0:
             raise ValueError("speed must be > 0")
         self.speed = float(speed)
+        self._lock = threading.Lock()
         self._t0 = time.monotonic()
+        self._t = 0.0
 
     def now(self) -> float:
+        with self._lock:
+            if self._holds:
+                return self._t
+            return self._running()
+
+    def _running(self) -> float:
         return (time.monotonic() - self._t0) * self.speed
 
+    def _freeze(self) -> None:
+        self._t = self._running()
 
-class ManualClock:
-    """Time that moves only through :meth:`advance` or :meth:`set`."""
+    def _thaw(self) -> None:
+        # Choose the origin so that the running reading starts at the held one.
+        self._t0 = time.monotonic() - self._t / self.speed
+
+
+class ManualClock(_Holdable):
+    """Time that moves only through :meth:`advance` or :meth:`set` (always held)."""
 
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)
@@ -50,12 +135,11 @@ class ManualClock:
         with self._lock:
             return self._t
 
-    def advance(self, dt: float) -> float:
-        if dt < 0:
-            raise ValueError("time cannot run backwards")
-        with self._lock:
-            self._t += dt
-            return self._t
+    def _freeze(self) -> None:
+        pass  # nothing but advance() and set() moves this clock anyway
+
+    def _thaw(self) -> None:
+        pass
 
     def set(self, t: float) -> None:
         with self._lock:
@@ -64,8 +148,9 @@ class ManualClock:
             self._t = float(t)
 
 
-class SteppingClock:
-    """Each reading advances time by ``step`` seconds (deterministic, no real waiting)."""
+class SteppingClock(_Holdable):
+    """Each reading advances time by ``step`` seconds (deterministic, no real waiting);
+    while held, readings do not step."""
 
     def __init__(self, step: float = 0.01, start: float = 0.0) -> None:
         if not step > 0:
@@ -76,5 +161,12 @@ class SteppingClock:
 
     def now(self) -> float:
         with self._lock:
-            self._t += self.step
+            if not self._holds:
+                self._t += self.step
             return self._t
+
+    def _freeze(self) -> None:
+        pass  # the reading is _t already
+
+    def _thaw(self) -> None:
+        pass

@@ -44,9 +44,16 @@ class OutboundQueue:
                     self._items.append((at, delivery.data))
                     self._last = at
 
-    def take(self, n: int) -> bytes:
-        """Up to ``n`` bytes that have arrived by now."""
-        now = time.monotonic()
+    def take(self, n: int, *, until: float | None = None) -> bytes:
+        """Up to ``n`` bytes that have arrived by now (and by ``until``, when given).
+
+        ``until`` is the deadline of the read asking: a frame that arrives after it is not
+        part of that read, even when the reading thread was descheduled past its deadline
+        and only looks later. Without this a late frame (a ``DELAY`` fault) could be taken
+        in time on a loaded machine, and a test of the late-reply recovery would pass or
+        fail with the machine's load.
+        """
+        now = time.monotonic() if until is None else min(time.monotonic(), until)
         out = bytearray()
         with self._lock:
             while self._items and len(out) < n and self._items[0][0] <= now:
@@ -153,7 +160,7 @@ class EmulatedSerial(SerialBase):
         while len(out) < size:
             self._check()
             self._pump()
-            out += self._queue.take(size - len(out))
+            out += self._queue.take(size - len(out), until=deadline)
             if len(out) >= size or self._timeout == 0:
                 break
             now = time.monotonic()

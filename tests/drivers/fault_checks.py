@@ -9,7 +9,6 @@ the command; anything else propagates and fails the test.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -72,10 +71,10 @@ def random_fault_session(operation: Callable[[int], None], faults: FaultInjector
 
 def unplug_and_replug(device, faults: FaultInjector, transport: str,
                       operation: Callable[[], object], reopen: Callable[[], object], *,
-                      command: str | None, limit_s: float):
+                      command: str | None):
     """Pull the cable at the next frame and put it back; return the device to go on with.
 
-    ``operation`` must then fail within ``limit_s`` with the transport's typed error naming
+    ``operation`` must then fail with the transport's typed error naming
     the device and ``command``: in-process the link raises (ConnectionFailed); a pty stays
     open but the dead instrument answers nothing (DeviceTimeout after the retries);
     ``command=None`` accepts any command (a wait polls several). Back
@@ -84,11 +83,9 @@ def unplug_and_replug(device, faults: FaultInjector, transport: str,
     """
     faults.schedule(FaultKind.DISCONNECT, nth=1)
     expected = ConnectionFailed if transport == "url" else DeviceTimeout
-    t0 = time.monotonic()
     try:
         operation()
     except expected as err:
-        assert time.monotonic() - t0 < limit_s
         assert err.device == device.name, err
         assert command is None or err.command == command, err
         assert err.__cause__ is not None

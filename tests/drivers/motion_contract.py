@@ -1,12 +1,15 @@
 """The contract every :class:`drivers.base.MotionAxis` implementation must keep.
 
-A driver's test module subclasses :class:`MotionAxisContract` and provides a fixture
-``axis_factory``: a callable returning a freshly opened axis (a fresh emulator behind it)
-with soft limits that include ``CONTRACT_RANGE``. Run it once per transport (in-process
-URL and pseudo-terminal), e.g. with a parametrised fixture.
+A driver's test module subclasses :class:`MotionAxisContract` and provides two fixtures:
+``axis_factory``, a callable returning a freshly opened axis (a fresh emulator behind it)
+with soft limits that include ``CONTRACT_RANGE``; and ``clock_of``, a callable giving the
+emulated clock (:class:`hw_mocks.clock.HoldableClock`) behind an axis. Run it once per
+transport (in-process URL and pseudo-terminal), e.g. with a parametrised fixture.
 
 The assertions are about behaviour a user relies on: limits refuse before motion, a
-move ends within tolerance of its target, a stop really stops, waits never hang.
+move ends within tolerance of its target, a stop really stops, waits never hang. What
+happens *during* a move ("still moving", "stopped short") is observed with the
+emulator's clock held, so that no assertion depends on how fast the machine runs.
 """
 
 from __future__ import annotations
@@ -104,42 +107,57 @@ class MotionAxisContract:
         ready_axis.move_by(-4.0, wait=True, timeout=self.move_timeout)
         assert ready_axis.position == pytest.approx(-0.5, abs=ready_axis.position_tolerance)
 
-    def test_move_is_non_blocking_and_reports_moving(self, ready_axis):
+    def _come_to_rest(self, axis: MotionAxis) -> None:
+        """Poll until the axis stands still (a stop decelerates in emulated time)."""
+        deadline = time.monotonic() + self.move_timeout
+        while axis.is_moving and time.monotonic() < deadline:
+            time.sleep(0.005)
+
+    def _stop_mid_move(self, axis: MotionAxis, clock) -> None:
+        """Start a slow move to the top of the range and stop it a quarter of the way.
+
+        The clock is held from the move to the stop, so the stop lands mid-move however
+        long the machine takes between the two commands.
+        """
+        axis.velocity = axis.velocity / 10.0
+        with clock.held():
+            axis.move_to(CONTRACT_RANGE[1])
+            assert axis.is_moving
+            # A quarter of the cruise time: the stage is under way, far from the target.
+            clock.advance(0.25 * (CONTRACT_RANGE[1] - axis.position) / axis.velocity)
+            assert axis.is_moving
+            axis.stop()
+
+    def test_move_is_non_blocking_and_reports_moving(self, ready_axis, clock_of):
         ready_axis.velocity = ready_axis.velocity  # round-trips
-        ready_axis.move_to(CONTRACT_RANGE[1])
-        assert ready_axis.is_moving
+        with clock_of(ready_axis).held():  # no emulated time passes: it cannot arrive
+            ready_axis.move_to(CONTRACT_RANGE[1])
+            assert ready_axis.is_moving
         ready_axis.wait(self.move_timeout)
         assert not ready_axis.is_moving
 
-    def test_stop_halts_short_of_target(self, ready_axis):
-        # Slow enough that the stop surely arrives mid-move at any emulator speed.
-        ready_axis.velocity = ready_axis.velocity / 100.0
-        ready_axis.move_to(CONTRACT_RANGE[1])
-        ready_axis.stop()
-        deadline = time.monotonic() + self.move_timeout
-        while ready_axis.is_moving and time.monotonic() < deadline:
-            time.sleep(0.005)
+    def test_stop_halts_short_of_target(self, ready_axis, clock_of):
+        self._stop_mid_move(ready_axis, clock_of(ready_axis))
+        self._come_to_rest(ready_axis)
         assert not ready_axis.is_moving
         assert ready_axis.position < CONTRACT_RANGE[1] - ready_axis.position_tolerance
 
-    def test_wait_times_out_and_stops(self, ready_axis):
-        ready_axis.velocity = ready_axis.velocity / 100.0
-        ready_axis.move_to(CONTRACT_RANGE[1])
-        with pytest.raises(DeviceTimeout) as info:
-            ready_axis.wait(0.05)
+    def test_wait_times_out_and_stops(self, ready_axis, clock_of):
+        with clock_of(ready_axis).held():  # the move cannot end before the wait gives up
+            ready_axis.move_to(CONTRACT_RANGE[1])
+            with pytest.raises(DeviceTimeout) as info:
+                ready_axis.wait(0.05)
         assert info.value.device == ready_axis.name
-        deadline = time.monotonic() + self.move_timeout
-        while ready_axis.is_moving and time.monotonic() < deadline:
-            time.sleep(0.005)
+        self._come_to_rest(ready_axis)
         assert not ready_axis.is_moving
+        assert ready_axis.position < CONTRACT_RANGE[1] - ready_axis.position_tolerance
 
-    def test_after_stop_wait_checks_no_target_and_move_by_counts_from_rest(self, ready_axis):
-        ready_axis.velocity = ready_axis.velocity / 100.0
-        ready_axis.move_to(CONTRACT_RANGE[1])
-        ready_axis.stop()
+    def test_after_stop_wait_checks_no_target_and_move_by_counts_from_rest(self, ready_axis,
+                                                                            clock_of):
+        self._stop_mid_move(ready_axis, clock_of(ready_axis))
         rest = ready_axis.wait(self.move_timeout)  # no MotionError: the target is gone
         assert rest < CONTRACT_RANGE[1] - ready_axis.position_tolerance
-        ready_axis.velocity = ready_axis.velocity * 100.0
+        ready_axis.velocity = ready_axis.velocity * 10.0
         ready_axis.move_by(-1.0, wait=True, timeout=self.move_timeout)
         assert ready_axis.position == pytest.approx(rest - 1.0,
                                                     abs=2 * ready_axis.position_tolerance)

@@ -4,8 +4,10 @@ Built on the device-agnostic loops of :mod:`tests.drivers.fault_checks`.
 
 Each helper drives one scenario through a driver on an emulator with a seeded fault
 injector and asserts what every serial motion driver owes its user: recovery or a typed
-error naming the device and the command, within a bounded time, and the same device state
-found again after a replug. The driver's test module supplies the axis, the emulator and
+error naming the device and the command after a bounded number of attempts, and the same
+device state found again after a replug. "Bounded" is checked by counting, never by timing
+(elapsed wall-clock time depends on the machine's load); a hang is caught by the suite's
+``pytest-timeout``. The driver's test module supplies the axis, the emulator and
 how to reopen it.
 """
 
@@ -32,47 +34,43 @@ QUERY_FAULTS = [
 
 def query_survives(faults: FaultInjector, kind: FaultKind, params: dict,
                    read: Callable[[], object], expected: object, *, times: int = 5) -> None:
-    """``read()`` returns ``expected`` within 2 s although each reply meets ``kind``."""
+    """``read()`` returns ``expected`` although each reply meets ``kind``."""
     for _ in range(times):
         faults.schedule(kind, nth=1, **params)
-        t0 = time.monotonic()
         assert read() == expected
-        assert time.monotonic() - t0 < 2.0
     assert [k for _, k in faults.log] == [kind] * times
 
 
 def motion_fault_session(axis: MotionAxis, faults: FaultInjector, *, moves: int = 30) -> None:
     """Random faults: each move succeeds or raises a typed error naming its command."""
-    t0 = time.monotonic()
     got = random_fault_session(
         lambda i: axis.move_to((i % 5) - 2.0, wait=True, timeout=5), faults, n=moves,
         device=axis.name, after_failure=lambda: time.sleep(0.2))  # late replies, moves end
-    assert time.monotonic() - t0 < 60
     assert got.right + got.failed == moves and got.right >= moves // 2
     assert len(faults.log) >= 5
 
 
 def unplug_during_query(axis: MotionAxis, emulator: FirmwareEmulator, transport: str,
                         reopen: Callable[[], MotionAxis], *, command: str) -> MotionAxis:
-    """Unplug before a position query: a typed error naming ``command`` within 2 s.
+    """Unplug before a position query: a typed error naming ``command``.
 
     Returns the axis to use after the replug.
     """
     return unplug_and_replug(axis, emulator.faults, transport, lambda: axis.position, reopen,
-                             command=command, limit_s=2.0)
+                             command=command)
 
 
 def unplug_during_move(axis: MotionAxis, emulator: FirmwareEmulator, transport: str,
                        reopen: Callable[[], MotionAxis], *,
                        command: str | None = None) -> MotionAxis:
-    """Unplug while waiting for a move: a typed error within 2 s, chained from its cause.
+    """Unplug while waiting for a move: a typed error, chained from its cause.
 
     The controller finishes the move on its own; the axis returned (after the replug) has
     come to rest, so the caller can check where.
     """
     axis = unplug_and_replug(axis, emulator.faults, transport, lambda: axis.wait(10), reopen,
-                             command=command, limit_s=2.0)
-    deadline = time.monotonic() + 5.0
+                             command=command)
+    deadline = time.monotonic() + 60.0  # returns as soon as the move has ended
     while axis.is_moving and time.monotonic() < deadline:
         time.sleep(0.005)
     return axis

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from drivers.errors import ConnectionFailed, DeviceTimeout, ProtocolError
@@ -48,10 +46,8 @@ def test_line_noise_without_terminator_is_a_protocol_error():
 def test_read_exact_times_out_with_partial_data_shown():
     chan, _ = channel([(b"q\n", b"ab")])
     chan.write(b"q\n", command="q")
-    t0 = time.monotonic()
     with pytest.raises(DeviceTimeout, match="2 of 4"):
         chan.read_exact(4, timeout=0.1, command="q")
-    assert time.monotonic() - t0 < 1.0
 
 
 def test_open_failure_names_device_and_url():

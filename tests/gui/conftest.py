@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from PySide6.QtCore import QEvent, QSettings
+from PySide6.QtCore import QEvent, QSettings, Qt
 from PySide6.QtWidgets import QApplication
 
 from tests.gui.helpers import fast_profile
@@ -52,7 +52,7 @@ def make_window(qtbot, tmp_path, settings):
     for w in windows:
         w.confirm_close_during_run(True)
         w.close()
-        qtbot.waitUntil(lambda w=w: not w.session.run, timeout=30000)
+        qtbot.waitUntil(lambda w=w: not w.session.run, timeout=60000)
         w.session.close(20)
         w.deleteLater()
     flush_deleted()
@@ -74,7 +74,14 @@ def _destroy_widgets_before_exit():
     flush_deleted()
 
 
-def connect(qtbot, window, timeout: int = 20000) -> None:
+def mouse_click(qtbot, widget) -> None:
+    """Click ``widget`` with the mouse once it is laid out (a button that a busy machine has
+    not yet given its height is a zero-sized rectangle: a click there reaches nothing)."""
+    qtbot.waitUntil(lambda: widget.isVisible() and not widget.rect().isEmpty(), timeout=60000)
+    qtbot.mouseClick(widget, Qt.LeftButton)
+
+
+def connect(qtbot, window, timeout: int = 60000) -> None:
     """Click Connect and wait until every device has its panel."""
     window.bench_panel.connect_button.click()
     qtbot.waitUntil(lambda: window.session.connected and bool(window.bench_panel.panels)

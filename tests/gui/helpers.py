@@ -1,10 +1,9 @@
-"""Shared GUI-test helpers: a fast simulated bench, a recording session listener."""
+"""Shared GUI-test helpers: a fast simulated bench, a recording session listener (waiting on
+events: :mod:`tests.waiting`)."""
 
 from __future__ import annotations
 
 import threading
-import time
-from collections.abc import Callable
 
 from instrument.bench.profile import BenchProfile, load_profile, parse_profile
 
@@ -18,15 +17,6 @@ def fast_profile(name: str = "sim", speed: int = FAST) -> BenchProfile:
     for slow in ("speed=20", "speed=50"):
         text = text.replace(slow, f"speed={speed}")
     return parse_profile(text, source=f"built-in profile {name!r}, speed={speed}")
-
-
-def wait_for(cond: Callable[[], bool], timeout: float = 10.0, what: str = "condition") -> None:
-    """Poll ``cond`` until true (Qt-free tests; Qt tests use qtbot.waitUntil)."""
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.005)
 
 
 class Recorder:

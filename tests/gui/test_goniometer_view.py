@@ -15,13 +15,13 @@ def test_the_drawing_follows_the_stages(qtbot, make_window, fast_bench_file):
     w = make_window(fast_bench_file())
     connect(qtbot, w)
     view = w.goniometer
-    qtbot.waitUntil(lambda: view.scene is not None and view.profile is not None, timeout=5000)
+    qtbot.waitUntil(lambda: view.scene is not None and view.profile is not None, timeout=60000)
     assert not view.scene.by_role("arm")  # not homed: the arm's position is unknown
     for role in ("sample_theta", "detector_theta"):
         w.bench_panel.panels[role].home.click()
     det = w.bench_panel.panels["detector_theta"]
     qtbot.waitUntil(lambda: w.session.states()["detector_theta"].value("homed")
-                    and w.session.states()["sample_theta"].value("homed"), timeout=20000)
+                    and w.session.states()["sample_theta"].value("homed"), timeout=60000)
     det.target.setValue(40.0)
     det.go.click()
     sample = w.bench_panel.panels["sample_theta"]
@@ -35,11 +35,11 @@ def test_the_drawing_follows_the_stages(qtbot, make_window, fast_bench_file):
         x, y = arms[0].xy[1]
         return abs(math.degrees(math.atan2(y, x)) - angle) < 0.01
 
-    qtbot.waitUntil(lambda: arm_at(40.0), timeout=10000)
+    qtbot.waitUntil(lambda: arm_at(40.0), timeout=60000)
     stage = registry.get("simsmc", "detector_theta").stage.physical_position()
     x, y = view.scene.by_role("arm")[0].xy[1]
     assert math.degrees(math.atan2(y, x)) == pytest.approx(stage, abs=0.01)
     qtbot.waitUntil(lambda: abs(np.degrees(np.arctan2(*view.scene.by_role("normal")[0].xy[1]
-                                                      [::-1])) - 15.0) < 0.02, timeout=10000)
+                                                      [::-1])) - 15.0) < 0.02, timeout=60000)
     assert "min_bistatic" not in view.caption.text()
     assert view.scene.by_role("bistatic_cone")

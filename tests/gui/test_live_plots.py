@@ -34,9 +34,9 @@ detectors = ["camera"]
 def _run_plan(qtbot, w, path):
     editor = w.plan_editor
     assert editor.open_plan(path)
-    qtbot.waitUntil(editor.start.isEnabled, timeout=20000)
+    qtbot.waitUntil(editor.start.isEnabled, timeout=60000)
     editor.start.click()
-    qtbot.waitUntil(lambda: w.current_run is not None, timeout=20000)
+    qtbot.waitUntil(lambda: w.current_run is not None, timeout=60000)
     return w.current_run, wait_end(qtbot, w, timeout=120000)
 
 
@@ -53,7 +53,7 @@ def test_the_light_field_image_grows_row_by_row(qtbot, make_window, fast_bench_f
     data = read_run(run.path)
     light = int((data.label == "lightfield").sum())
     assert light == 21
-    qtbot.waitUntil(lambda: w.live_plot.n_plotted == light, timeout=5000)
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == light, timeout=60000)
     assert w.live_plot.kind == "lightfield"
     img = w.live_plot.field_image.image
     assert img.shape == (len(run.plan.points), 1024)
@@ -69,7 +69,7 @@ def test_the_hemisphere_map_fills(qtbot, make_window, fast_bench_file, tmp_path)
     plan.write_text(HEMISPHERE)
     run, ev = _run_plan(qtbot, w, plan)
     assert ev.status == "finished"
-    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=5000)
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=60000)
     assert w.live_plot.kind == "hemisphere"
     x, y = w.live_plot.polar_points.getData()
     theta = np.hypot(x, y)

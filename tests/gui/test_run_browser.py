@@ -21,7 +21,7 @@ from tests.gui.test_run_control import PLAN, wait_end
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _listed(qtbot, browser, n=None, timeout=20000):
+def _listed(qtbot, browser, n=None, timeout=60000):
     with qtbot.waitSignal(browser.refreshed, timeout=timeout):
         browser.refresh()
     if n is not None:
@@ -31,7 +31,7 @@ def _listed(qtbot, browser, n=None, timeout=20000):
 def _select(qtbot, browser, run_id):
     assert browser.select(run_id)
     qtbot.waitUntil(lambda: browser.details is not None
-                    and browser.details.provenance["run id"] == run_id, timeout=20000)
+                    and browser.details.provenance["run id"] == run_id, timeout=60000)
 
 
 def test_resume_an_interrupted_run_from_the_browser(qtbot, make_window, fast_bench_file,
@@ -44,12 +44,16 @@ def test_resume_an_interrupted_run_from_the_browser(qtbot, make_window, fast_ben
                               str(runs), str(plan)], cwd=ROOT, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True)
     path = Path(child.stdout.readline().strip())
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 120
     while True:  # wait for three committed points, then pull the plug
+        # Looked at while the process is stopped: it cannot finish the scan between the
+        # look and the kill, however long this process is kept waiting by a busy machine.
+        os.kill(child.pid, signal.SIGSTOP)
         if journal_path(path).exists():
             records, _ = read_journal(journal_path(path))
             if sum(r["t"] == "point" for r in records) >= 3:
                 break
+        os.kill(child.pid, signal.SIGCONT)
         assert time.monotonic() < deadline and child.poll() is None, child.stderr.read()
         time.sleep(0.02)
     os.kill(child.pid, signal.SIGKILL)
@@ -68,7 +72,7 @@ def test_resume_an_interrupted_run_from_the_browser(qtbot, make_window, fast_ben
     assert {"sample_theta", "detector_theta", "camera"} <= set(browser.details.devices)
     browser.resume.click()
     qtbot.waitUntil(lambda: w.current_run is not None and w.current_run.resumed,
-                    timeout=30000)
+                    timeout=60000)
     ev = wait_end(qtbot, w, timeout=120000)
     assert ev.status == "finished" and ev.n_done == ev.n_total
     data = read_run(path)
@@ -146,10 +150,10 @@ def test_the_log_dock_collects_filters_and_copies(qtbot, make_window, glossy_run
     with qtbot.waitSignal(w.browser.analysisDone, timeout=120000):
         w.browser.analyse.click()
     # the pipeline's own warning (the receiver distance was assumed) reaches the log
-    qtbot.waitUntil(lambda: "assumed" in log.visible_text(), timeout=5000)
+    qtbot.waitUntil(lambda: "assumed" in log.visible_text(), timeout=60000)
     logging.getLogger("drivers.thorlabs_apt").warning("unsolicited message skipped")
     qtbot.waitUntil(lambda: "unsolicited message skipped" in log.view.toPlainText(),
-                    timeout=5000)
+                    timeout=60000)
     log.level.setCurrentIndex(log.level.findData("error"))
     assert "assumed" not in log.view.toPlainText()
     log.level.setCurrentIndex(log.level.findData("info"))

@@ -3,6 +3,8 @@ choice; closing the window during a run."""
 
 from __future__ import annotations
 
+import time
+
 import h5py
 import numpy as np
 import pytest
@@ -38,14 +40,29 @@ def start(qtbot, w, tmp_path, step=10.0):
     path.write_text(PLAN.format(step=step))
     editor = w.plan_editor
     assert editor.open_plan(path)
-    qtbot.waitUntil(editor.start.isEnabled, timeout=20000)
+    qtbot.waitUntil(editor.start.isEnabled, timeout=60000)
     editor.start.click()
-    qtbot.waitUntil(lambda: w.current_run is not None, timeout=20000)
+    qtbot.waitUntil(lambda: w.current_run is not None, timeout=60000)
     return w.current_run
 
 
-def wait_points(qtbot, run, n, timeout=30000):
-    qtbot.waitUntil(lambda: run.live.n_received >= n, timeout=timeout)
+def held_detector():
+    """The detector arm's emulated clock, to hold: while it is held a run moves on only as
+    far as :func:`drive` lets it, so it cannot end before the test has looked."""
+    return registry.get("simsmc", "detector_theta").clock
+
+
+def drive(qtbot, clock, until, what: str) -> None:
+    """Let emulated time pass on the held ``clock`` until ``until()``.
+
+    Each step is longer than any move of these plans, and a move that starts after it
+    starts at the held time: a step finishes at most the move under way.
+    """
+    deadline = time.monotonic() + 60.0
+    while not until():
+        assert time.monotonic() < deadline, f"the run never got to {what}"
+        clock.advance(5.0)
+        qtbot.wait(5)  # the engine's thread and the GUI's events go on meanwhile
 
 
 def wait_end(qtbot, w, timeout=60000):
@@ -57,19 +74,20 @@ def wait_end(qtbot, w, timeout=60000):
 def test_pause_resume_and_abort(qtbot, make_window, fast_bench_file, tmp_path):
     w = make_window(fast_bench_file())
     connect(qtbot, w)
-    run = start(qtbot, w, tmp_path)
-    wait_points(qtbot, run, 2)
-    w.run_control.pause.click()
-    qtbot.waitUntil(lambda: w.run_control.pause_state is not None, timeout=20000)
-    assert w.run_control.pause_state.kind is PauseKind.OPERATOR
-    assert run.engine.state is EngineState.PAUSED
-    assert not w.run_control.recovery.isVisible()  # no fault: resume or abort
-    assert get_world("sim").snapshot().source.on is False  # the bench is safe
-    n_paused = run.live.n_received
-    w.run_control.resume.click()
-    wait_points(qtbot, run, n_paused + 1)
-    w.run_control.abort.click()
-    ev = wait_end(qtbot, w)
+    with (clock := held_detector()).held():
+        run = start(qtbot, w, tmp_path)
+        drive(qtbot, clock, lambda: run.live.n_received >= 2, "2 points")
+        w.run_control.pause.click()
+        drive(qtbot, clock, lambda: w.run_control.pause_state is not None, "the pause")
+        assert w.run_control.pause_state.kind is PauseKind.OPERATOR
+        assert run.engine.state is EngineState.PAUSED
+        assert not w.run_control.recovery.isVisible()  # no fault: resume or abort
+        assert get_world("sim").snapshot().source.on is False  # the bench is safe
+        n_paused = run.live.n_received
+        w.run_control.resume.click()
+        drive(qtbot, clock, lambda: run.live.n_received >= n_paused + 1, "a point more")
+        w.run_control.abort.click()
+        ev = wait_end(qtbot, w)
     assert ev.status == "aborted" and ev.n_done < ev.n_total
     data = read_run(run.path)
     assert data.status == "aborted" and data.n_points == ev.n_done
@@ -87,12 +105,15 @@ def test_a_device_fault_pauses_the_run_and_the_operator_chooses(
         qtbot, make_window, fast_bench_file, tmp_path, choice):
     w = make_window(fast_bench_file())
     connect(qtbot, w)
-    run = start(qtbot, w, tmp_path, step=20.0)
-    wait_points(qtbot, run, 1)
-    faults = registry.get("simsmc", "detector_theta").faults
-    faults.schedule(FaultKind.DISCONNECT, nth=1)  # the cable is pulled
+    # The clock is held until the cable is pulled: the run cannot end before, and with its
+    # next exchange with the detector the fault strikes (recovery then needs time to run).
+    with (clock := held_detector()).held():
+        run = start(qtbot, w, tmp_path, step=20.0)
+        drive(qtbot, clock, lambda: run.live.n_received >= 1, "a point")
+        faults = registry.get("simsmc", "detector_theta").faults
+        faults.schedule(FaultKind.DISCONNECT, nth=1)  # the cable is pulled
     rc = w.run_control
-    qtbot.waitUntil(lambda: rc.pause_state is not None, timeout=30000)
+    qtbot.waitUntil(lambda: rc.pause_state is not None, timeout=60000)
     assert rc.pause_state.kind is PauseKind.DEVICE_FAULT
     assert rc.recovery.isVisible() and "detector_theta" in rc.question.text()
     rows = w.fault_panel.rows()
@@ -122,11 +143,12 @@ def test_closing_during_a_run_asks_then_makes_everything_safe(qtbot, make_window
                                                               fast_bench_file, tmp_path):
     w = make_window(fast_bench_file())
     connect(qtbot, w)
-    run = start(qtbot, w, tmp_path, step=5.0)
-    wait_points(qtbot, run, 2)
-    w.confirm_close_during_run(True)  # the operator answers "Yes" to the question
-    w.close()
-    qtbot.waitUntil(lambda: not w.isVisible(), timeout=30000)
+    with (clock := held_detector()).held():  # the run cannot end before the window closes
+        run = start(qtbot, w, tmp_path, step=5.0)
+        drive(qtbot, clock, lambda: run.live.n_received >= 2, "2 points")
+        w.confirm_close_during_run(True)  # the operator answers "Yes" to the question
+        w.close()
+        qtbot.waitUntil(lambda: not w.isVisible(), timeout=60000)
     assert w.session.run is None and not run.engine.alive
     data = read_run(run.path)  # a valid, finalised file
     assert data.status == "aborted" and 2 <= data.n_points < len(run.plan.points)
@@ -151,7 +173,7 @@ def test_a_small_scan_to_completion_file_catalog_and_live_plot(qtbot, make_windo
     assert (row.status, row.n_points, row.n_planned) == ("finished", ev.n_done, ev.n_done)
     assert row.sample == "gui-sample" and row.path == str(run.path)
     # the live plot shows every point done, one curve for the one θi
-    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=5000)
+    qtbot.waitUntil(lambda: w.live_plot.n_plotted == ev.n_done, timeout=60000)
     assert w.live_plot.kind == "in_plane" and list(w.live_plot._curves) == [20.0]
     x, y = w.live_plot._curves[20.0].getData()
     assert len(x) == ev.n_done and np.all(np.diff(x) > 0)
@@ -168,19 +190,20 @@ def test_space_pauses_and_resumes_but_not_while_typing(qtbot, make_window, fast_
 
     w = make_window(fast_bench_file())
     connect(qtbot, w)
-    run = start(qtbot, w, tmp_path, step=5.0)
-    wait_points(qtbot, run, 1)
-    w.activateWindow()
-    qtbot.waitUntil(w.isActiveWindow, timeout=5000)
-    field = w.plan_editor.field("plan.name")  # a text field: Space is typed, not a pause
-    field.setFocus()
-    qtbot.keyClick(field, Qt.Key_Space)
-    assert run.engine.state is EngineState.RUNNING
-    w.run_control.state.setFocus()
-    w.run_control.pause.setFocus()
-    qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
-    qtbot.waitUntil(lambda: run.engine.state is EngineState.PAUSED, timeout=20000)
-    qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
-    qtbot.waitUntil(lambda: run.engine.state is EngineState.RUNNING, timeout=20000)
-    w.run_control.abort.click()
-    assert wait_end(qtbot, w).status == "aborted"
+    with (clock := held_detector()).held():  # the run cannot end while the test types
+        run = start(qtbot, w, tmp_path, step=5.0)
+        drive(qtbot, clock, lambda: run.live.n_received >= 1, "a point")
+        w.activateWindow()
+        qtbot.waitUntil(w.isActiveWindow, timeout=60000)
+        field = w.plan_editor.field("plan.name")  # a text field: Space is typed, not a pause
+        field.setFocus()
+        qtbot.keyClick(field, Qt.Key_Space)
+        assert run.engine.state is EngineState.RUNNING
+        w.run_control.state.setFocus()
+        w.run_control.pause.setFocus()
+        qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
+        drive(qtbot, clock, lambda: run.engine.state is EngineState.PAUSED, "the pause")
+        qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
+        qtbot.waitUntil(lambda: run.engine.state is EngineState.RUNNING, timeout=60000)
+        w.run_control.abort.click()
+        assert wait_end(qtbot, w).status == "aborted"

@@ -7,7 +7,7 @@ import pytest
 
 from gui.model.camera import FramePump, FrameSlot, RateMeter, RoiBox, frame_stats, save_frame
 from hw_mocks.sim.ideal import IdealCamera
-from tests.gui.helpers import wait_for
+from tests.waiting import wait_for
 
 
 def test_stats_over_the_roi_and_the_saturation_mask():
@@ -54,7 +54,7 @@ def test_the_pump_drains_a_streaming_camera_into_the_slot():
     pump = FramePump(cam, slot, on_error=errors.append)
     cam.start_streaming()
     pump.start()
-    wait_for(lambda: slot.received > 20, 10, "frames")
+    wait_for(lambda: slot.received > 20, 60, "frames")
     cam.stop_streaming()
     pump.stop()
     assert not pump.alive and not errors

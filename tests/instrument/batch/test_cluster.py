@@ -125,7 +125,7 @@ def _kill_a_busy_worker(client, done: list, killed: list, stop: threading.Event)
         time.sleep(0.02)
 
 
-@pytest.mark.timeout(300)  # 80 s on a quiet 2-core box: cluster start, kill, retries
+@pytest.mark.timeout(900)  # 80 s on a quiet 2-core box: cluster start, kill, retries
 @pytest.mark.parametrize("retries", [3, 0], ids=["retried", "reported"])
 def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries):
     folder = fresh_copy(runs_dir, tmp_path / "runs")

@@ -2,38 +2,50 @@
 
 from __future__ import annotations
 
-import threading
-import time
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 from instrument.bench.devices import open_bench
 from instrument.bench.profile import load_profile, parse_profile
 from instrument.cli import main
 
-EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "bench_serve_sim.toml"
+ROOT = Path(__file__).resolve().parents[3]
+EXAMPLE = ROOT / "examples" / "bench_serve_sim.toml"
 
 
-def test_linked_ptys_open_through_the_example_profile(tmp_path, capsys):
+def test_linked_ptys_open_through_the_example_profile(tmp_path):
+    """The server runs until Ctrl-C (no duration to outlast on a slow machine), in its own
+    process as an operator runs it; SIGINT ends it and it removes its links."""
     links = tmp_path / "ptys"
-    done: list[int] = []
-    server = threading.Thread(target=lambda: done.append(main(
-        ["serve-sim", "--bench", "sim", "--link-dir", str(links), "--duration", "6"])),
-        daemon=True)
-    server.start()
-    deadline = time.monotonic() + 20
-    while not (links / "camera_z").is_symlink() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    # the example profile, with its link folder replaced by this test's
-    text = EXAMPLE.read_text(encoding="utf-8").replace("/tmp/scatterlab-ptys", str(links))
-    profile = parse_profile(text, source="bench_serve_sim.toml")
-    with open_bench(profile) as bench:
-        assert set(bench.axes) == {"sample_theta", "detector_theta", "camera_z"}
-        assert bench.axes["sample_theta"].identity.model == "K10CR1"
-    out = capsys.readouterr().out
-    assert f"(link {links / 'sample_theta'})" in out and "/dev/pts/" in out
-    load_profile(EXAMPLE)  # the example as shipped validates too
-    server.join(30)  # the server stops after its duration and removes its links
-    assert done == [0] and not any(links.iterdir())
+    server = subprocess.Popen(
+        [sys.executable, "-m", "instrument.cli", "serve-sim", "--bench", "sim",
+         "--link-dir", str(links)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        for line in server.stdout:  # the links exist once it says it is serving
+            lines.append(line)
+            if line.startswith("serving"):
+                break
+        out = "".join(lines)
+        assert f"(link {links / 'sample_theta'})" in out and "/dev/pts/" in out, out
+        # the example profile, with its link folder replaced by this test's
+        text = EXAMPLE.read_text(encoding="utf-8").replace("/tmp/scatterlab-ptys", str(links))
+        profile = parse_profile(text, source="bench_serve_sim.toml")
+        with open_bench(profile) as bench:
+            assert set(bench.axes) == {"sample_theta", "detector_theta", "camera_z"}
+            assert bench.axes["sample_theta"].identity.model == "K10CR1"
+        load_profile(EXAMPLE)  # the example as shipped validates too
+        server.send_signal(signal.SIGINT)  # Ctrl-C
+        assert server.wait(60) == 0
+    finally:
+        if server.poll() is None:
+            server.kill()
+            server.wait(60)
+        server.stdout.close()
+    assert not any(links.iterdir())  # the server removed its links
 
 
 def test_links_are_removed_and_a_file_is_never_replaced(tmp_path, capsys):

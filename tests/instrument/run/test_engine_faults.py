@@ -20,6 +20,7 @@ from instrument.run.engine import EngineState
 from instrument.run.events import EventQueue, Fault, Paused, PointCompleted
 from instrument.run.runner import start_run
 from tests.instrument.helpers import inplane_plan
+from tests.waiting import wait_for
 
 PROFILE = """
 [bench]
@@ -207,7 +208,7 @@ def test_abort_stops_a_move_in_progress(tmp_path, make_bench):
     # Slow the detector arm so that the first long move lasts seconds.
     det.enable()
     det.home()
-    det.velocity = 0.05  # × 400 (emulator clock) = 20 °/s: a 30° step takes 1.5 s
+    det.velocity = 0.05  # a 30° step takes 600 s of emulated time
     moving = threading.Event()
 
     def on(ev):
@@ -215,13 +216,19 @@ def test_abort_stops_a_move_in_progress(tmp_path, make_bench):
             moving.set()
 
     engine.subscribe(on)
+    emulator = registry.get("simsmc", "detector_theta")
     engine.start()
-    assert moving.wait(20)  # first point done; the next move is long
-    import time
-
-    time.sleep(0.3)
-    engine.abort()
-    assert engine.wait(20) is EngineState.ABORTED
+    assert moving.wait(60)  # first point done; the next move is long
+    # Emulated time stands still from the start of that move until the stop reached the
+    # controller, but for 100 s let pass by hand (5° of the 30°): the abort surely lands
+    # mid-move however slowly the machine runs.
+    with emulator.clock.held():
+        wait_for(lambda: emulator.stage.is_moving(), what="the next move to start")
+        emulator.clock.advance(100.0)
+        sent = len(emulator.received_log)
+        engine.abort()
+        wait_for(lambda: b"ST" in bytes(emulator.received_log[sent:]), what="the stop")
+    assert engine.wait(60) is EngineState.ABORTED
     s = det.status()
     assert not s.is_moving
     assert bench.source._on is False

@@ -41,7 +41,7 @@ TRUTH = {450.0: (0.30, 1.5 + 0.0045 / 0.45**2), 550.0: (0.45, 1.5 + 0.0045 / 0.5
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(600)  # 81 lock-in points, each settled and read four times
+@pytest.mark.timeout(900)  # 81 lock-in points, each settled and read four times
 def test_a_three_filter_lock_in_scan_recovers_rho_and_n_per_wavelength(tmp_path, capsys):
     plan = tmp_path / "plan.toml"
     plan.write_text(PLAN, encoding="utf-8")
