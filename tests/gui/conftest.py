@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import time
 
 import pytest
 
@@ -43,7 +44,9 @@ def make_window(qtbot, tmp_path, settings):
         kw.setdefault("settings", settings)
         kw.setdefault("fsync", False)
         w = create_window(bench=bench, **kw)
-        qtbot.addWidget(w)
+        # pytest-qt closes its widgets before this fixture's teardown: a window closed with a
+        # run going would ask "Close anyway?" in a modal box that nobody answers.
+        qtbot.addWidget(w, before_close_func=lambda w: w.confirm_close_during_run(True))
         w.show()
         windows.append(w)
         return w
@@ -66,6 +69,47 @@ def flush_deleted() -> None:
         app.processEvents()
         QApplication.sendPostedEvents(None, QEvent.DeferredDelete)
     gc.collect()
+
+
+# A modal dialog left open this long is one that the test does not answer (tests that
+# answer one do so within a second or two of it opening).
+UNANSWERED_DIALOG_S = 20.0
+
+
+@pytest.fixture(autouse=True)
+def _unanswered_modal_dialogs_fail(request):
+    """Close a modal dialog that nobody answers, and fail the test that left it.
+
+    A modal dialog runs Qt's nested event loop, in which Python's signal handlers do not
+    run: pytest-timeout cannot interrupt it, and the test (and the whole suite) would wait
+    for ever. A Qt timer does fire in that loop, so it rejects the dialog instead."""
+    if "qtbot" not in request.fixturenames:
+        yield
+        return
+    from PySide6.QtCore import QTimer
+
+    request.getfixturevalue("qapp")
+    left_open: list[str] = []
+    seen: dict[int, float] = {}
+
+    def look() -> None:
+        dialog = QApplication.activeModalWidget()
+        if dialog is None:
+            seen.clear()
+            return
+        opened = seen.setdefault(id(dialog), time.monotonic())
+        if time.monotonic() - opened > UNANSWERED_DIALOG_S:
+            left_open.append(f"{type(dialog).__name__} {dialog.windowTitle()!r}")
+            seen.pop(id(dialog), None)
+            dialog.close()
+
+    timer = QTimer()
+    timer.setInterval(500)
+    timer.timeout.connect(look)
+    timer.start()
+    yield
+    timer.stop()
+    assert not left_open, f"modal dialogs left unanswered by the test: {left_open}"
 
 
 @pytest.fixture(scope="session", autouse=True)
