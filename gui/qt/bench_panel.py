@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QFileDialog,
@@ -23,9 +24,13 @@ from gui.model.session import (
     Connect,
     ConnectionStatus,
     Disconnect,
+    Home,
+    Jog,
+    MoveTo,
     RunHandle,
 )
 from gui.qt.panels import DevicePanel, panel_for
+from gui.qt.wheel import install_wheel_guard
 from instrument.bench.profile import BenchProfile, ProfileError, builtin_profiles, load_profile
 
 __all__ = ["BenchPanel"]
@@ -40,6 +45,7 @@ class BenchPanel(QWidget):
         super().__init__(parent)
         self.session = session
         self.setObjectName("bench_panel")
+        install_wheel_guard()
         self.chooser = QComboBox()
         self.chooser.setObjectName("bench_chooser")
         self.chooser.setEditable(False)
@@ -59,9 +65,15 @@ class BenchPanel(QWidget):
         self.message.setObjectName("message")
         self.message.setWordWrap(True)
         self.message.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.message.setAlignment(Qt.AlignLeft | Qt.AlignTop)
+        # Reserved rows: a message or the run's notice appearing never shifts the panels.
+        lines = self.fontMetrics().lineSpacing()
+        self.message.setFixedHeight(3 * lines + 4)
         self.owner = QLabel("")
         self.owner.setObjectName("owner")
         self.owner.setStyleSheet("color: #0d47a1; font-weight: 600")
+        self.owner.setWordWrap(True)
+        self.owner.setFixedHeight(2 * lines + 2)
         top = QHBoxLayout()
         top.addWidget(QLabel("Bench"))
         top.addWidget(self.chooser, 1)
@@ -85,6 +97,15 @@ class BenchPanel(QWidget):
         lay.addWidget(self.message)
         self.panels: dict[str, DevicePanel] = {}
         self._manual = True
+        # What the message says, to clear it when it stops applying: the axis whose move
+        # or home it reports (and when that result came), or the bench's pose when a
+        # command was refused.
+        self._activity: tuple[str, float] | None = None
+        self._refused_at: tuple | None = None
+        self._ages = QTimer(self)
+        self._ages.setInterval(1000)
+        self._ages.timeout.connect(self._refresh_ages)
+        self._ages.start()
         self.browse.clicked.connect(self._browse)
         self.connect_button.clicked.connect(self.connect_bench)
         self.disconnect_button.clicked.connect(lambda: self.session.submit(Disconnect()))
@@ -153,7 +174,27 @@ class BenchPanel(QWidget):
                 panel.set_owned(self._manual)
             panel.set_state(state)
             panel.set_owned(self._manual)
+        self._clear_stale(states)
 
+    def _clear_stale(self, states: dict[str, DeviceState]) -> None:
+        """Clear a message once it stops applying: "moving"/"homing" when the axis is read
+        at rest after the command; a refusal when the bench's pose or light changed."""
+        if self._activity is not None:
+            role, since = self._activity
+            st = states.get(role)
+            if st is not None and st.t >= since and not st.value("moving"):
+                self._activity = None
+                self.message.setText("")
+        if self._refused_at is not None and pose_key(states) != self._refused_at:
+            self._refused_at = None
+            self.message.setText("")
+            for panel in self.panels.values():
+                panel.clear_outcome()
+
+    def _refresh_ages(self) -> None:
+        now = time.monotonic()
+        for panel in self.panels.values():
+            panel.refresh_age(now)
     def _order(self, role: str) -> int:
         roles = getattr(self, "_pending_roles", [])
         present = [r for r in roles if r in self.panels and r != role]
@@ -168,6 +209,10 @@ class BenchPanel(QWidget):
             self.show_message(result.message, error=True)
         else:
             self.show_message(result.message, error=False)
+        cmd = result.command
+        self._activity = (cmd.role, time.monotonic()) if result.ok and isinstance(
+            cmd, Home | MoveTo | Jog) else None
+        self._refused_at = pose_key(self.session.states()) if result.refused else None
 
     def on_run(self, run: RunHandle | None) -> None:
         self._manual = run is None
@@ -182,3 +227,18 @@ class BenchPanel(QWidget):
     def show_message(self, text: str, *, error: bool) -> None:
         self.message.setStyleSheet("color: #b71c1c" if error else "color: #1b5e20")
         self.message.setText(text)
+        self.message.setToolTip(text)
+
+
+def pose_key(states: dict[str, DeviceState]) -> tuple:
+    """What a refusal depends on: each axis's position (to 0.01), homed flag, and which
+    lights are on. A change means the refusal may no longer apply."""
+    key = []
+    for role, st in sorted(states.items()):
+        if st.kind == "motion_axis":
+            pos = st.value("position")
+            key.append((role, None if pos is None else round(float(pos), 2),
+                        bool(st.value("homed"))))
+        elif "on" in st.values:
+            key.append((role, bool(st.value("on"))))
+    return tuple(key)
