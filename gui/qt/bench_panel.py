@@ -100,8 +100,8 @@ class BenchPanel(QWidget):
         # What the message says, to clear it when it stops applying: the axis whose move
         # or home it reports (and when that result came), or the bench's pose when a
         # command was refused.
-        self._activity: tuple[str, float] | None = None
-        self._refused_at: tuple | None = None
+        self._activity: tuple[str, float, str] | None = None
+        self._refused_at: tuple[tuple, str] | None = None
         self._ages = QTimer(self)
         self._ages.setInterval(1000)
         self._ages.timeout.connect(self._refresh_ages)
@@ -180,16 +180,21 @@ class BenchPanel(QWidget):
         """Clear a message once it stops applying: "moving"/"homing" when the axis is read
         at rest after the command; a refusal when the bench's pose or light changed."""
         if self._activity is not None:
-            role, since = self._activity
+            role, since, text = self._activity
             st = states.get(role)
             if st is not None and st.t >= since and not st.value("moving"):
                 self._activity = None
-                self.message.setText("")
-        if self._refused_at is not None and pose_key(states) != self._refused_at:
+                self._clear_message(text)
+        if self._refused_at is not None and pose_key(states) != self._refused_at[0]:
+            text = self._refused_at[1]
             self._refused_at = None
-            self.message.setText("")
+            self._clear_message(text)
             for panel in self.panels.values():
                 panel.clear_outcome()
+
+    def _clear_message(self, text: str) -> None:
+        if self.message.text() == text:  # not a newer message
+            self.show_message("", error=False)
 
     def _refresh_ages(self) -> None:
         now = time.monotonic()
@@ -210,9 +215,10 @@ class BenchPanel(QWidget):
         else:
             self.show_message(result.message, error=False)
         cmd = result.command
-        self._activity = (cmd.role, time.monotonic()) if result.ok and isinstance(
-            cmd, Home | MoveTo | Jog) else None
-        self._refused_at = pose_key(self.session.states()) if result.refused else None
+        if result.ok and isinstance(cmd, Home | MoveTo | Jog):
+            self._activity = (cmd.role, time.monotonic(), result.message)
+        if result.refused:
+            self._refused_at = (pose_key(self.session.states()), result.message)
 
     def on_run(self, run: RunHandle | None) -> None:
         self._manual = run is None

@@ -89,6 +89,7 @@ class DevicePanel(QGroupBox):
         self.identity.setObjectName("identity")
         self.identity.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.identity.setStyleSheet("color: #555")
+        self.identity.setWordWrap(True)  # a long firmware string must not widen the dock
         self.status = QLabel("")
         self.status.setObjectName("status")
         self.status.setTextFormat(Qt.RichText)

@@ -6,8 +6,8 @@ scrolled, got 197). :func:`install_wheel_guard` puts one event filter on the app
 so it holds for every such field, also those a panel creates later: while a field does
 not have keyboard focus, a wheel event is left to its parent (the panel scrolls) and the
 value stays; once the operator has clicked or tabbed into the field, the wheel steps it
-as usual. The fields also lose ``WheelFocus`` when they are polished, so a wheel turn
-never gives them focus either.
+as usual. The fields also lose ``WheelFocus`` when they are shown, so a wheel turn never
+gives them focus either.
 """
 
 from __future__ import annotations
@@ -27,16 +27,21 @@ class _WheelGuard(QObject):
     wheel events offers it to the parent widgets (the scroll area) instead.
     """
 
-    def eventFilter(self, obj: QObject, event: QEvent) -> bool:  # noqa: N802 (Qt's name)
+    def eventFilter(self, obj: QObject, event: QEvent) -> bool:
         kind = event.type()
         if kind == QEvent.Type.Wheel:
             if isinstance(obj, _FIELDS) and not obj.hasFocus():
                 event.ignore()
                 return True
-        elif kind == QEvent.Type.Polish and isinstance(obj, _FIELDS) \
+        elif kind in _BEFORE_WHEEL and isinstance(obj, _FIELDS) \
                 and obj.focusPolicy() == Qt.FocusPolicy.WheelFocus:
             obj.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         return False
+
+
+#: Events a field receives before any wheel event can reach it (shown, then the pointer
+#: enters it): the place to take away its wheel focus, whenever it was made.
+_BEFORE_WHEEL = (QEvent.Type.Polish, QEvent.Type.Show, QEvent.Type.Enter)
 
 
 def install_wheel_guard() -> None:
