@@ -42,7 +42,7 @@ from gui.model.devices import DeviceState, axis_status_values, kind_of, read_sta
 from gui.model.live import LiveData
 from instrument.bench.devices import Bench, open_bench, open_device
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
-from instrument.bench.profile import BenchProfile, ProfileError
+from instrument.bench.profile import BenchProfile, ProfileError, same_bench
 from instrument.plans.build import Plan
 from instrument.run.engine import EngineState, RunEngine
 from instrument.run.events import Event, EventQueue, RunFinished
@@ -766,7 +766,7 @@ class BenchSession:
 
             stored = read_run(resume)
             stored_bench = stored.profile().get("bench", {}).get("name")
-            if stored_bench and stored_bench != bench.profile.name:
+            if stored_bench and not same_bench(stored_bench, bench.profile.name):
                 return CommandResult(cmd, False, f"run {stored.run_id} was recorded on "
                                      f"bench {stored_bench!r}, the connected bench is "
                                      f"{bench.profile.name!r}: connect that bench first",

@@ -31,7 +31,13 @@ from gui.model.session import (
 )
 from gui.qt.panels import DevicePanel, panel_for
 from gui.qt.wheel import install_wheel_guard
-from instrument.bench.profile import BenchProfile, ProfileError, builtin_profiles, load_profile
+from instrument.bench.profile import (
+    BenchProfile,
+    ProfileError,
+    builtin_profiles,
+    canonical_bench_name,
+    load_profile,
+)
 
 __all__ = ["BenchPanel"]
 
@@ -112,7 +118,9 @@ class BenchPanel(QWidget):
 
     # bench choice -----------------------------------------------------------------
     def choose(self, name_or_path: str) -> None:
-        """Select a built-in profile by name or add a profile file and select it."""
+        """Select a built-in profile by name (a former name too) or add a profile file
+        and select it."""
+        name_or_path = canonical_bench_name(name_or_path)
         k = self.chooser.findData(name_or_path)
         if k < 0:
             self.chooser.addItem(Path(name_or_path).name, name_or_path)

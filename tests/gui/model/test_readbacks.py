@@ -158,3 +158,13 @@ def test_an_empty_sample_is_said_in_the_forms_words():
     messages = result.errors.get("sample.name", [])
     assert messages and all("table" not in m for m in messages)
     assert "required" in messages[0]
+
+
+def test_built_in_profiles_have_one_naming_and_old_names_still_load():
+    from instrument.bench.profile import builtin_profiles, load_profile, same_bench
+
+    names = builtin_profiles()
+    assert all("_" not in n for n in names) and "sim-out-of-plane" in names
+    old = load_profile("sim_out_of_plane")  # run files and scripts name it so
+    assert old.name == "sim-out-of-plane"
+    assert same_bench("sim_out_of_plane", old.name) and not same_bench("sim", old.name)
