@@ -131,6 +131,9 @@ CALIBRATION = [
        f"the {k} calibration: a run id or a run file (empty: none)") for k in
     ("dark", "reference", "signature", "flat")
 ]
+SKIP_BEAM = _f("scan.skip_beam_points", "skip points in the beam", "bool",
+               "leave out (and report) points with the detector in the beam", default=True,
+               absent=False)
 IN_PLANE = [
     _f("scan.theta_i", "θi (deg)", "values", "incidence angles", default="20, 40, 60"),
     _f("scan.theta_r", "θr (deg)", "values", "signed: > 0 specular side, < 0 source side",
@@ -142,9 +145,7 @@ IN_PLANE = [
     _f("scan.reciprocity", "drop reciprocal points", "bool",
        "leave out (θi, θr) when (θr, θi) is measured: Helmholtz reciprocity",
        default=False),
-    _f("scan.skip_beam_points", "skip points in the beam", "bool",
-       "leave out (and report) points with the detector in the beam", default=True,
-       absent=False),
+    SKIP_BEAM,
 ]
 #: A two-pass lobe plan (``[scan] lobe``, ADR 0052): this plan is the coarse first pass.
 LOBE = [
@@ -179,9 +180,7 @@ HEMISPHERE = [
        "leave out a direction pair when its reciprocal is measured", default=False),
     _f("scan.isotropic", "isotropic sample", "bool",
        "the BRDF does not change when the sample turns about its normal", default=True),
-    _f("scan.skip_beam_points", "skip points in the beam", "bool",
-       "leave out (and report) points with the detector in the beam", default=True,
-       absent=False),
+    SKIP_BEAM,
 ]
 FRAMES_AT = [
     _f("scan.exposures_us", "exposures (µs)", "values",

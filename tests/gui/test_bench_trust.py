@@ -12,19 +12,8 @@ from PySide6.QtWidgets import QApplication, QScrollArea
 from gui.model.session import SetSetting
 from hw_mocks import registry
 from tests.gui.conftest import connect
+from tests.gui.test_bench_panel import _home, _state
 from tests.gui.test_run_control import start, wait_end
-
-
-def _state(window, role):
-    return window.session.states()[role]
-
-
-def _home(qtbot, window, *roles):
-    for role in roles:
-        window.bench_panel.panels[role].home.click()
-    qtbot.waitUntil(lambda: all(_state(window, r).value("homed")
-                                and not _state(window, r).value("moving") for r in roles),
-                    timeout=30000)
 
 
 def _connect(qtbot, window) -> None:

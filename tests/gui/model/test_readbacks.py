@@ -9,12 +9,16 @@ from drivers.base import exposure_text
 from gui.model.format import STALE_AFTER_S, age
 from gui.model.logbook import from_event
 from gui.model.planform import LOBE_MODELS, PlanForm, fields_for
-from gui.model.session import BenchSession, Connect, Home, Jog, MoveTo, StartRun
+from gui.model.session import Home, Jog, MoveTo, StartRun
 from instrument.plans import build_plan, parse_plan
 from instrument.plans.planfile import KINDS
 from instrument.run.events import AxisHomed
 from instrument.run.runfile import read_events
-from tests.gui.helpers import Recorder, fast_profile, wait_for
+from tests.gui.helpers import fast_profile, wait_for
+from tests.gui.model import test_session
+
+session = test_session.session  # the fixture: a session on its own device worker
+_connect = test_session._connect
 
 PLAN = """
 [plan]
@@ -30,19 +34,6 @@ mode = "fixed"
 exposure_us = 1000
 detectors = ["power_meter"]
 """
-
-
-@pytest.fixture
-def session():
-    rec = Recorder()
-    s = BenchSession(rec, fsync=False)
-    yield s, rec
-    assert s.close(20)
-
-
-def _connect(s, rec, profile):
-    s.submit(Connect(profile))
-    wait_for(lambda: s.connected and rec.state_updates > 0, 20, "connection")
 
 
 def _at_rest(s, role, where):
