@@ -11,6 +11,7 @@ from PySide6.QtWidgets import (
     QFileDialog,
     QHBoxLayout,
     QLabel,
+    QLayout,
     QPushButton,
     QScrollArea,
     QVBoxLayout,
@@ -90,6 +91,8 @@ class BenchPanel(QWidget):
         self._devices = QWidget()
         self._devices_layout = QVBoxLayout(self._devices)
         self._devices_layout.setContentsMargins(0, 0, 0, 0)
+        # the panels are never squeezed below their minimum height (the list scrolls)
+        self._devices_layout.setSizeConstraint(QLayout.SizeConstraint.SetMinimumSize)
         self._devices_layout.addStretch(1)
         scroll = QScrollArea()
         scroll.setWidgetResizable(True)

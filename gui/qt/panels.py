@@ -89,7 +89,10 @@ class DevicePanel(QGroupBox):
         self.identity.setObjectName("identity")
         self.identity.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.identity.setStyleSheet("color: #555")
-        self.identity.setWordWrap(True)  # a long firmware string must not widen the dock
+        # A long firmware string must not widen the dock: the line is cut at the panel's
+        # edge (not wrapped: a wrapped label makes the scrolled panels' heights depend on
+        # their width) and the tooltip has it whole.
+        self.identity.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
         self.status = QLabel("")
         self.status.setObjectName("status")
         self.status.setTextFormat(Qt.RichText)
@@ -143,6 +146,7 @@ class DevicePanel(QGroupBox):
             if ident.get("firmware"):
                 text += f" fw {ident['firmware']}"
             self.identity.setText(text)
+            self.identity.setToolTip(text)
         show_note(self.error, state.error or "")
         self.reconnect.setVisible(not state.connected)
         self.refresh_age()

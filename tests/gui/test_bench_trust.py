@@ -173,10 +173,10 @@ def test_a_message_does_not_move_the_panels(qtbot, make_window, fast_bench_file)
 
 
 def _buttons_inside(panel, viewport) -> bool:
-    for button in (panel.stop, panel.go, panel.set_velocity, panel.home):
+    for button in (panel.stop, panel.go, panel.set_velocity, panel.home, panel.plus):
         right = button.mapTo(viewport, QPoint(button.width() - 1, 0)).x()
-        if right >= viewport.width():
-            return False
+        if right >= viewport.width() or button.height() < button.minimumSizeHint().height():
+            return False  # cut off on the right, or squeezed
     return True
 
 
