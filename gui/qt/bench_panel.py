@@ -211,6 +211,7 @@ class BenchPanel(QWidget):
         now = time.monotonic()
         for panel in self.panels.values():
             panel.refresh_age(now)
+
     def _order(self, role: str) -> int:
         roles = getattr(self, "_pending_roles", [])
         present = [r for r in roles if r in self.panels and r != role]
@@ -242,7 +243,8 @@ class BenchPanel(QWidget):
             panel.set_owned(self._manual)
 
     def show_message(self, text: str, *, error: bool) -> None:
-        self.message.setStyleSheet("color: #b71c1c" if error else "color: #1b5e20")
+        if text:  # an empty line keeps its style (a restyle re-polishes the label)
+            self.message.setStyleSheet("color: #b71c1c" if error else "color: #1b5e20")
         self.message.setText(text)
         self.message.setToolTip(text)
 
