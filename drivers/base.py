@@ -155,6 +155,19 @@ class AxisKind(enum.Enum):
         return self.value
 
 
+def exposure_text(us: float) -> str:
+    """An exposure in microseconds as an operator reads it: ``1e8`` → ``"100 s"``,
+    ``250`` → ``"250 µs"`` (messages; values stay in µs)."""
+    if not math.isfinite(us):
+        return f"{us} µs"
+    mag = abs(us)
+    if mag >= 1e6:
+        return f"{us / 1e6:.4g} s"
+    if mag >= 1e3:
+        return f"{us / 1e3:.4g} ms"
+    return f"{us:.4g} µs"
+
+
 @dataclass(frozen=True)
 class AxisStatus:
     """A snapshot of an axis, decoded from the controller's status reply."""
@@ -652,7 +665,8 @@ class Camera(Device):
         low, high = self.exposure_range_us
         if not (math.isfinite(value) and low <= value <= high):
             raise ValueError(
-                f"{self.name}: exposure {value:g} us outside [{low:g}, {high:g}] us"
+                f"{self.name}: exposure {exposure_text(value)} outside "
+                f"[{exposure_text(low)}, {exposure_text(high)}]"
             )
         self._do_set_exposure_us(value)
         self.invalidate()

@@ -259,7 +259,7 @@ class OpenCVCamera(Camera):
                                         "exposure", tolerance=0.0)
                 if abs(got * _V4L2_EXPOSURE_UNIT_US - value) > 0.5 * _V4L2_EXPOSURE_UNIT_US:
                     raise UnsupportedFeature(
-                        f"exposure {value:g} us is not representable (100 us steps)",
+                        f"exposure {value:g} µs is not representable (100 µs steps)",
                         device=self.name, command="set exposure",
                     )
                 self._exposure_us = got * _V4L2_EXPOSURE_UNIT_US

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.base import (
+    AxisStatus,
     Camera,
     Device,
     FilterWheel,
@@ -45,6 +46,7 @@ __all__ = [
     "UNKNOWN_KIND",
     "DeviceKind",
     "DeviceState",
+    "axis_status_values",
     "kind_of",
     "kinds",
     "read_state",
@@ -158,12 +160,16 @@ def _axis_info(axis: MotionAxis) -> dict[str, Any]:
             "acceleration": axis.acceleration, "tolerance": axis.position_tolerance}
 
 
-def _axis_values(axis: MotionAxis) -> dict[str, Any]:
-    s = axis.status()
+def axis_status_values(s: AxisStatus) -> dict[str, Any]:
+    """An axis's live values from one status read (the device worker's poll, or the run
+    engine's read-back while a run owns the bench)."""
     return {"position": s.position, "moving": s.is_moving or s.is_homing,
             "homed": s.is_homed, "homing": s.is_homing, "enabled": s.is_enabled,
-            "at_limit": s.at_forward_limit or s.at_reverse_limit, "error": s.error,
-            "target": axis.target}
+            "at_limit": s.at_forward_limit or s.at_reverse_limit, "error": s.error}
+
+
+def _axis_values(axis: MotionAxis) -> dict[str, Any]:
+    return {**axis_status_values(axis.status()), "target": axis.target}
 
 
 def _camera_info(cam: Camera) -> dict[str, Any]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["duration", "position", "si"]
+__all__ = ["STALE_AFTER_S", "age", "duration", "position", "si"]
 
 _PREFIXES = [(1e-15, "f"), (1e-12, "p"), (1e-9, "n"), (1e-6, "µ"), (1e-3, "m"), (1.0, ""),
              (1e3, "k"), (1e6, "M"), (1e9, "G")]
@@ -46,3 +46,18 @@ def position(value: float | None, units: str) -> str:
         return "—"
     decimals = 4 if units == "mm" else 3
     return f"{value:.{decimals}f} {units}"
+
+
+#: A reading older than this (s) is shown with its age: the device worker polls every
+#: device at least once a second, so an older one is not being refreshed (a run owns the
+#: bench and does not read this device, or the worker is busy).
+STALE_AFTER_S = 2.0
+
+
+def age(seconds: float | None) -> str:
+    """``""`` for a fresh reading, else ``"read 12 s ago"`` (NaN/None: ``"not read"``)."""
+    if seconds is None or not math.isfinite(seconds):
+        return "not read"
+    if seconds < STALE_AFTER_S:
+        return ""
+    return f"read {duration(seconds)} ago"

@@ -16,8 +16,17 @@ import time
 from collections import deque
 from dataclasses import dataclass
 
+from gui.model import format as fmt
 from gui.model.faults import describe
-from instrument.run.events import Event, Fault, Paused, Resumed, RunFinished, RunStarted
+from instrument.run.events import (
+    AxisHomed,
+    Event,
+    Fault,
+    Paused,
+    Resumed,
+    RunFinished,
+    RunStarted,
+)
 
 __all__ = ["LEVELS", "LogBook", "LogBookHandler", "LogEntry", "from_event", "from_result"]
 
@@ -84,6 +93,10 @@ def from_event(ev: Event) -> LogEntry | None:
             return LogEntry(now, "warning", "engine", f"paused: {ev.reason}")
         case Resumed():
             return LogEntry(now, "info", "engine", "resumed")
+        case AxisHomed():
+            return LogEntry(now, "info", f"engine/{ev.device}",
+                            f"homed by the run (it was not homed) in "
+                            f"{fmt.duration(ev.elapsed_s)}; now at {ev.position:.6g}")
         case RunStarted():
             return LogEntry(now, "info", "engine", f"run {ev.run_id} started: {ev.n_total} "
                             f"points ({ev.n_done} already done), file {ev.path}")

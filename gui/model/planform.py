@@ -27,6 +27,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
+from analysis.brdf.registry import available_models, default_candidates
 from instrument.bench.guard import GuardError
 from instrument.bench.profile import AXIS_ROLES, BenchProfile
 from instrument.plans.build import Plan, build_plan
@@ -43,7 +44,12 @@ from instrument.plans.planfile import (
     parse_plan,
 )
 
-__all__ = ["FieldSpec", "PlanForm", "Validation", "field_for", "fields_for", "parse_values"]
+__all__ = ["LOBE_MODELS", "FieldSpec", "PlanForm", "Validation", "field_for", "fields_for",
+           "parse_values"]
+
+#: The lobe plan's first-pass model: "" (automatic: the fit's default candidates, the best
+#: by information criterion), those candidates, then every registered model.
+LOBE_MODELS = ("", *dict.fromkeys((*default_candidates(), *available_models())))
 
 #: What each kind is called in the form's kind chooser.
 KIND_TITLES = {
@@ -87,11 +93,12 @@ def _f(path, label, kind, help="", choices=(), default=None, absent=None):
 
 
 COMMON = [
-    _f("plan.name", "plan name", "text"),
+    _f("plan.name", "plan name", "text", "a name for this plan, shown in the run browser"),
     _f("plan.order", "point order", "choice", "optimised: shortest travel time", ORDERS,
        "optimised"),
     _f("sample.name", "sample", "text", "required for sample scans"),
-    _f("sample.description", "description", "text"),
+    _f("sample.description", "description", "text",
+       "free text stored with the run (material, preparation, orientation)"),
 ]
 _POL = AcquisitionPolicy()
 ACQUISITION = [
@@ -99,15 +106,20 @@ ACQUISITION = [
        _POL.mode),
     _f("acquisition.exposure_us", "exposure (µs)", "number", "fixed exposure, or the "
        "first one of auto", default=str(int(_POL.exposure_us))),
-    _f("acquisition.min_exposure_us", "min exposure (µs)", "number"),
-    _f("acquisition.max_exposure_us", "max exposure (µs)", "number"),
+    _f("acquisition.min_exposure_us", "min exposure (µs)", "number",
+       "auto: the shortest exposure it may choose, in µs"),
+    _f("acquisition.max_exposure_us", "max exposure (µs)", "number",
+       "auto: the longest exposure it may choose, in µs"),
     _f("acquisition.target_fraction", "target fraction", "number",
        "auto: the brightest pixel's target fraction of saturation"),
     _f("acquisition.hdr", "HDR brackets", "bool", "auto: keep saturated brackets",
        default=False),
-    _f("acquisition.hdr_factor", "HDR factor", "number"),
-    _f("acquisition.max_brackets", "max brackets", "integer"),
-    _f("acquisition.frames", "frames averaged", "integer"),
+    _f("acquisition.hdr_factor", "HDR factor", "number",
+       "HDR: ratio between successive bracket exposures (e.g. 8)"),
+    _f("acquisition.max_brackets", "max brackets", "integer",
+       "HDR: most exposures taken at one point"),
+    _f("acquisition.frames", "frames averaged", "integer",
+       "frames averaged per exposure (noise falls as 1/√N)"),
     _f("acquisition.dark", "darks", "choice", "every detector with the light off: none, "
        "after every point, before every row of θi, or at the start", DARK_POLICIES,
        _POL.dark),
@@ -116,78 +128,104 @@ ACQUISITION = [
     _f("acquisition.readout_s", "readout (s)", "number", "per-frame overhead (estimates)"),
 ]
 CALIBRATION = [
-    _f(f"calibration.{k}", f"{k} run", "text", "run id or file") for k in
+    _f(f"calibration.{k}", f"{k} run", "text",
+       f"the {k} calibration: a run id or a run file (empty: none)") for k in
     ("dark", "reference", "signature", "flat")
 ]
+SKIP_BEAM = _f("scan.skip_beam_points", "skip points in the beam", "bool",
+               "leave out (and report) points with the detector in the beam", default=True,
+               absent=False)
 IN_PLANE = [
     _f("scan.theta_i", "θi (deg)", "values", "incidence angles", default="20, 40, 60"),
     _f("scan.theta_r", "θr (deg)", "values", "signed: > 0 specular side, < 0 source side",
        default="-70 to 80 step 10"),
     _f("scan.specular.half_width_deg", "specular half-width (deg)", "number",
        "extra points around specular"),
-    _f("scan.specular.step_deg", "specular step (deg)", "number"),
-    _f("scan.reciprocity", "drop reciprocal points", "bool", default=False),
-    _f("scan.skip_beam_points", "skip points in the beam", "bool",
-       "leave out (and report) points with the detector in the beam", default=True,
-       absent=False),
+    _f("scan.specular.step_deg", "specular step (deg)", "number",
+       "spacing of the extra points around specular, in degrees"),
+    _f("scan.reciprocity", "drop reciprocal points", "bool",
+       "leave out (θi, θr) when (θr, θi) is measured: Helmholtz reciprocity",
+       default=False),
+    SKIP_BEAM,
 ]
 #: A two-pass lobe plan (``[scan] lobe``, ADR 0052): this plan is the coarse first pass.
 LOBE = [
     _f("scan.lobe.points", "lobe: second-pass points", "integer",
        "placed by Fisher information after the first pass (empty: one pass)"),
-    _f("scan.lobe.step_deg", "lobe: placement grid (deg)", "number"),
+    _f("scan.lobe.step_deg", "lobe: placement grid (deg)", "number",
+       "second pass: the θr grid its points are chosen from, in degrees"),
     _f("scan.lobe.search_half_width_deg", "lobe: search half-width (deg)", "number",
        "first pass: extra points around specular"),
-    _f("scan.lobe.search_step_deg", "lobe: search step (deg)", "number"),
-    _f("scan.lobe.prior", "lobe: model", "text", "the model fitted to the first pass"),
+    _f("scan.lobe.search_step_deg", "lobe: search step (deg)", "number",
+       "first pass: spacing of the search points around specular, in degrees"),
+    _f("scan.lobe.prior", "lobe: model", "choice",
+       "the BRDF model fitted to the first pass (automatic: the best of the default "
+       "candidates)", LOBE_MODELS, ""),
     _f("scan.lobe.target", "lobe: target parameter", "text",
        "the parameter whose σ the second pass reduces"),
 ]
 HEMISPHERE = [
-    _f("scan.theta_i", "θi (deg)", "list", default="30"),
-    _f("scan.phi_i", "φi (deg)", "list", default="0"),
+    _f("scan.theta_i", "θi (deg)", "list", "incidence polar angles, in degrees", default="30"),
+    _f("scan.phi_i", "φi (deg)", "list", "incidence azimuths, in degrees", default="0"),
     _f("scan.n_directions", "directions", "integer", "cells of equal solid angle",
        default="60"),
-    _f("scan.theta_max_deg", "θr max (deg)", "number", default="70"),
-    _f("scan.specular.half_width_deg", "specular half-width (deg)", "number"),
-    _f("scan.specular.rings", "specular rings", "integer"),
-    _f("scan.specular.per_ring", "points per ring", "integer"),
-    _f("scan.reciprocity", "drop reciprocal points", "bool", default=False),
-    _f("scan.isotropic", "isotropic sample", "bool", default=True),
-    _f("scan.skip_beam_points", "skip points in the beam", "bool", default=True,
-       absent=False),
+    _f("scan.theta_max_deg", "θr max (deg)", "number",
+       "largest viewing polar angle, in degrees", default="70"),
+    _f("scan.specular.half_width_deg", "specular half-width (deg)", "number",
+       "extra rings of points within this angle of specular, in degrees"),
+    _f("scan.specular.rings", "specular rings", "integer",
+       "number of extra rings around specular"),
+    _f("scan.specular.per_ring", "points per ring", "integer",
+       "directions on each specular ring"),
+    _f("scan.reciprocity", "drop reciprocal points", "bool",
+       "leave out a direction pair when its reciprocal is measured", default=False),
+    _f("scan.isotropic", "isotropic sample", "bool",
+       "the BRDF does not change when the sample turns about its normal", default=True),
+    SKIP_BEAM,
 ]
 FRAMES_AT = [
-    _f("scan.exposures_us", "exposures (µs)", "values", default="100, 1000, 10000"),
-    _f("scan.frames", "frames per exposure", "integer", default="4"),
+    _f("scan.exposures_us", "exposures (µs)", "values",
+       "camera exposures, in µs: list or range", default="100, 1000, 10000"),
+    _f("scan.frames", "frames per exposure", "integer",
+       "frames taken at each exposure", default="4"),
     _f("scan.positions", "axis positions", "positions", "role = value, …"),
 ]
 SCAN_FIELDS: dict[str, list[FieldSpec]] = {
     "brdf_in_plane": [*IN_PLANE, *LOBE],
-    "reference": [*IN_PLANE, _f("scan.reference_name", "standard", "text"),
-                  _f("scan.reflectance", "reflectance", "number")],
+    "reference": [*IN_PLANE, _f("scan.reference_name", "standard", "text",
+                     "the reference standard's name (e.g. Spectralon 99 %)"),
+                  _f("scan.reflectance", "reflectance", "number",
+                     "the standard's certified hemispherical reflectance, 0 to 1")],
     "signature": IN_PLANE,
     "brdf_hemisphere": HEMISPHERE,
     "lightfield": [
-        _f("scan.camera_z", "camera_z (mm)", "values", default="0 to 20 step 1"),
-        _f("scan.sample_theta", "sample_theta (deg)", "number"),
-        _f("scan.detector_theta", "detector_theta (deg)", "number"),
+        _f("scan.camera_z", "camera_z (mm)", "values",
+           "camera stage positions, in mm: list or range", default="0 to 20 step 1"),
+        _f("scan.sample_theta", "sample_theta (deg)", "number",
+           "sample rotation held during the scan, in degrees (empty: as it is)"),
+        _f("scan.detector_theta", "detector_theta (deg)", "number",
+           "detector arm angle held during the scan, in degrees (empty: as it is)"),
     ],
     "dark": FRAMES_AT,
     "flat_field": FRAMES_AT,
     "photon_transfer": [
         _f("scan.exposures_us", "exposures (µs)", "ptc_exposures",
            "list, range, or 'start to stop n N log'", default="10 to 100000 n 12 log"),
-        _f("scan.pairs", "pairs per exposure", "integer", default="2"),
-        _f("scan.dark", "dark pairs", "bool", default=True),
+        _f("scan.pairs", "pairs per exposure", "integer",
+           "frame pairs per exposure (their difference gives the noise)", default="2"),
+        _f("scan.dark", "dark pairs", "bool",
+           "also take pairs with the light off (dark offset and noise)", default=True),
         _f("scan.positions", "axis positions", "positions", "role = value, …"),
     ],
     "sphere_capture": [
-        _f("scan.selector", "sample changer", "choice", choices=SPHERE_ROLES,
+        _f("scan.selector", "sample changer", "choice",
+           "the axis that brings each sphere into place", choices=SPHERE_ROLES,
            default="sample_phi"),
-        _f("scan.lighting_role", "lighting axis", "choice", choices=SPHERE_ROLES,
+        _f("scan.lighting_role", "lighting axis", "choice",
+           "the axis that changes the lighting direction", choices=SPHERE_ROLES,
            default="source_theta"),
-        _f("scan.lighting_deg", "lighting positions (deg)", "list", default="0, 90"),
+        _f("scan.lighting_deg", "lighting positions (deg)", "list",
+           "positions of the lighting axis, in degrees", default="0, 90"),
         _f("scan.objects", "objects", "objects",
            "one per line: name, station_deg[, model p=v …]", default="sphere, 0"),
     ],
@@ -208,7 +246,8 @@ def fields_for(kind: str) -> list[FieldSpec]:
     """Every field of a plan of ``kind``: common, scan, acquisition, calibration (and the
     wavelength axis where the kind takes one)."""
     spectral = SPECTRAL if kind in SPECTRAL_KINDS else []
-    return [_f("plan.kind", "kind", "choice", choices=KINDS, default=kind), *COMMON,
+    return [_f("plan.kind", "kind", "choice", "what the plan measures", choices=KINDS,
+               default=kind), *COMMON,
             *SCAN_FIELDS[kind], *ACQUISITION, *CALIBRATION, *spectral]
 
 
@@ -616,8 +655,11 @@ class PlanForm:
 
 def _placed(error, paths: list[str]) -> tuple[str | None, str]:
     """(field, message) of a validator's FieldError; the message names what part of the
-    field it is about (``step: …`` for ``scan.theta_r.step``)."""
+    field it is about (``step: …`` for ``scan.theta_r.step``). A missing file section
+    (all of its fields empty) is said in the form's words, not the file's ("table")."""
     target = field_for(error.path, paths)
+    if error.message == "missing table" and target is not None:
+        return target, "required for this kind of plan: fill it in"
     if target is None:
         return None, f"{error.path}: {error.message}"
     rest = error.path[len(target):].lstrip(".") if error.path.startswith(target) else ""

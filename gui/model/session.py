@@ -38,11 +38,11 @@ import numpy as np
 from drivers.base import Camera, Device, LightSource, MotionAxis
 from drivers.errors import DeviceError
 from gui.model.camera import FramePump, FrameSlot
-from gui.model.devices import DeviceState, kind_of, read_state
+from gui.model.devices import DeviceState, axis_status_values, kind_of, read_state
 from gui.model.live import LiveData
 from instrument.bench.devices import Bench, open_bench, open_device
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
-from instrument.bench.profile import BenchProfile, ProfileError
+from instrument.bench.profile import BenchProfile, ProfileError, same_bench
 from instrument.plans.build import Plan
 from instrument.run.engine import EngineState, RunEngine
 from instrument.run.events import Event, EventQueue, RunFinished
@@ -394,8 +394,10 @@ class BenchSession:
             self._teardown()
 
     def _poll_wait(self) -> float:
-        if self._bench is None or self._run is not None:
+        if self._bench is None:
             return 0.5
+        if self._run is not None:
+            return self.poll_s  # the engine's read-backs, no driver call
         return max(0.0, min(self._next_poll_times(), default=0.5))
 
     def _next_poll_times(self) -> list[float]:
@@ -413,7 +415,10 @@ class BenchSession:
 
     def _poll(self, *, force: bool = False) -> None:
         bench = self._bench
-        if bench is None or self._run is not None:
+        if bench is None:
+            return
+        if self._run is not None:
+            self._poll_run(self._run)
             return
         now = time.monotonic()
         changed = False
@@ -427,6 +432,24 @@ class BenchSession:
             changed = True
         if changed:
             self._check_arrivals()
+            self.listener.states(self.states())
+
+    def _poll_run(self, run: RunHandle) -> None:
+        """While the engine owns the bench: the axes' states from the engine's own status
+        reads (the drivers are not touched), stamped with the time of each read; the other
+        devices keep their last state, whose stamp tells its age."""
+        changed = False
+        for role, (status, t) in run.engine.axis_readbacks().items():
+            old = self._states.get(role)
+            if old is None or old.t >= t:
+                continue
+            values = {**old.values, **axis_status_values(status)}
+            state = DeviceState(role, old.kind, True, values, old.info, status.error or None,
+                                t=t)
+            with self._lock:
+                self._states[role] = state
+            changed = True
+        if changed:
             self.listener.states(self.states())
 
     def _read(self, role: str, device: Device) -> DeviceState:
@@ -498,10 +521,7 @@ class BenchSession:
             case MoveTo(role=role, target=target):
                 return self._move(cmd, role, float(target))
             case Jog(role=role, delta=delta):
-                axis = self._axis(role)
-                base = axis.target if axis.is_moving and axis.target is not None \
-                    else axis.position
-                return self._move(cmd, role, base + float(delta))
+                return self._move(cmd, role, self._jog_base(self._axis(role)) + float(delta))
             case SetLight(on=on, role=role):
                 return self._set_light(cmd, bool(on), role)
             case SetSetting(role=role, name=name, value=value):
@@ -555,6 +575,18 @@ class BenchSession:
             if s.is_homed:
                 pose[role] = s.position
         return pose
+
+    @staticmethod
+    def _jog_base(axis: MotionAxis) -> float:
+        """Where a jog starts: the last target while the axis moves to it or has arrived
+        within its tolerance, so that steps add exactly (1 + 3 × 1° is 4.000, not the
+        read-back's 3.998); the read-back after a stop short of it, or before any move."""
+        s = axis.status()
+        target = axis.target
+        if target is not None and s.is_homed and (
+                s.is_moving or abs(s.position - target) <= axis.position_tolerance):
+            return float(target)
+        return s.position
 
     def _axes_moving(self) -> list[str]:
         assert self._bench is not None
@@ -734,7 +766,7 @@ class BenchSession:
 
             stored = read_run(resume)
             stored_bench = stored.profile().get("bench", {}).get("name")
-            if stored_bench and stored_bench != bench.profile.name:
+            if stored_bench and not same_bench(stored_bench, bench.profile.name):
                 return CommandResult(cmd, False, f"run {stored.run_id} was recorded on "
                                      f"bench {stored_bench!r}, the connected bench is "
                                      f"{bench.profile.name!r}: connect that bench first",

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QFileDialog,
     QHBoxLayout,
     QLabel,
+    QLayout,
     QPushButton,
     QScrollArea,
     QVBoxLayout,
@@ -23,10 +25,20 @@ from gui.model.session import (
     Connect,
     ConnectionStatus,
     Disconnect,
+    Home,
+    Jog,
+    MoveTo,
     RunHandle,
 )
 from gui.qt.panels import DevicePanel, panel_for
-from instrument.bench.profile import BenchProfile, ProfileError, builtin_profiles, load_profile
+from gui.qt.wheel import install_wheel_guard
+from instrument.bench.profile import (
+    BenchProfile,
+    ProfileError,
+    builtin_profiles,
+    canonical_bench_name,
+    load_profile,
+)
 
 __all__ = ["BenchPanel"]
 
@@ -40,6 +52,7 @@ class BenchPanel(QWidget):
         super().__init__(parent)
         self.session = session
         self.setObjectName("bench_panel")
+        install_wheel_guard()
         self.chooser = QComboBox()
         self.chooser.setObjectName("bench_chooser")
         self.chooser.setEditable(False)
@@ -59,9 +72,15 @@ class BenchPanel(QWidget):
         self.message.setObjectName("message")
         self.message.setWordWrap(True)
         self.message.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.message.setAlignment(Qt.AlignLeft | Qt.AlignTop)
+        # Reserved rows: a message or the run's notice appearing never shifts the panels.
+        lines = self.fontMetrics().lineSpacing()
+        self.message.setFixedHeight(3 * lines + 4)
         self.owner = QLabel("")
         self.owner.setObjectName("owner")
         self.owner.setStyleSheet("color: #0d47a1; font-weight: 600")
+        self.owner.setWordWrap(True)
+        self.owner.setFixedHeight(2 * lines + 2)
         top = QHBoxLayout()
         top.addWidget(QLabel("Bench"))
         top.addWidget(self.chooser, 1)
@@ -72,6 +91,8 @@ class BenchPanel(QWidget):
         self._devices = QWidget()
         self._devices_layout = QVBoxLayout(self._devices)
         self._devices_layout.setContentsMargins(0, 0, 0, 0)
+        # the panels are never squeezed below their minimum height (the list scrolls)
+        self._devices_layout.setSizeConstraint(QLayout.SizeConstraint.SetMinimumSize)
         self._devices_layout.addStretch(1)
         scroll = QScrollArea()
         scroll.setWidgetResizable(True)
@@ -85,13 +106,24 @@ class BenchPanel(QWidget):
         lay.addWidget(self.message)
         self.panels: dict[str, DevicePanel] = {}
         self._manual = True
+        # What the message says, to clear it when it stops applying: the axis whose move
+        # or home it reports (and when that result came), or the bench's pose when a
+        # command was refused.
+        self._activity: tuple[str, float, str] | None = None
+        self._refused_at: tuple[tuple, str] | None = None
+        self._ages = QTimer(self)
+        self._ages.setInterval(1000)
+        self._ages.timeout.connect(self._refresh_ages)
+        self._ages.start()
         self.browse.clicked.connect(self._browse)
         self.connect_button.clicked.connect(self.connect_bench)
         self.disconnect_button.clicked.connect(lambda: self.session.submit(Disconnect()))
 
     # bench choice -----------------------------------------------------------------
     def choose(self, name_or_path: str) -> None:
-        """Select a built-in profile by name or add a profile file and select it."""
+        """Select a built-in profile by name (a former name too) or add a profile file
+        and select it."""
+        name_or_path = canonical_bench_name(name_or_path)
         k = self.chooser.findData(name_or_path)
         if k < 0:
             self.chooser.addItem(Path(name_or_path).name, name_or_path)
@@ -153,6 +185,32 @@ class BenchPanel(QWidget):
                 panel.set_owned(self._manual)
             panel.set_state(state)
             panel.set_owned(self._manual)
+        self._clear_stale(states)
+
+    def _clear_stale(self, states: dict[str, DeviceState]) -> None:
+        """Clear a message once it stops applying: "moving"/"homing" when the axis is read
+        at rest after the command; a refusal when the bench's pose or light changed."""
+        if self._activity is not None:
+            role, since, text = self._activity
+            st = states.get(role)
+            if st is not None and st.t >= since and not st.value("moving"):
+                self._activity = None
+                self._clear_message(text)
+        if self._refused_at is not None and pose_key(states) != self._refused_at[0]:
+            text = self._refused_at[1]
+            self._refused_at = None
+            self._clear_message(text)
+            for panel in self.panels.values():
+                panel.clear_outcome()
+
+    def _clear_message(self, text: str) -> None:
+        if self.message.text() == text:  # not a newer message
+            self.show_message("", error=False)
+
+    def _refresh_ages(self) -> None:
+        now = time.monotonic()
+        for panel in self.panels.values():
+            panel.refresh_age(now)
 
     def _order(self, role: str) -> int:
         roles = getattr(self, "_pending_roles", [])
@@ -168,6 +226,11 @@ class BenchPanel(QWidget):
             self.show_message(result.message, error=True)
         else:
             self.show_message(result.message, error=False)
+        cmd = result.command
+        if result.ok and isinstance(cmd, Home | MoveTo | Jog):
+            self._activity = (cmd.role, time.monotonic(), result.message)
+        if result.refused:
+            self._refused_at = (pose_key(self.session.states()), result.message)
 
     def on_run(self, run: RunHandle | None) -> None:
         self._manual = run is None
@@ -180,5 +243,21 @@ class BenchPanel(QWidget):
             panel.set_owned(self._manual)
 
     def show_message(self, text: str, *, error: bool) -> None:
-        self.message.setStyleSheet("color: #b71c1c" if error else "color: #1b5e20")
+        if text:  # an empty line keeps its style (a restyle re-polishes the label)
+            self.message.setStyleSheet("color: #b71c1c" if error else "color: #1b5e20")
         self.message.setText(text)
+        self.message.setToolTip(text)
+
+
+def pose_key(states: dict[str, DeviceState]) -> tuple:
+    """What a refusal depends on: each axis's position (to 0.01), homed flag, and which
+    lights are on. A change means the refusal may no longer apply."""
+    key = []
+    for role, st in sorted(states.items()):
+        if st.kind == "motion_axis":
+            pos = st.value("position")
+            key.append((role, None if pos is None else round(float(pos), 2),
+                        bool(st.value("homed"))))
+        elif "on" in st.values:
+            key.append((role, bool(st.value("on"))))
+    return tuple(key)

@@ -40,6 +40,7 @@ from gui.model.session import (
 )
 from gui.qt.background import Background, JobDone
 from gui.qt.panels import spin_box
+from gui.qt.setpoint import SetpointField
 
 __all__ = ["CameraView"]
 
@@ -91,10 +92,15 @@ class CameraView(QWidget):
         self.stream.setCheckable(True)
         self.exposure = spin_box(0.01, 1e8, 2, 1000.0, "µs")
         self.exposure.setObjectName("exposure")
+        self.exposure.setToolTip("the camera's exposure time; type a new one and press Set")
+        self.exposure_field = SetpointField(self.exposure, "exposure")
         self.set_exposure = QPushButton("Set")
         self.set_exposure.setObjectName("set_exposure")
         self.gain = spin_box(-100.0, 1000.0, 2, 0.0, "")
         self.gain.setObjectName("gain")
+        self.gain.setToolTip("the camera's analogue gain (its own units); type a new one "
+                             "and press Set")
+        self.gain_field = SetpointField(self.gain, "gain")
         self.set_gain = QPushButton("Set")
         self.set_gain.setObjectName("set_gain")
         self.show_saturation = QCheckBox("saturation")
@@ -165,11 +171,10 @@ class CameraView(QWidget):
             self.stream.setChecked(streaming)
             self.stream.blockSignals(False)
         self.stream.setText("Stop live" if streaming else "Start live")
+        # the fields show the camera's settings as read back (unless an edit is pending)
+        self.exposure_field.follow(state.values.get("exposure_us"))
+        self.gain_field.follow(state.values.get("gain"))
         if first:
-            if "exposure_us" in state.values:
-                self.exposure.setValue(float(state.values["exposure_us"]))
-            if "gain" in state.values:
-                self.gain.setValue(float(state.values["gain"]))
             h, w = state.info.get("sensor", (64, 64))
             self.roi.setPos((w * 3 // 8, h * 3 // 8))
             self.roi.setSize((max(4, w // 4), max(4, h // 4)))
@@ -197,6 +202,10 @@ class CameraView(QWidget):
             cmd, StartStream | StopStream)
         if not mine:
             return
+        field = {"exposure_us": self.exposure_field, "gain": self.gain_field}.get(
+            getattr(cmd, "name", None))
+        if field is not None:
+            field.settled()  # done or refused: the field shows the camera's value again
         if result.ok:
             self.error.setText("")
         else:

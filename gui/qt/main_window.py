@@ -52,6 +52,7 @@ from gui.qt.log_dock import LogDock
 from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_browser import RunBrowser
 from gui.qt.run_control import FaultPanel, RunControl
+from gui.qt.wheel import install_wheel_guard
 from instrument.bench.profile import ProfileError, load_profile, parse_profile
 
 __all__ = ["MainWindow", "homed_positions"]
@@ -134,6 +135,7 @@ class MainWindow(QMainWindow):
         self._default_state = self.saveState(LAYOUT_VERSION)
         self._restore(bench)
         QApplication.instance().installEventFilter(self)
+        install_wheel_guard()  # no set-point changes under a scrolling wheel
         self.browser.refresh()
 
     # docks ---------------------------------------------------------------------------

@@ -15,6 +15,7 @@ or :class:`gui.model.session.Action` commands for its controls.
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 from PySide6.QtCore import Qt
@@ -47,8 +48,10 @@ from gui.model.session import (
     SetSetting,
     Stop,
 )
+from gui.qt.setpoint import SetpointField
 
-__all__ = ["DevicePanel", "GenericPanel", "panel_for", "register_panel", "spin_box"]
+__all__ = ["DevicePanel", "GenericPanel", "panel_for", "register_panel", "reserve_space",
+           "spin_box"]
 
 _PANELS: dict[str, type[DevicePanel]] = {}
 
@@ -86,33 +89,46 @@ class DevicePanel(QGroupBox):
         self.identity.setObjectName("identity")
         self.identity.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.identity.setStyleSheet("color: #555")
+        # A long firmware string must not widen the dock: the line is cut at the panel's
+        # edge (not wrapped: a wrapped label makes the scrolled panels' heights depend on
+        # their width) and the tooltip has it whole.
+        self.identity.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
         self.status = QLabel("")
         self.status.setObjectName("status")
         self.status.setTextFormat(Qt.RichText)
-        self.error = QLabel("")
-        self.error.setObjectName("error")
-        self.error.setWordWrap(True)
-        self.error.setStyleSheet("color: #b71c1c")
-        self.error.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        self.age = QLabel("")
+        self.age.setObjectName("age")
+        self.age.setStyleSheet("color: #e65100")
+        self.age.setToolTip("when this device was last read: a run reads only the axes it "
+                            "moves, so the others show their state from before the run")
+        self.error = note_label("error")
         self.reconnect = QPushButton("Reconnect")
         self.reconnect.setToolTip("close and open this device again (a cable plugged back in)")
         self.reconnect.clicked.connect(lambda: self.session.submit(Reconnect(self.role)))
+        reserve_space(self.reconnect)
         self.reconnect.hide()
         head = QHBoxLayout()
         head.addWidget(self.status, 1)
+        head.addWidget(self.age)
         head.addWidget(self.reconnect)
         self._outer.addWidget(self.identity)
         self._outer.addLayout(head)
         self.body = QWidget()
         self._outer.addWidget(self.body)
-        self._outer.addWidget(self.error)
+        # The device's error and the last refusal share two reserved lines under the
+        # body: a message appearing or going never moves the panels below (a click aimed
+        # at one field would land on another).
+        self.outcome = note_label("outcome")
+        notes = QWidget()
+        notes.setObjectName("notes")
+        notes_lay = QVBoxLayout(notes)
+        notes_lay.setContentsMargins(0, 0, 0, 0)
+        notes_lay.setSpacing(0)
+        notes_lay.addWidget(self.error)
+        notes_lay.addWidget(self.outcome)
+        notes.setFixedHeight(2 * self.fontMetrics().lineSpacing() + 2)
+        self._outer.addWidget(notes)
         self.error.hide()
-        self.outcome = QLabel("")
-        self.outcome.setObjectName("outcome")
-        self.outcome.setWordWrap(True)
-        self.outcome.setStyleSheet("color: #b71c1c")
-        self.outcome.setTextInteractionFlags(Qt.TextSelectableByMouse)
-        self._outer.addWidget(self.outcome)
         self.outcome.hide()
         self._controls: list[QWidget] = []
         self._editing = False
@@ -130,10 +146,19 @@ class DevicePanel(QGroupBox):
             if ident.get("firmware"):
                 text += f" fw {ident['firmware']}"
             self.identity.setText(text)
-        self.error.setVisible(bool(state.error))
-        self.error.setText(state.error or "")
+            self.identity.setToolTip(text)
+        show_note(self.error, state.error or "")
         self.reconnect.setVisible(not state.connected)
+        self.refresh_age()
         self.show_state(state)
+
+    def refresh_age(self, now: float | None = None) -> None:
+        """Show how old the shown state is, when it is old (see ``format.age``)."""
+        if self.state is None:
+            self.age.setText("")
+            return
+        now = time.monotonic() if now is None else now
+        self.age.setText(fmt.age(now - self.state.t))
 
     def set_owned(self, manual: bool) -> None:
         """``manual``: the device worker owns the bench (no run) and commands are taken."""
@@ -148,8 +173,36 @@ class DevicePanel(QGroupBox):
         """A command of this device ended: a refusal or the driver's error (a setting it
         rejected) stays shown under the panel until a command of this device succeeds."""
         failed = result.refused or not result.ok
-        self.outcome.setText(result.message if failed else "")
-        self.outcome.setVisible(failed)
+        show_note(self.outcome, result.message if failed else "")
+
+    def clear_outcome(self) -> None:
+        """The refusal shown no longer applies (the bench moved since)."""
+        show_note(self.outcome, "")
+
+
+def note_label(name: str) -> QLabel:
+    """A red line for an error or a refusal; the full text is also its tooltip (the row
+    is reserved and may clip a long message; the bench panel's message shows it whole)."""
+    label = QLabel("")
+    label.setObjectName(name)
+    label.setWordWrap(True)
+    label.setStyleSheet("color: #b71c1c")
+    label.setTextInteractionFlags(Qt.TextSelectableByMouse)
+    label.setAlignment(Qt.AlignLeft | Qt.AlignTop)
+    return label
+
+
+def show_note(label: QLabel, text: str) -> None:
+    label.setText(text)
+    label.setToolTip(text)
+    label.setVisible(bool(text))
+
+
+def reserve_space(widget: QWidget) -> None:
+    """Keep ``widget``'s place in its layout while it is hidden (no layout jump)."""
+    policy = widget.sizePolicy()
+    policy.setRetainSizeWhenHidden(True)
+    widget.setSizePolicy(policy)
 
 
 class GenericPanel(DevicePanel):
@@ -219,6 +272,8 @@ class AxisPanel(DevicePanel):
         self.go.setObjectName("go")
         self.new_velocity = spin_box(0.0001, 1e4, 4, 1.0)
         self.new_velocity.setObjectName("new_velocity")
+        self.new_velocity.setToolTip("the axis's velocity; type a new one and press Set")
+        self.velocity_field = SetpointField(self.new_velocity, "velocity")
         self.set_velocity = QPushButton("Set")
         self.set_velocity.setObjectName("set_velocity")
         for b in (self.minus, self.plus):
@@ -269,6 +324,7 @@ class AxisPanel(DevicePanel):
         self.position.setText(fmt.position(v.get("position"), units))
         vel = info.get("velocity")
         self.velocity.setText("—" if vel is None else f"{vel:.4g} {units}/s")
+        self.velocity_field.follow(vel)
         if limits is not None:
             self.limits.setText(f"soft limits [{limits[0]:g}, {limits[1]:g}] {units}")
         homed = bool(v.get("homed"))
@@ -282,6 +338,12 @@ class AxisPanel(DevicePanel):
         if state.error:
             flags.append(badge("error", True, good=False))
         self.status.setText(" ".join(flags))
+
+
+    def show_result(self, result: CommandResult) -> None:
+        super().show_result(result)
+        if isinstance(result.command, SetSetting) and result.command.name == "velocity":
+            self.velocity_field.settled()
 
 
 class CameraPanel(DevicePanel):
@@ -355,6 +417,9 @@ class PowerMeterPanel(DevicePanel):
         self.wavelength.setObjectName("wavelength")
         self.new_wavelength = spin_box(100.0, 25000.0, 1, 633.0, "nm")
         self.new_wavelength.setObjectName("new_wavelength")
+        self.new_wavelength.setToolTip("the wavelength the meter corrects its reading for; "
+                                       "type a new one and press Set")
+        self.wavelength_field = SetpointField(self.new_wavelength, "wavelength")
         self.set_wavelength = QPushButton("Set")
         self.set_wavelength.setObjectName("set_wavelength")
         self.zero = QPushButton("Dark zero")
@@ -378,7 +443,13 @@ class PowerMeterPanel(DevicePanel):
         self.reading.setText(fmt.si(v.get("power_w"), "W"))
         wl = v.get("wavelength_nm")
         self.wavelength.setText("—" if wl is None else f"{wl:g} nm")
+        self.wavelength_field.follow(wl)
         self.status.setText(badge("connected", state.connected))
+
+    def show_result(self, result: CommandResult) -> None:
+        super().show_result(result)
+        if isinstance(result.command, SetSetting) and result.command.name == "wavelength_nm":
+            self.wavelength_field.settled()
 
 
 class LockInPanel(DevicePanel):

@@ -20,6 +20,7 @@ from PySide6.QtGui import QImage, QPixmap
 from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
+    QDialog,
     QDoubleSpinBox,
     QFileDialog,
     QFormLayout,
@@ -30,6 +31,7 @@ from PySide6.QtWidgets import (
     QPlainTextEdit,
     QPushButton,
     QScrollArea,
+    QSizePolicy,
     QSplitter,
     QTableWidget,
     QTableWidgetItem,
@@ -49,6 +51,54 @@ __all__ = ["PlanEditor"]
 SECTIONS = (("plan", "Plan"), ("sample", "Sample"), ("scan", "Scan"),
             ("acquisition", "Acquisition"), ("calibration", "Calibration runs"),
             ("spectral", "Wavelength axis"))
+
+
+def field_tip(spec: FieldSpec) -> str:
+    """A field's tooltip: what it means (with its unit), then where it goes in the plan
+    file, for an operator who also edits plan files."""
+    return f"{spec.help or spec.label} (plan file: {spec.path})"
+
+
+class FittedImage(QLabel):
+    """A picture scaled to the space it has (aspect kept), full size on a double-click:
+    the coverage plot stays readable however the dock is sized."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setAlignment(Qt.AlignCenter)
+        self.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Ignored)
+        self.source: QPixmap | None = None
+
+    def set_image(self, pixmap: QPixmap | None) -> None:
+        self.source = pixmap
+        self._fit()
+
+    def clear(self) -> None:
+        self.source = None
+        super().clear()
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        self._fit()
+
+    def _fit(self) -> None:
+        if self.source is None or self.source.isNull():
+            return
+        self.setPixmap(self.source.scaled(self.size(), Qt.KeepAspectRatio,
+                                          Qt.SmoothTransformation))
+
+    def mouseDoubleClickEvent(self, event) -> None:
+        if self.source is None:
+            return
+        dialog = QDialog(self)
+        dialog.setWindowTitle("Plan coverage")
+        full = QLabel()
+        full.setPixmap(self.source)
+        area = QScrollArea()
+        area.setWidget(full)
+        QVBoxLayout(dialog).addWidget(area)
+        dialog.resize(min(self.source.width() + 40, 1400), min(self.source.height() + 40, 1000))
+        dialog.show()
 
 
 class PlanEditor(QWidget):
@@ -119,10 +169,10 @@ class PlanEditor(QWidget):
         self.preview.setObjectName("preview")
         self.preview.setWordWrap(True)
         self.preview.setTextInteractionFlags(Qt.TextSelectableByMouse)
-        self.coverage = QLabel("")
+        self.coverage = FittedImage()
         self.coverage.setObjectName("coverage")
-        self.coverage.setAlignment(Qt.AlignCenter)
         self.coverage.setMinimumSize(240, 240)
+        self.coverage.setToolTip("the plan's directions; double-click for full size")
         right = QWidget()
         rl = QVBoxLayout(right)
         rl.addWidget(QLabel("<b>Preview</b>"))
@@ -188,8 +238,9 @@ class PlanEditor(QWidget):
             hl.addWidget(widget)
             hl.addWidget(error)
             label = QLabel(spec.label)
-            label.setToolTip(spec.help or spec.path)
-            widget.setToolTip(f"{spec.path}: {spec.help}" if spec.help else spec.path)
+            tip = field_tip(spec)
+            label.setToolTip(tip)
+            widget.setToolTip(tip)
             boxes[spec.section].addRow(label, holder)
             self._widgets[spec.path] = widget
             self._errors[spec.path] = error
@@ -204,8 +255,11 @@ class PlanEditor(QWidget):
         elif spec.kind == "choice":
             w = QComboBox()
             for c in spec.choices:
-                w.addItem(KIND_TITLES.get(c, c) if spec.path == "plan.kind" else c, c)
-            w.setCurrentIndex(max(0, w.findData(value)))
+                w.addItem(KIND_TITLES.get(c, c) if spec.path == "plan.kind" else
+                          c or "automatic", c)
+            if value and w.findData(value) < 0:  # a plan file's value not in the list
+                w.addItem(str(value), value)
+            w.setCurrentIndex(max(0, w.findData(value or "")))
             w.currentIndexChanged.connect(
                 lambda _, p=spec.path, box=w: self._edited(p, box.currentData()))
         elif spec.kind == "objects":
@@ -396,8 +450,7 @@ class PlanEditor(QWidget):
             rgb = np.ascontiguousarray(image[:, :, ::-1])
             h, w, _ = rgb.shape
             qimg = QImage(rgb.data, w, h, 3 * w, QImage.Format_RGB888).copy()
-            self.coverage.setPixmap(QPixmap.fromImage(qimg).scaled(
-                360, 360, Qt.KeepAspectRatio, Qt.SmoothTransformation))
+            self.coverage.set_image(QPixmap.fromImage(qimg))
 
     def set_can_start(self, can: bool) -> None:
         """Whether a bench is connected and free (no run owns it)."""

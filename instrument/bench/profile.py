@@ -256,10 +256,25 @@ class BenchProfile:
 # --------------------------------------------------------------------------- loading
 
 
+#: Former names of built-in profiles, still accepted (run files and scripts name them):
+#: the built-in names are written with hyphens.
+PROFILE_ALIASES = {"sim_out_of_plane": "sim-out-of-plane"}
+
+
 def builtin_profiles() -> list[str]:
     """Names of the profiles shipped with scatterlab (``sim``...)."""
     folder = resources.files("instrument.bench") / "profiles"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def canonical_bench_name(name: str) -> str:
+    """A bench's current name (``sim_out_of_plane`` → ``sim-out-of-plane``)."""
+    return PROFILE_ALIASES.get(name, name)
+
+
+def same_bench(a: str, b: str) -> bool:
+    """Whether two recorded bench names name the same bench (aliases included)."""
+    return canonical_bench_name(a) == canonical_bench_name(b)
 
 
 def load_profile(name_or_path: str | Path) -> BenchProfile:
@@ -272,7 +287,7 @@ def load_profile(name_or_path: str | Path) -> BenchProfile:
             raise ProfileError(str(text_path), [FieldError("file", f"cannot read: {err}")]
                                ) from err
         return parse_profile(text, source=str(text_path))
-    name = str(name_or_path)
+    name = canonical_bench_name(str(name_or_path))
     if name not in builtin_profiles():
         raise ProfileError(name, [FieldError(
             "bench", f"no built-in profile {name!r} and no such file; built-in profiles: "

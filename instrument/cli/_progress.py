@@ -7,6 +7,7 @@ import time
 
 from instrument.cli._format import fmt_s
 from instrument.run.events import (
+    AxisHomed,
     Event,
     Fault,
     Paused,
@@ -74,6 +75,9 @@ class ConsoleProgress:
                 elif ev.n_done == ev.n_total or now - getattr(self, "_plain", 0) > 5:
                     self._plain = now
                     self._line(text)
+            case AxisHomed():
+                self._line(f"  {ev.device}: homed in {fmt_s(ev.elapsed_s)}, at "
+                           f"{ev.position:.6g}")
             case Fault():
                 self.faults += 1
                 where = "" if ev.index is None else f" at point {ev.index}"

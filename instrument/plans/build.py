@@ -226,7 +226,7 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
         raise PlanError(f"plan {spec.name!r}", [FieldError(
             "plan.kind", f"'brdf_hemisphere' needs an out-of-plane bench (geometry.kind = "
             f"'out_of_plane'); bench {profile.name!r} is {profile.geometry.kind!r}: "
-            "choose one with --bench (e.g. sim_out_of_plane)")])
+            "choose one with --bench (e.g. sim-out-of-plane)")])
     errors: list[FieldError] = []
 
     def geo_point(a: Angles, lab: str = label) -> ScanPoint | None:

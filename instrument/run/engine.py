@@ -45,6 +45,7 @@ from instrument.bench.profile import RetryPolicy
 from instrument.plans.build import Plan, dynamics_of
 from instrument.plans.commands import Acquire, AcquisitionPolicy, Move, PointDone, SetLight
 from instrument.run.events import (
+    AxisHomed,
     Event,
     Fault,
     Paused,
@@ -189,6 +190,10 @@ class RunEngine:
         self._point_dt: float | None = None
         self._message = ""
         self._position_cache: dict[str, float] = {}
+        # The newest status read of each axis and when (monotonic s), for a client that
+        # shows the bench during the run (the engine owns the drivers then).
+        self._readbacks: dict[str, tuple[AxisStatus, float]] = {}
+        self._readback_lock = threading.Lock()
 
     # public API (any thread) ----------------------------------------------------
     def subscribe(self, callback: Callable[[Event], None]) -> None:
@@ -211,6 +216,17 @@ class RunEngine:
         raises is dropped, as an event subscriber is.
         """
         self._frame_subscribers.append(callback)
+
+    def axis_readbacks(self) -> dict[str, tuple[AxisStatus, float]]:
+        """The newest status the engine read from each axis, with its ``time.monotonic()``
+        stamp; safe from any thread. Axes the run has not read yet are absent."""
+        with self._readback_lock:
+            return dict(self._readbacks)
+
+    def _read_back(self, role: str, status: AxisStatus) -> AxisStatus:
+        with self._readback_lock:
+            self._readbacks[role] = (status, time.monotonic())
+        return status
 
     @property
     def state(self) -> EngineState:
@@ -375,11 +391,16 @@ class RunEngine:
         for role in self.plan.axes:
             axis = self._axis(role)
             policy = self._policy(role)
-            status = self._retry(role, policy, "status", axis.status)
+            status = self._read_back(role, self._retry(role, policy, "status", axis.status))
             if not status.is_enabled:
                 self._retry(role, policy, "enable", axis.enable)
             if not status.is_homed:
+                t0 = time.monotonic()
                 self._retry(role, policy, "home", lambda a=axis: a.home(timeout=300.0))
+                after = self._read_back(role, self._retry(role, policy, "status",
+                                                          axis.status))
+                self.store_event("homed", device=role, position=after.position)
+                self._emit(AxisHomed(role, after.position, time.monotonic() - t0))
 
     def _loop(self) -> str:
         while True:
@@ -702,7 +723,7 @@ class RunEngine:
                     raise _Abort
             for role, axis in list(pending.items()):
                 try:
-                    s = axis.status()
+                    s = self._read_back(role, axis.status())
                 except DeviceError as err:
                     s = None
                     fail = err

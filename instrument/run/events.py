@@ -12,6 +12,7 @@ import queue
 from dataclasses import dataclass
 
 __all__ = [
+    "AxisHomed",
     "Event",
     "EventQueue",
     "Fault",
@@ -54,6 +55,15 @@ class PointCompleted:
 
 
 @dataclass(frozen=True)
+class AxisHomed:
+    """The engine homed an axis the plan moves (it was not homed when the run started)."""
+
+    device: str
+    position: float      # read back after the home
+    elapsed_s: float     # how long the home took
+
+
+@dataclass(frozen=True)
 class Progress:
     n_done: int
     n_total: int
@@ -91,7 +101,8 @@ class RunFinished:
     message: str
 
 
-Event = RunStarted | PointCompleted | Progress | Fault | Paused | Resumed | RunFinished
+Event = (RunStarted | PointCompleted | Progress | Fault | Paused | Resumed | RunFinished
+         | AxisHomed)
 
 
 class EventQueue:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gui.model.session import SetSetting
 from tests.gui.conftest import connect
 
 
@@ -83,9 +84,29 @@ def test_a_rejected_exposure_shows_the_drivers_error(qtbot, make_window, fast_be
     qtbot.waitUntil(lambda: cam.role == "camera", timeout=60000)
     cam.exposure.setValue(2.0)  # the simulated camera takes 10 µs to 10 s
     cam.set_exposure.click()
-    qtbot.waitUntil(lambda: "outside [10, 1e+07] us" in cam.error.text(), timeout=60000)
+    qtbot.waitUntil(lambda: "outside [10 µs, 10 s]" in cam.error.text(), timeout=60000)
     cam.exposure.setValue(2500.0)
     cam.set_exposure.click()
     qtbot.waitUntil(lambda: w.session.states()["camera"].value("exposure_us") == 2500.0,
                     timeout=60000)
     assert cam.error.text() == ""
+
+
+def test_a_refused_exposure_does_not_stay_in_the_field(qtbot, make_window, fast_bench_file):
+    """The exposure field shows the camera's setting: a refused value is replaced by the
+    value the camera kept, and a setting changed elsewhere is followed."""
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    cam = w.camera
+    qtbot.waitUntil(lambda: cam.role == "camera", timeout=5000)
+    kept = w.session.states()["camera"].value("exposure_us")
+    qtbot.waitUntil(lambda: cam.exposure.value() == kept, timeout=5000)
+    cam.exposure.setValue(99999999.0)  # typed: pending until its result
+    assert cam.exposure_field.pending
+    cam.set_exposure.click()
+    qtbot.waitUntil(lambda: "100 s outside [10 µs, 10 s]" in cam.error.text(), timeout=5000)
+    qtbot.waitUntil(lambda: cam.exposure.value() == kept, timeout=5000)
+    assert not cam.exposure_field.pending
+    # a new setting (from the session, as a run or another control would) is shown
+    w.session.submit(SetSetting("camera", "exposure_us", 4321.0))
+    qtbot.waitUntil(lambda: cam.exposure.value() == 4321.0, timeout=5000)

@@ -66,8 +66,10 @@ def drive(qtbot, clock, until, what: str) -> None:
 
 
 def wait_end(qtbot, w, timeout=60000):
-    qtbot.waitUntil(lambda: w.session.run is None and w.run_control.last_finished
-                    is not None, timeout=timeout)
+    # the window has taken the run's end too (the session's flag is set first, on its
+    # worker thread)
+    qtbot.waitUntil(lambda: w.session.run is None and w.bridge.run is None
+                    and w.run_control.last_finished is not None, timeout=timeout)
     return w.run_control.last_finished
 
 
