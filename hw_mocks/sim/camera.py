@@ -69,6 +69,7 @@ from scipy import ndimage
 from drivers.base import Camera, DeviceIdentity, Frame, PixelFormat, Roi
 from drivers.errors import DeviceTimeout
 from hw_mocks import registry
+from hw_mocks.sim import lens
 from hw_mocks.sim import pupil as pupil_rules
 from hw_mocks.sim.sensor import Sensor, SensorParams
 from hw_mocks.sim.world import VirtualBench, WorldState, get_world
@@ -123,6 +124,10 @@ class SimulatedCamera(Camera):
         Frames held in a simulated driver queue (see the module docstring).
     realtime
         Whether acquisition waits for the exposure time.
+    renderer
+        ``"fast"`` (default) or ``"reference"``: the same rendering, computed where the
+        scene's light can reach and with the lens-only quantities cached, or exhaustively
+        (every pixel, every view; kept to check the fast path against).
     """
 
     exposure_range_us = (10.0, 10e6)
@@ -140,6 +145,7 @@ class SimulatedCamera(Camera):
         stale_buffers: int = 0,
         realtime: bool = False,
         ring_capacity: int = 16,
+        renderer: str = "fast",
     ) -> None:
         super().__init__(name, ring_capacity=ring_capacity)
         self.world = world if world is not None else get_world("sim")
@@ -150,6 +156,9 @@ class SimulatedCamera(Camera):
             raise ValueError("stale_buffers must be >= 0")
         self.stale_buffers = int(stale_buffers)
         self.realtime = bool(realtime)
+        if renderer not in ("fast", "reference"):
+            raise ValueError(f"renderer must be 'fast' or 'reference', got {renderer!r}")
+        self.renderer = renderer
         p = self.sensor.params
         self._exposure_us = 1000.0
         self._gain_db = 0.0
@@ -188,10 +197,150 @@ class SimulatedCamera(Camera):
         """
         state = state if state is not None else self.world.snapshot()
         roi = roi if roi is not None else self._roi
-        key = (state.key, roi, self.optics)
+        key = (state.key, roi, self.optics, self.renderer)
         with self._lock:
             if key == self._cache_key and self._cache_rate is not None:
                 return self._cache_rate
+        p = self.sensor.params
+        render = self._render_reference if self.renderer == "reference" else self._render
+        collected = render(state, roi)
+        aperture_m2 = math.pi * (0.5e-3 * self.optics.aperture_diameter_mm) ** 2
+        etendue = aperture_m2 * (p.pixel_pitch_um * 1e-3 / self.optics.focal_length_mm) ** 2
+        photon_j = PLANCK_J_S * SPEED_OF_LIGHT_M_S / (state.source.wavelength_nm * 1e-9)
+        rate = (collected * (etendue / photon_j)).astype(np.float32)
+        with self._lock:
+            self._cache_key, self._cache_rate = key, rate
+        return rate
+
+    def _samples_pupil(self, state: WorldState) -> bool:
+        # a flatland scene (rays (y, θ) in one plane) has no pupil to sample
+        return self.optics.pupil == "sampled" and getattr(state.scene, "pupil_sampling", True)
+
+    def _focus_mm(self, center: NDArray) -> float:
+        return (self.optics.focus_distance_mm if self.optics.focus_distance_mm is not None
+                else float(np.linalg.norm(center)))
+
+    def _blur_px(self, state: WorldState, focus: float) -> int:
+        """How far (pixels, rounded up, + 1) rays through the pupil reach the scene off
+        their chief ray's point: ρ·Δ/(F − Δ) on the focus plane (Δ: the scene's depth
+        extent about the focus point, else a tenth of the focus distance)."""
+        rho = 0.5 * self.optics.aperture_diameter_mm
+        depth = float(getattr(state.scene, "depth_extent_mm", 0.1 * focus))
+        pitch_focus = (self.sensor.params.pixel_pitch_um * 1e-3 * focus
+                       / self.optics.focal_length_mm)
+        return math.ceil(rho * depth / max(focus - depth, 1e-9) / pitch_focus) + 1
+
+    # -- the fast renderer (default) ------------------------------------------------
+    def _render(self, state: WorldState, roi: Roi) -> NDArray[np.float64]:
+        """Radiance collected per pixel (the pupil integral, or the chief ray's
+        ``L cos⁴α``), W m⁻² sr⁻¹ times the pupil's relative obliquity.
+
+        The quantity of :meth:`_render_reference`, by the same rules and tolerances,
+        computed only where it can differ from the scene's uniform veil: chief rays are
+        traced in the box that the scene's lit outlines (``lit_outlines``, where the scene
+        has them) project to, and one ray outside it gives the veil; what depends on the
+        lens alone comes cached from :func:`hw_mocks.sim.lens.lens_grid`; the refined
+        region is grown by a distance transform of its bounding box (the same pixels as
+        the reference's disk dilation of the whole frame)."""
+        p = self.sensor.params
+        center, forward, right, down = self.camera_frame(state)
+        focus = self._focus_mm(center)
+        grid = lens.lens_grid((roi.x, roi.y, roi.width, roi.height), (p.width, p.height),
+                              p.pixel_pitch_um, self.optics.focal_length_mm,
+                              0.5 * self.optics.aperture_diameter_mm, focus)
+        frame = (center, forward, right, down)
+        radiance = self._chief_radiance(state, frame, grid)
+        if not self._samples_pupil(state):
+            return radiance * grid.cos_alpha ** 4
+        return self._pupil_integral_fast(state, frame, grid, radiance,
+                                         self._blur_px(state, focus))
+
+    def _chief_radiance(self, state: WorldState, frame: tuple[NDArray, ...],
+                        grid: lens.LensGrid) -> NDArray[np.float64]:
+        """Scene radiance along every chief ray of the ROI, traced only where the scene
+        can send more than its uniform veil."""
+        center, forward, right, down = frame
+        h, w = grid.v.size, grid.u.size
+        rows, cols = slice(0, h), slice(0, w)
+        outlines = getattr(state.scene, "lit_outlines", None)
+        hulls = outlines(state) if outlines is not None else ()
+        if hulls is None:  # nothing lit: the veil everywhere
+            rows, cols = slice(0, 0), slice(0, 0)
+        for hull in hulls or ():
+            box = lens.pixel_box(hull, center, right, down, forward, grid, margin_px=2)
+            if box is None:  # a lit point at or behind the pupil: trace every ray
+                rows, cols = slice(0, h), slice(0, w)
+                break
+            rows = slice(max(rows.start, box[0].start), min(rows.stop, box[0].stop))
+            cols = slice(max(cols.start, box[1].start), min(cols.stop, box[1].stop))
+        rows = rows if rows.stop > rows.start and cols.stop > cols.start else slice(0, 0)
+        if (rows.stop - rows.start, cols.stop - cols.start) == (h, w):
+            dirs = grid.chief_directions(rows, cols, right, down, forward)
+            return state.scene.radiance(center, dirs, state)
+        # a box smaller than the frame leaves out an edge row or column, so a corner
+        r, c = next((r, c) for r in (0, h - 1) for c in (0, w - 1)
+                    if not (rows.start <= r < rows.stop and cols.start <= c < cols.stop))
+        veil = state.scene.radiance(
+            center, grid.chief_directions(slice(r, r + 1), slice(c, c + 1), right, down,
+                                          forward), state)
+        out = np.full((h, w), float(veil.reshape(-1)[0]))
+        if rows.stop > rows.start:
+            dirs = grid.chief_directions(rows, cols, right, down, forward)
+            out[rows, cols] = state.scene.radiance(center, dirs, state)
+        return out
+
+    def _pupil_integral_fast(self, state: WorldState, frame: tuple[NDArray, ...],
+                             grid: lens.LensGrid, chief: NDArray, grow: int
+                             ) -> NDArray[np.float64]:
+        """(1/A) ∫_pupil L(a → X) cos⁴γ da per pixel: the rules, region and tolerances
+        of :meth:`_pupil_integral`, on the cached lens grid."""
+        center, forward, right, down = frame
+        out = chief * grid.obliquity
+        lo, hi = float(chief.min()), float(chief.max())
+        span = hi - lo
+        if span <= 0.0:
+            return out  # a uniform field: the radiance does not change across the pupil
+        todo = chief > lo + 1e-7 * span
+        # every pixel within ``grow`` of a lit one (the reference's disk dilation), from
+        # the distance transform of the lit pixels' bounding box grown by ``grow``
+        lit_r, lit_c = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
+        r0, r1 = max(lit_r[0] - grow, 0), min(lit_r[-1] + grow + 1, todo.shape[0])
+        c0, c1 = max(lit_c[0] - grow, 0), min(lit_c[-1] + grow + 1, todo.shape[1])
+        near = ndimage.distance_transform_edt(~todo[r0:r1, c0:c1]) <= grow
+        rows, cols = np.nonzero(near)
+        rows += r0
+        cols += c0
+        atol = 1e-9 * float(np.abs(chief).max())
+        rho = grid.pupil_radius_mm
+
+        def estimate(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
+                     cols: NDArray[np.intp]) -> NDArray:
+            acc = np.zeros(rows.size)
+            for k in range(len(rule)):
+                a = center + rho * (rule.x[k] * right + rule.y[k] * down)
+                d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right, down,
+                                           forward)
+                cos2 = cos_g * cos_g
+                acc += rule.weights[k] * state.scene.radiance(a, d, state) * (cos2 * cos2)
+            return acc
+
+        rules = [pupil_rules.radon7()]
+        rules += [pupil_rules.polar_gauss(n_s, n_phi) for n_s, n_phi in pupil_rules.LADDER]
+        prev = estimate(rules[0], rows, cols)
+        for rule in rules[1:]:
+            cur = estimate(rule, rows, cols)
+            out[rows, cols] = cur
+            left = np.abs(cur - prev) > self.optics.pupil_rtol * np.abs(cur) + atol
+            if not left.any():
+                break
+            rows, cols, prev = rows[left], cols[left], cur[left]
+        return out
+
+    # -- the reference renderer (exhaustive) ----------------------------------------
+    def _render_reference(self, state: WorldState, roi: Roi) -> NDArray[np.float64]:
+        """What :meth:`_render` computes, the straightforward way: every chief ray of the
+        ROI traced, the obliquity and the refined region computed anew for every view.
+        Kept (``renderer="reference"``) to check the fast renderer against it."""
         p = self.sensor.params
         center, forward, right, down = self.camera_frame(state)
         pitch_mm = p.pixel_pitch_um * 1e-3
@@ -205,19 +354,9 @@ class SimulatedCamera(Camera):
         dirs /= norm[..., None]
         cos_alpha = 1.0 / norm
         radiance = state.scene.radiance(center, dirs, state)
-        aperture_m2 = math.pi * (0.5e-3 * self.optics.aperture_diameter_mm) ** 2
-        etendue = aperture_m2 * (p.pixel_pitch_um * 1e-3 / f) ** 2
-        photon_j = PLANCK_J_S * SPEED_OF_LIGHT_M_S / (state.source.wavelength_nm * 1e-9)
-        # a flatland scene (rays (y, θ) in one plane) has no pupil to sample
-        if self.optics.pupil == "sampled" and getattr(state.scene, "pupil_sampling", True):
-            collected = self._pupil_integral(state, center, forward, right, down, dirs,
-                                             radiance)
-        else:
-            collected = radiance * cos_alpha**4
-        rate = (collected * (etendue / photon_j)).astype(np.float32)
-        with self._lock:
-            self._cache_key, self._cache_rate = key, rate
-        return rate
+        if self._samples_pupil(state):
+            return self._pupil_integral(state, center, forward, right, down, dirs, radiance)
+        return radiance * cos_alpha**4
 
     def _pupil_integral(self, state: WorldState, center: NDArray, forward: NDArray,
                         right: NDArray, down: NDArray, dirs: NDArray, chief: NDArray
@@ -231,8 +370,7 @@ class SimulatedCamera(Camera):
         convergence is checked in tests/hw_mocks/test_sim_camera.py).
         """
         rho = 0.5 * self.optics.aperture_diameter_mm
-        focus = (self.optics.focus_distance_mm if self.optics.focus_distance_mm is not None
-                 else float(np.linalg.norm(center)))
+        focus = self._focus_mm(center)
         # the conjugate point of every pixel on the focus plane ⟂ forward at ``focus``
         target = center + dirs * (focus / (dirs @ forward))[..., None]
 
@@ -261,10 +399,7 @@ class SimulatedCamera(Camera):
         # ray's point (Δ: the scene's depth extent about the focus point), so pixels that
         # far outside a lit region (a sharp edge, e.g. the sample's rim seen at grazing)
         # collect light too: grow the refined region by that blur in pixels.
-        depth = float(getattr(state.scene, "depth_extent_mm", 0.1 * focus))
-        pitch_focus = (self.sensor.params.pixel_pitch_um * 1e-3 * focus
-                       / self.optics.focal_length_mm)
-        grow = math.ceil(rho * depth / max(focus - depth, 1e-9) / pitch_focus) + 1
+        grow = self._blur_px(state, focus)
         todo = ndimage.binary_dilation(todo, structure=_disk_structure(grow))
         atol = 1e-9 * float(np.abs(chief).max())
 
@@ -466,7 +601,7 @@ def open_from_url(url: str, *, name: str | None = None) -> SimulatedCamera:
     opts: dict[str, Any] = dict(options)
     known = {"world", "seed", "width", "height", "focal_length_mm", "aperture_mm", "format",
              "stale", "realtime", "pixel_pitch_um", "pupil", "pupil_rtol",
-             "focus_distance_mm"}
+             "focus_distance_mm", "renderer"}
     unknown = set(opts) - known
     if unknown:
         raise ValueError(f"unknown simcam options {sorted(unknown)}; known {sorted(known)}")
@@ -499,4 +634,5 @@ def open_from_url(url: str, *, name: str | None = None) -> SimulatedCamera:
         pixel_format=fmt,
         stale_buffers=_option(opts, "stale", int, 0, url),
         realtime=str(opts.get("realtime", "0")).lower() in ("1", "true", "yes"),
+        renderer=str(opts.get("renderer", "fast")).lower(),
     )

@@ -210,6 +210,35 @@ class GoniometerScene:
         there sees them defocused by at most this depth (the sample's radius)."""
         return self.sample_radius_mm
 
+    def lit_outlines(self, state: WorldState) -> tuple[NDArray[np.float64], ...] | None:
+        """Where the scene sends more than its uniform veil (ambient + signature): lab
+        point sets (K, 3), mm, each of whose convex hulls holds every lit point; None when
+        nothing is lit (every ray sees the veil alone).
+
+        The lit points are those of the sample disk inside the beam's cut-off
+        (:data:`BEAM_CUTOFF_W2`), an ellipse of semi-axes √C·w/cos θi and √C·w in the
+        beam-aligned sample coordinates of :meth:`radiance`. Both curves are given as
+        circumscribed polygons (vertices at 1/cos(π/K) of the radius, an affine image of
+        a polygon around the unit circle), so each hull contains its curve. A camera
+        renders only the pixels whose rays can reach them."""
+        pose = state.pose
+        cos_i = float(pose.normal @ pose.source_dir)
+        if (self._active_brdf(state) is None or cos_i <= 0.0
+                or state.source.peak_intensity_w_m2() == 0.0):
+            return None
+        k = 64
+        phi = 2.0 * math.pi * np.arange(k) / k
+        c, s = np.cos(phi) / math.cos(math.pi / k), np.sin(phi) / math.cos(math.pi / k)
+        s_loc = pose.to_sample(pose.source_dir)
+        proj = math.hypot(s_loc[0], s_loc[1])
+        eu = (s_loc[0] / proj, s_loc[1] / proj) if proj > 1e-12 else (1.0, 0.0)
+        half = math.sqrt(BEAM_CUTOFF_W2) * state.source.beam_radius_mm
+        up, vp = c * (half / cos_i), s * half
+        ellipse = (up * eu[0] - vp * eu[1], up * eu[1] + vp * eu[0])
+        disk = (c * self.sample_radius_mm, s * self.sample_radius_mm)
+        x_s, y_s = pose.sample_axes[0], pose.sample_axes[1]
+        return tuple(xy[0][:, None] * x_s + xy[1][:, None] * y_s for xy in (ellipse, disk))
+
     # helpers ------------------------------------------------------------------
     def _active_brdf(self, state: WorldState) -> BrdfFunction | None:
         if self.target == "sample":
