@@ -72,9 +72,15 @@ class LensGrid:
         dx *= inv
         dy *= inv
         cos_g = f * inv
-        d = dx[:, None] * right + dy[:, None] * down
-        d += cos_g[:, None] * forward
-        return d, cos_g
+        # built component by component into a (3, M) array and returned as its (M, 3)
+        # transpose: every component contiguous, which the scene's per-component dot
+        # products read several times faster than an interleaved (M, 3) array
+        d = np.empty((3, dx.size))
+        for i in range(3):
+            np.multiply(dx, right[i], out=d[i])
+            d[i] += dy * down[i]
+            d[i] += cos_g * forward[i]
+        return d.T, cos_g
 
 
 @lru_cache(maxsize=8)
