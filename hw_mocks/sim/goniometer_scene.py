@@ -299,8 +299,9 @@ class GoniometerScene:
         dn = _dot3(d, n)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(dn < 0.0, -height / np.where(dn < 0.0, dn, -1.0), -1.0)
-        u = float(o @ x_s) + t * _dot3(d, x_s)
-        v = float(o @ y_s) + t * _dot3(d, y_s)
+        dx, dy = _dot3(d, x_s), _dot3(d, y_s)
+        u = float(o @ x_s) + t * dx
+        v = float(o @ y_s) + t * dy
         # On the plane, r⊥² = u'² cos²θi + v'² in beam-aligned sample coordinates (u', v').
         s_loc = pose.to_sample(pose.source_dir)
         proj = math.hypot(s_loc[0], s_loc[1])
@@ -313,10 +314,13 @@ class GoniometerScene:
                & (r_perp2 <= BEAM_CUTOFF_W2 * w2))
         if not lit.any():
             return out
-        irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
-        d_lit = d[lit]
-        # Towards the observer: −d, in the sample frame.
-        lx, ly, lz = -_dot3(d_lit, x_s), -_dot3(d_lit, y_s), -_dot3(d_lit, n)
+        # Towards the observer: −d, in the sample frame (components computed above).
+        if lit.all():  # the common case of a pupil's rays onto the footprint: no gathers
+            irradiance = peak * cos_i * np.exp(-2.0 * r_perp2 / w2)
+            lx, ly, lz = -dx, -dy, -dn
+        else:
+            irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
+            lx, ly, lz = -dx[lit], -dy[lit], -dn[lit]
         from_vectors = getattr(brdf, "from_vectors", None)
         if from_vectors is not None:
             values = np.asarray(from_vectors(s_loc, np.stack([lx, ly, lz], axis=-1)),
@@ -326,7 +330,10 @@ class GoniometerScene:
             tr = np.arccos(np.clip(lz, -1.0, 1.0))
             pr = np.arctan2(ly, lx)
             values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
-        out[lit] += values * irradiance
+        if lit.all():
+            out += values * irradiance
+        else:
+            out[lit] += values * irradiance
         return out
 
     def power_on_aperture(
