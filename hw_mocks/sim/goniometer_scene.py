@@ -58,7 +58,8 @@ def _dot3(v: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]
     return v[..., 0] * a[0] + v[..., 1] * a[1] + v[..., 2] * a[2]
 
 #: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays. A function may also
-#: carry ``from_vectors(ω_i, ω_r)`` (unit vectors in the sample frame), which the renderer
+#: carry ``from_vectors(ω_i, ω_r)`` (unit vectors in the sample frame) or
+#: ``from_components(ω_i, x_r, y_r, z_r)`` (ω_r by its components), which the renderer
 #: prefers.
 BrdfFunction = Callable[[Any, Any, Any, Any], NDArray[np.float64]]
 
@@ -77,7 +78,7 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         names take the model's start values); default the start values.
     """
     from analysis.brdf import get_model
-    from analysis.brdf.geometry import geometry_from_vectors
+    from analysis.brdf.geometry import MU_FLOOR, Geometry, geometry_from_vectors
 
     model = get_model(name)
     if params is None:
@@ -102,7 +103,20 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         # the renderer has vectors, and arccos/sin/cos per ray cost more than the model)
         return model.evaluate_geometry(vector, geometry_from_vectors(omega_i, omega_r))
 
+    def from_components(omega_i, rx, ry, rz):
+        # from_vectors with ω_r given as its sample-frame components (unit already): the
+        # renderer has them as separate arrays, and stacking, normalising and splitting
+        # them again cost as much as the model
+        wi = np.asarray(omega_i, dtype=float)
+        wi = wi / np.linalg.norm(wi)
+        shape = np.shape(rz)
+        return model.evaluate_geometry(vector, Geometry(
+            xi=np.full(shape, wi[0]), yi=np.full(shape, wi[1]),
+            mu_i=np.full(shape, max(float(wi[2]), MU_FLOOR)),
+            xr=rx, yr=ry, mu_r=np.maximum(rz, MU_FLOOR)))
+
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
+    brdf.from_components = from_components  # type: ignore[attr-defined]
     brdf.model_name = name  # type: ignore[attr-defined]
     brdf.params = tuple(float(v) for v in vector)  # type: ignore[attr-defined]
     return brdf
@@ -120,7 +134,11 @@ def lambertian_brdf(reflectance: float) -> BrdfFunction:
     def from_vectors(omega_i, omega_r):
         return np.full(np.shape(omega_r)[:-1], value)
 
+    def from_components(omega_i, rx, ry, rz):
+        return np.full(np.shape(rz), value)
+
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
+    brdf.from_components = from_components  # type: ignore[attr-defined]
     return brdf
 
 
@@ -321,8 +339,11 @@ class GoniometerScene:
         else:
             irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
             lx, ly, lz = -dx[lit], -dy[lit], -dn[lit]
+        from_components = getattr(brdf, "from_components", None)
         from_vectors = getattr(brdf, "from_vectors", None)
-        if from_vectors is not None:
+        if from_components is not None:
+            values = np.asarray(from_components(s_loc, lx, ly, lz), dtype=float)
+        elif from_vectors is not None:
             values = np.asarray(from_vectors(s_loc, np.stack([lx, ly, lz], axis=-1)),
                                 dtype=float)
         else:
