@@ -174,3 +174,15 @@ def test_renderer_option():
     assert open_from_url("simcam://c?width=8&height=8").renderer == "fast"
     with pytest.raises(ValueError, match="renderer"):
         open_from_url("simcam://c?renderer=quick")
+
+
+def test_threaded_pupil_integral_is_the_single_threaded_one(monkeypatch):
+    """Pixels split between worker threads are computed exactly as in one piece."""
+    import hw_mocks.sim.camera as camera_module
+
+    world = bench(40.0, 80.0)
+    one = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
+    monkeypatch.setattr(camera_module, "_RENDER_THREADS", 3)
+    monkeypatch.setattr(camera_module, "_MIN_PIXELS_PER_THREAD", 64)
+    split = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
+    np.testing.assert_array_equal(split, one)
