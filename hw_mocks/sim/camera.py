@@ -39,10 +39,23 @@ it may use besides :mod:`hw_mocks`). On every frame it
 The noise-free rendering is cached per world state, ROI and binning: a still scene streams
 at the speed of the noise generator.
 
+Two renderers compute the same thing (``renderer``, default ``fast``; ADR 0071). The
+``reference`` renderer does it exhaustively, every pixel for every view. The ``fast`` one
+traces chief rays only in the box that the scene's lit outlines (``lit_outlines``, where a
+scene has them) project to, and one ray outside it for the uniform veil; it takes the
+chief rays' and the pupil's obliquity from :func:`hw_mocks.sim.lens.lens_grid` (they depend
+on the lens, sensor and focus alone); it grows the refined region by a distance transform
+of its bounding box (the same pixels as the reference's dilation of the whole frame);
+it reuses the chief ray as the pupil centre's point of Radon's rule, and splits large
+pixel sets between worker threads. The rules, the refined region and the tolerances are
+the reference's, so the two agree within the pupil tolerance
+(tests/hw_mocks/test_sim_camera_fast.py).
+
 URL: ``simcam://<name>?world=sim&seed=1`` with optional ``width``, ``height`` (sensor px),
 ``focal_length_mm`` (default 50), ``aperture_mm`` (entrance pupil, default 12.5, i.e. f/4),
 ``pupil`` (``sampled`` or ``chief``, default sampled), ``pupil_rtol`` (default 1e-6),
-``focus_distance_mm`` (default: the sample centre),
+``focus_distance_mm`` (default: the sample centre), ``renderer`` (``fast`` or
+``reference``, default fast),
 ``format`` (MONO8/10/12/16, default MONO12), ``stale`` (frames a V4L2-like backend keeps
 buffered, default 0: see below) and ``realtime`` (1: ``acquire`` takes the exposure time in
 wall-clock time; default 0).
