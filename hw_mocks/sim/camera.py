@@ -259,7 +259,9 @@ class SimulatedCamera(Camera):
         the reference's disk dilation of the whole frame)."""
         p = self.sensor.params
         center, forward, right, down = self.camera_frame(state)
-        focus = self._focus_mm(center)
+        # to the picometre: the arm's length read back from unit vectors scatters by an
+        # ulp between views, which would miss the cache for no physical change
+        focus = round(self._focus_mm(center), 9)
         grid = lens.lens_grid((roi.x, roi.y, roi.width, roi.height), (p.width, p.height),
                               p.pixel_pitch_um, self.optics.focal_length_mm,
                               0.5 * self.optics.aperture_diameter_mm, focus)
