@@ -26,7 +26,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["FIRST_CHECK", "LADDER", "DiskRule", "polar_gauss", "radon7"]
+__all__ = ["LADDER", "DiskRule", "polar_gauss", "radon7"]
 
 
 class DiskRule:
@@ -74,9 +74,3 @@ def polar_gauss(n_s: int, n_phi: int) -> DiskRule:
 
 #: The refinement ladder after Radon's rule: (rings, azimuths) per rung.
 LADDER: tuple[tuple[int, int], ...] = ((3, 10), (6, 20), (12, 40), (24, 80))
-
-#: The first rung after Radon's rule in the camera's fast renderer: 2 rings × 8 azimuths,
-#: exact to degree 7 (Gauss–Legendre with 2 nodes integrates s⁰…s³, i.e. the rotation-
-#: invariant parts r⁰…r⁶; the trapezoid rule with 8 azimuths every harmonic cos mφ,
-#: sin mφ with 1 ≤ m ≤ 7), 16 points against the 30 of (3, 10).
-FIRST_CHECK: tuple[int, int] = (2, 8)
