@@ -24,7 +24,7 @@ it may use besides :mod:`hw_mocks`). On every frame it
    pupil reach other pixels), as through a real lens. The pupil integral is computed per
    pixel with the rules of :mod:`hw_mocks.sim.pupil`, refined until two successive rules
    agree within ``pupil_rtol`` of the pixel's value (or 10⁻⁹ of the frame's brightest
-   radiance): two rotated copies of Radon's degree-5 rule, then Gauss product rules of
+   radiance): Radon's degree-5 rule, then Gauss product rules of
    doubling order. Only pixels whose chief-ray radiance exceeds the frame's darkest by
    more than 10⁻⁷ of its range, grown by the defocus blur of the scene's depth extent
    (``depth_extent_mm`` of the scene, else a tenth of the focus distance), are refined;
