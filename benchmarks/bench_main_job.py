@@ -10,8 +10,8 @@ time of the whole process (all threads).
     python benchmarks/bench_main_job.py --renderer reference  # the exhaustive renderer
     python benchmarks/bench_main_job.py --repeat 1
 
-The renderer is chosen by giving ``SimulatedCamera`` that default for the run (the bench
-profile's camera URL does not name one).
+The renderer is chosen by handing it to every ``SimulatedCamera`` the run opens (the
+bench profile's camera URL does not name one).
 """
 
 from __future__ import annotations
@@ -78,8 +78,13 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
 
-    defaults = list(SimulatedCamera.__init__.__kwdefaults__.items())
-    SimulatedCamera.__init__.__kwdefaults__["renderer"] = args.renderer
+    original_init = SimulatedCamera.__init__
+
+    @functools.wraps(original_init)
+    def init(self, *a, **kw):  # the profile's simcam:// URL names no renderer
+        original_init(self, *a, **(kw | {"renderer": args.renderer}))
+
+    SimulatedCamera.__init__ = init
     clock = StageClock()
     clock.wrap(SimulatedCamera, "photon_rate", "camera: render a new view", only=_renders)
     clock.wrap(Sensor, "expose", "camera: sensor noise per frame")
@@ -100,7 +105,7 @@ def main() -> None:
         for stage, seconds in sorted(clock.seconds.items()):
             print(f"    {stage:<48} {seconds:6.1f} s  ({clock.calls[stage]} calls)")
         print(f"    {'the rest (engine, drivers, emulators, meter)':<48} {wall - staged:6.1f} s")
-    SimulatedCamera.__init__.__kwdefaults__.update(defaults)
+    SimulatedCamera.__init__ = original_init
 
 
 if __name__ == "__main__":
