@@ -58,7 +58,8 @@ def _dot3(v: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]
     return v[..., 0] * a[0] + v[..., 1] * a[1] + v[..., 2] * a[2]
 
 #: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays. A function may also
-#: carry ``from_vectors(ω_i, ω_r)`` (unit vectors in the sample frame), which the renderer
+#: carry ``from_vectors(ω_i, ω_r)`` (unit vectors in the sample frame) or
+#: ``from_components(ω_i, x_r, y_r, z_r)`` (ω_r by its components), which the renderer
 #: prefers.
 BrdfFunction = Callable[[Any, Any, Any, Any], NDArray[np.float64]]
 
@@ -77,7 +78,7 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         names take the model's start values); default the start values.
     """
     from analysis.brdf import get_model
-    from analysis.brdf.geometry import geometry_from_vectors
+    from analysis.brdf.geometry import MU_FLOOR, Geometry, geometry_from_vectors
 
     model = get_model(name)
     if params is None:
@@ -102,7 +103,20 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         # the renderer has vectors, and arccos/sin/cos per ray cost more than the model)
         return model.evaluate_geometry(vector, geometry_from_vectors(omega_i, omega_r))
 
+    def from_components(omega_i, rx, ry, rz):
+        # from_vectors with ω_r given as its sample-frame components (unit already): the
+        # renderer has them as separate arrays, and stacking, normalising and splitting
+        # them again cost as much as the model
+        wi = np.asarray(omega_i, dtype=float)
+        wi = wi / np.linalg.norm(wi)
+        shape = np.shape(rz)
+        return model.evaluate_geometry(vector, Geometry(
+            xi=np.full(shape, wi[0]), yi=np.full(shape, wi[1]),
+            mu_i=np.full(shape, max(float(wi[2]), MU_FLOOR)),
+            xr=rx, yr=ry, mu_r=np.maximum(rz, MU_FLOOR)))
+
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
+    brdf.from_components = from_components  # type: ignore[attr-defined]
     brdf.model_name = name  # type: ignore[attr-defined]
     brdf.params = tuple(float(v) for v in vector)  # type: ignore[attr-defined]
     return brdf
@@ -120,7 +134,11 @@ def lambertian_brdf(reflectance: float) -> BrdfFunction:
     def from_vectors(omega_i, omega_r):
         return np.full(np.shape(omega_r)[:-1], value)
 
+    def from_components(omega_i, rx, ry, rz):
+        return np.full(np.shape(rz), value)
+
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
+    brdf.from_components = from_components  # type: ignore[attr-defined]
     return brdf
 
 
@@ -210,6 +228,35 @@ class GoniometerScene:
         there sees them defocused by at most this depth (the sample's radius)."""
         return self.sample_radius_mm
 
+    def lit_outlines(self, state: WorldState) -> tuple[NDArray[np.float64], ...] | None:
+        """Where the scene sends more than its uniform veil (ambient + signature): lab
+        point sets (K, 3), mm, each of whose convex hulls holds every lit point; None when
+        nothing is lit (every ray sees the veil alone).
+
+        The lit points are those of the sample disk inside the beam's cut-off
+        (:data:`BEAM_CUTOFF_W2`), an ellipse of semi-axes √C·w/cos θi and √C·w in the
+        beam-aligned sample coordinates of :meth:`radiance`. Both curves are given as
+        circumscribed polygons (vertices at 1/cos(π/K) of the radius, an affine image of
+        a polygon around the unit circle), so each hull contains its curve. A camera
+        renders only the pixels whose rays can reach them."""
+        pose = state.pose
+        cos_i = float(pose.normal @ pose.source_dir)
+        if (self._active_brdf(state) is None or cos_i <= 0.0
+                or state.source.peak_intensity_w_m2() == 0.0):
+            return None
+        k = 64
+        phi = 2.0 * math.pi * np.arange(k) / k
+        c, s = np.cos(phi) / math.cos(math.pi / k), np.sin(phi) / math.cos(math.pi / k)
+        s_loc = pose.to_sample(pose.source_dir)
+        proj = math.hypot(s_loc[0], s_loc[1])
+        eu = (s_loc[0] / proj, s_loc[1] / proj) if proj > 1e-12 else (1.0, 0.0)
+        half = math.sqrt(BEAM_CUTOFF_W2) * state.source.beam_radius_mm
+        up, vp = c * (half / cos_i), s * half
+        ellipse = (up * eu[0] - vp * eu[1], up * eu[1] + vp * eu[0])
+        disk = (c * self.sample_radius_mm, s * self.sample_radius_mm)
+        x_s, y_s = pose.sample_axes[0], pose.sample_axes[1]
+        return tuple(xy[0][:, None] * x_s + xy[1][:, None] * y_s for xy in (ellipse, disk))
+
     # helpers ------------------------------------------------------------------
     def _active_brdf(self, state: WorldState) -> BrdfFunction | None:
         if self.target == "sample":
@@ -270,8 +317,9 @@ class GoniometerScene:
         dn = _dot3(d, n)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(dn < 0.0, -height / np.where(dn < 0.0, dn, -1.0), -1.0)
-        u = float(o @ x_s) + t * _dot3(d, x_s)
-        v = float(o @ y_s) + t * _dot3(d, y_s)
+        dx, dy = _dot3(d, x_s), _dot3(d, y_s)
+        u = float(o @ x_s) + t * dx
+        v = float(o @ y_s) + t * dy
         # On the plane, r⊥² = u'² cos²θi + v'² in beam-aligned sample coordinates (u', v').
         s_loc = pose.to_sample(pose.source_dir)
         proj = math.hypot(s_loc[0], s_loc[1])
@@ -284,12 +332,18 @@ class GoniometerScene:
                & (r_perp2 <= BEAM_CUTOFF_W2 * w2))
         if not lit.any():
             return out
-        irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
-        d_lit = d[lit]
-        # Towards the observer: −d, in the sample frame.
-        lx, ly, lz = -_dot3(d_lit, x_s), -_dot3(d_lit, y_s), -_dot3(d_lit, n)
+        # Towards the observer: −d, in the sample frame (components computed above).
+        if lit.all():  # the common case of a pupil's rays onto the footprint: no gathers
+            irradiance = peak * cos_i * np.exp(-2.0 * r_perp2 / w2)
+            lx, ly, lz = -dx, -dy, -dn
+        else:
+            irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
+            lx, ly, lz = -dx[lit], -dy[lit], -dn[lit]
+        from_components = getattr(brdf, "from_components", None)
         from_vectors = getattr(brdf, "from_vectors", None)
-        if from_vectors is not None:
+        if from_components is not None:
+            values = np.asarray(from_components(s_loc, lx, ly, lz), dtype=float)
+        elif from_vectors is not None:
             values = np.asarray(from_vectors(s_loc, np.stack([lx, ly, lz], axis=-1)),
                                 dtype=float)
         else:
@@ -297,7 +351,10 @@ class GoniometerScene:
             tr = np.arccos(np.clip(lz, -1.0, 1.0))
             pr = np.arctan2(ly, lx)
             values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
-        out[lit] += values * irradiance
+        if lit.all():
+            out += values * irradiance
+        else:
+            out[lit] += values * irradiance
         return out
 
     def power_on_aperture(
