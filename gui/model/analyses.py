@@ -20,7 +20,7 @@ from typing import Any
 from instrument.run.paths import results_dir
 
 __all__ = ["ANALYSES", "AnalysisOutcome", "RunDetails", "Table", "analyses_for",
-           "run_analysis", "run_details"]
+           "resume_refusal", "run_analysis", "run_details", "with_catalog"]
 
 #: Plan kind → the analyses that apply, in the order an operator runs them.
 ANALYSES: dict[str, tuple[str, ...]] = {
@@ -103,6 +103,40 @@ def run_details(path: str | Path) -> RunDetails:
                       tuple(e for e in events if e.get("kind") == "fault"), tuple(events),
                       data.n_points, n_planned, data.plan_kind, data.status, bench,
                       analyses_for(data.plan_kind))
+
+
+def with_catalog(d: RunDetails, row: Any) -> RunDetails:
+    """The details as the catalog lists the run (``row``: a
+    :class:`instrument.run.catalog.RunRow`, refreshed live).
+
+    The file's own status attribute says ``running`` after a crash, and a view read
+    before a resume keeps the old count; the catalog (refreshed from the journal by
+    :meth:`~instrument.run.catalog.Catalog.refresh_live`) is what the list shows, so the
+    details take their status and point count from it and never contradict the list.
+    """
+    from dataclasses import replace
+
+    status = str(row.status) if row.status else d.status
+    n_points = int(row.n_points) if row.n_points is not None else d.n_points
+    n_planned = int(row.n_planned) if row.n_planned else d.n_planned
+    prov = dict(d.provenance)
+    prov["status"] = status
+    prov["points"] = f"{n_points} of {n_planned} planned"
+    return replace(d, provenance=prov, status=status, n_points=n_points,
+                   n_planned=n_planned)
+
+
+def resume_refusal(d: RunDetails) -> str | None:
+    """Why the run cannot be continued, or ``None`` when it can (paused, aborted,
+    interrupted or failed, with points still to measure)."""
+    if d.status not in RESUMABLE:
+        what = "finished: every point is measured" if d.status == "finished" else \
+            f"{d.status}"
+        return f"run {d.provenance.get('run id', d.path.stem)} is {what}; nothing to resume"
+    if d.n_points >= d.n_planned:
+        return (f"run {d.provenance.get('run id', d.path.stem)} has all {d.n_planned} "
+                "points; nothing to resume")
+    return None
 
 
 def _figures(folder: Path, since: float) -> tuple[Path, ...]:

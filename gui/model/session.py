@@ -733,6 +733,9 @@ class BenchSession:
             from instrument.run.runfile import read_run
 
             stored = read_run(resume)
+            if stored.status == "finished":
+                return CommandResult(cmd, False, f"run {stored.run_id} is finished: every "
+                                     "point is measured, nothing to resume", refused=True)
             stored_bench = stored.profile().get("bench", {}).get("name")
             if stored_bench and stored_bench != bench.profile.name:
                 return CommandResult(cmd, False, f"run {stored.run_id} was recorded on "

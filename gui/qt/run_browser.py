@@ -34,13 +34,16 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model.analyses import (
-    RESUMABLE,
     AnalysisOutcome,
     RunDetails,
     Table,
+    resume_refusal,
     run_analysis,
     run_details,
+    with_catalog,
 )
+from gui.model.faults import point_number
+from gui.model.remedies import for_gui
 from gui.qt.background import Background, JobDone
 from instrument.plans.planfile import KINDS
 from instrument.run.catalog import CATALOG_NAME, Catalog, RunRow
@@ -77,6 +80,7 @@ class RunBrowser(QWidget):
     analysisDone = Signal(object)        # AnalysisOutcome
     analysisFailed = Signal(str, str)    # analysis name, message
     refreshed = Signal(int)              # rows listed
+    folderChanged = Signal(str)          # the runs folder now in use
 
     def __init__(self, background: Background, runs_dir: Path, *,
                  settings: QSettings | None = None, parent: QWidget | None = None) -> None:
@@ -163,7 +167,7 @@ class RunBrowser(QWidget):
         lay = QVBoxLayout(self)
         lay.addWidget(split)
 
-        self.choose_folder.clicked.connect(self._ask_folder)
+        self.choose_folder.clicked.connect(self.ask_folder)
         self.refresh_button.clicked.connect(self.refresh)
         self.sample.returnPressed.connect(self.refresh)
         self.kind.currentIndexChanged.connect(lambda _: self.refresh())
@@ -223,13 +227,18 @@ class RunBrowser(QWidget):
 
     # catalog ------------------------------------------------------------------------
     def set_runs_dir(self, folder: str | Path) -> None:
+        """List ``folder``'s runs and make it the runs folder now: the main window writes
+        new runs there (``folderChanged``), and the next launch opens it."""
         self.runs_dir = Path(folder)
         self.folder.setText(str(self.runs_dir))
+        self.folder.setToolTip(f"runs folder: new runs are written here\n{self.runs_dir}")
         if self.settings is not None:
             self.settings.setValue("runs_dir", str(self.runs_dir))
+        self.details = None
         self.refresh()
+        self.folderChanged.emit(str(self.runs_dir))
 
-    def _ask_folder(self) -> None:
+    def ask_folder(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Runs folder", str(self.runs_dir))
         if folder:
             self.set_runs_dir(folder)
@@ -261,6 +270,9 @@ class RunBrowser(QWidget):
                             f"{r.n_points}/{r.n_planned}") for r in rows])
         if selected is not None:
             self.select(selected.run_id)
+            now = self.selected_row()
+            if now is not None and now != selected:
+                self._selected()  # the run moved on (resumed, finished): read it again
         self.refreshed.emit(len(rows))
 
     def selected_row(self) -> RunRow | None:
@@ -286,6 +298,7 @@ class RunBrowser(QWidget):
         self.background.submit("details", lambda: (row, run_details(path)))
 
     def _show_details(self, row: RunRow, d: RunDetails) -> None:
+        d = with_catalog(d, row)
         self.details = d
         _fill(self.provenance, list(d.provenance.items()))
         self.plan_text.setPlainText(d.plan_text)
@@ -293,12 +306,14 @@ class RunBrowser(QWidget):
                               i.get("serial", ""), i.get("firmware", ""), i.get("driver", ""),
                               i.get("url", "")) for role, i in d.devices.items()])
         _fill(self.faults, [(time.strftime("%H:%M:%S", time.localtime(e.get("time", 0))),
-                             str(e.get("index", "")), e.get("device", ""), e.get("cause", ""),
+                             point_number(e.get("index")), e.get("device", ""),
+                             for_gui(str(e.get("cause", ""))),
                              e.get("action", "")) for e in d.faults])
         self.tabs.setTabText(3, f"Faults ({len(d.faults)})")
-        status = row.status if row.status != d.status and row.status == "interrupted" \
-            else d.status
-        self.resume.setEnabled(status in RESUMABLE and d.n_points < d.n_planned)
+        refusal = resume_refusal(d)
+        self.resume.setEnabled(refusal is None)
+        self.resume.setToolTip(refusal or f"continue {d.path.name} in its own file on "
+                               f"bench {d.bench_name!r}")
         self.analysis.clear()
         for name in d.analyses:
             self.analysis.addItem(name, name)

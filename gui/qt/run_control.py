@@ -21,8 +21,9 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model import format as fmt
-from gui.model.faults import FaultLog, PauseState, Recovery, recovery_for
+from gui.model.faults import FaultLog, PauseState, Recovery, point_number, recovery_for
 from gui.model.session import BenchSession, RunHandle
+from gui.qt.ask import Questions
 from instrument.run.events import (
     Event,
     Fault,
@@ -49,6 +50,8 @@ class FaultPanel(QWidget):
         self.table.setObjectName("faults")
         self.table.setHorizontalHeaderLabels(["time", "point", "device", "cause", "action",
                                               "what it means"])
+        self.table.horizontalHeaderItem(1).setToolTip(
+            "the point's number as the progress counts it (from 1)")
         self.table.setEditTriggers(QAbstractItemView.NoEditTriggers)
         self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
         self.table.horizontalHeader().setStretchLastSection(True)
@@ -72,7 +75,7 @@ class FaultPanel(QWidget):
             k -= 1
         self.table.insertRow(k)
         cells = (time.strftime("%H:%M:%S", time.localtime(row.time)),
-                 "" if row.index is None else str(row.index), row.device, row.cause,
+                 point_number(row.index), row.device, row.cause,
                  row.action, row.meaning)
         brush = QBrush(QColor(SEVERITY_COLOURS[row.severity]))
         for j, text in enumerate(cells):
@@ -80,6 +83,9 @@ class FaultPanel(QWidget):
             item.setBackground(brush)
             item.setToolTip(text)
             self.table.setItem(k, j, item)
+        # every column as wide as its widest cell (a scroll bar rather than cut text);
+        # the last one stretches
+        self.table.resizeColumnsToContents()
         self.table.scrollToBottom()
         self.summary.setText(f"{self.log.total} fault event(s)")
 
@@ -107,10 +113,12 @@ class RunControl(QWidget):
     finished = Signal(object)  # RunFinished
 
     def __init__(self, session: BenchSession, fault_panel: FaultPanel,
-                 parent: QWidget | None = None) -> None:
+                 parent: QWidget | None = None, *, questions: Questions | None = None
+                 ) -> None:
         super().__init__(parent)
         self.setObjectName("run_control")
         self.session = session
+        self.questions = questions or Questions()
         self.faults = fault_panel
         self.run: RunHandle | None = None
         self.pause_state: PauseState | None = None
@@ -165,16 +173,32 @@ class RunControl(QWidget):
         lay.addStretch(1)
         self.pause.clicked.connect(self.session.pause_run)
         self.resume.clicked.connect(lambda: self.session.resume_run())
-        self.abort.clicked.connect(self.session.abort_run)
+        self.abort.clicked.connect(self.confirm_abort)
         self.retry.clicked.connect(lambda: self.choose(Recovery.RETRY))
         self.skip.clicked.connect(lambda: self.choose(Recovery.SKIP))
         self.abort_run.clicked.connect(lambda: self.choose(Recovery.ABORT))
         self._buttons(None)
 
+    def confirm_abort(self) -> bool:
+        """Abort the run after asking (the points not yet measured are lost to this
+        session; *Stop all* and Esc abort at once, they are the safety path)."""
+        run = self.session.run
+        if run is None:
+            return False
+        done, total = run.engine.n_done, len(run.plan.points)
+        if not self.questions.ask(
+                "abort", self, "Abort the run?",
+                f"Abort run {run.path.name}? {done} of {total} points are measured.\n\n"
+                "Motion stops, the light goes off and the file is closed; it stays valid, "
+                "and Resume this run (Runs dock) measures the missing points later."):
+            return False
+        return self.session.abort_run()
+
     def choose(self, choice: Recovery) -> None:
         """Carry out the operator's choice after a pause."""
         if choice is Recovery.ABORT:
-            self.session.abort_run()
+            if not self.confirm_abort():
+                return
         elif choice is Recovery.SKIP:
             self.session.resume_run(skip_point=True)
         else:

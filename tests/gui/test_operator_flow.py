@@ -1,0 +1,157 @@
+"""What an operator relies on around runs: the runs folder applies now, the run browser
+agrees with the catalog, resume never reconnects a bench behind the operator's back, Abort
+asks, Home all, the menus and their shortcuts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtWidgets import QTextBrowser
+
+from instrument.run.catalog import Catalog
+from instrument.run.runfile import read_run
+from tests.gui.conftest import connect
+from tests.gui.test_run_control import start, wait_end, wait_points
+
+
+def _listed(qtbot, browser):
+    with qtbot.waitSignal(browser.refreshed, timeout=20000):
+        browser.refresh()
+
+
+def _select(qtbot, browser, run_id):
+    assert browser.select(run_id)
+    qtbot.waitUntil(lambda: browser.details is not None
+                    and browser.details.provenance["run id"] == run_id, timeout=20000)
+
+
+def _aborted_run(qtbot, w, tmp_path):
+    """A run aborted after its first points (Abort confirmed)."""
+    run = start(qtbot, w, tmp_path, step=20.0)
+    wait_points(qtbot, run, 2)
+    w.questions.answer("abort", True)
+    w.run_control.abort.click()
+    ev = wait_end(qtbot, w)
+    assert ev.status == "aborted" and ev.n_done < ev.n_total
+    return run, ev
+
+
+def test_abort_asks_first_and_no_keeps_the_run(qtbot, make_window, fast_bench_file,
+                                               tmp_path):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    run = start(qtbot, w, tmp_path, step=10.0)
+    wait_points(qtbot, run, 1)
+    w.questions.answer("abort", False)
+    w.run_control.abort.click()
+    assert w.questions.asked == ["abort"]
+    n = run.live.n_received
+    wait_points(qtbot, run, n + 1)  # still measuring: No kept the run
+    assert w.session.run is run and run.finished is None
+    w.questions.answer("abort", True)
+    w.run_control.abort.click()
+    assert wait_end(qtbot, w).status == "aborted"
+
+
+def test_finished_run_details_match_the_catalog_and_resume_follows(
+        qtbot, make_window, fast_bench_file, tmp_path):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    run, ev = _aborted_run(qtbot, w, tmp_path)
+    browser = w.browser
+    _listed(qtbot, browser)
+    run_id = read_run(run.path).run_id
+    _select(qtbot, browser, run_id)
+    d = browser.details
+    assert d.provenance["status"] == "aborted"
+    assert d.provenance["points"] == f"{ev.n_done} of {ev.n_total} planned"
+    assert browser.resume.isEnabled()
+    browser.resume.click()  # the bench it was recorded on is connected: no question
+    assert w.questions.asked == ["abort"]
+    qtbot.waitUntil(lambda: w.current_run is not None and w.current_run.resumed,
+                    timeout=30000)
+    end = wait_end(qtbot, w, timeout=120000)
+    assert end.status == "finished" and end.n_done == end.n_total
+    # the browser re-reads the run it shows: the details now say what the list says
+    qtbot.waitUntil(lambda: browser.details is not None
+                    and browser.details.provenance["status"] == "finished", timeout=30000)
+    with Catalog(tmp_path / "runs") as cat:
+        row = cat.get(run_id)
+    assert row.status == "finished"
+    assert browser.details.provenance["points"] == \
+        f"{row.n_points} of {row.n_planned} planned" == f"{end.n_total} of {end.n_total} planned"
+    assert not browser.resume.isEnabled()
+    assert "nothing to resume" in browser.resume.toolTip()
+    # and resuming it anyway (a stale request) is refused with the reason
+    assert not w.resume_run(browser.details)
+    assert "nothing to resume" in w.run_control.state.text()
+
+
+def test_a_disconnected_bench_is_never_reconnected_implicitly(
+        qtbot, make_window, fast_bench_file, tmp_path):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    run, _ = _aborted_run(qtbot, w, tmp_path)
+    w.bench_panel.disconnect_button.click()
+    qtbot.waitUntil(lambda: not w.session.connected, timeout=20000)
+    browser = w.browser
+    _listed(qtbot, browser)
+    _select(qtbot, browser, read_run(run.path).run_id)
+    assert browser.resume.isEnabled()
+    w.questions.answer("resume_connect", False)
+    browser.resume.click()
+    assert w.questions.asked[-1] == "resume_connect"
+    text = w.run_control.state.text()
+    assert text.startswith("not resumed") and "needs bench" in text
+    w.session.wait_idle(10)
+    assert not w.session.connected and w.session.run is None
+    # Yes connects the run's own bench (from the profile stored in the run) and resumes
+    w.questions.answer("resume_connect", True)
+    browser.resume.click()
+    qtbot.waitUntil(lambda: w.current_run is not None and w.current_run.resumed,
+                    timeout=30000)
+    assert w.session.profile.name == browser.details.bench_name
+    assert wait_end(qtbot, w, timeout=120000).status == "finished"
+
+
+def test_runs_folder_applies_now_and_is_kept(qtbot, make_window, fast_bench_file, tmp_path,
+                                             settings):
+    w = make_window(fast_bench_file())
+    connect(qtbot, w)
+    other = tmp_path / "elsewhere"
+    with qtbot.waitSignal(w.browser.refreshed, timeout=20000):
+        w.set_runs_dir(other)
+    assert w.runs_dir == other and w.browser.runs_dir == other
+    assert settings.value("runs_dir") == str(other)
+    assert w.camera.snapshot_dir == other  # snapshots follow unless a folder was chosen
+    run = start(qtbot, w, tmp_path, step=20.0)
+    assert Path(run.path).parent == other
+    wait_end(qtbot, w, timeout=120000)
+    qtbot.waitUntil(lambda: any(r.path == str(run.path) for r in w.browser.rows),
+                    timeout=30000)
+
+
+def test_home_all_and_the_first_time_hint(qtbot, make_window, fast_bench_file):
+    w = make_window(fast_bench_file())
+    assert not w.home_all_button.isEnabled()  # nothing connected
+    connect(qtbot, w)
+    qtbot.waitUntil(lambda: "not homed" in w.home_hint.text(), timeout=20000)
+    assert w.home_hint.text().startswith("3 axes not homed: press Home all")
+    assert w.home_all_button.isEnabled()
+    w.home_all_button.click()
+    qtbot.waitUntil(lambda: all(s.value("homed") and not s.value("moving")
+                                for s in w.session.states().values()
+                                if s.kind == "motion_axis"), timeout=60000)
+    qtbot.waitUntil(lambda: w.home_hint.text() == "", timeout=20000)
+
+
+def test_menus_and_the_shortcut_list(qtbot, make_window):
+    w = make_window()
+    titles = [a.text() for a in w.menuBar().actions()]
+    assert titles == ["&File", "&Bench", "&View", "&Help"]
+    dialog = w.show_shortcuts()
+    text = dialog.findChild(QTextBrowser, "dialog_text").toPlainText()
+    for key in ("Esc", "Space", "Ctrl+H", "F1"):
+        assert key in text
+    about = w.show_about().findChild(QTextBrowser, "dialog_text").toPlainText()
+    assert "scatterlab" in about and str(w.runs_dir) in about
