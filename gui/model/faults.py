@@ -65,7 +65,8 @@ def describe(ev: Fault, *, now: float | None = None) -> FaultRow:
         meaning = f"{ev.device} kept failing{where}; the engine re-homes it and tries once more"
     elif action == "skip point":
         severity = "warning"
-        meaning = f"point {point_number(ev.index)} is stored as skipped ({ev.device} failed); the run goes on"
+        meaning = (f"point {point_number(ev.index)} is stored as skipped ({ev.device} "
+                   "failed); the run goes on")
     elif action == "pause":
         severity = "error"
         meaning = (f"the run is paused{where}: {ev.device} failed and its policy is to wait "

@@ -756,6 +756,8 @@ class BenchSession:
         live = LiveData(plan.kind, len(plan.points), n_done=engine.n_done,
                         planned_angles=np.array([p.angles.as_tuple() if p.angles else
                                                  (np.nan,) * 4 for p in plan.points]))
+        if resume is not None:
+            live.prefill(stored)  # the points measured before: the plot starts with them
         events = EventQueue(maxsize=EVENT_QUEUE_MAX)
         handle = RunHandle(engine, live, events, plan, Path(path), resumed=resume is not None)
         cam = bench.camera

@@ -22,6 +22,7 @@ from PySide6.QtWidgets import (
 
 from gui.model import format as fmt
 from gui.model.faults import FaultLog, PauseState, Recovery, point_number, recovery_for
+from gui.model.live import ProgressClock
 from gui.model.session import BenchSession, RunHandle
 from gui.qt.ask import Questions
 from instrument.run.events import (
@@ -119,6 +120,7 @@ class RunControl(QWidget):
         self.setObjectName("run_control")
         self.session = session
         self.questions = questions or Questions()
+        self.clock = ProgressClock()
         self.faults = fault_panel
         self.run: RunHandle | None = None
         self.pause_state: PauseState | None = None
@@ -227,6 +229,7 @@ class RunControl(QWidget):
     def on_event(self, ev: Event) -> None:
         match ev:
             case RunStarted():
+                self.clock.start(ev.n_done)
                 self.progress.setRange(0, max(1, ev.n_total))
                 self.progress.setValue(ev.n_done)
                 what = "resumed" if ev.n_done else "running"
@@ -235,12 +238,16 @@ class RunControl(QWidget):
                 self._buttons("running")
             case Progress():
                 self.progress.setValue(ev.n_done)
+                elapsed, left = self.clock.times(ev)  # pauses left out of both
+                paused = self.clock.paused_s()
+                note = f" (paused {fmt.duration(paused)} not counted)" if paused >= 1 else ""
                 self.eta.setText(f"{ev.n_done}/{ev.n_total} points, elapsed "
-                                 f"{fmt.duration(ev.elapsed_s)}, ETA {fmt.duration(ev.eta_s)}")
+                                 f"{fmt.duration(elapsed)}, ETA {fmt.duration(left)}{note}")
             case Fault():
                 self._last_fault = ev
                 self.faults.add(ev)
             case Paused():
+                self.clock.paused()
                 self.pause_state = recovery_for(ev, self._last_fault)
                 self.state.setText(f"paused: {ev.reason}")
                 self._buttons("paused")
@@ -249,6 +256,7 @@ class RunControl(QWidget):
                     self.skip.setVisible(Recovery.SKIP in self.pause_state.choices)
                     self.recovery.show()
             case Resumed():
+                self.clock.resumed()
                 self.pause_state = None
                 self.recovery.hide()
                 self.state.setText("running")
