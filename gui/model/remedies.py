@@ -25,7 +25,6 @@ __all__ = ["ANALYSIS_CONTROLS", "REMEDIES", "event_for_gui", "for_gui"]
 ANALYSIS_CONTROLS: dict[str, str] = {
     "--distance-mm": "Distance (mm)",
     "--distance-u-mm": "Distance uncertainty (mm)",
-    "--incident-power-w": "Incident power (W)",
     "--incident-power-u": "Incident power uncertainty",
     "--models": "Candidate models",
     "--detector": "Detector",

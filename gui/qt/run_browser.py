@@ -15,11 +15,16 @@ from PySide6.QtGui import QDesktopServices, QPixmap
 from PySide6.QtWidgets import (
     QAbstractItemView,
     QComboBox,
+    QDoubleSpinBox,
     QFileDialog,
+    QFormLayout,
     QGridLayout,
+    QGroupBox,
     QHBoxLayout,
     QLabel,
     QLineEdit,
+    QListWidget,
+    QListWidgetItem,
     QPlainTextEdit,
     QProgressBar,
     QPushButton,
@@ -34,7 +39,9 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model.analyses import (
+    FIT_DETECTORS,
     AnalysisOutcome,
+    FitSettings,
     RunDetails,
     Table,
     resume_refusal,
@@ -180,6 +187,67 @@ class RunBrowser(QWidget):
         background.finished.connect(self._job_done)
         self.analysis_pool.finished.connect(self._analysis_done)
 
+    def _fit_options_box(self) -> QGroupBox:
+        """The fit's options, as ``scatterlab fit`` takes them (empty: the default)."""
+        from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+
+        box = QGroupBox("Fit options")
+        box.setObjectName("fit_options")
+        box.setCheckable(False)
+
+        def number(name: str, suffix: str, decimals: int, top: float, tip: str
+                   ) -> QDoubleSpinBox:
+            w = QDoubleSpinBox()
+            w.setObjectName(name)
+            w.setRange(0.0, top)
+            w.setDecimals(decimals)
+            w.setSuffix(suffix)
+            w.setSpecialValueText("default")  # 0: the option not given
+            w.setToolTip(tip)
+            return w
+
+        self.opt_distance = number(
+            "opt_distance_mm", " mm", 2, 1e5, "sample-to-receiver distance; default: the "
+            "profile's distance plus the camera_z read-back (--distance-mm)")
+        self.opt_distance_u = number(
+            "opt_distance_u_mm", " mm", 3, 1e3, "standard uncertainty of that distance; "
+            "default: unknown, left out of the common scale (--distance-u-mm)")
+        self.opt_power_u = number(
+            "opt_power_u", "", 4, 1.0, "relative standard uncertainty of the incident "
+            "power, e.g. 0.02 for 2 %; default: unknown (--incident-power-u)")
+        self.opt_detector = QComboBox()
+        self.opt_detector.setObjectName("opt_detector")
+        for d in FIT_DETECTORS:
+            self.opt_detector.addItem(d.replace("_", " "), d)
+        self.opt_detector.setToolTip("the detector whose readings are reduced (--detector)")
+        self.opt_models = QListWidget()
+        self.opt_models.setObjectName("opt_models")
+        self.opt_models.setToolTip("candidate models; the selection rule (BIC) picks one "
+                                   "(--models)")
+        for m in DEFAULT_MODELS:
+            item = QListWidgetItem(m)
+            item.setFlags(item.flags() | Qt.ItemIsUserCheckable)
+            item.setCheckState(Qt.Checked)
+            self.opt_models.addItem(item)
+        self.opt_models.setMaximumHeight(110)
+        form = QFormLayout(box)
+        form.addRow("Distance (mm)", self.opt_distance)
+        form.addRow("Distance uncertainty (mm)", self.opt_distance_u)
+        form.addRow("Incident power uncertainty", self.opt_power_u)
+        form.addRow("Detector", self.opt_detector)
+        form.addRow("Candidate models", self.opt_models)
+        return box
+
+    def fit_settings(self) -> FitSettings:
+        """The fit options as set in the Analysis tab."""
+        def value(w: QDoubleSpinBox) -> float | None:
+            return w.value() if w.value() > 0 else None
+
+        models = tuple(self.opt_models.item(k).text() for k in range(self.opt_models.count())
+                       if self.opt_models.item(k).checkState() == Qt.Checked)
+        return FitSettings(value(self.opt_distance), value(self.opt_distance_u),
+                           value(self.opt_power_u), models, self.opt_detector.currentData())
+
     def _analysis_page(self) -> QWidget:
         page = QWidget()
         self.analysis = QComboBox()
@@ -217,10 +285,14 @@ class RunBrowser(QWidget):
         top.addWidget(self.open_report)
         lay = QVBoxLayout(page)
         lay.addLayout(top)
+        self.fit_options = self._fit_options_box()
+        lay.addWidget(self.fit_options)
         lay.addWidget(self.busy)
         lay.addWidget(self.analysis_summary)
         lay.addWidget(scroll, 1)
         self.analyse.clicked.connect(self.start_analysis)
+        self.analysis.currentIndexChanged.connect(
+            lambda _: self.fit_options.setVisible(self.analysis.currentData() == "fit"))
         self.open_report.clicked.connect(self._open_report)
         self.result_table_widgets: list[QTableWidget] = []
         return page
@@ -336,7 +408,18 @@ class RunBrowser(QWidget):
         self.open_report.setEnabled(False)
         self.analysis_summary.setText(f"{name} of {d.path.name} running …")
         path = d.path
+        if name == "fit":
+            settings = self.fit_settings()
+            if not any(True for _ in settings.models):
+                self._analysis_refused("Candidate models: check at least one")
+                return None
+            return self.analysis_pool.submit(name, lambda: run_analysis(name, path, settings))
         return self.analysis_pool.submit(name, lambda: run_analysis(name, path))
+
+    def _analysis_refused(self, why: str) -> None:
+        self.busy.hide()
+        self.analyse.setEnabled(True)
+        self.analysis_summary.setText(f"not started: {why}")
 
     def _analysis_done(self, done: JobDone) -> None:
         self.busy.hide()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QTextBrowser
 
 from instrument.run.catalog import Catalog
@@ -155,3 +156,29 @@ def test_menus_and_the_shortcut_list(qtbot, make_window):
         assert key in text
     about = w.show_about().findChild(QTextBrowser, "dialog_text").toPlainText()
     assert "scatterlab" in about and str(w.runs_dir) in about
+
+
+def test_the_analysis_tab_sets_the_fit_options(qtbot, make_window):
+    from gui.model.analyses import FitSettings
+
+    w = make_window()
+    b = w.browser
+    assert b.fit_settings() == FitSettings(models=b.fit_settings().models)  # defaults
+    assert len(b.fit_settings().models) == b.opt_models.count() > 1
+    b.opt_distance.setValue(305.0)
+    b.opt_distance_u.setValue(0.5)
+    b.opt_power_u.setValue(0.02)
+    b.opt_detector.setCurrentIndex(b.opt_detector.findData("power_meter"))
+    for k in range(1, b.opt_models.count()):
+        b.opt_models.item(k).setCheckState(Qt.Unchecked)
+    s = b.fit_settings()
+    assert (s.distance_mm, s.distance_u_mm, s.incident_power_u, s.detector) == \
+        (305.0, 0.5, 0.02, "power_meter")
+    assert s.models == (b.opt_models.item(0).text(),)
+    # the controls the fit warnings name exist under those names
+    from gui.model.remedies import ANALYSIS_CONTROLS
+
+    form = b.fit_options.layout()
+    labels = {form.itemAt(r, form.ItemRole.LabelRole).widget().text()
+              for r in range(form.rowCount())}
+    assert set(ANALYSIS_CONTROLS.values()) <= labels
