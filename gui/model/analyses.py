@@ -20,8 +20,8 @@ from typing import Any
 from gui.model.remedies import for_gui
 from instrument.run.paths import results_dir
 
-__all__ = ["ANALYSES", "FIT_DETECTORS", "AnalysisOutcome", "FitSettings", "RunDetails", "Table", "analyses_for",
-           "resume_refusal", "run_analysis", "run_details", "with_catalog"]
+__all__ = ["ANALYSES", "FIT_DETECTORS", "AnalysisOutcome", "FitSettings", "RunDetails", "Table",
+           "analyses_for", "resume_refusal", "run_analysis", "run_details", "with_catalog"]
 
 #: Plan kind → the analyses that apply, in the order an operator runs them.
 ANALYSES: dict[str, tuple[str, ...]] = {
