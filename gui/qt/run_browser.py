@@ -52,6 +52,7 @@ from gui.model.analyses import (
 from gui.model.faults import point_number
 from gui.model.remedies import for_gui
 from gui.qt.background import Background, JobDone
+from gui.qt.report_view import ReportView
 from instrument.plans.planfile import KINDS
 from instrument.run.catalog import CATALOG_NAME, Catalog, RunRow
 
@@ -100,6 +101,7 @@ class RunBrowser(QWidget):
         self.rows: list[RunRow] = []
         self.details: RunDetails | None = None
         self.outcome: AnalysisOutcome | None = None
+        self.report_view: ReportView | None = None
         self._query = 0
 
         self.folder = QLabel(str(self.runs_dir))
@@ -255,7 +257,9 @@ class RunBrowser(QWidget):
         self.analyse = QPushButton("Run analysis")
         self.analyse.setObjectName("analyse")
         self.analyse.setEnabled(False)
-        self.open_report = QPushButton("Open HTML report")
+        self.open_report = QPushButton("Show report")
+        self.open_report.setToolTip("the HTML report with its figures, in this window; "
+                                    "a web browser from there on request")
         self.open_report.setObjectName("open_report")
         self.open_report.setEnabled(False)
         self.busy = QProgressBar()
@@ -475,9 +479,13 @@ class RunBrowser(QWidget):
         self._tables_layout.addWidget(widget)
         self.result_table_widgets.append(widget)
 
-    def _open_report(self) -> None:
-        if self.outcome is not None and self.outcome.report is not None:
-            QDesktopServices.openUrl(QUrl.fromLocalFile(str(self.outcome.report)))
+    def _open_report(self) -> ReportView | None:
+        if self.outcome is None or self.outcome.report is None:
+            return None
+        if self.report_view is None:
+            self.report_view = ReportView(self)
+        self.report_view.show_report(self.outcome.report)
+        return self.report_view
 
     # background results ---------------------------------------------------------------
     def _job_done(self, done: JobDone) -> None:

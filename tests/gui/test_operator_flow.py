@@ -182,3 +182,35 @@ def test_the_analysis_tab_sets_the_fit_options(qtbot, make_window):
     labels = {form.itemAt(r, form.ItemRole.LabelRole).widget().text()
               for r in range(form.rowCount())}
     assert set(ANALYSIS_CONTROLS.values()) <= labels
+
+
+def test_the_report_is_shown_inside_and_a_missing_browser_is_said(qtbot, tmp_path):
+    from PySide6.QtGui import QImage
+
+    from gui.qt.report_view import ReportView
+
+    folder = tmp_path / "RUN" / "fit"
+    folder.mkdir(parents=True)
+    img = QImage(40, 30, QImage.Format_RGB32)
+    img.fill(0x336699)
+    assert img.save(str(folder / "brdf.png"))
+    (folder / "index.html").write_text(
+        "<html><body><h1>Fit of RUN</h1><table><tr><td>ggx.alpha</td><td>0.12</td></tr>"
+        "</table><img src='brdf.png'></body></html>", encoding="utf-8")
+    asked = []
+    view = ReportView(opener=lambda url: asked.append(url.toLocalFile()) or False)
+    qtbot.addWidget(view)
+    view.show_report(folder / "index.html")
+    text = view.view.toPlainText()
+    assert "Fit of RUN" in text and "ggx.alpha" in text
+    from PySide6.QtCore import QUrl
+    from PySide6.QtGui import QTextDocument
+
+    figure = view.view.loadResource(QTextDocument.ImageResource, QUrl("brdf.png"))
+    assert figure is not None and not QImage.fromData(figure).isNull()  # found beside it
+    assert not view.open_external()
+    assert asked == [str(folder / "index.html")]
+    assert "No web browser could be opened" in view.message.text()
+    assert str(folder / "index.html") in view.message.text()
+    view.opener = lambda url: True
+    assert view.open_external() and "opened in the web browser" in view.message.text()
