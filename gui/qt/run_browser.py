@@ -53,6 +53,7 @@ from gui.model.faults import point_number
 from gui.model.remedies import for_gui
 from gui.qt.background import Background, JobDone
 from gui.qt.report_view import ReportView
+from gui.qt.tables import fit_columns
 from instrument.plans.planfile import KINDS
 from instrument.run.catalog import CATALOG_NAME, Catalog, RunRow
 
@@ -68,7 +69,9 @@ def _table(columns: tuple[str, ...], name: str) -> QTableWidget:
     t.setEditTriggers(QAbstractItemView.NoEditTriggers)
     t.setSelectionBehavior(QAbstractItemView.SelectRows)
     t.horizontalHeader().setStretchLastSection(True)
+    fit_columns(t)
     return t
+
 
 
 def _fill(table: QTableWidget, rows) -> None:

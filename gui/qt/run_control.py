@@ -25,6 +25,7 @@ from gui.model.faults import FaultLog, PauseState, Recovery, point_number, recov
 from gui.model.live import ProgressClock
 from gui.model.session import BenchSession, RunHandle
 from gui.qt.ask import Questions
+from gui.qt.tables import fit_columns
 from instrument.run.events import (
     Event,
     Fault,
@@ -57,6 +58,7 @@ class FaultPanel(QWidget):
         self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
         self.table.horizontalHeader().setStretchLastSection(True)
         self.table.setWordWrap(True)
+        fit_columns(self.table)
         self.copy = QPushButton("Copy")
         self.copy.clicked.connect(self.copy_selected)
         self.summary = QLabel("no faults")
@@ -84,9 +86,6 @@ class FaultPanel(QWidget):
             item.setBackground(brush)
             item.setToolTip(text)
             self.table.setItem(k, j, item)
-        # every column as wide as its widest cell (a scroll bar rather than cut text);
-        # the last one stretches
-        self.table.resizeColumnsToContents()
         self.table.scrollToBottom()
         self.summary.setText(f"{self.log.total} fault event(s)")
 

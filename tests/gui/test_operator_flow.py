@@ -214,3 +214,25 @@ def test_the_report_is_shown_inside_and_a_missing_browser_is_said(qtbot, tmp_pat
     assert str(folder / "index.html") in view.message.text()
     view.opener = lambda url: True
     assert view.open_external() and "opened in the web browser" in view.message.text()
+
+
+def test_runs_and_faults_columns_show_their_whole_text(qtbot, make_window):
+    from instrument.run.events import Fault
+
+    w = make_window()
+    w.fault_panel.add(Fault("detector_theta", "the controller stopped answering on "
+                            "/dev/ttyUSB0 after three polls", "pause", 26))
+    w.docks["faults"].raise_()
+    w.docks["runs"].raise_()
+    from gui.qt.run_browser import _fill
+
+    _fill(w.browser.table, [("20261126-151230-0a1b2c3d", "a rather long sample name, "
+                             "batch 7", "brdf_in_plane", "interrupted", "2026-11-26 15:12",
+                             "28/57")])
+    for table in (w.fault_panel.table, w.browser.table):
+        header = table.horizontalHeader()
+        for c in range(table.columnCount() - 1):  # the last one stretches
+            need = max(table.sizeHintForColumn(c), header.sectionSizeHint(c))
+            qtbot.waitUntil(lambda c=c, need=need: header.sectionSize(c) >= need,
+                            timeout=5000)
+    assert w.fault_panel.rows()[0][1] == "27"  # plan index 26: the 27th point
