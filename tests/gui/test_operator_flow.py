@@ -233,6 +233,6 @@ def test_runs_and_faults_columns_show_their_whole_text(qtbot, make_window):
         header = table.horizontalHeader()
         for c in range(table.columnCount() - 1):  # the last one stretches
             need = max(table.sizeHintForColumn(c), header.sectionSizeHint(c))
-            qtbot.waitUntil(lambda c=c, need=need: header.sectionSize(c) >= need,
+            qtbot.waitUntil(lambda h=header, c=c, n=need: h.sectionSize(c) >= n,
                             timeout=5000)
     assert w.fault_panel.rows()[0][1] == "27"  # plan index 26: the 27th point
