@@ -244,9 +244,6 @@ def _fit(path: Path, t0: float, options: dict[str, Any]) -> AnalysisOutcome:
                 tuple((r.name, str(r.n_params), f"{r.chi2:.2f}", f"{r.bic:.2f}")
                       for r in result.selection.table))
     warnings = list(reduced.warnings)
-    if reduced.scale_unknown:  # what the operator can give to include the common scale
-        warnings.append("common scale unknown, not included: "
-                        + "; ".join(reduced.scale_unknown))
     if not result.adequate:  # the goodness-of-fit gate (ADR 0051)
         warnings.append(f"{result.verdict}; the σ are inflated")
     folder = done.report.parent if done.report is not None else results_dir(path, "fit")
