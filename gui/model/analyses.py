@@ -13,14 +13,15 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from gui.model.remedies import for_gui
 from instrument.run.paths import results_dir
 
-__all__ = ["ANALYSES", "AnalysisOutcome", "RunDetails", "Table", "analyses_for",
-           "run_analysis", "run_details"]
+__all__ = ["ANALYSES", "FIT_DETECTORS", "AnalysisOutcome", "FitSettings", "RunDetails", "Table",
+           "analyses_for", "resume_refusal", "run_analysis", "run_details", "with_catalog"]
 
 #: Plan kind → the analyses that apply, in the order an operator runs them.
 ANALYSES: dict[str, tuple[str, ...]] = {
@@ -35,6 +36,52 @@ RESUMABLE = ("paused", "aborted", "interrupted", "failed")
 
 def analyses_for(plan_kind: str) -> tuple[str, ...]:
     return ANALYSES.get(plan_kind, ())
+
+
+#: Detectors a fit can reduce from the GUI (the lock-in is reduced per wavelength, which
+#: the command line's ``--per-wavelength`` does).
+FIT_DETECTORS = ("camera", "power_meter")
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The fit's options set in the Analysis tab: the same values as ``scatterlab fit``'s
+    ``--distance-mm``, ``--distance-u-mm``, ``--incident-power-u``, ``--models`` and
+    ``--detector`` (``None``: the option not given, the pipeline's default)."""
+
+    distance_mm: float | None = None
+    distance_u_mm: float | None = None
+    incident_power_u: float | None = None   # relative standard uncertainty
+    models: tuple[str, ...] = ()            # empty: the default candidates
+    detector: str = "camera"
+
+    def options(self) -> dict[str, Any]:
+        """The plain options :func:`instrument.batch.analyses.fit_arguments` takes, as
+        :func:`instrument.cli.fit.fit_options` builds them from the command line.
+
+        Raises
+        ------
+        ValueError
+            A value out of range, named by its control in the Analysis tab.
+        """
+        from instrument.batch.analyses import reduction_defaults
+        from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+
+        for label, v in (("Distance (mm)", self.distance_mm),
+                         ("Distance uncertainty (mm)", self.distance_u_mm),
+                         ("Incident power uncertainty", self.incident_power_u)):
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{label} must be > 0 (or left empty for the default), "
+                                 f"got {v}")
+        if self.detector not in FIT_DETECTORS:
+            raise ValueError(f"Detector must be one of {', '.join(FIT_DETECTORS)}, got "
+                             f"{self.detector!r}")
+        reduction = {**reduction_defaults(), "method": "absolute", "detector": self.detector,
+                     "receiver_distance_mm": self.distance_mm,
+                     "u_distance_mm": self.distance_u_mm,
+                     "u_incident_power_rel": self.incident_power_u}
+        return {"reduction": reduction, "models": list(self.models or DEFAULT_MODELS),
+                "criterion": "bic", "run_cv": True, "n_bootstrap": 0}
 
 
 @dataclass(frozen=True)
@@ -105,6 +152,38 @@ def run_details(path: str | Path) -> RunDetails:
                       analyses_for(data.plan_kind))
 
 
+def with_catalog(d: RunDetails, row: Any) -> RunDetails:
+    """The details as the catalog lists the run (``row``: a
+    :class:`instrument.run.catalog.RunRow`, refreshed live).
+
+    The file's own status attribute says ``running`` after a crash, and a view read
+    before a resume keeps the old count; the catalog (refreshed from the journal by
+    :meth:`~instrument.run.catalog.Catalog.refresh_live`) is what the list shows, so the
+    details take their status and point count from it and never contradict the list.
+    """
+    status = str(row.status) if row.status else d.status
+    n_points = int(row.n_points) if row.n_points is not None else d.n_points
+    n_planned = int(row.n_planned) if row.n_planned else d.n_planned
+    prov = dict(d.provenance)
+    prov["status"] = status
+    prov["points"] = f"{n_points} of {n_planned} planned"
+    return replace(d, provenance=prov, status=status, n_points=n_points,
+                   n_planned=n_planned)
+
+
+def resume_refusal(d: RunDetails) -> str | None:
+    """Why the run cannot be continued, or ``None`` when it can (paused, aborted,
+    interrupted or failed, with points still to measure)."""
+    if d.status not in RESUMABLE:
+        what = "finished: every point is measured" if d.status == "finished" else \
+            f"{d.status}"
+        return f"run {d.provenance.get('run id', d.path.stem)} is {what}; nothing to resume"
+    if d.n_points >= d.n_planned:
+        return (f"run {d.provenance.get('run id', d.path.stem)} has all {d.n_planned} "
+                "points; nothing to resume")
+    return None
+
+
 def _figures(folder: Path, since: float) -> tuple[Path, ...]:
     if not folder.is_dir():
         return ()
@@ -117,7 +196,8 @@ def _fmt(x: Any) -> str:
     return str(x)
 
 
-def run_analysis(name: str, path: str | Path) -> AnalysisOutcome:
+def run_analysis(name: str, path: str | Path,
+                 fit: FitSettings | None = None) -> AnalysisOutcome:
     """Run analysis ``name`` (:data:`ANALYSES`) on the run file ``path`` as the CLI does:
     its results file, figures and report go next to the run, into ``DIR/RUN/<pipeline>/``
     (ADR 0013); the run file is only read. Like the CLI it holds the run's lock while it
@@ -139,14 +219,21 @@ def run_analysis(name: str, path: str | Path) -> AnalysisOutcome:
                          "spheres")
     path = Path(path)
     check_run_file(path, name)  # first, so a wrong path creates no folder for the lock
+    if name == "fit":
+        options = (fit or FitSettings()).options()  # before the lock: a bad value is quick
+        analyses["fit"] = lambda p, t0: _fit(p, t0, options)
     with run_lock(path):
-        return analyses[name](path, time.time())
+        out = analyses[name](path, time.time())
+    # a remedy the pipeline words as a CLI option names the GUI's control instead
+    return replace(out, notes=tuple(for_gui(n) for n in out.notes),
+                   warnings=tuple(for_gui(w) for w in out.warnings))
 
 
-def _fit(path: Path, t0: float) -> AnalysisOutcome:
+def _fit(path: Path, t0: float, options: dict[str, Any]) -> AnalysisOutcome:
+    from instrument.batch.analyses import fit_arguments
     from instrument.pipelines.brdf.pipeline import fit_run
 
-    done = fit_run(path)
+    done = fit_run(path, **fit_arguments(options))
     result, reduced = done.result, done.reduced
     fit = result.chosen_fit
     params = Table(f"{result.chosen}: fitted parameters",

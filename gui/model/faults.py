@@ -19,7 +19,14 @@ from dataclasses import dataclass, field
 
 from instrument.run.events import Fault, Paused
 
-__all__ = ["FaultLog", "FaultRow", "PauseKind", "Recovery", "describe", "recovery_for"]
+__all__ = ["FaultLog", "FaultRow", "PauseKind", "Recovery", "describe", "point_number",
+           "recovery_for"]
+
+
+def point_number(index: int | None) -> str:
+    """The point as the operator counts it: the engine's plan index is 0-based, the
+    progress count (``28/57 points``) counts from 1, so plan index 27 is point 28."""
+    return "" if index is None else str(int(index) + 1)
 
 
 class Recovery(enum.Enum):
@@ -49,7 +56,7 @@ class FaultRow:
 def describe(ev: Fault, *, now: float | None = None) -> FaultRow:
     """The fault panel's row for one fault event."""
     action = ev.action
-    where = "" if ev.index is None else f" at point {ev.index}"
+    where = "" if ev.index is None else f" at point {point_number(ev.index)}"
     if action.startswith("retry"):
         severity = "info"
         meaning = f"{ev.device} failed{where}; the engine tries again ({action})"
@@ -58,7 +65,8 @@ def describe(ev: Fault, *, now: float | None = None) -> FaultRow:
         meaning = f"{ev.device} kept failing{where}; the engine re-homes it and tries once more"
     elif action == "skip point":
         severity = "warning"
-        meaning = f"point {ev.index} is stored as skipped ({ev.device} failed); the run goes on"
+        meaning = (f"point {point_number(ev.index)} is stored as skipped ({ev.device} "
+                   "failed); the run goes on")
     elif action == "pause":
         severity = "error"
         meaning = (f"the run is paused{where}: {ev.device} failed and its policy is to wait "

@@ -15,13 +15,17 @@ from __future__ import annotations
 
 import math
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from instrument.run.events import Event, PointCompleted, Progress, RunFinished, RunStarted
 
-__all__ = ["LiveData", "LiveSnapshot", "plot_kind", "signed_theta_r"]
+__all__ = ["LiveData", "LiveSnapshot", "ProgressClock", "decade_label", "log_ticks",
+           "plot_kind", "signed_theta_r"]
 
 #: Plan kind → the live picture of it.
 PLOTS = {
@@ -108,6 +112,26 @@ class LiveData:
                                         -pa[:, 0], pa[:, 0])
         self._planned_ti = signed
 
+    def prefill(self, run: Any) -> int:
+        """The points a resumed run already holds (``run``: the
+        :class:`instrument.run.runfile.RunData` read from its file), so its plot starts
+        with them instead of with the first new point. Returns the points added."""
+        n = min(int(run.index.size), self._index.size)
+        with self._lock:
+            k = self._n
+            m = min(n, self._index.size - k)
+            if m <= 0:
+                return 0
+            self._index[k:k + m] = run.index[:m]
+            self._ok[k:k + m] = run.point_status[:m] == 0
+            self._angles[k:k + m] = np.stack([run.theta_i[:m], run.phi_i[:m],
+                                              run.theta_r[:m], run.phi_r[:m]], axis=-1)
+            self._signal[k:k + m] = run.signal[:m]
+            self._power[k:k + m] = run.power_w[:m]
+            self._n = k + m
+            self._version += 1
+        return m
+
     # worker thread -----------------------------------------------------------------
     def on_event(self, ev: Event) -> None:
         if isinstance(ev, PointCompleted):
@@ -182,6 +206,81 @@ class LiveData:
                 None if self._field is None else self._field.copy(),
                 None if self._field_y is None else self._field_y.copy(),
                 self._image, self._elapsed, self._eta, self._version)
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def decade_label(log10_value: float) -> str:
+    """A log axis's tick label that always carries its decade: ``-3`` → ``10⁻³``,
+    ``log10(2e-3)`` → ``2×10⁻³`` (a bare ``2`` on a log axis says nothing of the
+    magnitude)."""
+    d = math.floor(log10_value + 1e-9)
+    m = round(10 ** (log10_value - d))
+    if m >= 10:
+        d, m = d + 1, 1
+    power = f"10{str(d).translate(_SUPERSCRIPT)}"
+    return power if m == 1 else f"{m}×{power}"
+
+
+def log_ticks(lo: float, hi: float) -> list[tuple[float, list[float]]]:
+    """Ticks of a log axis showing log10 values ``lo``..``hi``: the decades as major
+    ticks, 2…9 × each decade as minor ones (pyqtgraph's ``tickValues`` form)."""
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+        return [(1.0, []), (None, [])]
+    first, last = math.floor(lo), math.ceil(hi)
+    if last - first > 60:  # a degenerate range: no minor ticks, every few decades
+        step = math.ceil((last - first) / 12)
+        return [(float(step), [float(d) for d in range(first, last + 1, step)
+                               if lo <= d <= hi]), (None, [])]
+    major = [float(d) for d in range(first, last + 1) if lo <= d <= hi]
+    minor = [d + math.log10(k) for d in range(first, last + 1) for k in range(2, 10)
+             if lo <= d + math.log10(k) <= hi]
+    return [(1.0, major), (None, minor)]
+
+
+class ProgressClock:
+    """Elapsed time and time left of a run, without its pauses.
+
+    The engine's :class:`~instrument.run.events.Progress` counts wall time since it
+    started, pauses included, so after a ten-minute pause the elapsed time says ten
+    minutes more and the time left jumps. This clock measures the pauses between
+    ``Paused`` and ``Resumed`` (``now``: a monotonic clock, injectable for tests) and
+    subtracts them; the time left is the points still to do times the mean active time
+    per point measured in this session (a resumed run's earlier points are not in it).
+    """
+
+    def __init__(self, now: Callable[[], float] = time.monotonic) -> None:
+        self._now = now
+        self.start(0)
+
+    def start(self, n_done: int) -> None:
+        self._n0 = int(n_done)
+        self._paused_s = 0.0
+        self._pause_t: float | None = None
+
+    def paused(self) -> None:
+        if self._pause_t is None:
+            self._pause_t = self._now()
+
+    def resumed(self) -> None:
+        if self._pause_t is not None:
+            self._paused_s += self._now() - self._pause_t
+            self._pause_t = None
+
+    def paused_s(self) -> float:
+        """Time paused so far (a pause in progress included)."""
+        now = 0.0 if self._pause_t is None else self._now() - self._pause_t
+        return self._paused_s + now
+
+    def times(self, ev: Progress) -> tuple[float, float]:
+        """(elapsed, time left) in seconds for a Progress event; NaN time left before
+        the first point of this session."""
+        elapsed = max(0.0, ev.elapsed_s - self.paused_s())
+        done_here = ev.n_done - self._n0
+        if done_here <= 0:
+            return elapsed, math.nan
+        return elapsed, (ev.n_total - ev.n_done) * elapsed / done_here
 
 
 def _bin(row: np.ndarray, factor: int, width: int) -> np.ndarray:

@@ -765,6 +765,9 @@ class BenchSession:
             from instrument.run.runfile import read_run
 
             stored = read_run(resume)
+            if stored.status == "finished":
+                return CommandResult(cmd, False, f"run {stored.run_id} is finished: every "
+                                     "point is measured, nothing to resume", refused=True)
             stored_bench = stored.profile().get("bench", {}).get("name")
             if stored_bench and not same_bench(stored_bench, bench.profile.name):
                 return CommandResult(cmd, False, f"run {stored.run_id} was recorded on "
@@ -785,6 +788,8 @@ class BenchSession:
         live = LiveData(plan.kind, len(plan.points), n_done=engine.n_done,
                         planned_angles=np.array([p.angles.as_tuple() if p.angles else
                                                  (np.nan,) * 4 for p in plan.points]))
+        if resume is not None:
+            live.prefill(stored)  # the points measured before: the plot starts with them
         events = EventQueue(maxsize=EVENT_QUEUE_MAX)
         handle = RunHandle(engine, live, events, plan, Path(path), resumed=resume is not None)
         cam = bench.camera

@@ -68,7 +68,9 @@ class CameraView(QWidget):
         self.last_frame = None
         self._levels_set = False
         self._scale = 1
-        self._snapshot_dir = Path.cwd()
+        # snapshots go to a chosen folder (the main window sets the runs folder), never
+        # to the program's working directory
+        self.snapshot_dir = Path.home()
 
         self.graphics = pg.GraphicsLayoutWidget()
         self.view = self.graphics.addViewBox(lockAspect=True, invertY=True)
@@ -273,18 +275,20 @@ class CameraView(QWidget):
     # snapshot -----------------------------------------------------------------------
     def _ask_snapshot(self) -> None:
         path, _ = QFileDialog.getSaveFileName(
-            self, "Snapshot", str(self._snapshot_dir / "snapshot.png"),
+            self, "Snapshot", str(self.snapshot_dir / "snapshot.png"),
             "16-bit PNG (*.png);;TIFF (*.tif);;NumPy (*.npy)")
         if path:
             self.save_snapshot(path)
 
     def save_snapshot(self, path: str | Path) -> int | None:
-        """Write the frame on screen to ``path`` in the background; None if no frame."""
+        """Write the frame on screen to ``path`` in the background; None if no frame. A
+        relative ``path`` is taken in :attr:`snapshot_dir`."""
         frame = self.slot.latest()
         if frame is None:
             self.error.setText("snapshot: no frame yet (start live first)")
             return None
-        self._snapshot_dir = Path(path).parent
+        path = self.snapshot_dir / path  # an absolute path stays as it is
+        self.snapshot_dir = path.parent
         data = frame.data
         return self.background.submit("snapshot", lambda: save_frame(data, path))
 

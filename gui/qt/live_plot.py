@@ -19,16 +19,35 @@ from dataclasses import replace
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtWidgets import QLabel, QStackedWidget, QVBoxLayout, QWidget
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QStackedWidget, QVBoxLayout, QWidget
 
-from gui.model.live import LiveSnapshot, plot_kind, signed_theta_r
+from gui.model.live import LiveSnapshot, decade_label, log_ticks, plot_kind, signed_theta_r
 
-__all__ = ["LivePlot"]
+__all__ = ["DecadeAxis", "LivePlot"]
 
 #: Plans up to this many points get a marker per point; larger ones lines only.
 MARKERS_UP_TO = 600
 PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#4e342e",
            "#ad1457"]
+
+
+class DecadeAxis(pg.AxisItem):
+    """A log axis whose labels always name the decade (``2×10⁻³``, ``10⁻²``), also when
+    the data span less than a decade or nothing is plotted yet."""
+
+    def tickValues(self, minVal, maxVal, size):
+        if not self.logMode:
+            return super().tickValues(minVal, maxVal, size)
+        ticks = log_ticks(minVal, maxVal)
+        if len(ticks[0][1]) >= 2:  # two decades in view: label those, not the minors
+            return ticks
+        return [(1.0, ticks[0][1] + ticks[1][1])]  # label the 2…9 too, with the decade
+
+    def tickStrings(self, values, scale, spacing):
+        if not self.logMode:
+            return super().tickStrings(values, scale, spacing)
+        return [decade_label(v) for v in values]
 
 
 class LivePlot(QWidget):
@@ -43,13 +62,23 @@ class LivePlot(QWidget):
         self.caption.setObjectName("live_caption")
         self.stack = QStackedWidget()
         # in-plane
-        self.in_plane = pg.PlotWidget(background="w")
+        self.in_plane = pg.PlotWidget(background="w",
+                                      axisItems={"left": DecadeAxis("left")})
         self.in_plane.setLabel("bottom", "θr (signed: > 0 specular side)", units="deg")
         self.in_plane.setLabel("left", "signal (DN/µs)")
         self.in_plane.getAxis("left").enableAutoSIPrefix(False)
         self.in_plane.setLogMode(y=True)
         self.in_plane.showGrid(x=True, y=True, alpha=0.3)
-        self.in_plane_legend = self.in_plane.addLegend(offset=(-10, 10))
+        # the legend is a label beside the plot, not an item on it: it never covers data
+        self.in_plane_legend = QLabel("")
+        self.in_plane_legend.setObjectName("in_plane_legend")
+        self.in_plane_legend.setAlignment(Qt.AlignTop | Qt.AlignLeft)
+        self._legend_rows: list[str] = []
+        in_plane_page = QWidget()
+        row = QHBoxLayout(in_plane_page)
+        row.setContentsMargins(0, 0, 0, 0)
+        row.addWidget(self.in_plane, 1)
+        row.addWidget(self.in_plane_legend)
         self._curves: dict[float, pg.PlotDataItem] = {}
         self._counts: dict[float, int] = {}
         self._power_axis = False
@@ -84,7 +113,7 @@ class LivePlot(QWidget):
         self.series.setLabel("left", "signal (DN/µs)")
         self.series_curve = self.series.plot([], [], pen=None, symbol="o", symbolSize=6,
                                              symbolBrush="#1565c0")
-        self._pages = {"in_plane": self.in_plane, "hemisphere": self.polar,
+        self._pages = {"in_plane": in_plane_page, "hemisphere": self.polar,
                        "lightfield": self.field_plot, "image": self.image_plot,
                        "series": self.series}
         for page in self._pages.values():
@@ -106,7 +135,8 @@ class LivePlot(QWidget):
             self._power_axis = False
             for plot in (self.in_plane, self.series):
                 plot.setLabel("left", "signal (DN/µs)")
-        self.in_plane_legend.clear()
+        self._legend_rows = []
+        self.in_plane_legend.setText("")
         self.polar_points.clear()
         self.field_image.clear()
         self.latest.clear()
@@ -147,8 +177,10 @@ class LivePlot(QWidget):
             if curve is None:
                 colour = PALETTE[k % len(PALETTE)]
                 style = dict(symbol="o", symbolSize=6, symbolBrush=colour) if markers else {}
-                curve = self.in_plane.plot([], [], pen=pg.mkPen(colour, width=2),
-                                           name=f"θi = {value:g}°", **style)
+                curve = self.in_plane.plot([], [], pen=pg.mkPen(colour, width=2), **style)
+                self._legend_rows.append(f"<span style='color:{colour}'>━━</span> "
+                                         f"θi = {value:g}°")
+                self.in_plane_legend.setText("<br>".join(self._legend_rows))
                 self._curves[value] = curve
             curve.setData(x, y)
             self._counts[value] = n

@@ -5,12 +5,18 @@ runs folder) in the constructor, so tests build it on any bench with no patching
 
 Keyboard: **Esc** stops all motion (during a run: aborts it, the engine makes the bench
 safe) from anywhere in the application; **Space** pauses or resumes the run unless a text
-or number field has the focus (where a space is typed). Layout, window geometry, the
-last bench and the last folders are kept in ``QSettings``.
+or number field has the focus (where a space is typed); the rest is listed by *Help →
+Keyboard shortcuts* (:data:`SHORTCUTS`). Layout, window geometry, the last bench and the
+last folders are kept in ``QSettings``.
+
+Nothing reaches a different bench than the operator chose: resuming a run recorded on
+another bench (or with none connected) asks before it connects the run's bench, and an
+answer of *No* leaves the bench as it is.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,10 +27,10 @@ from PySide6.QtWidgets import (
     QApplication,
     QComboBox,
     QDockWidget,
+    QFileDialog,
     QLabel,
     QLineEdit,
     QMainWindow,
-    QMessageBox,
     QPlainTextEdit,
     QPushButton,
     QTextEdit,
@@ -32,21 +38,26 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from gui.model.analyses import resume_refusal
 from gui.model.devices import DeviceState
+from gui.model.remedies import event_for_gui, for_gui
 from gui.model.session import (
     BenchSession,
     CommandResult,
     Connect,
     ConnectionStatus,
+    Home,
     ResumeRun,
     RunHandle,
     StartRun,
 )
+from gui.qt.ask import Questions
 from gui.qt.background import Background
 from gui.qt.bench_panel import BenchPanel
 from gui.qt.bridge import SessionBridge
 from gui.qt.camera_view import CameraView
 from gui.qt.goniometer_view import GoniometerView
+from gui.qt.help_dialogs import about_html, shortcuts_html, text_dialog
 from gui.qt.live_plot import LivePlot
 from gui.qt.log_dock import LogDock
 from gui.qt.plan_editor import PlanEditor
@@ -55,10 +66,20 @@ from gui.qt.run_control import FaultPanel, RunControl
 from gui.qt.wheel import install_wheel_guard
 from instrument.bench.profile import ProfileError, load_profile, parse_profile
 
-__all__ = ["MainWindow", "homed_positions"]
+__all__ = ["SHORTCUTS", "MainWindow", "homed_positions", "unhomed_axes"]
 
 #: Bump when the dock set changes: an old saved layout is then ignored.
 LAYOUT_VERSION = 1
+
+#: Every keyboard shortcut of the window (Help → Keyboard shortcuts shows this list).
+SHORTCUTS = (
+    ("Esc", "Stop every axis now; during a run: abort it (from anywhere)"),
+    ("Space", "Pause a running run, resume a paused one (not while typing in a field)"),
+    ("Ctrl+H", "Home all axes"),
+    ("Ctrl+R", "Choose the runs folder"),
+    ("Ctrl+Q", "Quit (asks first during a run)"),
+    ("F1", "This list of shortcuts"),
+)
 
 
 def homed_positions(states: dict[str, DeviceState]) -> dict[str, float]:
@@ -66,6 +87,12 @@ def homed_positions(states: dict[str, DeviceState]) -> dict[str, float]:
     return {r: float(s.values["position"]) for r, s in states.items()
             if s.kind == "motion_axis" and s.values.get("homed")
             and s.values.get("position") is not None}
+
+
+def unhomed_axes(states: dict[str, DeviceState]) -> list[str]:
+    """The axes that read back not homed (homing in progress counts as not yet)."""
+    return [r for r, s in states.items()
+            if s.kind == "motion_axis" and s.error is None and not s.values.get("homed")]
 
 
 class MainWindow(QMainWindow):
@@ -85,7 +112,8 @@ class MainWindow(QMainWindow):
         self.docks: dict[str, QDockWidget] = {}
         self.current_run: RunHandle | None = None  # the running run, or the last one
         self._closing = False
-        self._close_confirmed = False
+        self.questions = Questions()
+        self.dialogs: dict[str, QWidget] = {}
 
         # Stop all: a toolbar that cannot be hidden, moved or floated away
         bar = QToolBar("Safety")
@@ -104,6 +132,24 @@ class MainWindow(QMainWindow):
                                     "(motion stopped, light off, file finalised)")
         self.stop_button.clicked.connect(self.stop_all)
         bar.addWidget(self.stop_button)
+        self.home_all_action = QAction("Home all", self)
+        self.home_all_action.setObjectName("home_all")
+        self.home_all_action.setShortcut(QKeySequence("Ctrl+H"))
+        self.home_all_action.setToolTip("home every axis of the connected bench (Ctrl+H)")
+        self.home_all_action.setEnabled(False)
+        self.home_all_action.triggered.connect(self.home_all)
+        self.home_all_button = QPushButton("Home all")
+        self.home_all_button.setObjectName("home_all_button")
+        self.home_all_button.setMinimumHeight(36)
+        self.home_all_button.setToolTip(self.home_all_action.toolTip())
+        self.home_all_button.setEnabled(False)
+        self.home_all_button.clicked.connect(self.home_all)
+        bar.addWidget(self.home_all_button)
+        # a first-time operator is told to home: axes that are not homed cannot move
+        self.home_hint = QLabel("")
+        self.home_hint.setObjectName("home_hint")
+        self.home_hint.setStyleSheet("color: #e65100; font-weight: 600; padding: 0 8px")
+        bar.addWidget(self.home_hint)
         self.run_label = QLabel("")
         self.run_label.setObjectName("run_label")
         bar.addSeparator()
@@ -124,13 +170,12 @@ class MainWindow(QMainWindow):
         bridge.runChanged.connect(self._on_run)
         self.bench_panel.benchChosen.connect(lambda b: self.settings.setValue("bench", b))
 
+        self._file_menu = self.menuBar().addMenu("&File")
+        self._bench_menu = self.menuBar().addMenu("&Bench")
         self._views_menu = self.menuBar().addMenu("&View")
+        self._help_menu = self.menuBar().addMenu("&Help")
         self._build_views()
-        for dock in self.docks.values():
-            self._views_menu.addAction(dock.toggleViewAction())
-        reset = QAction("Reset layout", self)
-        reset.triggered.connect(self.reset_layout)
-        self._views_menu.addAction(reset)
+        self._build_menus()
 
         self._default_state = self.saveState(LAYOUT_VERSION)
         self._restore(bench)
@@ -168,7 +213,8 @@ class MainWindow(QMainWindow):
         self.splitDockWidget(self.docks["goniometer"], self.docks["plan"], Qt.Vertical)
         self.plan_editor.startRequested.connect(self.start_run)
         self.fault_panel = FaultPanel()
-        self.run_control = RunControl(self.session, self.fault_panel)
+        self.run_control = RunControl(self.session, self.fault_panel,
+                                      questions=self.questions)
         self.add_dock("run", "Run", self.run_control, Qt.LeftDockWidgetArea)
         self.add_dock("faults", "Faults", self.fault_panel, Qt.RightDockWidgetArea)
         self.browser = RunBrowser(self.background, self.runs_dir, settings=self.settings)
@@ -177,26 +223,114 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["runs"], self.docks["faults"])
         self.docks["plan"].raise_()
         self.browser.resumeRequested.connect(self.resume_run)
+        self.browser.folderChanged.connect(self._runs_dir_changed)
         self.run_control.finished.connect(lambda ev: self.browser.refresh())
         self.log_dock = LogDock()
         self.add_dock("log", "Log", self.log_dock, Qt.RightDockWidgetArea)
         self.tabifyDockWidget(self.docks["faults"], self.docks["log"])
         self.docks["plan"].raise_()
-        self.bridge.engineEvent.connect(self.log_dock.on_event)
-        self.bridge.resultReady.connect(self.log_dock.on_result)
+        # engine events and command results reach the docks with GUI remedies
+        self.bridge.engineEvent.connect(self._on_engine_event)
         self.browser.analysisDone.connect(self.log_dock.on_analysis)
         self.browser.analysisFailed.connect(
             lambda name, msg: self.log_dock.log("error", name, msg))
-        self.bridge.engineEvent.connect(self.run_control.on_event)
         self.bridge.runChanged.connect(self.run_control.on_run)
         self.plan_editor.planChanged.connect(self._plan_changed)
         self.bridge.statesChanged.connect(self._on_states)
         self.bridge.statesChanged.connect(self.camera.on_states)
-        self.bridge.resultReady.connect(self.camera.on_result)
         self.bridge.runChanged.connect(self.camera.on_run)
         self._run_timer = QTimer(self)
         self._run_timer.setInterval(100)  # live views redraw at ≤ 10 Hz
         self._run_timer.timeout.connect(self._tick_run)
+
+    def _build_menus(self) -> None:
+        def action(menu, text: str, slot, shortcut: str | None = None,
+                   name: str | None = None) -> QAction:
+            a = QAction(text, self)
+            if shortcut:
+                a.setShortcut(QKeySequence(shortcut))
+            if name:
+                a.setObjectName(name)
+            a.triggered.connect(slot)
+            menu.addAction(a)
+            return a
+
+        f = self._file_menu
+        self.runs_folder_action = action(f, "Runs folder…", self.browser.ask_folder,
+                                         "Ctrl+R", "runs_folder")
+        action(f, "Snapshot folder…", self._ask_snapshot_folder, name="snapshot_folder")
+        f.addSeparator()
+        action(f, "Quit", self.close, "Ctrl+Q", "quit")
+        self._bench_menu.addAction(self.home_all_action)
+        action(self._bench_menu, "Stop all  (Esc)", self.stop_all)
+        for dock in self.docks.values():
+            self._views_menu.addAction(dock.toggleViewAction())
+        self._views_menu.addSeparator()
+        action(self._views_menu, "Reset layout", self.reset_layout, name="reset_layout")
+        action(self._help_menu, "Keyboard shortcuts", self.show_shortcuts, "F1",
+               "shortcuts")
+        action(self._help_menu, "About scatterlab", self.show_about, name="about")
+
+    def show_shortcuts(self) -> QWidget:
+        return self._show_dialog("shortcuts", "Keyboard shortcuts", shortcuts_html(SHORTCUTS))
+
+    def show_about(self) -> QWidget:
+        return self._show_dialog("about", "About scatterlab", about_html(
+            self.runs_dir, self.settings.fileName()))
+
+    def _show_dialog(self, key: str, title: str, html: str) -> QWidget:
+        dialog = self.dialogs.get(key)
+        if dialog is None:
+            dialog = text_dialog(self, title, html)
+            self.dialogs[key] = dialog
+        dialog.show()
+        dialog.raise_()
+        return dialog
+
+    # runs folder and snapshots ------------------------------------------------------
+    def set_runs_dir(self, folder: str | Path) -> None:
+        """New runs, the run browser and (unless chosen) snapshots use ``folder`` from
+        now on; kept in the settings for the next launch."""
+        self.browser.set_runs_dir(folder)  # emits folderChanged → _runs_dir_changed
+
+    def _runs_dir_changed(self, folder: str) -> None:
+        self.runs_dir = Path(folder)
+        if not self.settings.value("snapshot_dir"):
+            self.camera.snapshot_dir = self.runs_dir
+        self.statusBar().showMessage(f"runs folder: {self.runs_dir} (new runs are written "
+                                     "there)", 8000)
+
+    def _ask_snapshot_folder(self) -> None:
+        folder = QFileDialog.getExistingDirectory(self, "Snapshot folder",
+                                                  str(self.camera.snapshot_dir))
+        if folder:
+            self.set_snapshot_dir(folder)
+
+    def set_snapshot_dir(self, folder: str | Path) -> None:
+        self.camera.snapshot_dir = Path(folder)
+        self.settings.setValue("snapshot_dir", str(folder))
+
+    # bench ---------------------------------------------------------------------------
+    def home_all(self) -> list[str]:
+        """Home every axis of the connected bench (each through the guard, as its own
+        Home button does). Returns the axes asked to home."""
+        if not self.session.connected or self.session.run is not None:
+            return []
+        roles = [r for r, s in self.session.states().items() if s.kind == "motion_axis"]
+        for role in roles:
+            self.session.submit(Home(role))
+        return roles
+
+    def _update_home(self, states: dict[str, DeviceState] | None = None) -> None:
+        idle = self.session.connected and self.session.run is None
+        self.home_all_action.setEnabled(idle)
+        self.home_all_button.setEnabled(idle)
+        missing = unhomed_axes(states if states is not None else self.session.states()) \
+            if idle else []
+        self.home_hint.setText(
+            f"{len(missing)} ax{'is' if len(missing) == 1 else 'es'} not homed: press "
+            "Home all before moving" if missing else "")
+        self.home_hint.setToolTip(", ".join(missing))
 
     def validation_profile(self):
         """The bench plans are checked against: the connected one, else the chosen one."""
@@ -212,20 +346,46 @@ class MainWindow(QMainWindow):
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         self.session.submit(StartRun(plan, self.runs_dir))
 
-    def resume_run(self, details) -> None:
-        """Continue a run in its own file, on the bench it was recorded on (connected
-        first from the profile stored in the run when another bench is connected)."""
+    def resume_run(self, details) -> bool:
+        """Continue a run in its own file, on the bench it was recorded on.
+
+        The connected bench is used only when it is that bench. Otherwise (none
+        connected, or another) the operator is asked whether to connect the run's bench
+        from the profile stored in the run; *No* changes nothing and says why. Returns
+        whether the resume was submitted."""
+        self.docks["run"].raise_()
+        refusal = resume_refusal(details)
+        if refusal is None and self.session.run is not None:
+            refusal = "a run is in progress: let it finish or abort it first"
+        if refusal is not None:
+            return self._not_resumed(refusal)
+        run_id = details.provenance.get("run id", details.path.stem)
+        want = details.bench_name
         profile = self.session.profile if self.session.connected else None
-        if profile is None or profile.name != details.bench_name:
+        if profile is None or profile.name != want:
+            now = ("No bench is connected." if profile is None else
+                   f"Bench {profile.name!r} is connected; it is disconnected first (axes "
+                   "stopped, light off).")
+            if not self.questions.ask(
+                    "resume_connect", self, "Connect the run's bench?",
+                    f"Run {run_id} was recorded on bench {want!r}. {now}\n\nConnect bench "
+                    f"{want!r} from the profile stored in the run, and resume?"):
+                return self._not_resumed(
+                    f"run {run_id} needs bench {want!r}: connect it in the Bench dock, "
+                    "then press Resume this run again")
             try:
                 stored = parse_profile(details.profile_text,
                                        source=f"bench profile stored in {details.path}")
             except ProfileError as err:
-                self.run_control.state.setText(f"cannot resume: {err}")
-                return
+                return self._not_resumed(str(err))
             self.session.submit(Connect(stored))
         self.session.submit(ResumeRun(details.path))
-        self.docks["run"].raise_()
+        return True
+
+    def _not_resumed(self, reason: str) -> bool:
+        self.run_control.state.setText(f"not resumed: {reason}")
+        self.statusBar().showMessage(f"not resumed: {reason}", 15000)
+        return False
 
     def _plan_changed(self, plan) -> None:
         if self.session.run is None:
@@ -233,9 +393,11 @@ class MainWindow(QMainWindow):
 
     def _update_start(self) -> None:
         self.plan_editor.set_can_start(self.session.connected and self.session.run is None)
+        self._update_home()
 
     def _on_states(self, states) -> None:
         self.goniometer.set_positions(homed_positions(states))
+        self._update_home(states)
 
     def _tick_run(self) -> None:
         """Read the run's live values (a copy under a lock) and update the views."""
@@ -282,6 +444,8 @@ class MainWindow(QMainWindow):
             self.restoreState(QByteArray(state), LAYOUT_VERSION)
         chosen = bench or self.settings.value("bench", "sim")
         self.bench_panel.choose(str(chosen))
+        snapshots = self.settings.value("snapshot_dir")
+        self.camera.snapshot_dir = Path(str(snapshots)) if snapshots else self.runs_dir
 
     def save_settings(self) -> None:
         self.settings.setValue("geometry", self.saveGeometry())
@@ -322,8 +486,16 @@ class MainWindow(QMainWindow):
             self.plan_editor.validate_now()
         self._update_start()
 
+    def _on_engine_event(self, ev) -> None:
+        ev = event_for_gui(ev)
+        self.log_dock.on_event(ev)
+        self.run_control.on_event(ev)
+
     def _on_result(self, result: CommandResult) -> None:
+        result = replace(result, message=for_gui(result.message))
         self.bench_panel.on_result(result)
+        self.log_dock.on_result(result)
+        self.camera.on_result(result)
         if isinstance(result.command, StartRun | ResumeRun) and not result.ok:
             self.run_control.state.setText(f"the run did not start: {result.message}")
             self.statusBar().showMessage(result.message, 15000)
@@ -347,15 +519,12 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event: QCloseEvent) -> None:
         run = self.session.run
         if run is not None and not self._closing:
-            if not self._close_confirmed:
-                answer = QMessageBox.question(
-                    self, "A run is in progress",
+            if not self.questions.ask(
+                    "close_run", self, "A run is in progress",
                     "A run is in progress. Close anyway?\n\nThe run is aborted: motion "
-                    "stopped, light off, the file finalised (it can be resumed later).",
-                    QMessageBox.Yes | QMessageBox.No, QMessageBox.No)
-                if answer != QMessageBox.Yes:
-                    event.ignore()
-                    return
+                    "stopped, light off, the file finalised (it can be resumed later)."):
+                event.ignore()
+                return
             self._closing = True
             self.session.abort_run()
             self.statusBar().showMessage("aborting the run: making the bench safe …")
@@ -373,7 +542,7 @@ class MainWindow(QMainWindow):
 
     def confirm_close_during_run(self, yes: bool = True) -> None:
         """Answer the close question in advance (tests, scripted shutdown)."""
-        self._close_confirmed = yes
+        self.questions.answer("close_run", yes)
 
     def _wait_for_run_end(self) -> None:
         if self.session.run is None:

@@ -15,11 +15,16 @@ from PySide6.QtGui import QDesktopServices, QPixmap
 from PySide6.QtWidgets import (
     QAbstractItemView,
     QComboBox,
+    QDoubleSpinBox,
     QFileDialog,
+    QFormLayout,
     QGridLayout,
+    QGroupBox,
     QHBoxLayout,
     QLabel,
     QLineEdit,
+    QListWidget,
+    QListWidgetItem,
     QPlainTextEdit,
     QProgressBar,
     QPushButton,
@@ -34,14 +39,21 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model.analyses import (
-    RESUMABLE,
+    FIT_DETECTORS,
     AnalysisOutcome,
+    FitSettings,
     RunDetails,
     Table,
+    resume_refusal,
     run_analysis,
     run_details,
+    with_catalog,
 )
+from gui.model.faults import point_number
+from gui.model.remedies import for_gui
 from gui.qt.background import Background, JobDone
+from gui.qt.report_view import ReportView
+from gui.qt.tables import fit_columns
 from instrument.plans.planfile import KINDS
 from instrument.run.catalog import CATALOG_NAME, Catalog, RunRow
 
@@ -57,7 +69,9 @@ def _table(columns: tuple[str, ...], name: str) -> QTableWidget:
     t.setEditTriggers(QAbstractItemView.NoEditTriggers)
     t.setSelectionBehavior(QAbstractItemView.SelectRows)
     t.horizontalHeader().setStretchLastSection(True)
+    fit_columns(t)
     return t
+
 
 
 def _fill(table: QTableWidget, rows) -> None:
@@ -77,6 +91,7 @@ class RunBrowser(QWidget):
     analysisDone = Signal(object)        # AnalysisOutcome
     analysisFailed = Signal(str, str)    # analysis name, message
     refreshed = Signal(int)              # rows listed
+    folderChanged = Signal(str)          # the runs folder now in use
 
     def __init__(self, background: Background, runs_dir: Path, *,
                  settings: QSettings | None = None, parent: QWidget | None = None) -> None:
@@ -89,6 +104,7 @@ class RunBrowser(QWidget):
         self.rows: list[RunRow] = []
         self.details: RunDetails | None = None
         self.outcome: AnalysisOutcome | None = None
+        self.report_view: ReportView | None = None
         self._query = 0
 
         self.folder = QLabel(str(self.runs_dir))
@@ -163,7 +179,7 @@ class RunBrowser(QWidget):
         lay = QVBoxLayout(self)
         lay.addWidget(split)
 
-        self.choose_folder.clicked.connect(self._ask_folder)
+        self.choose_folder.clicked.connect(self.ask_folder)
         self.refresh_button.clicked.connect(self.refresh)
         self.sample.returnPressed.connect(self.refresh)
         self.kind.currentIndexChanged.connect(lambda _: self.refresh())
@@ -176,6 +192,67 @@ class RunBrowser(QWidget):
         background.finished.connect(self._job_done)
         self.analysis_pool.finished.connect(self._analysis_done)
 
+    def _fit_options_box(self) -> QGroupBox:
+        """The fit's options, as ``scatterlab fit`` takes them (empty: the default)."""
+        from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+
+        box = QGroupBox("Fit options")
+        box.setObjectName("fit_options")
+        box.setCheckable(False)
+
+        def number(name: str, suffix: str, decimals: int, top: float, tip: str
+                   ) -> QDoubleSpinBox:
+            w = QDoubleSpinBox()
+            w.setObjectName(name)
+            w.setRange(0.0, top)
+            w.setDecimals(decimals)
+            w.setSuffix(suffix)
+            w.setSpecialValueText("default")  # 0: the option not given
+            w.setToolTip(tip)
+            return w
+
+        self.opt_distance = number(
+            "opt_distance_mm", " mm", 2, 1e5, "sample-to-receiver distance; default: the "
+            "profile's distance plus the camera_z read-back (--distance-mm)")
+        self.opt_distance_u = number(
+            "opt_distance_u_mm", " mm", 3, 1e3, "standard uncertainty of that distance; "
+            "default: unknown, left out of the common scale (--distance-u-mm)")
+        self.opt_power_u = number(
+            "opt_power_u", "", 4, 1.0, "relative standard uncertainty of the incident "
+            "power, e.g. 0.02 for 2 %; default: unknown (--incident-power-u)")
+        self.opt_detector = QComboBox()
+        self.opt_detector.setObjectName("opt_detector")
+        for d in FIT_DETECTORS:
+            self.opt_detector.addItem(d.replace("_", " "), d)
+        self.opt_detector.setToolTip("the detector whose readings are reduced (--detector)")
+        self.opt_models = QListWidget()
+        self.opt_models.setObjectName("opt_models")
+        self.opt_models.setToolTip("candidate models; the selection rule (BIC) picks one "
+                                   "(--models)")
+        for m in DEFAULT_MODELS:
+            item = QListWidgetItem(m)
+            item.setFlags(item.flags() | Qt.ItemIsUserCheckable)
+            item.setCheckState(Qt.Checked)
+            self.opt_models.addItem(item)
+        self.opt_models.setMaximumHeight(110)
+        form = QFormLayout(box)
+        form.addRow("Distance (mm)", self.opt_distance)
+        form.addRow("Distance uncertainty (mm)", self.opt_distance_u)
+        form.addRow("Incident power uncertainty", self.opt_power_u)
+        form.addRow("Detector", self.opt_detector)
+        form.addRow("Candidate models", self.opt_models)
+        return box
+
+    def fit_settings(self) -> FitSettings:
+        """The fit options as set in the Analysis tab."""
+        def value(w: QDoubleSpinBox) -> float | None:
+            return w.value() if w.value() > 0 else None
+
+        models = tuple(self.opt_models.item(k).text() for k in range(self.opt_models.count())
+                       if self.opt_models.item(k).checkState() == Qt.Checked)
+        return FitSettings(value(self.opt_distance), value(self.opt_distance_u),
+                           value(self.opt_power_u), models, self.opt_detector.currentData())
+
     def _analysis_page(self) -> QWidget:
         page = QWidget()
         self.analysis = QComboBox()
@@ -183,7 +260,9 @@ class RunBrowser(QWidget):
         self.analyse = QPushButton("Run analysis")
         self.analyse.setObjectName("analyse")
         self.analyse.setEnabled(False)
-        self.open_report = QPushButton("Open HTML report")
+        self.open_report = QPushButton("Show report")
+        self.open_report.setToolTip("the HTML report with its figures, in this window; "
+                                    "a web browser from there on request")
         self.open_report.setObjectName("open_report")
         self.open_report.setEnabled(False)
         self.busy = QProgressBar()
@@ -213,23 +292,32 @@ class RunBrowser(QWidget):
         top.addWidget(self.open_report)
         lay = QVBoxLayout(page)
         lay.addLayout(top)
+        self.fit_options = self._fit_options_box()
+        lay.addWidget(self.fit_options)
         lay.addWidget(self.busy)
         lay.addWidget(self.analysis_summary)
         lay.addWidget(scroll, 1)
         self.analyse.clicked.connect(self.start_analysis)
+        self.analysis.currentIndexChanged.connect(
+            lambda _: self.fit_options.setVisible(self.analysis.currentData() == "fit"))
         self.open_report.clicked.connect(self._open_report)
         self.result_table_widgets: list[QTableWidget] = []
         return page
 
     # catalog ------------------------------------------------------------------------
     def set_runs_dir(self, folder: str | Path) -> None:
+        """List ``folder``'s runs and make it the runs folder now: the main window writes
+        new runs there (``folderChanged``), and the next launch opens it."""
         self.runs_dir = Path(folder)
         self.folder.setText(str(self.runs_dir))
+        self.folder.setToolTip(f"runs folder: new runs are written here\n{self.runs_dir}")
         if self.settings is not None:
             self.settings.setValue("runs_dir", str(self.runs_dir))
+        self.details = None
         self.refresh()
+        self.folderChanged.emit(str(self.runs_dir))
 
-    def _ask_folder(self) -> None:
+    def ask_folder(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Runs folder", str(self.runs_dir))
         if folder:
             self.set_runs_dir(folder)
@@ -261,6 +349,9 @@ class RunBrowser(QWidget):
                             f"{r.n_points}/{r.n_planned}") for r in rows])
         if selected is not None:
             self.select(selected.run_id)
+            now = self.selected_row()
+            if now is not None and now != selected:
+                self._selected()  # the run moved on (resumed, finished): read it again
         self.refreshed.emit(len(rows))
 
     def selected_row(self) -> RunRow | None:
@@ -286,6 +377,7 @@ class RunBrowser(QWidget):
         self.background.submit("details", lambda: (row, run_details(path)))
 
     def _show_details(self, row: RunRow, d: RunDetails) -> None:
+        d = with_catalog(d, row)
         self.details = d
         _fill(self.provenance, list(d.provenance.items()))
         self.plan_text.setPlainText(d.plan_text)
@@ -293,12 +385,14 @@ class RunBrowser(QWidget):
                               i.get("serial", ""), i.get("firmware", ""), i.get("driver", ""),
                               i.get("url", "")) for role, i in d.devices.items()])
         _fill(self.faults, [(time.strftime("%H:%M:%S", time.localtime(e.get("time", 0))),
-                             str(e.get("index", "")), e.get("device", ""), e.get("cause", ""),
+                             point_number(e.get("index")), e.get("device", ""),
+                             for_gui(str(e.get("cause", ""))),
                              e.get("action", "")) for e in d.faults])
         self.tabs.setTabText(3, f"Faults ({len(d.faults)})")
-        status = row.status if row.status != d.status and row.status == "interrupted" \
-            else d.status
-        self.resume.setEnabled(status in RESUMABLE and d.n_points < d.n_planned)
+        refusal = resume_refusal(d)
+        self.resume.setEnabled(refusal is None)
+        self.resume.setToolTip(refusal or f"continue {d.path.name} in its own file on "
+                               f"bench {d.bench_name!r}")
         self.analysis.clear()
         for name in d.analyses:
             self.analysis.addItem(name, name)
@@ -321,7 +415,18 @@ class RunBrowser(QWidget):
         self.open_report.setEnabled(False)
         self.analysis_summary.setText(f"{name} of {d.path.name} running …")
         path = d.path
+        if name == "fit":
+            settings = self.fit_settings()
+            if not any(True for _ in settings.models):
+                self._analysis_refused("Candidate models: check at least one")
+                return None
+            return self.analysis_pool.submit(name, lambda: run_analysis(name, path, settings))
         return self.analysis_pool.submit(name, lambda: run_analysis(name, path))
+
+    def _analysis_refused(self, why: str) -> None:
+        self.busy.hide()
+        self.analyse.setEnabled(True)
+        self.analysis_summary.setText(f"not started: {why}")
 
     def _analysis_done(self, done: JobDone) -> None:
         self.busy.hide()
@@ -377,9 +482,13 @@ class RunBrowser(QWidget):
         self._tables_layout.addWidget(widget)
         self.result_table_widgets.append(widget)
 
-    def _open_report(self) -> None:
-        if self.outcome is not None and self.outcome.report is not None:
-            QDesktopServices.openUrl(QUrl.fromLocalFile(str(self.outcome.report)))
+    def _open_report(self) -> ReportView | None:
+        if self.outcome is None or self.outcome.report is None:
+            return None
+        if self.report_view is None:
+            self.report_view = ReportView(self)
+        self.report_view.show_report(self.outcome.report)
+        return self.report_view
 
     # background results ---------------------------------------------------------------
     def _job_done(self, done: JobDone) -> None:

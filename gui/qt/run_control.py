@@ -21,8 +21,11 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model import format as fmt
-from gui.model.faults import FaultLog, PauseState, Recovery, recovery_for
+from gui.model.faults import FaultLog, PauseState, Recovery, point_number, recovery_for
+from gui.model.live import ProgressClock
 from gui.model.session import BenchSession, RunHandle
+from gui.qt.ask import Questions
+from gui.qt.tables import fit_columns
 from instrument.run.events import (
     Event,
     Fault,
@@ -49,10 +52,13 @@ class FaultPanel(QWidget):
         self.table.setObjectName("faults")
         self.table.setHorizontalHeaderLabels(["time", "point", "device", "cause", "action",
                                               "what it means"])
+        self.table.horizontalHeaderItem(1).setToolTip(
+            "the point's number as the progress counts it (from 1)")
         self.table.setEditTriggers(QAbstractItemView.NoEditTriggers)
         self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
         self.table.horizontalHeader().setStretchLastSection(True)
         self.table.setWordWrap(True)
+        fit_columns(self.table)
         self.copy = QPushButton("Copy")
         self.copy.clicked.connect(self.copy_selected)
         self.summary = QLabel("no faults")
@@ -72,7 +78,7 @@ class FaultPanel(QWidget):
             k -= 1
         self.table.insertRow(k)
         cells = (time.strftime("%H:%M:%S", time.localtime(row.time)),
-                 "" if row.index is None else str(row.index), row.device, row.cause,
+                 point_number(row.index), row.device, row.cause,
                  row.action, row.meaning)
         brush = QBrush(QColor(SEVERITY_COLOURS[row.severity]))
         for j, text in enumerate(cells):
@@ -107,10 +113,13 @@ class RunControl(QWidget):
     finished = Signal(object)  # RunFinished
 
     def __init__(self, session: BenchSession, fault_panel: FaultPanel,
-                 parent: QWidget | None = None) -> None:
+                 parent: QWidget | None = None, *, questions: Questions | None = None
+                 ) -> None:
         super().__init__(parent)
         self.setObjectName("run_control")
         self.session = session
+        self.questions = questions or Questions()
+        self.clock = ProgressClock()
         self.faults = fault_panel
         self.run: RunHandle | None = None
         self.pause_state: PauseState | None = None
@@ -165,16 +174,32 @@ class RunControl(QWidget):
         lay.addStretch(1)
         self.pause.clicked.connect(self.session.pause_run)
         self.resume.clicked.connect(lambda: self.session.resume_run())
-        self.abort.clicked.connect(self.session.abort_run)
+        self.abort.clicked.connect(self.confirm_abort)
         self.retry.clicked.connect(lambda: self.choose(Recovery.RETRY))
         self.skip.clicked.connect(lambda: self.choose(Recovery.SKIP))
         self.abort_run.clicked.connect(lambda: self.choose(Recovery.ABORT))
         self._buttons(None)
 
+    def confirm_abort(self) -> bool:
+        """Abort the run after asking (the points not yet measured are lost to this
+        session; *Stop all* and Esc abort at once, they are the safety path)."""
+        run = self.session.run
+        if run is None:
+            return False
+        done, total = run.engine.n_done, len(run.plan.points)
+        if not self.questions.ask(
+                "abort", self, "Abort the run?",
+                f"Abort run {run.path.name}? {done} of {total} points are measured.\n\n"
+                "Motion stops, the light goes off and the file is closed; it stays valid, "
+                "and Resume this run (Runs dock) measures the missing points later."):
+            return False
+        return self.session.abort_run()
+
     def choose(self, choice: Recovery) -> None:
         """Carry out the operator's choice after a pause."""
         if choice is Recovery.ABORT:
-            self.session.abort_run()
+            if not self.confirm_abort():
+                return
         elif choice is Recovery.SKIP:
             self.session.resume_run(skip_point=True)
         else:
@@ -203,6 +228,7 @@ class RunControl(QWidget):
     def on_event(self, ev: Event) -> None:
         match ev:
             case RunStarted():
+                self.clock.start(ev.n_done)
                 self.progress.setRange(0, max(1, ev.n_total))
                 self.progress.setValue(ev.n_done)
                 what = "resumed" if ev.n_done else "running"
@@ -211,12 +237,16 @@ class RunControl(QWidget):
                 self._buttons("running")
             case Progress():
                 self.progress.setValue(ev.n_done)
+                elapsed, left = self.clock.times(ev)  # pauses left out of both
+                paused = self.clock.paused_s()
+                note = f" (paused {fmt.duration(paused)} not counted)" if paused >= 1 else ""
                 self.eta.setText(f"{ev.n_done}/{ev.n_total} points, elapsed "
-                                 f"{fmt.duration(ev.elapsed_s)}, ETA {fmt.duration(ev.eta_s)}")
+                                 f"{fmt.duration(elapsed)}, ETA {fmt.duration(left)}{note}")
             case Fault():
                 self._last_fault = ev
                 self.faults.add(ev)
             case Paused():
+                self.clock.paused()
                 self.pause_state = recovery_for(ev, self._last_fault)
                 self.state.setText(f"paused: {ev.reason}")
                 self._buttons("paused")
@@ -225,6 +255,7 @@ class RunControl(QWidget):
                     self.skip.setVisible(Recovery.SKIP in self.pause_state.choices)
                     self.recovery.show()
             case Resumed():
+                self.clock.resumed()
                 self.pause_state = None
                 self.recovery.hide()
                 self.state.setText("running")

@@ -75,3 +75,40 @@ def test_the_hemisphere_map_fills(qtbot, make_window, fast_bench_file, tmp_path)
     theta = np.hypot(x, y)
     data = read_run(run.path)
     assert np.allclose(np.sort(theta), np.sort(data.theta_r), atol=1e-3)
+
+
+def test_in_plane_legend_beside_the_data_and_log_labels_with_decades(qtbot):
+    from gui.model.live import LiveData
+    from gui.qt.live_plot import LivePlot
+    from instrument.run.events import PointCompleted
+
+    plot = LivePlot()
+    qtbot.addWidget(plot)
+    plot.resize(800, 500)
+    plot.show()
+    plot.start("brdf_in_plane")
+    axis = plot.in_plane.getAxis("left")
+    # empty: the labels still name a decade (not a bare 2 … 9)
+    vb = plot.in_plane.getViewBox()
+    lo, hi = vb.viewRange()[1]
+    labels = axis.tickStrings([v for _, vs in axis.tickValues(lo, hi, 400) for v in vs],
+                              1.0, 1.0)
+    assert labels and all("10" in t for t in labels)
+    angles = np.array([(20.0 if k < 10 else 40.0, 180.0, -60 + 10 * (k % 10), 0.0)
+                       for k in range(20)])
+    live = LiveData("brdf_in_plane", 20, planned_angles=angles)
+    for k in range(20):
+        live.on_event(PointCompleted(k, "", "ok", {}, tuple(angles[k]), 1000.0,
+                                     float("nan"), 2e-3 * (1 + k % 10), 0))
+    plot.update_from(live.snapshot())
+    assert plot.n_plotted == 20 and len(plot._curves) == 2
+    # the legend is beside the plot, never over its data
+    legend = plot.in_plane_legend
+    assert "θi = -20°" in legend.text() and "θi = -40°" in legend.text()  # φi = 180°
+    qtbot.waitUntil(lambda: legend.isVisible() and legend.width() > 0, timeout=10000)
+    assert legend.geometry().left() >= plot.in_plane.geometry().right()
+    qtbot.waitUntil(lambda: vb.viewRange()[1][1] < -1.0, timeout=10000)  # auto-ranged
+    lo, hi = vb.viewRange()[1]  # 2e-3 … 2e-2: about one decade
+    labels = axis.tickStrings([v for _, vs in axis.tickValues(lo, hi, 400) for v in vs],
+                              1.0, 1.0)
+    assert "10⁻²" in labels and all("×10" in t or t.startswith("10") for t in labels)

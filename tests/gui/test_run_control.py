@@ -88,6 +88,7 @@ def test_pause_resume_and_abort(qtbot, make_window, fast_bench_file, tmp_path):
         n_paused = run.live.n_received
         w.run_control.resume.click()
         drive(qtbot, clock, lambda: run.live.n_received >= n_paused + 1, "a point more")
+        w.questions.answer("abort", True)  # Abort asks first
         w.run_control.abort.click()
         ev = wait_end(qtbot, w)
     assert ev.status == "aborted" and ev.n_done < ev.n_total
@@ -122,8 +123,11 @@ def test_a_device_fault_pauses_the_run_and_the_operator_chooses(
     assert rows and all(r[2] == "detector_theta" for r in rows)
     assert rows[-1][4] == "pause" and "disconnected" in rows[-1][3]
     failed = rc.pause_state.index
+    # the fault's point is numbered as the progress counts: the point after those done
+    assert rows[-1][1] == str(failed + 1)
     assert get_world("sim").snapshot().source.on is False
     faults.clear()  # plugged back in
+    w.questions.answer("abort", True)
     {"retry": rc.retry, "skip": rc.skip, "abort": rc.abort_run}[choice].click()
     ev = wait_end(qtbot, w)
     data = read_run(run.path)
@@ -207,5 +211,6 @@ def test_space_pauses_and_resumes_but_not_while_typing(qtbot, make_window, fast_
         drive(qtbot, clock, lambda: run.engine.state is EngineState.PAUSED, "the pause")
         qtbot.keyClick(w.run_control.progress, Qt.Key_Space)
         qtbot.waitUntil(lambda: run.engine.state is EngineState.RUNNING, timeout=60000)
+        w.questions.answer("abort", True)  # Abort asks first
         w.run_control.abort.click()
         assert wait_end(qtbot, w).status == "aborted"

@@ -11,8 +11,9 @@ def test_severity_and_meaning_follow_the_action():
     rehome = describe(Fault("sample_theta", "x", "rehome", 3))
     assert rehome.severity == "warning" and "re-homes" in rehome.meaning
     pause = describe(Fault("detector_theta", "disconnected", "pause", 4))
-    assert pause.severity == "error" and "paused at point 4" in pause.meaning
-    assert describe(Fault("camera", "x", "skip point", 5)).meaning.startswith("point 5")
+    # the plan index is 0-based, the operator's count (the progress) from 1
+    assert pause.severity == "error" and "paused at point 5" in pause.meaning
+    assert describe(Fault("camera", "x", "skip point", 5)).meaning.startswith("point 6")
 
 
 def test_recovery_choices():
