@@ -32,6 +32,7 @@ from instrument.pipelines.brdf.attenuation import (
 from instrument.pipelines.brdf.reduce import reduce_run
 from instrument.plans import build_plan, parse_plan
 from instrument.plans.planfile import PlanError
+from instrument.run.recovery import recover
 from instrument.run.runfile import read_run
 
 ROOT = Path(__file__).parents[4]
@@ -161,6 +162,9 @@ def test_the_engine_reads_the_clipping_peak_through_the_next_nd_filter(tmp_path)
     assert 0.05 < pm[3] / pm[2] < 2.0
     # after the peak the wheel goes back to the open slot within one point
     assert slots[-1] in (-1, 2)
+    # the journal carries the filter: a recovery rewrites the same column
+    recover(path)
+    assert np.array_equal(nd_slots(read_run(path), rows), slots)
 
 
 def test_without_a_wheel_the_peak_is_clipped_and_the_column_says_open(tmp_path):
