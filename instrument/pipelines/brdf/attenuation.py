@@ -36,8 +36,8 @@ import numpy as np
 from analysis.brdf.reduction import camera_signal
 from instrument.run.runfile import RunData, read_run
 
-__all__ = ["NOMINAL_U_REL", "Transmission", "apply_nd", "calibrate_nd", "nd_filters",
-           "nd_slots", "nd_transmissions"]
+__all__ = ["NOMINAL_U_REL", "Transmission", "apply_nd", "calibrate_nd",
+           "calibration_run_path", "nd_filters", "nd_slots", "nd_transmissions"]
 
 #: Relative standard uncertainty assumed for an uncalibrated filter's nominal 10^−od
 #: (absorptive ND glass is sold within several per cent of nominal at one wavelength).
@@ -86,13 +86,18 @@ def nd_slots(run: RunData, rows: np.ndarray) -> np.ndarray:
     return np.asarray(col)[rows].astype(np.int64)
 
 
-def _resolve(run: RunData, src: str) -> Path:
-    """A calibration run named by path, or by run id next to ``run``'s file."""
+def calibration_run_path(run: RunData, src: str) -> Path:
+    """A calibration run named by path, or by run id (or name) next to ``run``'s file."""
     path = Path(src)
     if not path.is_absolute() and not path.exists():
         path = run.path.parent / src
         if not path.suffix:
             path = path.with_suffix(".h5")
+    return path
+
+
+def _resolve(run: RunData, src: str) -> Path:
+    path = calibration_run_path(run, src)
     if not path.exists():
         raise ValueError(f"ND calibration run {src!r} not found (looked for {path})")
     return path

@@ -39,7 +39,12 @@ from analysis.brdf.reduction import (
 from analysis.radiometry import FlatField, flat_field
 from instrument.bench.angles import AngularModel, angular_model
 from instrument.bench.camera_calibration import CameraCalibration
-from instrument.pipelines.brdf.attenuation import apply_nd, nd_slots, nd_transmissions
+from instrument.pipelines.brdf.attenuation import (
+    apply_nd,
+    calibration_run_path,
+    nd_slots,
+    nd_transmissions,
+)
 from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
 
@@ -186,11 +191,7 @@ def _flat_for(run: RunData, opts: ReductionOptions
     src = opts.flat_run or run.calibration.get("flat")
     if src is None:
         return None, "none", 0
-    path = Path(src)
-    if not path.is_absolute() and not path.exists():
-        path = run.path.parent / src  # a run id or a name next to the run file
-        if not path.suffix:
-            path = path.with_suffix(".h5")
+    path = calibration_run_path(run, src)
     flat, n = _flat_and_frames(path)
     return flat, str(path), n
 
