@@ -29,7 +29,7 @@ from instrument.pipelines.brdf.attenuation import (
     calibrate_nd,
     nd_slots,
 )
-from instrument.pipelines.brdf.reduce import reduce_run
+from instrument.pipelines.brdf.reduce import ReductionOptions, reduce_run
 from instrument.plans import build_plan, parse_plan
 from instrument.plans.planfile import PlanError
 from instrument.run.recovery import recover
@@ -215,3 +215,28 @@ def test_the_nd_calibration_plan_reads_every_filter_and_refuses_band_pass_slots(
     mixed = text.replace("[1, 2, 3, 4]", "[1, 4]")
     with pytest.raises(PlanError, match="mixes neutral-density filters with band-pass"):
         build_plan(parse_plan(mixed), load_profile(tmp_path / "mixed.toml"))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_the_sharp_peak_through_calibrated_filters_is_in_the_fit(tmp_path, capsys):
+    """1024-px camera (the receiver model is the full sensor's): the peak at θi = 20° read
+    through ND1, the filters calibrated by the ND plan, fitted with the true family."""
+    bench = sharp_bench(tmp_path, small=False)
+    path = run_plan(tmp_path, PEAK_PLAN, bench, "peak")
+    cal = run_plan(tmp_path, (ROOT / "examples" / "calibration_nd.toml").read_text(
+        encoding="utf-8"), bench, "cal")
+    capsys.readouterr()
+    assert main(["fit", str(path), "--nd-calibration", str(cal), "--models", "lambert+ggx",
+                 "--no-cv", "--no-write"]) == 0
+    out = capsys.readouterr().out
+    assert "the model describes the data" in out and "clipped" not in out, out
+    assert "not calibrated" not in out
+    for key, truth in (("lambert.rho", 0.3), ("ggx.ks", 0.5), ("ggx.alpha", 0.05)):
+        m = re.search(rf"^\s+{re.escape(key)}\s+([-\d.e+]+) ± ([\d.e+-]+)", out, re.M)
+        assert m, out
+        value, sigma = float(m.group(1)), float(m.group(2))
+        assert abs(value - truth) <= 2.0 * sigma, (key, value, sigma)
+    red = reduce_run(path, ReductionOptions(nd_calibration=str(cal)))
+    assert not red.points.clipped.any()
+    assert "calibration run" in " ".join(red.provenance["nd_filters"])
