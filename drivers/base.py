@@ -1032,12 +1032,18 @@ class FilterSpec:
     """What sits in one filter-wheel slot, as the bench configuration describes it.
 
     A band-pass filter has a centre wavelength and a full width at half maximum, both in
-    nm; a slot with neither is empty (clear aperture, passes everything).
+    nm. A neutral-density filter has an optical density ``od`` (its nominal transmission
+    is 10^−od) and may carry a calibrated ``transmission`` with its standard uncertainty
+    ``u_transmission`` (from the ND calibration plan or the maker's certificate). A slot
+    with none of them is empty (clear aperture, passes everything).
     """
 
     center_nm: float | None = None
     bandwidth_nm: float | None = None
     label: str = ""
+    od: float | None = None
+    transmission: float | None = None
+    u_transmission: float | None = None
 
     def __post_init__(self) -> None:
         if (self.center_nm is None) != (self.bandwidth_nm is None):
@@ -1048,27 +1054,54 @@ class FilterSpec:
                                 ("bandwidth_nm", self.bandwidth_nm)):
                 if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                     raise ValueError(f"filter {what} must be a finite number > 0, got {value!r}")
+        if self.od is not None:
+            if self.center_nm is not None:
+                raise ValueError("a filter is band-pass (center_nm, bandwidth_nm) or neutral "
+                                 f"density (od), not both: {self}")
+            if not (isinstance(self.od, int | float) and math.isfinite(self.od)
+                    and self.od > 0):
+                raise ValueError(f"filter od must be a finite number > 0, got {self.od!r}")
+        elif self.transmission is not None or self.u_transmission is not None:
+            raise ValueError("transmission and u_transmission belong to a neutral-density "
+                             f"filter: give its od too, got {self}")
+        if self.transmission is not None and not (
+                isinstance(self.transmission, int | float) and 0 < self.transmission <= 1):
+            raise ValueError(f"filter transmission must be in (0, 1], got "
+                             f"{self.transmission!r}")
+        if self.u_transmission is not None and not (
+                isinstance(self.u_transmission, int | float)
+                and math.isfinite(self.u_transmission) and self.u_transmission >= 0):
+            raise ValueError(f"filter u_transmission must be a finite number >= 0, got "
+                             f"{self.u_transmission!r}")
 
     @property
     def is_empty(self) -> bool:
-        return self.center_nm is None
+        return self.center_nm is None and self.od is None
+
+    @property
+    def is_neutral_density(self) -> bool:
+        return self.od is not None
 
     @classmethod
     def parse(cls, spec: FilterSpec | Mapping[str, Any] | None) -> FilterSpec:
-        """A spec from its configuration form: a table ``{center_nm, bandwidth_nm, label}``."""
+        """A spec from its configuration form: a table ``{center_nm, bandwidth_nm, label}``
+        (band-pass) or ``{od, transmission, u_transmission, label}`` (neutral density)."""
         if spec is None:
             return cls()
         if isinstance(spec, FilterSpec):
             return spec
+        known = ("center_nm", "bandwidth_nm", "label", "od", "transmission", "u_transmission")
         if not isinstance(spec, Mapping):
-            raise TypeError(f"a filter is a table {{center_nm, bandwidth_nm, label}}, "
-                            f"got {spec!r}")
-        unknown = set(spec) - {"center_nm", "bandwidth_nm", "label"}
+            raise TypeError(f"a filter is a table {{center_nm, bandwidth_nm, label}} or "
+                            f"{{od, transmission, u_transmission, label}}, got {spec!r}")
+        unknown = set(spec) - set(known)
         if unknown:
-            raise ValueError(f"unknown filter keys {sorted(unknown)}; "
-                             "known: center_nm, bandwidth_nm, label")
+            raise ValueError(f"unknown filter keys {sorted(unknown)}; known: "
+                             + ", ".join(known))
         return cls(center_nm=spec.get("center_nm"), bandwidth_nm=spec.get("bandwidth_nm"),
-                   label=str(spec.get("label", "")))
+                   label=str(spec.get("label", "")), od=spec.get("od"),
+                   transmission=spec.get("transmission"),
+                   u_transmission=spec.get("u_transmission"))
 
 
 def parse_filters(filters: Mapping[Any, Any] | None) -> dict[int, FilterSpec]:

@@ -6,6 +6,10 @@ full width of the top hat) and ``blocking`` outside. Real interference filters h
 edges and a finite optical density; the flat top is enough to make the light at the sample
 follow the selected filter.
 
+A neutral-density filter (:class:`NeutralDensity`) passes every wavelength with the same
+``transmission``: the slot's true value, hidden from the instrument, which knows only the
+nominal optical density of the profile and what its calibration plan measures.
+
 The source's spectrum is equally simple: a line at ``wavelength_nm`` when its
 ``bandwidth_nm`` is 0 (a laser), otherwise a flat band of that full width around
 ``wavelength_nm`` with uniform spectral power. :func:`transmit` returns the light after
@@ -19,7 +23,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol, TypeVar
 
-__all__ = ["FilterBand", "Light", "parse_bands", "transmit"]
+__all__ = ["FilterBand", "Light", "NeutralDensity", "parse_bands", "transmit"]
 
 
 class Light(Protocol):
@@ -57,10 +61,24 @@ class FilterBand:
         return self.center_nm - half, self.center_nm + half
 
 
-def transmit(source: L, band: FilterBand | None) -> L:
+@dataclass(frozen=True)
+class NeutralDensity:
+    """A neutral-density filter: the same ``transmission`` (0, 1] at every wavelength."""
+
+    transmission: float
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.transmission) and 0.0 < self.transmission <= 1.0):
+            raise ValueError("a neutral-density filter's transmission must be in (0, 1], "
+                             f"got {self.transmission}")
+
+
+def transmit(source: L, band: FilterBand | NeutralDensity | None) -> L:
     """The light after ``band`` (``None``: an empty slot, everything passes)."""
     if band is None:
         return source
+    if isinstance(band, NeutralDensity):
+        return replace(source, power_w=source.power_w * band.transmission)
     low, high = band.edges_nm
     if source.bandwidth_nm <= 0.0:  # a line: in the band or blocked
         inside = low <= source.wavelength_nm <= high
@@ -78,10 +96,12 @@ def transmit(source: L, band: FilterBand | None) -> L:
     return replace(source, power_w=source.power_w * t)
 
 
-def parse_bands(filters: Mapping[Any, Any] | None) -> dict[int, FilterBand]:
+def parse_bands(filters: Mapping[Any, Any] | None
+                ) -> dict[int, FilterBand | NeutralDensity]:
     """Slot (1-based; TOML gives string keys) → :class:`FilterBand` from plain tables
-    ``{center_nm, bandwidth_nm[, peak_transmission, blocking]}``; empty tables are clear."""
-    out: dict[int, FilterBand] = {}
+    ``{center_nm, bandwidth_nm[, peak_transmission, blocking]}``, :class:`NeutralDensity`
+    from ``{transmission}``; empty tables are clear."""
+    out: dict[int, FilterBand | NeutralDensity] = {}
     for key, spec in (filters or {}).items():
         try:
             slot = int(key)
@@ -89,7 +109,7 @@ def parse_bands(filters: Mapping[Any, Any] | None) -> dict[int, FilterBand]:
             raise ValueError(f"filter slots are numbered from 1, got {key!r}") from None
         if slot < 1:
             raise ValueError(f"filter slots are numbered from 1, got {key!r}")
-        if isinstance(spec, FilterBand):
+        if isinstance(spec, FilterBand | NeutralDensity):
             out[slot] = spec
             continue
         if not isinstance(spec, Mapping):
@@ -97,7 +117,11 @@ def parse_bands(filters: Mapping[Any, Any] | None) -> dict[int, FilterBand]:
         table = {k: v for k, v in spec.items() if k != "label"}
         if not table:
             continue  # an empty slot
+        if set(table) == {"transmission"}:
+            out[slot] = NeutralDensity(float(table["transmission"]))
+            continue
         known = {"center_nm", "bandwidth_nm", "peak_transmission", "blocking"}
+        # (a neutral-density filter is {transmission} alone)
         unknown = set(table) - known
         if unknown:
             raise ValueError(f"filter {slot}: unknown keys {sorted(unknown)}; known "

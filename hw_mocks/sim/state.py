@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hw_mocks import registry
-from hw_mocks.sim.filters import FilterBand, parse_bands
+from hw_mocks.sim.filters import FilterBand, NeutralDensity, parse_bands
 
 __all__ = ["ROLES", "BenchPose", "LightPath", "PowerMeterHead", "Scene", "SourceState",
            "WorldState", "rotation"]
@@ -139,13 +139,14 @@ class LightPath:
 
     ``shutter`` is an SC10 emulator (``simsc10://name``): the light passes while its blade
     is open. ``filter_wheel`` is an FW102C emulator (``simfw102c://name``) whose slots hold
-    ``filters`` (slot → :class:`~hw_mocks.sim.filters.FilterBand`; slots not listed are
-    clear); while it turns, or stands jammed between slots, the beam is blocked.
+    ``filters`` (slot → :class:`~hw_mocks.sim.filters.FilterBand` or
+    :class:`~hw_mocks.sim.filters.NeutralDensity`; slots not listed are clear); while it
+    turns, or stands jammed between slots, the beam is blocked.
     """
 
     shutter: str | None = None
     filter_wheel: str | None = None
-    filters: Mapping[int, FilterBand] = field(default_factory=dict)
+    filters: Mapping[int, FilterBand | NeutralDensity] = field(default_factory=dict)
 
     @classmethod
     def from_config(cls, shutter: Any = None, filter_wheel: Any = None) -> LightPath:

@@ -58,6 +58,10 @@ def add_fit_options(p: argparse.ArgumentParser,
     p.add_argument("--flat", default=None,
                    help="flat_field run for the PRNU correction (default: calibration.flat)")
     p.add_argument("--signature", default=None, help="instrument-signature run to subtract")
+    p.add_argument("--nd-calibration", default=None, metavar="RUN",
+                   help="ND calibration run for the transmissions of the neutral-density "
+                        "filters the camera read the peak through (default: calibration.nd, "
+                        "else the profile's values)")
     p.add_argument("--incident-power-w", type=float, default=None,
                    help="incident power on the sample (absolute method)")
     p.add_argument("--incident-power-u", type=float, default=None,
@@ -123,6 +127,7 @@ def fit_options(args: argparse.Namespace) -> dict:
         "camera_calibration": path("camera_calibration"), "flat_run": path("flat"),
         "reference_run": path("reference"), "signature_run": path("signature"),
         "reference_table": path("reference_table"), "beam_radius_mm": args.beam_radius_mm,
+        "nd_calibration": path("nd_calibration"),
         "receiver_geometry": not args.point_receiver,
     }
     return {

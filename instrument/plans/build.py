@@ -431,6 +431,16 @@ def filter_bands(profile: BenchProfile) -> dict[int, tuple[float, float]] | None
     return out
 
 
+def nd_slots_of(profile: BenchProfile) -> set[int]:
+    """The slots of the bench's filter wheel that hold a neutral-density filter (``od``
+    in its ``options.filters``)."""
+    wheels = [d for d in profile.devices.values() if d.driver == "fw102c"]
+    if not wheels:
+        return set()
+    return {int(k) for k, v in dict(wheels[0].options.get("filters", {})).items()
+            if isinstance(v, dict) and "od" in v}
+
+
 def _check_power_meter_wavelength(spec: PlanSpec, profile: BenchProfile) -> None:
     """A power meter set to another wavelength than the light it reads corrects it with the
     wrong responsivity: refused before the run where the profile states both (a simulated
@@ -457,10 +467,21 @@ def _wavelength_axis(spec: PlanSpec, profile: BenchProfile, body: list[ScanPoint
 
     Refuses, naming the field, a bench without a filter wheel, a slot whose band the
     profile does not give, and (on a simulated bench, whose source spectrum is known) a
-    filter outside the source's band: its points would be dark.
+    filter outside the source's band: its points would be dark. A list that names a
+    neutral-density filter is an ND calibration (``examples/calibration_nd.toml``): its
+    slots are ND filters and open slots (the reference reading), all of one wavelength.
     """
     sp = spec.spectral or {}
     bands = filter_bands(profile)
+    nd = nd_slots_of(profile)
+    if nd & set(sp["filters"]):
+        both = sorted(set(sp["filters"]) & set(bands or {}))
+        if both:
+            raise PlanError(f"plan {spec.name!r}", [FieldError(
+                "spectral.filters", f"mixes neutral-density filters with band-pass slot(s) "
+                f"{both}: an ND calibration reads ND filters against an open slot")])
+        return [replace(p, meta=(*p.meta, ("filter", f)))
+                for f in sp["filters"] for p in body]
     errors = []
     if bands is None:
         errors.append(FieldError("spectral", f"bench {profile.name!r} has no filter wheel "

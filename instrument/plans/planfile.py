@@ -25,7 +25,7 @@ as a :class:`~instrument.bench.profile.FieldError` (``scan.theta_i[2]: ...``) in
     detectors = ["camera", "power_meter"]
 
     [calibration]                 # run ids or file paths of calibration runs (optional)
-    dark = "..."; reference = "..."; signature = "..."; flat = "..."
+    dark = "..."; reference = "..."; signature = "..."; flat = "..."; nd = "..."
 
 [scan] by kind (angles in degrees; a *range* is ``{start, stop, step}`` inclusive, or an
 explicit list):
@@ -150,7 +150,7 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
         _SCAN_CHECKS[kind](v, scan, "scan")
     acq = _acquisition(v, v.table(data, "acquisition"), "acquisition")
     calib = v.table(data, "calibration")
-    v.unknown(calib, "calibration", {"dark", "reference", "signature", "flat"})
+    v.unknown(calib, "calibration", {"dark", "reference", "signature", "flat", "nd"})
     calibration = {}
     for key in list(calib):
         val = v.string(calib, key, "calibration")

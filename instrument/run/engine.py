@@ -175,6 +175,11 @@ class RunEngine:
         self._lockin = getattr(bench, "lockin", None)
         self._wheel = getattr(bench, "filter_wheel", None)
         self._wheel_slot: int | None = None  # the slot this engine last put in the beam
+        # The attenuation ladder for a camera that saturates at its shortest exposure: the
+        # open slot, then the wheel's neutral-density filters by optical density (a wheel
+        # that carries a wavelength axis's band-pass filters is not used for this).
+        self._nd_ladder: list[tuple[int, float]] | None = None
+        self._nd_level = 0  # where the next point starts (predicted from the last one)
         # Light and dark frames switch the shutter when the bench has one, else the source;
         # with a shutter in front of a switchable source, the source is turned on with the
         # first light and left on (a laser is not cycled for every dark frame).
@@ -816,22 +821,40 @@ class RunEngine:
         lockin = self._lockin if policy.uses_lockin else None
         if acq.light != self._light and self._source is not None:
             self._set_light(acq.light)
-        if pm is not None:
-            st.power_w = self._read_power(pm, st)
-        if self._wheel is not None:
-            st.extra.update(self._filter_in_beam())
-        if lockin is not None:
-            role = self._roles[id(lockin)]
-            st.extra.update(self._retry(role, self._policies[role], "read lock-in",
-                                        lambda: self._read_lockin(policy.frames), st))
-        brackets: list[FrameData] = []
-        if cam is not None:
+        ladder = self._attenuation_ladder(st) if (cam is not None and acq.light
+                                                   and slot is None) else []
+        level = min(self._nd_level, len(ladder) - 1) if ladder else 0
+        while True:
+            if ladder:
+                self._select_filter(ladder[level][0], st)
+            if pm is not None:
+                st.power_w = self._read_power(pm, st)
+            if lockin is not None:
+                role = self._roles[id(lockin)]
+                st.extra.update(self._retry(role, self._policies[role], "read lock-in",
+                                            lambda: self._read_lockin(policy.frames), st))
+            brackets: list[FrameData] = []
+            if cam is None:
+                break
             role = self._roles[id(cam)]
             brackets = self._retry(role, self._policy(role), "acquire",
                                    lambda: self._brackets(cam, policy, acq), st)
+            main = _best_bracket(brackets)
+            if (main.saturated > 0 and level + 1 < len(ladder)
+                    and main.exposure_us <= self._shortest_exposure(cam, policy)):
+                # Clipped at the shortest exposure: the next denser filter, and the point
+                # is read again (every detector, so that all see the same light).
+                level += 1
+                continue
             st.frames.extend(brackets)
-            st.main = _best_bracket(brackets)
-            st.exposure_us = st.main.exposure_us
+            st.main = main
+            st.exposure_us = main.exposure_us
+            break
+        if ladder:
+            self._nd_level = self._next_level(ladder, level, st.main, cam, policy)
+            st.extra["nd_position"] = float(ladder[level][0]) if level else math.nan
+        if self._wheel is not None:
+            st.extra.update(self._filter_in_beam())
         dark_level = 0.0
         if policy.dark == "per_point" and acq.light and self._source is not None:
             # One dark phase for every detector of the point (light off: the shutter
@@ -915,6 +938,49 @@ class RunEngine:
         return {"lockin_dark_x_v": float(xy[0].mean()), "lockin_dark_y_v": float(xy[1].mean()),
                 "lockin_dark_u_v": float(np.sqrt(np.mean(xy.var(axis=1, ddof=1))
                                                  / xy.shape[1]))}
+
+    def _attenuation_ladder(self, st: _PointState) -> list[tuple[int, float]]:
+        """(slot, nominal transmission) of the open slot, then of the wheel's
+        neutral-density filters from the lightest to the densest; empty without any."""
+        if self._nd_ladder is None:
+            wheel = self._wheel
+            nd = sorted((f.od, s) for s, f in (wheel.filters.items() if wheel else ())
+                        if f.is_neutral_density)
+            if not nd:
+                self._nd_ladder = []
+                return []
+            role = self._roles[id(wheel)]
+            count = int(self._retry(role, self._policies[role], "read slot count",
+                                    lambda: wheel.position_count, st))
+            open_slot = next((k for k in range(1, count + 1) if wheel.filter_at(k).is_empty),
+                             None)
+            if open_slot is None:
+                raise _PointFailed("abort", role, "the filter wheel has neutral-density "
+                                   "filters but no open slot: leave one slot empty in the "
+                                   "profile's options.filters")
+            self._nd_ladder = [(open_slot, 1.0)] + [(s, 10.0 ** -od) for od, s in nd]
+        return self._nd_ladder
+
+    @staticmethod
+    def _shortest_exposure(cam: Camera, policy: AcquisitionPolicy) -> float:
+        return max(cam.exposure_range_us[0], policy.min_exposure_us)
+
+    def _next_level(self, ladder: list[tuple[int, float]], level: int,
+                    main: FrameData | None, cam: Camera, policy: AcquisitionPolicy) -> int:
+        """The filter the next point starts with: the lightest one through which this
+        point's brightest pixel would not have clipped at the shortest exposure (nominal
+        transmissions, 20 % margin). Neighbouring points of a scan see similar light, so
+        the wheel turns back only when the peak has been left behind."""
+        if main is None or not level:
+            return 0
+        emin = self._shortest_exposure(cam, policy)
+        full = float(2 ** _bit_depth(cam) - 1)
+        # DN per µs of the open beam (the dark level is small beside a clipping peak)
+        rate_open = float(np.max(main.data)) / main.exposure_us / ladder[level][1]
+        for k in range(level + 1):
+            if rate_open * ladder[k][1] * emin < 0.8 * full:
+                return k
+        return level
 
     def _select_filter(self, slot: int, st: _PointState) -> None:
         """Put ``slot`` in the beam (a wavelength axis): the wheel moves only when the slot

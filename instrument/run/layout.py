@@ -76,11 +76,13 @@ STR_FIELDS = ("label", "note")
 #: it overloaded; the filter in the beam (slot, centre wavelength and FWHM in nm); with
 #: ``dark = "per_point"``, the point's dark readings (light off: shutter closed or source
 #: off): the power meter's (W) and the lock-in's mean X, Y (V) and the standard error of
-#: one component (V rms).
+#: one component (V rms); the slot of the neutral-density filter the camera read the point
+#: through when it clipped at its shortest exposure (NaN: open beam).
 DETECTOR_FIELDS = ("lockin_r_v", "lockin_u_r_v", "lockin_x_v", "lockin_y_v",
                    "lockin_theta_deg", "lockin_sensitivity_v", "lockin_time_constant_s",
                    "lockin_overload", "filter_position", "wavelength_nm", "bandwidth_nm",
-                   "power_dark_w", "lockin_dark_x_v", "lockin_dark_y_v", "lockin_dark_u_v")
+                   "power_dark_w", "lockin_dark_x_v", "lockin_dark_y_v", "lockin_dark_u_v",
+                   "nd_position")
 FRAME_FIELDS = ("frame_point", "frame_exposure_us", "frame_light", "frame_timestamp",
                 "frame_saturated")
 STATUS_OK, STATUS_SKIPPED = 0, 1

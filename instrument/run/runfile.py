@@ -173,7 +173,9 @@ class RunData:
     frame_shape: tuple[int, ...] | None = None
     #: :data:`~instrument.run.layout.DETECTOR_FIELDS` columns the file has, also readable
     #: as attributes (``run.lockin_r_v``; ``None`` for a file without them).
-    #: ``filter_position`` is an integer slot (-1: none), ``lockin_overload`` 0 or 1.
+    #: ``filter_position`` is an integer slot (-1: none), ``lockin_overload`` 0 or 1,
+    #: ``nd_position`` the neutral-density filter's slot (-1: open beam; None for a file
+    #: written before the engine used ND filters: every reading was of the open beam).
     detectors: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __getattr__(self, name: str) -> Any:
@@ -302,7 +304,7 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
         return np.asarray(grp[name][()])
 
     detectors = {name: col(name) for name in DETECTOR_FIELDS if name in p}
-    for name, missing in (("filter_position", -1), ("lockin_overload", 0)):
+    for name, missing in (("filter_position", -1), ("lockin_overload", 0), ("nd_position", -1)):
         if name in detectors:
             v = detectors[name]
             detectors[name] = np.where(np.isfinite(v), v, missing).astype(np.int64)

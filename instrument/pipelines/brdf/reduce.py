@@ -39,6 +39,12 @@ from analysis.brdf.reduction import (
 from analysis.radiometry import FlatField, flat_field
 from instrument.bench.angles import AngularModel, angular_model
 from instrument.bench.camera_calibration import CameraCalibration
+from instrument.pipelines.brdf.attenuation import (
+    apply_nd,
+    calibration_run_path,
+    nd_slots,
+    nd_transmissions,
+)
 from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
 
@@ -87,6 +93,10 @@ class ReductionOptions:
         The beam's 1/e² divergence half-angle and the sample's radius; default the run's
         calibration or stored bench geometry, or on a simulated bench its source
         (collimated) and scene.
+    nd_calibration : path or None
+        An ND calibration run (``examples/calibration_nd.toml``) for the transmissions of
+        the neutral-density filters points were read through; default the run's
+        ``calibration.nd``, else the profile's values (:mod:`.attenuation`).
     """
 
     method: str = "absolute"
@@ -108,6 +118,7 @@ class ReductionOptions:
     receiver_geometry: bool = True
     beam_divergence_mrad: float | None = None
     sample_radius_mm: float | None = None
+    nd_calibration: str | None = None
 
 
 @dataclass(frozen=True)
@@ -180,11 +191,7 @@ def _flat_for(run: RunData, opts: ReductionOptions
     src = opts.flat_run or run.calibration.get("flat")
     if src is None:
         return None, "none", 0
-    path = Path(src)
-    if not path.is_absolute() and not path.exists():
-        path = run.path.parent / src  # a run id or a name next to the run file
-        if not path.suffix:
-            path = path.with_suffix(".h5")
+    path = calibration_run_path(run, src)
     flat, n = _flat_and_frames(path)
     return flat, str(path), n
 
@@ -507,6 +514,14 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
                          for r, rw in parts])
     p_s, u_s, cov_rel, n_clipped = (sig.power_w, sig.u_power_w, sig.covariance(u_resp),
                                     sig.clipped)
+    # readings through a neutral-density filter: divided by its transmission, whose error
+    # is shared by every point read through the same filter (in either pass)
+    nd_table, nd_warnings = nd_transmissions(run, opts.nd_calibration,
+                                             opts.camera_calibration)
+    slots = np.concatenate([nd_slots(r, rw) for r, rw in parts])
+    p_s, u_s, cov_nd = apply_nd(p_s, u_s, slots, nd_table)
+    if cov_nd is not None:
+        cov_rel = cov_nd if cov_rel is None else cov_rel + cov_nd
     prov: dict[str, Any] = {"run_id": run.run_id, "method": opts.method,
                             "detector": opts.detector,
                             "sigma_theta_i_deg": math.degrees(sig_i),
@@ -522,7 +537,11 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         prov["pixel_response_u_rel"] = u_resp
     receiver, rinfo = _receiver(run, rows, opts, cal)
     prov.update(rinfo)
-    warnings = _receiver_warnings(rinfo) + list(ang.warnings)
+    warnings = _receiver_warnings(rinfo) + list(ang.warnings) + nd_warnings
+    if (slots >= 0).any():
+        prov["nd_filters"] = [
+            f"{nd_table[int(k)].describe()}: {int(np.sum(slots == k))} point(s)"
+            for k in np.unique(slots[slots >= 0])]
     if sig.dark is not None:
         prov["detector_dark"] = sig.dark.describe("nW", 1e9)
         warnings.extend(_dark_warnings(sig.dark, opts))
@@ -551,8 +570,15 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         ref_cal = (ref_run.camera_calibration(opts.camera_calibration)
                    if opts.detector == "camera" else None)
         # same geometry, same pixels: the pixel response cancels in the ratio
-        ref = _Signals.join([_signals(ref_run, _match_rows(r, rw, ref_run), opts, ref_cal)
-                             for r, rw in parts])
+        ref_rows = [_match_rows(r, rw, ref_run) for r, rw in parts]
+        ref = _Signals.join([_signals(ref_run, rr, opts, ref_cal) for rr in ref_rows])
+        ref_table, _ = nd_transmissions(ref_run, None, opts.camera_calibration)
+        ref_p, ref_u, ref_nd = apply_nd(
+            ref.power_w, ref.u_power_w,
+            np.concatenate([nd_slots(ref_run, rr) for rr in ref_rows]), ref_table)
+        if ref_nd is not None:  # the standard's readings: the filter's error on each
+            ref_u = np.hypot(ref_u, ref_p * np.sqrt(np.diag(ref_nd)))
+        ref = replace(ref, power_w=ref_p, u_power_w=ref_u)
         std = _reference_standard(ref_run, opts)
         pts = relative_brdf(p_s, u_s, ref.power_w, ref.u_power_w, ti, pi_, tr, pr,
                             reference=std, sigma_theta_i=sig_i, sigma_theta_r=sig_r,

@@ -75,7 +75,7 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
     benches = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
                "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
     directional = {"brdf_inplane", "brdf_lobe", "brdf_hemisphere", "calibration_reference",
-                   "calibration_signature", "brdf_spectral_lockin"}
+                   "calibration_signature", "brdf_spectral_lockin", "calibration_nd"}
     names = sorted(p.stem for p in examples.glob("*.toml")
                    if "[plan]" in p.read_text(encoding="utf-8"))  # plans, not profiles
     assert len(names) >= 10
