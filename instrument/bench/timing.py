@@ -44,7 +44,7 @@ __all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "BenchTiming", "bench_timing",
 #: noise, rendering the view through the pupil); a USB camera's one frame period at
 #: 30 frames/s, and two after a change (its queue flushed).
 CAMERA_DEFAULTS: dict[str, dict[str, float]] = {
-    "sim_camera": {"frame_overhead_s": 0.11, "scene_change_s": 0.85},
+    "sim_camera": {"frame_overhead_s": 0.11, "scene_change_s": 0.27},
     "opencv_camera": {"frame_overhead_s": 1 / 30, "scene_change_s": 2 / 30},
 }
 #: The SR830's output filter at power-up (time constant, slope): 100 ms, 12 dB/oct.

@@ -14,8 +14,9 @@ from instrument.plans import build_plan, parse_plan
 from instrument.plans.planfile import KINDS
 from instrument.run.events import AxisHomed
 from instrument.run.runfile import read_events
-from tests.gui.helpers import fast_profile, wait_for
+from tests.gui.helpers import fast_profile
 from tests.gui.model import test_session
+from tests.waiting import wait_for
 
 session = test_session.session  # the fixture: a session on its own device worker
 _connect = test_session._connect
@@ -49,7 +50,7 @@ def test_the_run_homes_the_axes_and_the_session_reports_its_read_backs(session, 
     plan = build_plan(parse_plan(PLAN), profile)
     homes: list[AxisHomed] = []
     s.submit(StartRun(plan, tmp_path))
-    wait_for(lambda: s.run is not None, 20, "run")
+    wait_for(lambda: s.run is not None, 60, "run")
     run = s.run
     run.engine.subscribe(lambda ev: homes.append(ev) if isinstance(ev, AxisHomed) else None)
     started = run.engine.snapshot().elapsed_s
@@ -79,14 +80,14 @@ def test_states_during_a_run_come_from_the_engine(session, tmp_path):
     plan = build_plan(parse_plan(PLAN), profile)
     seen: list = []
     s.submit(StartRun(plan, tmp_path))
-    wait_for(lambda: s.run is not None, 20, "run")
+    wait_for(lambda: s.run is not None, 60, "run")
     run = s.run
     run.engine.pause()
     wait_for(lambda: run.engine.state.value == "paused" or s.run is None, 60, "pause")
-    wait_for(lambda: s.states()["detector_theta"].value("homed"), 20, "homed state")
+    wait_for(lambda: s.states()["detector_theta"].value("homed"), 60, "homed state")
     st = s.states()["detector_theta"]
     status, t = run.engine.axis_readbacks()["detector_theta"]
-    wait_for(lambda: s.states()["detector_theta"].t == t, 20, "the newest read-back")
+    wait_for(lambda: s.states()["detector_theta"].t == t, 60, "the newest read-back")
     st = s.states()["detector_theta"]
     seen.append(st)
     assert st.value("position") == status.position and st.value("homed")
@@ -102,11 +103,11 @@ def test_jogs_add_to_the_target_not_to_the_read_back(session):
     wait_for(lambda: s.states()["sample_theta"].value("homed")
              and not s.states()["sample_theta"].value("moving"), 20, "homed")
     s.submit(MoveTo("sample_theta", 1.0))
-    wait_for(lambda: _at_rest(s, "sample_theta", 1.0), 20, "at 1")
+    wait_for(lambda: _at_rest(s, "sample_theta", 1.0), 60, "at 1")
     for k in range(3):
         s.submit(Jog("sample_theta", 1.0))
         assert s.wait_idle()
-        wait_for(lambda k=k: _at_rest(s, "sample_theta", 2.0 + k), 20, f"at {2 + k}")
+        wait_for(lambda k=k: _at_rest(s, "sample_theta", 2.0 + k), 60, f"at {2 + k}")
     # exactly: the K10CR1's read-back of 1° is 0.9995° (its encoder steps), and three
     # jogs from the read-back ended at 3.9985°
     assert s.states()["sample_theta"].value("target") == 4.0
