@@ -34,7 +34,7 @@ def test_launch_connect_home_jog(qtbot, make_window, fast_bench_file):
     connect(qtbot, w)
     panels = w.bench_panel.panels
     assert set(panels) == {"sample_theta", "detector_theta", "camera_z", "camera",
-                           "power_meter", "source"}
+                           "power_meter", "source", "filter_wheel"}
     assert "K10CR1" in panels["sample_theta"].identity.text()
     assert "PM100USB" in panels["power_meter"].identity.text()
     _home(qtbot, w, "sample_theta", "detector_theta")

@@ -65,6 +65,11 @@ def drive(qtbot, clock, until, what: str) -> None:
         qtbot.wait(5)  # the engine's thread and the GUI's events go on meanwhile
 
 
+def wait_points(qtbot, run, n, timeout=60000):
+    """Wait until the window has received ``n`` points of ``run`` (an event, not a time)."""
+    qtbot.waitUntil(lambda: run.live.n_received >= n, timeout=timeout)
+
+
 def wait_end(qtbot, w, timeout=60000):
     # the window has taken the run's end too (the session's flag is set first, on its
     # worker thread)

@@ -80,9 +80,10 @@ def test_a_filter_outside_the_source_band_is_refused_before_the_run():
     with pytest.raises(PlanError) as err:
         build_plan(parse_plan(text), profile)
     assert any(e.path == "spectral.filters" and "[4]" in e.message for e in err.value.errors)
-    # and a bench without a filter wheel has no wavelength axis
+    # and a bench without a filter wheel has no wavelength axis (the built-in `sim` has a
+    # wheel of neutral-density filters; its slots serve the ND calibration plan)
     with pytest.raises(PlanError, match="no filter wheel"):
-        build_plan(parse_plan(PLAN), load_profile("sim"))
+        build_plan(parse_plan(PLAN), load_profile("sim-out-of-plane"))
 
 
 def test_a_power_meter_set_to_another_wavelength_than_the_source_is_refused():
