@@ -8,7 +8,7 @@ matplotlib or a BLAS, this module chooses:
   GUI test creates its ``QApplication``; on a desktop it keeps test windows off the screen.
   The real-display smoke test starts its own X server and sets the platform itself.
 - matplotlib's ``Agg`` backend unless ``MPLBACKEND`` is set.
-- one BLAS/OpenMP thread per process unless set: the suite runs one process per core
+- one BLAS/OpenMP thread per process unless set: the suite runs two processes per core
   (pytest-xdist), and a threaded OpenBLAS in each of them oversubscribes the cores (on a
   loaded 2-core box a 1500×81 SVD went from 4 ms to 1.2 s).
 

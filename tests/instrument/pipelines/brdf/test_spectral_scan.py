@@ -80,10 +80,14 @@ def test_a_filter_outside_the_source_band_is_refused_before_the_run():
     with pytest.raises(PlanError) as err:
         build_plan(parse_plan(text), profile)
     assert any(e.path == "spectral.filters" and "[4]" in e.message for e in err.value.errors)
-    # and a bench without a filter wheel has no wavelength axis (the built-in `sim` has a
-    # wheel of neutral-density filters; its slots serve the ND calibration plan)
+    # and a bench without a filter wheel has no wavelength axis (the built-in `sim` with
+    # its wheel of neutral-density filters taken out)
+    no_wheel = load_profile("sim").source_text
+    for table in ("[devices.filter_wheel]", "[simulation.filter_wheel]"):
+        start = no_wheel.index(table)
+        no_wheel = no_wheel[:start] + no_wheel[no_wheel.index("\n[", start + 1) + 1:]
     with pytest.raises(PlanError, match="no filter wheel"):
-        build_plan(parse_plan(PLAN), load_profile("sim-out-of-plane"))
+        build_plan(parse_plan(PLAN), parse_profile(no_wheel, source="sim without wheel"))
 
 
 def test_a_power_meter_set_to_another_wavelength_than_the_source_is_refused():
