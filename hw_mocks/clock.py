@@ -19,6 +19,7 @@ observation instead of hoping that the machine is fast enough to look in time.
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import threading
 import time
@@ -44,7 +45,7 @@ class HoldableClock(Protocol):
     def held(self) -> contextlib.AbstractContextManager[HoldableClock]: ...
 
 
-class _Holdable:
+class _Holdable(abc.ABC):
     """Holding for the clocks: a count of holds, and time that only :meth:`advance` moves.
 
     Subclasses keep their reading in ``_t`` while held and implement :meth:`_freeze`
@@ -89,11 +90,13 @@ class _Holdable:
                 self._t += dt
             return self._t
 
+    @abc.abstractmethod
     def _freeze(self) -> None:
-        raise NotImplementedError
+        """Stop emulated time (called under the lock when the first hold starts)."""
 
+    @abc.abstractmethod
     def _thaw(self) -> None:
-        raise NotImplementedError
+        """Let emulated time run on from where it stood (the last hold ended)."""
 
 
 class ScaledClock(_Holdable):

@@ -27,7 +27,6 @@ Quirks of the client (where it differs from the manual, the emulator follows the
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -40,6 +39,7 @@ from pymeasure.adapters import VISAAdapter  # noqa: E402
 from hw_mocks.clock import ManualClock  # noqa: E402
 from hw_mocks.firmware.sr830 import Sr830Emulator  # noqa: E402
 from hw_mocks.pty_server import PtyServer  # noqa: E402
+from tests.waiting import wait_for  # noqa: E402
 
 #: VISA timeout, ms: generous (a loaded machine), and the cost of each get_buffer call.
 TIMEOUT_MS = 3000
@@ -65,12 +65,6 @@ def settle(lockin, clock) -> None:
     clock.advance(100 * lockin.time_constant)  # the query has synchronised the writes
 
 
-def wait_until(predicate, timeout: float = 30.0) -> None:
-    """Wait (generously, on a loaded machine) for the emulator to reach a state."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "the emulator did not get there"
-        time.sleep(0.005)
 
 
 def test_identity_and_status(bench):
@@ -156,7 +150,7 @@ def test_auto_functions_and_range(bench):
     settle(lockin, clock)
     assert lockin.is_out_of_range()  # OUTPT overload latched
     lockin.auto_gain()
-    wait_until(emulator.is_busy)
+    wait_for(emulator.is_busy)
     clock.advance(1.0)  # AGAN keeps the interpreter busy for 10 τ (at least 50 ms)
     assert lockin.sensitivity == pytest.approx(5e-3)  # smallest with R ≤ 80 % of it
     lockin.auto_reserve()

@@ -34,16 +34,12 @@ apt = pytest.importorskip("thorlabs_apt_device.protocol")
 from hw_mocks.clock import ScaledClock  # noqa: E402
 from hw_mocks.firmware.apt import AptEmulator  # noqa: E402
 from hw_mocks.pty_server import PtyServer  # noqa: E402
+from tests.waiting import wait_for  # noqa: E402
 
 SPEED = 20.0
 HOST, DEVICE = 0x01, 0x50
 
 
-def wait_until(predicate, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "the state was not reached"
-        time.sleep(0.01)
 
 
 def request_velparams(device) -> None:
@@ -67,7 +63,7 @@ def bench(request):
 def client(bench):
     model, emulator, server = bench
     device = apt_device.KDC101(serial_port=server.path, home=False)
-    wait_until(lambda: device.status.get("msg") is not None)  # first status polled
+    wait_for(lambda: device.status.get("msg") is not None)  # first status polled
     yield model, emulator, device
     device.close()
 
@@ -107,19 +103,19 @@ def test_power_up_state_settings_and_a_move(client):
     profile = emulator.profile
     # Power-up as the emulator documents it: channel disabled, zero home velocity.
     assert device.status["channel_enabled"] is False
-    wait_until(lambda: "home_velocity" in device.homeparams)
+    wait_for(lambda: "home_velocity" in device.homeparams)
     assert device.homeparams["home_velocity"] == 0
     # Settings round trip: velocity parameters.
     device.set_velocity_params(acceleration=12000, max_velocity=50_000_000)
     request_velparams(device)
-    wait_until(lambda: device.velparams.get("max_velocity") == 50_000_000)
+    wait_for(lambda: device.velparams.get("max_velocity") == 50_000_000)
     assert device.velparams["acceleration"] == 12000
     device.set_enabled(True)
-    wait_until(lambda: device.status["channel_enabled"])
+    wait_for(lambda: device.status["channel_enabled"])
     device.set_home_params(velocity=round(profile.velocity_scale * 5.0), offset_distance=0)
     target = round(5.0 * profile.counts_per_unit)
     device.move_absolute(target)
-    wait_until(lambda: abs(device.status["position"] - target) <= profile.stop_short_counts
+    wait_for(lambda: abs(device.status["position"] - target) <= profile.stop_short_counts
                and not (device.status["moving_forward"] or device.status["moving_reverse"]))
     assert emulator.stage.position() == pytest.approx(5.0, abs=(profile.stop_short_counts + 1)
                                                     / profile.counts_per_unit)
@@ -132,6 +128,6 @@ def test_a_disabled_channel_does_not_move(client):
     # A later round trip on the same line proves the move was read and dropped.
     device.set_velocity_params(acceleration=11000, max_velocity=40_000_000)
     request_velparams(device)
-    wait_until(lambda: device.velparams.get("max_velocity") == 40_000_000)
+    wait_for(lambda: device.velparams.get("max_velocity") == 40_000_000)
     assert emulator.stage.position() == start and not emulator.stage.is_moving()
     assert device.status["channel_enabled"] is False
