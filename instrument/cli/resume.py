@@ -9,8 +9,10 @@ points whose frames a damaged file lost.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
+from instrument.cli._client import add_server, call
 from instrument.cli.run import add_common
 
 HELP = "continue a run that did not finish, or repair one (same file)"
@@ -18,11 +20,18 @@ HELP = "continue a run that did not finish, or repair one (same file)"
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("resume", help=HELP)
-    p.add_argument("run", help="run id (looked up in the --out catalog) or run file path")
+    p.add_argument("run", nargs="?", default=None,
+                   help="run id (looked up in the --out catalog) or run file path; "
+                   "without it, with --server: the bench server's paused run, or the "
+                   "interrupted or aborted run at the head of its queue")
     p.add_argument("--remeasure-lost", action="store_true",
                    help="also measure again the points whose frames a damaged file lost "
                    "(they are marked status 2); finished runs too")
     add_common(p)
+    add_server(p)
+    p.add_argument("--answer", choices=("resume", "retry", "skip"), default="resume",
+                   help="with --server, after a device fault: try the failed point again "
+                   "(retry) or store it as skipped (skip)")
     p.set_defaults(func=run)
 
 
@@ -51,6 +60,13 @@ def print_repairs(report, path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.run is None:
+        # the bench server's run (a client command); with RUN, today's direct resume
+        if not (args.server or os.environ.get("SCATTERLAB_SERVER")):
+            print("error: give the run to resume (id or file), or --server URL to resume "
+                  "the bench server's run")
+            return 2
+        return call(args, lambda c: print(c.resume(args.answer)))
     from instrument.run.health import inspect_run_file
     from instrument.run.locks import LockHeld, hold
     from instrument.run.paths import writer_lock_path

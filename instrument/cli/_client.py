@@ -1,0 +1,30 @@
+"""What the client commands (queue, status, watch, pause, abort, resume) share: the server's
+address and key, and one line for every refusal."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from typing import Any
+
+ENV_SERVER = "SCATTERLAB_SERVER"  # instrument.client.ENV_SERVER, without importing httpx
+
+
+def add_server(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--server", default=None, metavar="URL",
+                   help=f"the bench server, e.g. http://127.0.0.1:8765 (default: "
+                   f"${ENV_SERVER}); the key is read from $SCATTERLAB_KEY")
+
+
+def call(args: argparse.Namespace, fn: Callable[[Any], int]) -> int:
+    """Run ``fn(client)``; a refusal or an unreachable server is one line on stderr
+    (exit 2 for a refusal, 3 when the server cannot be reached)."""
+    from instrument.client import BenchClient, ClientError
+
+    try:
+        with BenchClient(args.server) as client:
+            return int(fn(client) or 0)
+    except ClientError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 3 if err.status == 0 else 2

@@ -1,0 +1,684 @@
+"""The bench service: the one owner of the bench, its engine and the plan queue.
+
+Everything here is plain threads and is used by the HTTP layer (:mod:`instrument.server.app`)
+through the methods below, each of which either does what it says or raises
+:class:`ServiceError` with the HTTP status and a sentence — *before* anything changed.
+
+Threads:
+
+* the **runner** takes the head of the queue when the queue runs and the bench is idle,
+  starts (or resumes, exactly as ``scatterlab resume`` does: :func:`resume_run`) its run,
+  holds the run's writer lock (``RUN.h5.lock``, so a ``scatterlab resume`` elsewhere is
+  told who continues it) and records the outcome in the history;
+* the **sampler** publishes device states at most 10 times a second (read back by the
+  engine during a run, polled otherwise) and the run's latest camera frame, decimated for
+  display, at most twice a second;
+* the engine's worker and writer threads (ADR 0011); the event hub's dispatcher.
+
+Manual commands (home, jog, move, light, stop all) are judged by the same guard as the
+GUI's (:mod:`instrument.bench.manual`); while a run owns the bench only Stop all is
+accepted, and it aborts the run (the engine stops every axis and turns the light off).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.base import LightSource, MotionAxis
+from drivers.errors import DeviceError
+from instrument.bench.devices import Bench, open_bench
+from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
+from instrument.bench.profile import BenchProfile, ProfileError
+from instrument.plans import build_plan, parse_plan
+from instrument.run import events as ev
+from instrument.run.engine import EngineState, RunEngine
+from instrument.run.locks import LockHeld, hold
+from instrument.run.paths import writer_lock_path
+from instrument.run.runner import recover_run, resume_run, start_run
+from instrument.run.storage import FrameData, StorageError
+from instrument.server.db import ServerDB
+from instrument.server.hub import EventHub
+from instrument.server.plans import PlanRefused, check_plan
+from instrument.server.queue import RESUMABLE, PlanQueue, QueueError, QueueItem
+
+__all__ = ["LEASE_S", "BenchService", "Caller", "ServiceError"]
+
+#: Seconds an operator's control lease lasts after its last command.
+LEASE_S = 300.0
+#: Device states are published at most this often (Hz), camera frames at most FRAME_HZ.
+STATE_HZ = 10.0
+FRAME_HZ = 2.0
+#: Display frames are decimated to at most this many pixels on their longer side.
+FRAME_MAX_PX = 160
+
+
+@dataclass(frozen=True)
+class Caller:
+    """Who makes a request: the key's holder and role."""
+
+    name: str
+    role: str
+
+
+class ServiceError(Exception):
+    """A request refused or failed; nothing changed. ``status`` is its HTTP status;
+    ``reasons`` lists details (a guard's violations, a plan's field errors)."""
+
+    def __init__(self, status: int, message: str, reasons: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+        self.reasons = list(reasons)
+
+
+def event_message(event: ev.Event) -> tuple[str, dict[str, Any]]:
+    """An engine event as an event-stream message (type, data)."""
+    name = {ev.RunStarted: "run_started", ev.PointCompleted: "point",
+            ev.Progress: "progress", ev.Fault: "fault", ev.Paused: "paused",
+            ev.Resumed: "resumed", ev.RunFinished: "run_finished",
+            ev.AxisHomed: "axis_homed"}[type(event)]
+    return name, _finite(dataclasses.asdict(event))
+
+
+def _finite(value: Any) -> Any:
+    """JSON has no NaN: a value not measured is ``null``."""
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def decimate(frame: np.ndarray, max_px: int = FRAME_MAX_PX) -> tuple[np.ndarray, float]:
+    """A frame for display: block-averaged to at most ``max_px`` on its longer side, scaled
+    to 8 bits by its own maximum; returns the image and the scale (DN per 8-bit step)."""
+    img = np.asarray(frame, dtype=np.float32)
+    k = max(1, int(np.ceil(max(img.shape) / max_px)))
+    h, w = (img.shape[0] // k) * k, (img.shape[1] // k) * k
+    small = img[:h, :w].reshape(h // k, k, w // k, k).mean(axis=(1, 3))
+    top = float(small.max()) if small.size else 0.0
+    scale = top / 255.0 if top > 0 else 1.0
+    return np.clip(np.rint(small / scale), 0, 255).astype(np.uint8), scale
+
+
+class BenchService:
+    """Own ``profile``'s bench, the queue in ``runs_dir`` and the runs it makes.
+
+    Parameters
+    ----------
+    opener
+        Opens the bench (tests pass one that also reaches the emulators).
+    allowed
+        Folders besides ``runs_dir`` whose files a plan may name.
+    connect
+        Open the bench now (else an admin connects it).
+    """
+
+    def __init__(self, profile: BenchProfile, runs_dir: str | Path, *, fsync: bool = True,
+                 allowed: Sequence[str | Path] = (), lease_s: float = LEASE_S,
+                 opener: Callable[[BenchProfile], Bench] = open_bench,
+                 connect: bool = True) -> None:
+        self.profile = profile
+        self.runs_dir = Path(runs_dir).resolve()
+        self.runs_dir.mkdir(parents=True, exist_ok=True)
+        self.allowed = [self.runs_dir, *(Path(a).resolve() for a in allowed)]
+        self.fsync = fsync
+        self.lease_s = float(lease_s)
+        self._opener = opener
+        self.db = ServerDB(self.runs_dir)
+        self.queue = PlanQueue(self.db)
+        self.hub = EventHub()
+        self._lock = threading.RLock()
+        self._cond = threading.Condition(self._lock)
+        self._bench_lock = threading.Lock()  # one manual command or poll at a time
+        self.bench: Bench | None = None
+        self.engine: RunEngine | None = None
+        self.current: QueueItem | None = None
+        self.queue_running = False
+        self._closed = False
+        self._pause_now = False
+        self._last_fault: ev.Fault | None = None
+        self._lease: tuple[str, float] | None = None
+        self._frame: tuple[int, FrameData] | None = None
+        self.interrupted = self.queue.after_restart()
+        if connect:
+            self.connect(Caller("server", "admin"))
+        self._runner = threading.Thread(target=self._run_queue, name="queue-runner",
+                                        daemon=True)
+        self._runner.start()
+        self._sampler = threading.Thread(target=self._sample, name="state-sampler",
+                                         daemon=True)
+        self._sampler.start()
+
+    # lifecycle --------------------------------------------------------------------------
+    def close(self) -> None:
+        """Abort a run in progress (resumable), make the bench safe, close everything."""
+        with self._cond:
+            self._closed = True
+            self.queue_running = False
+            engine = self.engine
+            self._cond.notify_all()
+        if engine is not None:
+            engine.abort()
+            engine.wait(60.0)
+        self._runner.join(60.0)
+        self._sampler.join(5.0)
+        with self._bench_lock:
+            if self.bench is not None:
+                self.bench.close()
+                self.bench = None
+        self.hub.close()
+        self.db.close()
+
+    # state ------------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            engine, item = self.engine, self.current
+            lease = self._lease_now()
+            run = None
+            if engine is not None:
+                s = engine.snapshot()
+                run = {"state": s.state.value, "n_done": s.n_done, "n_total": s.n_total,
+                       "n_skipped": s.n_skipped, "elapsed_s": s.elapsed_s, "path": s.path,
+                       "pause_reason": s.pause_reason, "item_id": item.id if item else None,
+                       "answers": self._answers() if s.state is EngineState.PAUSED else []}
+            return {"bench": self.profile.name, "connected": self.bench is not None,
+                    "queue_running": self.queue_running, "run": run,
+                    "control": {"holder": lease[0] if lease else None,
+                                "until": lease[1] if lease else None},
+                    "queue": [i.summary() for i in self.queue.items()],
+                    "runs_dir": str(self.runs_dir)}
+
+    def _answers(self) -> list[str]:
+        f = self._last_fault
+        return ["retry", "skip", "abort"] if f is not None and f.action == "pause" \
+            else ["resume", "abort"]
+
+    def _publish_queue(self) -> None:
+        self.hub.publish("queue", {"running": self.queue_running,
+                                   "items": [i.summary() for i in self.queue.items()]})
+
+    # control lease ----------------------------------------------------------------------
+    def _lease_now(self) -> tuple[str, float] | None:
+        if self._lease is not None and self._lease[1] <= time.time():
+            self._lease = None
+        return self._lease
+
+    def take_control(self, caller: Caller, *, force: bool = False,
+                     timeout_s: float | None = None) -> dict[str, Any]:
+        """Take (or renew) the control lease. Another holder's live lease refuses it
+        (409) unless an admin forces it."""
+        with self._lock:
+            lease = self._lease_now()
+            if lease and lease[0] != caller.name and not (force and caller.role == "admin"):
+                raise ServiceError(409, f"control is held by {lease[0]} until "
+                                   f"{time.strftime('%H:%M:%S', time.localtime(lease[1]))}; "
+                                   "ask them to release it, or wait")
+            s = self.lease_s if timeout_s is None else max(1.0, min(float(timeout_s), 86400))
+            self._lease = (caller.name, time.time() + s)
+            changed = lease is None or lease[0] != caller.name
+        if changed:
+            self._publish_control()
+        return {"holder": self._lease[0], "until": self._lease[1]}
+
+    def release_control(self, caller: Caller) -> None:
+        with self._lock:
+            lease = self._lease_now()
+            if lease is None:
+                return
+            if lease[0] != caller.name and caller.role != "admin":
+                raise ServiceError(409, f"control is held by {lease[0]}, not by you")
+            self._lease = None
+        self._publish_control()
+
+    def _publish_control(self) -> None:
+        lease = self._lease_now()
+        self.hub.publish("control", {"holder": lease[0] if lease else None,
+                                     "until": lease[1] if lease else None})
+
+    def require_control(self, caller: Caller) -> None:
+        """Refuse (409) when another operator holds control; otherwise take or renew it
+        (the first command of an operator when nobody holds control takes it, and every
+        one is announced)."""
+        self.take_control(caller)
+
+    # queue ------------------------------------------------------------------------------
+    def add_plan(self, caller: Caller, text: str, name: str | None = None, *,
+                 propose: bool = False) -> QueueItem:
+        try:
+            spec = check_plan(text, self.profile, self.allowed)
+        except PlanRefused as err:
+            raise ServiceError(422, err.message, err.errors) from err
+        item = self.queue.add("plan", name or spec.name, text, caller.name, proposed=propose)
+        self._queue_changed()
+        return item
+
+    def add_stop(self, caller: Caller) -> QueueItem:
+        item = self.queue.add("stop", "stop marker", None, caller.name)
+        self._queue_changed()
+        return item
+
+    def _queue_call(self, fn, *args):
+        try:
+            return fn(*args)
+        except QueueError as err:
+            raise ServiceError(err.status, str(err)) from err
+
+    def remove(self, caller: Caller, item_id: int) -> QueueItem:
+        with self._lock:
+            if self.current is not None and self.current.id == item_id:
+                raise ServiceError(409, f"item {item_id} is running: abort its run first")
+            item = self._queue_call(self.queue.remove, item_id, caller.name)
+        self._queue_changed()
+        return item
+
+    def move_item(self, caller: Caller, item_id: int, index: int) -> QueueItem:
+        item = self._queue_call(self.queue.move, item_id, index)
+        self._queue_changed()
+        return item
+
+    def approve(self, caller: Caller, item_id: int) -> QueueItem:
+        item = self._queue_call(self.queue.approve, item_id)
+        self._queue_changed()
+        return item
+
+    def deny(self, caller: Caller, item_id: int) -> QueueItem:
+        item = self._queue_call(self.queue.deny, item_id, caller.name)
+        self._queue_changed()
+        return item
+
+    def start_queue(self, caller: Caller) -> None:
+        with self._cond:
+            if self.bench is None:
+                raise ServiceError(409, "no bench is connected: an admin connects it first")
+            self.queue_running = True
+            self._cond.notify_all()
+        self._publish_queue()
+
+    def stop_queue(self, caller: Caller) -> None:
+        """The queue stops after the run in progress (which goes on)."""
+        with self._cond:
+            self.queue_running = False
+        self._publish_queue()
+
+    def _queue_changed(self) -> None:
+        with self._cond:
+            self._cond.notify_all()
+        self._publish_queue()
+
+    # run control ------------------------------------------------------------------------
+    def _live_engine(self) -> RunEngine:
+        engine = self.engine
+        if engine is None or not engine.alive:
+            raise ServiceError(409, "no run is in progress")
+        return engine
+
+    def pause(self, caller: Caller, *, now: bool = False) -> str:
+        """Pause at the end of the point in progress, or ``now``: stop at once (motion
+        stopped, light off, the file closed), leaving the item at the head, resumable."""
+        with self._lock:
+            engine = self._live_engine()
+            if now:
+                self._pause_now = True
+                self.queue_running = False
+                engine.abort()
+                return "stopping now: the run is resumable from its file (resume)"
+            if engine.state is EngineState.PAUSED:
+                return "the run is already paused"
+            engine.pause(f"paused by {caller.name}")
+            return "pausing at the end of the point in progress"
+
+    def resume(self, caller: Caller, answer: str = "resume") -> str:
+        """Continue: a paused engine (``retry`` or ``skip`` the failed point after a device
+        fault), or the head item's interrupted, aborted or paused-now run (the queue is
+        started and resumes its file)."""
+        if answer not in ("resume", "retry", "skip"):
+            raise ServiceError(422, f"answer must be resume, retry or skip, got {answer!r}")
+        with self._cond:
+            engine = self.engine
+            if engine is not None and engine.alive:
+                if engine.state is not EngineState.PAUSED:
+                    raise ServiceError(409, "the run is not paused")
+                engine.resume(skip_point=answer == "skip")
+                return "resuming" + (" (the failed point is skipped)" if answer == "skip"
+                                     else "")
+            head = self.queue.head()
+            if head is None or head.state not in RESUMABLE:
+                raise ServiceError(409, "nothing to resume: no paused run and no "
+                                   "resumable item at the head of the queue")
+        self.start_queue(caller)
+        return f"resuming item {head.id} ({head.name}) from {head.run_file}"
+
+    def abort(self, caller: Caller) -> str:
+        with self._lock:
+            engine = self._live_engine()
+            self.queue_running = False
+            engine.abort()
+        self._publish_queue()
+        return "aborting: the item stays at the head of the queue, resumable"
+
+    # manual commands --------------------------------------------------------------------
+    def _idle_bench(self) -> Bench:
+        if self.bench is None:
+            raise ServiceError(409, "no bench is connected")
+        if self.engine is not None and self.engine.alive:
+            raise ServiceError(409, "a run owns the bench: pause does not hand it back; "
+                               "abort the run or let it finish")
+        return self.bench
+
+    def _axis(self, bench: Bench, role: str) -> MotionAxis:
+        axis = bench.axes.get(role)
+        if axis is None:
+            raise ServiceError(422, f"bench {self.profile.name!r} has no axis {role!r} "
+                               f"(axes: {', '.join(bench.axes)})")
+        return axis
+
+    @staticmethod
+    def _pose(bench: Bench) -> dict[str, float]:
+        pose = {}
+        for role, axis in bench.axes.items():
+            s = axis.status()
+            if s.is_homed:
+                pose[role] = s.position
+        return pose
+
+    @staticmethod
+    def _light_on(bench: Bench) -> bool:
+        return bool(bench.source is not None and bench.source.is_on)
+
+    def _manual(self, caller: Caller, what: str, fn: Callable[[Bench], str]) -> str:
+        with self._lock, self._bench_lock:
+            bench = self._idle_bench()
+            try:
+                message = fn(bench)
+            except MoveRefused as err:
+                raise ServiceError(422, str(err), [v.detail for v in err.violations]) from err
+            except DeviceError as err:
+                raise ServiceError(502, f"{what}: device error: {err}") from err
+        self.hub.publish("manual", {"who": caller.name, "what": what, "message": message})
+        return message
+
+    def home(self, caller: Caller, role: str) -> str:
+        def do(bench: Bench) -> str:
+            axis = self._axis(bench, role)
+            plan_home(bench.profile, self._pose(bench), role, light=self._light_on(bench))
+            if not axis.is_enabled:
+                axis.enable()
+            axis.home(wait=False)
+            return f"{role}: homing"
+        return self._manual(caller, f"home {role}", do)
+
+    def move_axes(self, caller: Caller, targets: dict[str, float]) -> str:
+        def do(bench: Bench) -> str:
+            axes = {r: self._axis(bench, r) for r in targets}
+            move = plan_manual_move(bench.profile, self._pose(bench), targets,
+                                    light=self._light_on(bench))
+            for role, target in targets.items():
+                axes[role].move_to(float(target))
+            return f"{move.describe()}: moving"
+        return self._manual(caller, "move " + " ".join(f"{r}={v:g}" for r, v in targets.items()),
+                            do)
+
+    def jog(self, caller: Caller, role: str, step: float) -> str:
+        with self._bench_lock:
+            bench = self._idle_bench()
+            s = self._axis(bench, role).status()
+        if not s.is_homed:
+            raise ServiceError(409, f"{role} is not homed: home it first")
+        return self.move_axes(caller, {role: s.position + float(step)})
+
+    def light(self, caller: Caller, on: bool) -> str:
+        def do(bench: Bench) -> str:
+            src = bench.source
+            if not isinstance(src, LightSource):
+                raise ServiceError(422, f"bench {self.profile.name!r} has no light source")
+            if on:
+                bad = check_light_on(bench.profile, self._pose(bench))
+                if bad:
+                    raise ServiceError(422, "light on refused: " + "; ".join(
+                        v.detail for v in bad) + "; move the detector out of the beam first",
+                        [v.detail for v in bad])
+                src.turn_on()
+            else:
+                src.turn_off()
+            return f"light {'on' if on else 'off'}"
+        return self._manual(caller, f"light {'on' if on else 'off'}", do)
+
+    def stop_all(self, caller: Caller) -> str:
+        """Stop every axis now; during a run, abort it (the engine stops every axis and
+        turns the light off). Never refused for want of control."""
+        with self._lock:
+            engine = self.engine
+            if engine is not None and engine.alive:
+                self.queue_running = False
+                engine.abort()
+                message = "run aborted: the engine stops every axis and turns the light off"
+            elif self.bench is None:
+                raise ServiceError(409, "no bench is connected")
+            else:
+                with self._bench_lock:
+                    problems = []
+                    for role, axis in self.bench.axes.items():
+                        try:
+                            axis.stop()
+                        except DeviceError as err:
+                            problems.append(f"{role}: {err}")
+                message = "all axes stopped" + (
+                    f" (could not stop: {'; '.join(problems)})" if problems else "")
+        self.hub.publish("manual", {"who": caller.name, "what": "stop all",
+                                    "message": message})
+        return message
+
+    # bench ------------------------------------------------------------------------------
+    def connect(self, caller: Caller) -> str:
+        with self._cond, self._bench_lock:
+            if self.bench is not None:
+                return f"bench {self.profile.name!r} is connected"
+            try:
+                self.bench = self._opener(self.profile)
+            except (DeviceError, ProfileError, OSError, ValueError) as err:
+                raise ServiceError(502, f"bench {self.profile.name!r}: {err}") from err
+            self._cond.notify_all()
+        message = f"bench {self.profile.name!r} connected: {len(self.bench.devices)} devices"
+        self.hub.publish("bench", {"connected": True, "bench": self.profile.name,
+                                   "message": message})
+        return message
+
+    def disconnect(self, caller: Caller) -> str:
+        with self._cond, self._bench_lock:
+            if self.engine is not None and self.engine.alive:
+                raise ServiceError(409, "a run owns the bench: abort it first")
+            bench, self.bench = self.bench, None
+            self.queue_running = False
+        if bench is not None:
+            bench.close()  # stops every axis and turns the light off first
+        message = "bench disconnected: axes stopped, light off"
+        self.hub.publish("bench", {"connected": False, "bench": self.profile.name,
+                                   "message": message})
+        return message
+
+    # runner -----------------------------------------------------------------------------
+    def _next_item(self) -> QueueItem | None:
+        with self._cond:
+            while not self._closed:
+                head = self.queue.head() if self.queue_running and self.bench else None
+                if head is not None:
+                    return head
+                self._cond.wait(0.5)
+            return None
+
+    def _run_queue(self) -> None:
+        while (item := self._next_item()) is not None:
+            if item.kind == "stop":
+                self.queue.finish(item, "stop marker", "server",
+                                  note="the queue stopped at a stop marker")
+                with self._cond:
+                    self.queue_running = False
+                self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                                   "outcome": "stop marker", "run_file": None})
+                self._publish_queue()
+                continue
+            try:
+                self._run_item(item)
+            except Exception as err:
+                self._item_failed(item, f"{type(err).__name__}: {err}")
+
+    def _item_failed(self, item: QueueItem, why: str) -> None:
+        with self._cond:
+            self.queue_running = False
+            self.engine = None
+            self.current = None
+        self.queue.record(item, "failed", "server", note=why, state="failed")
+        self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                           "outcome": "failed", "run_file": item.run_file})
+        self._publish_queue()
+
+    def _engine_for(self, item: QueueItem, bench: Bench) -> RunEngine | None:
+        """A new run for a queued item, or its run file continued (None: it had finished)."""
+        if item.run_file and item.state in RESUMABLE:
+            report = recover_run(item.run_file)
+            if report.status == "finished":
+                return None
+            return resume_run(item.run_file, bench, fsync=self.fsync)
+        plan = build_plan(parse_plan(item.plan_text or "", source=f"queue item {item.id}"),
+                          bench.profile)
+        return start_run(plan, bench, runs_dir=self.runs_dir, fsync=self.fsync)
+
+    def _run_item(self, item: QueueItem) -> None:
+        bench = self.bench
+        assert bench is not None
+        try:
+            with self._bench_lock:
+                engine = self._engine_for(item, bench)
+        except (ProfileError, StorageError, DeviceError, ValueError) as err:
+            self._item_failed(item, str(err))
+            return
+        if engine is None:
+            self.queue.finish(item, "finished", "server", note="its run file was complete")
+            self._publish_queue()
+            return
+        path = str(engine.store.path)
+        try:
+            with hold(writer_lock_path(path), f"scatterlab serve (queue item {item.id})"):
+                self._drive(item, engine, path)
+        except LockHeld as err:
+            engine.store.close()
+            self._item_failed(item, f"run {Path(path).name} is being continued by "
+                              f"{err.holder}")
+
+    def _drive(self, item: QueueItem, engine: RunEngine, path: str) -> None:
+        self.queue.set_state(item.id, "running", path)
+        with self._cond:
+            self.current = self.queue.get(item.id)
+            self._pause_now = False
+            self._last_fault = None
+            self.engine = engine
+        engine.subscribe(self._on_engine_event)
+        engine.subscribe_frames(self._on_frame)
+        self._publish_queue()
+        engine.start()
+        engine.wait()
+        state = engine.state
+        with self._cond:
+            pause_now, self._pause_now = self._pause_now, False
+            self.engine = None
+            self.current = None
+        if state is EngineState.FINISHED:
+            self.queue.finish(item, "finished", "server", run_file=path)
+            outcome = "finished"
+        elif pause_now:
+            self.queue.record(item, "paused", "server", run_file=path, state="paused",
+                              note="stopped at once (pause now); resume continues the file")
+            outcome = "paused"
+        elif state is EngineState.ABORTED:
+            self.queue.record(item, "aborted", "server", run_file=path, state="aborted",
+                              note="the item stays at the head; starting the queue resumes it")
+            outcome = "aborted"
+        else:  # failed, or paused and stopped: keep it for a look, stop the queue
+            self.queue.record(item, state.value, "server", run_file=path, state="failed",
+                              note=engine.snapshot().pause_reason or "")
+            outcome = state.value
+        if outcome != "finished":
+            with self._cond:
+                self.queue_running = False
+        self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                           "outcome": outcome, "run_file": path})
+        self._publish_queue()
+
+    def _on_engine_event(self, event: ev.Event) -> None:
+        """On the engine's worker thread: one queue put per event (the hub does the rest)."""
+        kind, data = event_message(event)
+        if isinstance(event, ev.Fault):
+            self._last_fault = event
+        elif isinstance(event, ev.Paused):
+            data["answers"] = self._answers()
+        elif isinstance(event, ev.Resumed):
+            self._last_fault = None
+        elif isinstance(event, ev.RunStarted):
+            item = self.current
+            data["item_id"] = item.id if item is not None else None
+        self.hub.publish(kind, data)
+
+    def _on_frame(self, index: int, frame: FrameData) -> None:
+        self._frame = (index, frame)  # the sampler decimates it (off the worker thread)
+
+    # sampler ----------------------------------------------------------------------------
+    def _sample(self) -> None:
+        last_state: dict | None = None
+        last_sent = 0.0
+        last_frame_t = 0.0
+        while not self._closed:
+            time.sleep(1.0 / STATE_HZ)
+            state = self._device_states()
+            now = time.monotonic()
+            if state is not None and (state != last_state or now - last_sent > 2.0):
+                self.hub.publish("devices", state)
+                last_state, last_sent = state, now
+            frame, self._frame = self._frame, None
+            if frame is not None and now - last_frame_t >= 1.0 / FRAME_HZ:
+                last_frame_t = now
+                self.hub.publish("frame", _frame_message(*frame))
+
+    def _device_states(self) -> dict[str, Any] | None:
+        engine = self.engine
+        if engine is not None and engine.alive:
+            axes = {r: {"position": s.position, "moving": s.is_moving, "homed": s.is_homed}
+                    for r, (s, _) in engine.axis_readbacks().items()}
+            return {"axes": axes, "light": None, "owner": "run"}
+        if not self._bench_lock.acquire(timeout=0.05):
+            return None  # a manual command is talking to the bench: next time
+        try:
+            bench = self.bench
+            if bench is None:
+                return None
+            axes = {}
+            for role, axis in bench.axes.items():
+                with contextlib.suppress(DeviceError):
+                    s = axis.status()
+                    axes[role] = {"position": s.position, "moving": s.is_moving,
+                                  "homed": s.is_homed}
+            light = None
+            with contextlib.suppress(DeviceError):
+                light = self._light_on(bench)
+            return {"axes": axes, "light": light, "owner": "idle"}
+        finally:
+            self._bench_lock.release()
+
+
+def _frame_message(index: int, frame: FrameData) -> dict[str, Any]:
+    import base64
+
+    img, scale = decimate(frame.data)
+    return {"index": index, "shape": list(img.shape), "scale": scale,
+            "data": base64.b64encode(img.tobytes()).decode("ascii")}
