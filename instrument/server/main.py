@@ -73,6 +73,7 @@ def _bind(listen: Listen) -> socket.socket:
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((listen.host, listen.port))
+        sock.listen(2048)  # connections made as soon as the address is printed wait
     except OSError as err:
         sock.close()
         raise ServeRefused(f"--listen {listen.host}:{listen.port}: {err.strerror or err}") \
@@ -118,7 +119,7 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
             "(scatterlab serve keys add)")
     sys.stdout.flush()
     config = uvicorn.Config(app, log_level="warning", ssl_certfile=cert, ssl_keyfile=key,
-                            ws="websockets", lifespan="on", timeout_graceful_shutdown=5)
+                            ws="websockets-sansio", lifespan="on", timeout_graceful_shutdown=5)
     server = uvicorn.Server(config)
     server.run(sockets=[sock])
     return 0

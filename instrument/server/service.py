@@ -510,11 +510,17 @@ class BenchService:
 
     # runner -----------------------------------------------------------------------------
     def _next_item(self) -> QueueItem | None:
+        """The item to run next; waits while the queue is stopped. A running queue that
+        has run out stops (as a stop marker would), and says so."""
         with self._cond:
             while not self._closed:
-                head = self.queue.head() if self.queue_running and self.bench else None
-                if head is not None:
-                    return head
+                if self.queue_running and self.bench is not None:
+                    head = self.queue.head()
+                    if head is not None:
+                        return head
+                    self.queue_running = False
+                    self.hub.publish("queue", {"running": False, "items": [
+                        i.summary() for i in self.queue.items()]})
                 self._cond.wait(0.5)
             return None
 

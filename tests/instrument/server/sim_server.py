@@ -1,0 +1,51 @@
+"""Child process for the end-to-end tests: ``scatterlab serve`` on an emulated bench, with
+an optional device fault injected from inside the bench (where the emulators live).
+
+``python -m tests.instrument.server.sim_server ARGS...`` takes the arguments of
+``scatterlab serve``. With ``SCATTERLAB_TEST_FAULT=scheme:name:after`` in the environment,
+the link of the emulated controller ``scheme://name`` is cut at its next exchange once
+point ``after`` is stored (on the engine's worker thread, so it strikes during the run
+however fast the machine is), and plugged back in when the run pauses for it: the
+operator's answer (retry, skip, abort) then decides.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from hw_mocks import registry
+from hw_mocks.faults import FaultKind
+from instrument.cli import main
+from instrument.run import events as ev
+from instrument.server import main as server_main
+from instrument.server.service import BenchService
+
+
+class FaultyService(BenchService):
+    def __init__(self, *args, **kw) -> None:
+        scheme, name, after = os.environ["SCATTERLAB_TEST_FAULT"].split(":")
+        self._target = (scheme, name)
+        self._after = int(after)
+        self._armed = True
+        super().__init__(*args, **kw)
+
+    def _on_engine_event(self, event) -> None:
+        super()._on_engine_event(event)
+        faults = registry.get(*self._target).faults
+        if self._armed and isinstance(event, ev.PointCompleted) and event.index >= self._after:
+            self._armed = False
+            faults.schedule(FaultKind.DISCONNECT, nth=1)  # the cable is pulled
+        elif isinstance(event, ev.Paused):
+            faults.clear()  # plugged back in, for the operator's answer
+
+
+if __name__ == "__main__":
+    if os.environ.get("SCATTERLAB_TEST_FAULT"):
+        serve = server_main.serve
+
+        def serve_faulty(*args, **kw):
+            return serve(*args, make_service=FaultyService, **kw)
+
+        server_main.serve = serve_faulty
+    sys.exit(main(["serve", *sys.argv[1:]]))
