@@ -223,8 +223,17 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
                        audit.write("(unchecked)", "", f"{method} {path}", 413,
                                    "body too large"))
 
+    def ctl(request: Request, caller: Caller) -> None:
+        """Refuse (409) when another operator holds control; the lease is taken or renewed
+        only when the request succeeds (:func:`done`), so a refused one leaves it as it was."""
+        service.check_control(caller)
+        request.state.lease_for = caller
+
     def done(request: Request, message: str, **extra: Any) -> dict[str, Any]:
         request.state.audit_result = message
+        caller = getattr(request.state, "lease_for", None)
+        if caller is not None:
+            service.take_control(caller)
         return {"ok": True, "message": message, **extra}
 
     p = API_PREFIX
@@ -276,7 +285,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     # queue --------------------------------------------------------------------------
     @app.post(f"{p}/queue")
     def queue_add(body: AddItem, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         if body.stop:
             if body.plan is not None:
                 raise ServiceError(422, "give either a plan or stop, not both")
@@ -295,76 +304,76 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
 
     @app.post(f"{p}/queue/{{item_id}}/approve")
     def queue_approve(item_id: int, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         item = service.approve(caller, item_id)
         return done(request, f"approved item {item.id} ({item.name})", item=item.summary())
 
     @app.post(f"{p}/queue/{{item_id}}/deny")
     def queue_deny(item_id: int, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         item = service.deny(caller, item_id)
         return done(request, f"denied item {item.id} ({item.name})")
 
     @app.post(f"{p}/queue/{{item_id}}/move")
     def queue_move(item_id: int, body: MoveItem, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         item = service.move_item(caller, item_id, body.index)
         return done(request, f"moved item {item.id} to place {body.index}")
 
     @app.delete(f"{p}/queue/{{item_id}}")
     def queue_remove(item_id: int, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         item = service.remove(caller, item_id)
         return done(request, f"removed item {item.id} ({item.name})")
 
     @app.post(f"{p}/queue/start")
     def queue_start(request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         service.start_queue(caller)
         return done(request, "queue started")
 
     @app.post(f"{p}/queue/stop")
     def queue_stop(request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         service.stop_queue(caller)
         return done(request, "queue stopped: the run in progress goes on to its end")
 
     # run control --------------------------------------------------------------------
     @app.post(f"{p}/run/pause")
     def run_pause(request: Request, body: PauseBody | None = None, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.pause(caller, now=bool(body and body.now)))
 
     @app.post(f"{p}/run/resume")
     def run_resume(request: Request, body: ResumeBody | None = None,
                    caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.resume(caller, body.answer if body else "resume"))
 
     @app.post(f"{p}/run/abort")
     def run_abort(request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.abort(caller))
 
     # manual commands ----------------------------------------------------------------
     @app.post(f"{p}/bench/home")
     def bench_home(body: RoleBody, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.home(caller, body.role))
 
     @app.post(f"{p}/bench/jog")
     def bench_jog(body: JogBody, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.jog(caller, body.role, body.step))
 
     @app.post(f"{p}/bench/move")
     def bench_move(body: MoveBody, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.move_axes(caller, dict(body.targets)))
 
     @app.post(f"{p}/bench/light")
     def bench_light(body: LightBody, request: Request, caller: Caller = control):
-        service.require_control(caller)  # after the body is validated
+        ctl(request, caller)
         return done(request, service.light(caller, body.on))
 
     @app.post(f"{p}/bench/stop-all")

@@ -221,10 +221,8 @@ class BenchService:
         (409) unless an admin forces it."""
         with self._lock:
             lease = self._lease_now()
-            if lease and lease[0] != caller.name and not (force and caller.role == "admin"):
-                raise ServiceError(409, f"control is held by {lease[0]} until "
-                                   f"{time.strftime('%H:%M:%S', time.localtime(lease[1]))}; "
-                                   "ask them to release it, or wait")
+            if not (force and caller.role == "admin"):
+                self.check_control(caller)
             s = self.lease_s if timeout_s is None else max(1.0, min(float(timeout_s), 86400))
             self._lease = (caller.name, time.time() + s)
             changed = lease is None or lease[0] != caller.name
@@ -247,11 +245,16 @@ class BenchService:
         self.hub.publish("control", {"holder": lease[0] if lease else None,
                                      "until": lease[1] if lease else None})
 
-    def require_control(self, caller: Caller) -> None:
-        """Refuse (409) when another operator holds control; otherwise take or renew it
-        (the first command of an operator when nobody holds control takes it, and every
-        one is announced)."""
-        self.take_control(caller)
+    def check_control(self, caller: Caller) -> None:
+        """Refuse (409) when another operator holds control. The caller's command, once
+        carried out, takes or renews the lease (:meth:`take_control`): the first command
+        of an operator when nobody holds control takes it, and that is announced."""
+        with self._lock:
+            lease = self._lease_now()
+            if lease and lease[0] != caller.name:
+                raise ServiceError(409, f"control is held by {lease[0]} until "
+                                   f"{time.strftime('%H:%M:%S', time.localtime(lease[1]))}; "
+                                   "ask them to release it, or wait")
 
     # queue ------------------------------------------------------------------------------
     def add_plan(self, caller: Caller, text: str, name: str | None = None, *,
