@@ -57,11 +57,13 @@ class ClientBuffer:
                     self._missed_seq[1] = message.seq
                     return
                 self._n_display += 1
+                self._items.append((False, text))
             elif len(self._items) - self._n_display >= self.lifecycle_limit:
-                self.cut_off = True
+                self.cut_off = True  # the sender closes the connection, saying why
                 self._items.clear()
                 self._n_display = 0
-            self._items.append((message.lifecycle, text))
+            else:
+                self._items.append((True, text))
         self.wake()
 
     def take(self, now: float | None = None) -> list[str]:
