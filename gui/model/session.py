@@ -569,12 +569,7 @@ class BenchSession:
     def _pose(self) -> dict[str, float]:
         """Positions of the homed axes now (read on this thread, for the guard)."""
         assert self._bench is not None
-        pose = {}
-        for role, axis in self._bench.axes.items():
-            s = axis.status()
-            if s.is_homed:
-                pose[role] = s.position
-        return pose
+        return self._bench.homed_pose()
 
     @staticmethod
     def _jog_base(axis: MotionAxis) -> float:

@@ -247,6 +247,17 @@ class Bench:
     def filter_wheel(self) -> FilterWheel | None:
         return self._one(FilterWheel)
 
+    def homed_pose(self) -> dict[str, float]:
+        """Positions (axis units) of the homed axes now, read from each axis: the pose the
+        guard judges a manual move from (an unhomed axis's counter is not a physical
+        position, so it is left out)."""
+        pose = {}
+        for role, axis in self.axes.items():
+            s = axis.status()
+            if s.is_homed:
+                pose[role] = s.position
+        return pose
+
     def make_safe(self) -> list[str]:
         """Stop every axis and turn the light off; return what could not be done."""
         problems = []

@@ -388,15 +388,6 @@ class BenchService:
         return axis
 
     @staticmethod
-    def _pose(bench: Bench) -> dict[str, float]:
-        pose = {}
-        for role, axis in bench.axes.items():
-            s = axis.status()
-            if s.is_homed:
-                pose[role] = s.position
-        return pose
-
-    @staticmethod
     def _light_on(bench: Bench) -> bool:
         return bool(bench.source is not None and bench.source.is_on)
 
@@ -415,7 +406,7 @@ class BenchService:
     def home(self, caller: Caller, role: str) -> str:
         def do(bench: Bench) -> str:
             axis = self._axis(bench, role)
-            plan_home(bench.profile, self._pose(bench), role, light=self._light_on(bench))
+            plan_home(bench.profile, bench.homed_pose(), role, light=self._light_on(bench))
             if not axis.is_enabled:
                 axis.enable()
             axis.home(wait=False)
@@ -425,7 +416,7 @@ class BenchService:
     def move_axes(self, caller: Caller, targets: dict[str, float]) -> str:
         def do(bench: Bench) -> str:
             axes = {r: self._axis(bench, r) for r in targets}
-            move = plan_manual_move(bench.profile, self._pose(bench), targets,
+            move = plan_manual_move(bench.profile, bench.homed_pose(), targets,
                                     light=self._light_on(bench))
             for role, target in targets.items():
                 axes[role].move_to(float(target))
@@ -447,7 +438,7 @@ class BenchService:
             if not isinstance(src, LightSource):
                 raise ServiceError(422, f"bench {self.profile.name!r} has no light source")
             if on:
-                bad = check_light_on(bench.profile, self._pose(bench))
+                bad = check_light_on(bench.profile, bench.homed_pose())
                 if bad:
                     raise ServiceError(422, "light on refused: " + "; ".join(
                         v.detail for v in bad) + "; move the detector out of the beam first",
