@@ -73,11 +73,12 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
     _t("run_started", True, "a run (new or resumed) started",
        run_id="string", path="string", plan_kind="string", n_total="integer",
        n_done="integer", estimated_s="number", item_id="integer"),
-    _t("point", False, "a point was acquired (live values; superseded by the next)",
-       index="integer", label="string", status="string", positions="object",
-       angles="array|null", exposure_us="number", power_w="number", signal="number",
-       retries="integer"),
-    _t("progress", False, "points done, elapsed and estimated time left",
+    _t("points", False, "the points acquired since the last such message (at most 10 "
+       "messages a second); each item: index, label, status, positions, angles, "
+       "exposure_us, power_w, signal, retries. A client that missed some reads them from "
+       "the run file", items="array"),
+    _t("progress", False, "points done, elapsed and estimated time left (the newest, at "
+       "most 10 a second)",
        n_done="integer", n_total="integer", elapsed_s="number", eta_s="number"),
     _t("axis_homed", True, "the engine homed an axis the plan moves",
        device="string", position="number", elapsed_s="number"),

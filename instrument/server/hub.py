@@ -34,6 +34,7 @@ class ClientBuffer:
 
     def __init__(self, capacity: int = 256, lifecycle_limit: int = 10_000,
                  wake: Callable[[], None] | None = None) -> None:
+        # ``wake`` is called by the hub's dispatcher (never under this buffer's lock)
         self.capacity = int(capacity)
         self.lifecycle_limit = int(lifecycle_limit)
         self.wake = wake or (lambda: None)
@@ -44,18 +45,22 @@ class ClientBuffer:
         self._missed_seq: list[int] = []
         self.cut_off = False
         self.delivered = 0
+        self._woken = False
 
-    def put(self, message: Message, text: str) -> None:
+    def put(self, message: Message, text: str) -> bool:
+        """Queue (or drop, or count) one message; True when the client's sender must be
+        woken: the first message since its last :meth:`take` (one wake per batch, not
+        per message: each wake costs the event loop, and so the engine, some time)."""
         with self._lock:
             if self.cut_off:
-                return
+                return False
             if not message.lifecycle:
                 if self._n_display >= self.capacity:
                     self._missed[message.type] += 1
                     if not self._missed_seq:
                         self._missed_seq = [message.seq, message.seq]
                     self._missed_seq[1] = message.seq
-                    return
+                    return False
                 self._n_display += 1
                 self._items.append((False, text))
             elif len(self._items) - self._n_display >= self.lifecycle_limit:
@@ -64,7 +69,8 @@ class ClientBuffer:
                 self._n_display = 0
             else:
                 self._items.append((True, text))
-        self.wake()
+            wake, self._woken = not self._woken, True
+            return wake
 
     def take(self, now: float | None = None) -> list[str]:
         """Everything waiting, oldest first, a ``missed`` message in front when display
@@ -80,6 +86,7 @@ class ClientBuffer:
             out.extend(text for _, text in self._items)
             self._items.clear()
             self._n_display = 0
+            self._woken = False
             self.delivered += len(out)
             return out
 
@@ -100,13 +107,10 @@ class EventHub:
         self._listeners: list[Callable[[Message], None]] = []
         self._thread = threading.Thread(target=self._loop, name="event-hub", daemon=True)
         self._thread.start()
-        self._idle = threading.Event()
-        self._idle.set()
 
     def publish(self, kind: str, data: dict[str, Any]) -> None:
         if kind not in MESSAGE_TYPES:
             raise ValueError(f"unknown message type {kind!r}")
-        self._idle.clear()
         self._in.put((kind, data, time.time()))
 
     def attach(self, buffer: ClientBuffer) -> None:
@@ -140,25 +144,41 @@ class EventHub:
 
     def _loop(self) -> None:
         while True:
-            got = self._in.get()
-            if got is None:
-                return
-            kind, data, t = got
-            if kind == "__flush__":
-                data["event"].set()
-                continue
-            self._seq += 1
-            message = Message(self._seq, kind, t, data)
-            try:
-                text = encode(message)
-            except (TypeError, ValueError) as err:  # a bug in a converter: say so, go on
-                text = encode(Message(self._seq, kind, t, {"error": str(err)}))
-            for fn in list(self._listeners):
+            batch = [self._in.get()]
+            while len(batch) < 512:  # what else is waiting goes out with it: one wake each
                 try:
-                    fn(message)
-                except Exception:
-                    self._listeners.remove(fn)
+                    batch.append(self._in.get_nowait())
+                except queue.Empty:
+                    break
             with self._lock:
                 clients = list(self._clients)
-            for c in clients:
-                c.put(message, text)
+            to_wake: set[int] = set()
+            for got in batch:
+                if got is None:
+                    return
+                kind, data, t = got
+                if kind == "__flush__":
+                    self._wake(clients, to_wake)
+                    to_wake.clear()
+                    data["event"].set()
+                    continue
+                self._seq += 1
+                message = Message(self._seq, kind, t, data)
+                try:
+                    text = encode(message)
+                except (TypeError, ValueError) as err:  # a converter's bug: say so, go on
+                    text = encode(Message(self._seq, kind, t, {"error": str(err)}))
+                for fn in list(self._listeners):
+                    try:
+                        fn(message)
+                    except Exception:  # an observer must not stop the stream
+                        self._listeners.remove(fn)
+                for k, c in enumerate(clients):
+                    if c.put(message, text):
+                        to_wake.add(k)
+            self._wake(clients, to_wake)
+
+    @staticmethod
+    def _wake(clients: list[ClientBuffer], which: set[int]) -> None:
+        for k in which:
+            clients[k].wake()

@@ -151,6 +151,9 @@ class BenchService:
         self._last_fault: ev.Fault | None = None
         self._lease: tuple[str, float] | None = None
         self._frame: tuple[int, FrameData] | None = None
+        self._display_lock = threading.Lock()
+        self._points: list[dict[str, Any]] = []
+        self._progress: dict[str, Any] | None = None
         self.interrupted = self.queue.after_restart()
         if connect:
             self.connect(Caller("server", "admin"))
@@ -617,8 +620,21 @@ class BenchService:
         self._publish_queue()
 
     def _on_engine_event(self, event: ev.Event) -> None:
-        """On the engine's worker thread: one queue put per event (the hub does the rest)."""
+        """On the engine's worker thread: one queue put per lifecycle event (the hub does
+        the rest). Points and progress are display messages: they are gathered here and
+        published by the sampler at most :data:`STATE_HZ` times a second (every point, in
+        batches; the newest progress), so the fan-out per second does not grow with the
+        engine's rate; a lifecycle event first flushes what was gathered, so that a client
+        never sees a run end before its last points."""
         kind, data = event_message(event)
+        if kind in ("point", "progress"):
+            with self._display_lock:
+                if kind == "point":
+                    self._points.append(data)
+                else:
+                    self._progress = data
+            return
+        self._flush_display()
         if isinstance(event, ev.Fault):
             self._last_fault = event
         elif isinstance(event, ev.Paused):
@@ -630,6 +646,15 @@ class BenchService:
             data["item_id"] = item.id if item is not None else None
         self.hub.publish(kind, data)
 
+    def _flush_display(self) -> None:
+        with self._display_lock:
+            points, self._points = self._points, []
+            progress, self._progress = self._progress, None
+        if points:
+            self.hub.publish("points", {"items": points})
+        if progress is not None:
+            self.hub.publish("progress", progress)
+
     def _on_frame(self, index: int, frame: FrameData) -> None:
         self._frame = (index, frame)  # the sampler decimates it (off the worker thread)
 
@@ -640,6 +665,7 @@ class BenchService:
         last_frame_t = 0.0
         while not self._closed:
             time.sleep(1.0 / STATE_HZ)
+            self._flush_display()
             state = self._device_states()
             now = time.monotonic()
             if state is not None and (state != last_state or now - last_sent > 2.0):

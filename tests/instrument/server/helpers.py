@@ -20,12 +20,13 @@ ROOT = Path(__file__).resolve().parents[3]
 FAST = 200
 
 
-def fast_profile_text(*, pause_on_detector_fault: bool = False) -> str:
-    """The built-in sim bench with fast stages; optionally a detector arm whose failure
-    pauses the run for the operator (instead of the default retry policy)."""
+def fast_profile_text(*, pause_on_detector_fault: bool = False, speed: int = FAST) -> str:
+    """The built-in sim bench with stages at ``speed`` times real time; optionally a
+    detector arm whose failure pauses the run for the operator (instead of the default
+    retry policy)."""
     text = load_profile("sim").source_text
     for slow in ("speed=20", "speed=50"):
-        text = text.replace(slow, f"speed={FAST}")
+        text = text.replace(slow, f"speed={speed}")
     if pause_on_detector_fault:
         text = text.replace("[devices.camera_z]", "[devices.detector_theta.retry]\n"
                             "attempts = 1\nbackoff_s = 0.0\non_failure = \"pause\"\n\n"

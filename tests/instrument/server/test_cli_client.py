@@ -3,12 +3,17 @@ resume without a run; serve keys and audit; serve's refusal to listen beyond loo
 
 from __future__ import annotations
 
+import io
 import re
+import threading
 
 import pytest
 
 from instrument.cli import main
+from instrument.cli.watch import watch
+from instrument.client import BenchClient
 from tests.instrument.server.helpers import plan_text
+from tests.waiting import wait_for
 
 
 @pytest.fixture
@@ -36,12 +41,19 @@ def test_queue_status_and_watch_through_the_server(bench_file, start_server, pla
     assert out.index("beta") < out.index("alpha") < out.index("stop marker")
     assert main(["pause"]) == 2
     assert "no run is in progress" in capsys.readouterr().err
+    # `scatterlab watch`'s loop, started before the queue so that it sees every run
+    seen = io.StringIO()
+    client = BenchClient(server.url)
+    watcher = threading.Thread(target=watch, args=(client,), kwargs={"out": seen},
+                               daemon=True)
+    watcher.start()
+    wait_for(lambda: "watching bench 'sim'" in seen.getvalue(), what="the watcher")
     assert main(["queue", "start"]) == 0
-    assert main(["watch", "--until-idle"]) == 0
-    out = capsys.readouterr().out
-    assert "watching bench 'sim'" in out
+    wait_for(lambda: "stop marker: stop marker" in seen.getvalue(), what="the stop marker")
+    assert main(["watch", "--until-idle"]) == 0  # the queue stopped: it returns at once
+    out = seen.getvalue()
     assert out.count("run finished: 2/2 points") == 2
-    assert "queue item #3 stop marker: stop marker" in out
+    assert out.index("item #2 beta: finished") < out.index("item #1 alpha: finished")
     assert main(["status"]) == 0
     out = capsys.readouterr().out
     assert "run: none" in out and "queue stopped: 0 item(s)" in out
@@ -50,6 +62,10 @@ def test_queue_status_and_watch_through_the_server(bench_file, start_server, pla
     assert [w for w in out.split() if w in ("alpha", "beta")] == ["beta", "alpha"]
     assert main(["resume"]) == 2
     assert "nothing to resume" in capsys.readouterr().err
+    server.stop()
+    watcher.join(60)
+    assert "the server closed the event stream" in seen.getvalue()
+    client.close()
 
 
 def test_keys_and_the_audit_log_from_the_command_line(bench_file, start_server, tmp_path,

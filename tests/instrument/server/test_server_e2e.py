@@ -97,7 +97,9 @@ def test_a_queue_of_three_plans_runs_in_order_and_two_clients_watch_it(
 @pytest.mark.timeout(900)
 def test_kill_9_of_the_server_mid_run_then_restart_and_resume_loses_nothing(
         bench_file, start_server, tmp_path):
-    bench = bench_file()
+    # Stages at real speed: the 16 points left after the third take seconds of emulated
+    # motion however fast the machine, so the kill lands mid-run.
+    bench = bench_file(speed=1)
     theta_r = [float(x) for x in np.arange(-70.0, 71.0, 7.0) if abs(x + 20.0) > 7.0]
     server = start_server(bench)
     w = Watcher(server.url)
@@ -105,9 +107,11 @@ def test_kill_9_of_the_server_mid_run_then_restart_and_resume_loses_nothing(
     with BenchClient(server.url) as c:
         item = c.add_plan(plan_text("long", theta_r))
         c.start_queue()
-        wait_for(lambda: len(w.of("point")) >= 3, what="three points stored")
+        wait_for(lambda: sum(len(m.data["items"]) for m in w.of("points")) >= 3,
+                 what="three points stored")
     server.kill()
     w.close()
+    assert not w.of("run_finished")  # killed mid-run
     path = w.of("run_started")[0].data["path"]
     n_total = w.of("run_started")[0].data["n_total"]
     # restarted on the same runs folder: the item is there, shown resumable
