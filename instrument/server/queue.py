@@ -13,7 +13,9 @@ queue when it reaches the head. Items are kept in order by a real-valued ``posit
 ``aborted``     its run was aborted: the item stays at the head, and starting the queue
                 again resumes the same run file;
 ``interrupted`` the server died while it ran: resumable in the same way;
-``failed``      its run could not start or failed: it stays at the head for a look.
+``failed``      its run could not start or failed: it stays at the head for a look;
+                starting the queue tries it again (continuing its run file, if it has
+                one).
 
 Every end of an item is a history row (outcome, run file, who); an item leaves the queue
 when its run finishes, when it is removed, or when its proposal is denied.
@@ -28,8 +30,8 @@ from instrument.server.db import ServerDB
 
 __all__ = ["HistoryRow", "PlanQueue", "QueueError", "QueueItem"]
 
-#: Item states whose run file holds a run that can be continued.
-RESUMABLE = ("paused", "aborted", "interrupted")
+#: Item states whose run file (when it has one) holds a run that can be continued.
+RESUMABLE = ("paused", "aborted", "interrupted", "failed")
 #: Item states of the run the server drives now.
 ACTIVE = ("running",)
 

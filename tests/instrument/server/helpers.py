@@ -77,7 +77,7 @@ class ServerProcess:
     def _read_url(self) -> str:
         for line in self.proc.stdout:
             self.lines.append(line)
-            m = re.search(r"serving bench .* on (http://127\.0\.0\.1:\d+)", line)
+            m = re.search(r"serving bench .* on (https?://127\.0\.0\.1:\d+)", line)
             if m:
                 return m.group(1)
         raise AssertionError("the server did not start:\n" + "".join(self.lines))
