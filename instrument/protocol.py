@@ -7,7 +7,8 @@ stream: one JSON text frame per message::
     {"v": 1, "seq": 42, "type": "progress", "time": 1790000000.0, "data": {...}}
 
 ``v`` is :data:`PROTOCOL_VERSION` (a client refuses a major version it does not know);
-``seq`` numbers every message the server publishes, in order, so a client sees a gap;
+``seq`` numbers every message the server publishes, in order, so a client sees a gap
+(``hello`` and ``missed``, which concern one connection only, carry 0);
 ``type`` is one of :data:`MESSAGE_TYPES`, whose entry names the fields of ``data`` and
 whether the message is *lifecycle* (never dropped for a slow client) or *display*
 (superseded by the next one of its type, so a client that falls behind may lose it and is

@@ -78,7 +78,7 @@ class ClientBuffer:
         with self._lock:
             out: list[str] = []
             if self._missed:
-                out.append(encode(Message(-1, "missed", now or time.time(), {
+                out.append(encode(Message(0, "missed", now or time.time(), {
                     "counts": dict(self._missed), "first_seq": self._missed_seq[0],
                     "last_seq": self._missed_seq[1]})))
                 self._missed.clear()

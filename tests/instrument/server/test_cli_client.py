@@ -85,7 +85,14 @@ def test_keys_and_the_audit_log_from_the_command_line(bench_file, start_server, 
     assert "observer keys may not do this" in capsys.readouterr().err
     assert main(["queue", "add", "--propose", plans[0]]) == 0
     monkeypatch.setenv("SCATTERLAB_KEY", token)
+    assert main(["control", "take", "--timeout", "600"]) == 0
+    assert "control held by ann until" in capsys.readouterr().out
     assert main(["queue", "approve", "1"]) == 0
+    monkeypatch.setenv("SCATTERLAB_KEY", obs)
+    assert main(["control", "show"]) == 0
+    assert "control held by ann" in capsys.readouterr().out
+    monkeypatch.setenv("SCATTERLAB_KEY", token)
+    assert main(["control", "release"]) == 0
     monkeypatch.setenv("SCATTERLAB_KEY", "sl_wrong")
     assert main(["status"]) == 2
     assert "HTTP 401" in capsys.readouterr().err
@@ -99,6 +106,8 @@ def test_keys_and_the_audit_log_from_the_command_line(bench_file, start_server, 
     assert "obs (observer)" in lines[0] and " 403 " in lines[0]
     assert "obs (observer)" in lines[1] and " 200 " in lines[1] and "proposed" in lines[1]
     assert "ann (operator)" in lines[2] and "approved item 1" in lines[2]
+    assert any("/api/v1/control/take" in ln and "ann (operator)" in ln
+               for ln in out.splitlines())
 
 
 def test_serve_refuses_a_lab_address_without_tls_and_keys(tmp_path, capsys):
