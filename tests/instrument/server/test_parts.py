@@ -194,3 +194,30 @@ def test_expiry_in_days_or_as_a_date():
             parse_expiry(bad)
 
 
+
+
+# display messages ------------------------------------------------------------------------
+def test_a_frame_is_decimated_for_display_by_block_means():
+    import numpy as np
+
+    from instrument.server.service import decimate
+
+    frame = np.zeros((1024, 1280), dtype=np.uint16)
+    frame[:8, :8] = 4000  # one 8×8 block at full value
+    img, scale = decimate(frame, max_px=160)
+    assert img.shape == (128, 160) and img.dtype == np.uint8
+    assert img[0, 0] == 255 and img[1:, :].max() == 0
+    assert scale == pytest.approx(4000 / 255)
+
+
+def test_engine_events_become_messages_with_null_for_what_was_not_measured():
+    import math
+
+    from instrument.run.events import PointCompleted
+    from instrument.server.service import event_message
+
+    kind, data = event_message(PointCompleted(3, "sample", "ok", {"detector_theta": 10.0},
+                                              None, math.nan, 1e-6, math.nan, 0))
+    assert kind == "point" and data["exposure_us"] is None and data["signal"] is None
+    assert data["power_w"] == 1e-6
+    encode(Message(1, "points", 0.0, {"items": [data]}))  # JSON without NaN

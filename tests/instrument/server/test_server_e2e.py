@@ -180,3 +180,55 @@ def test_a_fault_on_the_emulated_bench_reaches_every_client_and_an_operator_answ
         assert (flags == 0).all()
     else:
         assert flags[row] == 1 and (flags == 1).sum() == 1
+
+
+@pytest.mark.timeout(900)
+def test_clients_that_stall_or_disconnect_change_nothing_for_the_run(bench_file,
+                                                                      start_server):
+    from websockets.sync.client import connect
+
+    server = start_server(bench_file())
+    ws_url = "ws" + server.url[4:] + "/api/v1/events"
+    with connect(ws_url) as stalled, connect(ws_url) as leaver:  # stalled never reads
+        leaver.recv(60)  # its hello; it goes away once the run has started
+        w = Watcher(server.url)
+        assert w.hello.wait(60)
+        with BenchClient(server.url) as c:
+            c.add_plan(plan_text("crowded", THETA_R))
+            c.start_queue()
+            wait_for(lambda: w.of("run_started"), what="the run's start")
+            leaver.close()
+            wait_idle(c, "the run's end")
+            (h,) = c.history()
+        assert stalled.protocol is not None
+    assert h["outcome"] == "finished"
+    with h5py.File(h["run_file"]) as f:
+        assert sorted(f["entry/points/index"][:].tolist()) == list(range(len(THETA_R)))
+    w.close()
+
+
+@pytest.mark.timeout(900)
+def test_pause_now_stops_at_once_and_resume_continues_the_same_file(bench_file,
+                                                                     start_server):
+    bench = bench_file(speed=1)  # the run cannot end before the pause, however fast
+    theta_r = [-70.0, -60.0, -45.0, 0.0, 10.0, 30.0, 50.0, 70.0]
+    server = start_server(bench)
+    w = Watcher(server.url)
+    assert w.hello.wait(60)
+    with BenchClient(server.url) as c:
+        item = c.add_plan(plan_text("paused now", theta_r))
+        c.start_queue()
+        wait_for(lambda: w.of("points"), what="a point stored")
+        c.pause(now=True)
+        wait_for(lambda: w.of("run_finished"), what="the stop")
+        assert w.of("run_finished")[0].data["status"] == "aborted"
+        head = c.queue()["items"][0]
+        assert head["id"] == item["id"] and head["state"] == "paused" and head["resumable"]
+        c.resume()
+        wait_idle(c, "the resumed run's end")
+        assert [h["outcome"] for h in c.history()] == ["paused", "finished"]
+    path = w.of("run_started")[0].data["path"]
+    assert [m.data["path"] for m in w.of("run_started")] == [path, path]
+    with h5py.File(path) as f:
+        assert sorted(f["entry/points/index"][:].tolist()) == list(range(len(theta_r)))
+    w.close()
