@@ -360,7 +360,7 @@ class BenchService:
                 return "resuming" + (" (the failed point is skipped)" if answer == "skip"
                                      else "")
             head = self.queue.head()
-            if head is None or head.state not in RESUMABLE:
+            if head is None or not head.summary()["resumable"]:
                 raise ServiceError(409, "nothing to resume: no paused run and no "
                                    "resumable item at the head of the queue")
         self.start_queue(caller)
