@@ -10,9 +10,9 @@ import sys
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
-from instrument import fit, open_bench, plans  # noqa: E402
+from instrument import fit, open_bench, plans
 
 runs = sys.argv[1] if len(sys.argv) > 1 else "runs"
 plan = plans.in_plane(theta_i=[30.0], theta_r=range(-70, 81, 10), skip_beam_points=True,
