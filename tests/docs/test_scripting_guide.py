@@ -56,3 +56,32 @@ def test_every_python_block_of_the_chapter_runs(tmp_path, monkeypatch, capsys):
     assert "finished" in out and "1/sr" in out
     assert (tmp_path / "runs" / "brdf.png").stat().st_size > 1000
     assert namespace["handle"].status == "finished"
+
+
+NOTEBOOKS = sorted((ROOT / "examples" / "notebooks").glob("*.ipynb"))
+
+
+def test_the_notebooks_are_stored_without_outputs_and_use_only_the_facade():
+    import nbformat
+
+    assert NOTEBOOKS
+    for path in NOTEBOOKS:
+        nb = nbformat.read(path, as_version=4)
+        code = [c for c in nb.cells if c.cell_type == "code"]
+        assert all(not c.outputs and c.execution_count is None for c in code), path
+        assert project_imports("\n".join(c.source for c in code)) <= PUBLIC, path
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_every_notebook_runs_on_the_simulated_bench(path, tmp_path):
+    import nbformat
+    from nbclient import NotebookClient
+
+    nb = nbformat.read(path, as_version=4)
+    NotebookClient(nb, timeout=900, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
+              if o.output_type == "error"]
+    assert not errors, errors
+    assert list((tmp_path / "runs").glob("*.h5"))
