@@ -190,7 +190,8 @@ def _ext(grp: h5py.Group, name: str, dtype: Any, *, chunk: int, width: int | Non
     return d
 
 
-_UNITS = {"t_start": "s", "t_end": "s", "theta_i": "deg", "phi_i": "deg", "theta_r": "deg",
+#: Units of the per-point columns (stored as each dataset's ``units`` attribute).
+UNITS = {"t_start": "s", "t_end": "s", "theta_i": "deg", "phi_i": "deg", "theta_r": "deg",
           "phi_r": "deg", "exposure_us": "us", "power_w": "W", "signal": "DN/us",
           "lockin_r_v": "V", "lockin_u_r_v": "V", "lockin_x_v": "V", "lockin_y_v": "V",
           "lockin_theta_deg": "deg", "lockin_sensitivity_v": "V",
@@ -255,7 +256,7 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         rows = table_chunk_rows(n)
         pts = _group(entry, "points", "NXcollection")
         for name in (*FLOAT_FIELDS, *DETECTOR_FIELDS):
-            _ext(pts, name, "f8", chunk=rows, units=_UNITS.get(name))
+            _ext(pts, name, "f8", chunk=rows, units=UNITS.get(name))
         for name in INT_FIELDS:
             _ext(pts, name, "i8", chunk=rows)
         for name in STR_FIELDS:

@@ -1,29 +1,11 @@
-"""A minimal TOML writer for the fuzz tests (tables, arrays, scalars)."""
+"""A minimal TOML writer for the fuzz tests: nested tables as ``[a.b]`` sections, values
+as the plan builders write them (:func:`instrument.plans.scripted.toml_value`)."""
 
 from __future__ import annotations
 
 import json
-import math
 
-
-def _scalar(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(_scalar(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{json.dumps(k)} = {_scalar(x)}" for k, x in v.items()) + "}"
-    raise TypeError(type(v))
+from instrument.plans.scripted import toml_value as _scalar
 
 
 def dumps(data: dict, prefix: str = "") -> str:

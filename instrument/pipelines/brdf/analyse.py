@@ -224,7 +224,9 @@ def analyse(
     if np.any(u_all[idx] <= 0):
         raise ValueError("every point needs a positive uncertainty to be fitted")
     lam = None if wavelength_nm is None else 1e-3 * float(wavelength_nm)
-    base = {m: get_model(m, wavelength_um=lam) for m in models}
+    # keyed by the model's own name: the fits are, and an alias ("lambertian") must
+    # find its model again
+    base = {mod.name: mod for mod in (get_model(m, wavelength_um=lam) for m in models)}
     a = tuple(np.asarray(x)[idx] for x in (points.theta_i, points.phi_i, points.theta_r,
                                            points.phi_r))
     f = f_all[idx]

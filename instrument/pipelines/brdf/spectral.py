@@ -57,7 +57,7 @@ from instrument.run.runfile import RunData, check_run_file, read_run
 __all__ = ["DEFAULT_SPECTRAL_MODELS", "SpectralFit", "SpectralOptions", "WavelengthFit",
            "WavelengthGroup", "analyse_spectral", "detector_of", "fit_spectral",
            "has_wavelength_axis",
-           "plot_parameters_vs_wavelength", "reduce_group", "wavelength_groups",
+           "plot_parameters_vs_wavelength", "reduce_group", "reduce_spectral", "wavelength_groups",
            "write_spectral_report", "write_spectral_results"]
 
 #: Diffuse albedo plus a GGX lobe whose level is the Fresnel reflectance of n.
@@ -418,15 +418,15 @@ def reduce_group(run: RunData, group: WavelengthGroup, opts: SpectralOptions, *,
 
 
 # ------------------------------------------------------------------------- the fit
-def analyse_spectral(run: RunData, options: SpectralOptions | None = None, *,
-                     criterion: str = "bic", seed: int = 0) -> SpectralFit:
-    """Group, reduce and fit a run already read (no report, nothing written): the
-    per-wavelength fits of :func:`fit_spectral`, callable on any :class:`RunData`.
+def reduce_spectral(run: RunData, options: SpectralOptions | None = None
+                    ) -> tuple[str, tuple[tuple[WavelengthGroup, Reduced], ...]]:
+    """The detector used and each wavelength's reduction, in order of wavelength (nothing
+    fitted, nothing written).
 
     Raises
     ------
     ValueError
-        As :func:`fit_spectral`.
+        The run has no wavelength axis, or as :func:`reduce_group`.
     """
     opts = options or SpectralOptions()
     if not has_wavelength_axis(run):
@@ -440,9 +440,24 @@ def analyse_spectral(run: RunData, options: SpectralOptions | None = None, *,
         camera = reduce_run(run.path, red_opts)
         cal = run.camera_calibration(red_opts.camera_calibration)
         camera.provenance["camera_wavelength_nm"] = cal.wavelength_nm
+    return detector, tuple((g, reduce_group(run, g, opts, detector=detector, camera=camera))
+                           for g in wavelength_groups(run))
+
+
+def analyse_spectral(run: RunData, options: SpectralOptions | None = None, *,
+                     criterion: str = "bic", seed: int = 0) -> SpectralFit:
+    """Group, reduce and fit a run already read (no report, nothing written): the
+    per-wavelength fits of :func:`fit_spectral`, callable on any :class:`RunData`.
+
+    Raises
+    ------
+    ValueError
+        As :func:`fit_spectral`.
+    """
+    opts = options or SpectralOptions()
+    detector, groups = reduce_spectral(run, opts)
     fits = []
-    for group in wavelength_groups(run):
-        reduced = reduce_group(run, group, opts, detector=detector, camera=camera)
+    for group, reduced in groups:
         result = analyse(reduced.points, opts.models, criterion=criterion, run_cv=False,
                          seed=seed, wavelength_nm=group.wavelength_nm,
                          instrument_aware=reduced.points.receiver is not None)
