@@ -157,7 +157,8 @@ class Plan:
                 total += timing.wheel_move_s(1 if slot is None else slot, int(want))
                 slot = int(want)
             if pol.uses_lockin and timing.lockin_settle_s > 0:
-                reads = 2 if pol.dark == "per_point" and p.light else 1
+                reads = 2 if (pol.dark == "per_point" and p.light
+                              and pol.reads_dark("lockin")) else 1
                 total += reads * timing.lockin_reading_s(pol.frames)
             if not pol.uses_camera:
                 total += timing.point_overhead_s / 4  # a journal line, no frames

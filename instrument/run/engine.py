@@ -861,9 +861,9 @@ class RunEngine:
             # closed or the source off), read as the light was: the power meter's and the
             # lock-in's offsets are subtracted by the reduction like the camera's frames.
             self._set_light(False)
-            if pm is not None:
+            if pm is not None and policy.reads_dark("power_meter"):
                 st.extra["power_dark_w"] = self._read_power(pm, st)
-            if lockin is not None:
+            if lockin is not None and policy.reads_dark("lockin"):
                 role = self._roles[id(lockin)]
                 st.extra.update(self._retry(role, self._policies[role], "read lock-in dark",
                                             lambda: self._read_lockin_dark(policy.frames),
