@@ -251,7 +251,7 @@ def _run_spectral(args: argparse.Namespace) -> int:
     detector = None if args.detector in (None, "power_meter") else args.detector
     opts = SpectralOptions(
         detector=detector, route=args.route, u_incident_power_rel=args.incident_power_u,
-        receiver_distance_mm=args.distance_mm, sigma_theta_deg=args.sigma_theta_deg or 0.0,
+        receiver_distance_mm=args.distance_mm, sigma_theta_deg=args.sigma_theta_deg,
         models=models,
         reduction=ReductionOptions(camera_calibration=args.camera_calibration,
                                    flat_run=args.flat, beam_radius_mm=args.beam_radius_mm,
