@@ -151,10 +151,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if spectral:
         return _run_spectral(args)
-    if args.detector == "lockin":
-        print("error: --detector lockin is reduced per wavelength (a run with a filter "
-              "wheel); give --per-wavelength yes")
-        return 2
+    if args.detector == "lockin":  # one wavelength: the lock-in's per-wavelength path
+        return _run_spectral(args)
     try:
         options = fit_options(args)
     except ValueError as err:

@@ -62,11 +62,23 @@ from instrument.run.paths import results_dir, results_path
 from instrument.run.results import put, replace_group, write_results_file
 from instrument.run.runfile import RunData, check_run_file, read_run
 
-__all__ = ["DEFAULT_SPECTRAL_MODELS", "SpectralFit", "SpectralOptions", "WavelengthFit",
-           "WavelengthGroup", "analyse_spectral", "detector_of", "fit_spectral",
-           "has_wavelength_axis",
-           "plot_parameters_vs_wavelength", "reduce_group", "wavelength_groups",
-           "write_spectral_report", "write_spectral_results"]
+__all__ = [
+    "DEFAULT_SPECTRAL_MODELS",
+    "SpectralFit",
+    "SpectralOptions",
+    "WavelengthFit",
+    "WavelengthGroup",
+    "analyse_spectral",
+    "detector_of",
+    "fit_spectral",
+    "has_wavelength_axis",
+    "plot_parameters_vs_wavelength",
+    "reduce_group",
+    "single_wavelength_group",
+    "wavelength_groups",
+    "write_spectral_report",
+    "write_spectral_results",
+]
 
 #: Diffuse albedo plus a GGX lobe whose level is the Fresnel reflectance of n.
 DEFAULT_SPECTRAL_MODELS = ("lambert+ggx_fresnel",)
@@ -109,6 +121,9 @@ class SpectralOptions:
         (:func:`instrument_function`: beam footprint and divergence, the photodiode's
         aperture, the read-back spread), its receiver factor divided out and the models
         fitted as the receiver sees them; False: a point spot and a point receiver.
+    wavelength_nm : float or None
+        Lock-in run without a wavelength axis: the light's wavelength (for R(λ)); default
+        the profile's ``[photodiode] wavelength_nm``, else a simulated source's.
     """
 
     detector: str | None = None
@@ -122,6 +137,7 @@ class SpectralOptions:
     models: tuple[str, ...] = DEFAULT_SPECTRAL_MODELS
     reduction: ReductionOptions | None = None
     receiver_geometry: bool = True
+    wavelength_nm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -228,6 +244,22 @@ def wavelength_groups(run: RunData, rows: np.ndarray | None = None
               for (p, _), rw in keys.items()]
     return tuple(sorted(groups, key=lambda g: (math.isnan(g.wavelength_nm),
                                                g.wavelength_nm)))
+
+
+def single_wavelength_group(run: RunData, opts: SpectralOptions) -> WavelengthGroup:
+    """Every scattering point of a lock-in run without a wavelength axis, as one group at
+    the light's wavelength (:class:`SpectralOptions` ``wavelength_nm``); points read
+    through a neutral-density filter stay in it (their slot is divided out)."""
+    profile = run.profile()
+    src = profile.get("simulation", {}).get("source", {})
+    lam = opts.wavelength_nm or profile.get("photodiode", {}).get("wavelength_nm") or (
+        src.get("wavelength_nm"))
+    if lam is None:
+        raise ValueError(f"{run.path}: the light's wavelength is unknown (the run has no "
+                         "wavelength axis): set [photodiode] wavelength_nm in the bench "
+                         "profile for the photodiode's responsivity")
+    return WavelengthGroup(float(lam), float(src.get("bandwidth_nm", math.nan)), -1,
+                           run.brdf_rows())
 
 
 def _plan_table(run: RunData) -> dict[str, Any]:
@@ -480,10 +512,13 @@ def analyse_spectral(run: RunData, options: SpectralOptions | None = None, *,
         As :func:`fit_spectral`.
     """
     opts = options or SpectralOptions()
-    if not has_wavelength_axis(run):
-        raise ValueError(f"{run.path}: the run has no wavelength axis (no wavelength_nm per "
-                         "point); fit it with scatterlab fit")
     detector = detector_of(run, opts.detector)
+    groups = wavelength_groups(run)
+    if not has_wavelength_axis(run):
+        if detector != "lockin":
+            raise ValueError(f"{run.path}: the run has no wavelength axis (no wavelength_nm "
+                             "per point); fit it with scatterlab fit")
+        groups = (single_wavelength_group(run, opts),)
     camera = None
     if detector == "camera":
         red_opts = replace(opts.reduction or ReductionOptions(), incident_power_w=1.0,
@@ -492,7 +527,7 @@ def analyse_spectral(run: RunData, options: SpectralOptions | None = None, *,
         cal = run.camera_calibration(red_opts.camera_calibration)
         camera.provenance["camera_wavelength_nm"] = cal.wavelength_nm
     fits = []
-    for group in wavelength_groups(run):
+    for group in groups:
         reduced = reduce_group(run, group, opts, detector=detector, camera=camera)
         result = analyse(reduced.points, opts.models, criterion=criterion, run_cv=False,
                          seed=seed, wavelength_nm=group.wavelength_nm,
