@@ -165,19 +165,23 @@ filters = [2]
 """
 
 
-def lockin_profile(brdf: str, params: str, seed: int) -> str:
+def lockin_profile(brdf: str, params: str, seed: int, aperture_samples: int | None = None
+                   ) -> str:
     """The sim-spectral bench with a plain sample (no spectral table) and the lock-in's
-    noise seed ``seed``."""
+    noise seed ``seed``; ``aperture_samples`` refines the emulator's grid over the
+    photodiode's aperture (default 9 per side)."""
     text = (ROOT / "instrument" / "bench" / "profiles" / "sim-spectral.toml").read_text("utf-8")
     head, _, tail = text.partition('[simulation.scene]\nbrdf = "spectral"')
     tail = tail.split("[simulation.source]", 1)[1]
-    text = (f'{head}[simulation.scene]\nbrdf = "{brdf}"\nparams = {params}\n\n'
+    grid = "" if aperture_samples is None else f"aperture_samples = {aperture_samples}\n"
+    text = (f'{head}[simulation.scene]\nbrdf = "{brdf}"\nparams = {params}\n{grid}\n'
             f"[simulation.source]{tail}")
     return re.sub(r"(simsr830://lockin\?[^\"]*)seed=\d+", rf"\g<1>seed={300 + seed}", text)
 
 
 def lockin_scan(name: str, brdf: str, params: str, model: str, truth: tuple[float, ...],
-                seed: int) -> tuple[np.ndarray, float, float]:
+                seed: int, aperture_samples: int | None = None
+                ) -> tuple[np.ndarray, float, float]:
     """One lock-in scan through the engine: (pulls of the true model's parameters, its χ²
     p-value, χ²/dof)."""
     from instrument.cli import main as cli
@@ -186,7 +190,8 @@ def lockin_scan(name: str, brdf: str, params: str, model: str, truth: tuple[floa
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp_p = Path(tmp)
-        (tmp_p / "bench.toml").write_text(lockin_profile(brdf, params, seed), "utf-8")
+        (tmp_p / "bench.toml").write_text(lockin_profile(brdf, params, seed,
+                                                         aperture_samples), "utf-8")
         (tmp_p / "plan.toml").write_text(LOCKIN_PLAN.format(name=name), "utf-8")
         assert cli(["run", str(tmp_p / "plan.toml"), "--bench", str(tmp_p / "bench.toml"),
                     "--out", str(tmp_p / "runs"), "--no-fsync", "--quiet"]) == 0
@@ -198,7 +203,8 @@ def lockin_scan(name: str, brdf: str, params: str, model: str, truth: tuple[floa
     return (fit.params - np.array(truth)) / fit.stderr, gof.p_value, gof.chi2 / gof.dof
 
 
-def lockin(n: int, names: list[str] | None, jobs: int) -> None:
+def lockin(n: int, names: list[str] | None, jobs: int,
+           aperture_samples: int | None = None) -> None:
     from concurrent.futures import ProcessPoolExecutor
 
     print(HEADER)
@@ -209,7 +215,8 @@ def lockin(n: int, names: list[str] | None, jobs: int) -> None:
             continue
         t0 = time.perf_counter()
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            done = list(pool.map(lockin_scan, *zip(*[(name, brdf, params, model, truth, k)
+            done = list(pool.map(lockin_scan, *zip(*[(name, brdf, params, model, truth, k,
+                                                      aperture_samples)
                                                      for k in range(n)], strict=True)))
         zs = np.array([d[0] for d in done])
         ps = np.array([d[1] for d in done])
@@ -228,6 +235,8 @@ def main() -> int:
     ap.add_argument("--power-meter", type=int, default=10, metavar="N")
     ap.add_argument("--lockin", type=int, default=0, metavar="N")
     ap.add_argument("--jobs", type=int, default=4, help="lock-in runs at once")
+    ap.add_argument("--aperture-samples", type=int, default=None,
+                    help="lock-in: the emulator's grid per side over the photodiode")
     ap.add_argument("--samples", default=None, help="comma-separated sample names")
     args = ap.parse_args()
     names = args.samples.split(",") if args.samples else None
@@ -236,7 +245,7 @@ def main() -> int:
     if args.power_meter:
         power_meter(args.power_meter, names)
     if args.lockin:
-        lockin(args.lockin, names, args.jobs)
+        lockin(args.lockin, names, args.jobs, args.aperture_samples)
     return 0
 
 
