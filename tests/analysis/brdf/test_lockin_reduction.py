@@ -179,7 +179,7 @@ def test_dark_readings_enter_the_noise_model_at_zero_signal():
     _, mean, u = _snapshots(7, n_points=20)
     dark = np.full(20, np.sqrt(1e-16 / 4))
     sigma, a, b = pooled_reading_sigma(mean, u, 4, dark_u_v=dark, n_dark_readings=4)
-    assert abs(a / 1e-16 - 1) < 0.3 and sigma.shape == (20,)
+    assert abs(a / 1e-16 - 1) < 0.3 and b > 0 and sigma.shape == (20,)
     with pytest.raises(ValueError, match="at least two readings"):
         pooled_reading_sigma(mean, u, 1)
     # noiseless readings: their own (zero) σ back, nothing invented
