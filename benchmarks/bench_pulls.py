@@ -43,6 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from tests.instrument.pipelines.brdf.test_closed_loop import matrix_stats  # noqa: E402
+from tests.instrument.pipelines.brdf.test_lockin_pulls import lockin_profile  # noqa: E402
 from tests.instrument.sim_scan import MATRIX  # noqa: E402
 
 #: Samples of the power-meter runs: (name, scene brdf, its parameters as profile TOML,
@@ -145,38 +146,11 @@ def power_meter(n: int, names: list[str] | None) -> None:
                   time.perf_counter() - t_all), flush=True)
 
 
-LOCKIN_PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "pulls"
-[sample]
-name = "{name}"
-[scan]
-skip_beam_points = true
-theta_i = [20, 50]
-theta_r = [-60, -40, -20, 0, 10, 30, 40, 60, 70]
-specular = {{ half_width_deg = 4, step_deg = 2 }}
-[acquisition]
-detectors = ["lockin"]
-dark = "per_point"
-frames = 4
-[spectral]
-filters = [2]
-"""
-
-
-def lockin_profile(brdf: str, params: str, seed: int, aperture_samples: int | None = None
-                   ) -> str:
-    """The sim-spectral bench with a plain sample (no spectral table) and the lock-in's
-    noise seed ``seed``; ``aperture_samples`` refines the emulator's grid over the
-    photodiode's aperture (default 9 per side)."""
-    text = (ROOT / "instrument" / "bench" / "profiles" / "sim-spectral.toml").read_text("utf-8")
-    head, _, tail = text.partition('[simulation.scene]\nbrdf = "spectral"')
-    tail = tail.split("[simulation.source]", 1)[1]
-    grid = "" if aperture_samples is None else f"aperture_samples = {aperture_samples}\n"
-    text = (f'{head}[simulation.scene]\nbrdf = "{brdf}"\nparams = {params}\n{grid}\n'
-            f"[simulation.source]{tail}")
-    return re.sub(r"(simsr830://lockin\?[^\"]*)seed=\d+", rf"\g<1>seed={300 + seed}", text)
+#: The power meter's plan, read by the lock-in at the sim-spectral bench's 550 nm filter.
+LOCKIN_PLAN = (PM_PLAN.replace("theta_r = {{ start = -70, stop = 80, step = 10 }}",
+                               "theta_r = [-60, -40, -20, 0, 10, 30, 40, 60, 70]")
+               .replace('detectors = ["power_meter"]', 'detectors = ["lockin"]')
+               + "frames = 4\n[spectral]\nfilters = [2]\n")
 
 
 def lockin_scan(name: str, brdf: str, params: str, model: str, truth: tuple[float, ...],
@@ -190,7 +164,7 @@ def lockin_scan(name: str, brdf: str, params: str, model: str, truth: tuple[floa
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp_p = Path(tmp)
-        (tmp_p / "bench.toml").write_text(lockin_profile(brdf, params, seed,
+        (tmp_p / "bench.toml").write_text(lockin_profile(brdf, params, 300 + seed,
                                                          aperture_samples), "utf-8")
         (tmp_p / "plan.toml").write_text(LOCKIN_PLAN.format(name=name), "utf-8")
         assert cli(["run", str(tmp_p / "plan.toml"), "--bench", str(tmp_p / "bench.toml"),
