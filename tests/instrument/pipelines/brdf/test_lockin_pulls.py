@@ -69,7 +69,7 @@ def _bench(tmp_path: Path, seed: int) -> Path:
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1200)  # two scans of 9 points, each settled and read 4 + 4 times
+@pytest.mark.timeout(1200)  # one scan of 10 points, each settled and read 4 + 4 times
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_lock_in_fit_passes_chi2_and_its_rho_pull_is_within_3_sigma(tmp_path, seed):
     plan = tmp_path / "plan.toml"
