@@ -125,7 +125,9 @@ def test_a_certified_transmission_is_divided_out_with_its_error_shared(peak_run)
 
 def test_the_cli_fits_a_one_wavelength_lock_in_run(peak_run, capsys):
     capsys.readouterr()
-    assert main(["fit", str(peak_run), "--detector", "lockin", "--models", "lambert+ggx",
+    # four points: a one-parameter model (three parameters on four points leave one degree
+    # of freedom, and the lock-in's noise draw depends on when it was read)
+    assert main(["fit", str(peak_run), "--detector", "lockin", "--models", "lambert",
                  "--no-write", "--no-cv"]) == 0
     out = capsys.readouterr().out
     assert "1 wavelengths (lockin)" in out and "633 nm" in out, out
