@@ -111,18 +111,32 @@ def _pm_profile(brdf: str, params: str, seed: int) -> str:
     return text.replace("world=sim&seed=2", f"world=sim&seed={100 + seed}")
 
 
+def over_samples(label: str, names: list[str] | None, scans) -> None:
+    """One table row per sample of :data:`PM_SAMPLES` (``scans(sample)`` gives the pulls,
+    shape (seeds, parameters), and the χ² p-values of its scans), then all together."""
+    print(HEADER)
+    all_z, all_p = [], []
+    t_all = time.perf_counter()
+    for sample in PM_SAMPLES:
+        if names and sample[0] not in names:
+            continue
+        t0 = time.perf_counter()
+        zs, ps = scans(sample)
+        all_z.append(zs)
+        all_p.append(ps)
+        print(summary(f"{label} / {sample[0]}", [zs], ps, time.perf_counter() - t0),
+              flush=True)
+    print(summary(f"**{label}, all**", all_z, np.concatenate(all_p),
+                  time.perf_counter() - t_all), flush=True)
+
+
 def power_meter(n: int, names: list[str] | None) -> None:
     from instrument.cli import main as cli
     from instrument.pipelines.brdf.analyse import analyse
     from instrument.pipelines.brdf.reduce import ReductionOptions, reduce_run
 
-    print(HEADER)
-    all_z, all_p = [], []
-    t_all = time.perf_counter()
-    for name, brdf, params, model, truth in PM_SAMPLES:
-        if names and name not in names:
-            continue
-        t0 = time.perf_counter()
+    def scans(sample: tuple) -> tuple[np.ndarray, np.ndarray]:
+        name, brdf, params, model, truth = sample
         zs, ps = [], []
         for seed in range(n):
             with tempfile.TemporaryDirectory() as tmp:
@@ -138,12 +152,9 @@ def power_meter(n: int, names: list[str] | None) -> None:
                 fit = res.fits[model]
                 zs.append((fit.params - np.array(truth)) / fit.stderr)
                 ps.append(res.goodness[model].p_value)
-        all_z.append(np.array(zs))
-        all_p.append(np.array(ps))
-        print(summary(f"power meter / {name}", [np.array(zs)], np.array(ps),
-                      time.perf_counter() - t0), flush=True)
-    print(summary("**power meter, all**", all_z, np.concatenate(all_p),
-                  time.perf_counter() - t_all), flush=True)
+        return np.array(zs), np.array(ps)
+
+    over_samples("power meter", names, scans)
 
 
 #: The power meter's plan, read by the lock-in at the sim-spectral bench's 550 nm filter.
@@ -181,26 +192,16 @@ def lockin(n: int, names: list[str] | None, jobs: int,
            aperture_samples: int | None = None) -> None:
     from concurrent.futures import ProcessPoolExecutor
 
-    print(HEADER)
-    all_z, all_p = [], []
-    t_all = time.perf_counter()
-    for name, brdf, params, model, truth in PM_SAMPLES:
-        if names and name not in names:
-            continue
-        t0 = time.perf_counter()
+    def scans(sample: tuple) -> tuple[np.ndarray, np.ndarray]:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            done = list(pool.map(lockin_scan, *zip(*[(name, brdf, params, model, truth, k,
-                                                      aperture_samples)
+            done = list(pool.map(lockin_scan, *zip(*[(*sample, k, aperture_samples)
                                                      for k in range(n)], strict=True)))
         zs = np.array([d[0] for d in done])
-        ps = np.array([d[1] for d in done])
-        print(f"<!-- {name}: χ²/dof per scan {', '.join(f'{d[2]:.2f}' for d in done)}; "
+        print(f"<!-- {sample[0]}: χ²/dof per scan {', '.join(f'{d[2]:.2f}' for d in done)}; "
               f"RMS pull per parameter {np.sqrt(np.mean(zs**2, axis=0)).round(2).tolist()} -->")
-        all_z.append(zs)
-        all_p.append(ps)
-        print(summary(f"lock-in / {name}", [zs], ps, time.perf_counter() - t0), flush=True)
-    print(summary("**lock-in, all**", all_z, np.concatenate(all_p),
-                  time.perf_counter() - t_all), flush=True)
+        return zs, np.array([d[1] for d in done])
+
+    over_samples("lock-in", names, scans)
 
 
 def main() -> int:
