@@ -18,8 +18,8 @@ from tests.gui.helpers import fast_profile
 from tests.gui.test_run_control import wait_end
 
 # far from the peak first, then only points on it: once the engine has turned to ND1 it
-# stays there for the rest of the run, so a pause after the first filtered point always
-# finds slot 2 in the beam
+# stays there for the rest of the run, so a pause after any filtered point finds slot 2 in
+# the beam, and there is always a later filtered point to pause at
 PLAN = """
 [plan]
 kind = "brdf_in_plane"
@@ -30,7 +30,7 @@ name = "sharp"
 [scan]
 skip_beam_points = true
 theta_i = [20]
-theta_r = [-40, -20, 0, 10, 19, 20, 21]
+theta_r = [-40, -20, 0, 10, 19, 19.5, 20, 20.5, 21, 21.5]
 [acquisition]
 mode = "auto"
 exposure_us = 2000
