@@ -37,7 +37,7 @@ from instrument.run.runner import start_run  # noqa: E402
 
 #: The bench each example is written for (the rest run on ``sim``).
 BENCHES = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
-           "sphere_capture": "sim-spheres"}
+           "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
 
 
 def run_once(name: str, folder: Path) -> tuple[object, float, float]:

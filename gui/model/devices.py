@@ -259,7 +259,8 @@ def _shutter_values(shutter: Shutter) -> dict[str, Any]:
 def _wheel_info(wheel: FilterWheel) -> dict[str, Any]:
     return {"count": wheel.position_count,
             "speeds": tuple(s.value for s in WheelSpeed),
-            "filters": {slot: (spec.center_nm, spec.bandwidth_nm, spec.label)
+            "filters": {slot: (spec.center_nm, spec.bandwidth_nm, spec.label,
+                               getattr(spec, "od", None))
                         for slot, spec in wheel.filters.items()}}
 
 

@@ -28,20 +28,23 @@ __all__ = ["FilterBand", "bands_from_info", "bands_from_profile", "merge_bands",
 
 @dataclass(frozen=True)
 class FilterBand:
-    """One slot's filter: centre and full width at half maximum in nm (None: empty slot)."""
+    """One slot's filter: centre and full width at half maximum in nm (None: empty slot),
+    or a neutral-density filter's optical density ``od`` (ADR 0018)."""
 
     slot: int
     centre_nm: float | None = None
     bandwidth_nm: float | None = None
     label: str = ""
+    od: float | None = None
 
 
 def bands_from_info(filters: Mapping[Any, Any] | None) -> dict[int, FilterBand]:
-    """The wheel info's ``filters`` (slot → (centre, FWHM, label)) as bands."""
+    """The wheel info's ``filters`` (slot → (centre, FWHM, label[, od])) as bands."""
     out: dict[int, FilterBand] = {}
     for slot, spec in (filters or {}).items():
-        centre, width, label = (*tuple(spec), None, None, "")[:3]
-        out[int(slot)] = FilterBand(int(slot), centre, width, str(label or ""))
+        items = tuple(spec)
+        centre, width, label, od = (*items, *(None, None, "", None)[len(items):])[:4]
+        out[int(slot)] = FilterBand(int(slot), centre, width, str(label or ""), od)
     return out
 
 
@@ -98,16 +101,20 @@ def merge_bands(driver: Mapping[int, FilterBand], profile: Mapping[int, FilterBa
                 ) -> dict[int, FilterBand]:
     """The driver's configured bands, the profile's list for the slots it does not know."""
     out = dict(profile)
-    out.update({slot: band for slot, band in driver.items() if band.centre_nm is not None})
+    out.update({slot: band for slot, band in driver.items()
+                if band.centre_nm is not None or band.od is not None})
     return out
 
 
 def slot_label(bands: Mapping[int, FilterBand], slot: int | None) -> str:
-    """``"slot 2: 550 nm, FWHM 10 nm (green)"``, ``"slot 4: empty"``; ``"—"`` unknown."""
+    """``"slot 2: 550 nm, FWHM 10 nm (green)"``, ``"slot 3: ND, OD 1 (ND1)"``,
+    ``"slot 4: empty"``; ``"—"`` unknown."""
     if slot is None:
         return "—"
     band = bands.get(slot)
-    if band is None or band.centre_nm is None:
+    if band is not None and band.od is not None:
+        what = f"ND, OD {band.od:g}"
+    elif band is None or band.centre_nm is None:
         what = "empty"
     elif band.bandwidth_nm is None:
         what = f"{band.centre_nm:g} nm"

@@ -18,6 +18,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from typing import Any
 
 import numpy as np
@@ -76,6 +77,8 @@ class LiveSnapshot:
     elapsed_s: float
     eta_s: float
     version: int              # changes whenever anything new arrived
+    #: The neutral-density filter's wheel slot each point was read through (−1: open beam)
+    nd_slot: np.ndarray = dataclass_field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 class LiveData:
@@ -97,6 +100,7 @@ class LiveData:
         self._angles = np.full((n, 4), np.nan, np.float32)
         self._signal = np.full(n, np.nan, np.float32)
         self._power = np.full(n, np.nan, np.float32)
+        self._nd = np.full(n, -1, np.int64)
         self._positions: dict[str, float] = {}
         self._field: np.ndarray | None = None
         self._field_y: np.ndarray | None = None
@@ -128,6 +132,9 @@ class LiveData:
                                               run.theta_r[:m], run.phi_r[:m]], axis=-1)
             self._signal[k:k + m] = run.signal[:m]
             self._power[k:k + m] = run.power_w[:m]
+            nd = getattr(run, "nd_position", None)
+            if nd is not None:
+                self._nd[k:k + m] = np.asarray(nd)[:m]
             self._n = k + m
             self._version += 1
         return m
@@ -145,6 +152,7 @@ class LiveData:
                     self._angles[k] = ev.angles
                 self._signal[k] = ev.signal
                 self._power[k] = ev.power_w
+                self._nd[k] = ev.nd_slot
                 self._positions.update(ev.positions)
                 if self._field_y is not None and "camera_z" in ev.positions \
                         and 0 <= ev.index < self._field_y.size:
@@ -205,7 +213,8 @@ class LiveData:
                 dict(self._positions),
                 None if self._field is None else self._field.copy(),
                 None if self._field_y is None else self._field_y.copy(),
-                self._image, self._elapsed, self._eta, self._version)
+                self._image, self._elapsed, self._eta, self._version,
+                self._nd[:n].copy())
 
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")

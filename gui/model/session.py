@@ -436,8 +436,9 @@ class BenchSession:
 
     def _poll_run(self, run: RunHandle) -> None:
         """While the engine owns the bench: the axes' states from the engine's own status
-        reads (the drivers are not touched), stamped with the time of each read; the other
-        devices keep their last state, whose stamp tells its age."""
+        reads and the filter wheel's slot as the engine read or set it (the drivers are not
+        touched), stamped with the time of each read; the other devices keep their last
+        state, whose stamp tells its age."""
         changed = False
         for role, (status, t) in run.engine.axis_readbacks().items():
             old = self._states.get(role)
@@ -449,6 +450,17 @@ class BenchSession:
             with self._lock:
                 self._states[role] = state
             changed = True
+        # the filter wheel as the engine last read or set it (an ND filter in the beam)
+        wheel = getattr(run.engine, "wheel_readback", lambda: None)()
+        if wheel is not None:
+            role, slot, t = wheel
+            old = self._states.get(role)
+            if old is not None and old.t < t:
+                state = DeviceState(role, old.kind, True, {**old.values, "position": slot},
+                                    old.info, None, t=t)
+                with self._lock:
+                    self._states[role] = state
+                changed = True
         if changed:
             self.listener.states(self.states())
 

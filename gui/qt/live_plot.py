@@ -81,6 +81,14 @@ class LivePlot(QWidget):
         row.addWidget(self.in_plane_legend)
         self._curves: dict[float, pg.PlotDataItem] = {}
         self._counts: dict[float, int] = {}
+        # points read through a neutral-density filter: an open square around the point
+        # (its signal is the filtered light, about T times the open beam's)
+        self.nd_points = self.in_plane.plot([], [], pen=None, symbol="s", symbolSize=13,
+                                            symbolBrush=None,
+                                            symbolPen=pg.mkPen("#000000", width=1.5))
+        self.nd_points.setObjectName("nd_points")
+        self.nd_points.setZValue(10)
+        self.n_nd = 0
         self._power_axis = False
         # hemisphere
         self.polar = pg.PlotWidget(background="w")
@@ -137,6 +145,8 @@ class LivePlot(QWidget):
                 plot.setLabel("left", "signal (DN/µs)")
         self._legend_rows = []
         self.in_plane_legend.setText("")
+        self.nd_points.setData([], [])
+        self.n_nd = 0
         self.polar_points.clear()
         self.field_image.clear()
         self.latest.clear()
@@ -153,8 +163,12 @@ class LivePlot(QWidget):
                     plot.setLabel("left", "power (W)")
         ok = snap.ok & np.isfinite(snap.signal)
         getattr(self, f"_draw_{self.kind}")(snap, ok)
+        behind = _behind_filter(snap)
+        nd = (f"; {int(behind.sum())} read through an ND filter (slot "
+              f"{', '.join(str(k) for k in np.unique(snap.nd_slot[behind]))}): □"
+              if behind.any() else "")
         self.caption.setText(f"{snap.plan_kind}: {snap.n_received} of {snap.n_total} points "
-                             f"received, {int(ok.sum())} plotted")
+                             f"received, {int(ok.sum())} plotted{nd}")
 
     # pictures -------------------------------------------------------------------------
     def _draw_in_plane(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
@@ -185,6 +199,15 @@ class LivePlot(QWidget):
             curve.setData(x, y)
             self._counts[value] = n
         self.n_plotted = plotted
+        behind = sel & _behind_filter(snap)
+        if int(behind.sum()) != self.n_nd:
+            self.n_nd = int(behind.sum())
+            self.nd_points.setData(tr[behind], snap.signal[behind])
+            rows = [r for r in self._legend_rows if "ND filter" not in r]
+            if self.n_nd:
+                rows.append("□ read through an ND filter")
+            self._legend_rows = rows
+            self.in_plane_legend.setText("<br>".join(rows))
 
     def _draw_hemisphere(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
         sel = ok & np.isfinite(snap.theta_r) & (snap.signal > 0)
@@ -226,3 +249,11 @@ class LivePlot(QWidget):
     def _draw_series(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
         self.series_curve.setData(np.flatnonzero(ok), snap.signal[ok])
         self.n_plotted = int(ok.sum())
+
+
+def _behind_filter(snap: LiveSnapshot) -> np.ndarray:
+    """Which of the snapshot's points were read through a neutral-density filter."""
+    nd = snap.nd_slot
+    if nd.size != snap.index.size:
+        return np.zeros(snap.index.size, dtype=bool)
+    return nd >= 0

@@ -23,7 +23,10 @@ power-up 100 ms; the slope's wait in time constants from the driver's table,
 :attr:`drivers.base.LockIn.SETTLE_TIME_CONSTANTS`) once per snapshot and twice more to
 choose its range. A filter wheel turns the shorter way round at the FW102C's high speed,
 half a turn in 3 s, and settles on the slot sensor for 0.1 s (Thorlabs FW102C manual,
-as the emulator models it: hw_mocks/firmware/fw102c.py).
+as the emulator models it: hw_mocks/firmware/fw102c.py); twice as long at its normal speed
+(``wheel_speed=0``), and an emulated wheel's clock ``speed=`` times faster. The engine's
+neutral-density turns near a specular peak are predicted by the plan
+(:meth:`instrument.plans.build.Plan.estimate`).
 """
 
 from __future__ import annotations
@@ -109,6 +112,9 @@ class BenchTiming:
     lockin_settle_s: float = 0.0
     #: The filter wheel's slots (0: no wheel).
     wheel_slots: int = 0
+    #: How many times faster than the FW102C's high speed the wheel turns (an emulated
+    #: wheel's clock ``speed=``; 0.5 at the normal speed, ``wheel_speed=0``).
+    wheel_speed: float = 1.0
     #: What the estimate assumed because the profile did not say (in words).
     assumed: tuple[str, ...] = ()
 
@@ -129,7 +135,8 @@ class BenchTiming:
             return 0.0
         steps = abs(end - start) % self.wheel_slots
         steps = min(steps, self.wheel_slots - steps)
-        return steps * 360.0 / self.wheel_slots * WHEEL_S_PER_DEG + WHEEL_SETTLE_S
+        return (steps * 360.0 / self.wheel_slots * WHEEL_S_PER_DEG
+                + WHEEL_SETTLE_S) / self.wheel_speed
 
 
 def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming:
@@ -160,10 +167,13 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
             assumed.append(f"{lockin.role}: no time constant in its settings; the SR830's "
                            f"power-up {tau:g} s at {slope} dB/oct assumed")
     wheel = next((d for d in profile.devices.values() if d.driver == "fw102c"), None)
-    slots = 0
+    slots, wheel_speed = 0, 1.0
     if wheel is not None:
         slots = 12 if "slots=12" in wheel.url or wheel.options.get("slots") == 12 else 6
+        normal = _query(wheel.url).get("wheel_speed", "1").strip() == "0"
+        wheel_speed = clock_speed(wheel) * (0.5 if normal else 1.0)
     return BenchTiming(speed, home,
                        1.0 if camera is None or exposes_in_wall_time(camera) else 0.0,
                        costs["frame_overhead_s"], costs["scene_change_s"],
-                       lockin_settle_s=settle, wheel_slots=slots, assumed=tuple(assumed))
+                       lockin_settle_s=settle, wheel_slots=slots, wheel_speed=wheel_speed,
+                       assumed=tuple(assumed))

@@ -151,10 +151,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if spectral:
         return _run_spectral(args)
-    if args.detector == "lockin":
-        print("error: --detector lockin is reduced per wavelength (a run with a filter "
-              "wheel); give --per-wavelength yes")
-        return 2
+    if args.detector == "lockin":  # one wavelength: the lock-in's per-wavelength path
+        return _run_spectral(args)
     try:
         options = fit_options(args)
     except ValueError as err:
@@ -251,7 +249,7 @@ def _run_spectral(args: argparse.Namespace) -> int:
     detector = None if args.detector in (None, "power_meter") else args.detector
     opts = SpectralOptions(
         detector=detector, route=args.route, u_incident_power_rel=args.incident_power_u,
-        receiver_distance_mm=args.distance_mm, sigma_theta_deg=args.sigma_theta_deg or 0.0,
+        receiver_distance_mm=args.distance_mm, sigma_theta_deg=args.sigma_theta_deg,
         models=models,
         reduction=ReductionOptions(camera_calibration=args.camera_calibration,
                                    flat_run=args.flat, beam_radius_mm=args.beam_radius_mm,

@@ -85,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
           + (f", and {fmt_s(homing)} before it to home axes not homed yet" if homing else ""))
     for what in est.assumed:
         print(f"  warning: {what}; set it in the bench profile for a true estimate")
+    for what in est.predicted:
+        print(f"  includes {what}")
     if est.speedup > 1.001:
         print(f"  its emulated stages run {est.speedup:.3g}× faster than real ones: on real "
               f"stages at the profile's speeds the motion alone takes {fmt_s(est.motion_s)}")

@@ -63,6 +63,9 @@ class PlanEstimate:
     homing_s: dict[str, float] = field(default_factory=dict)
     #: Costs the profile does not give and the estimate assumed (in words).
     assumed: tuple[str, ...] = ()
+    #: What the estimate predicted about the run beyond the plan's points (in words): the
+    #: neutral-density turns near a specular peak.
+    predicted: tuple[str, ...] = ()
 
     @property
     def total_s(self) -> float:
@@ -126,9 +129,52 @@ class Plan:
         fast = {r: _faster(d, timing.axis_speed.get(r, 1.0)) for r, d in dyn.items()}
         bench_motion, _ = route_time(t, self.axes, fast)
         speedup = motion / bench_motion if bench_motion > 0 else 1.0
+        nd_s, nd_note = self._nd_turns(timing)
         return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
-                            self._acquisition_on(timing), speedup, dict(timing.home_s),
-                            timing.assumed)
+                            self._acquisition_on(timing) + nd_s, speedup, dict(timing.home_s),
+                            timing.assumed, nd_note)
+
+    #: Points within this angle of the mirror direction are taken to clip the camera at
+    #: its shortest exposure when the plan does not refine a specular window itself.
+    ND_WINDOW_DEG = 5.0
+
+    def _nd_turns(self, timing: BenchTiming) -> tuple[float, tuple[str, ...]]:
+        """Seconds of the neutral-density turns the engine will make (ADR 0018), and the
+        prediction in words.
+
+        The engine turns to the lightest ND filter when the camera clips at its shortest
+        exposure and reads that point again, and turns back once the peak is behind. Which
+        points clip depends on the sample; the estimate takes those within the plan's
+        specular window (``[scan] specular.half_width_deg``, else :data:`ND_WINDOW_DEG`)
+        of the mirror direction as clipping: per run of such points, a turn to the first
+        ND slot, the point read again (its frames and the scene change) and a turn back.
+        A matt sample makes none of them (an upper estimate there); never zero where a
+        glossy one would."""
+        pol = self.spec.acquisition
+        nd = sorted(nd_slots_of(self.profile))
+        if not (nd and timing.wheel_slots and pol.uses_camera and self.spec.spectral is None):
+            return 0.0, ()
+        open_slot = next((k for k in range(1, timing.wheel_slots + 1) if k not in nd), 1)
+        specular = self.spec.scan.get("specular") if isinstance(self.spec.scan, dict) else None
+        window = float(specular.get("half_width_deg", self.ND_WINDOW_DEG)
+                       if isinstance(specular, dict) else self.ND_WINDOW_DEG)
+        turn = timing.wheel_move_s(open_slot, nd[0])
+        per_frame = (pol.min_exposure_us * 1e-6 * timing.exposure_factor
+                     + max(timing.frame_overhead_s, pol.readout_s))
+        reread = pol.frames * per_frame * (2 if pol.mode == "auto" and pol.hdr else 1)
+        runs, inside = 0, False
+        for p in self.points:
+            near = (p.light and p.label == "sample" and p.angles is not None
+                    and _from_mirror_deg(p.angles) <= window)
+            if near and not inside:
+                runs += 1
+            inside = near
+        if not runs:
+            return 0.0, ()
+        seconds = runs * (2 * turn + reread + timing.scene_change_s)
+        return seconds, (f"ND filters: {runs} peak(s) within {window:g}° of specular taken "
+                         f"to clip, {2 * runs} wheel turns of {turn:.2g} s and {runs} "
+                         f"point(s) read again: {seconds:.3g} s (none on a matt sample)",)
 
     def _acquisition_on(self, timing: BenchTiming) -> float:
         """Wall-clock seconds of every point's acquisition and storage on a bench.
@@ -157,7 +203,8 @@ class Plan:
                 total += timing.wheel_move_s(1 if slot is None else slot, int(want))
                 slot = int(want)
             if pol.uses_lockin and timing.lockin_settle_s > 0:
-                reads = 2 if pol.dark == "per_point" and p.light else 1
+                reads = 2 if (pol.dark == "per_point" and p.light
+                              and pol.reads_dark("lockin")) else 1
                 total += reads * timing.lockin_reading_s(pol.frames)
             if not pol.uses_camera:
                 total += timing.point_overhead_s / 4  # a journal line, no frames
@@ -177,6 +224,16 @@ class Plan:
             lit = p.light
             total += timing.point_overhead_s
         return total
+
+
+def _from_mirror_deg(a: Angles) -> float:
+    """Angle (degrees) between the receiver direction and the mirror direction of the
+    incidence (the specular peak), conventions of :mod:`analysis.brdf.geometry`."""
+    ti, pi_, tr, pr = (math.radians(x) for x in (a.theta_i, a.phi_i, a.theta_r, a.phi_r))
+    mirror = (-math.sin(ti) * math.cos(pi_), -math.sin(ti) * math.sin(pi_), math.cos(ti))
+    recv = (math.sin(tr) * math.cos(pr), math.sin(tr) * math.sin(pr), math.cos(tr))
+    dot = sum(x * y for x, y in zip(mirror, recv, strict=True))
+    return math.degrees(math.acos(max(-1.0, min(1.0, dot))))
 
 
 def _fill_forward(t: np.ndarray, start: dict[str, float] | None, axes) -> np.ndarray:

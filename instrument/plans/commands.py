@@ -42,7 +42,10 @@ class AcquisitionPolicy:
     exposures), so an HDR merge can use them. ``dark`` chooses when dark frames (light
     off) are taken: never, after every point at the same exposure(s), before every row of
     θi (a dark point where the axes are), or once at the start of the run; the power meter
-    and the lock-in read their dark at the same times as the camera.
+    and the lock-in read their dark at the same times as the camera. ``dark_detectors``
+    names the detectors whose per-point dark is read (``None``: every detector listed);
+    a plan that leaves ``detectors`` at its default measures with the camera and reads
+    the power meter beside it without a dark of its own (:meth:`reads_dark`).
     """
 
     mode: str = "fixed"
@@ -57,6 +60,7 @@ class AcquisitionPolicy:
     dark: str = "none"
     detectors: tuple[str, ...] = ("camera", "power_meter")
     readout_s: float = 0.0  # per-frame readout/transfer overhead, for estimates only
+    dark_detectors: tuple[str, ...] | None = None
 
     def as_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)
@@ -72,6 +76,13 @@ class AcquisitionPolicy:
     @property
     def uses_lockin(self) -> bool:
         return "lockin" in self.detectors
+
+    def reads_dark(self, detector: str) -> bool:
+        """Whether ``detector`` reads its own dark at each point under ``dark="per_point"``
+        (a detector the plan does not read never does)."""
+        if detector not in self.detectors:
+            return False
+        return self.dark_detectors is None or detector in self.dark_detectors
 
     def estimated_seconds(self, exposure_us: float | None = None) -> float:
         """Time one point's acquisition takes (no brackets), for dry-run estimates."""

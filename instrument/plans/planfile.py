@@ -23,6 +23,8 @@ as a :class:`~instrument.bench.profile.FieldError` (``scan.theta_i[2]: ...``) in
     hdr = false
     dark = "none"                 # "none" | "per_point" | "start"
     detectors = ["camera", "power_meter"]
+    dark_detectors = ["camera"]   # whose dark is read per point (default: all listed,
+                                  # the camera alone when detectors is left out)
 
     [calibration]                 # run ids or file paths of calibration runs (optional)
     dark = "..."; reference = "..."; signature = "..."; flat = "..."; nd = "..."
@@ -482,6 +484,29 @@ _SCAN_CHECKS = {
 }
 
 
+def _dark_detectors(v: _Validator, t: dict, path: str, detectors: tuple[str, ...]
+                    ) -> tuple[str, ...] | None:
+    """Which detectors read a dark at every point: the list given, else every detector the
+    plan names; a plan that leaves ``detectors`` at its default measures with the camera,
+    and the power meter read beside it takes no dark of its own (one reading saved per
+    point)."""
+    if "dark_detectors" in t:
+        raw = t["dark_detectors"]
+        if not isinstance(raw, list) or not all(isinstance(x, str) and x in detectors
+                                                for x in raw):
+            v.error(f"{path}.dark_detectors", "must be a list drawn from the plan's "
+                    f"detectors ({', '.join(detectors)})")
+            return None
+        if "camera" in detectors and "camera" not in raw:
+            v.error(f"{path}.dark_detectors", "must include the camera when the plan reads "
+                    "it (its frames are reduced with their dark frames)")
+            return None
+        return tuple(dict.fromkeys(raw))
+    if "detectors" not in t:
+        return ("camera",)
+    return None
+
+
 def _acquisition(v: _Validator, t: dict, path: str) -> AcquisitionPolicy:
     d = AcquisitionPolicy()
     v.unknown(t, path, set(d.__dataclass_fields__))
@@ -511,6 +536,7 @@ def _acquisition(v: _Validator, t: dict, path: str) -> AcquisitionPolicy:
                     f"{', '.join(DETECTORS)}")
         else:
             detectors = tuple(dict.fromkeys(raw))
+    dark_detectors = _dark_detectors(v, t, path, detectors)
     emin_v = emin if emin is not None else d.min_exposure_us
     emax_v = emax if emax is not None else d.max_exposure_us
     if emin_v > emax_v:
@@ -526,6 +552,6 @@ def _acquisition(v: _Validator, t: dict, path: str) -> AcquisitionPolicy:
         hdr_factor=float(factor if factor is not None else d.hdr_factor),
         max_brackets=int(brackets if brackets is not None else d.max_brackets),
         frames=int(frames if frames is not None else d.frames),
-        dark=dark, detectors=detectors,
+        dark=dark, detectors=detectors, dark_detectors=dark_detectors,
         readout_s=float(readout if readout is not None else d.readout_s),
     )

@@ -199,6 +199,7 @@ class RunEngine:
         # shows the bench during the run (the engine owns the drivers then).
         self._readbacks: dict[str, tuple[AxisStatus, float]] = {}
         self._readback_lock = threading.Lock()
+        self._wheel_readback: tuple[str, int, float] | None = None
 
     # public API (any thread) ----------------------------------------------------
     def subscribe(self, callback: Callable[[Event], None]) -> None:
@@ -227,6 +228,18 @@ class RunEngine:
         stamp; safe from any thread. Axes the run has not read yet are absent."""
         with self._readback_lock:
             return dict(self._readbacks)
+
+    def wheel_readback(self) -> tuple[str, int, float] | None:
+        """(role, slot, ``time.monotonic()`` stamp) of the filter wheel's slot as the
+        engine last read or set it; None before it touched the wheel. Safe from any
+        thread, no device call (what the GUI shows during a run, ADR 0062)."""
+        with self._readback_lock:
+            return self._wheel_readback
+
+    def _wheel_at(self, slot: int) -> None:
+        role = self._roles[id(self._wheel)]
+        with self._readback_lock:
+            self._wheel_readback = (role, int(slot), time.monotonic())
 
     def _read_back(self, role: str, status: AxisStatus) -> AxisStatus:
         with self._readback_lock:
@@ -629,10 +642,12 @@ class RunEngine:
         self._point_dt = dt if self._point_dt is None else 0.9 * self._point_dt + 0.1 * dt
         if st.main is not None and not skipped:
             self._emit_frame(st.index, st.main)
+        nd = st.extra.get("nd_position", math.nan)
         self._emit(PointCompleted(st.index, st.label, "skipped" if skipped else "ok",
                                   dict(st.positions),
                                   None if math.isnan(angles[0]) else angles,
-                                  st.exposure_us, st.power_w, st.signal, st.retries))
+                                  st.exposure_us, st.power_w, st.signal, st.retries,
+                                  nd_slot=-1 if math.isnan(nd) else int(nd)))
         self._emit(Progress(n, self._n_total, now - self._t0,
                             (self._n_total - n) * (self._point_dt or 0.0)))
 
@@ -861,9 +876,9 @@ class RunEngine:
             # closed or the source off), read as the light was: the power meter's and the
             # lock-in's offsets are subtracted by the reduction like the camera's frames.
             self._set_light(False)
-            if pm is not None:
+            if pm is not None and policy.reads_dark("power_meter"):
                 st.extra["power_dark_w"] = self._read_power(pm, st)
-            if lockin is not None:
+            if lockin is not None and policy.reads_dark("lockin"):
                 role = self._roles[id(lockin)]
                 st.extra.update(self._retry(role, self._policies[role], "read lock-in dark",
                                             lambda: self._read_lockin_dark(policy.frames),
@@ -997,6 +1012,7 @@ class RunEngine:
             self._retry(role, self._policies[role], f"move to filter {slot}",
                         lambda: wheel.move_to(slot), st)
         self._wheel_slot = slot
+        self._wheel_at(slot)
         if self._camera is not None:
             self._camera.invalidate()
         centre = getattr(wheel.filter_at(slot), "center_nm", None)
@@ -1012,6 +1028,7 @@ class RunEngine:
         role = self._roles[id(wheel)]
         slot = int(self._retry(role, self._policies[role], "read position",
                                lambda: wheel.position))
+        self._wheel_at(slot)
         spec = wheel.filter_at(slot) if hasattr(wheel, "filter_at") else None
         centre = getattr(spec, "center_nm", None)
         width = getattr(spec, "bandwidth_nm", None)

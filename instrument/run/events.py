@@ -52,6 +52,7 @@ class PointCompleted:
     power_w: float
     signal: float
     retries: int
+    nd_slot: int = -1    # the neutral-density filter's wheel slot it was read through
 
 
 @dataclass(frozen=True)

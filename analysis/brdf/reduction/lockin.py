@@ -27,8 +27,18 @@ are reused):
 
 Uncertainty budget (per point, in the columns of :class:`~analysis.brdf.reduction.BRDFPoints`):
 
-* ``u_stat``: the standard error of the reading, from the spread of the lock-in readings
-  averaged at the point (the run's ``lockin_u_r_v``).
+* ``u_stat``: the standard error of the reading from the **noise model of the run's
+  readings** (:func:`pooled_reading_sigma`), not from each point's own spread: with the
+  engine's four snapshots a point's sample variance has 3 degrees of freedom, and
+  weighting a fit by such estimates makes E[χ²/ν] = (n−1)/(n−3) = 3 (the reciprocal of a
+  χ²₃/3 variable; Student 1908), the lock-in fits' χ²/ν of 3–5. The variance of one
+  snapshot is a + b·R: the amplifier's and the ambient light's shot noise (a, also what
+  a dark reading sees) and the shot noise of the chopped photocurrent, proportional to
+  its fundamental R (photodiode docstring, hw_mocks/sim/photodiode.py; SR830 manual
+  p. 3-25, noise ∝ √ENBW at a fixed time constant). a and b are fitted to all the
+  points' sample variances together (a variance function estimated from the pooled
+  replicates, Carroll & Ruppert 1988, *Transformation and Weighting in Regression*,
+  §3.2), so the weights carry hundreds of degrees of freedom instead of three.
 * Gain accuracy of the lock-in's sensitivity range: SR830 manual, Rev. 2.5, p. 1-5
   "Specifications — Signal channel: Gain accuracy ±1 % (±0.2 % typical)", one
   specification for every range 2 nV … 1 V. A limit of ±1 % read as a rectangular
@@ -69,6 +79,7 @@ __all__ = [
     "lockin_gain_u_rel",
     "lockin_power_w",
     "photodiode_from_profile",
+    "pooled_reading_sigma",
     "range_covariance_rel",
 ]
 
@@ -195,6 +206,59 @@ def range_covariance_rel(sensitivity_v: ArrayLike, *, reference_sensitivity_v: f
     return u2 * (same - on_ref[:, None] - on_ref[None, :] + 1.0)
 
 
+def pooled_reading_sigma(r_v: ArrayLike, u_r_v: ArrayLike, n_readings: ArrayLike, *,
+                         dark_u_v: ArrayLike | None = None,
+                         n_dark_readings: ArrayLike | None = None,
+                         iterations: int = 20) -> tuple[NDArray[np.float64], float, float]:
+    """The standard error of each mean reading from the run's noise model (module
+    docstring): (σ per point, a in V², b in V) with var(one snapshot) = a + b·R.
+
+    Parameters
+    ----------
+    r_v, u_r_v : array_like, shape (n,)
+        Mean R (V rms) of each point and its standard error from the point's own spread.
+    n_readings : array_like of int
+        Snapshots averaged at each point (≥ 2).
+    dark_u_v, n_dark_readings : array_like, optional
+        The dark readings' standard error of one component and their snapshot counts:
+        points at R = 0 whose X and Y each carry ``n − 1`` degrees of freedom.
+
+    a, b ≥ 0 minimise Σ ν_k (s_k² − v_k)²/v_k², the weights of a sample variance with ν_k
+    degrees of freedom (Var s² = 2v²/ν), iterated from equal weights. With all spreads zero
+    (noiseless readings) the points' own σ are returned unchanged.
+    """
+    from scipy.optimize import nnls
+
+    r = np.abs(np.asarray(r_v, dtype=float).reshape(-1))
+    n = np.broadcast_to(np.asarray(n_readings, dtype=float), r.shape)
+    if np.any(n < 2):
+        raise ValueError("the lock-in's noise needs at least two readings per point")
+    own = np.abs(np.asarray(u_r_v, dtype=float).reshape(-1))
+    s2, level, dof = own**2 * n, r, n - 1.0
+    if dark_u_v is not None:
+        du = np.asarray(dark_u_v, dtype=float).reshape(-1)
+        dn = np.broadcast_to(np.asarray(n_dark_readings if n_dark_readings is not None
+                                        else 4, dtype=float), du.shape)
+        ok = np.isfinite(du)
+        s2 = np.concatenate([s2, du[ok]**2 * dn[ok]])
+        level = np.concatenate([level, np.zeros(int(ok.sum()))])
+        dof = np.concatenate([dof, 2.0 * (dn[ok] - 1.0)])
+    if not np.any(s2 > 0):
+        return own, 0.0, 0.0
+    design = np.stack([np.ones_like(level), level], axis=1)
+    v = np.full(level.shape, float(np.mean(s2)))
+    coef = np.zeros(2)
+    for _ in range(iterations):
+        w = np.sqrt(dof) / v
+        coef, _ = nnls(design * w[:, None], s2 * w)
+        new = np.maximum(design @ coef, 1e-300)
+        if np.allclose(new, v, rtol=1e-6):
+            break
+        v = new
+    a, b = float(coef[0]), float(coef[1])
+    return np.sqrt((a + b * r) / n), a, b
+
+
 def lockin_power_w(r_v: ArrayLike, u_r_v: ArrayLike, *, photodiode: Photodiode,
                    wavelength_nm: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(P, u_P) in W of chopped light from lock-in readings R (V rms) and their standard
@@ -241,6 +305,7 @@ def lockin_brdf_absolute(
     sigma_theta_r: float = 0.0,
     cosine_corrected: bool = False,
     receiver: ReceiverGeometry | None = None,
+    cov_extra_rel: NDArray[np.float64] | None = None,
 ) -> BRDFPoints:
     """BRDF from lock-in readings through the photodiode's responsivity (module docstring).
 
@@ -262,6 +327,9 @@ def lockin_brdf_absolute(
         Readings taken in overload: flagged ``clipped``.
     gain_limit_rel : float
         The lock-in's gain accuracy limit (SR830: 0.01).
+    cov_extra_rel : ndarray (n, n), optional
+        Other relative errors shared between readings, added to the ranges' covariance
+        (a calibrated neutral-density filter's transmission, ADR 0018).
 
     Returns
     -------
@@ -277,8 +345,13 @@ def lockin_brdf_absolute(
                         u_responsivity_rel=photodiode.u_scale_rel,
                         sigma_theta_i=sigma_theta_i, sigma_theta_r=sigma_theta_r,
                         cosine_corrected=cosine_corrected, receiver=receiver,
-                        cov_power_rel=range_covariance_rel(s, limit_rel=gain_limit_rel))
+                        cov_power_rel=_with(range_covariance_rel(s, limit_rel=gain_limit_rel),
+                                            cov_extra_rel))
     return replace(pts, method="absolute-lockin", clipped=o)
+
+
+def _with(cov: NDArray[np.float64], extra: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    return cov if extra is None else cov + np.asarray(extra, dtype=float)
 
 
 def lockin_brdf_ratio(
@@ -301,6 +374,7 @@ def lockin_brdf_ratio(
     sigma_theta_r: float = 0.0,
     cosine_corrected: bool = False,
     receiver: ReceiverGeometry | None = None,
+    cov_extra_rel: NDArray[np.float64] | None = None,
 ) -> BRDFPoints:
     """BRDF from the ratio of lock-in readings to a direct-beam reading of the same
     photodiode and lock-in: f = (R_V/R_ref) / (Ω cos θr G_rx). Responsivity, transimpedance
@@ -322,8 +396,8 @@ def lockin_brdf_ratio(
                          f"{reference_r_v}")
     if not (math.isfinite(u_reference_r_v) and u_reference_r_v >= 0):
         raise ValueError("the reference reading's standard error must be ≥ 0")
-    cov = range_covariance_rel(s, reference_sensitivity_v=reference_sensitivity_v,
-                               limit_rel=gain_limit_rel)
+    cov = _with(range_covariance_rel(s, reference_sensitivity_v=reference_sensitivity_v,
+                                     limit_rel=gain_limit_rel), cov_extra_rel)
     pts = absolute_brdf(r, u, theta_i, phi_i, theta_r, phi_r,
                         incident_power_w=float(reference_r_v),
                         u_incident_power_w=float(u_reference_r_v), solid_angle=solid_angle,

@@ -48,7 +48,8 @@ from instrument.pipelines.brdf.attenuation import (
 from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
 
-__all__ = ["Reduced", "ReductionOptions", "flat_from_run", "load_reference_table", "reduce_run"]
+__all__ = ["Reduced", "ReductionOptions", "flat_from_run", "instrument_function",
+           "load_reference_table", "reduce_run"]
 
 
 @dataclass(frozen=True)
@@ -59,13 +60,19 @@ class ReductionOptions:
     ----------
     method : {"absolute", "relative"}
     detector : {"camera", "power_meter"}
+        (``"lockin"`` only for :func:`instrument_function`, which the per-wavelength
+        lock-in reduction shares with the camera's and the power meter's.)
     cosine_corrected : bool
     incident_power_w, u_incident_power_rel : float or None
         P_i and its relative uncertainty; default from the run's calibration attribute
         ``incident_power_w`` or, on a simulated bench, the source power of the profile.
     receiver_distance_mm : float or None
         Sample-to-receiver distance; default the profile's detector distance plus the
-        run's ``camera_z`` read-back when the run moved it (the camera rides on it).
+        run's ``camera_z`` read-back when the run moved it (the camera rides on it); the
+        lock-in's photodiode: the profile's ``[photodiode] distance_mm`` when given.
+    aperture_diameter_mm : float or None
+        A meter's or photodiode's aperture; default the profile's ``[photodiode]
+        aperture_diameter_mm`` (lock-in) or the bench geometry's ``detector_aperture_mm``.
     u_distance_mm, u_aperture_mm : float or None
         Standard uncertainties of the receiver distance and aperture (mm); ``None``: not
         known (taken as 0 and reported as an unknown part of the common scale).
@@ -105,6 +112,7 @@ class ReductionOptions:
     incident_power_w: float | None = None
     u_incident_power_rel: float | None = None
     receiver_distance_mm: float | None = None
+    aperture_diameter_mm: float | None = None
     u_distance_mm: float | None = None
     u_aperture_mm: float | None = None
     sigma_theta_deg: float | None = None
@@ -353,6 +361,9 @@ def _receiver_distance(run: RunData, rows: np.ndarray, opts: ReductionOptions
     if "receiver_distance_mm" in run.calibration:
         return float(run.calibration["receiver_distance_mm"]), "run calibration"
     base = float(run.geometry.get("detector_distance_mm", 300.0))
+    photodiode = run.profile().get("photodiode", {})
+    if opts.detector == "lockin" and "distance_mm" in photodiode:
+        return float(photodiode["distance_mm"]), "bench profile [photodiode]"
     if opts.detector == "camera":
         z = run.position("camera_z")[rows]
         if np.all(np.isfinite(z)):
@@ -406,16 +417,18 @@ def _sample_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, 
                   "geometry.sample_radius_mm)")
 
 
-def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
-              cal: CameraCalibration | None) -> tuple[ReceiverGeometry | None, dict[str, Any]]:
-    """What each reading integrated: the camera pupil or the meter aperture (module
-    docstring of :mod:`analysis.brdf.reduction`), with the solid angle the reduction uses,
-    and the rest of the instrument function from the run's stored profile: the beam's
-    radius and divergence, the sample's radius and the axes' set-point uncertainty.
+def instrument_function(run: RunData, rows: np.ndarray, opts: ReductionOptions,
+                        cal: CameraCalibration | None = None
+                        ) -> tuple[ReceiverGeometry | None, dict[str, Any]]:
+    """What each reading integrated: the camera pupil, the meter aperture or the lock-in's
+    photodiode aperture (module docstring of :mod:`analysis.brdf.reduction`), with the
+    solid angle the reduction uses, and the rest of the instrument function from the run's
+    stored profile: the beam's radius and divergence, the sample's radius and the axes'
+    set-point uncertainty. One forward model for every detector.
 
-    Camera: Ω = A_pupil/R², the étendue of its calibration (camera equation); power meter:
-    the aperture's cone solid angle. The receiver factor corrects either to what the
-    receiver integrates.
+    Camera: Ω = A_pupil/R², the étendue of its calibration (camera equation); power meter
+    and photodiode: the aperture's cone solid angle. The receiver factor corrects either to
+    what the receiver integrates.
     """
     distance, dist_src = _receiver_distance(run, rows, opts)
     if opts.detector == "camera":
@@ -426,7 +439,12 @@ def _receiver(run: RunData, rows: np.ndarray, opts: ReductionOptions,
                                                u_distance_mm=opts.u_distance_mm or 0.0)
         sampled = not cal.chief_ray_only
     else:
-        aperture = float(run.geometry.get("detector_aperture_mm", 5.0))
+        aperture = opts.aperture_diameter_mm
+        if aperture is None and opts.detector == "lockin":
+            aperture = run.profile().get("photodiode", {}).get("aperture_diameter_mm")
+        if aperture is None:
+            aperture = run.geometry.get("detector_aperture_mm", 5.0)
+        aperture = float(aperture)
         omega, u_omega = solid_angle_sr(aperture, distance,
                                         u_diameter_mm=opts.u_aperture_mm or 0.0,
                                         u_distance_mm=opts.u_distance_mm or 0.0)
@@ -535,7 +553,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         prov["camera_calibration"] = cal.source
         prov["flat_field"] = flat_src
         prov["pixel_response_u_rel"] = u_resp
-    receiver, rinfo = _receiver(run, rows, opts, cal)
+    receiver, rinfo = instrument_function(run, rows, opts, cal)
     prov.update(rinfo)
     warnings = _receiver_warnings(rinfo) + list(ang.warnings) + nd_warnings
     if (slots >= 0).any():

@@ -38,27 +38,48 @@ from typing import Any
 
 import numpy as np
 
-from analysis.brdf.reduction import BRDFPoints, ReceiverGeometry, solid_angle_sr
+from analysis.brdf.reduction import BRDFPoints
 from analysis.brdf.reduction.lockin import (
     Photodiode,
     lockin_brdf_absolute,
     lockin_brdf_ratio,
     photodiode_from_profile,
+    pooled_reading_sigma,
 )
+from instrument.bench.angles import AngularModel, angular_model
 from instrument.pipelines.brdf.analyse import AnalysisResult, analyse
+from instrument.pipelines.brdf.attenuation import apply_nd, nd_slots, nd_transmissions
 from instrument.pipelines.brdf.dark import lockin_dark, net_lockin_r
-from instrument.pipelines.brdf.reduce import Reduced, ReductionOptions, reduce_run
+from instrument.pipelines.brdf.reduce import (
+    Reduced,
+    ReductionOptions,
+    instrument_function,
+    reduce_run,
+)
 from instrument.pipelines.brdf.report import write_report
 from instrument.pipelines.brdf.results import PROGRAM, fill_analysis
 from instrument.run.paths import results_dir, results_path
 from instrument.run.results import put, replace_group, write_results_file
 from instrument.run.runfile import RunData, check_run_file, read_run
 
-__all__ = ["DEFAULT_SPECTRAL_MODELS", "SpectralFit", "SpectralOptions", "WavelengthFit",
-           "WavelengthGroup", "analyse_spectral", "detector_of", "fit_spectral",
-           "has_wavelength_axis",
-           "plot_parameters_vs_wavelength", "reduce_group", "reduce_spectral", "wavelength_groups",
-           "write_spectral_report", "write_spectral_results"]
+__all__ = [
+    "DEFAULT_SPECTRAL_MODELS",
+    "SpectralFit",
+    "SpectralOptions",
+    "WavelengthFit",
+    "WavelengthGroup",
+    "analyse_spectral",
+    "detector_of",
+    "fit_spectral",
+    "has_wavelength_axis",
+    "plot_parameters_vs_wavelength",
+    "reduce_group",
+    "reduce_spectral",
+    "single_wavelength_group",
+    "wavelength_groups",
+    "write_spectral_report",
+    "write_spectral_results",
+]
 
 #: Diffuse albedo plus a GGX lobe whose level is the Fresnel reflectance of n.
 DEFAULT_SPECTRAL_MODELS = ("lambert+ggx_fresnel",)
@@ -89,15 +110,21 @@ class SpectralOptions:
     receiver_distance_mm, aperture_diameter_mm : float or None
         The photodiode's distance from the sample and aperture; default the profile's
         ``[photodiode]`` ``distance_mm``/``aperture_diameter_mm``, else the bench geometry.
-    sigma_theta_deg : float
-        Angular standard uncertainty of the set-points.
+    sigma_theta_deg : float or None
+        Angular standard uncertainty of the recorded angles; default the stages' read-back
+        resolution and repeatability (:mod:`instrument.bench.angles`), as the camera's.
     models : sequence of str
         Candidate models fitted at every wavelength.
     reduction : ReductionOptions or None
         Camera route: the options of the camera reduction.
     receiver_geometry : bool
-        Lock-in: divide out the footprint × aperture receiver factor (needs the beam
-        radius from the profile) and fit the models as the receiver sees them.
+        Lock-in: the instrument function of the camera and the power meter
+        (:func:`instrument_function`: beam footprint and divergence, the photodiode's
+        aperture, the read-back spread), its receiver factor divided out and the models
+        fitted as the receiver sees them; False: a point spot and a point receiver.
+    wavelength_nm : float or None
+        Lock-in run without a wavelength axis: the light's wavelength (for R(λ)); default
+        the profile's ``[photodiode] wavelength_nm``, else a simulated source's.
     """
 
     detector: str | None = None
@@ -107,10 +134,11 @@ class SpectralOptions:
     reference_r_v: Mapping[int, tuple[float, float, float]] | None = None
     receiver_distance_mm: float | None = None
     aperture_diameter_mm: float | None = None
-    sigma_theta_deg: float = 0.0
+    sigma_theta_deg: float | None = None
     models: tuple[str, ...] = DEFAULT_SPECTRAL_MODELS
     reduction: ReductionOptions | None = None
-    receiver_geometry: bool = False
+    receiver_geometry: bool = True
+    wavelength_nm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -219,6 +247,22 @@ def wavelength_groups(run: RunData, rows: np.ndarray | None = None
                                                g.wavelength_nm)))
 
 
+def single_wavelength_group(run: RunData, opts: SpectralOptions) -> WavelengthGroup:
+    """Every scattering point of a lock-in run without a wavelength axis, as one group at
+    the light's wavelength (:class:`SpectralOptions` ``wavelength_nm``); points read
+    through a neutral-density filter stay in it (their slot is divided out)."""
+    profile = run.profile()
+    src = profile.get("simulation", {}).get("source", {})
+    lam = opts.wavelength_nm or profile.get("photodiode", {}).get("wavelength_nm") or (
+        src.get("wavelength_nm"))
+    if lam is None:
+        raise ValueError(f"{run.path}: the light's wavelength is unknown (the run has no "
+                         "wavelength axis): set [photodiode] wavelength_nm in the bench "
+                         "profile for the photodiode's responsivity")
+    return WavelengthGroup(float(lam), float(src.get("bandwidth_nm", math.nan)), -1,
+                           run.brdf_rows())
+
+
 def _plan_table(run: RunData) -> dict[str, Any]:
     try:
         return tomllib.loads(run.plan_text) if run.plan_text else {}
@@ -288,18 +332,99 @@ def _incident_power(run: RunData, group: WavelengthGroup, opts: SpectralOptions
 
 
 # ----------------------------------------------------------------------- reductions
-def _lockin_geometry(run: RunData, opts: SpectralOptions
-                     ) -> tuple[float, float, float, float, dict[str, Any]]:
-    """(distance mm, aperture mm, Ω, u(Ω), provenance) of the photodiode."""
-    pd = run.profile().get("photodiode", {})
-    dist = (opts.receiver_distance_mm or pd.get("distance_mm")
-            or run.geometry.get("detector_distance_mm", 300.0))
-    ap = (opts.aperture_diameter_mm or pd.get("aperture_diameter_mm")
-          or run.geometry.get("detector_aperture_mm", 9.5))
-    omega, u_omega = solid_angle_sr(float(ap), float(dist))
-    return float(dist), float(ap), omega, u_omega, {
-        "receiver_distance_mm": float(dist), "receiver_aperture_mm": float(ap),
-        "solid_angle_sr": omega}
+def _lockin_reduction_options(opts: SpectralOptions) -> ReductionOptions:
+    """The camera's and power meter's reduction options, as the lock-in's photodiode uses
+    them: one instrument function (:func:`instrument_function`) for every detector."""
+    base = opts.reduction or ReductionOptions()
+    return replace(base, detector="lockin",
+                   receiver_distance_mm=(opts.receiver_distance_mm
+                                         or base.receiver_distance_mm),
+                   aperture_diameter_mm=(opts.aperture_diameter_mm
+                                         or base.aperture_diameter_mm),
+                   sigma_theta_deg=(opts.sigma_theta_deg if opts.sigma_theta_deg is not None
+                                    else base.sigma_theta_deg),
+                   receiver_geometry=opts.receiver_geometry and base.receiver_geometry)
+
+
+def _lockin_noise(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
+    """σ of each point's mean R and of its dark component from the noise model fitted to
+    every lock-in reading of the run (:func:`pooled_reading_sigma`), and its description."""
+    all_rows = run.brdf_rows()
+    r = _column(run, "lockin_r_v", np.nan).astype(float)
+    u = _column(run, "lockin_u_r_v", np.nan).astype(float)
+    du = _column(run, "lockin_dark_u_v", np.nan).astype(float)
+    n = _snapshots(run)
+    ok = all_rows[np.isfinite(r[all_rows]) & np.isfinite(u[all_rows])]
+    _, a, b = pooled_reading_sigma(r[ok], u[ok], n, dark_u_v=du[ok], n_dark_readings=n)
+    if a == 0.0 and b == 0.0:
+        return u[rows], du[rows], "each point's own spread (no spread recorded)"
+    sig = np.sqrt((a + b * np.abs(r[rows])) / n)
+    sig_dark = np.where(np.isfinite(du[rows]), math.sqrt(a / n), np.nan)
+    return sig, sig_dark, (f"noise model of the run's {ok.size} points: var(R) = "
+                           f"({math.sqrt(a) * 1e9:.3g} nV)² + {b * 1e9:.3g} nV·R per snapshot, "
+                           f"{n} snapshots a point")
+
+
+def _snapshots(run: RunData) -> int:
+    """Snapshots the engine averaged per lock-in point (``frames``, at least 4)."""
+    return max(int(dict(run.acquisition).get("frames", 4) or 4), 4)
+
+
+def _lockin_points(run: RunData, group: WavelengthGroup, opts: SpectralOptions,
+                   photodiode: Photodiode) -> tuple[BRDFPoints, dict[str, Any], list[str]]:
+    rows = group.rows
+    r, _, s, o = (_column(run, c, np.nan if c != "lockin_overload" else 0).astype(float)[rows]
+                  for c in _LOCKIN_COLUMNS)
+    u, u_dark, noise = _lockin_noise(run, rows)
+    # the lock-in's reading with the light off (a coherent offset), subtracted as a phasor
+    dark = lockin_dark(run, rows)
+    if dark.measured:
+        if dark.policy == "per_point":
+            dark = replace(dark, u_level=u_dark)
+        x = _column(run, "lockin_x_v", np.nan).astype(float)[rows]
+        y = _column(run, "lockin_y_v", np.nan).astype(float)[rows]
+        r, u = net_lockin_r(x, y, u, dark)
+    # readings through a neutral-density filter: divided by its transmission (ADR 0018)
+    red_opts = _lockin_reduction_options(opts)
+    nd_table, warnings = nd_transmissions(run, red_opts.nd_calibration,
+                                          red_opts.camera_calibration)
+    slots = nd_slots(run, rows)
+    r, u, cov_nd = apply_nd(r, u, slots, nd_table)
+    rad = np.radians
+    angles = (rad(run.theta_i[rows]), rad(run.phi_i[rows]), rad(run.theta_r[rows]),
+              rad(run.phi_r[rows]))
+    receiver, prov = instrument_function(run, rows, red_opts)
+    ang = (AngularModel(math.radians(opts.sigma_theta_deg),
+                        math.radians(opts.sigma_theta_deg), (), ())
+           if opts.sigma_theta_deg is not None else angular_model(run.profile()))
+    warnings += list(ang.warnings)
+    common = {"solid_angle": prov["solid_angle_sr"], "u_solid_angle": prov["u_solid_angle_sr"],
+              "overload": o > 0, "sigma_theta_i": ang.sigma_theta_i_rad,
+              "sigma_theta_r": ang.sigma_theta_r_rad, "receiver": receiver,
+              "cov_extra_rel": cov_nd}
+    prov["detector_dark"] = dark.describe("µV", 1e6)
+    prov["lockin_noise"] = noise
+    if (slots >= 0).any():
+        prov["nd_filters"] = [
+            f"{nd_table[int(k)].describe()}: {int(np.sum(slots == k))} point(s)"
+            for k in np.unique(slots[slots >= 0])]
+    if opts.route == "absolute":
+        p_i, src = _incident_power(run, group, opts)
+        u_rel = opts.u_incident_power_rel
+        pts = lockin_brdf_absolute(r, u, s, *angles, photodiode=photodiode,
+                                   wavelength_nm=group.wavelength_nm, incident_power_w=p_i,
+                                   u_incident_power_w=p_i * (u_rel or 0.0), **common)
+        prov.update(incident_power_w=p_i, incident_power_source=src,
+                    responsivity_a_per_w=photodiode.responsivity(group.wavelength_nm))
+    elif opts.route == "ratio":
+        r_ref, u_ref, s_ref = _direct_beam(run, group, opts)
+        pts = lockin_brdf_ratio(r, u, s, *angles, reference_r_v=r_ref,
+                                u_reference_r_v=u_ref, reference_sensitivity_v=s_ref,
+                                **common)
+        prov.update(reference_r_v=r_ref, u_reference_r_v=u_ref)
+    else:
+        raise ValueError(f"route must be 'absolute' or 'ratio', got {opts.route!r}")
+    return pts, prov, warnings
 
 
 def _direct_beam(run: RunData, group: WavelengthGroup, opts: SpectralOptions
@@ -317,48 +442,6 @@ def _direct_beam(run: RunData, group: WavelengthGroup, opts: SpectralOptions
         return float(np.mean(r)), float(np.sqrt(np.sum(u**2)) / rows.size), float(s[0])
     raise ValueError(f"the ratio route needs a direct-beam lock-in reading at filter {pos} "
                      f"({group.label}): points labelled direct_beam, or reference_r_v")
-
-
-def _lockin_points(run: RunData, group: WavelengthGroup, opts: SpectralOptions,
-                   photodiode: Photodiode) -> tuple[BRDFPoints, dict[str, Any]]:
-    rows = group.rows
-    r, u, s, o = (_column(run, c, np.nan if c != "lockin_overload" else 0).astype(float)[rows]
-                  for c in _LOCKIN_COLUMNS)
-    # the lock-in's reading with the light off (a coherent offset), subtracted as a phasor
-    dark = lockin_dark(run, rows)
-    if dark.measured:
-        x = _column(run, "lockin_x_v", np.nan).astype(float)[rows]
-        y = _column(run, "lockin_y_v", np.nan).astype(float)[rows]
-        r, u = net_lockin_r(x, y, u, dark)
-    rad = np.radians
-    angles = (rad(run.theta_i[rows]), rad(run.phi_i[rows]), rad(run.theta_r[rows]),
-              rad(run.phi_r[rows]))
-    dist, ap, omega, u_omega, prov = _lockin_geometry(run, opts)
-    receiver = None
-    beam = run.profile().get("simulation", {}).get("source", {}).get("beam_radius_mm")
-    if opts.receiver_geometry and beam is not None:
-        receiver = ReceiverGeometry(float(beam), dist, ap, omega, sample_aperture=True)
-    sig = math.radians(opts.sigma_theta_deg)
-    common = {"solid_angle": omega, "u_solid_angle": u_omega, "overload": o > 0,
-              "sigma_theta_i": sig, "sigma_theta_r": sig, "receiver": receiver}
-    prov["detector_dark"] = dark.describe("µV", 1e6)
-    if opts.route == "absolute":
-        p_i, src = _incident_power(run, group, opts)
-        u_rel = opts.u_incident_power_rel
-        pts = lockin_brdf_absolute(r, u, s, *angles, photodiode=photodiode,
-                                   wavelength_nm=group.wavelength_nm, incident_power_w=p_i,
-                                   u_incident_power_w=p_i * (u_rel or 0.0), **common)
-        prov.update(incident_power_w=p_i, incident_power_source=src,
-                    responsivity_a_per_w=photodiode.responsivity(group.wavelength_nm))
-    elif opts.route == "ratio":
-        r_ref, u_ref, s_ref = _direct_beam(run, group, opts)
-        pts = lockin_brdf_ratio(r, u, s, *angles, reference_r_v=r_ref,
-                                u_reference_r_v=u_ref, reference_sensitivity_v=s_ref,
-                                **common)
-        prov.update(reference_r_v=r_ref, u_reference_r_v=u_ref)
-    else:
-        raise ValueError(f"route must be 'absolute' or 'ratio', got {opts.route!r}")
-    return pts, prov
 
 
 def _rescaled(pts: BRDFPoints, factor: float, u_scale_rel: float) -> BRDFPoints:
@@ -384,8 +467,9 @@ def reduce_group(run: RunData, group: WavelengthGroup, opts: SpectralOptions, *,
     if detector == "lockin":
         photodiode = photodiode_from_profile(run.profile().get("photodiode", {}),
                                              where="the bench profile's [photodiode]")
-        pts, extra = _lockin_points(run, group, opts, photodiode)
+        pts, extra, lockin_warnings = _lockin_points(run, group, opts, photodiode)
         prov.update(extra, method=pts.method, route=opts.route)
+        warnings.extend(f"{group.label}: {w}" for w in lockin_warnings)
         if extra["detector_dark"].startswith("none"):
             warnings.append(f"{group.label}: lock-in dark not measured (a coherent offset at "
                             "the chopper frequency stays in every reading); set "
@@ -429,10 +513,13 @@ def reduce_spectral(run: RunData, options: SpectralOptions | None = None
         The run has no wavelength axis, or as :func:`reduce_group`.
     """
     opts = options or SpectralOptions()
-    if not has_wavelength_axis(run):
-        raise ValueError(f"{run.path}: the run has no wavelength axis (no wavelength_nm per "
-                         "point); fit it with scatterlab fit")
     detector = detector_of(run, opts.detector)
+    groups = wavelength_groups(run)
+    if not has_wavelength_axis(run):
+        if detector != "lockin":
+            raise ValueError(f"{run.path}: the run has no wavelength axis (no wavelength_nm "
+                             "per point); fit it with scatterlab fit")
+        groups = (single_wavelength_group(run, opts),)
     camera = None
     if detector == "camera":
         red_opts = replace(opts.reduction or ReductionOptions(), incident_power_w=1.0,
@@ -441,7 +528,7 @@ def reduce_spectral(run: RunData, options: SpectralOptions | None = None
         cal = run.camera_calibration(red_opts.camera_calibration)
         camera.provenance["camera_wavelength_nm"] = cal.wavelength_nm
     return detector, tuple((g, reduce_group(run, g, opts, detector=detector, camera=camera))
-                           for g in wavelength_groups(run))
+                           for g in groups)
 
 
 def analyse_spectral(run: RunData, options: SpectralOptions | None = None, *,

@@ -125,3 +125,62 @@ def test_bad_readings_are_refused() -> None:
         lockin_brdf_ratio([1e-3], [1e-5], [1e-2], [0.1], [0.0], [0.2], [np.pi],
                           reference_r_v=0.0, u_reference_r_v=0.0,
                           reference_sensitivity_v=1.0, solid_angle=OMEGA)
+
+
+# the noise model of a run's readings ----------------------------------------------------
+def _snapshots(seed: int, n_points: int = 150, n: int = 4, a: float = 1e-16,
+               b: float = 2e-12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(true R, mean R, standard error of the mean from the point's own spread) of
+    ``n_points`` points of ``n`` snapshots each, one snapshot's variance a + b·R."""
+    from numpy.random import default_rng
+
+    rng = default_rng(seed)
+    r_true = 10 ** rng.uniform(-6, -3, n_points)
+    sd = np.sqrt(a + b * r_true)
+    snaps = r_true[:, None] + sd[:, None] * rng.standard_normal((n_points, n))
+    return r_true, snaps.mean(axis=1), snaps.std(axis=1, ddof=1) / np.sqrt(n)
+
+
+def test_the_pooled_noise_model_recovers_a_and_b_from_three_dof_spreads():
+    from analysis.brdf.reduction.lockin import pooled_reading_sigma
+
+    a, b = 1e-16, 2e-12
+    fits = [pooled_reading_sigma(m, u, 4)[1:] for m, u in
+            (_snapshots(seed)[1:] for seed in range(40))]
+    got = np.array(fits) / [a, b]
+    # 150 points × 3 dof: one seed gives a and b to about 25 % (1σ, the spread of these
+    # seeds), so each within 0.75; their mean over 40 seeds within 0.15 (≈ 3.5σ)
+    assert np.all(np.abs(got - 1) < 0.75)
+    assert np.all(np.abs(np.mean(got, axis=0) - 1) < 0.15)
+
+
+def test_weights_from_the_pooled_model_give_chi2_per_dof_near_one_and_own_spreads_three():
+    """With σ of each mean from its own four snapshots, E[χ²/ν] = 3/(3 − 2) = 3 (the
+    reciprocal of χ²₃/3); from the pooled model it is 1."""
+    from analysis.brdf.reduction.lockin import pooled_reading_sigma
+
+    pooled, own = [], []
+    for seed in range(40):
+        r_true, mean, u = _snapshots(100 + seed)
+        sigma, _, _ = pooled_reading_sigma(mean, u, 4)
+        pooled.append(np.mean(((mean - r_true) / sigma) ** 2))
+        own.append(np.mean(((mean - r_true) / u) ** 2))
+    # pooled: E[v/v̂] ≈ 1 + CV(v̂)², the model's a and b known to ~25 % per run of 150
+    # points (test above), so 1 to about 1.2 (1.19 measured on these seeds); the noise of
+    # 40 × 150 χ²₁ terms is ±0.05 (3σ)
+    assert 0.95 < np.mean(pooled) < 1.3
+    # own spreads: a t₃² per point, mean 3 (3.2 on these seeds): the lock-in's χ²/dof 3–5
+    assert np.mean(own) > 2.5
+
+
+def test_dark_readings_enter_the_noise_model_at_zero_signal():
+    from analysis.brdf.reduction.lockin import pooled_reading_sigma
+
+    _, mean, u = _snapshots(7, n_points=20)
+    dark = np.full(20, np.sqrt(1e-16 / 4))
+    sigma, a, b = pooled_reading_sigma(mean, u, 4, dark_u_v=dark, n_dark_readings=4)
+    assert abs(a / 1e-16 - 1) < 0.3 and b > 0 and sigma.shape == (20,)
+    with pytest.raises(ValueError, match="at least two readings"):
+        pooled_reading_sigma(mean, u, 1)
+    # noiseless readings: their own (zero) σ back, nothing invented
+    assert np.all(pooled_reading_sigma(mean, np.zeros(20), 4)[0] == 0)

@@ -212,3 +212,57 @@ def test_lock_in_settling_and_filter_turns_are_in_the_estimate():
     assert timing.wheel_move_s(2, 2) == 0.0
     two = _lockin_estimate(filters="[1, 3]")
     assert two.bench_acquisition_s - 2 * one.bench_acquisition_s == pytest.approx(2.1, abs=0.01)
+
+
+ND_PLAN = """
+[plan]
+kind = "brdf_in_plane"
+name = "nd turns"
+[sample]
+name = "s"
+[scan]
+skip_beam_points = true
+theta_i = [20, 50]
+theta_r = [-40, 0, 30, 60]
+{specular}
+[acquisition]
+exposure_us = 2000
+frames = 2
+detectors = {detectors}
+"""
+
+
+def test_neutral_density_turns_near_the_peak_are_in_the_estimate():
+    """The sim bench's wheel holds ND1–3 beside an open slot: a camera plan crossing the
+    specular direction counts, per run of points near it, a turn to ND1 and back at the
+    emulated wheel's speed-up (speed=20) and the point read again; never zero."""
+    profile = load_profile("sim")
+    timing = bench_timing(profile)
+    assert timing.wheel_speed == 20.0
+    turn = timing.wheel_move_s(1, 2)  # open slot 1 → ND1 in slot 2: 60°, 1 s + 0.1 s
+    assert turn == pytest.approx(1.1 / 20)
+    spec = ND_PLAN.format(specular="specular = { half_width_deg = 2, step_deg = 2 }",
+                          detectors='["camera"]')
+    plan = build_plan(parse_plan(spec), profile)
+    est = plan.estimate()
+    note = next(a for a in est.predicted if a.startswith("ND filters"))
+    # θi = 20° and 50°: the peaks at θr = 20° ± 2° and 50° ± 2°, one run of points each
+    assert "2 peak(s) within 2° of specular" in note and "4 wheel turns" in note
+    pol = plan.spec.acquisition
+    reread = pol.frames * (pol.min_exposure_us * 1e-6 * timing.exposure_factor
+                           + timing.frame_overhead_s)
+    wanted = 2 * (2 * turn + reread + timing.scene_change_s)
+    without = replace(profile, devices={k: v for k, v in profile.devices.items()
+                                         if k != "filter_wheel"})
+    bare = build_plan(parse_plan(spec), without).estimate()
+    assert est.bench_acquisition_s - bare.bench_acquisition_s == pytest.approx(wanted)
+    assert not any(a.startswith("ND filters") for a in bare.predicted)
+    # no specular window in the plan: points within 5° of the mirror direction; here
+    # only the grid's θr = 60° (10° from θi = 50°) is not, and none is within 5°
+    none = build_plan(parse_plan(ND_PLAN.format(specular="", detectors='["camera"]')),
+                      profile).estimate()
+    assert not any(a.startswith("ND filters") for a in none.predicted)
+    # only the camera clips: a power-meter plan turns no filter
+    pm = build_plan(parse_plan(spec.replace('["camera"]', '["power_meter"]')),
+                    profile).estimate()
+    assert not any(a.startswith("ND filters") for a in pm.predicted)

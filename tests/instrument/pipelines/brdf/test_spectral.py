@@ -159,11 +159,31 @@ def test_ratio_route_without_a_direct_beam_says_what_to_give() -> None:
         analyse_spectral(synthetic_run(3), SpectralOptions(route="ratio"))
 
 
-def test_run_without_wavelength_axis_is_refused() -> None:
-    run = dataclasses.replace(synthetic_run(4), wavelength_nm=np.full(363, np.nan)
-                              [:synthetic_run(4).n_points])
+def test_run_without_wavelength_axis_is_one_lock_in_group_or_refused() -> None:
+    """Without a wavelength per point the lock-in's readings are one group at the light's
+    wavelength (the simulated source's 550 nm here); the camera's are refused (scatterlab
+    fit reduces them)."""
+    base = synthetic_run(4)
+    run = dataclasses.replace(base, wavelength_nm=np.full(base.n_points, np.nan),
+                              filter_position=np.full(base.n_points, -1))
+    sample = SpectralSample.from_config(SAMPLE)
+    keep = np.flatnonzero(base.filter_position == 2)  # the 550 nm filter's points
+    one = dataclasses.replace(
+        run, **{k: getattr(run, k)[keep] for k in (
+            "index", "label", "point_status", "theta_i", "phi_i", "theta_r", "phi_r",
+            "exposure_us", "power_w", "signal", "n_frames", "frame_start", "wavelength_nm",
+            "bandwidth_nm", "filter_position", "lockin_r_v", "lockin_u_r_v",
+            "lockin_sensitivity_v", "lockin_overload")},
+        positions=run.positions[keep])
+    # the whole source band at the sample: 400 nm wide, so the power is the source's
+    fit = analyse_spectral(one, SpectralOptions(models=("lambert+ggx_fresnel",),
+                                                incident_power_w={-1: P_SOURCE * 10 / 400}))
+    (wf,) = fit.fits
+    assert wf.group.wavelength_nm == 550.0 and wf.group.rows.size == keep.size
+    rho, err = fit.parameter("rho")
+    assert abs(rho[0] - sample.truth(550.0)["rho"]) < 3 * err[0]
     with pytest.raises(ValueError, match="no wavelength axis"):
-        analyse_spectral(run)
+        analyse_spectral(run, SpectralOptions(detector="camera"))
 
 
 def test_report_and_results(tmp_path: Path) -> None:
