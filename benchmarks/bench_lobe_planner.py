@@ -7,8 +7,9 @@ from −70° to 70° and ±4° around the mirror direction in 1° steps) is acqu
 sensor noise, read through the sim bench's neutral-density filters where the peak clips at
 the shortest exposure (the engine's rule, ADR 0018; calibrated transmissions, their error
 shared by the points of a filter, and each seed's calibrated values drawn about the
-truth with their stated σ, so that the seed spread holds that shared error), fitted; the second pass (24 points on a 0.25° grid) is
-placed by :func:`~instrument.plans.lobe.place_points` with the fit's error budget
+truth with their stated σ, so that the seed spread holds that shared error), fitted; the
+second pass (24 points on a 0.25° grid) is placed by
+:func:`~instrument.plans.lobe.place_points` with the fit's error budget
 (:mod:`instrument.plans.lobe_budget`), acquired with another seed, and both passes are
 fitted together as ``scatterlab fit`` does (forward model, shared filter errors
 propagated).
@@ -41,11 +42,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from analysis.brdf.reduction import BRDFPoints  # noqa: E402
-from instrument.bench.profile import parse_profile  # noqa: E402
-from instrument.pipelines.brdf.analyse import analyse  # noqa: E402
-from instrument.plans.build import build_plan  # noqa: E402
-from instrument.plans.lobe import (  # noqa: E402
+from analysis.brdf.reduction import BRDFPoints
+from instrument.bench.profile import parse_profile
+from instrument.pipelines.brdf.analyse import analyse
+from instrument.plans.build import build_plan
+from instrument.plans.lobe import (
     candidate_pairs,
     lobe_of,
     pass_move_seconds,
@@ -55,10 +56,10 @@ from instrument.plans.lobe import (  # noqa: E402
     second_pass_text,
     single_pass_alternative,
 )
-from instrument.plans.lobe_budget import ErrorBudget, NDStep  # noqa: E402
-from instrument.plans.planfile import parse_plan  # noqa: E402
-from instrument.plans.tradeoff import Prior, ScanOption, setup_from_profile  # noqa: E402
-from tests.instrument.sim_scan import (  # noqa: E402
+from instrument.plans.lobe_budget import ErrorBudget, NDStep
+from instrument.plans.planfile import parse_plan
+from instrument.plans.tradeoff import Prior, ScanOption, setup_from_profile
+from tests.instrument.sim_scan import (
     NDFilters,
     Sample,
     ScanSetup,

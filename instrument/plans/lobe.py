@@ -48,7 +48,6 @@ from analysis.brdf.model import BRDFModel
 from instrument.bench.dynamics import move_time
 from instrument.bench.profile import BenchProfile
 from instrument.plans.build import Plan, build_plan, dynamics_of, guarded_points
-from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.plans.lobe_budget import (
     ErrorBudget,
     PointBudget,
@@ -57,6 +56,7 @@ from instrument.plans.lobe_budget import (
     predicted_covariance,
     shared_covariance,
 )
+from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.plans.tradeoff import DetectorSetup, ScanOption
 
 __all__ = ["LobeSpec", "Placement", "SinglePass", "candidate_pairs", "lobe_of",

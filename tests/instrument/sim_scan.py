@@ -311,8 +311,8 @@ def reduce_seed_nd(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
                              quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
     cov_rel = None
     if nd is not None and (level > 0).any():
-        value = np.array((1.0,) + nd.value)[level]
-        rel = np.array((0.0,) + tuple(u / v for u, v in zip(nd.u, nd.value, strict=True)))[
+        value = np.array((1.0, *nd.value))[level]
+        rel = np.array((0.0, *tuple(u / v for u, v in zip(nd.u, nd.value, strict=True))))[
             level]
         power, u_power = power / value, u_power / value
         same = (level[:, None] == level[None, :]) & (level[:, None] > 0)
