@@ -302,12 +302,16 @@ def _power_meter_signals(run: RunData, rows: np.ndarray, opts: ReductionOptions
     if not np.all(np.isfinite(p)):
         raise ValueError("the run has no power-meter readings at every point")
     dark = power_meter_dark(run, rows)
-    floor = dark.noise_floor or 0.0
+    meter = _meter_relative_noise(run, opts)
+    rel = meter.relative
+    # the floor from the darks' spread; too few darks: the profile's declared floor
+    floor = dark.noise_floor if dark.noise_floor is not None else (meter.floor_w or 0.0)
     net = p - dark.level
-    rel = _meter_relative_noise(run, opts).relative
     u = np.hypot(floor, np.abs(p) * rel)
-    # a dark whose noise was not measured: the relative noise of a reading (and a warning)
+    # a dark whose noise was not measured: the declared floor, else the relative noise of
+    # a reading (and a warning)
     u_dark = (dark.u_level if dark.noise_floor is not None
+              else np.full(p.size, meter.floor_w) if meter.floor_w is not None
               else np.abs(dark.level) * rel)
     shared = dark.group >= 0
     u = np.where(shared, u, np.hypot(u, u_dark))
@@ -320,7 +324,8 @@ def _meter_relative_noise(run: RunData, opts: ReductionOptions) -> MeterNoise:
     profile or the meter's kind says (:mod:`instrument.bench.meter_noise`)."""
     if opts.u_power_meter_rel is not None:
         return MeterNoise(float(opts.u_power_meter_rel),
-                          f"{opts.u_power_meter_rel:.2g} of the reading (option)")
+                          f"{opts.u_power_meter_rel:.2g} of the reading (option)",
+                          floor_w=meter_noise(run.profile()).floor_w)
     return meter_noise(run.profile())
 
 
@@ -560,7 +565,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         prov["detector_dark"] = sig.dark.describe("nW", 1e9)
         noise = _meter_relative_noise(run, opts)
         prov["power_meter_relative_noise"] = noise.source
-        warnings.extend(_dark_warnings(sig.dark, noise.relative))
+        warnings.extend(_dark_warnings(sig.dark, noise))
         if noise.warning:
             warnings.append(noise.warning)
     scale_unknown: list[str] = []
@@ -646,7 +651,7 @@ def _receiver_warnings(rinfo: dict[str, Any]) -> list[str]:
     return out
 
 
-def _dark_warnings(dark: PointDark, relative_noise: float) -> list[str]:
+def _dark_warnings(dark: PointDark, noise: MeterNoise) -> list[str]:
     """The power meter's dark in words when it was not measured, or its noise not."""
     if not dark.measured:
         return ["power-meter dark not measured: every reading still holds the photodiode's "
@@ -654,9 +659,11 @@ def _dark_warnings(dark: PointDark, relative_noise: float) -> list[str]:
                 "(or \"start\") in the plan so that it is read with the light off and "
                 "subtracted"]
     if dark.noise_floor is None:
+        held = (f"the profile's noise_floor_w ({noise.floor_w:.3g} W) is taken"
+                if noise.floor_w is not None else
+                f"each reading's σ is its relative noise alone ({noise.relative:.2%})")
         return [f"power-meter noise floor not measured ({dark.n_readings} dark reading(s), "
-                "fewer than 3): each reading's σ is its relative noise alone "
-                f"({relative_noise:.2%}); dark = \"per_point\" measures it"]
+                f"fewer than 3): {held}; dark = \"per_point\" measures it"]
     return []
 
 

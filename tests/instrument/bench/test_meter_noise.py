@@ -24,11 +24,18 @@ def _profile(name: str) -> dict:
 
 
 def test_the_emulated_meter_reads_its_documented_noise_not_half_a_percent():
-    noise = meter_noise(_profile("sim"))
+    sim = _profile("sim")
+    noise = meter_noise(sim)
+    # the sim profile declares the emulated meter's documented noise
+    assert noise.relative == pytest.approx(1e-4) and noise.warning is None
+    assert noise.floor_w == pytest.approx(2.6e-10)
+    # a sim profile without the keys: the same from the emulated meter's kind
+    bare = load_profile("sim").source_text.replace("relative_noise = 1e-4\n", "")
+    noise = meter_noise(tomllib.loads(bare))
     assert noise.relative == pytest.approx(1e-4) and noise.warning is None
     assert "emulated PM100USB" in noise.source
     # the meter averages n samples per reading: σ/√n
-    text = load_profile("sim").source_text.replace(
+    text = bare.replace(
         "settings = { wavelength_nm = 633.0 }",
         "settings = { wavelength_nm = 633.0, averaging = 16 }")
     assert meter_noise(tomllib.loads(text)).relative == pytest.approx(
@@ -36,9 +43,8 @@ def test_the_emulated_meter_reads_its_documented_noise_not_half_a_percent():
 
 
 def test_a_declared_relative_noise_wins_and_is_validated():
-    text = load_profile("sim").source_text.replace(
-        "settings = { wavelength_nm = 633.0 }",
-        "settings = { wavelength_nm = 633.0 }\nrelative_noise = 0.002")
+    text = load_profile("sim").source_text.replace("relative_noise = 1e-4",
+                                                   "relative_noise = 0.002")
     parse_profile(text)
     noise = meter_noise(tomllib.loads(text))
     assert noise.relative == 0.002 and "(profile)" in noise.source
