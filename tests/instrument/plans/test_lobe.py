@@ -221,3 +221,26 @@ def test_the_planners_promise_holds_over_seeds() -> None:
     z = r["errors"] / r["pred_each"]
     assert 4.9 < float(np.sum(z**2)) < 42.3, z
     assert r["clipped"] == (0, 0)  # the peak read through filters, nothing placed to clip
+
+
+def test_second_pass_plan_weighs_itself_against_one_pass_of_equal_time(
+        sharp_first_pass, tmp_path: Path) -> None:
+    """``scatterlab run``'s planning of the second pass from a first-pass run file: the
+    placement carries the run's error budget, and the single pass of equal time is
+    predicted with the same budget (here the sharp lobe's second pass beats it)."""
+    from instrument.cli._lobe import second_pass_plan
+
+    _, _, profile, spec, r1, _, _ = sharp_first_pass
+    first = write_run_file(r1, 3, tmp_path / "first.h5", plan_text=spec.source_text,
+                           run_id="first")
+    second = second_pass_plan(first, spec, profile)
+    pl, alt = second.placement, second.alternative
+    assert second.target == "ggx.alpha" and len(pl.pairs) == 10
+    assert second.first_seconds > 0 and second.second_seconds > 0
+    # the alternative is the densest one-pass plan the two passes' time pays for
+    assert alt.seconds <= second.first_seconds + second.second_seconds or \
+        alt.theta_r_step_deg == 20.0
+    assert alt.n_points > 0 and alt.sigma["ggx.alpha"] > 0
+    assert second.worthwhile, (pl.sigma_both, alt)
+    assert pl.sigma_both["ggx.alpha"] < pl.sigma_first["ggx.alpha"]
+    assert set(pl.slots) == {-1}  # the sim bench's filters: none needed at 20 nW
