@@ -23,11 +23,19 @@ in two passes:
    Atkinson, Donev & Tobias, *Optimum Experimental Designs*, 2007, §10.1–10.3 and §11.2 on
    sequential construction. Either gain is divided by the point's acquisition and move
    time. J is the Jacobian of the *forward model* (what the instrument sees: the
-   lobe averaged over beam and pupil), and σ includes the set-point scatter |∂F/∂θ|σθ, so
-   points gather where the measured lobe curves, not on flanks steeper than the axes can
-   hold. Each direction is used once (and none the first pass measured): the points
-   spread over the region of highest information instead of piling onto its best angle,
-   which keeps the design robust when the model is slightly wrong.
+   lobe averaged over beam and pupil), and σ is the σ the fit will give the reading
+   (:mod:`instrument.plans.lobe_budget`, ADR 0022: the detector's noise, the angular error
+   of both stages from the model's slopes, the neutral-density filter a clipping peak will
+   be read through and its transmission error), so points gather where the measured lobe
+   curves, not on flanks steeper than the axes can hold, and never where the reading
+   would clip behind every filter. Each direction is used once (and none the first pass
+   measured): the points spread over the region of highest information instead of piling
+   onto its best angle, which keeps the design robust when the model is slightly wrong.
+   The promised σ are the fit's covariance of both passes, shared errors (a filter's
+   transmission, the common scale) propagated as the fit propagates them.
+3. **Worth it?** :func:`single_pass_alternative` predicts, with the same budget, the one-pass
+   plan the two passes' time would buy; the second pass is run only when it promises a
+   smaller σ of the target.
 
 The second pass is a plan of explicit ``points`` with ``first_pass`` naming the first
 pass's run (:func:`second_pass_text`); the analysis reduces the two runs together.
