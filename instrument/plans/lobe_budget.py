@@ -88,7 +88,8 @@ class ErrorBudget:
     filters : tuple of NDStep
         The wheel's neutral-density filters, lightest first (empty: no wheel).
     filter_move_s : float
-        Seconds of one wheel turn into a filter and back out, for each filtered reading.
+        Seconds of one wheel turn from the open slot into a filter, charged to each
+        filtered reading.
     scale_rel : float
         The run's common relative scale uncertainty (what the fit propagates).
     clip_margin : float
