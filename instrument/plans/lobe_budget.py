@@ -31,7 +31,7 @@ the point again through the next denser filter (ADR 0018); the planner predicts 
 the lightest filter (lightest first) through which the predicted peak pixel at the
 shortest exposure stays below ``clip_margin`` of the well — the engine's own 20 % margin
 (:meth:`instrument.run.engine.RunEngine._next_level`) — and charges the filter's costs: the
-clipped open exposure and the wheel's turn there and back. Without a filter that helps, the
+clipped open exposure and one turn of the wheel. Without a filter that helps, the
 candidate is *not measurable* and is never placed.
 """
 
