@@ -212,7 +212,7 @@ def test_the_planners_promise_holds_over_seeds() -> None:
     lobe (α = 0.05) whose peak is read through ND filters, six seeds. Each seed's predicted
     σ is the σ its fit reports (the same error budget, within 10 %); over the seeds, the
     estimates scatter as predicted: 18 pulls z = (estimate − truth)/σ_predicted have
-    Σz² inside the 99.9 % interval of χ²₁₈ [4.9, 42.3]: a promise 2× too small fails it
+    Σz² between the 0.1 % tails of χ²₁₈ (4.9 and 42.3): a promise 2× too small fails it
     nine times in ten, the old planner's 8× always; the 30 % goal itself is measured over
     20 seeds by benchmarks/bench_lobe_planner.py."""
     from tests.instrument.lobe_closed_loop import run_alpha
