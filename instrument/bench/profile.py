@@ -24,6 +24,10 @@ Schema (all lengths in mm, angles in degrees)::
     repeatability = 0.005              # motion: ± bidirectional repeatability (axis
                                        # units; emulated stages 0, else not known)
     settle_s = 0.01                    # motion: settling after each move (planning, s)
+    relative_noise = 0.001             # power meter: 1σ noise of a reading as a fraction
+                                       # of it (instrument.bench.meter_noise)
+    noise_floor_w = 2.6e-10            # power meter: 1σ of a dark reading (W), used when
+                                       # the run's darks are too few to measure it
     home_s = 20.0                      # motion: time homing takes (estimates, s)
     frame_overhead_s = 0.02            # camera: time per frame beyond the exposure (s)
     scene_change_s = 0.1               # camera: extra time of the first frame after a
@@ -376,7 +380,8 @@ def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
              "position_tolerance", "options", "retry", "settle_s", "settings",
-             "home_s", "readback_resolution", "repeatability", *CAMERA_TIMING}
+             "home_s", "readback_resolution", "repeatability", "relative_noise",
+             "noise_floor_w", *CAMERA_TIMING}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
     if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
@@ -414,6 +419,16 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     if "repeatability" in t and not (_is_number(t["repeatability"])
                                      and 0 <= t["repeatability"] < math.inf):
         v.error(f"{path}.repeatability", "must be a number ≥ 0 (± half-width, axis units)")
+    # the power meter's noise per reading (instrument.bench.meter_noise)
+    for key, what in (("relative_noise", "a fraction of a reading from 0 to 1 (1σ, e.g. "
+                                         "0.001)"),
+                      ("noise_floor_w", "a power in W from 0 to 1 (1σ of a dark reading)")):
+        if key not in t:
+            continue
+        if driver is not None and driver != "pm100usb":
+            v.error(f"{path}.{key}", f"only power meters take {key!r}")
+        elif not (_is_number(t[key]) and 0 <= t[key] < 1):
+            v.error(f"{path}.{key}", f"must be {what}")
     options = t.get("options", {})
     if not isinstance(options, dict):
         v.error(f"{path}.options", "must be a table")

@@ -145,11 +145,23 @@ def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) ->
         print(f"error: the second pass of {first.name} could not be planned: {err}")
         return 2
     pl = second.placement
+    if not second.worthwhile:
+        print(second.refusal())
+        print(f"first pass: {first}")
+        return 0
     print(f"second pass: {len(second.plan.points)} points placed by Fisher information on "
           f"{second.model} fitted to the first pass ({second.verdict})")
+    filtered = sum(s >= 0 for s in pl.slots)
+    if filtered or pl.not_measurable:
+        print(f"  {filtered} of them read through a neutral-density filter; "
+              f"{pl.not_measurable} candidate direction(s) left out (they would clip "
+              "behind every filter)")
     for name in pl.sigma_first:
         print(f"  predicted σ({name}): {pl.sigma_first[name]:.3g} after the first pass, "
-              f"{pl.sigma_both[name]:.3g} with the second")
+              f"{pl.sigma_both[name]:.3g} with the second (the fit's error budget)")
+    a = second.alternative
+    print(f"  a single pass of equal time (θr every {a.theta_r_step_deg:g}°, {a.n_points} "
+          f"points) is predicted to give σ({second.target}) {a.sigma[second.target]:.3g}")
     engine = _start(second.plan, bench, args)
     if engine is None:
         return 2

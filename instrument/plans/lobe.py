@@ -23,11 +23,19 @@ in two passes:
    Atkinson, Donev & Tobias, *Optimum Experimental Designs*, 2007, §10.1–10.3 and §11.2 on
    sequential construction. Either gain is divided by the point's acquisition and move
    time. J is the Jacobian of the *forward model* (what the instrument sees: the
-   lobe averaged over beam and pupil), and σ includes the set-point scatter |∂F/∂θ|σθ, so
-   points gather where the measured lobe curves, not on flanks steeper than the axes can
-   hold. Each direction is used once (and none the first pass measured): the points
-   spread over the region of highest information instead of piling onto its best angle,
-   which keeps the design robust when the model is slightly wrong.
+   lobe averaged over beam and pupil), and σ is the σ the fit will give the reading
+   (:mod:`instrument.plans.lobe_budget`, ADR 0022: the detector's noise, the angular error
+   of both stages from the model's slopes, the neutral-density filter a clipping peak will
+   be read through and its transmission error), so points gather where the measured lobe
+   curves, not on flanks steeper than the axes can hold, and never where the reading
+   would clip behind every filter. Each direction is used once (and none the first pass
+   measured): the points spread over the region of highest information instead of piling
+   onto its best angle, which keeps the design robust when the model is slightly wrong.
+   The promised σ are the fit's covariance of both passes, shared errors (a filter's
+   transmission, the common scale) propagated as the fit propagates them.
+3. **Worth it?** :func:`single_pass_alternative` predicts, with the same budget, the one-pass
+   plan the two passes' time would buy; the second pass is run only when it promises a
+   smaller σ of the target.
 
 The second pass is a plan of explicit ``points`` with ``first_pass`` naming the first
 pass's run (:func:`second_pass_text`); the analysis reduces the two runs together.
@@ -38,7 +46,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -47,12 +55,21 @@ from analysis.brdf.geometry import make_geometry
 from analysis.brdf.model import BRDFModel
 from instrument.bench.dynamics import move_time
 from instrument.bench.profile import BenchProfile
-from instrument.plans.build import dynamics_of, guarded_points
+from instrument.plans.build import Plan, build_plan, dynamics_of, guarded_points
+from instrument.plans.lobe_budget import (
+    ErrorBudget,
+    PointBudget,
+    angular_sigma,
+    point_budget,
+    predicted_covariance,
+    shared_covariance,
+)
 from instrument.plans.planfile import PlanSpec, parse_plan
-from instrument.plans.tradeoff import DetectorSetup, ScanOption, _point_noise
+from instrument.plans.tradeoff import DetectorSetup, ScanOption
 
-__all__ = ["LobeSpec", "Placement", "candidate_pairs", "lobe_of", "place_points",
-           "second_pass_text"]
+__all__ = ["LobeSpec", "Placement", "SinglePass", "candidate_pairs", "lobe_of",
+           "place_points", "plan_budget", "plan_seconds", "second_pass_text",
+           "single_pass_alternative"]
 
 
 @dataclass(frozen=True)
@@ -142,7 +159,12 @@ class Placement:
         shorter budget).
     sigma_first, sigma_both : dict str → float
         Predicted standard uncertainty of each parameter after the first pass alone and
-        with the second pass (Cramér–Rao, the planner's noise model).
+        with the second pass: the covariance the fit will report
+        (:func:`instrument.plans.lobe_budget.predicted_covariance`, the fit's error budget).
+    slots : list of int
+        The wheel slot each chosen point is predicted to be read through (-1: open beam).
+    not_measurable : int
+        Candidates left out because they would clip whatever filter is in the beam.
     """
 
     pairs: list[tuple[float, float]]
@@ -150,19 +172,40 @@ class Placement:
     costs: list[float]
     sigma_first: dict[str, float]
     sigma_both: dict[str, float]
+    slots: list[int] = field(default_factory=list)
+    not_measurable: int = 0
 
 
-def _information(model: BRDFModel, params: np.ndarray, angles: np.ndarray,
-                 sigma: np.ndarray) -> np.ndarray:
-    g = make_geometry(*angles.T)
-    j = model.jacobian_geometry(params, g).reshape(len(angles), -1)
-    return (j / sigma[:, None]).T @ (j / sigma[:, None])
-
-
-def _sigmas(model: BRDFModel, info: np.ndarray) -> dict[str, float]:
-    cov = np.linalg.pinv(info, rcond=1e-12)
+def _sigmas(model: BRDFModel, cov: np.ndarray) -> dict[str, float]:
     return dict(zip(model.param_names, np.sqrt(np.maximum(np.diag(cov), 0.0)).tolist(),
                     strict=True))
+
+
+def _joint_shared(first_f: np.ndarray, first_slots: np.ndarray | None,
+                  first_cov: np.ndarray | None, second: PointBudget, budget: ErrorBudget,
+                  chosen: list[int]) -> np.ndarray | None:
+    """Errors shared between the readings of both passes: the first pass's correlated
+    covariance as reduced, the second pass's calibrated filters, and the filters the two
+    passes share."""
+    n1, n2 = first_f.size, len(chosen)
+    s2 = second.slots(budget)[chosen]
+    block2 = shared_covariance(second.f[chosen], s2, second.rel_shared[chosen])
+    if first_cov is None and block2 is None:
+        return None
+    out = np.zeros((n1 + n2, n1 + n2))
+    if first_cov is not None:
+        out[:n1, :n1] = first_cov
+    if block2 is not None:
+        out[n1:, n1:] = block2
+    if first_slots is not None and block2 is not None:
+        rel_of = {st.slot: st.u / st.transmission for st in budget.filters if st.calibrated}
+        for j, slot in enumerate(s2):
+            rel = rel_of.get(int(slot), 0.0)
+            if rel > 0:
+                hit = np.asarray(first_slots) == slot
+                out[:n1, n1 + j] = np.where(hit, first_f * second.f[chosen[j]] * rel**2, 0.0)
+                out[n1 + j, :n1] = out[:n1, n1 + j]
+    return out
 
 
 def place_points(
@@ -178,11 +221,14 @@ def place_points(
     readout_s: float,
     frames_per_point: int,
     move_s: float,
-    sigma_theta_rad: float = 0.0,
+    budget: ErrorBudget | None = None,
+    first_cov: np.ndarray | None = None,
+    first_slots: np.ndarray | None = None,
     min_separation_deg: float = 0.1,
     target: str | None = None,
 ) -> Placement:
-    """Greedy D-optimal placement per unit time (module docstring).
+    """Greedy c- or D-optimal placement per unit time (module docstring), each candidate
+    weighed with the σ the fit will give it (:mod:`instrument.plans.lobe_budget`).
 
     Parameters
     ----------
@@ -191,7 +237,9 @@ def place_points(
     params : sequence of float
         Its fitted parameters.
     first_angles_rad : ndarray, shape (n, 4)
-        The first pass's angles; ``first_sigma`` (n,) its standard uncertainties.
+        The first pass's fitted (unclipped) readings' angles; ``first_sigma`` (n,) their
+        independent σ as reduced (the angular term is added here from the model's slopes,
+        as the fit adds it).
     candidates : sequence of (θi, θr)
         Signed in-plane pairs in degrees (:func:`candidate_pairs`).
     n_points : int
@@ -202,45 +250,44 @@ def place_points(
         Per-frame readout overhead; ``frames_per_point`` frames (light and dark) per point.
     move_s : float
         Move and settle time added per point.
-    sigma_theta_rad : float
-        Set-point uncertainty of the axes (adds |∂F/∂θr|σθ to each candidate's σ).
+    budget : ErrorBudget
+        Angular error, filters, common scale (default: none of them).
+    first_cov, first_slots : ndarray or None
+        The first pass's covariance of shared errors (n, n; BRDF units²) and the wheel slot
+        of each of its readings (-1: open), so that a filter both passes read through
+        shares its error across them.
     min_separation_deg : float
         Candidates closer than this in θr (same θi) to a first-pass point are left out.
     target : str or None
         The parameter whose variance the points should reduce (default the model's last);
         ``"all"``: D-optimal over every parameter.
     """
+    budget = budget or ErrorBudget()
     p = np.asarray(params, dtype=float)
+    first = np.asarray(first_angles_rad, dtype=float)
+    sig1 = np.hypot(np.asarray(first_sigma, dtype=float),
+                    angular_sigma(model, p, first, budget.sigma_theta_i_rad,
+                                  budget.sigma_theta_r_rad))
     cand = _angles_rad(candidates)
+    pb = point_budget(model, p, cand, det=det, option=option, budget=budget,
+                      readout_s=readout_s)
+    cost = frames_per_point * (pb.t_us * 1e-6 + readout_s) + move_s + pb.extra_s
+    sig = np.where(pb.measurable, pb.sigma, 1.0)
     g = make_geometry(*cand.T)
-    f = model.evaluate_geometry(p, g)
-    f = np.maximum(f, 1e-300)
-    rel, t_us = _point_noise(f, cand[:, 0], cand[:, 2], option, det)
-    sig = rel * f
-    if sigma_theta_rad > 0:
-        h = 1e-4
-        up = cand.copy()
-        dn = cand.copy()
-        up[:, 2] = np.clip(up[:, 2] + h, 0.0, np.pi / 2)
-        dn[:, 2] = np.clip(dn[:, 2] - h, 0.0, np.pi / 2)
-        slope = (model.evaluate_geometry(p, make_geometry(*up.T))
-                 - model.evaluate_geometry(p, make_geometry(*dn.T))) / np.maximum(
-                     up[:, 2] - dn[:, 2], 1e-12)
-        sig = np.hypot(sig, slope * sigma_theta_rad)
-    cost = frames_per_point * (t_us * 1e-6 + readout_s) + move_s
     jac = model.jacobian_geometry(p, g).reshape(len(cand), -1) / sig[:, None]
-    info0 = _information(model, p, np.asarray(first_angles_rad, dtype=float),
-                         np.asarray(first_sigma, dtype=float))
+    g1 = make_geometry(*first.T)
+    j1 = model.jacobian_geometry(p, g1).reshape(len(first), -1) / sig1[:, None]
+    info0 = j1.T @ j1
     ridge = 1e-12 * max(float(np.trace(info0)), 1e-300)
     inv = np.linalg.inv(info0 + ridge * np.eye(p.size))
-    info = info0.copy()
     # each direction once, and none the first pass measured already: spreading the
     # points over the region of highest information keeps the design robust to a model
-    # that is slightly wrong (a pile of repeats at one angle is optimal only if it is right)
+    # that is slightly wrong (a pile of repeats at one angle is optimal only if it is right);
+    # never a reading predicted to clip (a lower bound the fit leaves out)
     c_ti = np.array([c[0] for c in candidates])
     c_tr = np.array([c[1] for c in candidates])
-    free = np.ones(len(cand), dtype=bool)
-    for ti, tr in _signed(np.degrees(np.asarray(first_angles_rad, dtype=float))):
+    free = pb.measurable.copy()
+    for ti, tr in _signed(np.degrees(first)):
         free &= ~((np.abs(c_ti - ti) < 0.05) & (np.abs(c_tr - tr) < min_separation_deg))
     chosen: list[int] = []
     names = model.param_names
@@ -258,9 +305,87 @@ def place_points(
         jk = jac[k]
         u = inv @ jk
         inv = inv - np.outer(u, u) / (1.0 + jk @ u)  # Sherman–Morrison
-        info = info + np.outer(jk, jk)
+    f1 = model.evaluate_geometry(p, g1)
+    cov_first = predicted_covariance(model, p, first, sig1, shared=first_cov,
+                                     scale_rel=budget.scale_rel)
+    both = np.concatenate([first, cand[chosen]])
+    shared = _joint_shared(f1, first_slots, first_cov, pb, budget, chosen)
+    cov_both = predicted_covariance(model, p, both, np.concatenate([sig1, pb.sigma[chosen]]),
+                                    shared=shared, scale_rel=budget.scale_rel)
     return Placement([tuple(candidates[k]) for k in chosen], float(cost[chosen].sum()),
-                     cost[chosen].tolist(), _sigmas(model, info0), _sigmas(model, info))
+                     cost[chosen].tolist(), _sigmas(model, cov_first),
+                     _sigmas(model, cov_both), pb.slots(budget)[chosen].tolist(),
+                     int((~pb.measurable).sum()))
+
+
+@dataclass(frozen=True)
+class SinglePass:
+    """The one-pass plan a second pass is weighed against: the plan's θi and θr range with
+    the first pass's search around specular, its θr step the finest whose predicted
+    duration fits the two passes' time (:func:`single_pass_alternative`)."""
+
+    theta_r_step_deg: float
+    n_points: int
+    seconds: float
+    sigma: dict[str, float]
+
+
+#: θr steps (deg) a single-pass alternative is tried at, coarsest first.
+SINGLE_PASS_STEPS = (20.0, 15.0, 10.0, 7.5, 5.0, 4.0, 3.0, 2.5, 2.0, 1.5, 1.0, 0.75, 0.5,
+                     0.25)
+
+
+def plan_seconds(plan: Plan, pb: PointBudget, readout_s: float, frames_per_point: int
+                 ) -> float:
+    """Predicted duration of ``plan`` (s): motion along its route (the engine's estimate)
+    and each point's frames at the exposure ``pb`` predicts, with the filters' costs."""
+    acq = frames_per_point * (pb.t_us * 1e-6 + readout_s) + pb.extra_s
+    return float(plan.estimate().motion_s + acq[pb.measurable].sum())
+
+
+def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float], *,
+                det: DetectorSetup, option: ScanOption, budget: ErrorBudget,
+                readout_s: float) -> tuple[np.ndarray, PointBudget]:
+    """The angles (n, 4; radians) of ``plan``'s scattering points and their budget."""
+    pts = [q for q in plan.points if q.angles is not None and q.light]
+    ang = np.radians(np.array([q.angles.as_tuple() for q in pts]))
+    return ang, point_budget(model, np.asarray(params, dtype=float), ang, det=det,
+                             option=option, budget=budget, readout_s=readout_s)
+
+
+def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
+                            params: Sequence[float], *, seconds: float, det: DetectorSetup,
+                            option: ScanOption, budget: ErrorBudget, readout_s: float,
+                            frames_per_point: int) -> SinglePass:
+    """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two
+    passes' ``seconds`` pay for, with its predicted σ (the same error budget); the coarsest
+    when none fits."""
+    lobe = lobe_of(spec)
+    assert lobe is not None
+    scan = {k: v for k, v in spec.scan.items() if k not in ("lobe", "specular")}
+    scan["specular"] = {"half_width_deg": lobe.search_half_width_deg,
+                        "step_deg": lobe.search_step_deg}
+    tr = spec.scan["theta_r"]
+    lo, hi = ((float(tr["start"]), float(tr["stop"])) if isinstance(tr, dict)
+              else (float(min(tr)), float(max(tr))))
+    p = np.asarray(params, dtype=float)
+    best: SinglePass | None = None
+    for step in SINGLE_PASS_STEPS:
+        one = replace(spec, scan={**scan, "theta_r": {"start": lo, "stop": hi, "step": step}})
+        plan = build_plan(one, profile)
+        ang, pb = plan_budget(plan, model, p, det=det, option=option, budget=budget,
+                              readout_s=readout_s)
+        dur = plan_seconds(plan, pb, readout_s, frames_per_point)
+        if best is not None and dur > seconds:
+            break
+        ok = pb.measurable
+        cov = predicted_covariance(model, p, ang[ok], pb.sigma[ok],
+                                   shared=shared_covariance(pb.f[ok], pb.slots(budget)[ok],
+                                                            pb.rel_shared[ok]),
+                                   scale_rel=budget.scale_rel)
+        best = SinglePass(step, int(ok.sum()), dur, _sigmas(model, cov))
+    assert best is not None
+    return best
 
 
 def pass_move_seconds(profile: BenchProfile, step_deg: float) -> float:

@@ -142,9 +142,11 @@ def spec_for(spec: PlanSpec, option: ScanOption) -> PlanSpec:
     return replace(spec, scan=scan, acquisition=acq)
 
 
-def _point_noise(f: np.ndarray, ti: np.ndarray, tr: np.ndarray, option: ScanOption,
-                 det: DetectorSetup) -> tuple[np.ndarray, np.ndarray]:
-    """(relative σ of f, exposure µs) per point (module docstring)."""
+def peak_electron_rate(f: np.ndarray, ti: np.ndarray, tr: np.ndarray, det: DetectorSetup
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(electrons per second over the footprint's image, electrons per second on its
+    brightest pixel) of readings of BRDF ``f`` at incidence ``ti`` and view ``tr`` (radians;
+    module docstring: P_s = f·P_i·Ω·cos θr and the peak fraction q of the footprint)."""
     cam = det.camera
     omega, _ = solid_angle_sr(cam.pupil_diameter_mm, det.distance_mm)
     photon_j = PLANCK_J_S * SPEED_OF_LIGHT_M_S / (cam.wavelength_nm * 1e-9)
@@ -154,15 +156,32 @@ def _point_noise(f: np.ndarray, ti: np.ndarray, tr: np.ndarray, option: ScanOpti
     a = pitch * 1e-3 * det.distance_mm / focal
     q = np.minimum(1.0, 2.0 * a * a / (math.pi * det.beam_radius_mm**2
                                        * np.maximum(np.cos(tr), 1e-3) / np.cos(ti)))
-    full_well_e = cam.noise.saturation_dn / cam.noise.system_gain_dn_per_e
-    t_us = det.fill * full_well_e / np.maximum(rate_e * q, 1e-30) * 1e6
+    return rate_e, rate_e * q
+
+
+def full_well_e(det: DetectorSetup) -> float:
+    """Electrons at which the camera's brightest pixel saturates."""
+    noise = det.camera.noise
+    return float(noise.saturation_dn / noise.system_gain_dn_per_e)
+
+
+def _point_noise(f: np.ndarray, ti: np.ndarray, tr: np.ndarray, option: ScanOption,
+                 det: DetectorSetup, transmission: np.ndarray | float = 1.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(relative σ of f, exposure µs) per point (module docstring), the light attenuated by
+    ``transmission`` (a neutral-density filter in the beam; 1: open)."""
+    cam = det.camera
+    rate_e, peak_e = peak_electron_rate(f, ti, tr, det)
+    rate_e = rate_e * transmission
+    peak_e = peak_e * transmission
+    t_us = det.fill * full_well_e(det) / np.maximum(peak_e, 1e-30) * 1e6
     t_us = np.clip(t_us, det.min_exposure_us, option.max_exposure_us)
     s = rate_e * t_us * 1e-6
     n_pix = cam.n_pixels if cam.n_pixels is not None else 1024 * 1024
     k = cam.noise.system_gain_dn_per_e
     pix = np.array([cam.noise.difference_noise_dn(float(e), n_averaged=option.frames,
                                                   n_dark_averaged=option.frames) / k
-                    for e in t_us])
+                    for e in np.ravel(t_us)]).reshape(np.shape(t_us))
     var = s / option.frames + n_pix * pix**2
     return np.sqrt(var) / np.maximum(s, 1e-300), t_us
 

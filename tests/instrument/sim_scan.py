@@ -201,14 +201,15 @@ def noise_free(r: Rendered) -> BRDFPoints:
                          receiver=rg)
 
 
-def exposures_us(r: Rendered) -> np.ndarray:
-    """Per-point exposure: the brightest pixel at ``fill`` of the full well, capped."""
+def exposures_us(r: Rendered, attenuation: np.ndarray | float = 1.0) -> np.ndarray:
+    """Per-point exposure: the brightest pixel at ``fill`` of the full well, capped (the
+    light divided by ``attenuation``: 1/T behind a filter of transmission T)."""
     s = r.setup
     p = s.sensor_params()
     peak_e_per_s = r.photon_rate.reshape(len(r.photon_rate), -1).max(axis=1) * (
         p.quantum_efficiency * (1 + 3 * p.prnu))
     t = s.fill * p.full_well_e / np.maximum(peak_e_per_s, 1e-30) * 1e6
-    return np.clip(t, s.min_exposure_us, s.max_exposure_us)
+    return np.clip(t * attenuation, s.min_exposure_us, s.max_exposure_us)
 
 
 def acquisition_seconds(r: Rendered, *, readout_s: float = 0.0) -> float:
@@ -232,16 +233,43 @@ def receiver(setup: ScanSetup) -> ReceiverGeometry:
                             sample_aperture=True, sample_radius_mm=setup.sample_radius_mm)
 
 
+@dataclass(frozen=True)
+class NDFilters:
+    """Neutral-density filters for a scan acquired without the engine, lightest first:
+    ``true`` attenuates the light, ``value`` ± ``u`` is what the reduction divides by (a
+    calibration's value and its error, shared by every point through that filter; the
+    sim bench's wheel, ``instrument/bench/profiles/sim.toml``, by default), ``slots`` their
+    wheel slots."""
+
+    true: tuple[float, ...] = (0.1043, 0.00962, 0.001071)
+    value: tuple[float, ...] = (0.1043, 0.00962, 0.001071)
+    u: tuple[float, ...] = (1e-4, 1e-5, 1e-6)
+    slots: tuple[int, ...] = (2, 3, 4)
+
+
 def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
-                receiver_geometry: bool = True) -> BRDFPoints:
+                receiver_geometry: bool = True, nd: NDFilters | None = None) -> BRDFPoints:
     """Acquire every point with sensor seed ``seed`` and reduce by the absolute method
-    (``receiver_geometry``: divide out the receiver factor and keep the geometry)."""
+    (``receiver_geometry``: divide out the receiver factor and keep the geometry); ``nd``
+    as for :func:`reduce_seed_nd`."""
+    return reduce_seed_nd(r, seed, sigma_theta_deg=sigma_theta_deg,
+                          receiver_geometry=receiver_geometry, nd=nd)[0]
+
+
+def reduce_seed_nd(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
+                   receiver_geometry: bool = True, nd: NDFilters | None = None
+                   ) -> tuple[BRDFPoints, np.ndarray]:
+    """:func:`reduce_seed`, and the wheel slot each point was read through (-1: open).
+
+    With ``nd``, a point that clips at the shortest exposure is read again through the next
+    denser filter (the engine's rule, ADR 0018); its reading is divided by the filter's
+    ``value`` and the filter's error is a covariance between its points (as
+    ``instrument.pipelines.brdf.attenuation.apply_nd`` carries it)."""
     s = r.setup
     p = s.sensor_params()
     sensor = Sensor(p, seed=seed)
     noise = noise_model(s)
-    t = exposures_us(r)
-    n = len(t)
+    n = len(r.photon_rate)
     roi = (0, 0, p.width, p.height)
     # a perfect flat-field calibration: the sensor's own PRNU map (mean 1)
     flat = FlatField(sensor.prnu_map.astype(np.float64), np.ones(sensor.prnu_map.shape, bool),
@@ -249,18 +277,30 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
     rates = np.empty(n)
     variances = np.empty(n)
     clipped = np.zeros(n, dtype=bool)
+    level = np.zeros(n, dtype=int)
     zero = np.zeros_like(r.photon_rate[0], dtype=np.float32)
+    ladder = (1.0,) + (nd.true if nd is not None else ())
     for k in range(n):
-        light, dark = [], []
-        for j in range(s.frames):
-            light.append(sensor.expose(r.photon_rate[k].astype(np.float32), t[k], gain_db=0.0,
-                                       bits=12, roi=roi, frame_index=4 * k * s.frames + j))
-            dark.append(sensor.expose(zero, t[k], gain_db=0.0, bits=12, roi=roi,
-                                      frame_index=(4 * k + 2) * s.frames + j))
-        lf = np.mean(np.array(light, dtype=np.float64), axis=0)
-        df = np.mean(np.array(dark, dtype=np.float64), axis=0)
-        sig = camera_signal(lf[None], [t[k]], df[None], noise=noise, n_averaged=s.frames,
-                            flat=flat)
+        while True:
+            lv = int(level[k])
+            t = float(exposures_us(replace(r, photon_rate=r.photon_rate[k:k + 1]),
+                                   1.0 / ladder[lv])[0])
+            light, dark = [], []
+            base = 4 * k * s.frames + lv * 4 * n * s.frames
+            for j in range(s.frames):
+                light.append(sensor.expose((r.photon_rate[k] * ladder[lv]).astype(np.float32),
+                                           t, gain_db=0.0, bits=12, roi=roi,
+                                           frame_index=base + j))
+                dark.append(sensor.expose(zero, t, gain_db=0.0, bits=12, roi=roi,
+                                          frame_index=base + 2 * s.frames + j))
+            lf = np.mean(np.array(light, dtype=np.float64), axis=0)
+            df = np.mean(np.array(dark, dtype=np.float64), axis=0)
+            sig = camera_signal(lf[None], [t], df[None], noise=noise, n_averaged=s.frames,
+                                flat=flat)
+            if sig.clipped_pixels > 0 and t <= s.min_exposure_us and lv + 1 < len(ladder):
+                level[k] += 1
+                continue
+            break
         rates[k], variances[k] = sig.rate_dn_per_us, sig.variance
         clipped[k] = sig.clipped_pixels > 0
     k_gain = noise.system_gain_dn_per_e
@@ -269,15 +309,24 @@ def reduce_seed(r: Rendered, seed: int, *, sigma_theta_deg: float = 0.0,
                            quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
     u_power = camera_power_w(np.sqrt(variances), system_gain_dn_per_e=k_gain,
                              quantum_efficiency=p.quantum_efficiency, wavelength_nm=wl)
+    cov_rel = None
+    if nd is not None and (level > 0).any():
+        value = np.array((1.0, *nd.value))[level]
+        rel = np.array((0.0, *tuple(u / v for u, v in zip(nd.u, nd.value, strict=True))))[
+            level]
+        power, u_power = power / value, u_power / value
+        same = (level[:, None] == level[None, :]) & (level[:, None] > 0)
+        cov_rel = np.where(same, np.outer(rel, rel), 0.0)
     rg = receiver(s)
     a = r.angles_rad
     sig_t = math.radians(sigma_theta_deg)
     pts = absolute_brdf(power, u_power, a[:, 0], a[:, 1], a[:, 2], a[:, 3],
                         incident_power_w=s.power_w, solid_angle=rg.solid_angle_sr,
                         sigma_theta_i=sig_t, sigma_theta_r=sig_t,
-                        receiver=rg if receiver_geometry else None)
+                        receiver=rg if receiver_geometry else None, cov_power_rel=cov_rel)
+    slots = np.array((-1,) + (nd.slots if nd is not None else ()))[level]
     # readings clipped even at the shortest exposure are lower bounds, as in a run
-    return replace(pts, clipped=clipped)
+    return replace(pts, clipped=clipped), slots
 
 
 def profile_text(setup: ScanSetup, sample: Sample) -> str:

@@ -39,6 +39,7 @@ from analysis.brdf.reduction import (
 from analysis.radiometry import FlatField, flat_field
 from instrument.bench.angles import AngularModel, angular_model
 from instrument.bench.camera_calibration import CameraCalibration
+from instrument.bench.meter_noise import MeterNoise, meter_noise
 from instrument.pipelines.brdf.attenuation import (
     apply_nd,
     calibration_run_path,
@@ -79,8 +80,10 @@ class ReductionOptions:
     sigma_theta_deg : float or None
         Angular standard uncertainty of θi and θr; default from the stages' read-back
         resolution and repeatability (:mod:`instrument.bench.angles`).
-    u_power_meter_rel : float
-        Relative noise of one power-meter reading (power-meter detector).
+    u_power_meter_rel : float or None
+        Relative noise of one power-meter reading (power-meter detector); default from
+        the profile's ``relative_noise`` or the meter's kind
+        (:func:`instrument.bench.meter_noise.meter_noise`).
     camera_calibration : path or None
     flat_run : path or None
         A ``flat_field`` run (uniform radiance); default the run's ``calibration.flat``.
@@ -116,7 +119,7 @@ class ReductionOptions:
     u_distance_mm: float | None = None
     u_aperture_mm: float | None = None
     sigma_theta_deg: float | None = None
-    u_power_meter_rel: float = 0.005
+    u_power_meter_rel: float | None = None
     camera_calibration: str | None = None
     flat_run: str | None = None
     reference_run: str | None = None
@@ -299,23 +302,39 @@ def _power_meter_signals(run: RunData, rows: np.ndarray, opts: ReductionOptions
     """The power meter's readings less its dark (:mod:`instrument.pipelines.brdf.dark`).
 
     σ of a reading: the noise floor measured from the dark readings' spread combined with
-    ``u_power_meter_rel`` of the signal; the subtracted dark adds its own σ (independent
-    for a dark of its own, a covariance for a dark shared between points).
+    the meter's relative noise of the signal (:func:`_meter_relative_noise`); the
+    subtracted dark adds its own σ (independent for a dark of its own, a covariance for a
+    dark shared between points).
     """
     p = run.power_w[rows].astype(float)
     if not np.all(np.isfinite(p)):
         raise ValueError("the run has no power-meter readings at every point")
     dark = power_meter_dark(run, rows)
-    floor = dark.noise_floor or 0.0
+    meter = _meter_relative_noise(run, opts)
+    rel = meter.relative
+    # the floor from the darks' spread; too few darks: the profile's declared floor
+    floor = dark.noise_floor if dark.noise_floor is not None else (meter.floor_w or 0.0)
     net = p - dark.level
-    u = np.hypot(floor, np.abs(p) * opts.u_power_meter_rel)
-    # a dark whose noise was not measured: the relative noise of a reading (and a warning)
+    u = np.hypot(floor, np.abs(p) * rel)
+    # a dark whose noise was not measured: the declared floor, else the relative noise of
+    # a reading (and a warning)
     u_dark = (dark.u_level if dark.noise_floor is not None
-              else np.abs(dark.level) * opts.u_power_meter_rel)
+              else np.full(p.size, meter.floor_w) if meter.floor_w is not None
+              else np.abs(dark.level) * rel)
     shared = dark.group >= 0
     u = np.where(shared, u, np.hypot(u, u_dark))
     cov = dark.shared_covariance(u_dark) if shared.any() else None
     return _Signals(net, u, np.zeros(rows.size, dtype=int), [], [], 0, cov, dark)
+
+
+def _meter_relative_noise(run: RunData, opts: ReductionOptions) -> MeterNoise:
+    """The power meter's relative noise per reading: the option, else what the run's
+    profile or the meter's kind says (:mod:`instrument.bench.meter_noise`)."""
+    if opts.u_power_meter_rel is not None:
+        return MeterNoise(float(opts.u_power_meter_rel),
+                          f"{opts.u_power_meter_rel:.2g} of the reading (option)",
+                          floor_w=meter_noise(run.profile()).floor_w)
+    return meter_noise(run.profile())
 
 
 def _first_pass(run: RunData) -> Path | None:
@@ -562,7 +581,11 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             for k in np.unique(slots[slots >= 0])]
     if sig.dark is not None:
         prov["detector_dark"] = sig.dark.describe("nW", 1e9)
-        warnings.extend(_dark_warnings(sig.dark, opts))
+        noise = _meter_relative_noise(run, opts)
+        prov["power_meter_relative_noise"] = noise.source
+        warnings.extend(_dark_warnings(sig.dark, noise))
+        if noise.warning:
+            warnings.append(noise.warning)
     scale_unknown: list[str] = []
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
@@ -646,7 +669,7 @@ def _receiver_warnings(rinfo: dict[str, Any]) -> list[str]:
     return out
 
 
-def _dark_warnings(dark: PointDark, opts: ReductionOptions) -> list[str]:
+def _dark_warnings(dark: PointDark, noise: MeterNoise) -> list[str]:
     """The power meter's dark in words when it was not measured, or its noise not."""
     if not dark.measured:
         return ["power-meter dark not measured: every reading still holds the photodiode's "
@@ -654,9 +677,11 @@ def _dark_warnings(dark: PointDark, opts: ReductionOptions) -> list[str]:
                 "(or \"start\") in the plan so that it is read with the light off and "
                 "subtracted"]
     if dark.noise_floor is None:
+        held = (f"the profile's noise_floor_w ({noise.floor_w:.3g} W) is taken"
+                if noise.floor_w is not None else
+                f"each reading's σ is its relative noise alone ({noise.relative:.2%})")
         return [f"power-meter noise floor not measured ({dark.n_readings} dark reading(s), "
-                "fewer than 3): each reading's σ is its relative noise alone "
-                f"({opts.u_power_meter_rel:.2%}); dark = \"per_point\" measures it"]
+                f"fewer than 3): {held}; dark = \"per_point\" measures it"]
     return []
 
 
