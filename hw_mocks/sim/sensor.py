@@ -13,7 +13,7 @@ This module implements it pixel by pixel, with what the standard characterises a
 * dark current ``dark_current_e_per_s`` (electrons ∝ exposure time, R3.1 §3);
 * shot noise: electrons are Poisson distributed (a Gaussian with the same mean and
   variance for means ≥ 50 e⁻, where the two agree to far better than any test resolves,
-  for speed);
+  for speed; how each pixel is drawn: ``_temporal_electrons``);
 * full-well saturation: at most ``full_well_e`` electrons per (binned) pixel;
 * temporal dark (read) noise σ_d (e⁻, Gaussian) and a dark-signal non-uniformity
   (DSNU) offset map (e⁻, fixed);
@@ -41,6 +41,10 @@ from numpy.typing import NDArray
 __all__ = ["Sensor", "SensorParams"]
 
 _POISSON_EXACT_BELOW_E = 50.0
+#: The pixels at a frame's least mean draw their Poisson counts by splitting (see
+#: ``_temporal_electrons``) up to this mean: beyond it the split's ∝-electrons cost
+#: exceeds numpy's per-pixel draw (measured, BENCHMARKS.md "main job").
+_SPLIT_BELOW_E = 1.0
 
 
 @dataclass(frozen=True)
@@ -211,19 +215,60 @@ class Sensor:
         rng = np.random.default_rng([self.seed, int(frame_index), 0xF4A3E])
         lam = self.mean_electrons(photon_rate, exposure_us, roi=roi, binning=binning)
         lam = np.maximum(lam, 0.0, dtype=np.float32)
-        z = rng.standard_normal(lam.shape, dtype=np.float32)
-        electrons = lam + np.sqrt(lam) * z
-        small = lam < _POISSON_EXACT_BELOW_E
-        if small.any():
-            electrons[small] = rng.poisson(lam[small].astype(np.float64))
-        np.clip(electrons, 0.0, p.full_well_e * binning * binning, out=electrons)
+        well = p.full_well_e * binning * binning
         sy, sx = self._slices(roi)
-        dsnu = self._bin(self.dsnu_map_e[sy, sx], binning)
-        electrons += dsnu
-        electrons += np.float32(p.read_noise_e) * rng.standard_normal(lam.shape,
-                                                                      dtype=np.float32)
+        electrons = _temporal_electrons(lam, p.read_noise_e, well, rng)
+        electrons += self._bin(self.dsnu_map_e[sy, sx], binning)
         k = np.float32(p.system_gain(gain_db, bits))
         dn = electrons * k + np.float32(p.black_level(bits))
         np.rint(dn, out=dn)
         np.clip(dn, 0, 2**bits - 1, out=dn)
         return dn.astype(np.uint8 if bits <= 8 else np.uint16)
+
+
+def _temporal_electrons(lam: NDArray[np.float32], read_noise_e: float, well_e: float,
+                        rng: np.random.Generator) -> NDArray[np.float32]:
+    """One frame's electrons: shot noise on the mean ``lam``, clipped at the full well
+    ``well_e``, plus the read noise σ_d (module docstring), each pixel drawn in a form
+    that is exact for it and cheap. One standard normal z per pixel carries the noise:
+
+    * mean ≥ 50 e⁻ (shot noise Gaussian, module docstring): the shot and the read noise
+      are independent Gaussians, so their sum is one, ``lam + √(lam + σ_d²) z`` — the
+      distribution of drawing them apart; within 8 σ of the full well, where the clip
+      acts between the two, they are drawn apart (a second draw for these pixels only);
+    * mean < 50 e⁻: exact Poisson electrons plus ``σ_d z``. The pixels at the frame's
+      least mean (the unlit ones: dark current alone, most of a frame) share one mean
+      λ₀; for λ₀ ≤ :data:`_SPLIT_BELOW_E` their counts are drawn as a Poisson(N λ₀)
+      number T of electrons dropped uniformly on all N pixels, which leaves independent
+      Poisson(λ₀) counts n_i (splitting of a Poisson count: e^(−Nλ₀)(Nλ₀)^T/T! ·
+      T!/∏n_i! · N^(−T) = ∏ e^(−λ₀) λ₀^(n_i)/n_i!), at a cost ∝ N λ₀ rather than N;
+      the other pixels draw their own counts.
+    """
+    z = rng.standard_normal(lam.shape, dtype=np.float32)
+    sigma = np.float32(read_noise_e)
+    gaussian = lam >= np.float32(_POISSON_EXACT_BELOW_E)
+    # every pixel first as a Gaussian one, then the others replaced
+    out = np.sqrt(lam + sigma * sigma)
+    out *= z
+    out += lam
+    rest = ~gaussian
+    least = lam.min()
+    if least <= _SPLIT_BELOW_E:
+        # Poisson(least) on every pixel from a Poisson(N·least) number of electrons
+        # dropped uniformly, kept where the mean is the least
+        n = lam.size
+        drops = rng.integers(0, n, size=int(rng.poisson(float(least) * n)))
+        counts = np.bincount(drops, minlength=n).astype(np.float32).reshape(lam.shape)
+        counts += sigma * z
+        at_least = lam == least
+        np.copyto(out, counts, where=at_least)
+        rest &= ~at_least
+    if rest.any():
+        out[rest] = (rng.poisson(lam[rest].astype(np.float64)).astype(np.float32)
+                     + sigma * z[rest])
+    near_well = gaussian & (lam > np.float32(well_e - 8.0 * np.sqrt(well_e)))
+    if near_well.any():
+        ln = lam[near_well]
+        shot = np.clip(ln + np.sqrt(ln) * z[near_well], 0.0, well_e)
+        out[near_well] = shot + sigma * rng.standard_normal(ln.shape, dtype=np.float32)
+    return out
