@@ -291,9 +291,19 @@ class SimulatedCamera(Camera):
             rows = slice(max(rows.start, box[0].start), min(rows.stop, box[0].stop))
             cols = slice(max(cols.start, box[1].start), min(cols.stop, box[1].stop))
         rows = rows if rows.stop > rows.start and cols.stop > cols.start else slice(0, 0)
-        if (rows.stop - rows.start, cols.stop - cols.start) == (h, w):
+        def trace(rows: slice, cols: slice) -> NDArray[np.float64]:
             dirs = grid.chief_directions(rows, cols, right, down, forward)
             return state.scene.radiance(center, dirs, state)
+
+        def traced(rows: slice, cols: slice) -> NDArray[np.float64]:
+            # the box's rows in blocks (threads and cache, as the pupil rays)
+            step = max(1, _BLOCK_PIXELS // max(cols.stop - cols.start, 1))
+            return np.concatenate(_in_blocks([
+                (trace, slice(r, min(r + step, rows.stop)), cols)
+                for r in range(rows.start, rows.stop, step)]))
+
+        if (rows.stop - rows.start, cols.stop - cols.start) == (h, w):
+            return traced(rows, cols)
         # a box smaller than the frame leaves out an edge row or column, so a corner
         r, c = next((r, c) for r in (0, h - 1) for c in (0, w - 1)
                     if not (rows.start <= r < rows.stop and cols.start <= c < cols.stop))
@@ -302,8 +312,7 @@ class SimulatedCamera(Camera):
                                           forward), state)
         out = np.full((h, w), float(veil.reshape(-1)[0]))
         if rows.stop > rows.start:
-            dirs = grid.chief_directions(rows, cols, right, down, forward)
-            out[rows, cols] = state.scene.radiance(center, dirs, state)
+            out[rows, cols] = traced(rows, cols)
         return out
 
     def _pupil_integral_fast(self, state: WorldState, frame: tuple[NDArray, ...],
@@ -345,15 +354,12 @@ class SimulatedCamera(Camera):
 
         def estimate(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
                      cols: NDArray[np.intp]) -> NDArray:
-            # pixels are independent: large sets are split between worker threads (numpy
-            # releases the GIL in its loops), each pixel computed exactly as in one piece
-            n = min(_RENDER_THREADS, rows.size // _MIN_PIXELS_PER_THREAD)
-            if n <= 1:
-                return part(rule, rows, cols)
-            pieces = np.array_split(np.arange(rows.size), n)
-            pool = _render_pool()
-            futures = [pool.submit(part, rule, rows[i], cols[i]) for i in pieces]
-            return np.concatenate([f.result() for f in futures])
+            # pixels are independent: large sets are cut into blocks whose temporaries
+            # stay in a core's cache, computed by worker threads (numpy releases the GIL
+            # in its loops), each pixel exactly as in one piece
+            pieces = np.array_split(np.arange(rows.size), -(-rows.size // _BLOCK_PIXELS))
+            return np.concatenate(_in_blocks([
+                (part, rule, rows[i], cols[i]) for i in pieces]))
 
         # the reference's ladder and acceptance (a cheaper first check, Radon's rule
         # against a 16-point degree-7 rule, was measured and rejected: on a sharp lobe
@@ -614,9 +620,10 @@ class SimulatedCamera(Camera):
 
 
 #: Worker threads of the fast renderer's pupil integral (at most; the machine's cores)
-#: and the fewest pixels worth a thread.
+#: and the pixels of one block of work: the ~40 float64 temporaries of a block's rays
+#: (128 KiB each) stay within a core's L2 cache (BENCHMARKS.md "main job").
 _RENDER_THREADS = max(1, min(4, os.cpu_count() or 1))
-_MIN_PIXELS_PER_THREAD = 8192
+_BLOCK_PIXELS = 16384
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 
@@ -628,6 +635,16 @@ def _render_pool() -> ThreadPoolExecutor:
         if _POOL is None:
             _POOL = ThreadPoolExecutor(_RENDER_THREADS, thread_name_prefix="simcam-render")
         return _POOL
+
+
+def _in_blocks(calls: list[tuple]) -> list:
+    """``[fn(*args) for fn, *args in calls]``, computed by the render threads when there
+    are several calls and threads (each call exactly as on its own)."""
+    if len(calls) <= 1 or _RENDER_THREADS <= 1:
+        return [fn(*args) for fn, *args in calls]
+    pool = _render_pool()
+    futures = [pool.submit(fn, *args) for fn, *args in calls]
+    return [f.result() for f in futures]
 
 
 def _disk_structure(radius_px: int) -> NDArray[np.bool_]:

@@ -110,9 +110,10 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         wi = np.asarray(omega_i, dtype=float)
         wi = wi / np.linalg.norm(wi)
         shape = np.shape(rz)
+        # ω_i is one direction: broadcast views of it, not arrays filled with it
         return model.evaluate_geometry(vector, Geometry(
-            xi=np.full(shape, wi[0]), yi=np.full(shape, wi[1]),
-            mu_i=np.full(shape, max(float(wi[2]), MU_FLOOR)),
+            xi=np.broadcast_to(wi[0], shape), yi=np.broadcast_to(wi[1], shape),
+            mu_i=np.broadcast_to(max(float(wi[2]), MU_FLOOR), shape),
             xr=rx, yr=ry, mu_r=np.maximum(rz, MU_FLOOR)))
 
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]

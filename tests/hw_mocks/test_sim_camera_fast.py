@@ -183,6 +183,6 @@ def test_threaded_pupil_integral_is_the_single_threaded_one(monkeypatch):
     world = bench(40.0, 80.0)
     one = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
     monkeypatch.setattr(camera_module, "_RENDER_THREADS", 3)
-    monkeypatch.setattr(camera_module, "_MIN_PIXELS_PER_THREAD", 64)
+    monkeypatch.setattr(camera_module, "_BLOCK_PIXELS", 64)
     split = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
     np.testing.assert_array_equal(split, one)
