@@ -335,6 +335,7 @@ class SimulatedCamera(Camera):
         near = ndimage.distance_transform_edt(~todo[r0:r1, c0:c1]) <= grow
         atol = 1e-9 * float(np.abs(chief).max())
         rho = grid.pupil_radius_mm
+        projected = getattr(state.scene, "radiance_projected", None)
 
         def part(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
                  cols: NDArray[np.intp]) -> NDArray:
@@ -346,10 +347,16 @@ class SimulatedCamera(Camera):
                     acc += rule.weights[k] * chief[rows, cols] * (cos2 * cos2)
                     continue
                 a = center + rho * (rule.x[k] * right + rule.y[k] * down)
-                d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right, down,
-                                           forward)
+                if projected is not None:  # the scene takes the rays' projections
+                    project, cos_g = grid.pupil_ray_projector(
+                        rule.x[k], rule.y[k], rows, cols, right, down, forward)
+                    radiance = projected(a, project, cos_g.shape, state)
+                else:
+                    d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right,
+                                               down, forward)
+                    radiance = state.scene.radiance(a, d, state)
                 cos2 = cos_g * cos_g
-                acc += rule.weights[k] * state.scene.radiance(a, d, state) * (cos2 * cos2)
+                acc += rule.weights[k] * radiance * (cos2 * cos2)
             return acc
 
         def estimate(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
