@@ -69,11 +69,9 @@ discards the queue. Tests use it to prove that callers invalidate after moves.
 from __future__ import annotations
 
 import math
-import os
 import threading
 import time
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -84,7 +82,7 @@ from scipy import ndimage
 from drivers.base import Camera, DeviceIdentity, Frame, PixelFormat, Roi
 from drivers.errors import DeviceTimeout
 from hw_mocks import registry
-from hw_mocks.sim import lens
+from hw_mocks.sim import lens, workers
 from hw_mocks.sim import pupil as pupil_rules
 from hw_mocks.sim.sensor import Sensor, SensorParams
 from hw_mocks.sim.world import VirtualBench, WorldState, get_world
@@ -297,8 +295,8 @@ class SimulatedCamera(Camera):
 
         def traced(rows: slice, cols: slice) -> NDArray[np.float64]:
             # the box's rows in blocks (threads and cache, as the pupil rays)
-            step = max(1, _BLOCK_PIXELS // max(cols.stop - cols.start, 1))
-            return np.concatenate(_in_blocks([
+            step = max(1, workers.BLOCK_PIXELS // max(cols.stop - cols.start, 1))
+            return np.concatenate(workers.in_blocks([
                 (trace, slice(r, min(r + step, rows.stop)), cols)
                 for r in range(rows.start, rows.stop, step)]))
 
@@ -364,8 +362,9 @@ class SimulatedCamera(Camera):
             # pixels are independent: large sets are cut into blocks whose temporaries
             # stay in a core's cache, computed by worker threads (numpy releases the GIL
             # in its loops), each pixel exactly as in one piece
-            pieces = np.array_split(np.arange(rows.size), -(-rows.size // _BLOCK_PIXELS))
-            return np.concatenate(_in_blocks([
+            blocks = -(-rows.size // workers.BLOCK_PIXELS)
+            pieces = np.array_split(np.arange(rows.size), blocks)
+            return np.concatenate(workers.in_blocks([
                 (part, rule, rows[i], cols[i]) for i in pieces]))
 
         # the reference's ladder and acceptance (a cheaper first check, Radon's rule
@@ -624,34 +623,6 @@ class SimulatedCamera(Camera):
             self._pending.clear()
             self._backlog.clear()
             self._cache_rate = None
-
-
-#: Worker threads of the fast renderer's pupil integral (at most; the machine's cores)
-#: and the pixels of one block of work: the ~40 float64 temporaries of a block's rays
-#: (128 KiB each) stay within a core's L2 cache (BENCHMARKS.md "main job").
-_RENDER_THREADS = max(1, min(4, os.cpu_count() or 1))
-_BLOCK_PIXELS = 16384
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-
-
-def _render_pool() -> ThreadPoolExecutor:
-    """The renderers' shared worker threads, started on first use."""
-    global _POOL
-    with _POOL_LOCK:
-        if _POOL is None:
-            _POOL = ThreadPoolExecutor(_RENDER_THREADS, thread_name_prefix="simcam-render")
-        return _POOL
-
-
-def _in_blocks(calls: list[tuple]) -> list:
-    """``[fn(*args) for fn, *args in calls]``, computed by the render threads when there
-    are several calls and threads (each call exactly as on its own)."""
-    if len(calls) <= 1 or _RENDER_THREADS <= 1:
-        return [fn(*args) for fn, *args in calls]
-    pool = _render_pool()
-    futures = [pool.submit(fn, *args) for fn, *args in calls]
-    return [f.result() for f in futures]
 
 
 def _disk_structure(radius_px: int) -> NDArray[np.bool_]:

@@ -38,6 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from hw_mocks.sim import workers
+
 __all__ = ["Sensor", "SensorParams"]
 
 _POISSON_EXACT_BELOW_E = 50.0
@@ -218,12 +220,29 @@ class Sensor:
         well = p.full_well_e * binning * binning
         sy, sx = self._slices(roi)
         electrons = _temporal_electrons(lam, p.read_noise_e, well, rng)
-        electrons += self._bin(self.dsnu_map_e[sy, sx], binning)
+        dsnu = self._bin(self.dsnu_map_e[sy, sx], binning)
         k = np.float32(p.system_gain(gain_db, bits))
-        dn = electrons * k + np.float32(p.black_level(bits))
-        np.rint(dn, out=dn)
-        np.clip(dn, 0, 2**bits - 1, out=dn)
-        return dn.astype(np.uint8 if bits <= 8 else np.uint16)
+        black = np.float32(p.black_level(bits))
+        dn = np.empty(lam.shape, dtype=np.uint8 if bits <= 8 else np.uint16)
+
+        def digitise(rows: slice) -> None:
+            e = electrons[rows]
+            e += dsnu[rows]
+            e *= k
+            e += black
+            np.rint(e, out=e)
+            np.clip(e, 0, 2**bits - 1, out=e)
+            dn[rows] = e
+
+        workers.in_blocks([(digitise, rows) for rows in _row_blocks(lam.shape)])
+        return dn
+
+
+def _row_blocks(shape: tuple[int, ...]) -> list[slice]:
+    """Rows of a frame in blocks of about 4 × :data:`workers.BLOCK_PIXELS` pixels (float32
+    arrays of 256 KiB: a block's temporaries stay in a core's cache)."""
+    step = max(1, 4 * workers.BLOCK_PIXELS // max(shape[1], 1))
+    return [slice(r, min(r + step, shape[0])) for r in range(0, shape[0], step)]
 
 
 def _temporal_electrons(lam: NDArray[np.float32], read_noise_e: float, well_e: float,
@@ -246,29 +265,47 @@ def _temporal_electrons(lam: NDArray[np.float32], read_noise_e: float, well_e: f
     """
     z = rng.standard_normal(lam.shape, dtype=np.float32)
     sigma = np.float32(read_noise_e)
-    gaussian = lam >= np.float32(_POISSON_EXACT_BELOW_E)
-    # every pixel first as a Gaussian one, then the others replaced
-    out = np.sqrt(lam + sigma * sigma)
-    out *= z
-    out += lam
-    rest = ~gaussian
     least = lam.min()
+    counts = None
     if least <= _SPLIT_BELOW_E:
         # Poisson(least) on every pixel from a Poisson(N·least) number of electrons
         # dropped uniformly, kept where the mean is the least
         n = lam.size
         drops = rng.integers(0, n, size=int(rng.poisson(float(least) * n)))
-        counts = np.bincount(drops, minlength=n).astype(np.float32).reshape(lam.shape)
-        counts += sigma * z
-        at_least = lam == least
-        np.copyto(out, counts, where=at_least)
-        rest &= ~at_least
-    if rest.any():
-        out[rest] = (rng.poisson(lam[rest].astype(np.float64)).astype(np.float32)
-                     + sigma * z[rest])
-    near_well = gaussian & (lam > np.float32(well_e - 8.0 * np.sqrt(well_e)))
-    if near_well.any():
-        ln = lam[near_well]
-        shot = np.clip(ln + np.sqrt(ln) * z[near_well], 0.0, well_e)
-        out[near_well] = shot + sigma * rng.standard_normal(ln.shape, dtype=np.float32)
+        counts = np.bincount(drops, minlength=n).reshape(lam.shape)
+    out = np.empty_like(lam)
+    low, high = np.float32(_POISSON_EXACT_BELOW_E), np.float32(well_e - 8.0 * np.sqrt(well_e))
+    width = lam.shape[1]
+
+    def block(rows: slice) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every pixel of ``rows`` as a Gaussian one, the least-mean ones from the split;
+        the flat indices of the others below 50 e⁻ and of those near the well."""
+        lb, zb = lam[rows], z[rows]
+        ob = np.sqrt(lb + sigma * sigma)
+        ob *= zb
+        ob += lb
+        rest = lb < low
+        if counts is not None:
+            at_least = lb == least
+            split = counts[rows].astype(np.float32)
+            split += sigma * zb
+            np.copyto(ob, split, where=at_least)
+            rest &= ~at_least
+        out[rows] = ob
+        offset = rows.start * width
+        return np.flatnonzero(rest) + offset, np.flatnonzero(lb > high) + offset
+
+    found = workers.in_blocks([(block, rows) for rows in _row_blocks(lam.shape)])
+    # drawn in row-major order, as boolean indexing of the whole frame would
+    rest = np.concatenate([f[0] for f in found])
+    flat_out, flat_lam, flat_z = out.reshape(-1), lam.reshape(-1), z.reshape(-1)
+    if rest.size:
+        flat_out[rest] = (rng.poisson(flat_lam[rest].astype(np.float64)).astype(np.float32)
+                          + sigma * flat_z[rest])
+    near_well = np.concatenate([f[1] for f in found])
+    near_well = near_well[flat_lam[near_well] >= low]
+    if near_well.size:
+        ln = flat_lam[near_well]
+        shot = np.clip(ln + np.sqrt(ln) * flat_z[near_well], 0.0, well_e)
+        flat_out[near_well] = shot + sigma * rng.standard_normal(ln.shape, dtype=np.float32)
     return out
