@@ -69,11 +69,9 @@ discards the queue. Tests use it to prove that callers invalidate after moves.
 from __future__ import annotations
 
 import math
-import os
 import threading
 import time
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -84,7 +82,7 @@ from scipy import ndimage
 from drivers.base import Camera, DeviceIdentity, Frame, PixelFormat, Roi
 from drivers.errors import DeviceTimeout
 from hw_mocks import registry
-from hw_mocks.sim import lens
+from hw_mocks.sim import lens, workers
 from hw_mocks.sim import pupil as pupil_rules
 from hw_mocks.sim.sensor import Sensor, SensorParams
 from hw_mocks.sim.world import VirtualBench, WorldState, get_world
@@ -291,9 +289,19 @@ class SimulatedCamera(Camera):
             rows = slice(max(rows.start, box[0].start), min(rows.stop, box[0].stop))
             cols = slice(max(cols.start, box[1].start), min(cols.stop, box[1].stop))
         rows = rows if rows.stop > rows.start and cols.stop > cols.start else slice(0, 0)
-        if (rows.stop - rows.start, cols.stop - cols.start) == (h, w):
+        def trace(rows: slice, cols: slice) -> NDArray[np.float64]:
             dirs = grid.chief_directions(rows, cols, right, down, forward)
             return state.scene.radiance(center, dirs, state)
+
+        def traced(rows: slice, cols: slice) -> NDArray[np.float64]:
+            # the box's rows in blocks (threads and cache, as the pupil rays)
+            step = max(1, workers.BLOCK_PIXELS // max(cols.stop - cols.start, 1))
+            return np.concatenate(workers.in_blocks([
+                (trace, slice(r, min(r + step, rows.stop)), cols)
+                for r in range(rows.start, rows.stop, step)]))
+
+        if (rows.stop - rows.start, cols.stop - cols.start) == (h, w):
+            return traced(rows, cols)
         # a box smaller than the frame leaves out an edge row or column, so a corner
         r, c = next((r, c) for r in (0, h - 1) for c in (0, w - 1)
                     if not (rows.start <= r < rows.stop and cols.start <= c < cols.stop))
@@ -302,8 +310,7 @@ class SimulatedCamera(Camera):
                                           forward), state)
         out = np.full((h, w), float(veil.reshape(-1)[0]))
         if rows.stop > rows.start:
-            dirs = grid.chief_directions(rows, cols, right, down, forward)
-            out[rows, cols] = state.scene.radiance(center, dirs, state)
+            out[rows, cols] = traced(rows, cols)
         return out
 
     def _pupil_integral_fast(self, state: WorldState, frame: tuple[NDArray, ...],
@@ -326,6 +333,7 @@ class SimulatedCamera(Camera):
         near = ndimage.distance_transform_edt(~todo[r0:r1, c0:c1]) <= grow
         atol = 1e-9 * float(np.abs(chief).max())
         rho = grid.pupil_radius_mm
+        projected = getattr(state.scene, "radiance_projected", None)
 
         def part(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
                  cols: NDArray[np.intp]) -> NDArray:
@@ -337,23 +345,27 @@ class SimulatedCamera(Camera):
                     acc += rule.weights[k] * chief[rows, cols] * (cos2 * cos2)
                     continue
                 a = center + rho * (rule.x[k] * right + rule.y[k] * down)
-                d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right, down,
-                                           forward)
+                if projected is not None:  # the scene takes the rays' projections
+                    project, cos_g = grid.pupil_ray_projector(
+                        rule.x[k], rule.y[k], rows, cols, right, down, forward)
+                    radiance = projected(a, project, cos_g.shape, state)
+                else:
+                    d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right,
+                                               down, forward)
+                    radiance = state.scene.radiance(a, d, state)
                 cos2 = cos_g * cos_g
-                acc += rule.weights[k] * state.scene.radiance(a, d, state) * (cos2 * cos2)
+                acc += rule.weights[k] * radiance * (cos2 * cos2)
             return acc
 
         def estimate(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
                      cols: NDArray[np.intp]) -> NDArray:
-            # pixels are independent: large sets are split between worker threads (numpy
-            # releases the GIL in its loops), each pixel computed exactly as in one piece
-            n = min(_RENDER_THREADS, rows.size // _MIN_PIXELS_PER_THREAD)
-            if n <= 1:
-                return part(rule, rows, cols)
-            pieces = np.array_split(np.arange(rows.size), n)
-            pool = _render_pool()
-            futures = [pool.submit(part, rule, rows[i], cols[i]) for i in pieces]
-            return np.concatenate([f.result() for f in futures])
+            # pixels are independent: large sets are cut into blocks whose temporaries
+            # stay in a core's cache, computed by worker threads (numpy releases the GIL
+            # in its loops), each pixel exactly as in one piece
+            blocks = -(-rows.size // workers.BLOCK_PIXELS)
+            pieces = np.array_split(np.arange(rows.size), blocks)
+            return np.concatenate(workers.in_blocks([
+                (part, rule, rows[i], cols[i]) for i in pieces]))
 
         # the reference's ladder and acceptance (a cheaper first check, Radon's rule
         # against a 16-point degree-7 rule, was measured and rejected: on a sharp lobe
@@ -611,23 +623,6 @@ class SimulatedCamera(Camera):
             self._pending.clear()
             self._backlog.clear()
             self._cache_rate = None
-
-
-#: Worker threads of the fast renderer's pupil integral (at most; the machine's cores)
-#: and the fewest pixels worth a thread.
-_RENDER_THREADS = max(1, min(4, os.cpu_count() or 1))
-_MIN_PIXELS_PER_THREAD = 8192
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-
-
-def _render_pool() -> ThreadPoolExecutor:
-    """The renderers' shared worker threads, started on first use."""
-    global _POOL
-    with _POOL_LOCK:
-        if _POOL is None:
-            _POOL = ThreadPoolExecutor(_RENDER_THREADS, thread_name_prefix="simcam-render")
-        return _POOL
 
 
 def _disk_structure(radius_px: int) -> NDArray[np.bool_]:

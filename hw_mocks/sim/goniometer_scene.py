@@ -110,9 +110,10 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
         wi = np.asarray(omega_i, dtype=float)
         wi = wi / np.linalg.norm(wi)
         shape = np.shape(rz)
+        # ω_i is one direction: broadcast views of it, not arrays filled with it
         return model.evaluate_geometry(vector, Geometry(
-            xi=np.full(shape, wi[0]), yi=np.full(shape, wi[1]),
-            mu_i=np.full(shape, max(float(wi[2]), MU_FLOOR)),
+            xi=np.broadcast_to(wi[0], shape), yi=np.broadcast_to(wi[1], shape),
+            mu_i=np.broadcast_to(max(float(wi[2]), MU_FLOOR), shape),
             xr=rx, yr=ry, mu_r=np.maximum(rz, MU_FLOOR)))
 
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
@@ -297,48 +298,62 @@ class GoniometerScene:
     ) -> NDArray[np.float64]:
         """Radiance (W m⁻² sr⁻¹) seen from ``origin_mm`` along unit ``directions``
         (shape (..., 3), pointing away from the observer), shape (...)."""
+        d = np.asarray(directions, dtype=float)
+        return self.radiance_projected(origin_mm, lambda a: _dot3(d, a), d.shape[:-1],
+                                       state)
+
+    def radiance_projected(
+        self, origin_mm: NDArray[np.float64],
+        project: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+        shape: tuple[int, ...], state: WorldState,
+    ) -> NDArray[np.float64]:
+        """:meth:`radiance` along rays given by their projections: ``project(a)`` is
+        d · a, shape ``shape``, for a lab vector a (a camera has its rays' components on
+        its own axes, and projects them without building the (..., 3) directions)."""
         pose = state.pose
         o = np.asarray(origin_mm, dtype=float)
-        d = np.asarray(directions, dtype=float)
         n = pose.normal
         dist = float(np.linalg.norm(o))
         observer_dir = o / dist if dist > 0 else pose.detector_dir
         peak = state.source.peak_intensity_w_m2()
         veil = self.ambient_radiance + self._signature(observer_dir, state) * peak
-        out = np.full(d.shape[:-1], veil, dtype=float)
+        out = np.full(shape, veil, dtype=float)
         brdf = self._active_brdf(state)
         cos_i = float(n @ pose.source_dir)
         height = float(o @ n)
         if brdf is None or cos_i <= 0.0 or peak == 0.0 or height <= 0.0:
             return out  # nothing lit, or we look at the back of the sample
         x_s, y_s = pose.sample_axes[0], pose.sample_axes[1]
-        # Ray–plane intersection x = o + t d, written per component (a (..., 3) @ (3,)
-        # product is several times slower in numpy for large ray bundles).
-        dn = _dot3(d, n)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(dn < 0.0, -height / np.where(dn < 0.0, dn, -1.0), -1.0)
-        dx, dy = _dot3(d, x_s), _dot3(d, y_s)
-        u = float(o @ x_s) + t * dx
-        v = float(o @ y_s) + t * dy
+        # Towards the observer, −d, in the sample frame (what the BRDF takes), written per
+        # component (a (..., 3) @ (3,) product is several times slower in numpy for large
+        # ray bundles); the ray meets the plane at x = o − t·(−d), t = height / (−d)·n,
+        # in front of the observer where (−d)·n > 0.
+        lz, lx, ly = project(-n), project(-x_s), project(-y_s)
         # On the plane, r⊥² = u'² cos²θi + v'² in beam-aligned sample coordinates (u', v').
         s_loc = pose.to_sample(pose.source_dir)
         proj = math.hypot(s_loc[0], s_loc[1])
         eu = (s_loc[0] / proj, s_loc[1] / proj) if proj > 1e-12 else (1.0, 0.0)
-        up = u * eu[0] + v * eu[1]
-        vp = -u * eu[1] + v * eu[0]
-        r_perp2 = up * up * (cos_i * cos_i) + vp * vp
         w2 = state.source.beam_radius_mm ** 2
-        lit = ((t > 0.0) & (u * u + v * v <= self.sample_radius_mm**2)
-               & (r_perp2 <= BEAM_CUTOFF_W2 * w2))
+        # (rays along the plane or away from it give ±inf or NaN here, and are not lit)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t = height / lz
+            u = float(o @ x_s) - t * lx
+            v = float(o @ y_s) - t * ly
+            up = u * eu[0] + v * eu[1]
+            vp = v * eu[0] - u * eu[1]
+            up *= up
+            vp *= vp
+            r_perp2 = up * (cos_i * cos_i) + vp
+            lit = ((lz > 0.0) & (up + vp <= self.sample_radius_mm**2)
+                   & (r_perp2 <= BEAM_CUTOFF_W2 * w2))
         if not lit.any():
             return out
-        # Towards the observer: −d, in the sample frame (components computed above).
         if lit.all():  # the common case of a pupil's rays onto the footprint: no gathers
-            irradiance = peak * cos_i * np.exp(-2.0 * r_perp2 / w2)
-            lx, ly, lz = -dx, -dy, -dn
+            irradiance = np.exp(r_perp2 * (-2.0 / w2))
         else:
-            irradiance = peak * cos_i * np.exp(-2.0 * r_perp2[lit] / w2)
-            lx, ly, lz = -dx[lit], -dy[lit], -dn[lit]
+            irradiance = np.exp(r_perp2[lit] * (-2.0 / w2))
+            lx, ly, lz = lx[lit], ly[lit], lz[lit]
+        irradiance *= peak * cos_i
         from_components = getattr(brdf, "from_components", None)
         from_vectors = getattr(brdf, "from_vectors", None)
         if from_components is not None:

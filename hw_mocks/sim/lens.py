@@ -83,6 +83,27 @@ class LensGrid:
         return d.T, cos_g
 
 
+    def pupil_ray_projector(self, x: float, y: float, rows: NDArray[np.intp],
+                            cols: NDArray[np.intp], right: NDArray, down: NDArray,
+                            forward: NDArray):
+        """The rays of :meth:`pupil_rays` as a projector ``a ↦ d · a`` (M,) for lab
+        vectors a, and their cos γ: each projection is formed from the rays' camera-frame
+        components, without the (M, 3) directions."""
+        f, rho = self.focus_mm, self.pupil_radius_mm
+        dx = f * self.u[cols] - rho * x
+        dy = f * self.v[rows] - rho * y
+        inv = 1.0 / np.sqrt(dx * dx + dy * dy + f * f)
+
+        def project(a: NDArray) -> NDArray[np.float64]:
+            p = dx * float(right @ a)
+            p += dy * float(down @ a)
+            p += f * float(forward @ a)
+            p *= inv
+            return p
+
+        return project, f * inv
+
+
 @lru_cache(maxsize=8)
 def lens_grid(roi: tuple[int, int, int, int], sensor_size: tuple[int, int], pitch_um: float,
               focal_length_mm: float, pupil_radius_mm: float, focus_mm: float) -> LensGrid:

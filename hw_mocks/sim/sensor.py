@@ -13,7 +13,7 @@ This module implements it pixel by pixel, with what the standard characterises a
 * dark current ``dark_current_e_per_s`` (electrons ∝ exposure time, R3.1 §3);
 * shot noise: electrons are Poisson distributed (a Gaussian with the same mean and
   variance for means ≥ 50 e⁻, where the two agree to far better than any test resolves,
-  for speed);
+  for speed; how each pixel is drawn: ``_temporal_electrons``);
 * full-well saturation: at most ``full_well_e`` electrons per (binned) pixel;
 * temporal dark (read) noise σ_d (e⁻, Gaussian) and a dark-signal non-uniformity
   (DSNU) offset map (e⁻, fixed);
@@ -38,9 +38,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from hw_mocks.sim import workers
+
 __all__ = ["Sensor", "SensorParams"]
 
 _POISSON_EXACT_BELOW_E = 50.0
+#: The pixels at a frame's least mean draw their Poisson counts by splitting (see
+#: ``_temporal_electrons``) up to this mean: beyond it the split's ∝-electrons cost
+#: exceeds numpy's per-pixel draw (measured, BENCHMARKS.md "main job").
+_SPLIT_BELOW_E = 1.0
 
 
 @dataclass(frozen=True)
@@ -211,19 +217,95 @@ class Sensor:
         rng = np.random.default_rng([self.seed, int(frame_index), 0xF4A3E])
         lam = self.mean_electrons(photon_rate, exposure_us, roi=roi, binning=binning)
         lam = np.maximum(lam, 0.0, dtype=np.float32)
-        z = rng.standard_normal(lam.shape, dtype=np.float32)
-        electrons = lam + np.sqrt(lam) * z
-        small = lam < _POISSON_EXACT_BELOW_E
-        if small.any():
-            electrons[small] = rng.poisson(lam[small].astype(np.float64))
-        np.clip(electrons, 0.0, p.full_well_e * binning * binning, out=electrons)
+        well = p.full_well_e * binning * binning
         sy, sx = self._slices(roi)
+        electrons = _temporal_electrons(lam, p.read_noise_e, well, rng)
         dsnu = self._bin(self.dsnu_map_e[sy, sx], binning)
-        electrons += dsnu
-        electrons += np.float32(p.read_noise_e) * rng.standard_normal(lam.shape,
-                                                                      dtype=np.float32)
         k = np.float32(p.system_gain(gain_db, bits))
-        dn = electrons * k + np.float32(p.black_level(bits))
-        np.rint(dn, out=dn)
-        np.clip(dn, 0, 2**bits - 1, out=dn)
-        return dn.astype(np.uint8 if bits <= 8 else np.uint16)
+        black = np.float32(p.black_level(bits))
+        dn = np.empty(lam.shape, dtype=np.uint8 if bits <= 8 else np.uint16)
+
+        def digitise(rows: slice) -> None:
+            e = electrons[rows]
+            e += dsnu[rows]
+            e *= k
+            e += black
+            np.rint(e, out=e)
+            np.clip(e, 0, 2**bits - 1, out=e)
+            dn[rows] = e
+
+        workers.in_blocks([(digitise, rows) for rows in _row_blocks(lam.shape)])
+        return dn
+
+
+def _row_blocks(shape: tuple[int, ...]) -> list[slice]:
+    """Rows of a frame in blocks of about 4 × :data:`workers.BLOCK_PIXELS` pixels (float32
+    arrays of 256 KiB: a block's temporaries stay in a core's cache)."""
+    step = max(1, 4 * workers.BLOCK_PIXELS // max(shape[1], 1))
+    return [slice(r, min(r + step, shape[0])) for r in range(0, shape[0], step)]
+
+
+def _temporal_electrons(lam: NDArray[np.float32], read_noise_e: float, well_e: float,
+                        rng: np.random.Generator) -> NDArray[np.float32]:
+    """One frame's electrons: shot noise on the mean ``lam``, clipped at the full well
+    ``well_e``, plus the read noise σ_d (module docstring), each pixel drawn in a form
+    that is exact for it and cheap. One standard normal z per pixel carries the noise:
+
+    * mean ≥ 50 e⁻ (shot noise Gaussian, module docstring): the shot and the read noise
+      are independent Gaussians, so their sum is one, ``lam + √(lam + σ_d²) z`` — the
+      distribution of drawing them apart; within 8 σ of the full well, where the clip
+      acts between the two, they are drawn apart (a second draw for these pixels only);
+    * mean < 50 e⁻: exact Poisson electrons plus ``σ_d z``. The pixels at the frame's
+      least mean (the unlit ones: dark current alone, most of a frame) share one mean
+      λ₀; for λ₀ ≤ :data:`_SPLIT_BELOW_E` their counts are drawn as a Poisson(N λ₀)
+      number T of electrons dropped uniformly on all N pixels, which leaves independent
+      Poisson(λ₀) counts n_i (splitting of a Poisson count: e^(−Nλ₀)(Nλ₀)^T/T! ·
+      T!/∏n_i! · N^(−T) = ∏ e^(−λ₀) λ₀^(n_i)/n_i!), at a cost ∝ N λ₀ rather than N;
+      the other pixels draw their own counts.
+    """
+    z = rng.standard_normal(lam.shape, dtype=np.float32)
+    sigma = np.float32(read_noise_e)
+    least = lam.min()
+    counts = None
+    if least <= _SPLIT_BELOW_E:
+        # Poisson(least) on every pixel from a Poisson(N·least) number of electrons
+        # dropped uniformly, kept where the mean is the least
+        n = lam.size
+        drops = rng.integers(0, n, size=int(rng.poisson(float(least) * n)))
+        counts = np.bincount(drops, minlength=n).reshape(lam.shape)
+    out = np.empty_like(lam)
+    low, high = np.float32(_POISSON_EXACT_BELOW_E), np.float32(well_e - 8.0 * np.sqrt(well_e))
+    width = lam.shape[1]
+
+    def block(rows: slice) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every pixel of ``rows`` as a Gaussian one, the least-mean ones from the split;
+        the flat indices of the others below 50 e⁻ and of those near the well."""
+        lb, zb = lam[rows], z[rows]
+        ob = np.sqrt(lb + sigma * sigma)
+        ob *= zb
+        ob += lb
+        rest = lb < low
+        if counts is not None:
+            at_least = lb == least
+            split = counts[rows].astype(np.float32)
+            split += sigma * zb
+            np.copyto(ob, split, where=at_least)
+            rest &= ~at_least
+        out[rows] = ob
+        offset = rows.start * width
+        return np.flatnonzero(rest) + offset, np.flatnonzero(lb > high) + offset
+
+    found = workers.in_blocks([(block, rows) for rows in _row_blocks(lam.shape)])
+    # drawn in row-major order, as boolean indexing of the whole frame would
+    rest = np.concatenate([f[0] for f in found])
+    flat_out, flat_lam, flat_z = out.reshape(-1), lam.reshape(-1), z.reshape(-1)
+    if rest.size:
+        flat_out[rest] = (rng.poisson(flat_lam[rest].astype(np.float64)).astype(np.float32)
+                          + sigma * flat_z[rest])
+    near_well = np.concatenate([f[1] for f in found])
+    near_well = near_well[flat_lam[near_well] >= low]
+    if near_well.size:
+        ln = flat_lam[near_well]
+        shot = np.clip(ln + np.sqrt(ln) * flat_z[near_well], 0.0, well_e)
+        flat_out[near_well] = shot + sigma * rng.standard_normal(ln.shape, dtype=np.float32)
+    return out

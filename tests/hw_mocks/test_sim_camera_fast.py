@@ -178,11 +178,12 @@ def test_renderer_option():
 
 def test_threaded_pupil_integral_is_the_single_threaded_one(monkeypatch):
     """Pixels split between worker threads are computed exactly as in one piece."""
-    import hw_mocks.sim.camera as camera_module
+    from hw_mocks.sim import workers
 
     world = bench(40.0, 80.0)
+    monkeypatch.setattr(workers, "THREADS", 1)
     one = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
-    monkeypatch.setattr(camera_module, "_RENDER_THREADS", 3)
-    monkeypatch.setattr(camera_module, "_MIN_PIXELS_PER_THREAD", 64)
+    monkeypatch.setattr(workers, "THREADS", 3)
+    monkeypatch.setattr(workers, "BLOCK_PIXELS", 64)
     split = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
     np.testing.assert_array_equal(split, one)
