@@ -68,7 +68,7 @@ def unplug_during_move(axis: MotionAxis, emulator: FirmwareEmulator, transport: 
     The controller finishes the move on its own; the axis returned (after the replug) has
     come to rest, so the caller can check where.
     """
-    axis = unplug_and_replug(axis, emulator.faults, transport, lambda: axis.wait(10), reopen,
+    axis = unplug_and_replug(axis, emulator.faults, transport, lambda: axis.wait(60), reopen,
                              command=command)
     deadline = time.monotonic() + 60.0  # returns as soon as the move has ended
     while axis.is_moving and time.monotonic() < deadline:

@@ -123,7 +123,7 @@ def test_move_absolute_relative_and_wait_transcript():
              (b"1PR-1.25\r\n", b""), (b"1TE\r\n", b"1TE@\r\n")]
     axis, port = transcript_axis(steps, poll_interval=0.0)
     axis.move_to(45.5)
-    assert axis.wait(1.0) == pytest.approx(45.5)
+    assert axis.wait(60) == pytest.approx(45.5)
     axis.move_by(-1.25)
     assert axis.target == pytest.approx(44.25)
     port.assert_complete()
@@ -362,7 +362,7 @@ def test_limit_switch_stop_raises_limit_error_and_recovers(homed):
     emulator.stage.travel = (-5.0, 5.0)  # switches inside the software limits
     homed.move_to(8.0)
     with pytest.raises(LimitError) as info:
-        homed.wait(10)
+        homed.wait(60)
     assert info.value.device == "beh" and info.value.command == "wait"
     status = homed.status()
     assert status.at_forward_limit and not status.is_enabled
@@ -462,7 +462,7 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
     assert sent.count(b"1TE\r\n") == 1  # reading TE clears it: never asked twice
     # The documented recovery: the outcome is learnt from status; the move did start.
     time.sleep(0.35)
-    axis.wait(10)
+    axis.wait(60)
     assert axis.position == pytest.approx(3.0, abs=1e-6)
 
 
@@ -507,7 +507,7 @@ def test_error_state_during_move_raises_controller_error_and_enable_recovers(fau
     axis.move_to(5.0)
     faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0020")
     with pytest.raises(ControllerError) as info:
-        axis.wait(10)
+        axis.wait(60)
     assert "following error" in str(info.value) and info.value.code == 0x0020
     assert info.value.device == "beh"
     assert not axis.is_enabled

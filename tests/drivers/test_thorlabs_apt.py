@@ -133,7 +133,7 @@ def test_k10cr1_open_identify_home_move_stop_transcript():
     assert motor.kind is AxisKind.ROTARY
     motor.home(timeout=1.0)
     motor.move_to(45.0)
-    final = motor.wait(timeout=1.0)
+    final = motor.wait(timeout=60)
     assert final == pytest.approx(45.0 - 3 / (409600 / 3))
     assert motor.position == pytest.approx(45.0, abs=1e-4)
     motor.stop()
@@ -621,7 +621,7 @@ def test_unplugged_mid_move_is_typed_and_bounded_then_the_move_is_found_finished
     emu.faults.schedule(FaultKind.DISCONNECT, nth=1)
     expected = ConnectionFailed if apt_on.transport == "url" else DeviceTimeout
     with pytest.raises(expected) as info:
-        motor.wait(timeout=5.0)
+        motor.wait(timeout=60)
     assert info.value.device == "mid" and info.value.command == "MOT_REQ_DCSTATUSUPDATE"
     assert info.value.__cause__ is not None
     if apt_on.transport == "url":
@@ -659,14 +659,14 @@ def test_fault_error_state_is_a_controller_error_and_reenable_recovers():
     motor.move_to(10.0)
     emu.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0x21")
     with pytest.raises(ControllerError) as info:
-        motor.wait(timeout=5.0)
+        motor.wait(timeout=60)
     err = info.value
     # The HW_RICHRESPONSE arrives during the status poll of the wait.
     assert err.device == "ax" and err.command == "MOT_REQ_DCSTATUSUPDATE"
     assert err.code == 0x21 and "0x0021" in str(err)
     assert motor.status().error  # latched in the status bits
     with pytest.raises(ControllerError):
-        motor.wait(timeout=5.0)
+        motor.wait(timeout=60)
     motor.enable()  # the documented recovery: re-enable the channel
     assert motor.status().error is None
     motor.move_to(10.0, wait=True, timeout=10.0)
@@ -755,7 +755,7 @@ def test_after_a_stop_wait_reports_the_rest_position_and_move_by_counts_from_it(
         motor.move_to(8.0)
         clock.advance(4.0)
         motor.stop()
-    rest = motor.wait(timeout=5.0)  # no MotionError: the stop voided the target
+    rest = motor.wait(timeout=60)  # no MotionError: the stop voided the target
     assert 0.0 < rest < 8.0 - motor.position_tolerance
     assert motor.target is None
     # Read back in quantised device units and scaled up again, the K10CR1's 10 deg/s

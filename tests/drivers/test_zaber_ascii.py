@@ -179,7 +179,7 @@ def test_move_absolute_relative_and_wait_transcript():
              ex(13, 1, "move rel -5333", "OK BUSY -- 0")]
     axis, port = transcript_axis(steps)
     axis.move_to(7.5)
-    assert axis.wait(1.0) == pytest.approx(7.5)
+    assert axis.wait(60) == pytest.approx(7.5)
     axis.move_by(-1.25)
     assert axis.target == pytest.approx(6.25)
     port.assert_complete()
@@ -245,7 +245,7 @@ def test_fault_during_wait_stops_and_raises_with_the_flag():
     axis, port = transcript_axis(steps)
     axis.move_to(10)
     with pytest.raises(ZaberFault) as info:
-        axis.wait(1.0)
+        axis.wait(60)
     assert info.value.code == "FS" and info.value.command == "wait"
     assert "stalled" in str(info.value) and "enable()" in str(info.value)
     with pytest.raises(ZaberFault):
@@ -512,7 +512,7 @@ def test_limit_sensor_stop_is_a_limit_error_and_enable_recovers(homed):
         emulator.axes[1].stage.travel = (-5.0, 5.0)  # sensors inside the limits
     homed.move_to(8.0)
     with pytest.raises(ZaberLimitTriggered) as info:
-        homed.wait(10)
+        homed.wait(60)
     assert info.value.code == "WL" and info.value.command == "wait"
     assert homed.status().position == pytest.approx(5.0, abs=MS)
     homed.enable()  # warnings clear
@@ -524,7 +524,7 @@ def test_stop_sets_a_notice_that_is_not_an_error(homed):
     homed.velocity = 1.0
     homed.move_to(10.0)
     homed.stop()
-    rest = homed.wait(10)
+    rest = homed.wait(60)
     assert rest < 10.0 and "NI" in homed.warnings()
     assert homed.status().error is None
 
@@ -546,12 +546,12 @@ def test_two_axes_of_one_chain_share_the_port(transport, cleanup):
     cleanup.append(second)
     first.home(wait=False)
     second.home(wait=False)
-    first.wait(10)
-    second.wait(10)
+    first.wait(60)
+    second.wait(60)
     first.move_to(5.0)
     second.move_to(-3.0)  # both move together
-    assert first.wait(10) == pytest.approx(5.0, abs=MS)
-    assert second.wait(10) == pytest.approx(-3.0, abs=MS_LINEAR)
+    assert first.wait(60) == pytest.approx(5.0, abs=MS)
+    assert second.wait(60) == pytest.approx(-3.0, abs=MS_LINEAR)
     first.close()
     assert second.position == pytest.approx(-3.0, abs=MS_LINEAR)  # the port stays open
     emulator = emulator or registry.get("simzaber", "chain")
@@ -695,7 +695,7 @@ def test_error_state_during_move_raises_fault_and_enable_recovers(faulty):
     axis.move_to(5.0)
     faults.schedule(FaultKind.ERROR_STATE, nth=1, code="FS")
     with pytest.raises(ZaberFault) as info:
-        axis.wait(10)
+        axis.wait(60)
     assert info.value.code == "FS" and "stalled and stopped" in str(info.value)
     assert info.value.device == "beh"
     with pytest.raises(ZaberFault):

@@ -187,18 +187,18 @@ def test_a_forced_second_ctrl_c_names_the_resume_command(tmp_path, capsys):
         if not isinstance(ev, PointCompleted) or ev.index != 2:
             return
         os.kill(os.getpid(), signal.SIGINT)
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 60
         while not engine._abort_requested and time.monotonic() < deadline:
             time.sleep(0.005)  # the first Ctrl-C has reached the main thread
         os.kill(os.getpid(), signal.SIGINT)
-        release.wait(10)  # the engine is still busy when the second one lands
+        release.wait(60)  # the engine is still busy when the second one lands
 
     engine.subscribe(interrupt_twice)
     try:
         assert drive(engine, quiet=True) == 130
     finally:
         release.set()
-        engine.wait(10)
+        engine.wait(60)
     text = capsys.readouterr().out
     assert "Ctrl-C again to force" in text
     assert f"continue the run with:\n  scatterlab resume {engine.store.path}" in text

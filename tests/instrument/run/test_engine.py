@@ -77,13 +77,13 @@ def test_pause_resume_at_point_boundary(tmp_path):
 
     engine.subscribe(on)
     engine.start()
-    assert paused.wait(10)
+    assert paused.wait(60)
     assert engine.state is EngineState.PAUSED and engine.n_done == 4
     snap = engine.snapshot()
     assert (snap.state, snap.n_done, snap.n_total) == (EngineState.PAUSED, 4, len(plan.points))
     assert snap.pause_reason == "test pause" and snap.path == str(engine.store.path)
     engine.resume()
-    assert engine.wait(10) is EngineState.FINISHED
+    assert engine.wait(60) is EngineState.FINISHED
     kinds = [type(e).__name__ for e in q.drain()]
     assert kinds.index("Paused") < kinds.index("Resumed") < kinds.index("RunFinished")
     assert sorted(_indices(engine.store.path)) == list(range(len(plan.points)))
@@ -144,7 +144,7 @@ def test_storage_error_pauses_then_continues_without_gap(tmp_path):
 
     engine.subscribe(on)
     engine.start()
-    assert paused.wait(10)
+    assert paused.wait(60)
     events = q.drain()
     faults = [e for e in events if isinstance(e, Fault)]
     assert faults and faults[0].device == "storage" and "disk nearly full" in faults[0].cause
@@ -158,7 +158,7 @@ def test_storage_error_pauses_then_continues_without_gap(tmp_path):
     # Space is freed; on resume the engine reopens (and recovers) the same file.
     engine.store.min_free_bytes = 1 << 20
     engine.resume()
-    assert engine.wait(10) is EngineState.FINISHED
+    assert engine.wait(60) is EngineState.FINISHED
     idx = _indices(engine.store.path)
     assert sorted(idx) == list(range(len(plan.points))) and len(idx) == len(set(idx))
     assert any(isinstance(e, Resumed) for e in q.drain())

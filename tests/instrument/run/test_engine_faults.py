@@ -143,7 +143,7 @@ def test_persistent_fault_pauses_safely_and_resumes(tmp_path, make_bench):
     faults = registry.get("simapt", "sample_theta").faults
     paused = _disconnect_after_point(engine, faults, 2)
     engine.start()
-    assert paused.wait(20)
+    assert paused.wait(60)
     events = q.drain()
     fault = [e for e in events if isinstance(e, Fault)][-1]
     assert fault.device == "sample_theta" and fault.action == "pause"
@@ -248,7 +248,7 @@ def test_after_a_fault_pause_the_operator_skips_the_point(tmp_path, make_bench):
     faults = registry.get("simsmc", "detector_theta").faults
     paused = _disconnect_after_point(engine, faults, 2)
     engine.start()
-    assert paused.wait(20)
+    assert paused.wait(60)
     pause = [e for e in q.drain() if isinstance(e, Paused)][-1]
     faults.clear()
     engine.resume(skip_point=True)
@@ -277,7 +277,7 @@ def test_skip_point_after_an_operator_pause_skips_nothing(tmp_path, make_bench):
 
     engine.subscribe(on)
     engine.start()
-    assert paused.wait(20)
+    assert paused.wait(60)
     engine.resume(skip_point=True)
     assert engine.wait(30) is EngineState.FINISHED
     _, status, _, _ = _file(engine)
