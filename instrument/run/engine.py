@@ -1036,7 +1036,9 @@ class RunEngine:
         """Fixed exposure, or auto-exposure with HDR bracketing (see AcquisitionPolicy)."""
         lo, hi = cam.exposure_range_us
         emin, emax = max(lo, policy.min_exposure_us), min(hi, policy.max_exposure_us)
-        if acq.exposure_us is not None or policy.mode == "fixed":
+        if acq.exposure_us is not None or policy.mode == "fixed" or not acq.light:
+            # A dark frame (light off) is not auto-exposed: its peak is the black level,
+            # which would lengthen it to the longest exposure; it takes the plan's.
             e = acq.exposure_us if acq.exposure_us is not None else policy.exposure_us
             return [self._frame(cam, min(max(e, lo), hi), policy.frames, acq.light)]
         e = self._last_exposure or policy.exposure_us
