@@ -16,19 +16,16 @@ some; ``--no-fixed`` leaves out the fixed-exposure runs).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from bench_lightfield_scan import timed_run  # sibling benchmark module
 
 from drivers.transport import add_url_handler_package
 from hw_mocks import registry
 from hw_mocks.sim.world import reset_worlds
 from instrument.bench.profile import load_profile
-from instrument.cli import main
 from instrument.pipelines.lightfield.locate import locate_run
 from instrument.plans import build_plan, load_plan
 from instrument.run.runfile import read_run
@@ -74,15 +71,7 @@ def one(wall: str, plan: Path, folder: Path, tag: str) -> dict:
     reset_worlds()
     profile = wall_profile(wall, folder)
     est = estimate_s(plan, profile)
-    out = folder / f"runs-{tag}-{wall}"
-    t0 = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        rc = main(["run", str(plan), "--bench", str(profile), "--out", str(out), "--no-fsync",
-                   "--quiet"])
-    wall_s = time.perf_counter() - t0
-    if rc != 0:
-        raise RuntimeError(f"scan failed ({wall}, {tag})")
-    (run_path,) = sorted(out.glob("*.h5"))
+    run_path, wall_s = timed_run(plan, profile, folder / f"runs-{tag}-{wall}")
     run = read_run(run_path)
     lit = run.frame_light.astype(bool)
     loc = locate_run(run_path)
@@ -102,10 +91,13 @@ def one(wall: str, plan: Path, folder: Path, tag: str) -> dict:
     return row
 
 
-def report(rows: list[dict]) -> None:
+def header() -> None:
     print("| wall | plan | estimate s | run s | run/estimate | lit frames | saturated "
           "| exposures µs | disc (y, z) mm | blur δy / δz mm | brightness (σ) | quality |")
-    print("|---|---|---:|---:|---:|---:|---:|---|---|---|---|---|")
+    print("|---|---|---:|---:|---:|---:|---:|---|---|---|---|---|", flush=True)
+
+
+def report(rows: list[dict]) -> None:
     for r in rows:
         exps = ", ".join(f"{e:g}" for e in r["exposures"][:4])
         if len(r["exposures"]) > 4:
@@ -115,7 +107,7 @@ def report(rows: list[dict]) -> None:
                 if "y" in r else "none | — | — | —")
         print(f"| {r['wall']} | {r['tag']} | {r['estimate_s']:.1f} | {r['run_s']:.1f} | "
               f"{r['run_s'] / r['estimate_s']:.2f} | {r['lit']} | {r['saturated']} | {exps} "
-              f"| {disc} |")
+              f"| {disc} |", flush=True)
 
 
 def main_() -> None:
@@ -125,15 +117,14 @@ def main_() -> None:
     ap.add_argument("--no-fixed", action="store_true")
     args = ap.parse_args()
     add_url_handler_package("hw_mocks.urlhandler")
-    rows = []
+    header()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         fixed = fixed_plan(folder)
         for wall in args.walls:
-            rows.append(one(wall, PLAN, folder, "auto"))
+            report([one(wall, PLAN, folder, "auto")])
             if not args.no_fixed:
-                rows.append(one(wall, fixed, folder, "fixed"))
-    report(rows)
+                report([one(wall, fixed, folder, "fixed")])
 
 
 if __name__ == "__main__":
