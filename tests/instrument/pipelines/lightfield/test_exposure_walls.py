@@ -48,6 +48,7 @@ def _profile(wall: str, folder: Path) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # a 101-point scan and a localisation, on a shared CI machine
 @pytest.mark.parametrize("wall", [*MATERIALS, *(f"{w:g}" for w in MIRRORS_DEG)])
 def test_the_example_scan_has_no_saturated_frame_and_finds_the_disc(wall, tmp_path):
     out = tmp_path / "runs"
