@@ -54,21 +54,27 @@ def peak_count(stack: np.ndarray, enough: np.ndarray, threshold_rel: float,
     return int(np.count_nonzero(peaks))
 
 
+def timed_run(plan: Path, profile: Path, out: Path) -> tuple[Path, float]:
+    """``scatterlab run PLAN --bench PROFILE --out OUT`` quietly: the run file and the wall
+    time (s); RuntimeError if the run fails."""
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        rc = main(["run", str(plan), "--bench", str(profile), "--out", str(out), "--no-fsync",
+                   "--quiet"])
+    seconds = time.perf_counter() - t0
+    if rc != 0:
+        raise RuntimeError(f"scan failed: {plan.name} on {profile.name}")
+    (run,) = sorted(out.glob("*.h5"))
+    return run, seconds
+
+
 def one(seed: int, folder: Path, material: str = "brushed_metal") -> dict:
     registry.reset()
     reset_worlds()
     profile = folder / f"sim-lightfield-{seed}-{material}.toml"
     profile.write_text(PROFILE.read_text().replace("&seed=1&", f"&seed={seed}&").replace(
         'material = "brushed_metal"', f'material = "{material}"'))
-    out = folder / f"runs-{seed}-{material}"
-    t0 = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        rc = main(["run", str(PLAN), "--bench", str(profile), "--out", str(out), "--no-fsync",
-                   "--quiet"])
-    t_scan = time.perf_counter() - t0
-    if rc != 0:
-        raise RuntimeError(f"scan failed (seed {seed})")
-    (run,) = sorted(out.glob("*.h5"))
+    run, t_scan = timed_run(PLAN, profile, folder / f"runs-{seed}-{material}")
     t0 = time.perf_counter()
     rec = reconstruct_run(run)
     t_rec = time.perf_counter() - t0

@@ -40,6 +40,7 @@ Configuration (``[simulation.scene]`` of a bench profile, ``kind = "lightfield"`
     camera_track = { x0_mm = 0.0, z_mm = 30.0, direction = 1.0 }
     reference_power_w = 1e-3
     ambient_radiance = 0.0              # W m⁻² sr⁻¹
+    renderer = "lobe"                   # or "reference" (HiddenScene: the check renderer)
     objects = [
       { kind = "point", y_mm = -8.0, z_mm = -200.0, radius_mm = 1.5, radiance = 5.0 },
       { kind = "bar", y_min_mm = 15.0, y_max_mm = 30.0, z_mm = -260.0, radiance = 1.5 },
@@ -202,7 +203,7 @@ class LightFieldBenchScene:
         if kind != "lightfield":
             raise ValueError(f"not a light-field scene: kind = {kind!r}")
         known = {"material", "brdf", "wall", "camera_track", "objects", "reference_power_w",
-                 "ambient_radiance"}
+                 "ambient_radiance", "renderer"}
         unknown = set(cfg) - known
         if unknown:
             raise ValueError(f"unknown light-field scene keys {sorted(unknown)}; "
@@ -217,7 +218,8 @@ class LightFieldBenchScene:
                             float(track_cfg.get("direction", 1.0)))
         wall_lo, wall_hi = (float(v) for v in cfg.get("wall", (-150.0, 150.0)))
         objects = tuple(_object_at(i, o) for i, o in enumerate(cfg.get("objects", ())))
-        hidden = HiddenScene(objects, Wall(wall_lo, wall_hi, brdf), d2_mm=track.z_mm)
+        hidden = HiddenScene(objects, Wall(wall_lo, wall_hi, brdf), d2_mm=track.z_mm,
+                             renderer=str(cfg.get("renderer", "lobe")))
         return cls(hidden, track, float(cfg.get("reference_power_w", 1e-3)),
                    float(cfg.get("ambient_radiance", 0.0)))
 

@@ -6,8 +6,11 @@ z = d2 where the camera on its linear stage samples rays ``(y_m, θ_m)``.  For e
 sample the renderer traces the ray back to its wall point ``c = y_m − d2 tan θ_m``, finds in
 closed form the interval of incident angles θ_o whose rays hit each object (tangent angles
 to a disc, end points of a bar), and integrates
-``∫ f(c, θ_o − Θ(c), θ_m − Θ(c)) cos⁺(θ_o − Θ(c)) L_k(c, θ_o) dθ_o`` over that interval by
-composite Gauss–Legendre quadrature with panels a fraction of the specular width.
+``∫ f(c, θ_o − Θ(c), θ_m − Θ(c)) cos⁺(θ_o − Θ(c)) L_k(c, θ_o) dθ_o`` over that interval.
+By default the specular lobe is integrated in its own variable over its window
+(:mod:`hw_mocks.sim.lightfield_lobe`: bounded cost at any specular width, the perfect
+mirror as its limit); ``renderer="reference"`` integrates the whole interval by composite
+Gauss–Legendre quadrature with panels a fraction of the specular width (cost ∝ 1/width).
 
 This is deliberately *not* the discretised operator of ``analysis.lightfield.forward``:
 no angle grid, no interpolation, objects integrated over their exact angular extent,
@@ -25,9 +28,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from analysis.lightfield.brdf import MATERIALS, FlatlandBRDF, SpatiallyVaryingBRDF
 from analysis.lightfield.field import LightField2D, theta_grid
+from hw_mocks.sim import lightfield_lobe
 
 __all__ = [
     "MATERIALS",
+    "RENDERERS",
     "BarObject",
     "HiddenScene",
     "PointObject",
@@ -37,6 +42,8 @@ __all__ = [
 _HALF_PI = np.pi / 2 - 1e-9
 _GL_NODES = 8
 _CHUNK = 2_000_000
+#: The renderers of :meth:`HiddenScene.radiance` (the class docstring).
+RENDERERS = ("lobe", "reference")
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,11 @@ class PointObject:
             raise ValueError("need z_mm < 0 and radius_mm > 0")
         if self.profile not in ("disc", "gaussian"):
             raise ValueError("profile must be 'disc' or 'gaussian'")
+
+    @property
+    def uniform_radiance(self) -> float | None:
+        """The radiance of every ray that meets a disc; None for the Gaussian profile."""
+        return self.radiance if self.profile == "disc" else None
 
     def interval(self, c: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
         """Incident-angle interval at wall points c whose rays meet the object (rad)."""
@@ -93,6 +105,11 @@ class BarObject:
     def __post_init__(self) -> None:
         if self.z_mm >= 0 or self.y_max_mm <= self.y_min_mm:
             raise ValueError("need z_mm < 0 and y_max_mm > y_min_mm")
+
+    @property
+    def uniform_radiance(self) -> float:
+        """The radiance of every ray that meets the bar."""
+        return self.radiance
 
     def interval(self, c: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
         """Rays from c with ``c − |z| tan θ ∈ [y_min, y_max]``."""
@@ -140,17 +157,25 @@ class HiddenScene:
     objects : sequence of PointObject / BarObject
     wall : Wall
     d2_mm : float — wall → measurement plane distance (mm)
-    panel_rad : float, optional — Gauss–Legendre panel width (default: a quarter of the
-        BRDF's specular width, or 2 mrad)
+    panel_rad : float, optional — the reference quadrature's Gauss–Legendre panel width
+        (default: a quarter of the BRDF's specular width, or 2 mrad)
+    renderer : ``"lobe"`` (default) or ``"reference"`` — the lobe-adaptive integration of
+        :mod:`hw_mocks.sim.lightfield_lobe` (cost bounded at any specular width), or the
+        panel quadrature over each object's whole interval described above (cost ∝ 1/σ;
+        kept as the check of the other).  A wall whose BRDF the lobe renderer does not
+        know (a plain callable) is rendered by the reference.
     """
 
     objects: tuple[PointObject | BarObject, ...]
     wall: Wall
     d2_mm: float
     panel_rad: float | None = None
+    renderer: str = "lobe"
     _panel: float = field(init=False, repr=False, default=0.0)
 
     def __post_init__(self) -> None:
+        if self.renderer not in RENDERERS:
+            raise ValueError(f"renderer = {self.renderer!r}; choose one of {RENDERERS}")
         object.__setattr__(self, "objects", tuple(self.objects))
         base = getattr(self.wall.brdf, "base", self.wall.brdf)
         width = getattr(base, "specular_width_rad", None)
@@ -189,6 +214,10 @@ class HiddenScene:
         c = ym - self.d2_mm * np.tan(tm)
         on = (c >= self.wall.y_min_mm) & (c <= self.wall.y_max_mm)
         idx = np.nonzero(on)[0]
+        if self.renderer == "lobe" and lightfield_lobe.supports(self.wall.brdf):
+            out[idx] = lightfield_lobe.lobe_radiance(
+                self.wall.brdf, self.wall.normal_at(c[idx]), self.objects, c[idx], tm[idx])
+            return out.reshape(shape)
         for obj in self.objects:
             lo, hi = obj.interval(c[idx])
             lo = np.clip(lo, -_HALF_PI, _HALF_PI)

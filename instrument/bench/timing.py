@@ -11,8 +11,10 @@ also costs time beyond the exposure: per frame (``frame_overhead_s``: readout an
 on a real camera; synthesising the sensor noise on the simulated one) and once after each
 change of the scene (``scene_change_s``: the first frame after a move or after the light
 came on, when a real camera's queue is flushed and the simulated one renders the new
-view). Homing an axis takes ``home_s`` of its own time (the profile says how long; an
-emulated axis takes that divided by its speed-up). :func:`bench_timing` collects these from
+view; a simulated light-field wall adds its render cost per view, ``render_s``, from the
+scene's walls and objects: :mod:`instrument.bench.render_cost`). Homing an axis takes
+``home_s`` of its own time (the profile says how long; an emulated axis takes that divided
+by its speed-up). :func:`bench_timing` collects these from
 a profile so that an estimate says what *this* bench will take.
 
 No cost counts as zero because a profile left it out: a camera without
@@ -37,6 +39,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from drivers.base import LockIn
 from instrument.bench.profile import BenchProfile, DeviceSpec
+from instrument.bench.render_cost import lightfield_render_s
 
 __all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "BenchTiming", "bench_timing",
            "clock_speed", "exposes_in_wall_time"]
@@ -55,6 +58,9 @@ LOCKIN_POWER_UP = (0.1, 12)
 #: FW102C at high speed: seconds per degree of the wheel's turn, settling on the slot.
 WHEEL_S_PER_DEG = 3.0 / 180.0
 WHEEL_SETTLE_S = 0.1
+
+#: The simulated camera's sensor width when its URL does not give one (hw_mocks' default).
+SIM_CAMERA_WIDTH = 1024
 
 #: The speed-up taken for an emulator clock that steps per reading (``step=``).
 STEPPING_SPEEDUP = 1e9
@@ -117,6 +123,10 @@ class BenchTiming:
     wheel_speed: float = 1.0
     #: What the estimate assumed because the profile did not say (in words).
     assumed: tuple[str, ...] = ()
+    #: Seconds the simulated scene takes to render a lit view beyond ``scene_change_s``
+    #: (the light-field wall's cost model, :mod:`instrument.bench.render_cost`; 0 where
+    #: the camera's ``scene_change_s`` already holds the render).
+    render_s: float = 0.0
 
     @property
     def emulated(self) -> bool:
@@ -176,4 +186,18 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
                        1.0 if camera is None or exposes_in_wall_time(camera) else 0.0,
                        costs["frame_overhead_s"], costs["scene_change_s"],
                        lockin_settle_s=settle, wheel_slots=slots, wheel_speed=wheel_speed,
-                       assumed=tuple(assumed))
+                       assumed=tuple(assumed),
+                       render_s=_scene_render_s(profile, camera))
+
+
+def _scene_render_s(profile: BenchProfile, camera: DeviceSpec | None) -> float:
+    """The render cost of one lit view of a simulated light-field scene (0 otherwise)."""
+    scene = (profile.simulation or {}).get("scene")
+    if camera is None or camera.driver != "sim_camera" or not isinstance(scene, dict) \
+            or scene.get("kind") != "lightfield":
+        return 0.0
+    try:
+        columns = int(_query(camera.url).get("width", SIM_CAMERA_WIDTH))
+    except ValueError:
+        columns = SIM_CAMERA_WIDTH
+    return lightfield_render_s(scene, columns)

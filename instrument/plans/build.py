@@ -183,10 +183,10 @@ class Plan:
         ``max_brackets`` and one more, the middle of what a scene needs) and as many dark
         frames with ``dark = "per_point"``, each of ``frames`` averaged frames costing the
         exposure (when the camera exposes in wall time) and the camera's per-frame time;
-        the camera's scene-change time for a lit point after a move or after the light came
-        on; the lock-in's settling for its readings (twice with per-point darks); the
-        filter wheel's turn where the slot changes; the engine's and storage's time per
-        point.
+        the camera's scene-change time (and a simulated scene's render time) for a lit
+        point after a move or after the light came on; the lock-in's settling for its
+        readings (twice with per-point darks); the filter wheel's turn where the slot
+        changes; the engine's and storage's time per point.
         """
         pol = self.spec.acquisition
         total = 0.0
@@ -220,7 +220,7 @@ class Plan:
                          + max(timing.frame_overhead_s, pol.readout_s))
             total += (brackets + darks) * pol.frames * per_frame
             if p.light and (moved or lit is not True):
-                total += timing.scene_change_s
+                total += timing.scene_change_s + timing.render_s
             lit = p.light
             total += timing.point_overhead_s
         return total

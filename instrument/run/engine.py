@@ -191,6 +191,9 @@ class RunEngine:
         self._policies = {r: self._policy(r) for r in bench.devices}
         self._light: bool | None = None
         self._last_exposure: float | None = None
+        # Exposures (µs) a dark frame of this run was taken at: with auto-exposure and
+        # ``dark = "start"`` a lit exposure without one gets its dark frame when first used.
+        self._dark_exposures: set[float] = set()
         self._t0 = 0.0
         self._point_dt: float | None = None
         self._message = ""
@@ -892,8 +895,35 @@ class RunEngine:
                 if b is st.main:
                     dark_level = float(dark.data.mean())
             self._set_light(True)
+        elif cam is not None and not acq.light:
+            self._dark_exposures.update(f.exposure_us for f in st.frames)
+        elif (cam is not None and policy.dark == "start" and policy.mode == "auto"
+              and self._source is not None):
+            dark_level = self._dark_for_new_exposure(cam, policy, st)
         if st.main is not None:
             st.signal = (float(st.main.data.mean()) - dark_level) / st.main.exposure_us
+
+    def _dark_for_new_exposure(self, cam: Camera, policy: AcquisitionPolicy,
+                               st: _PointState) -> float:
+        """Auto-exposure with one dark frame at the start: a lit exposure the run has no dark
+        frame at gets one now (light off, the frame, light on), stored with this point, so
+        that every lit frame's dark is at its own exposure (the reduction subtracts it).
+        Returns the mean of the dark taken at the main exposure (0 when none was needed)."""
+        level = 0.0
+        for b in [f for f in st.frames if f.light]:
+            if b.exposure_us in self._dark_exposures:
+                continue
+            self._set_light(False)
+            role = self._roles[id(cam)]
+            dark = self._retry(role, self._policy(role), "dark",
+                               lambda e=b.exposure_us: self._frame(cam, e, policy.frames,
+                                                                   False), st)
+            self._set_light(True)
+            st.frames.append(dark)
+            self._dark_exposures.add(b.exposure_us)
+            if b is st.main:
+                level = float(dark.data.mean())
+        return level
 
     def _read_power(self, pm: PowerMeter, st: _PointState) -> float:
         role = self._roles[id(pm)]
@@ -1053,7 +1083,9 @@ class RunEngine:
         """Fixed exposure, or auto-exposure with HDR bracketing (see AcquisitionPolicy)."""
         lo, hi = cam.exposure_range_us
         emin, emax = max(lo, policy.min_exposure_us), min(hi, policy.max_exposure_us)
-        if acq.exposure_us is not None or policy.mode == "fixed":
+        if acq.exposure_us is not None or policy.mode == "fixed" or not acq.light:
+            # A dark frame (light off) is not auto-exposed: its peak is the black level,
+            # which would lengthen it to the longest exposure; it takes the plan's.
             e = acq.exposure_us if acq.exposure_us is not None else policy.exposure_us
             return [self._frame(cam, min(max(e, lo), hi), policy.frames, acq.light)]
         e = self._last_exposure or policy.exposure_us
