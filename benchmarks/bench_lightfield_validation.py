@@ -33,8 +33,9 @@ seed is scored (:func:`score`):
 
 Run: ``python benchmarks/bench_lightfield_validation.py`` (2 seeds, all walls and scenes);
 ``--seeds 20`` for the matrix, ``--walls``/``--scenes`` for a part of it, ``--jsonl FILE`` to
-append one line per scan (a rerun skips the scans already there).  A reduced matrix runs in
-CI as ``tests/analysis/lightfield/test_validation_matrix.py``.
+append one line per scan (a rerun skips the scans already there; ``--report`` only tabulates
+them), ``--empty-seeds N`` for more scans of the empty scene.  A reduced matrix runs in CI
+as ``tests/analysis/lightfield/test_validation_matrix.py``.
 """
 
 from __future__ import annotations
@@ -282,7 +283,11 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=None, help="folder for the renders")
     ap.add_argument("--jsonl", type=Path, default=None,
                     help="append one line per scan; scans already there are skipped")
+    ap.add_argument("--report", action="store_true",
+                    help="only tabulate the scans already in --jsonl (compute nothing)")
     args = ap.parse_args()
+    if args.report and args.jsonl is None:
+        ap.error("--report needs --jsonl")
     done: dict[tuple[str, str, int], dict] = {}
     if args.jsonl is not None and args.jsonl.exists():
         for line in args.jsonl.read_text().splitlines():
@@ -295,7 +300,7 @@ def main() -> None:
     for wname, brdf in walls().items():
         if args.walls and wname not in args.walls:
             continue
-        blur = wall_blur(brdf, args.cache, wname)
+        blur = 10.0 if args.report else wall_blur(brdf, args.cache, wname)
         for sname, objects in scenes(blur).items():
             if args.scenes and sname not in args.scenes:
                 continue
@@ -305,6 +310,8 @@ def main() -> None:
                        else args.seeds)
             for seed in range(1, n_seeds + 1):
                 rec = done.get((wname, sname, seed))
+                if rec is None and args.report:
+                    continue
                 if rec is None:
                     if lf is None:
                         lf = render(brdf, objects, args.cache, f"{wname}__{sname}")
@@ -317,6 +324,8 @@ def main() -> None:
                         with args.jsonl.open("a") as f:
                             f.write(json.dumps(rec) + "\n")
                 s.add(from_record(rec))
+            if not s.scans:
+                continue
             total.add(s)
             print(f"| {wname} | {sname} | {s.truths} | {s.detected} | {s.within_blur} | "
                   f"{s.phantoms} | {s.scans_with_phantom}/{s.scans} | {s.confidently_wrong} "

@@ -3,7 +3,7 @@
 Its scoring is checked on hand-made detections (each kind of confident error counted as
 that kind), then a reduced matrix runs on renderer scenes: no scan may hold a confidently
 wrong object, and the objects bright enough to be found must be found within the blur.
-The full matrix (seven walls, eleven scenes, 20 seeds) is in BENCHMARKS.md
+The matrix (seven walls, eleven scenes; the seeds run so far) is in BENCHMARKS.md
 (lightfield_validation).
 """
 
@@ -109,6 +109,9 @@ def _run(bench, wall: str, scene: str, seeds) -> object:
 @pytest.mark.parametrize(("wall", "scene"), [
     ("brushed_metal", "empty"),
     ("brushed_metal", "three"),
+    # a disc 100 mm from the wall, larger than the blur there: its residual on its own ray
+    # fan made a phantom at 4.5σ until each amplitude was judged on its own rays
+    ("brushed_metal", "near"),
     ("coated_paper_glossy", "ratio_10"),
 ])
 def test_reduced_matrix_has_no_confident_error_and_finds_what_is_bright(bench, wall, scene):
@@ -119,11 +122,15 @@ def test_reduced_matrix_has_no_confident_error_and_finds_what_is_bright(bench, w
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("wall", ["coated_paper_matte", "pearl_paint_glass",
-                                  "brushed_metal_0.5deg", "brushed_metal_0.1deg",
-                                  "brushed_metal_0.01deg"])
-@pytest.mark.parametrize("scene", ["one", "pair_2blur", "ratio_100", "three"])
+@pytest.mark.parametrize(("wall", "scene"), [
+    ("coated_paper_matte", "one"),
+    ("coated_paper_matte", "pair_2blur"),
+    ("coated_paper_matte", "ratio_100"),
+    ("brushed_metal_0.01deg", "one"),
+])
 def test_matrix_walls_have_no_confident_error(bench, wall, scene):
+    """The matte and the near-mirror ends of the matrix (BENCHMARKS.md)."""
     s = _run(bench, wall, scene, seeds=(1, 2))
     assert s.confidently_wrong == 0
     assert s.phantoms == 0
+    assert s.within_blur == s.detected
