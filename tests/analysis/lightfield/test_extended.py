@@ -95,7 +95,7 @@ def _synthetic(truth: str, amp_noise: float, seed: int):
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_the_statistic_follows_the_noise_model_on_exact_rays(seed):
     """On rays that are exactly one of the two models plus white noise, the truth wins:
-    a segment gives Δ near 0 (below the bound ln n_eff ≈ 9.8), two points a Δ that grows
+    a segment gives Δ near 0 (below the bound ln n_eff ≈ 10), two points a Δ that grows
     as the noise falls — the decision tightens with the data instead of sitting at a
     fixed spacing."""
     seg = _synthetic("segment", 2e-4, seed)
