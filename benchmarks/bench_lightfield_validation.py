@@ -2,41 +2,56 @@
 
 Scenes rendered by the continuous renderer (``hw_mocks.sim.lightfield_scene``: exact disc
 geometry, quadrature over the BRDF) behind 200 mm of wall at d2 = 100 mm, with seeded
-Gaussian noise of a fixed level (2·10⁻⁴, the brightest object's measured radiance is
-≈ 0.1–0.4), reconstructed (Wiener, noise from the data) and located with the reconstruction's
-noise model at the default false-alarm probability (0.01 per scan), the depth range widened
-while an object sits at its far edge (:func:`analysis.lightfield.detect_widening`).
+Gaussian noise of a fixed level (2·10⁻⁴; a 3 mm disc of radiance 1 gives a measured
+radiance of ≈ 0.1–0.4), reconstructed (Wiener, noise from the data) and located with the
+reconstruction's noise model at the default false-alarm probability (0.01 per scan), the
+depth range widened while an object sits at its far edge
+(:func:`analysis.lightfield.detect_widening`).  A scene's noise-free render depends only on
+wall and scene, so it is made once and every seed adds its own noise to it (``--cache DIR``
+keeps the renders between runs).
 
-Matrix: walls (the thesis materials plus narrower lobes of the brushed metal) × scenes:
-one object inside the default range (−400 … −60 mm); one beyond it (−600 mm); two at
-0.5, 1 and 2 transverse blurs apart at equal brightness; two 40 mm apart at brightness
-ratios 10, 100 and 1000.  Each scene × wall × seed is scored:
+Matrix: walls from matte to a near mirror (the four built-in materials, then the brushed
+metal's lobe narrowed to 0.5°, 0.1° and 0.01°) × scenes: none (false alarms); one object
+inside the default range (−400 … −60 mm) at −200 and −100 mm; one beyond it (−600 mm); two
+at 0.5, 1 and 2 transverse blurs apart at equal brightness (the blur of that wall: from a
+one-object reconstruction's p̂); two 40 mm apart at brightness ratios 10, 100 and 1000;
+three objects (brightness 1, 0.3, 0.1) 40 mm apart at three depths.  Each scene × wall ×
+seed is scored (:func:`score`):
 
-* detected — a true object with a reported object within δy across whose depth interval
-  holds it;
-* phantom — a reported object that explains no true object;
+* detected — a true object with a reported object within δy (plus its extent) across whose
+  depth interval holds it (a blend of a sub-resolution pair counts for both);
 * position within blur — a detected object within δy across and δz in depth;
-* confidently wrong — a reported object marked "resolved" that is a phantom, a split (more
-  reported objects explaining the true ones than there are), or with a brightness ≤ 0 (an
-  interval excluding the truth makes the object a phantom or undetected);
-* false alarm per scan — a scan with at least one phantom.
+* phantom — a reported object that explains no true object; a false alarm per scan — a
+  scan with at least one phantom;
+* confidently wrong — a reported object marked "resolved" that is a phantom, a split (a
+  second reported object explaining the same true object), has a brightness ≤ 0 (wrong
+  sign), or lies over a true object (within δy across) with an interval excluding its
+  depth (excluded truth).  Each kind is counted separately;
+* the significance of each true object: that of the reported object explaining it, else of
+  the strongest candidate below the threshold within its blur (NaN: none examined), for
+  the detection probability against significance.
 
-Run: ``python benchmarks/bench_lightfield_validation.py`` (reduced: 2 seeds, 3 walls);
-``--seeds N --walls all`` for more.  Its failure cases (a phantom at a lowered threshold, a
-dim object beside a bright one, an object beyond the range) run in CI as
-``tests/analysis/lightfield/test_localize_significance.py``.
+Run: ``python benchmarks/bench_lightfield_validation.py`` (2 seeds, all walls and scenes);
+``--seeds 20`` for the matrix, ``--walls``/``--scenes`` for a part of it, ``--jsonl FILE`` to
+append one line per scan (a rerun skips the scans already there; ``--report`` only tabulates
+them), ``--empty-seeds N`` for more scans of the empty scene.  A reduced matrix runs in CI
+as ``tests/analysis/lightfield/test_validation_matrix.py``.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
+import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from analysis.lightfield import (
     FlatlandBRDF,
+    LightField2D,
     detect_widening,
     effective_p_max,
     material,
@@ -47,35 +62,44 @@ from hw_mocks.sim.lightfield_scene import HiddenScene, PointObject, Wall
 
 DOMAIN = (-0.6, 0.6)
 NOISE = 2e-4
+N_THETA = 128
+D2 = 100.0
 WALL_POINTS = np.arange(-100.0, 100.1, 1.0)
 Y_GRID = np.arange(-90.0, 90.1, 2.0)
 Z_GRID = np.arange(-400.0, -59.0, 4.0)
+MEASURED_Y = np.linspace(-180.0, 180.0, 361)
+#: bins of true-object significance (σ) for the detection probability
+SIGNIFICANCE_BINS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 10.0, np.inf)
 
 
-def walls(which: str) -> dict[str, FlatlandBRDF]:
-    """The walls of the matrix: reduced (brushed metal, 0.5° lobe, glossy paper) or all."""
+def walls() -> dict[str, FlatlandBRDF]:
+    """The walls of the matrix, matte first, the near mirror last."""
     base = material("brushed_metal")
-    narrow = FlatlandBRDF(base.specular_reflectance, np.deg2rad(0.5), base.diffuse_reflectance,
-                          0.0, "brushed_metal_0.5deg")
-    out = {"brushed_metal": base, "brushed_metal_0.5deg": narrow,
-           "coated_paper_glossy": material("coated_paper_glossy")}
-    if which == "all":
-        out["coated_paper_matte"] = material("coated_paper_matte")
+    out = {name: material(name) for name in ("coated_paper_matte", "coated_paper_glossy",
+                                             "brushed_metal", "pearl_paint_glass")}
+    for deg in (0.5, 0.1, 0.01):
+        out[f"brushed_metal_{deg:g}deg"] = FlatlandBRDF(
+            base.specular_reflectance, np.deg2rad(deg), base.diffuse_reflectance, 0.0,
+            f"brushed_metal_{deg:g}deg")
     return out
 
 
-def scenes(brdf: FlatlandBRDF) -> dict[str, list[PointObject]]:
-    """The scenes; pair separations in units of the transverse blur at −200 mm (p̂ ≈ 16)."""
-    blur = theoretical_resolution(16, domain_rad=DOMAIN, distance_mm=200.0,
-                                  aperture_mm=200.0).transverse_mm
-    out = {"one": [PointObject(0.0, -200.0, 1.5, 1.0)],
-           "beyond": [PointObject(10.0, -600.0, 1.5, 1.0)]}
+def scenes(blur_mm: float) -> dict[str, list[PointObject]]:
+    """The scenes; pair separations in units of the wall's transverse blur at −200 mm."""
+    out: dict[str, list[PointObject]] = {
+        "empty": [],
+        "one": [PointObject(0.0, -200.0, 1.5, 1.0)],
+        "near": [PointObject(-30.0, -100.0, 1.5, 1.0)],
+        "beyond": [PointObject(10.0, -600.0, 1.5, 1.0)],
+    }
     for f in (0.5, 1.0, 2.0):
-        out[f"pair_{f:g}blur"] = [PointObject(-0.5 * f * blur, -200.0, 1.5, 1.0),
-                                  PointObject(0.5 * f * blur, -200.0, 1.5, 1.0)]
+        out[f"pair_{f:g}blur"] = [PointObject(-0.5 * f * blur_mm, -200.0, 1.5, 1.0),
+                                  PointObject(0.5 * f * blur_mm, -200.0, 1.5, 1.0)]
     for ratio in (10, 100, 1000):
         out[f"ratio_{ratio}"] = [PointObject(-20.0, -200.0, 1.5, 1.0),
                                  PointObject(20.0, -220.0, 1.5, 1.0 / ratio)]
+    out["three"] = [PointObject(-40.0, -200.0, 1.5, 1.0), PointObject(0.0, -260.0, 1.5, 0.3),
+                    PointObject(40.0, -150.0, 1.5, 0.1)]
     return out
 
 
@@ -86,95 +110,251 @@ class Score:
     within_blur: int = 0
     phantoms: int = 0
     scans_with_phantom: int = 0
-    confidently_wrong: int = 0
+    split: int = 0
+    phantom_resolved: int = 0
+    wrong_sign: int = 0
+    excluded: int = 0
     scans: int = 0
     seconds: float = 0.0
+    #: (significance, detected) per true object
+    truth_significance: list[tuple[float, bool]] = field(default_factory=list)
+
+    @property
+    def confidently_wrong(self) -> int:
+        return self.split + self.phantom_resolved + self.wrong_sign + self.excluded
+
+    def add(self, other: Score) -> None:
+        for name in ("truths", "detected", "within_blur", "phantoms", "scans_with_phantom",
+                     "split", "phantom_resolved", "wrong_sign", "excluded", "scans",
+                     "seconds"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.truth_significance += other.truth_significance
 
 
-def score(det, objects, s: Score) -> None:
-    """Add one scan's outcome to ``s`` (module doc)."""
-    explains = np.zeros((det.count, len(objects)), dtype=bool)
-    for k in range(det.count):
+def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
+    """Add one scan's outcome to ``s`` (module doc) and return it as a dict.
+
+    ``blur_at(z)`` is the theoretical resolution at depth z (for candidates below the
+    threshold, which carry none of their own).
+    """
+    n = det.count
+    explains = np.zeros((n, len(objects)), dtype=bool)
+    over = np.zeros((n, len(objects)), dtype=bool)
+    for k in range(n):
         r = det.resolutions[k]
         far, near = det.depth_interval_mm[k]
         extent = det.extent_mm[k, 0] if det.extent_mm.size else 0.0
         for j, o in enumerate(objects):
-            explains[k, j] = (abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm + extent
-                              and far <= o.z_mm <= near)
-    s.scans += 1
-    s.truths += len(objects)
+            over[k, j] = abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm + extent
+            explains[k, j] = over[k, j] and far <= o.z_mm <= near
+    out = Score(scans=1, truths=len(objects))
     for j, o in enumerate(objects):
         hits = np.nonzero(explains[:, j])[0]
         if hits.size:
-            s.detected += 1
-            k = int(hits[0])
+            out.detected += 1
+            k = int(hits[np.argmin(np.abs(det.positions_mm[hits, 0] - o.y_mm))])
             r = det.resolutions[k]
             if (abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm
                     and abs(det.positions_mm[k, 1] - o.z_mm) < r.depth_mm):
-                s.within_blur += 1
-    # a split: more reported objects explain the true ones than there are, marked resolved
-    explaining = np.nonzero(explains.any(axis=1))[0]
-    extra = explaining.size - len(objects)
-    if extra > 0:
-        s.confidently_wrong += min(extra, sum(det.quality[k] == "resolved" for k in explaining))
-    phantom = ~explains.any(axis=1)
-    s.phantoms += int(phantom.sum())
-    s.scans_with_phantom += int(phantom.any())
-    for k in range(det.count):
-        if det.quality[k] != "resolved":
+                out.within_blur += 1
+            sig = float(det.significance[k])
+        else:
+            r = blur_at(o.z_mm)
+            close = [i for i, (yb, zb) in enumerate(det.below_positions_mm)
+                     if abs(yb - o.y_mm) < r.transverse_mm
+                     and abs(1 / abs(zb) - 1 / abs(o.z_mm)) < r.depth_mm / o.z_mm**2]
+            sig = max((float(det.below_significance[i]) for i in close), default=np.nan)
+        out.truth_significance.append((sig, bool(hits.size)))
+    resolved = np.array([q == "resolved" for q in det.quality], dtype=bool)
+    # each reported object is assigned to the nearest true object it explains; a second
+    # one assigned to the same truth is a split
+    owner = np.full(n, -1)
+    for k in range(n):
+        js = np.nonzero(explains[k])[0]
+        if js.size:
+            owner[k] = int(js[np.argmin([abs(det.positions_mm[k, 0] - objects[j].y_mm)
+                                         for j in js])])
+    for j in range(len(objects)):
+        mine = np.nonzero(owner == j)[0]
+        if mine.size > 1:
+            best = mine[np.argmax(det.significance[mine])]
+            out.split += int(sum(resolved[k] for k in mine if k != best))
+    phantom = owner < 0
+    out.phantoms = int(phantom.sum())
+    out.scans_with_phantom = int(phantom.any())
+    for k in range(n):
+        if not resolved[k]:
             continue
-        if phantom[k] or det.brightness_rp[k] <= 0:
-            s.confidently_wrong += 1
+        if det.brightness_rp[k] <= 0:
+            out.wrong_sign += 1
+        elif phantom[k] and over[k].any():
+            out.excluded += 1
+        elif phantom[k]:
+            out.phantom_resolved += 1
+    s.add(out)
+    return {"truths": out.truths, "detected": out.detected, "within_blur": out.within_blur,
+            "phantoms": out.phantoms, "split": out.split,
+            "phantom_resolved": out.phantom_resolved, "wrong_sign": out.wrong_sign,
+            "excluded": out.excluded,
+            "truth_significance": [[sg, d] for sg, d in out.truth_significance],
+            "count": n, "quality": list(det.quality),
+            "positions_mm": det.positions_mm.tolist(),
+            "significance": det.significance.tolist()}
 
 
-def run_one(brdf: FlatlandBRDF, objects: list[PointObject], seed: int):
-    scene = HiddenScene(tuple(objects), Wall(-150.0, 150.0, brdf), d2_mm=100.0)
-    lf = scene.measured_field(np.linspace(-180.0, 180.0, 361), DOMAIN, 128)
+def render(brdf: FlatlandBRDF, objects: list[PointObject], cache: Path | None,
+           key: str) -> LightField2D:
+    """The noise-free measured field of a scene, from ``cache`` when it holds it."""
+    path = None if cache is None else cache / f"{key}.npy"
+    y = MEASURED_Y
+    if path is not None and path.exists():
+        from analysis.lightfield import theta_grid
+
+        return LightField2D(np.load(path), y, theta_grid(DOMAIN, N_THETA), DOMAIN, D2)
+    if objects:
+        scene = HiddenScene(tuple(objects), Wall(-150.0, 150.0, brdf), d2_mm=D2)
+        lf = scene.measured_field(y, DOMAIN, N_THETA)
+    else:
+        from analysis.lightfield import theta_grid
+
+        lf = LightField2D(np.zeros((y.size, N_THETA)), y, theta_grid(DOMAIN, N_THETA),
+                          DOMAIN, D2)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.save(path, lf.radiance)
+    return lf
+
+
+def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int):
+    """Seeded noise on ``lf``, reconstruction, widened detection: (detection, p̂)."""
     rng = np.random.default_rng(seed)
     noisy = lf.with_radiance(lf.radiance + rng.normal(0.0, NOISE, lf.shape))
-    rec = reconstruct(noisy, brdf, d2_mm=100.0, points_mm=WALL_POINTS)
+    rec = reconstruct(noisy, brdf, d2_mm=D2, points_mm=WALL_POINTS)
+    p_hat = effective_p_max(rec.regularization.filter_factors, rec.orders)
     det, _ = detect_widening(
-        rec.incident_field, z_mm=Z_GRID, y_mm=Y_GRID,
-        p_max=effective_p_max(rec.regularization.filter_factors, rec.orders),
+        rec.incident_field, z_mm=Z_GRID, y_mm=Y_GRID, p_max=p_hat,
         solvable_domain_rad=rec.solvable_domain_rad,
         filter_factors=rec.regularization.filter_factors,
         noise_power=rec.regularization.noise_power, min_measure_fraction=0.1)
-    return det
+    return det, p_hat, rec.solvable_domain_rad
+
+
+def blur_of(p_hat: float, solvable: tuple[float, float]):
+    """The theoretical resolution at depth z for a reconstruction with ``p_hat``."""
+    aperture = float(WALL_POINTS[-1] - WALL_POINTS[0])
+
+    def at(z: float):
+        return theoretical_resolution(p_hat, domain_rad=DOMAIN, distance_mm=abs(z),
+                                      aperture_mm=aperture, solvable_domain_rad=solvable)
+    return at
+
+
+def wall_blur(brdf: FlatlandBRDF, cache: Path | None, wname: str) -> float:
+    """Transverse blur at −200 mm behind this wall (p̂ of a one-object scan, seed 0)."""
+    one = scenes(10.0)["one"]
+    _, p_hat, solvable = locate(render(brdf, one, cache, f"{wname}__one"), brdf, 0)
+    return blur_of(p_hat, solvable)(-200.0).transverse_mm
+
+
+def detection_table(pairs: list[tuple[float, bool]]) -> list[str]:
+    """Markdown rows: detection probability of true objects by significance bin."""
+    rows = ["| significance (σ) | true objects | detected | probability |", "|---|---|---|---|"]
+    sig = np.array([p[0] for p in pairs], dtype=float)
+    hit = np.array([p[1] for p in pairs], dtype=bool)
+    none = np.isnan(sig)
+    if none.any():
+        rows.append(f"| none examined | {none.sum()} | {hit[none].sum()} | "
+                    f"{hit[none].mean():.2f} |")
+    for lo, hi in itertools.pairwise(SIGNIFICANCE_BINS):
+        m = ~none & (sig >= lo) & (sig < hi)
+        if m.any():
+            rows.append(f"| {lo:g} – {hi:g} | {m.sum()} | {hit[m].sum()} | "
+                        f"{hit[m].mean():.2f} |")
+    return rows
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=2)
-    ap.add_argument("--walls", choices=("reduced", "all"), default="reduced")
+    ap.add_argument("--empty-seeds", type=int, default=None,
+                    help="seeds of the empty scene (default --seeds; cheap: no render)")
+    ap.add_argument("--walls", nargs="*", default=None, help="wall names (default all)")
     ap.add_argument("--scenes", nargs="*", default=None, help="scene names (default all)")
-    ap.add_argument("--only-walls", nargs="*", default=None,
-                    help="wall names of the chosen set to run (default all of them)")
+    ap.add_argument("--cache", type=Path, default=None, help="folder for the renders")
+    ap.add_argument("--jsonl", type=Path, default=None,
+                    help="append one line per scan; scans already there are skipped")
+    ap.add_argument("--report", action="store_true",
+                    help="only tabulate the scans already in --jsonl (compute nothing)")
     args = ap.parse_args()
+    if args.report and args.jsonl is None:
+        ap.error("--report needs --jsonl")
+    done: dict[tuple[str, str, int], dict] = {}
+    if args.jsonl is not None and args.jsonl.exists():
+        for line in args.jsonl.read_text().splitlines():
+            rec = json.loads(line)
+            done[(rec["wall"], rec["scene"], rec["seed"])] = rec
     total = Score()
     print("| wall | scene | truths | detected | within blur | phantoms | scans w/ phantom "
-          "| confidently wrong | s/scan |")
+          "| confidently wrong (split/phantom/sign/excluded) | s/scan |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for wname, brdf in walls(args.walls).items():
-        if args.only_walls and wname not in args.only_walls:
+    for wname, brdf in walls().items():
+        if args.walls and wname not in args.walls:
             continue
-        for sname, objects in scenes(brdf).items():
+        blur = 10.0 if args.report else wall_blur(brdf, args.cache, wname)
+        for sname, objects in scenes(blur).items():
             if args.scenes and sname not in args.scenes:
                 continue
             s = Score()
-            for seed in range(1, args.seeds + 1):
-                t0 = time.process_time()
-                det = run_one(brdf, objects, seed)
-                s.seconds += time.process_time() - t0
-                score(det, objects, s)
-            for f in ("truths", "detected", "within_blur", "phantoms", "scans_with_phantom",
-                      "confidently_wrong", "scans", "seconds"):
-                setattr(total, f, getattr(total, f) + getattr(s, f))
+            lf = None
+            n_seeds = (args.empty_seeds if sname == "empty" and args.empty_seeds is not None
+                       else args.seeds)
+            for seed in range(1, n_seeds + 1):
+                rec = done.get((wname, sname, seed))
+                if rec is None and args.report:
+                    continue
+                if rec is None:
+                    if lf is None:
+                        lf = render(brdf, objects, args.cache, f"{wname}__{sname}")
+                    t0 = time.process_time()
+                    det, p_hat, solvable = locate(lf, brdf, seed)
+                    rec = score(det, objects, blur_of(p_hat, solvable), Score())
+                    rec.update(wall=wname, scene=sname, seed=seed, p_hat=p_hat,
+                               seconds=time.process_time() - t0)
+                    if args.jsonl is not None:
+                        with args.jsonl.open("a") as f:
+                            f.write(json.dumps(rec) + "\n")
+                s.add(from_record(rec))
+            if not s.scans:
+                continue
+            total.add(s)
             print(f"| {wname} | {sname} | {s.truths} | {s.detected} | {s.within_blur} | "
-                  f"{s.phantoms} | {s.scans_with_phantom}/{s.scans} | {s.confidently_wrong} | "
-                  f"{s.seconds / s.scans:.1f} |", flush=True)
+                  f"{s.phantoms} | {s.scans_with_phantom}/{s.scans} | {s.confidently_wrong} "
+                  f"({s.split}/{s.phantom_resolved}/{s.wrong_sign}/{s.excluded}) | "
+                  f"{s.seconds / max(s.scans, 1):.1f} |", flush=True)
+    summary(total)
+
+
+def from_record(rec: dict) -> Score:
+    """A scan's :class:`Score` from its stored line."""
+    return Score(truths=rec["truths"], detected=rec["detected"],
+                 within_blur=rec["within_blur"], phantoms=rec["phantoms"],
+                 scans_with_phantom=int(rec["phantoms"] > 0), split=rec["split"],
+                 phantom_resolved=rec["phantom_resolved"], wrong_sign=rec["wrong_sign"],
+                 excluded=rec["excluded"], scans=1, seconds=rec["seconds"],
+                 truth_significance=[(float("nan") if sg is None else float(sg), bool(d))
+                                     for sg, d in rec["truth_significance"]])
+
+
+def summary(total: Score) -> None:
+    within = total.within_blur / max(total.detected, 1)
     print(f"\ntotal: {total.detected}/{total.truths} detected, {total.within_blur} within the "
-          f"blur, {total.phantoms} phantoms in {total.scans_with_phantom}/{total.scans} scans, "
-          f"{total.confidently_wrong} confidently wrong; CPU {total.seconds:.0f} s")
+          f"blur ({100 * within:.1f} % of those detected), {total.phantoms} phantoms in "
+          f"{total.scans_with_phantom}/{total.scans} scans "
+          f"({100 * total.scans_with_phantom / max(total.scans, 1):.2f} % per scan), "
+          f"{total.confidently_wrong} confidently wrong (split {total.split}, phantom "
+          f"{total.phantom_resolved}, wrong sign {total.wrong_sign}, excluded truth "
+          f"{total.excluded}); CPU {total.seconds:.0f} s\n")
+    print("\n".join(detection_table(total.truth_significance)))
 
 
 if __name__ == "__main__":

@@ -363,8 +363,9 @@ class Detection:
         within one inverse-depth resolution), "two_estimates_agree" (one of them does not),
         "unresolved" (no two agree, the interval runs out of the searched region, or the
         detection is a blend wider than one point's response), "extended" (several point
-        components within :data:`EXTENDED_CELLS` resolution cells of each other: one object
-        larger than the blur, its size in ``extent_mm``)
+        components within :data:`EXTENDED_RANGE` resolution cells whose rays a uniform
+        segment explains as well as two points do, :mod:`.extended`: one object larger
+        than the blur, its size in ``extent_mm``)
     depth_estimates_mm : (count, 3) — z from the depth filter, the matched filter and the
         RP stack (the evidence behind the flag)
     depth_open : (count, 2) bool — the (far, near) end of the interval is open: the searched
@@ -383,6 +384,9 @@ class Detection:
         a uniform object with the same weighted spread as its point components (√12 × their
         standard deviation; 0 for a point), each uncertain by the blur
     components_mm : tuple of (n_k, 2) — the (y, z) of the point components of each object
+    extended_tests : tuple of (y₁, z₁, y₂, z₂, Δ, ln n_eff) — each pair of components tested
+        for being one extended object (:func:`.extended.one_or_two`): its statistic Δ and
+        the bound it is compared with (Δ ≤ bound: one extended object)
     """
 
     count: int
@@ -405,16 +409,14 @@ class Detection:
     notes: tuple[str, ...] = ()
     extent_mm: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
     components_mm: tuple[NDArray[np.float64], ...] = ()
+    extended_tests: tuple[tuple[float, float, float, float, float, float], ...] = ()
 
 
-#: Components of one fit closer than this many resolution cells to each other (across in
-#: δy, in depth in δz/D²) are one extended object (quality "extended") with a size.  A
-#: 15 mm bar (2 δy) on the emulated bench fits as two points 1.10 δy apart; two points
-#: 1.13 δy apart behind the glossy paper (tests/analysis/lightfield/test_validation.py)
-#: fit 1.13 δy apart and must stay two.  Spacing alone cannot tell the two cases apart
-#: closer than this: a bar narrower than ≈ 1.9 δy is reported as two points, two points
-#: nearer than 1.12 δy as one extended object — either is flagged, neither is a phantom.
-EXTENDED_CELLS = 1.12
+#: Components closer than this many resolution cells to each other (across in δy, in
+#: depth in δz/D²) are tested for being one extended object (:mod:`.extended`: a uniform
+#: segment against two points, by the data).  Beyond two cells the point responses (main
+#: lobe ±1 δy) no longer overlap, so the two are separate whatever their shape.
+EXTENDED_RANGE = 2.0
 
 #: Systematic error of the point-response model, as a fraction of the response a bright
 #: object leaks into a candidate's (``a_j ⟨K_k, K_j⟩/⟨K_k, K_k⟩``).  On renderer data (3 mm
@@ -982,20 +984,21 @@ def detect_objects(
                          f"the residual: part of the light comes from outside the searched "
                          f"range or from extended objects; depths are flagged unresolved "
                          f"(widen the z range)")
-    # one extended object, not several "resolved" points: components closer than
-    # EXTENDED_CELLS resolution cells to each other (a 15 mm bar, twice the blur across,
-    # fits as two points 1.1 δy apart) are one object with a size
+    # one extended object, not several "resolved" points: each pair of components whose
+    # responses overlap (within EXTENDED_RANGE cells) is one object larger than the blur
+    # when a uniform segment explains its rays as well as two points do, by the Bayesian
+    # information criterion (.extended; a 15 mm bar, twice the blur across, fits as two
+    # points 1.1 δy apart)
+    from .extended import extended_groups
+
     cands_pos = [(c.y, c.z) for c in cands]
     weight = (np.asarray(amps, dtype=float) if noise is not None
               else np.asarray([float(c.model.num.max()) for c in cands]))
-    groups: list[list[int]] = []
-    for k, c in enumerate(cands):
-        home = next((gr for gr in groups
-                     if any(near(c, cands[j], EXTENDED_CELLS) for j in gr)), None)
-        if home is None:
-            groups.append([k])
-        else:
-            home.append(k)
+    pairs = [(i, j) for i in range(len(cands)) for j in range(i + 1, len(cands))
+             if near(cands[i], cands[j], EXTENDED_RANGE)]
+    groups, pair_tests = extended_groups(g_rays, lf_wall, use, phi,
+                                         np.asarray(cands_pos, dtype=float).reshape(-1, 2),
+                                         pairs, n_eff=n_eff, bounds=box)
     members = [[(cands[j].y, cands[j].z) for j in gr] for gr in groups]
     merged, extent, group_sig = [], [], []
     for gr in groups:
@@ -1010,11 +1013,13 @@ def detect_objects(
                             (any(cands[j].open_ends[0] for j in gr),
                              any(cands[j].open_ends[1] for j in gr)))
         merged.append(c0)
-        # width of the uniform object the components sample: √12 × their weighted spread
-        # (two equal points fitted to a uniform bar of width W sit W/√3 apart)
+        # width of the uniform object the components sample: for a pair the fitted
+        # segment's length, for more √12 × their weighted spread (two equal points fitted
+        # to a uniform bar of width W sit W/√3 apart)
         spread = [float(np.sqrt(12.0 * np.average((v - np.average(v, weights=w)) ** 2,
                                                   weights=w))) for v in (ys_, zs_)]
-        extent.append((spread[0], spread[1]))
+        test = pair_tests.get((gr[0], gr[1])) if len(gr) == 2 else None
+        extent.append(test.size_mm if test is not None else (spread[0], spread[1]))
         if noise is not None:
             sd = weight[gr] / signif[gr]
             group_sig.append(float(weight[gr].sum() / np.sqrt(np.sum(sd**2))))
@@ -1060,4 +1065,6 @@ def detect_objects(
                                       dtype=float).reshape(m, 2),
         below_significance=np.asarray([sg for _, sg in below], dtype=float).reshape(m),
         notes=tuple(notes),
+        extended_tests=tuple((*cands_pos[i], *cands_pos[j], t.statistic, t.penalty)
+                             for (i, j), t in pair_tests.items()),
     )

@@ -144,8 +144,10 @@ def _noise_disagreement(sigma_tail: float, sigma_rows: float, n_theta: int, *,
         lobe = (f"the wall's specular lobe ({np.degrees(specular_width_rad):.3g}°) is "
                 f"narrower than one angle cell ({np.degrees(cell_rad):.3g}°) at the camera's "
                 f"pixel limit, " if specular_width_rad < cell_rad else "")
-        return (head + f"n_theta {n_theta} already samples about one camera pixel per angle "
-                f"(at most {n_max}): {lobe}the camera's angular resolution of the wall is the "
-                f"limit, not n_theta — trust positions, not fine angular detail",)
+        reach = ("already samples about one camera pixel per angle" if n_max >= n_theta
+                 else "asks for angle cells narrower than a camera pixel")
+        return (head + f"n_theta {n_theta} {reach} (at most {n_max}): {lobe}the camera's "
+                f"angular resolution of the wall is the limit, not n_theta — more angles "
+                f"cannot help; trust positions, not fine angular detail",)
     hint = f" (at most {n_max}, one camera pixel per angle)" if n_max is not None else ""
     return (head + f"raise n_theta (now {n_theta}{hint}) until the two agree",)

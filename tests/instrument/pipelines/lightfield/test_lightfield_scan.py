@@ -466,6 +466,11 @@ def test_the_n_theta_note_recommends_only_what_the_camera_allows():
     assert "raise n_theta" not in at_limit
     assert "angular resolution of the wall is the limit" in at_limit
     assert "specular lobe (0.01°)" in at_limit
+    # beyond the pixel limit (the near-mirror scan: 0.83 pixel per cell) it says so, and
+    # still asks for nothing more
+    (beyond,) = _noise_disagreement(1.9e-2, 4.7e-3, 1024, pixels_per_cell=0.835)
+    assert "narrower than a camera pixel (at most 855)" in beyond
+    assert "raise n_theta" not in beyond and "more angles cannot help" in beyond
     (coarse,) = _noise_disagreement(1e-3, 1e-4, 8, pixels_per_cell=128.0)
     assert "raise n_theta (now 8 (at most 1024" in coarse
     assert _noise_disagreement(1e-4, 1e-4, 128, pixels_per_cell=8.0) == ()

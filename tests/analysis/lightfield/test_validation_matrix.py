@@ -1,0 +1,136 @@
+"""The localisation validation matrix, reduced (benchmarks/bench_lightfield_validation.py).
+
+Its scoring is checked on hand-made detections (each kind of confident error counted as
+that kind), then a reduced matrix runs on renderer scenes: no scan may hold a confidently
+wrong object, and the objects bright enough to be found must be found within the blur.
+The matrix (seven walls, eleven scenes; the seeds run so far) is in BENCHMARKS.md
+(lightfield_validation).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.lightfield import Resolution
+from analysis.lightfield.localize import Detection, FocalStack
+from hw_mocks.sim.lightfield_scene import PointObject
+
+BENCH = Path(__file__).parents[3] / "benchmarks" / "bench_lightfield_validation.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_lightfield_validation", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    yield module
+    sys.modules.pop(spec.name, None)
+
+
+def _det(positions, intervals, quality, brightness, significance=None) -> Detection:
+    n = len(positions)
+    res = Resolution(8.0, 30.0, 0.04, 15.0, 200.0, 200.0)
+    empty = np.zeros((0, 0))
+    stack = FocalStack(np.zeros(0), np.zeros(0), empty, empty, empty, (-0.5, 0.5))
+    return Detection(
+        count=n, positions_mm=np.asarray(positions, float).reshape(n, 2),
+        brightness_rp=np.asarray(brightness, float), brightness_conventional=np.zeros(n),
+        resolutions=(res,) * n, stack=stack, depth_profiles=np.zeros((n, 0)),
+        depth_interval_mm=np.asarray(intervals, float).reshape(n, 2), quality=tuple(quality),
+        depth_estimates_mm=np.zeros((n, 3)), depth_open=np.zeros((n, 2), bool),
+        significance=np.asarray(significance if significance is not None else [10.0] * n),
+        extent_mm=np.zeros((n, 2)), below_positions_mm=np.array([[40.0, -200.0]]),
+        below_significance=np.array([3.1]))
+
+
+def _blur(z):
+    return Resolution(8.0, 30.0, 0.04, 15.0, abs(z), 200.0)
+
+
+def test_each_kind_of_confident_error_is_counted_as_itself(bench):
+    truth = [PointObject(0.0, -200.0, 1.5, 1.0), PointObject(40.0, -200.0, 1.5, 0.01)]
+    cases = {
+        # right: one object found, the dim one below the threshold (its 3.1σ recorded)
+        "right": (_det([(1.0, -205.0)], [(-240, -170)], ["resolved"], [0.3]),
+                  dict(detected=1, within_blur=1, split=0, phantom_resolved=0,
+                       wrong_sign=0, excluded=0, phantoms=0)),
+        "split": (_det([(1.0, -205.0), (-3.0, -195.0)], [(-240, -170), (-230, -160)],
+                       ["resolved", "resolved"], [0.3, 0.1], [10.0, 5.0]),
+                  dict(detected=1, split=1, phantoms=0)),
+        "phantom": (_det([(1.0, -205.0), (-80.0, -300.0)], [(-240, -170), (-350, -260)],
+                         ["resolved", "resolved"], [0.3, 0.1]),
+                    dict(phantoms=1, phantom_resolved=1)),
+        "flagged phantom": (_det([(1.0, -205.0), (-80.0, -300.0)],
+                                 [(-240, -170), (-350, -260)],
+                                 ["resolved", "unresolved"], [0.3, 0.1]),
+                            dict(phantoms=1, phantom_resolved=0)),
+        "wrong sign": (_det([(1.0, -205.0)], [(-240, -170)], ["resolved"], [-0.3]),
+                       dict(wrong_sign=1)),
+        "excluded": (_det([(1.0, -400.0)], [(-420, -380)], ["resolved"], [0.3]),
+                     dict(detected=0, excluded=1, phantoms=1)),
+    }
+    for name, (det, want) in cases.items():
+        s = bench.Score()
+        bench.score(det, truth, _blur, s)
+        for field, value in want.items():
+            assert getattr(s, field) == value, (name, field, getattr(s, field))
+        assert s.scans == 1 and s.truths == 2
+    s = bench.Score()
+    bench.score(cases["right"][0], truth, _blur, s)
+    assert s.truth_significance == [(10.0, True), (3.1, False)]
+
+
+def test_detection_table_bins_by_significance(bench):
+    rows = bench.detection_table([(np.nan, False), (2.5, False), (4.5, True), (4.2, False),
+                                  (20.0, True)])
+    assert "| none examined | 1 | 0 | 0.00 |" in rows
+    assert "| 4 – 5 | 2 | 1 | 0.50 |" in rows
+    assert "| 10 – inf | 1 | 1 | 1.00 |" in rows
+
+
+def _run(bench, wall: str, scene: str, seeds) -> object:
+    brdf = bench.walls()[wall]
+    blur = bench.wall_blur(brdf, None, wall)
+    objects = bench.scenes(blur)[scene]
+    lf = bench.render(brdf, objects, None, "")
+    s = bench.Score()
+    for seed in seeds:
+        det, p_hat, solvable = bench.locate(lf, brdf, seed)
+        bench.score(det, objects, bench.blur_of(p_hat, solvable), s)
+    return s
+
+
+@pytest.mark.parametrize(("wall", "scene"), [
+    ("brushed_metal", "empty"),
+    ("brushed_metal", "three"),
+    # a disc 100 mm from the wall, larger than the blur there: its residual on its own ray
+    # fan made a phantom at 4.5σ until each amplitude was judged on its own rays
+    ("brushed_metal", "near"),
+    ("coated_paper_glossy", "ratio_10"),
+])
+def test_reduced_matrix_has_no_confident_error_and_finds_what_is_bright(bench, wall, scene):
+    s = _run(bench, wall, scene, seeds=(1, 2))
+    assert s.confidently_wrong == 0
+    assert s.phantoms == 0
+    assert s.detected == s.truths and s.within_blur == s.detected
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("wall", "scene"), [
+    ("coated_paper_matte", "one"),
+    ("coated_paper_matte", "pair_2blur"),
+    ("coated_paper_matte", "ratio_100"),
+    ("brushed_metal_0.01deg", "one"),
+])
+def test_matrix_walls_have_no_confident_error(bench, wall, scene):
+    """The matte and the near-mirror ends of the matrix (BENCHMARKS.md)."""
+    s = _run(bench, wall, scene, seeds=(1, 2))
+    assert s.confidently_wrong == 0
+    assert s.phantoms == 0
+    assert s.within_blur == s.detected
