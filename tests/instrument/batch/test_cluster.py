@@ -125,6 +125,7 @@ def _kill_a_busy_worker(client, done: list, killed: list, stop: threading.Event)
         time.sleep(0.02)
 
 
+@pytest.mark.slow  # a cluster of its own per case, a kill and reports: 80 s on 2 cores
 @pytest.mark.timeout(900)  # 80 s on a quiet 2-core box: cluster start, kill, retries
 @pytest.mark.parametrize("retries", [3, 0], ids=["retried", "reported"])
 def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries):
