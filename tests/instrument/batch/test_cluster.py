@@ -188,6 +188,7 @@ def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries)
         assert not list(results_dir(o.run, "fit").glob(".*.tmp"))
 
 
+@pytest.mark.slow  # a second cluster (the command starts its own): ~55 s of CPU on 2 cores
 def test_cli_batch_on_a_local_cluster_prints_the_dashboard_and_writes_the_table(
         runs_dir, serial, tmp_path, capsys):
     folder = fresh_copy(runs_dir, tmp_path / "runs")
