@@ -145,12 +145,39 @@ class Rendered:
     plan: Plan
 
 
+#: Noise-free renders of the default scene, kept per test process: the same (setup, sample)
+#: scan is rendered by several test modules (the fit report's, the batch's, the reduction's,
+#: the run browser's), a few seconds of CPU each time, and pytest-xdist may run one
+#: module's tests on several workers, each building the module's fixtures again.
+_RENDERED: dict[tuple[ScanSetup, Sample], Rendered] = {}
+
+
 def render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None,
            plan: Plan | None = None, cache: dict | None = None) -> Rendered:
     """Render every plan point of ``setup`` (or of ``plan``) for ``sample`` (noise-free);
     ``scene`` replaces the default scene (the sample alone) e.g. to add an instrument
     signature. ``cache`` (a dict kept by the caller) reuses the frames of axis targets
-    rendered before for the same sample and setup."""
+    rendered before for the same sample and setup.
+
+    A render of the default scene and plan is computed once per process and shared (its
+    arrays are read-only, so no caller can change another's): the render is deterministic,
+    the noise is added later, per seed."""
+    if scene is None and plan is None and cache is None:
+        key = (setup, sample)
+        if key not in _RENDERED:
+            _RENDERED[key] = _read_only(_render(setup, sample))
+        return _RENDERED[key]
+    return _render(setup, sample, scene=scene, plan=plan, cache=cache)
+
+
+def _read_only(r: Rendered) -> Rendered:
+    r.angles_rad.setflags(write=False)
+    r.photon_rate.setflags(write=False)
+    return r
+
+
+def _render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None = None,
+            plan: Plan | None = None, cache: dict | None = None) -> Rendered:
     plan = plan if plan is not None else setup.plan()
     if scene is None:
         scene = GoniometerScene(brdf=brdf_from_model(sample.model, sample.params),

@@ -44,6 +44,7 @@ def _rows(folder: Path, analysis: str) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow  # five localisations and reconstructions with figures: about 50 s of CPU
 def test_batch_reconstruct_and_locate_give_the_single_run_answers(lightfield_run, tmp_path,
                                                                   capsys):
     run = lightfield_run

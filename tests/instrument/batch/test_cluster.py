@@ -125,6 +125,7 @@ def _kill_a_busy_worker(client, done: list, killed: list, stop: threading.Event)
         time.sleep(0.02)
 
 
+@pytest.mark.slow  # a cluster of its own per case, a kill and reports: 80 s on 2 cores
 @pytest.mark.timeout(900)  # 80 s on a quiet 2-core box: cluster start, kill, retries
 @pytest.mark.parametrize("retries", [3, 0], ids=["retried", "reported"])
 def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries):
@@ -187,6 +188,7 @@ def test_a_worker_killed_mid_batch(runs_dir, options, serial, tmp_path, retries)
         assert not list(results_dir(o.run, "fit").glob(".*.tmp"))
 
 
+@pytest.mark.slow  # a second cluster (the command starts its own): ~55 s of CPU on 2 cores
 def test_cli_batch_on_a_local_cluster_prints_the_dashboard_and_writes_the_table(
         runs_dir, serial, tmp_path, capsys):
     folder = fresh_copy(runs_dir, tmp_path / "runs")

@@ -4,13 +4,14 @@ already analysed runs, the results file it leaves, the summary table and the com
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 import shutil
 import subprocess
 import sys
 import threading
-import time
 
 import h5py
 import numpy as np
@@ -40,6 +41,7 @@ from instrument.run.results import (
     run_lock,
 )
 from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run, parse_cli
+from tests.waiting import EVENT_TIMEOUT_S
 
 
 @pytest.fixture(scope="module")
@@ -336,22 +338,41 @@ def test_a_run_fitted_alone_is_skipped_by_the_batch_and_both_write_the_same_file
     assert run_task("fit", run, _options("--no-cv", "--criterion", "aic")).status == "analysed"
 
 
+class _Console(io.StringIO):
+    """A console that sets ``seen`` once ``text`` has been printed to it."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__()
+        self.text, self.seen = text, threading.Event()
+
+    def write(self, s: str) -> int:
+        n = super().write(s)
+        if self.text in self.getvalue():
+            self.seen.set()
+        return n
+
+
 def test_a_single_run_command_waits_for_the_batch_holding_the_run(runs, capsys):
     run = runs / "run-01.h5"
     order: list[str] = []
     held = threading.Event()
+    console = _Console("waiting: another analysis of run-01.h5")
 
     def batch_task_holding_the_run() -> None:
         with run_lock(run):
             held.set()
-            time.sleep(0.5)  # long enough for the command below to reach the lock
+            # released only once the command has found the lock taken and said so: the
+            # command cannot pass the lock before it is free, however the threads run
+            assert console.seen.wait(EVENT_TIMEOUT_S), "the command never said it waits"
             order.append("lock released")
 
     t = threading.Thread(target=batch_task_holding_the_run)
     t.start()
-    assert held.wait(30)
-    assert main(["fit", str(run), "--no-cv"]) == 0
+    assert held.wait(EVENT_TIMEOUT_S)
+    with contextlib.redirect_stdout(console):
+        assert main(["fit", str(run), "--no-cv"]) == 0
     order.append("fit written")
-    t.join(30)
+    t.join(EVENT_TIMEOUT_S)
     assert order == ["lock released", "fit written"]
+    assert console.seen.is_set()
     assert read_record(run, "fit")["status"] == "analysed"

@@ -394,6 +394,7 @@ def test_per_wavelength_fit_needs_a_wavelength_axis(glossy_run, capsys) -> None:
     assert "[photodiode] needs responsivity_a_per_w" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # a 3-θi scan to θi = 80° rendered for one sharp sample: 40 s
 def test_the_comparison_table_counts_only_the_fitted_readings(tmp_path, capsys) -> None:
     """A sharp lobe (GGX α = 0.05) loses its peak readings to clipping: they are left out
     of the fits, so the comparison table's χ²/dof uses the same degrees of freedom as the
