@@ -8,7 +8,7 @@ points 1.13 δy apart (ADR 0032).  The data can, because the two hypotheses pred
 different rays beyond their second moment:
 
 * H₂, two points: ``a₁ K(θ − θ*(c; P₁)) + a₂ K(θ − θ*(c; P₂))`` (six parameters, the
-  model the localiser fits, :func:`.localize._fit_points`);
+  model the localiser fits, :func:`.ray_fit.fit_points`);
 * H₁, one uniform segment from E₁ to E₂ (a bar; across, in depth or oblique):
   ``a ∫₀¹ K(θ − θ*(c; E₁ + t (E₂ − E₁))) dt`` (five parameters; the integral by the
   midpoint rule on :data:`SEGMENT_NODES` nodes, its error ≤ (L/δy)²/(24 n²) of the
@@ -40,7 +40,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .field import LightField2D
-from .localize import _fit_points, _ray_model
+from .ray_fit import fit_points as _fit_points
+from .ray_fit import ray_model as _ray_model
 
 __all__ = ["SEGMENT_NODES", "OneOrTwo", "extended_groups", "one_or_two"]
 

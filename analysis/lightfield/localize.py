@@ -56,6 +56,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from .field import LightField2D, LightField4D
 from .propagate import project_4d, propagate_4d, sample_columns
+from .ray_fit import JointFit as _JointFit
+from .ray_fit import fit_points as _fit_points
+from .ray_fit import ray_model as _ray_model
 
 __all__ = [
     "BLEND_WIDTH_RATIO",
@@ -505,98 +508,6 @@ def point_response(
     coef = phi[None, :] * np.exp(-1j * p[None, :] * omega * (t_star[:, None] - centre))
     g = synthesize(coef, axis=-1).real / (b - a)
     return lf_wall.with_radiance(g / np.cos(th)[None, :])
-
-
-@dataclass(frozen=True)
-class _JointFit:
-    """Least-squares fit of a sum of point responses to the wall's rays (see
-    :func:`_fit_points`): positions (K, 2) as (y, z) in mm, amplitudes (K,) in radiance
-    units, the residual sum of squares and the number of rays fitted."""
-
-    positions: NDArray
-    amplitudes: NDArray
-    rss: float
-    n_rays: int
-
-
-def _ray_model(
-    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray, pos: NDArray
-) -> tuple[NDArray, NDArray, NDArray]:
-    """``g = L cos θ`` of unit point responses on the rays in the solvable domain, and its
-    derivatives in y and z.
-
-    Row c sees a point at (y, z) at ``θ* = atan(u)``, ``u = (c − y)/(−z)``; its filtered
-    delta ``K(θ − θ*)`` (:func:`point_response` without the obliquity) is a Fourier
-    series in θ*, so ``∂K/∂θ*`` is the same series times ``−i p ω``; the chain rule adds
-    ``∂θ*/∂y = (1/z)/(1 + u²)`` and ``∂θ*/∂z = ((c − y)/z²)/(1 + u²)``.
-
-    Returns three (K, R, n_use) arrays: responses, ∂/∂y, ∂/∂z.
-    """
-    from .spectral import fourier_orders, synthesize
-
-    th = lf_wall.theta_rad
-    a, b = lf_wall.domain_rad
-    omega = 2 * np.pi / (b - a)
-    p = fourier_orders(th.size)
-    c = np.asarray(lf_wall.y_mm, dtype=float)
-    yk, zk = pos[:, 0][:, None], pos[:, 1][:, None]
-    u = (c[None, :] - yk) / (-zk)
-    t_star = np.arctan(u)
-    coef = phi * np.exp(-1j * p * omega * (t_star[..., None] - 0.5 * (a + b)))
-    resp = synthesize(coef, axis=-1).real[..., use] / (b - a)
-    d_t = synthesize(coef * (-1j * p * omega), axis=-1).real[..., use] / (b - a)
-    w = 1.0 / (1.0 + u**2)
-    return resp, d_t * (w / zk)[..., None], d_t * (w * (c[None, :] - yk) / zk**2)[..., None]
-
-
-def _fit_points(
-    g: NDArray, lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray, pos: NDArray,
-    bounds: tuple[tuple[float, float], tuple[float, float]],
-) -> _JointFit:
-    """Joint least squares of K point responses with free (y, z) and amplitude.
-
-    Minimises ``Σ_{c, θ ∈ [A, B]} (g(c, θ) − Σ_k a_k K(θ − θ*_k(c)))²`` over the rays of
-    the solvable domain — the model whose one-source statistic is the matched filter
-    (module doc) — by trust-region least squares (scipy ``least_squares``, analytic
-    Jacobian from :func:`_ray_model`), started from ``pos`` (K, 2) with the linear
-    least-squares amplitudes there.  ``g`` (R, n_use) is the data on those rays;
-    ``bounds`` the (y, z) box of the searched grid.
-    """
-    from scipy.optimize import least_squares
-
-    k = pos.shape[0]
-    flat = g.ravel()
-    (ylo, yhi), (zlo, zhi) = bounds
-    start = np.column_stack([np.clip(pos[:, 0], ylo, yhi), np.clip(pos[:, 1], zlo, zhi)])
-    r0, _, _ = _ray_model(lf_wall, use, phi, start)
-    amp0 = np.linalg.lstsq(r0.reshape(k, -1).T, flat, rcond=None)[0]
-
-    def unpack(x: NDArray) -> tuple[NDArray, NDArray]:
-        return x[:k], x[k:].reshape(k, 2)
-
-    def resid(x: NDArray) -> NDArray:
-        amp, p_ = unpack(x)
-        r, _, _ = _ray_model(lf_wall, use, phi, p_)
-        return np.tensordot(amp, r, axes=1).ravel() - flat
-
-    def jac(x: NDArray) -> NDArray:
-        amp, p_ = unpack(x)
-        r, dy, dz = _ray_model(lf_wall, use, phi, p_)
-        cols = np.empty((flat.size, 3 * k))
-        cols[:, :k] = r.reshape(k, -1).T
-        cols[:, k::2] = (amp[:, None, None] * dy).reshape(k, -1).T
-        cols[:, k + 1::2] = (amp[:, None, None] * dz).reshape(k, -1).T
-        return cols
-
-    lo = np.concatenate([np.full(k, -np.inf), np.tile([ylo, zlo], k)])
-    hi = np.concatenate([np.full(k, np.inf), np.tile([yhi, zhi], k)])
-    x0 = np.concatenate([amp0, start.ravel()])
-    # inverse-depth scale: z moves ≈ (D/δy)× further than y for the same misfit
-    scale = np.concatenate([np.maximum(np.abs(amp0), 1e-12), np.tile([1.0, 10.0], k)])
-    sol = least_squares(resid, x0, jac=jac, bounds=(lo, hi), x_scale=scale, max_nfev=40,
-                        ftol=1e-6, xtol=1e-5, tr_solver="lsmr")
-    amp, p_ = unpack(sol.x)
-    return _JointFit(p_.copy(), amp.copy(), float(np.sum(sol.fun**2)), flat.size)
 
 
 @dataclass(frozen=True)

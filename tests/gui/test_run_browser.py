@@ -34,6 +34,7 @@ def _select(qtbot, browser, run_id):
                     and browser.details.provenance["run id"] == run_id, timeout=60000)
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_resume_an_interrupted_run_from_the_browser(qtbot, make_window, fast_bench_file,
                                                    tmp_path):
     bench = fast_bench_file()

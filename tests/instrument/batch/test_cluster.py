@@ -83,6 +83,7 @@ def _same_answer(o: Outcome, ref: Outcome) -> None:
                                                        ref.sample)
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_two_workers_give_the_serial_answers_and_report_a_bad_run(client, runs_dir, options,
                                                                   serial, tmp_path):
     folder = fresh_copy(runs_dir, tmp_path / "runs")

@@ -96,6 +96,7 @@ def test_a_task_analyses_a_run_as_the_single_run_command_does(runs):
         assert "analysis" not in f["entry"]
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_a_rerun_skips_what_was_analysed_with_the_same_options(runs):
     opts = _options("--no-cv")
     first = run_serial("fit", sorted(runs.glob("run-*.h5")), opts, report=False)
@@ -215,6 +216,7 @@ def test_summary_csv_reads_back_value_for_value_and_html_names_every_run(tmp_pat
     assert all(n in text for n in ("a.h5", "b.h5", "c.h5", "1 failed", "a &lt;b&gt; flag"))
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_cli_batch_fit_here_then_again(runs, tmp_path, capsys):
     argv = ["batch", "fit", str(runs / "run-*.h5"), str(runs / "flat.h5"), "--no-cv",
             "--workers", "0", "--no-report", "--summary-dir", str(tmp_path / "s")]
@@ -308,6 +310,7 @@ def _layout(path) -> dict[str, tuple]:
     return out
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_a_run_fitted_alone_is_skipped_by_the_batch_and_both_write_the_same_file(runs,
                                                                                 tmp_path,
                                                                                 capsys):
@@ -352,6 +355,7 @@ class _Console(io.StringIO):
         return n
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_a_single_run_command_waits_for_the_batch_holding_the_run(runs, capsys):
     run = runs / "run-01.h5"
     order: list[str] = []

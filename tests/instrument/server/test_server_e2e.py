@@ -94,6 +94,7 @@ def test_a_queue_of_three_plans_runs_in_order_and_two_clients_watch_it(
         w.close()
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 @pytest.mark.timeout(900)
 def test_kill_9_of_the_server_mid_run_then_restart_and_resume_loses_nothing(
         bench_file, start_server, tmp_path):
@@ -182,6 +183,7 @@ def test_a_fault_on_the_emulated_bench_reaches_every_client_and_an_operator_answ
         assert flags[row] == 1 and (flags == 1).sum() == 1
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 @pytest.mark.timeout(900)
 def test_clients_that_stall_or_disconnect_change_nothing_for_the_run(bench_file,
                                                                       start_server):
@@ -207,6 +209,7 @@ def test_clients_that_stall_or_disconnect_change_nothing_for_the_run(bench_file,
     w.close()
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 @pytest.mark.timeout(900)
 def test_pause_now_stops_at_once_and_resume_continues_the_same_file(bench_file,
                                                                      start_server):

@@ -171,6 +171,7 @@ def test_scan_records_one_light_field_row_per_stage_position(scan_run):
         assert not e["data/frame_saturated"][()].any()
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan_run,
                                                                            capsys):
     raw = scan_run.read_bytes()
