@@ -180,7 +180,8 @@ def test_rp_refocusing_brightness_equal_where_conventional_is_not():
 
 
 # 18 and 20 mm were the failing separations; the rest of the sweep is slow-marked
-@pytest.mark.parametrize("sep", [pytest.param(16.0, marks=pytest.mark.slow), 18.0,
+@pytest.mark.parametrize("sep", [pytest.param(16.0, marks=pytest.mark.slow),
+                                 pytest.param(18.0, marks=pytest.mark.slow),
                                  pytest.param(20.0, marks=pytest.mark.slow),
                                  pytest.param(22.0, marks=pytest.mark.slow),
                                  pytest.param(24.0, marks=pytest.mark.slow)])

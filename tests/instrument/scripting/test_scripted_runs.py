@@ -144,6 +144,9 @@ import os, signal, sys
 from instrument import open_bench, plans
 from instrument.run.events import PointCompleted
 
+# as at a console: a test runner's worker may pass SIGINT on ignored to its children
+signal.signal(signal.SIGINT, signal.default_int_handler)
+
 def interrupt_once(ev, sent=[]):
     if isinstance(ev, PointCompleted) and not sent:
         sent.append(ev)

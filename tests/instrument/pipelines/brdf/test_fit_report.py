@@ -151,6 +151,7 @@ def test_cosine_corrected_and_checks(glossy_run) -> None:
     assert np.all((d > 0.3) & (d < 1.0))
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_bootstrap_sigma_checks_the_covariance(glossy_run, tmp_path, capsys) -> None:
     red = reduce_run(glossy_run)
     res = analyse(red.points, ["lambert+ggx"], run_cv=False, n_bootstrap=60, seed=5)
@@ -298,6 +299,7 @@ def test_run_reduction_records_the_receiver(glossy_run) -> None:
     assert np.all(np.abs(ratio - 1) < 1e-3) and np.ptp(ratio) > 5e-5
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_cli_fit_receiver_options_reach_the_reduction(glossy_run, tmp_path, capsys) -> None:
     out = tmp_path / "r"
     base = ["fit", str(glossy_run), "--out", str(out), "--models", "lambert+ggx", "--no-cv"]
@@ -332,6 +334,7 @@ def test_report_panels_merge_jittered_incidence_and_keep_out_of_plane_points_off
     assert _in_plane(pts).tolist() == [True, True, True, False, True]
 
 
+@pytest.mark.slow  # run by CI after the default run (ADR 0021)
 def test_a_fit_that_did_not_converge_is_noted(glossy_run, tmp_path) -> None:
     from analysis.brdf.model import BRDFModel, ParamSpec
     from analysis.brdf.registry import register_model, unregister_model
