@@ -22,7 +22,10 @@ def test_linked_ptys_open_through_the_example_profile(tmp_path):
     server = subprocess.Popen(
         [sys.executable, "-m", "instrument.cli", "serve-sim", "--bench", "sim",
          "--link-dir", str(links)],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        # Ctrl-C reaches it as at a console: a runner started in the background (a shell's
+        # `&`, some CI agents) passes SIGINT on ignored, and Python then keeps it ignored
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         lines = []
         for line in server.stdout:  # the links exist once it says it is serving
