@@ -458,7 +458,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
                 for text in buf.take():
                     await ws.send_text(text)
         except (WebSocketDisconnect, RuntimeError, OSError):
-            pass
+            pass  # the client went away: nothing to tell it; its buffer is detached below
         finally:
             service.hub.detach(buf)
 
