@@ -20,7 +20,7 @@ from instrument.bench.profile import BenchProfile, load_profile
 from instrument.plans.build import Plan, PlanEstimate, build_plan
 from instrument.plans.planfile import PlanSpec, load_plan
 from instrument.run.paths import DEFAULT_RUNS_DIR
-from instrument.scripting.handle import RunHandle, paused_by_the_engine
+from instrument.scripting.handle import RunHandle
 
 if TYPE_CHECKING:
     from instrument.bench.devices import Bench
@@ -186,7 +186,7 @@ class ScriptBench:
             for ev in handle.events():
                 if bar is not None:
                     bar(ev)
-                if paused_by_the_engine(ev):
+                if handle.paused_by_the_engine(ev):
                     engine.stop_when_paused()
             handle.wait()
         except BaseException:

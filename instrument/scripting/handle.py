@@ -61,6 +61,7 @@ class RunHandle:
         self._engine = engine
         self._queue = EventQueue(maxsize=MAX_BACKLOG)
         self._pending: deque[Event] = deque()
+        self._pause_asked = False
         self._finished: RunFinished | None = None
         self._faults: list[Fault] = []
         self._engine.subscribe(self._record)
@@ -107,11 +108,18 @@ class RunHandle:
     # ---------------------------------------------------------------- control
     def pause(self, reason: str = "paused from a script") -> None:
         """Pause at the end of the current point (the run file stays open)."""
+        self._pause_asked = True
         self._engine.pause(reason)
+
+    def paused_by_the_engine(self, ev: Event) -> bool:
+        """Whether ``ev`` is a pause nobody asked for through this handle (a fault that
+        needs an answer, a full disk)."""
+        return isinstance(ev, Paused) and not self._pause_asked
 
     def resume(self, *, skip_point: bool = False) -> None:
         """Continue a paused run; after a fault's pause, ``skip_point`` stores the failed
         point as skipped instead of trying it again."""
+        self._pause_asked = False
         self._engine.resume(skip_point=skip_point)
 
     def abort(self, timeout: float | None = 60.0) -> str:
@@ -177,8 +185,3 @@ class RunHandle:
     def __repr__(self) -> str:
         p = self.progress
         return f"<RunHandle {self.path.name}: {p.state}, {p.n_done}/{p.n_total} points>"
-
-
-def paused_by_the_engine(ev: Event) -> bool:
-    """A pause nobody asked for (a fault that needs an answer, a full disk)."""
-    return isinstance(ev, Paused) and not ev.reason.startswith("paused from a script")
