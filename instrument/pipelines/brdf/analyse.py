@@ -41,7 +41,7 @@ import numpy as np
 
 from analysis.brdf import get_model
 from analysis.brdf.fit import FitResult, fit_brdf
-from analysis.brdf.geometry import make_geometry
+from analysis.brdf.geometry import Geometry, make_geometry
 from analysis.brdf.goodness import (
     DEFAULT_ALPHA,
     GoodnessOfFit,
@@ -61,7 +61,8 @@ from analysis.brdf.reduction.candidates import select_forward
 from analysis.brdf.registry import default_candidates
 from analysis.brdf.selection import SelectionResult, select_model
 
-__all__ = ["DEFAULT_MODELS", "UNCERTAINTY_RULE", "AnalysisResult", "analyse", "model_band"]
+__all__ = ["DEFAULT_MODELS", "UNCERTAINTY_RULE", "AnalysisResult", "analyse", "model_band",
+           "model_band_at"]
 
 #: Candidates when ``--models`` is not given: every family of the library alone and every
 #: sum of one diffuse and one specular or physical-optics model
@@ -360,7 +361,13 @@ def _offset_note(name: str, fit: FitResult, model: BRDFModel, angles: tuple[np.n
 def model_band(model: BRDFModel, fit: FitResult, theta_i: np.ndarray, phi_i: np.ndarray,
                theta_r: np.ndarray, phi_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Model value and its standard uncertainty σ_f = √(J C Jᵀ) at the given angles."""
-    g = make_geometry(theta_i, phi_i, theta_r, phi_r)
+    return model_band_at(model, fit, make_geometry(theta_i, phi_i, theta_r, phi_r))
+
+
+def model_band_at(model: BRDFModel, fit: FitResult, g: Geometry
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`model_band` on a prepared geometry: the receiver's quadrature nodes are cached
+    on ``g``, so the curves of several models at the same angles share them."""
     val = model.evaluate_geometry(fit.params, g)
     jac = model.jacobian_geometry(fit.params, g).reshape(-1, fit.n_params)
     cov = np.nan_to_num(fit.covariance)

@@ -11,14 +11,15 @@ from __future__ import annotations
 import html
 import math
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from analysis.brdf.geometry import make_geometry
+from analysis.brdf.geometry import Geometry, make_geometry
 from analysis.brdf.reduction import BRDFPoints
-from instrument.pipelines.brdf.analyse import UNCERTAINTY_RULE, AnalysisResult, model_band
+from instrument.pipelines.brdf.analyse import UNCERTAINTY_RULE, AnalysisResult, model_band_at
 
 __all__ = ["coincident_with", "unit_text", "write_report"]
 
@@ -69,10 +70,24 @@ def _signed_deg(points: BRDFPoints) -> np.ndarray:
     return np.degrees(np.where(far, points.theta_r, -points.theta_r))
 
 
-def _curve(theta_i: float, phi_i: float, s_deg: np.ndarray) -> tuple[np.ndarray, ...]:
-    s = np.radians(s_deg)
-    return (np.full(s.shape, theta_i), np.full(s.shape, phi_i), np.abs(s),
-            np.where(s >= 0, phi_i + np.pi, phi_i))
+#: Signed θr of the drawn model curves (deg; > 0 specular side), half-degree steps.
+_S_GRID = np.linspace(-89.0, 89.0, 357)
+
+
+def _curve(theta_i: float, phi_i: float) -> Geometry:
+    """The plane of incidence at (θi, φi) along :data:`_S_GRID`, as one geometry.
+
+    The same object is handed to every figure and model (:func:`_curves`): a receiver-averaged
+    model caches its quadrature nodes on the geometry, and building them is most of a
+    curve's cost."""
+    s = np.radians(_S_GRID)
+    return make_geometry(np.full(s.shape, theta_i), np.full(s.shape, phi_i), np.abs(s),
+                         np.where(s >= 0, phi_i + np.pi, phi_i))
+
+
+def _curves(points: BRDFPoints) -> dict[tuple[float, float], Geometry]:
+    """One curve geometry per incidence group of ``points`` (keyed by (θi, φi))."""
+    return {(ti, pi_): _curve(ti, pi_) for ti, pi_, _ in _groups(points)}
 
 
 #: Incidence read-backs jitter by ~0.001–0.01° around the set angle (and φi by a full turn,
@@ -113,7 +128,8 @@ def _band_width_px(ax, x: np.ndarray, val: np.ndarray, sd: np.ndarray) -> float:
     return float(np.max(np.abs(hi - lo)))
 
 
-def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> str:
+def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path,
+                  curves: dict[tuple[float, float], Geometry]) -> str:
     """Draw the in-plane panels; return a sentence on the ±1σ band's visibility."""
     import matplotlib.pyplot as plt
 
@@ -123,9 +139,9 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path) -> str:
     plane = _in_plane(points)
     clipped = ~points.valid
     fig, axes = plt.subplots(len(groups), 1, figsize=(7.5, 3.0 * len(groups)), squeeze=False)
-    s_grid = np.linspace(-89.0, 89.0, 357)
+    s_grid = _S_GRID
     # the models on every panel, so that coinciding curves are found once for the figure
-    values = {name: [model_band(res.models[name], fit, *_curve(ti, pi_, s_grid))
+    values = {name: [model_band_at(res.models[name], fit, curves[ti, pi_])
                      for ti, pi_, _ in groups] for name, fit in _shown(res).items()}
     styles = _coincidence_styles(
         {name: np.concatenate([v for v, _ in bands]) for name, bands in values.items()},
@@ -192,7 +208,8 @@ def _shown(res: AnalysisResult) -> dict:
             if (n == res.chosen or n in res.plausible) and f.converged}
 
 
-def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
+def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path,
+                curves: dict[tuple[float, float], Geometry]) -> None:
     import matplotlib.pyplot as plt
 
     f, _ = points.plain_brdf()
@@ -203,12 +220,12 @@ def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path) -> None:
     ax.set_theta_direction(-1)  # specular side (signed θr > 0) on the right
     ax.set_thetamin(-90)
     ax.set_thetamax(90)
-    s_grid = np.linspace(-89.0, 89.0, 357)
+    s_grid = _S_GRID
     model, fit = res.models[res.chosen], res.chosen_fit
     plane = _in_plane(points)
     for ti, pi_, group in _groups(points):
         sel = group[plane[group]]
-        val = model.evaluate_geometry(fit.params, make_geometry(*_curve(ti, pi_, s_grid)))
+        val = model.evaluate_geometry(fit.params, curves[ti, pi_])
         line, = ax.plot(np.radians(s_grid), val, lw=1.2,
                         label=f"θi = {math.degrees(ti):.0f}°")
         ax.plot(signed[sel], f[sel], "o", ms=3, color=line.get_color())
@@ -344,10 +361,12 @@ def write_report(
     matplotlib.use("Agg", force=True)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    curves = _curves(points)
     figures = {
         "inplane.png": ("In-plane BRDF per θi with fits (chosen model ±1σ band)",
-                        _plot_inplane),
-        "polar.png": ("Polar plot of the chosen model and the data", _plot_polar),
+                        partial(_plot_inplane, curves=curves)),
+        "polar.png": ("Polar plot of the chosen model and the data",
+                      partial(_plot_polar, curves=curves)),
         "residuals.png": ("Normalised residuals of the chosen model", _plot_residuals),
     }
     captions = {name: fn(points, res, out / name) for name, (_, fn) in figures.items()}
