@@ -10,6 +10,7 @@ event loop and the worker that drives the hardware never waits for it.
 
 from __future__ import annotations
 
+import shiboken6
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from gui.model.session import CommandResult, ConnectionStatus, RunHandle
@@ -41,16 +42,23 @@ class SessionBridge(QObject):
 
     # SessionListener (worker threads) ---------------------------------------------
     def states(self, states) -> None:
-        self.statesChanged.emit(states)
+        self._emit(self.statesChanged, states)
 
     def result(self, result: CommandResult) -> None:
-        self.resultReady.emit(result)
+        self._emit(self.resultReady, result)
 
     def connection(self, status: ConnectionStatus) -> None:
-        self.connectionChanged.emit(status)
+        self._emit(self.connectionChanged, status)
 
     def run_changed(self, run: RunHandle | None) -> None:
-        self._runChangedRaw.emit(run)
+        self._emit(self._runChangedRaw, run)
+
+    def _emit(self, signal, value) -> None:
+        # The worker may report once more after the window closed and Qt destroyed this
+        # bridge (a run handed back during shutdown): nobody is left to tell, and raising
+        # on the worker's thread would only end the worker that is making the bench safe.
+        if shiboken6.isValid(self):
+            signal.emit(value)
 
     # GUI thread ---------------------------------------------------------------------
     @property

@@ -207,7 +207,7 @@ def test_errors_pickle_with_code():
 
 def open_lockin(transport: str, name: str, *, cleanup: list, options: str = "",
                 **kw) -> Sr830LockIn:
-    kw.setdefault("reply_timeout", 0.3)
+    kw.setdefault("reply_timeout", 1.0)
     if transport == "url":
         return Sr830LockIn(f"simsr830://{name}?speed={SPEED:g}&seed=3{options}", name=name,
                            **kw)
@@ -291,19 +291,25 @@ def test_configurable_baud_rate():
 # --------------------------------------------------------------------------- faults
 
 
+#: The reply timeout of the fault tests (s). Short, so that lost replies cost little, but
+#: long enough that the emulator's thread answers in time on a loaded machine (on a real
+#: pty at 0.1 s, a box at load 30 let it expire: the link's timeout, not the fault's).
+FAULT_REPLY_S = 0.4
+
+
 @pytest.fixture
 def faulty(lockin):
     """A lock-in fed 2 mV, settled, with a short reply timeout and the fault injector."""
     emulator_of(lockin).set_input(2e-3)
     lockin.sensitivity_v = 5e-3
     lockin.settle(20)
-    lockin.reply_timeout = 0.1
+    lockin.reply_timeout = FAULT_REPLY_S
     return lockin, emulator_of(lockin).faults
 
 
 @pytest.mark.parametrize("kind, params", [
     (FaultKind.DROP, {}),
-    (FaultKind.DELAY, {"delay_s": 0.15}),   # past one reply timeout (0.1 s)
+    (FaultKind.DELAY, {"delay_s": 1.5 * FAULT_REPLY_S}),   # past one reply timeout
     (FaultKind.SPLIT, {"chunks": 4, "gap_s": 0.01}),
     (FaultKind.GARBAGE, {"nbytes": 5}),
     (FaultKind.UNSOLICITED, {}),
@@ -332,8 +338,8 @@ def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
 
 @pytest.mark.parametrize("kind, params", [
     (FaultKind.DROP, {}),
-    # later than the reply timeout (0.1 s), within the quiet wait that follows it
-    (FaultKind.DELAY, {"delay_s": 0.15}),
+    # later than the reply timeout, within the quiet wait that follows it
+    (FaultKind.DELAY, {"delay_s": 1.5 * FAULT_REPLY_S}),
 ])
 def test_lost_status_reply_after_a_setting_is_typed_and_never_asked_twice(faulty, kind, params):
     lockin, faults = faulty
@@ -384,7 +390,7 @@ def test_disconnect_is_typed_and_reconnect_finds_same_settings(transport, server
     instrument answers nothing (DeviceTimeout after the retries). Bounded either way."""
     lockin = open_lockin(transport, "dc", cleanup=servers)
     lockin.sensitivity_v = 0.2
-    lockin.reply_timeout = 0.1
+    lockin.reply_timeout = FAULT_REPLY_S
     lockin = unplug_and_replug(
         lockin, emulator_of(lockin).faults, transport, lambda: lockin.sensitivity_v,
         lambda: open_lockin(transport, "dc", cleanup=servers), command="SENS?")

@@ -105,9 +105,9 @@ def test_in_plane_legend_beside_the_data_and_log_labels_with_decades(qtbot):
     # the legend is beside the plot, never over its data
     legend = plot.in_plane_legend
     assert "θi = -20°" in legend.text() and "θi = -40°" in legend.text()  # φi = 180°
-    qtbot.waitUntil(lambda: legend.isVisible() and legend.width() > 0, timeout=10000)
+    qtbot.waitUntil(lambda: legend.isVisible() and legend.width() > 0, timeout=60000)
     assert legend.geometry().left() >= plot.in_plane.geometry().right()
-    qtbot.waitUntil(lambda: vb.viewRange()[1][1] < -1.0, timeout=10000)  # auto-ranged
+    qtbot.waitUntil(lambda: vb.viewRange()[1][1] < -1.0, timeout=60000)  # auto-ranged
     lo, hi = vb.viewRange()[1]  # 2e-3 … 2e-2: about one decade
     labels = axis.tickStrings([v for _, vs in axis.tickValues(lo, hi, 400) for v in vs],
                               1.0, 1.0)

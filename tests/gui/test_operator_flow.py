@@ -16,14 +16,14 @@ from tests.gui.test_run_control import start, wait_end, wait_points
 
 
 def _listed(qtbot, browser):
-    with qtbot.waitSignal(browser.refreshed, timeout=20000):
+    with qtbot.waitSignal(browser.refreshed, timeout=60000):
         browser.refresh()
 
 
 def _select(qtbot, browser, run_id):
     assert browser.select(run_id)
     qtbot.waitUntil(lambda: browser.details is not None
-                    and browser.details.provenance["run id"] == run_id, timeout=20000)
+                    and browser.details.provenance["run id"] == run_id, timeout=60000)
 
 
 def _aborted_run(qtbot, w, tmp_path):
@@ -70,12 +70,12 @@ def test_finished_run_details_match_the_catalog_and_resume_follows(
     browser.resume.click()  # the bench it was recorded on is connected: no question
     assert w.questions.asked == ["abort"]
     qtbot.waitUntil(lambda: w.current_run is not None and w.current_run.resumed,
-                    timeout=30000)
+                    timeout=60000)
     end = wait_end(qtbot, w, timeout=120000)
     assert end.status == "finished" and end.n_done == end.n_total
     # the browser re-reads the run it shows: the details now say what the list says
     qtbot.waitUntil(lambda: browser.details is not None
-                    and browser.details.provenance["status"] == "finished", timeout=30000)
+                    and browser.details.provenance["status"] == "finished", timeout=60000)
     with Catalog(tmp_path / "runs") as cat:
         row = cat.get(run_id)
     assert row.status == "finished"
@@ -94,7 +94,7 @@ def test_a_disconnected_bench_is_never_reconnected_implicitly(
     connect(qtbot, w)
     run, _ = _aborted_run(qtbot, w, tmp_path)
     w.bench_panel.disconnect_button.click()
-    qtbot.waitUntil(lambda: not w.session.connected, timeout=20000)
+    qtbot.waitUntil(lambda: not w.session.connected, timeout=60000)
     browser = w.browser
     _listed(qtbot, browser)
     _select(qtbot, browser, read_run(run.path).run_id)
@@ -110,7 +110,7 @@ def test_a_disconnected_bench_is_never_reconnected_implicitly(
     w.questions.answer("resume_connect", True)
     browser.resume.click()
     qtbot.waitUntil(lambda: w.current_run is not None and w.current_run.resumed,
-                    timeout=30000)
+                    timeout=60000)
     assert w.session.profile.name == browser.details.bench_name
     assert wait_end(qtbot, w, timeout=120000).status == "finished"
 
@@ -120,7 +120,7 @@ def test_runs_folder_applies_now_and_is_kept(qtbot, make_window, fast_bench_file
     w = make_window(fast_bench_file())
     connect(qtbot, w)
     other = tmp_path / "elsewhere"
-    with qtbot.waitSignal(w.browser.refreshed, timeout=20000):
+    with qtbot.waitSignal(w.browser.refreshed, timeout=60000):
         w.set_runs_dir(other)
     assert w.runs_dir == other and w.browser.runs_dir == other
     assert settings.value("runs_dir") == str(other)
@@ -129,21 +129,21 @@ def test_runs_folder_applies_now_and_is_kept(qtbot, make_window, fast_bench_file
     assert Path(run.path).parent == other
     wait_end(qtbot, w, timeout=120000)
     qtbot.waitUntil(lambda: any(r.path == str(run.path) for r in w.browser.rows),
-                    timeout=30000)
+                    timeout=60000)
 
 
 def test_home_all_and_the_first_time_hint(qtbot, make_window, fast_bench_file):
     w = make_window(fast_bench_file())
     assert not w.home_all_button.isEnabled()  # nothing connected
     connect(qtbot, w)
-    qtbot.waitUntil(lambda: "not homed" in w.home_hint.text(), timeout=20000)
+    qtbot.waitUntil(lambda: "not homed" in w.home_hint.text(), timeout=60000)
     assert w.home_hint.text().startswith("3 axes not homed: press Home all")
     assert w.home_all_button.isEnabled()
     w.home_all_button.click()
     qtbot.waitUntil(lambda: all(s.value("homed") and not s.value("moving")
                                 for s in w.session.states().values()
                                 if s.kind == "motion_axis"), timeout=60000)
-    qtbot.waitUntil(lambda: w.home_hint.text() == "", timeout=20000)
+    qtbot.waitUntil(lambda: w.home_hint.text() == "", timeout=60000)
 
 
 def test_menus_and_the_shortcut_list(qtbot, make_window):
@@ -234,5 +234,5 @@ def test_runs_and_faults_columns_show_their_whole_text(qtbot, make_window):
         for c in range(table.columnCount() - 1):  # the last one stretches
             need = max(table.sizeHintForColumn(c), header.sectionSizeHint(c))
             qtbot.waitUntil(lambda h=header, c=c, n=need: h.sectionSize(c) >= n,
-                            timeout=5000)
+                            timeout=60000)
     assert w.fault_panel.rows()[0][1] == "27"  # plan index 26: the 27th point

@@ -25,7 +25,7 @@ def test_fields_explain_themselves_and_the_lobe_model_is_a_list(qtbot, make_wind
     # an empty sample: a requirement in the form's words, not "missing table"
     editor.set_field("sample.description", "")
     editor.set_field("sample.name", "")
-    qtbot.waitUntil(lambda: editor.error_text("sample.name") != "", timeout=20000)
+    qtbot.waitUntil(lambda: editor.error_text("sample.name") != "", timeout=60000)
     assert "table" not in editor.error_text("sample.name")
     assert "required" in editor.error_text("sample.name")
 
@@ -35,7 +35,7 @@ def test_the_coverage_picture_fills_its_space(qtbot, make_window):
     editor = w.plan_editor
     editor.open_plan(EXAMPLES[[p.stem for p in EXAMPLES].index("brdf_inplane")])
     _validated(qtbot, editor)
-    qtbot.waitUntil(lambda: editor.coverage.source is not None, timeout=20000)
+    qtbot.waitUntil(lambda: editor.coverage.source is not None, timeout=60000)
     w.docks["plan"].raise_()
     QApplication.processEvents()
     shown = editor.coverage.pixmap()
