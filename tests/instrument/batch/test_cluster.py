@@ -278,12 +278,14 @@ def test_the_slurm_example_asks_for_single_threaded_workers_per_core():
     assert mod.main(["--jobs", "1"]) == 2  # no batch command line after --
 
 
-def test_plan_target_uncertainty_on_two_workers_prints_the_serial_answer(capsys):
+def test_plan_target_uncertainty_on_two_workers_prints_the_serial_answer(client, capsys):
+    """The sweep on the module's running cluster (``--scheduler``): starting one more costs
+    more than the sweep; ``scatterlab batch`` starting its own is tested above."""
     argv = ["plan", str(ROOT / "examples" / "brdf_inplane.toml"), "--target-uncertainty",
             "5e-5", "--readout-s", "0.02"]
     assert main(argv) == 0
     here = capsys.readouterr().out
-    assert main([*argv, "--workers", "2"]) == 0
+    assert main([*argv, "--scheduler", client.scheduler.address]) == 0
     there = capsys.readouterr().out
     assert "Dask cluster: 2 worker(s)" in there
     assert there.split("\n", 2)[2] == here  # after the two lines about the cluster
