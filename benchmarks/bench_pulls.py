@@ -211,7 +211,8 @@ def main() -> int:
     ap.add_argument("--lockin", type=int, default=0, metavar="N")
     ap.add_argument("--jobs", type=int, default=4, help="lock-in runs at once")
     ap.add_argument("--aperture-samples", type=int, default=None,
-                    help="lock-in: the emulator's grid per side over the photodiode")
+                    help="lock-in: the emulator's aperture_samples (resolution of its rule over "
+                         "the photodiode, GoniometerScene)")
     ap.add_argument("--samples", default=None, help="comma-separated sample names")
     args = ap.parse_args()
     names = args.samples.split(",") if args.samples else None

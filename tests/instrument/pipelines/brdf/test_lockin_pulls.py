@@ -48,8 +48,9 @@ filters = [2]
 def lockin_profile(brdf: str, params: str, seed: int, aperture_samples: int | None = None
                    ) -> str:
     """The sim-spectral bench with a plain sample (no spectral table) and the lock-in's
-    noise seed ``seed``; ``aperture_samples`` refines the emulator's grid over the
-    photodiode's aperture (default 9 per side). Shared with benchmarks/bench_pulls.py."""
+    noise seed ``seed``; ``aperture_samples`` sets the resolution of the emulator's rule
+    over the photodiode's aperture (default 9: 36 nodes, GoniometerScene). Shared with
+    benchmarks/bench_pulls.py."""
     text = (ROOT / "instrument" / "bench" / "profiles" / "sim-spectral.toml").read_text(
         encoding="utf-8")
     head, _, tail = text.partition('[simulation.scene]\nbrdf = "spectral"')
