@@ -45,6 +45,7 @@ import uvicorn  # noqa: E402
 from instrument.bench.profile import load_profile, parse_profile  # noqa: E402
 from instrument.protocol import API_PREFIX  # noqa: E402
 from instrument.server.app import create_app  # noqa: E402
+from instrument.server.main import WS_OPTIONS  # noqa: E402
 from instrument.server.service import BenchService  # noqa: E402
 from tests.instrument.helpers import ideal_bench  # noqa: E402
 
@@ -97,8 +98,8 @@ class Served:
         sock.bind(("127.0.0.1", 0))
         sock.listen(2048)
         self.url = f"http://127.0.0.1:{sock.getsockname()[1]}"
-        config = uvicorn.Config(create_app(service), log_level="warning",
-                                ws="websockets-sansio", lifespan="on")
+        config = uvicorn.Config(create_app(service), log_level="warning", lifespan="on",
+                                **WS_OPTIONS)
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]},
                                        daemon=True)
@@ -244,8 +245,11 @@ def stop_all_latency(work: Path, n: int) -> dict[str, list[float]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2,000 points, fewer requests")
+    ap.add_argument("--fanout-only", action="store_true",
+                    help="only the zero-latency fan-out scan (no latency, sim bench, stop all)")
+    ap.add_argument("--points", type=int, default=None, help="points of the fan-out scan")
     args = ap.parse_args()
-    n_points = 2000 if args.quick else 10_000
+    n_points = args.points or (2000 if args.quick else 10_000)
     n_req = 200 if args.quick else 1000
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -254,10 +258,11 @@ def main() -> None:
                                opener=lambda p: bench)
         served = Served(service)
         try:
-            lat = request_latency(served.url, n_req)
-            print("request latency (idle server, one client):")
-            for k, v in lat.items():
-                print(f"  {k}: {v:.2f} ms")
+            if not args.fanout_only:
+                lat = request_latency(served.url, n_req)
+                print("request latency (idle server, one client):")
+                for k, v in lat.items():
+                    print(f"  {k}: {v:.2f} ms")
             plan = scan_plan(n_points)
             alone = run_scan(served, plan, 0)
             print(f"scan, no client: {alone['n']} points, {alone['points_per_s']:.0f} "
@@ -272,6 +277,8 @@ def main() -> None:
                   f"{crowd['missed_median']:.0f} display messages reported missed")
         finally:
             served.close()
+        if args.fanout_only:
+            return
         # the same on the emulated sim bench: real drivers and firmware emulators, stages
         # at 20x real time: points take motion time, as on a real bench
         from hw_mocks import registry
