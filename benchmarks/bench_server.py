@@ -26,7 +26,9 @@ process, as they would on other machines.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -102,7 +104,7 @@ class Served:
                                 **WS_OPTIONS)
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]},
-                                       daemon=True)
+                                       name="uvicorn", daemon=True)
         self.thread.start()
         while not self.server.started:
             time.sleep(0.01)
@@ -110,6 +112,33 @@ class Served:
     def close(self) -> None:
         self.server.should_exit = True
         self.thread.join(60)
+
+
+def thread_cpu(pid: int | str = "self") -> dict[str, float]:
+    """CPU seconds (user + system) of each thread of a process, summed by thread name
+    (Linux /proc; empty elsewhere)."""
+    out: dict[str, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    names = {t.native_id: t.name.split(" ")[0] for t in threading.enumerate()} \
+        if pid == "self" else {}
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            stat = (task / "stat").read_text()
+        except OSError:
+            continue
+        name = names.get(int(task.name)) or stat[stat.index("(") + 1:stat.rindex(")")]
+        fields = stat[stat.rindex(")") + 2:].split()
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    # the process as a whole: threads that ended (the run's engine) are counted here only
+    with contextlib.suppress(OSError):
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        fields = stat[stat.rindex(")") + 2:].split()
+        out["(process)"] = (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
+def cpu_since(before: dict[str, float], after: dict[str, float]) -> dict[str, float]:
+    return {k: after[k] - before.get(k, 0.0) for k in after if after[k] > before.get(k, 0.0)}
 
 
 def percentile_ms(xs: list[float], q: float) -> float:
@@ -181,10 +210,18 @@ def run_scan(served: Served, plan: str, n_clients: int) -> dict:
     with httpx.Client(base_url=served.url + API_PREFIX, timeout=60) as c:
         r = c.post("/queue", json={"plan": plan})
         assert r.status_code == 200, r.text
+        # CPU from here to the end of the run (the plan's expansion when it was added is
+        # before; its expansion again when it starts is in)
+        cpu0 = thread_cpu()
+        clients_cpu0 = thread_cpu(clients.pid) if clients is not None else {}
         c.post("/queue/start")
     finished.wait(3600)
-    out = {"n": result["n_done"], "points_per_s": result["n_done"] / result["elapsed_s"]}
+    cpu = cpu_since(cpu0, thread_cpu())
+    out = {"n": result["n_done"], "points_per_s": result["n_done"] / result["elapsed_s"],
+           "cpu": cpu}
     if clients is not None:
+        out["cpu"]["(clients' process)"] = cpu_since(clients_cpu0, thread_cpu(clients.pid)
+                                                     ).get("(process)", 0.0)
         counts = json.loads(clients.stdout.readline())
         clients.wait(120)
         out["clients_with_every_lifecycle"] = sum(
@@ -248,6 +285,8 @@ def main() -> None:
     ap.add_argument("--fanout-only", action="store_true",
                     help="only the zero-latency fan-out scan (no latency, sim bench, stop all)")
     ap.add_argument("--points", type=int, default=None, help="points of the fan-out scan")
+    ap.add_argument("--cpu", action="store_true",
+                    help="print the CPU seconds of each thread during the fan-out scans")
     args = ap.parse_args()
     n_points = args.points or (2000 if args.quick else 10_000)
     n_req = 200 if args.quick else 1000
@@ -275,6 +314,11 @@ def main() -> None:
                   f"every lifecycle message; median per client: "
                   f"{crowd['progress_received_median']:.0f} progress messages received, "
                   f"{crowd['missed_median']:.0f} display messages reported missed")
+            if args.cpu:
+                for what, r in (("no client", alone), (f"{N_CLIENTS} clients", crowd)):
+                    print(f"  CPU s during the scan, {what}: " + ", ".join(
+                        f"{k} {v:.2f}" for k, v in sorted(r["cpu"].items(),
+                                                          key=lambda kv: -kv[1])))
         finally:
             served.close()
         if args.fanout_only:
