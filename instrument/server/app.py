@@ -244,6 +244,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     app.add_middleware(_KeepSend)
     fanouts: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, LoopFanout] = \
         weakref.WeakKeyDictionary()
+    app.state.fanouts = fanouts  # the event stream's clients, by event loop (tests look)
 
     def ctl(request: Request, caller: Caller) -> None:
         """Refuse (409) when another operator holds control; the lease is taken or renewed

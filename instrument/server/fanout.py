@@ -71,8 +71,10 @@ class RawSink:
         transport this module knows how to write to."""
         protocol = getattr(send, "__self__", None)
         transport = getattr(protocol, "transport", None)
-        if protocol is None or not hasattr(protocol, "close_sent") or \
-                not isinstance(transport, asyncio.WriteTransport):
+        # duck-typed: uvloop's transports are not subclasses of asyncio's
+        if protocol is None or not hasattr(protocol, "close_sent") or not all(
+                callable(getattr(transport, m, None))
+                for m in ("write", "is_closing", "get_write_buffer_size")):
             return None
         return cls(protocol)
 
