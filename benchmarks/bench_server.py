@@ -285,6 +285,8 @@ def main() -> None:
     ap.add_argument("--fanout-only", action="store_true",
                     help="only the zero-latency fan-out scan (no latency, sim bench, stop all)")
     ap.add_argument("--points", type=int, default=None, help="points of the fan-out scan")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="fan-out: this many pairs of scans (no client, 50 clients)")
     ap.add_argument("--cpu", action="store_true",
                     help="print the CPU seconds of each thread during the fan-out scans")
     args = ap.parse_args()
@@ -303,22 +305,28 @@ def main() -> None:
                 for k, v in lat.items():
                     print(f"  {k}: {v:.2f} ms")
             plan = scan_plan(n_points)
-            alone = run_scan(served, plan, 0)
-            print(f"scan, no client: {alone['n']} points, {alone['points_per_s']:.0f} "
-                  "points/s")
-            crowd = run_scan(served, plan, N_CLIENTS)
-            print(f"scan, {N_CLIENTS} observer clients: {crowd['n']} points, "
-                  f"{crowd['points_per_s']:.0f} points/s "
-                  f"({crowd['points_per_s'] / alone['points_per_s']:.1%} of no client); "
-                  f"{crowd['clients_with_every_lifecycle']}/{N_CLIENTS} clients received "
-                  f"every lifecycle message; median per client: "
-                  f"{crowd['progress_received_median']:.0f} progress messages received, "
-                  f"{crowd['missed_median']:.0f} display messages reported missed")
-            if args.cpu:
-                for what, r in (("no client", alone), (f"{N_CLIENTS} clients", crowd)):
-                    print(f"  CPU s during the scan, {what}: " + ", ".join(
-                        f"{k} {v:.2f}" for k, v in sorted(r["cpu"].items(),
-                                                          key=lambda kv: -kv[1])))
+            ratios = []
+            for _ in range(args.repeat):  # alternated: the box's load drifts
+                alone = run_scan(served, plan, 0)
+                print(f"scan, no client: {alone['n']} points, {alone['points_per_s']:.0f} "
+                      f"points/s (load average {os.getloadavg()[0]:.1f})")
+                crowd = run_scan(served, plan, N_CLIENTS)
+                ratios.append(crowd['points_per_s'] / alone['points_per_s'])
+                print(f"scan, {N_CLIENTS} observer clients: {crowd['n']} points, "
+                      f"{crowd['points_per_s']:.0f} points/s ({ratios[-1]:.1%} of no client); "
+                      f"{crowd['clients_with_every_lifecycle']}/{N_CLIENTS} clients received "
+                      f"every lifecycle message; median per client: "
+                      f"{crowd['progress_received_median']:.0f} progress messages received, "
+                      f"{crowd['missed_median']:.0f} display messages reported missed")
+                if args.cpu:
+                    for what, r in (("no client", alone), (f"{N_CLIENTS} clients", crowd)):
+                        print(f"  CPU s during the scan, {what}: " + ", ".join(
+                            f"{k} {v:.2f}" for k, v in sorted(r["cpu"].items(),
+                                                              key=lambda kv: -kv[1])))
+            if args.repeat > 1:
+                print(f"50 clients / no client, median of {args.repeat}: "
+                      f"{np.median(ratios):.1%} (each: "
+                      f"{', '.join(f'{r:.0%}' for r in ratios)})")
         finally:
             served.close()
         if args.fanout_only:
