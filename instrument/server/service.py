@@ -83,6 +83,11 @@ class ServiceError(Exception):
         self.reasons = list(reasons)
 
 
+class _StoppedBetweenPasses(Exception):
+    """The queue was stopped while a two-pass lobe plan's second pass was being planned:
+    the item stays at the head, and starting the queue plans it again."""
+
+
 def event_message(event: ev.Event) -> tuple[str, dict[str, Any]]:
     """An engine event as an event-stream message (type, data)."""
     name = {ev.RunStarted: "run_started", ev.PointCompleted: "point",
@@ -457,7 +462,10 @@ class BenchService:
 
     def stop_all(self, caller: Caller) -> str:
         """Stop every axis now; during a run, abort it (the engine stops every axis and
-        turns the light off). Never refused for want of control."""
+        turns the light off). The queue stops too, so that nothing starts moving again by
+        itself (the next item, a lobe plan's second pass). Never refused for want of
+        control."""
+        was_running = self.queue_running
         with self._lock:
             engine = self.engine
             if engine is not None and engine.alive:
@@ -467,6 +475,7 @@ class BenchService:
             elif self.bench is None:
                 raise ServiceError(409, "no bench is connected")
             else:
+                self.queue_running = False  # nothing starts moving again by itself
                 with self._bench_lock:
                     problems = []
                     for role, axis in self.bench.axes.items():
@@ -478,6 +487,8 @@ class BenchService:
                     f" (could not stop: {'; '.join(problems)})" if problems else "")
         self.hub.publish("manual", {"who": caller.name, "what": "stop all",
                                     "message": message})
+        if was_running:
+            self._publish_queue()
         return message
 
     # bench ------------------------------------------------------------------------------
@@ -557,10 +568,12 @@ class BenchService:
             report = recover_run(item.run_file)
             if report.status == "finished":
                 return self._after(item, bench, item.run_file)
-            return resume_run(item.run_file, bench, fsync=self.fsync), ""
+            with self._bench_lock:
+                return resume_run(item.run_file, bench, fsync=self.fsync), ""
         plan = build_plan(parse_plan(item.plan_text or "", source=f"queue item {item.id}"),
                           bench.profile)
-        return start_run(plan, bench, runs_dir=self.runs_dir, fsync=self.fsync), ""
+        with self._bench_lock:  # not while planning: a manual Stop all must not wait
+            return start_run(plan, bench, runs_dir=self.runs_dir, fsync=self.fsync), ""
 
     def _after(self, item: QueueItem, bench: Bench, finished: str
                ) -> tuple[RunEngine | None, str]:
@@ -594,7 +607,11 @@ class BenchService:
             f"{second.model} fitted to the first pass ({second.verdict}); predicted σ({t}) "
             f"{pl.sigma_first[t]:.3g} after the first pass, {pl.sigma_both[t]:.3g} with "
             "the second")
-        return start_run(second.plan, bench, runs_dir=self.runs_dir, fsync=self.fsync), ""
+        with self._cond, self._bench_lock:
+            if not self.queue_running:  # stopped (or Stop all) while the fit ran
+                raise _StoppedBetweenPasses
+            return start_run(second.plan, bench, runs_dir=self.runs_dir,
+                             fsync=self.fsync), ""
 
     def _run_item(self, item: QueueItem) -> None:
         """Run the item: one run, or a two-pass lobe plan's two runs one after the other.
@@ -605,9 +622,17 @@ class BenchService:
         finished: str | None = None  # this item's run that has just finished
         while True:
             try:
-                with self._bench_lock:
-                    engine, note = (self._engine_for(item, bench) if finished is None
-                                    else self._after(item, bench, finished))
+                engine, note = (self._engine_for(item, bench) if finished is None
+                                else self._after(item, bench, finished))
+            except _StoppedBetweenPasses:
+                self.queue.record(item, "stopped", "server", run_file=finished,
+                                  state="aborted", note="the queue was stopped after the "
+                                  "first pass; starting it plans and runs the second pass")
+                self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                                   "outcome": "stopped",
+                                                   "run_file": finished})
+                self._publish_queue()
+                return
             except (ProfileError, StorageError, DeviceError, ValueError) as err:
                 self._item_failed(item, str(err))
                 return
