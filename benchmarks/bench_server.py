@@ -26,7 +26,9 @@ process, as they would on other machines.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -45,6 +47,7 @@ import uvicorn  # noqa: E402
 from instrument.bench.profile import load_profile, parse_profile  # noqa: E402
 from instrument.protocol import API_PREFIX  # noqa: E402
 from instrument.server.app import create_app  # noqa: E402
+from instrument.server.main import WS_OPTIONS  # noqa: E402
 from instrument.server.service import BenchService  # noqa: E402
 from tests.instrument.helpers import ideal_bench  # noqa: E402
 
@@ -97,11 +100,11 @@ class Served:
         sock.bind(("127.0.0.1", 0))
         sock.listen(2048)
         self.url = f"http://127.0.0.1:{sock.getsockname()[1]}"
-        config = uvicorn.Config(create_app(service), log_level="warning",
-                                ws="websockets-sansio", lifespan="on")
+        config = uvicorn.Config(create_app(service), log_level="warning", lifespan="on",
+                                **WS_OPTIONS)
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]},
-                                       daemon=True)
+                                       name="uvicorn", daemon=True)
         self.thread.start()
         while not self.server.started:
             time.sleep(0.01)
@@ -109,6 +112,33 @@ class Served:
     def close(self) -> None:
         self.server.should_exit = True
         self.thread.join(60)
+
+
+def thread_cpu(pid: int | str = "self") -> dict[str, float]:
+    """CPU seconds (user + system) of each thread of a process, summed by thread name
+    (Linux /proc; empty elsewhere)."""
+    out: dict[str, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    names = {t.native_id: t.name.split(" ")[0] for t in threading.enumerate()} \
+        if pid == "self" else {}
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            stat = (task / "stat").read_text()
+        except OSError:
+            continue
+        name = names.get(int(task.name)) or stat[stat.index("(") + 1:stat.rindex(")")]
+        fields = stat[stat.rindex(")") + 2:].split()
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    # the process as a whole: threads that ended (the run's engine) are counted here only
+    with contextlib.suppress(OSError):
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        fields = stat[stat.rindex(")") + 2:].split()
+        out["(process)"] = (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
+def cpu_since(before: dict[str, float], after: dict[str, float]) -> dict[str, float]:
+    return {k: after[k] - before.get(k, 0.0) for k in after if after[k] > before.get(k, 0.0)}
 
 
 def percentile_ms(xs: list[float], q: float) -> float:
@@ -180,10 +210,18 @@ def run_scan(served: Served, plan: str, n_clients: int) -> dict:
     with httpx.Client(base_url=served.url + API_PREFIX, timeout=60) as c:
         r = c.post("/queue", json={"plan": plan})
         assert r.status_code == 200, r.text
+        # CPU from here to the end of the run (the plan's expansion when it was added is
+        # before; its expansion again when it starts is in)
+        cpu0 = thread_cpu()
+        clients_cpu0 = thread_cpu(clients.pid) if clients is not None else {}
         c.post("/queue/start")
     finished.wait(3600)
-    out = {"n": result["n_done"], "points_per_s": result["n_done"] / result["elapsed_s"]}
+    cpu = cpu_since(cpu0, thread_cpu())
+    out = {"n": result["n_done"], "points_per_s": result["n_done"] / result["elapsed_s"],
+           "cpu": cpu}
     if clients is not None:
+        out["cpu"]["(clients' process)"] = cpu_since(clients_cpu0, thread_cpu(clients.pid)
+                                                     ).get("(process)", 0.0)
         counts = json.loads(clients.stdout.readline())
         clients.wait(120)
         out["clients_with_every_lifecycle"] = sum(
@@ -244,8 +282,15 @@ def stop_all_latency(work: Path, n: int) -> dict[str, list[float]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2,000 points, fewer requests")
+    ap.add_argument("--fanout-only", action="store_true",
+                    help="only the zero-latency fan-out scan (no latency, sim bench, stop all)")
+    ap.add_argument("--points", type=int, default=None, help="points of the fan-out scan")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="fan-out: this many pairs of scans (no client, 50 clients)")
+    ap.add_argument("--cpu", action="store_true",
+                    help="print the CPU seconds of each thread during the fan-out scans")
     args = ap.parse_args()
-    n_points = 2000 if args.quick else 10_000
+    n_points = args.points or (2000 if args.quick else 10_000)
     n_req = 200 if args.quick else 1000
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -254,24 +299,38 @@ def main() -> None:
                                opener=lambda p: bench)
         served = Served(service)
         try:
-            lat = request_latency(served.url, n_req)
-            print("request latency (idle server, one client):")
-            for k, v in lat.items():
-                print(f"  {k}: {v:.2f} ms")
+            if not args.fanout_only:
+                lat = request_latency(served.url, n_req)
+                print("request latency (idle server, one client):")
+                for k, v in lat.items():
+                    print(f"  {k}: {v:.2f} ms")
             plan = scan_plan(n_points)
-            alone = run_scan(served, plan, 0)
-            print(f"scan, no client: {alone['n']} points, {alone['points_per_s']:.0f} "
-                  "points/s")
-            crowd = run_scan(served, plan, N_CLIENTS)
-            print(f"scan, {N_CLIENTS} observer clients: {crowd['n']} points, "
-                  f"{crowd['points_per_s']:.0f} points/s "
-                  f"({crowd['points_per_s'] / alone['points_per_s']:.1%} of no client); "
-                  f"{crowd['clients_with_every_lifecycle']}/{N_CLIENTS} clients received "
-                  f"every lifecycle message; median per client: "
-                  f"{crowd['progress_received_median']:.0f} progress messages received, "
-                  f"{crowd['missed_median']:.0f} display messages reported missed")
+            ratios = []
+            for _ in range(args.repeat):  # alternated: the box's load drifts
+                alone = run_scan(served, plan, 0)
+                print(f"scan, no client: {alone['n']} points, {alone['points_per_s']:.0f} "
+                      f"points/s (load average {os.getloadavg()[0]:.1f})")
+                crowd = run_scan(served, plan, N_CLIENTS)
+                ratios.append(crowd['points_per_s'] / alone['points_per_s'])
+                print(f"scan, {N_CLIENTS} observer clients: {crowd['n']} points, "
+                      f"{crowd['points_per_s']:.0f} points/s ({ratios[-1]:.1%} of no client); "
+                      f"{crowd['clients_with_every_lifecycle']}/{N_CLIENTS} clients received "
+                      f"every lifecycle message; median per client: "
+                      f"{crowd['progress_received_median']:.0f} progress messages received, "
+                      f"{crowd['missed_median']:.0f} display messages reported missed")
+                if args.cpu:
+                    for what, r in (("no client", alone), (f"{N_CLIENTS} clients", crowd)):
+                        print(f"  CPU s during the scan, {what}: " + ", ".join(
+                            f"{k} {v:.2f}" for k, v in sorted(r["cpu"].items(),
+                                                              key=lambda kv: -kv[1])))
+            if args.repeat > 1:
+                print(f"50 clients / no client, median of {args.repeat}: "
+                      f"{np.median(ratios):.1%} (each: "
+                      f"{', '.join(f'{r:.0%}' for r in ratios)})")
         finally:
             served.close()
+        if args.fanout_only:
+            return
         # the same on the emulated sim bench: real drivers and firmware emulators, stages
         # at 20x real time: points take motion time, as on a real bench
         from hw_mocks import registry

@@ -92,6 +92,11 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
     _t("run_finished", True, "the run ended (status finished, aborted, paused or failed)",
        status="string", n_done="integer", n_total="integer", n_skipped="integer",
        path="string", elapsed_s="number", message="string"),
+    _t("second_pass", True, "a queue item's two-pass lobe plan after its first pass: "
+       "state planning (the first pass is being fitted), planned (n_points placed by "
+       "Fisher information; its run starts next) or not run (it could not beat a single "
+       "pass of equal time; message says why)", item_id="integer", first_pass="string",
+       state="string", n_points="integer|null", message="string"),
     _t("queue", True, "the queue changed (items in order, whether it runs)",
        running="boolean", items="array"),
     _t("item_finished", True, "a queue item ended: its outcome and run file",

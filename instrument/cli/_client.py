@@ -17,14 +17,24 @@ def add_server(p: argparse.ArgumentParser) -> None:
                    f"${ENV_SERVER}); the key is read from $SCATTERLAB_KEY")
 
 
-def call(args: argparse.Namespace, fn: Callable[[Any], int]) -> int:
-    """Run ``fn(client)``; a refusal or an unreachable server is one line on stderr
-    (exit 2 for a refusal, 3 when the server cannot be reached)."""
+def call(args: argparse.Namespace, fn: Callable[[Any], int], *, one_line: bool = False
+         ) -> int:
+    """Run ``fn(client)``; a refusal or an unreachable server is reported on stderr (exit 2
+    for a refusal, 3 when the server cannot be reached). ``one_line``: the refusal's
+    reasons (a guard's violations) go on the same line as its message, each once."""
     from instrument.client import BenchClient, ClientError
 
     try:
         with BenchClient(args.server) as client:
             return int(fn(client) or 0)
     except ClientError as err:
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {refusal_line(err) if one_line else err}", file=sys.stderr)
         return 3 if err.status == 0 else 2
+
+
+def refusal_line(err: Any) -> str:
+    """A :class:`~instrument.client.ClientError` as one line: its message, the reasons it
+    does not already state, and the HTTP status."""
+    extra = [r for r in dict.fromkeys(err.reasons) if r not in err.message]
+    text = "; ".join([err.message, *extra])
+    return " ".join(text.split()) + (f" (HTTP {err.status})" if err.status else "")

@@ -137,7 +137,7 @@ def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) ->
     """A two-pass lobe plan (``[scan] lobe``): fit the first pass, place the second pass's
     points by Fisher information and run them (:mod:`instrument.plans.lobe`)."""
     from instrument.bench.guard import GuardError
-    from instrument.cli._lobe import second_pass_plan
+    from instrument.pipelines.brdf.second_pass import second_pass_plan
 
     try:
         second = second_pass_plan(first, spec, profile)

@@ -58,6 +58,8 @@ def line_for(msg) -> str | None:
         case "run_finished":
             return (f"run {d['status']}: {d['n_done']}/{d['n_total']} points "
                     f"({d['n_skipped']} skipped) {d['message']}")
+        case "second_pass":
+            return f"queue item #{d['item_id']} second pass {d['state']}: {d['message']}"
         case "item_finished":
             return f"queue item #{d['item_id']} {d['name']}: {d['outcome']}"
         case "control":

@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
+import weakref
 from typing import Annotated, Any, Literal
 
 from fastapi import Depends, FastAPI, Request, WebSocket, WebSocketDisconnect
@@ -26,6 +27,7 @@ from instrument.protocol import API_PREFIX, PROTOCOL_VERSION, Message, encode, r
 from instrument.run.catalog import Catalog
 from instrument.server.audit import AuditLog
 from instrument.server.db import SERVER_DB_NAME
+from instrument.server.fanout import LoopFanout, RawSink
 from instrument.server.hub import ClientBuffer
 from instrument.server.keys import KeyStore
 from instrument.server.plans import MAX_PLAN_BYTES
@@ -142,6 +144,23 @@ class _SizeLimit:
         await resp(scope, _empty_receive, send)
 
 
+class _KeepSend:
+    """Keep the ASGI server's own ``send`` of a WebSocket connection in its scope, before
+    any middleware wraps it: the event stream writes frames to the connection's transport
+    when the server is uvicorn (:class:`~instrument.server.fanout.RawSink`)."""
+
+    def __init__(self, app) -> None:
+        self.app = app
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] == "websocket":
+            scope[_RAW_SEND] = send
+        await self.app(scope, receive, send)
+
+
+_RAW_SEND = "scatterlab.server_send"
+
+
 async def _empty_receive():
     return {"type": "http.disconnect"}
 
@@ -222,6 +241,10 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     app.add_middleware(_SizeLimit, limit=MAX_BODY_BYTES, on_refuse=lambda method, path:
                        audit.write("(unchecked)", "", f"{method} {path}", 413,
                                    "body too large"))
+    app.add_middleware(_KeepSend)
+    fanouts: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, LoopFanout] = \
+        weakref.WeakKeyDictionary()
+    app.state.fanouts = fanouts  # the event stream's clients, by event loop (tests look)
 
     def ctl(request: Request, caller: Caller) -> None:
         """Refuse (409) when another operator holds control; the lease is taken or renewed
@@ -438,8 +461,15 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
             return
         await ws.accept()
         loop = asyncio.get_running_loop()
-        wake = asyncio.Event()
-        buf = ClientBuffer(wake=lambda: loop.call_soon_threadsafe(wake.set))
+        sink = RawSink.of(ws.scope.get(_RAW_SEND))
+        if sink is not None:  # uvicorn: one flush per batch writes every client's frames
+            fanout = fanouts.get(loop)
+            if fanout is None:
+                fanout = fanouts[loop] = LoopFanout(loop)
+            buf = ClientBuffer(wake=fanout.request)
+        else:  # another ASGI server: a task per client, a send per message
+            wake = asyncio.Event()
+            buf = ClientBuffer(wake=lambda: loop.call_soon_threadsafe(wake.set))
         service.hub.attach(buf)
         try:
             st = await asyncio.to_thread(service.status)
@@ -447,7 +477,15 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
                 "protocol": PROTOCOL_VERSION, "bench": service.profile.name,
                 "role": caller.role, "name": caller.name, "status": st})))
             closed = asyncio.ensure_future(_until_closed(ws))
-            while not closed.done():
+            if sink is not None:
+                cut = asyncio.Event()
+                fanout.add(buf, sink, cut.set)  # what came since the hello goes out now
+                waiter = asyncio.ensure_future(cut.wait())
+                await asyncio.wait({waiter, closed}, return_when=asyncio.FIRST_COMPLETED)
+                waiter.cancel()
+                if cut.is_set():
+                    await ws.close(code=1013, reason="fell too far behind: reconnect")
+            while sink is None and not closed.done():
                 waiter = asyncio.ensure_future(wake.wait())
                 await asyncio.wait({waiter, closed}, return_when=asyncio.FIRST_COMPLETED)
                 waiter.cancel()
@@ -460,6 +498,8 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass  # the client went away: nothing to tell it; its buffer is detached below
         finally:
+            if sink is not None:
+                fanout.remove(buf)
             service.hub.detach(buf)
 
     return app

@@ -14,9 +14,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["DEFAULT_LISTEN", "Listen", "ServeRefused", "check_listen", "parse_listen", "serve"]
+__all__ = ["DEFAULT_LISTEN", "WS_OPTIONS", "Listen", "ServeRefused", "check_listen",
+           "parse_listen", "serve"]
 
 DEFAULT_LISTEN = "127.0.0.1:8765"
+
+#: uvicorn's WebSocket settings. No permessage-deflate: compressing every event message
+#: once per client (its own zlib stream each) was two thirds of the event loop's time with
+#: 50 clients, on the CPU the engine needs (docs/decisions/0084); the event stream is a
+#: few hundred kB/s per client at the engine's fastest, small for any lab network.
+WS_OPTIONS = {"ws": "websockets-sansio", "ws_per_message_deflate": False}
 
 
 class ServeRefused(ValueError):
@@ -119,7 +126,7 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
             "(scatterlab serve keys add)")
     sys.stdout.flush()
     config = uvicorn.Config(app, log_level="warning", ssl_certfile=cert, ssl_keyfile=key,
-                            ws="websockets-sansio", lifespan="on", timeout_graceful_shutdown=5)
+                            lifespan="on", timeout_graceful_shutdown=5, **WS_OPTIONS)
     server = uvicorn.Server(config)
     server.run(sockets=[sock])
     return 0

@@ -16,7 +16,6 @@ from pathlib import Path
 from instrument.bench.guard import GuardError
 from instrument.bench.profile import BenchProfile, FieldError, ProfileError
 from instrument.plans import PlanSpec, build_plan, parse_plan
-from instrument.plans.lobe import lobe_of
 
 __all__ = ["PlanRefused", "check_plan", "named_files"]
 
@@ -64,8 +63,9 @@ def check_plan(text: str, profile: BenchProfile, allowed: Sequence[Path]) -> Pla
     Raises
     ------
     PlanRefused
-        Field errors, guard violations, a two-pass lobe plan, or a named file outside the
-        allowed folders.
+        Field errors, guard violations (of a two-pass lobe plan's first pass: the second
+        pass is planned, and guarded, after it), or a named file outside the allowed
+        folders.
     """
     if len(text.encode("utf-8", "surrogatepass")) > MAX_PLAN_BYTES:
         raise PlanRefused(f"plan text is over {MAX_PLAN_BYTES >> 20} MiB", ["plan: too large"])
@@ -81,9 +81,6 @@ def check_plan(text: str, profile: BenchProfile, allowed: Sequence[Path]) -> Pla
     if bad:
         raise PlanRefused("plan names files outside the allowed folders",
                           [str(e) for e in bad])
-    if lobe_of(spec) is not None:
-        raise PlanRefused("two-pass lobe plans are run with `scatterlab run` (the server "
-                          "runs one-pass plans)", ["scan.lobe: not supported by the server"])
     try:
         build_plan(spec, profile)
     except GuardError as err:

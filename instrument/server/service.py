@@ -36,9 +36,12 @@ import numpy as np
 from drivers.base import LightSource, MotionAxis
 from drivers.errors import DeviceError
 from instrument.bench.devices import Bench, open_bench
+from instrument.bench.guard import GuardError
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
 from instrument.bench.profile import BenchProfile, ProfileError
+from instrument.pipelines.brdf.second_pass import is_second_pass, second_pass_plan
 from instrument.plans import build_plan, parse_plan
+from instrument.plans.lobe import lobe_of
 from instrument.run import events as ev
 from instrument.run.engine import EngineState, RunEngine
 from instrument.run.locks import LockHeld, hold
@@ -78,6 +81,11 @@ class ServiceError(Exception):
         self.status = status
         self.message = message
         self.reasons = list(reasons)
+
+
+class _StoppedBetweenPasses(Exception):
+    """The queue was stopped while a two-pass lobe plan's second pass was being planned:
+    the item stays at the head, and starting the queue plans it again."""
 
 
 def event_message(event: ev.Event) -> tuple[str, dict[str, Any]]:
@@ -454,7 +462,10 @@ class BenchService:
 
     def stop_all(self, caller: Caller) -> str:
         """Stop every axis now; during a run, abort it (the engine stops every axis and
-        turns the light off). Never refused for want of control."""
+        turns the light off). The queue stops too, so that nothing starts moving again by
+        itself (the next item, a lobe plan's second pass). Never refused for want of
+        control."""
+        was_running = self.queue_running
         with self._lock:
             engine = self.engine
             if engine is not None and engine.alive:
@@ -464,6 +475,7 @@ class BenchService:
             elif self.bench is None:
                 raise ServiceError(409, "no bench is connected")
             else:
+                self.queue_running = False  # nothing starts moving again by itself
                 with self._bench_lock:
                     problems = []
                     for role, axis in self.bench.axes.items():
@@ -475,6 +487,8 @@ class BenchService:
                     f" (could not stop: {'; '.join(problems)})" if problems else "")
         self.hub.publish("manual", {"who": caller.name, "what": "stop all",
                                     "message": message})
+        if was_running:
+            self._publish_queue()
         return message
 
     # bench ------------------------------------------------------------------------------
@@ -547,40 +561,106 @@ class BenchService:
                                            "outcome": "failed", "run_file": item.run_file})
         self._publish_queue()
 
-    def _engine_for(self, item: QueueItem, bench: Bench) -> RunEngine | None:
-        """A new run for a queued item, or its run file continued (None: it had finished)."""
+    def _engine_for(self, item: QueueItem, bench: Bench) -> tuple[RunEngine | None, str]:
+        """A new run for a queued item, or its run file continued; when that file had
+        finished, what follows it (:meth:`_after`)."""
         if item.run_file and item.state in RESUMABLE:
             report = recover_run(item.run_file)
             if report.status == "finished":
-                return None
-            return resume_run(item.run_file, bench, fsync=self.fsync)
+                return self._after(item, bench, item.run_file)
+            with self._bench_lock:
+                return resume_run(item.run_file, bench, fsync=self.fsync), ""
         plan = build_plan(parse_plan(item.plan_text or "", source=f"queue item {item.id}"),
                           bench.profile)
-        return start_run(plan, bench, runs_dir=self.runs_dir, fsync=self.fsync)
+        with self._bench_lock:  # not while planning: a manual Stop all must not wait
+            return start_run(plan, bench, runs_dir=self.runs_dir, fsync=self.fsync), ""
+
+    def _after(self, item: QueueItem, bench: Bench, finished: str
+               ) -> tuple[RunEngine | None, str]:
+        """The run that follows the item's finished run ``finished``, or None and a note
+        when the item is done. Only the first pass of a two-pass lobe plan has a
+        follower: its second pass, planned from the first pass's fit exactly as
+        ``scatterlab run`` plans it (:mod:`instrument.pipelines.brdf.second_pass`), unless
+        it could not beat a single pass of equal time (the note says so, as ``run``
+        does). Each step is announced on the event stream (``second_pass``)."""
+        spec = parse_plan(item.plan_text or "", source=f"queue item {item.id}")
+        if lobe_of(spec) is None or is_second_pass(finished):
+            return None, ""
+
+        def say(state: str, n_points: int | None, message: str) -> None:
+            self.hub.publish("second_pass", {"item_id": item.id, "first_pass": finished,
+                                             "state": state, "n_points": n_points,
+                                             "message": message})
+
+        say("planning", None, "fitting the first pass and placing the second pass's points")
+        try:
+            second = second_pass_plan(finished, spec, bench.profile)
+        except (ValueError, GuardError) as err:
+            raise ValueError(f"the second pass of {Path(finished).name} could not be "
+                             f"planned: {err}") from err
+        if not second.worthwhile:
+            say("not run", 0, second.refusal())
+            return None, second.refusal()
+        pl, t = second.placement, second.target
+        say("planned", len(second.plan.points),
+            f"{len(second.plan.points)} points placed by Fisher information on "
+            f"{second.model} fitted to the first pass ({second.verdict}); predicted σ({t}) "
+            f"{pl.sigma_first[t]:.3g} after the first pass, {pl.sigma_both[t]:.3g} with "
+            "the second")
+        with self._cond, self._bench_lock:
+            if not self.queue_running:  # stopped (or Stop all) while the fit ran
+                raise _StoppedBetweenPasses
+            return start_run(second.plan, bench, runs_dir=self.runs_dir,
+                             fsync=self.fsync), ""
 
     def _run_item(self, item: QueueItem) -> None:
+        """Run the item: one run, or a two-pass lobe plan's two runs one after the other.
+        The item's ``run_file`` names the run in progress, so that after a restart the
+        right one is resumed, or the second pass planned after a finished first."""
         bench = self.bench
         assert bench is not None
-        try:
-            with self._bench_lock:
-                engine = self._engine_for(item, bench)
-        except (ProfileError, StorageError, DeviceError, ValueError) as err:
-            self._item_failed(item, str(err))
-            return
-        if engine is None:
-            self.queue.finish(item, "finished", "server", note="its run file was complete")
-            self._publish_queue()
-            return
-        path = str(engine.store.path)
-        try:
-            with hold(writer_lock_path(path), f"scatterlab serve (queue item {item.id})"):
-                self._drive(item, engine, path)
-        except LockHeld as err:
-            engine.store.close()
-            self._item_failed(item, f"run {Path(path).name} is being continued by "
-                              f"{err.holder}")
+        finished: str | None = None  # this item's run that has just finished
+        while True:
+            try:
+                engine, note = (self._engine_for(item, bench) if finished is None
+                                else self._after(item, bench, finished))
+            except _StoppedBetweenPasses:
+                self.queue.record(item, "stopped", "server", run_file=finished,
+                                  state="aborted", note="the queue was stopped after the "
+                                  "first pass; starting it plans and runs the second pass")
+                self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                                   "outcome": "stopped",
+                                                   "run_file": finished})
+                self._publish_queue()
+                return
+            except (ProfileError, StorageError, DeviceError, ValueError) as err:
+                self._item_failed(item, str(err))
+                return
+            if engine is None:
+                run_file = finished or item.run_file
+                self.queue.finish(item, "finished", "server", run_file=run_file,
+                                  note=note or ("" if finished else
+                                                "its run file was complete"))
+                self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                                   "outcome": "finished",
+                                                   "run_file": run_file})
+                self._publish_queue()
+                return
+            path = str(engine.store.path)
+            try:
+                with hold(writer_lock_path(path), f"scatterlab serve (queue item {item.id})"):
+                    if not self._drive(item, engine, path):
+                        return
+            except LockHeld as err:
+                engine.store.close()
+                self._item_failed(item, f"run {Path(path).name} is being continued by "
+                                  f"{err.holder}")
+                return
+            item, finished = self.queue.get(item.id), path
 
-    def _drive(self, item: QueueItem, engine: RunEngine, path: str) -> None:
+    def _drive(self, item: QueueItem, engine: RunEngine, path: str) -> bool:
+        """Run ``engine`` to its end; True when it finished (the caller ends the item),
+        else the outcome is recorded and the queue stops."""
         self.queue.set_state(item.id, "running", path)
         with self._cond:
             self.current = self.queue.get(item.id)
@@ -598,9 +678,8 @@ class BenchService:
             self.engine = None
             self.current = None
         if state is EngineState.FINISHED:
-            self.queue.finish(item, "finished", "server", run_file=path)
-            outcome = "finished"
-        elif pause_now:
+            return True
+        if pause_now:
             self.queue.record(item, "paused", "server", run_file=path, state="paused",
                               note="stopped at once (pause now); resume continues the file")
             outcome = "paused"
@@ -612,12 +691,12 @@ class BenchService:
             self.queue.record(item, state.value, "server", run_file=path, state="failed",
                               note=engine.snapshot().pause_reason or "")
             outcome = state.value
-        if outcome != "finished":
-            with self._cond:
-                self.queue_running = False
+        with self._cond:
+            self.queue_running = False
         self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
                                            "outcome": outcome, "run_file": path})
         self._publish_queue()
+        return False
 
     def _on_engine_event(self, event: ev.Event) -> None:
         """On the engine's worker thread: one queue put per lifecycle event (the hub does

@@ -229,7 +229,7 @@ def test_second_pass_plan_weighs_itself_against_one_pass_of_equal_time(
     """``scatterlab run``'s planning of the second pass from a first-pass run file: the
     placement carries the run's error budget, and the single pass of equal time is
     predicted with the same budget (here the sharp lobe's second pass beats it)."""
-    from instrument.cli._lobe import second_pass_plan
+    from instrument.pipelines.brdf.second_pass import second_pass_plan
 
     _, _, profile, spec, r1, _, _ = sharp_first_pass
     first = write_run_file(r1, 3, tmp_path / "first.h5", plan_text=spec.source_text,

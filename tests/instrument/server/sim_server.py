@@ -7,11 +7,17 @@ the link of the emulated controller ``scheme://name`` is cut at its next exchang
 point ``after`` is stored (on the engine's worker thread, so it strikes during the run
 however fast the machine is), and plugged back in when the run pauses for it: the
 operator's answer (retry, skip, abort) then decides.
+
+With ``SCATTERLAB_TEST_KILL=run:point`` the server kills itself (SIGKILL, as ``kill -9``
+would) on the engine's worker thread once point ``point`` of the ``run``-th run it
+started is stored: a kill at a chosen place however fast the machine is (the second pass
+of a two-pass lobe plan, for instance).
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 from hw_mocks import registry
@@ -40,12 +46,30 @@ class FaultyService(BenchService):
             faults.clear()  # plugged back in, for the operator's answer
 
 
+class KilledService(BenchService):
+    def __init__(self, *args, **kw) -> None:
+        run, point = os.environ["SCATTERLAB_TEST_KILL"].split(":")
+        self._kill_at = (int(run), int(point))
+        self._n_runs = 0
+        super().__init__(*args, **kw)
+
+    def _on_engine_event(self, event) -> None:
+        super()._on_engine_event(event)
+        if isinstance(event, ev.RunStarted):
+            self._n_runs += 1
+        elif isinstance(event, ev.PointCompleted) and \
+                (self._n_runs, event.index) >= self._kill_at:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+
 if __name__ == "__main__":
-    if os.environ.get("SCATTERLAB_TEST_FAULT"):
+    special = FaultyService if os.environ.get("SCATTERLAB_TEST_FAULT") else \
+        KilledService if os.environ.get("SCATTERLAB_TEST_KILL") else None
+    if special is not None:
         serve = server_main.serve
 
-        def serve_faulty(*args, **kw):
-            return serve(*args, make_service=FaultyService, **kw)
+        def serve_special(*args, **kw):
+            return serve(*args, make_service=special, **kw)
 
-        server_main.serve = serve_faulty
+        server_main.serve = serve_special
     sys.exit(main(["serve", *sys.argv[1:]]))

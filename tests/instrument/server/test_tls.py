@@ -35,6 +35,8 @@ def test_a_tls_server_is_reached_by_a_client_that_trusts_its_certificate(
         events = c.events()
         hello = next(events)
         assert hello.type == "hello"
+        c.take_control(600)  # announced to every client: a frame through the fan-out
+        assert any(m.type == "control" and m.data["holder"] == "local" for m in events)
         events.close()
     with BenchClient(server.url) as c, pytest.raises(ClientError) as err:
         c.status()  # the system's CAs do not know this certificate

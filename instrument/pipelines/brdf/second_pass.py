@@ -1,4 +1,5 @@
-"""The second pass of a two-pass lobe plan (``[scan] lobe``), for ``scatterlab run``.
+"""The second pass of a two-pass lobe plan (``[scan] lobe``), for ``scatterlab run`` and
+the bench server's queue (both plan it here, from the first pass's run file).
 
 After the first pass has run, :func:`second_pass_plan` reduces and fits it (the plan's
 ``lobe.prior`` model, or a selection among the default candidates), places the second
@@ -9,11 +10,13 @@ second pass, whose ``first_pass`` names the first run (the analysis reduces both
 
 It also predicts the single-pass plan the same time would buy
 (:func:`instrument.plans.lobe.single_pass_alternative`); when the second pass would not
-beat it, ``worthwhile`` is False and ``scatterlab run`` says so instead of running it.
+beat it, ``worthwhile`` is False and ``scatterlab run`` (or the server) says so instead of
+running it.
 """
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -43,7 +46,7 @@ from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.plans.tradeoff import Prior, ScanOption, setup_from_profile
 from instrument.run.runfile import RunData, read_run
 
-__all__ = ["SecondPass", "error_budget", "second_pass_plan"]
+__all__ = ["SecondPass", "error_budget", "is_second_pass", "second_pass_plan"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,13 @@ class SecondPass:
                 f"({self.first_seconds + self.second_seconds:.0f} s for both passes) against "
                 f"{a.sigma[t]:.3g} for one pass with θr every {a.theta_r_step_deg:g}° "
                 f"({a.n_points} points, {a.seconds:.0f} s); scan that plan instead")
+
+
+def is_second_pass(run_file: str | Path) -> bool:
+    """Whether the run is the second pass of a two-pass lobe plan: its stored plan names
+    the first pass (``[scan] first_pass``), as :func:`second_pass_plan` writes it."""
+    text = read_run(run_file).plan_text
+    return "first_pass" in tomllib.loads(text).get("scan", {})
 
 
 def error_budget(run: RunData, profile: BenchProfile, u_scale_rel: float
