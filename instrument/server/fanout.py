@@ -1,4 +1,4 @@
-"""Writing the event stream to every client of an event loop in one pass (ADR 0084).
+"""Writing the event stream to every client of an event loop in one pass (ADR 0086).
 
 With 50 clients the per-message path (one asyncio task per client woken per batch, then
 Starlette's and uvicorn's ``websocket.send`` for every message: about 100 µs of Python

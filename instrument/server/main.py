@@ -21,7 +21,7 @@ DEFAULT_LISTEN = "127.0.0.1:8765"
 
 #: uvicorn's WebSocket settings. No permessage-deflate: compressing every event message
 #: once per client (its own zlib stream each) was two thirds of the event loop's time with
-#: 50 clients, on the CPU the engine needs (docs/decisions/0084); the event stream is a
+#: 50 clients, on the CPU the engine needs (docs/decisions/0086); the event stream is a
 #: few hundred kB/s per client at the engine's fastest, small for any lab network.
 WS_OPTIONS = {"ws": "websockets-sansio", "ws_per_message_deflate": False}
 
