@@ -39,7 +39,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_brdf_lobe import concat, duration  # noqa: E402  (the two-pass benchmark's)
+from bench_brdf_lobe import concat, duration  # the two-pass benchmark's
 
 from instrument.bench.profile import parse_profile
 from instrument.pipelines.brdf.analyse import analyse
@@ -157,7 +157,8 @@ def run_alpha(alpha: float, seeds: int) -> list[str]:
         f"| {alpha:g} | fixed | {len(fixed.points)} | {t_u:.1f} | {a_u.std(ddof=1):.3g} | "
         f"{s_u.mean():.3g} | {np.mean(np.abs(a_u - alpha) <= 2 * s_u):.0%} | {t_u:.1f} |",
         f"| {alpha:g} | adaptive | {runs[0]['n_base']} + "
-        f"{np.mean([r[3] for r in last]) - runs[0]['n_base']:.1f} | {t_a:.1f} | {a_a.std(ddof=1):.3g} | {s_a.mean():.3g} | "
+        f"{np.mean([r[3] for r in last]) - runs[0]['n_base']:.1f} | {t_a:.1f} | "
+        f"{a_a.std(ddof=1):.3g} | {s_a.mean():.3g} | "
         f"{np.mean(np.abs(a_a - alpha) <= 2 * s_a):.0%} | "
         f"{np.nanmedian(t_hit):.1f} (reached in {np.mean(np.isfinite(t_hit)):.0%}) |",
     ]
