@@ -21,8 +21,9 @@
    w (e_αᵀ C j)² / (1 + w jᵀ C j) (c-optimal sequential design: Atkinson, Donev & Tobias,
    *Optimum Experimental Designs*, 2007, §10.1–10.3 and §11.2), C being updated after each
    choice. No direction is measured twice.
-4. The plan stops when the fit's σ(α) reaches ``target_sigma_alpha`` or the estimated
-   instrument time of the points planned (``History.seconds``) reaches ``budget_s``.
+4. The plan stops when the fit's σ(α) reaches ``target_sigma_alpha``, the estimated
+   instrument time of the points planned (``History.seconds``) reaches ``budget_s``, or
+   the run holds ``max_points`` points.
 
 The fitted α is the lobe *as the instrument sees it* (averaged over beam and pupil),
 which is what decides where points help; the BRDF analysis (``scatterlab fit``) fits the
@@ -139,6 +140,7 @@ class SharpLobe:
     budget_s : stop when the points planned take this long (instrument time, estimated).
     batch : points chosen per decision; step_deg : their grid; window_deg : how far from
         the fitted peak they may lie.
+    max_points : stop when the run holds this many points (None: no limit).
     acquisition, sample : the plan's ``[acquisition]`` table and sample name.
     seed : offsets the refinement grid by a seeded fraction of a step, so repeated runs do
         not all sample the same directions; stored, so a resumed run decides the same.
@@ -148,6 +150,7 @@ class SharpLobe:
                  search_half_width_deg: float = 4.0, search_step_deg: float = 1.0,
                  target_sigma_alpha: float = 1e-3, budget_s: float = 600.0, batch: int = 4,
                  step_deg: float = 0.25, window_deg: float = 15.0,
+                 max_points: int | None = None,
                  acquisition: dict[str, Any] | None = None, sample: str = "sample",
                  seed: int | None = 0) -> None:
         self.theta_i = float(theta_i)
@@ -159,6 +162,7 @@ class SharpLobe:
         self.batch = int(batch)
         self.step_deg = float(step_deg)
         self.window_deg = float(window_deg)
+        self.max_points = None if max_points is None else int(max_points)
         self.acquisition = dict(acquisition or {})
         self.sample = str(sample)
         self.seed = 0 if seed is None else int(seed)
@@ -174,6 +178,7 @@ class SharpLobe:
                         theta_r={"start": start, "stop": stop, "step": step},
                         specular={"half_width_deg": self.search_half_width_deg,
                                   "step_deg": self.search_step_deg},
+                        skip_beam_points=True,  # the coarse grid may cross the beam
                         acquisition=self.acquisition or None, sample=self.sample,
                         name="sharp-lobe refinement")
 
@@ -184,10 +189,13 @@ class SharpLobe:
             "search_step_deg": self.search_step_deg,
             "target_sigma_alpha": self.target_sigma_alpha, "budget_s": self.budget_s,
             "batch": self.batch, "step_deg": self.step_deg, "window_deg": self.window_deg,
+            "max_points": self.max_points,
             "acquisition": self.acquisition, "sample": self.sample}}
 
     def propose(self, history: History) -> list[Proposal] | None:
-        if history.seconds >= self.budget_s:
+        n = len(history.points)
+        if history.seconds >= self.budget_s or (self.max_points is not None
+                                                and n >= self.max_points):
             return None
         fit = fit_lobe(history.points, self.theta_i)
         self.fit = fit
@@ -195,9 +203,10 @@ class SharpLobe:
             return None
         if fit.sigma_alpha <= self.target_sigma_alpha:
             return None
-        return [Proposal(self.theta_i, float(t)) for t in self._choose(fit, history)]
+        room = self.batch if self.max_points is None else min(self.batch, self.max_points - n)
+        return [Proposal(self.theta_i, float(t)) for t in self._choose(fit, history, room)]
 
-    def _choose(self, fit: LobeFit, history: History) -> list[float]:
+    def _choose(self, fit: LobeFit, history: History, room: int) -> list[float]:
         peak = self.theta_i + float(fit.params[2])
         k = np.arange(-math.floor(self.window_deg / self.step_deg),
                       math.floor(self.window_deg / self.step_deg) + 1)
@@ -215,7 +224,7 @@ class SharpLobe:
         cov = fit.cov.copy()
         chosen: list[float] = []
         free = np.ones(cand.size, bool)
-        for _ in range(min(self.batch, cand.size)):
+        for _ in range(min(room, cand.size)):
             cj = jac @ cov                                   # (n, 4): rows (C j)ᵀ
             gain = w * cj[:, 3] ** 2 / (1.0 + w * np.einsum("ij,ij->i", cj, jac))
             gain[~free] = -np.inf
