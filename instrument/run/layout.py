@@ -10,7 +10,9 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
                                 with the device identity and retry policy as attributes
       plan/        NXcollection plan_text, acquisition_policy, retry_policies (JSON),
                                 axes, planned_targets (N, A), planned_angles (N, 4),
-                                planned_label, planned_light, planned_exposure_us
+                                planned_label, planned_light, planned_exposure_us;
+                                attr ``adaptive`` (JSON) on an adaptive run, whose
+                                planned tables are extendible and grow (ADR 0091)
       calibration/ NXcollection one attribute per calibration reference (run id or path)
       points/      NXcollection per completed point (row = order of first completion; a
                                 point measured again keeps its row): index, label, status
