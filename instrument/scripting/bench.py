@@ -128,15 +128,7 @@ class ScriptBench:
         Raises :class:`~instrument.bench.guard.GuardError` with the guard's reasons when
         a point is not allowed, as ``run`` would before anything moves.
         """
-        import numpy as np
-
-        built = self._plan(plan)
-        nan4 = (np.nan,) * 4
-        angles = np.array([nan4 if (a := p.angles) is None
-                           else (a.theta_i, a.phi_i, a.theta_r, a.phi_r)
-                           for p in built.points], dtype=float).reshape(-1, 4)
-        return DryRun(built, built.estimate(), built.targets_array(), built.axes, angles,
-                      built.dropped_in_beam)
+        return dry_run_of(self._plan(plan))
 
     # ------------------------------------------------------------------- runs
     def run(self, plan: PlanLike | AdaptivePlan, *, block: bool = True,
@@ -223,6 +215,18 @@ class ScriptBench:
 
     def __repr__(self) -> str:
         return f"<ScriptBench {self.profile.name!r}: {len(self._bench.devices)} devices>"
+
+
+def dry_run_of(built: Plan) -> DryRun:
+    """The :class:`DryRun` of a plan built (and guarded) for a bench."""
+    import numpy as np
+
+    nan4 = (np.nan,) * 4
+    angles = np.array([nan4 if (a := p.angles) is None
+                       else (a.theta_i, a.phi_i, a.theta_r, a.phi_r)
+                       for p in built.points], dtype=float).reshape(-1, 4)
+    return DryRun(built, built.estimate(), built.targets_array(), built.axes, angles,
+                  built.dropped_in_beam)
 
 
 def _progress_bar(handle: RunHandle) -> Callable[[Event | None], None]:
