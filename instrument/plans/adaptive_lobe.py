@@ -182,6 +182,13 @@ class SharpLobe:
                         acquisition=self.acquisition or None, sample=self.sample,
                         name="sharp-lobe refinement")
 
+    def curve(self, theta_r_deg: Sequence[float] | np.ndarray) -> np.ndarray:
+        """The newest fit's lobe at signed ``theta_r_deg`` (NaN before a fit)."""
+        x = np.asarray(theta_r_deg, float)
+        if self.fit is None:
+            return np.full(x.shape, np.nan)
+        return lobe_model(x, self.theta_i, self.fit.params)
+
     def describe(self) -> dict[str, Any]:
         return {"name": "sharp_lobe", "seed": self.seed, "params": {
             "theta_i": self.theta_i, "theta_r": list(self.theta_r),
