@@ -28,10 +28,8 @@ Run: ``python benchmarks/bench_adaptive_lobe.py [--seeds N] [--alphas 0.05,0.02]
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_brdf_lobe import concat, duration  # the two-pass benchmark's
+from bench_brdf_lobe import concat, duration, table_main  # the two-pass benchmark's
 
 from instrument.bench.profile import parse_profile
 from instrument.pipelines.brdf.analyse import analyse
@@ -166,19 +164,10 @@ def run_alpha(alpha: float, seeds: int) -> list[str]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=8)
-    ap.add_argument("--alphas", default="0.05,0.02")
-    args = ap.parse_args()
-    print("| α | plan | points | duration (s) | σ(α) measured | σ(α) reported "
-          "| truth within 2σ | time to the fixed plan's σ(α) (s, median) |")
-    print("|---:|---|---|---:|---:|---:|---:|---:|")
-    for alpha in (float(x) for x in args.alphas.split(",")):
-        t0 = time.perf_counter()
-        for line in run_alpha(alpha, args.seeds):
-            print(line, flush=True)
-        print(f"<!-- α = {alpha:g}: {time.perf_counter() - t0:.0f} s -->", flush=True)
-    return 0
+    return table_main(run_alpha, doc=__doc__, seeds=8, alphas="0.05,0.02",
+                      header="| α | plan | points | duration (s) | σ(α) measured | "
+                             "σ(α) reported | truth within 2σ | time to the fixed plan's "
+                             "σ(α) (s, median) |")
 
 
 if __name__ == "__main__":
