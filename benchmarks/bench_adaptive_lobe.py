@@ -37,7 +37,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_brdf_lobe import concat, duration, table_main  # the two-pass benchmark's
+from bench_brdf_lobe import (  # the two-pass benchmark's setup and helpers
+    MODEL,
+    READOUT_S,
+    concat,
+    duration,
+    table_main,
+)
 
 from instrument.bench.profile import parse_profile
 from instrument.pipelines.brdf.analyse import analyse
@@ -46,27 +52,18 @@ from instrument.plans.adaptive import History, Measured
 from instrument.plans.adaptive_lobe import SharpLobe
 from instrument.plans.build import build_plan
 from instrument.plans.planfile import parse_plan
-from tests.instrument.sim_scan import (
-    Sample,
-    ScanSetup,
-    acquisition_seconds,
-    profile_text,
-    reduce_seed,
-    render,
-)
+from tests.instrument import sim_scan as sim
 
-READOUT_S = 0.02
-MODEL = "lambert+ggx"
 THETA_I = 40.0
 
 
-def acquisition(setup: ScanSetup) -> dict:
+def acquisition(setup: sim.ScanSetup) -> dict:
     return {"mode": "auto", "exposure_us": min(2000.0, setup.max_exposure_us),
             "max_exposure_us": setup.max_exposure_us, "frames": setup.frames,
             "dark": "per_point", "detectors": ["camera"]}
 
 
-def explicit_plan(pairs, setup: ScanSetup, profile):
+def explicit_plan(pairs, setup: sim.ScanSetup, profile):
     """The points ``pairs`` (signed θi, θr) run in the order given (as the engine runs an
     adaptive plan's batches after its base)."""
     spec = scripted.in_plane(points=[list(p) for p in pairs], order="raster", sample="sim",
@@ -93,9 +90,9 @@ def adaptive_run(setup, sample, profile, seed: int, budget_s: float, target: flo
                      batch=4, acquisition=acquisition(setup), sample="sim", seed=seed)
     base = build_plan(plan.base, profile)
     pairs = [(THETA_I, m.theta_r) for m in measured_angles(base)]
-    r = render(setup, sample, plan=base, cache=cache)
-    acc = reduce_seed(r, 1000 * seed)
-    acq_s = acquisition_seconds(r, readout_s=READOUT_S)
+    r = sim.render(setup, sample, plan=base, cache=cache)
+    acc = sim.reduce_seed(r, 1000 * seed)
+    acq_s = sim.acquisition_seconds(r, readout_s=READOUT_S)
     hist = measured(acc, 0)
     rounds = []
     t_target = math.nan
@@ -110,9 +107,9 @@ def adaptive_run(setup, sample, profile, seed: int, budget_s: float, target: flo
             break
         new = [(p.theta_i, p.theta_r) for p in props]
         batch = explicit_plan(new, setup, profile)
-        rb = render(setup, sample, plan=batch, cache=cache)
-        pts = reduce_seed(rb, 1000 * seed + k)
-        acq_s += acquisition_seconds(rb, readout_s=READOUT_S)
+        rb = sim.render(setup, sample, plan=batch, cache=cache)
+        pts = sim.reduce_seed(rb, 1000 * seed + k)
+        acq_s += sim.acquisition_seconds(rb, readout_s=READOUT_S)
         hist += measured(pts, len(hist))
         acc = concat(acc, pts)
         pairs += new
@@ -130,14 +127,14 @@ def measured_angles(plan) -> list[Measured]:
 
 
 def run_alpha(alpha: float, seeds: int) -> list[str]:
-    sample = Sample(f"glossy-{alpha}", MODEL, (0.3, 0.5, alpha))
-    setup = ScanSetup(power_w=2e-8, fill=0.5, max_exposure_us=10_000.0)
-    profile = parse_profile(profile_text(setup, sample))
+    sample = sim.Sample(f"glossy-{alpha}", MODEL, (0.3, 0.5, alpha))
+    setup = sim.ScanSetup(power_w=2e-8, fill=0.5, max_exposure_us=10_000.0)
+    profile = parse_profile(sim.profile_text(setup, sample))
     cache: dict = {}
     fixed = build_plan(parse_plan(setup.plan_text()), profile)
-    r_u = render(setup, sample, plan=fixed, cache=cache)
+    r_u = sim.render(setup, sample, plan=fixed, cache=cache)
     t_u = sum(duration(fixed, r_u))
-    fits_u = [analyse(reduce_seed(r_u, seed), [MODEL], run_cv=False).chosen_fit
+    fits_u = [analyse(sim.reduce_seed(r_u, seed), [MODEL], run_cv=False).chosen_fit
               for seed in range(seeds)]
     a_u = np.array([f.params[2] for f in fits_u])
     s_u = np.array([f.stderr[2] for f in fits_u])
