@@ -5,13 +5,17 @@ refusals reach the plan, and a run killed mid-way resumes to the same decisions
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from instrument.plans.adaptive import (
     AdaptiveReplayError,
@@ -22,7 +26,7 @@ from instrument.plans.adaptive import (
 )
 from instrument.plans.build import build_plan
 from instrument.run.journal import read_journal
-from instrument.run.layout import journal_path
+from instrument.run.layout import grow_plan_tables, header_from_file, journal_path, new_run_file
 from instrument.run.recovery import recover
 from instrument.run.runfile import read_planned, read_run, read_summary
 from instrument.run.runner import resume_run
@@ -158,3 +162,40 @@ def test_guard_refusal_reaches_the_plan_not_the_run(tmp_path):
     # a resume cannot rebuild a plan this program does not know, and says what to do
     with pytest.raises(UnknownAdaptivePlan, match="pass the plan object"):
         resume_run(engine.store.path, lobe_bench(), fsync=False, catalog=False)
+
+
+# ------------------------------------------------------------------- the growing table
+_angle = st.floats(-89.0, 89.0, allow_nan=False)
+_row = st.builds(lambda a, b, lab, e: {"targets": [a, b], "angles": [abs(a), 0.0, abs(b),
+                                                                       180.0],
+                                       "label": lab, "light": True, "exposure_us": e},
+                 _angle, _angle, st.sampled_from(["sample", "dark"]),
+                 st.one_of(st.just(math.nan), st.floats(1.0, 1e6)))
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(base=st.integers(1, 4), batches=st.lists(st.lists(_row, min_size=1, max_size=5),
+                                                max_size=4))
+def test_a_plan_grown_in_batches_reads_as_one_planned_at_once(tmp_path, base, batches):
+    """Extending the file batch by batch (as the run does, and as recovery does from the
+    journal) leaves the same tables as a file created with every point planned."""
+    from tests.instrument.run.test_storage import header
+
+    h0 = replace(header(base), adaptive='{"name": "probe"}')
+    grown_path, once_path = tmp_path / "grown.h5", tmp_path / "once.h5"
+    for p in (grown_path, once_path):
+        p.unlink(missing_ok=True)
+    h = h0
+    with new_run_file(grown_path, h0) as f:
+        for rows in batches:
+            h = h.with_planned(rows)
+            grow_plan_tables(f["entry/plan"], h)
+    new_run_file(once_path, h).close()
+    with h5py.File(grown_path) as g, h5py.File(once_path) as o:
+        for name in ("planned_targets", "planned_angles", "planned_light",
+                     "planned_exposure_us", "planned_label"):
+            np.testing.assert_array_equal(g["entry/plan"][name][()], o["entry/plan"][name][()])
+        assert g["entry"].attrs["n_planned"] == base + sum(map(len, batches))
+        assert header_from_file(g).planned_label == h.planned_label
+        assert header_from_file(g).adaptive == h0.adaptive
