@@ -149,13 +149,15 @@ def run_alpha(alpha: float, seeds: int) -> list[str]:
     return out
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=16)
-    ap.add_argument("--alphas", default="0.2,0.05,0.02")
+def table_main(run_alpha, *, doc: str, header: str, seeds: int, alphas: str) -> int:
+    """Print a Markdown table: ``header`` (its columns), then the rows of
+    ``run_alpha(alpha, seeds)`` for each α of ``--alphas`` (also used by
+    bench_adaptive_lobe.py)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=seeds)
+    ap.add_argument("--alphas", default=alphas)
     args = ap.parse_args()
-    print("| α | plan | points | duration (s) | σ(α) measured | σ(α) reported "
-          "| truth within 2σ | σ(α) uniform / lobe |")
+    print(header)
     print("|---:|---|---:|---:|---:|---:|---:|---:|")
     for alpha in (float(x) for x in args.alphas.split(",")):
         t0 = time.perf_counter()
@@ -163,6 +165,12 @@ def main() -> int:
             print(line, flush=True)
         print(f"<!-- α = {alpha:g}: {time.perf_counter() - t0:.0f} s -->", flush=True)
     return 0
+
+
+def main() -> int:
+    return table_main(run_alpha, doc=__doc__, seeds=16, alphas="0.2,0.05,0.02",
+                      header="| α | plan | points | duration (s) | σ(α) measured | "
+                             "σ(α) reported | truth within 2σ | σ(α) uniform / lobe |")
 
 
 if __name__ == "__main__":

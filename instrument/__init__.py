@@ -20,6 +20,7 @@ from typing import Any
 #: Public name → the module that defines it.
 _FACADE = {
     "open_bench": "instrument.scripting.bench",
+    "connect": "instrument.scripting.remote",
     "open_run": "instrument.scripting.results",
     "fit": "instrument.scripting.results",
     "reconstruct": "instrument.scripting.results",

@@ -33,7 +33,7 @@ from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
 from instrument.plans.ranges import float_range
 
-__all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points"]
+__all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points", "in_plane_angles"]
 
 #: Used for planning when a profile gives no velocity/acceleration for an axis.
 DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
@@ -298,7 +298,7 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
     pts: list[ScanPoint] = []
     angles: list[Angles] = []
     if kind in ("brdf_in_plane", "reference", "signature") and "points" in s:
-        angles.extend(_in_plane_angles(float(ti), float(tr)) for ti, tr in s["points"])
+        angles.extend(in_plane_angles(float(ti), float(tr)) for ti, tr in s["points"])
     elif kind in ("brdf_in_plane", "reference", "signature"):
         theta_r = _expand(s["theta_r"])
         # a two-pass lobe plan builds its first pass: the θr grid and a search around the
@@ -317,7 +317,7 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
                        for ti_abs in (abs(ti),) if abs(ti_abs + k * step) < 90]
                 rs = sorted(set(round(r, 9) for r in rs))
             for tr in rs:
-                angles.append(_in_plane_angles(ti, tr))
+                angles.append(in_plane_angles(ti, tr))
     elif kind == "brdf_hemisphere":
         grid, _ = equal_solid_angle_grid(int(s["n_directions"]),
                                          float(s.get("theta_max_deg", 85.0)))
@@ -377,7 +377,7 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
     return pts
 
 
-def _in_plane_angles(theta_i: float, theta_r_signed: float) -> Angles:
+def in_plane_angles(theta_i: float, theta_r_signed: float) -> Angles:
     """Plan-file signed angles → sample-frame angles.
 
     θi ≥ 0 puts the source at φi = 0 (θi < 0 at φi = 180°); θr > 0 is on the specular

@@ -32,7 +32,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -42,6 +42,7 @@ from instrument.bench.devices import Bench
 from instrument.bench.dynamics import move_time
 from instrument.bench.kinematics import kinematics_for
 from instrument.bench.profile import RetryPolicy
+from instrument.plans.adaptive import AdaptiveDriver
 from instrument.plans.build import Plan, dynamics_of
 from instrument.plans.commands import Acquire, AcquisitionPolicy, Move, PointDone, SetLight
 from instrument.run.events import (
@@ -137,14 +138,21 @@ class RunEngine:
     reopen_store
         Called to reopen the run file after a storage error (default:
         :meth:`RunStore.reopen` on the same path with the same settings).
+    adaptive
+        The driver of an adaptive plan (:mod:`instrument.plans.adaptive`): when every
+        point of the plan is done it is asked for more, which are committed to the run
+        file's planned table (:meth:`RunStore.extend_plan`) before they are run.
     """
 
     def __init__(self, bench: Bench, plan: Plan, store: RunStore, *,
                  done: set[int] | frozenset[int] = frozenset(),
                  move_timeout_factor: float = 3.0, move_timeout_min_s: float = 10.0,
                  poll_s: float = 0.002,
-                 reopen_store: Callable[[], tuple[RunStore, set[int]]] | None = None) -> None:
+                 reopen_store: Callable[[], tuple[RunStore, set[int]]] | None = None,
+                 adaptive: AdaptiveDriver | None = None) -> None:
         self.bench = bench
+        #: An adaptive plan's driver: asked for more points when the plan's are done.
+        self._adaptive = adaptive
         self.plan = plan
         self.store = store
         self._n_total = len(plan.points)
@@ -440,6 +448,8 @@ class RunEngine:
                             self._run_point(group)
                             group = []
                 self._commit_wait_or_pause(None)
+                if self._adaptive is not None and self._grow():
+                    continue
                 break
             except _Restart:
                 # The run file was recovered from its journal after a storage error:
@@ -448,6 +458,25 @@ class RunEngine:
         with self._lock:
             n = len(self._done)
         return "finished" if n >= self._n_total else "paused"
+
+    def _grow(self) -> bool:
+        """Ask the adaptive plan for its next points; commit and add them (ADR 0091).
+        Returns False when it is done. Refused points are logged in the run file."""
+        with self._lock:
+            if self._abort_requested:
+                raise _Abort
+        decision = self._adaptive.decide(self.plan)
+        if decision is None:
+            self.store_event("adaptive_done", rounds=self._adaptive.rounds)
+            return False
+        for ti, tr, reason in decision.record["refused"]:
+            self.store_event("refused", theta_i=ti, theta_r=tr, reason=reason)
+        self._writer.call(lambda: self.store.extend_plan(decision.rows, decision.record))
+        self.plan = replace(self.plan, points=self.plan.points + tuple(decision.points))
+        with self._lock:
+            self._n_total = len(self.plan.points)
+            self._done.grow(self._n_total)
+        return True
 
     # points -----------------------------------------------------------------------
     def _run_point(self, group: list) -> None:
@@ -637,6 +666,9 @@ class RunEngine:
         with self._lock:
             self._done.add(st.index)
             n = len(self._done)
+        if self._adaptive is not None:
+            self._adaptive.observe_point(st.index, None if math.isnan(angles[0]) else angles,
+                                         st.signal, not skipped)
         if skipped:
             self._n_skipped += 1
         now = time.monotonic()
@@ -1125,6 +1157,11 @@ class _DoneSet:
         if not self._bits[i]:
             self._bits[i] = True
             self._count += 1
+
+    def grow(self, n: int) -> None:
+        """Make room for points up to ``n`` (an adaptive plan's new points, not done)."""
+        if n > self._bits.size:
+            self._bits = np.concatenate([self._bits, np.zeros(n - self._bits.size, bool)])
 
     def discard_all(self, indices) -> None:
         for i in indices:

@@ -10,7 +10,9 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
                                 with the device identity and retry policy as attributes
       plan/        NXcollection plan_text, acquisition_policy, retry_policies (JSON),
                                 axes, planned_targets (N, A), planned_angles (N, 4),
-                                planned_label, planned_light, planned_exposure_us
+                                planned_label, planned_light, planned_exposure_us;
+                                attr ``adaptive`` (JSON) on an adaptive run, whose
+                                planned tables are extendible and grow (ADR 0091)
       calibration/ NXcollection one attribute per calibration reference (run id or path)
       points/      NXcollection per completed point (row = order of first completion; a
                                 point measured again keeps its row): index, label, status
@@ -40,7 +42,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +60,7 @@ __all__ = [
     "StorageError",
     "detector_columns",
     "end_of_allocation",
+    "grow_plan_tables",
     "header_from_file",
     "journal_path",
     "new_run_file",
@@ -145,6 +148,27 @@ class RunHeader:
     #: value], …]``: the filter slot of a wavelength axis), so that a resumed run acquires
     #: each point as planned; empty in files written before it (points without meta).
     planned_meta: list[str] = field(default_factory=list)
+    #: An adaptive run's plan (:mod:`instrument.plans.adaptive`): JSON of its name,
+    #: parameters and seed, from which a resumed run rebuilds it; empty for a fixed plan.
+    #: Its planned tables grow during the run (:func:`grow_plan_tables`, ADR 0091).
+    adaptive: str = ""
+
+    def with_planned(self, rows: list[dict[str, Any]]) -> RunHeader:
+        """This header with ``rows`` (a journal ``planned`` record's points) appended to
+        its planned points."""
+        n = len(self.planned_label)
+        meta = list(self.planned_meta)
+        if meta or any(r.get("meta") for r in rows):
+            meta = (meta or ["[]"] * n) + [json.dumps(r.get("meta", [])) for r in rows]
+        return replace(
+            self,
+            planned_targets=[*self.planned_targets, *(list(r["targets"]) for r in rows)],
+            planned_angles=[*self.planned_angles, *(list(r["angles"]) for r in rows)],
+            planned_label=[*self.planned_label, *(str(r["label"]) for r in rows)],
+            planned_light=[*self.planned_light, *(bool(r["light"]) for r in rows)],
+            planned_exposure_us=[*self.planned_exposure_us,
+                                 *(float(r["exposure_us"]) for r in rows)],
+            planned_meta=meta)
 
     def as_dict(self) -> dict[str, Any]:
         d = dict(vars(self))
@@ -237,22 +261,13 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         plan.create_dataset("acquisition_policy", data=h.acquisition_policy)
         plan.create_dataset("retry_policies", data=h.retry_policies)
         plan.create_dataset("axes", data=np.array(list(h.axes), dtype=object), dtype=_STR)
-        n = len(h.planned_label)
-        targets = np.array(h.planned_targets, dtype=float).reshape(n, len(h.axes))
-        plan.create_dataset("planned_targets", data=targets)
-        plan.create_dataset("planned_angles",
-                            data=np.array(h.planned_angles, dtype=float).reshape(n, 4))
-        plan.create_dataset("planned_label", data=np.array(h.planned_label, dtype=object),
-                            dtype=_STR)
-        plan.create_dataset("planned_light", data=np.array(h.planned_light, dtype=bool))
-        plan.create_dataset("planned_exposure_us",
-                            data=np.array(h.planned_exposure_us, dtype=float))
-        if h.planned_meta:
-            plan.create_dataset("planned_meta", data=np.array(h.planned_meta, dtype=object),
-                                dtype=_STR)
+        if h.adaptive:
+            plan.attrs["adaptive"] = h.adaptive
+        write_plan_tables(plan, h)
         cal = _group(entry, "calibration", "NXcollection")
         for k, v in h.calibration.items():
             cal.attrs[k] = v
+        n = len(h.planned_label)
         rows = table_chunk_rows(n)
         pts = _group(entry, "points", "NXcollection")
         for name in (*FLOAT_FIELDS, *DETECTOR_FIELDS):
@@ -277,6 +292,54 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         f.close()
         raise
     return f
+
+
+def _plan_columns(h: RunHeader) -> dict[str, np.ndarray]:
+    n = len(h.planned_label)
+    cols = {
+        "planned_targets": np.array(h.planned_targets, dtype=float).reshape(n, len(h.axes)),
+        "planned_angles": np.array(h.planned_angles, dtype=float).reshape(n, 4),
+        "planned_label": np.array(h.planned_label, dtype=object),
+        "planned_light": np.array(h.planned_light, dtype=bool),
+        "planned_exposure_us": np.array(h.planned_exposure_us, dtype=float),
+    }
+    if h.planned_meta:
+        cols["planned_meta"] = np.array(h.planned_meta, dtype=object)
+    return cols
+
+
+def write_plan_tables(plan: h5py.Group, h: RunHeader) -> None:
+    """Create the planned-point tables of a new file. A fixed plan's are written once, at
+    their size; an adaptive plan's (``h.adaptive``) can grow (:func:`grow_plan_tables`)."""
+    for name, data in _plan_columns(h).items():
+        kw: dict[str, Any] = {"dtype": _STR} if data.dtype == object else {}
+        if h.adaptive:
+            kw.update(maxshape=(None, *data.shape[1:]),
+                      chunks=(64, *(max(d, 1) for d in data.shape[1:])))
+        plan.create_dataset(name, data=data, **kw)
+
+
+def grow_plan_tables(plan: h5py.Group, h: RunHeader) -> bool:
+    """Make the planned-point tables of an adaptive run's file hold ``h``'s planned points
+    (the journal's, which may be more than the file holds after a crash); returns whether
+    anything was written. Rows the file has beyond ``h`` were never committed and go."""
+    n = len(h.planned_label)
+    changed = False
+    for name, data in _plan_columns(h).items():
+        if name not in plan:  # the first point with meta: the column starts now
+            plan.create_dataset(name, data=data, dtype=_STR, maxshape=(None,), chunks=(64,))
+            changed = True
+            continue
+        d = plan[name]
+        have = d.shape[0]
+        if have == n:
+            continue
+        d.resize(n, axis=0)
+        if n > have:
+            d[have:n] = data[have:n]
+        changed = True
+    plan.parent.attrs["n_planned"] = n
+    return changed
 
 
 def detector_columns(grp: h5py.Group, extras: list[dict[str, float]]
@@ -351,6 +414,7 @@ def header_from_file(f: h5py.File) -> RunHeader:
         planned_exposure_us=[float(x) for x in plan["planned_exposure_us"][()]],
         planned_meta=([_text(x) for x in plan["planned_meta"][()]]
                       if "planned_meta" in plan else []),
+        adaptive=_text(plan.attrs.get("adaptive", "")),
         acquisition_policy=_text(plan["acquisition_policy"][()]),
         retry_policies=json.dumps(retry), identities=identities, device_kinds=kinds,
         geometry=geometry,

@@ -61,6 +61,7 @@ from instrument.run.layout import (
     RunHeader,
     StorageError,
     detector_columns,
+    grow_plan_tables,
     header_from_file,
     journal_path,
     new_run_file,
@@ -194,6 +195,9 @@ def _read_journal(path: Path) -> _Journalled:
                 owners.extend([-1] * len(r["frames"]))
                 continue
             start[i] = pos
+        elif t == "planned":  # an adaptive plan's decision: its points join the plan
+            if r.get("first") == len(header.planned_label):
+                header = header.with_planned(r["points"])
         elif t == "frames_lost":
             lost.add(r["index"])
         elif t == "event":
@@ -487,6 +491,8 @@ def _reconcile(f: h5py.File, j: _Journalled, rebuilt: bool, check_all: bool
         d.resize(nf, axis=0)
         if nf:
             d[:nf] = frame_cols[name]
+    if header.adaptive:  # a growing plan: the journal's decisions (ADR 0091)
+        grow_plan_tables(f["entry/plan"], header)
     log = f["entry/events/log"]
     log.resize(len(j.events), axis=0)
     if j.events:

@@ -341,7 +341,8 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
 # ------------------------------------------------------------------------------ plan
 @dataclass(frozen=True)
 class PlannedPoints:
-    """The plan's points as the run stored them at creation (every planned point, in order).
+    """The plan's points as the run stored them (every planned point, in order; an
+    adaptive run's grew during the run).
 
     ``targets`` (n, len(axes)) and ``angles`` (n, 4: θi, φi, θr, φr) hold NaN where a point
     has no target on an axis or no scattering geometry; ``exposure_us`` NaN where the
@@ -357,6 +358,8 @@ class PlannedPoints:
     exposure_us: np.ndarray
     #: Per point, its meta as JSON (empty for files written before it).
     meta: tuple[str, ...] = ()
+    #: An adaptive run's plan as JSON (:attr:`RunSummary.adaptive`); "" for a fixed plan.
+    adaptive: str = ""
 
 
 def read_planned(path: str | Path) -> PlannedPoints:
@@ -369,7 +372,8 @@ def read_planned(path: str | Path) -> PlannedPoints:
             p["planned_targets"][()], p["planned_angles"][()],
             tuple(as_text(s) for s in p["planned_label"][()]),
             p["planned_light"][()], p["planned_exposure_us"][()],
-            tuple(as_text(x) for x in p["planned_meta"][()]) if "planned_meta" in p else ())
+            tuple(as_text(x) for x in p["planned_meta"][()]) if "planned_meta" in p else (),
+            as_text(p.attrs.get("adaptive", "")))
 
 
 # ------------------------------------------------------------------------------ summary
@@ -394,6 +398,9 @@ class RunSummary:
     recorded: tuple[str, ...] = ()
     #: Points whose frames a damaged file lost (status 2), not measured again yet.
     lost: tuple[int, ...] = ()
+    #: An adaptive run's plan as JSON (name, parameters, seed; its planned table grew
+    #: during the run, ADR 0091); empty for a fixed plan and in older files.
+    adaptive: str = ""
 
 
 #: Point columns and their names in a summary, in the order they are listed.
@@ -419,7 +426,8 @@ def read_summary(path: str | Path) -> RunSummary:
                           None if frames is None else tuple(frames.shape[1:]),
                           path.stat().st_size,
                           as_text(e["sample/name"][()]) if "sample/name" in e else "",
-                          tuple(as_text(a) for a in e["plan/axes"][()]), recorded, lost)
+                          tuple(as_text(a) for a in e["plan/axes"][()]), recorded, lost,
+                          as_text(e["plan"].attrs.get("adaptive", "")))
 
 
 # ------------------------------------------------------------------------------ log

@@ -14,11 +14,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
 from drivers.errors import DeviceError
 from instrument.bench.devices import Bench
 from instrument.bench.kinematics import Angles
 from instrument.bench.profile import FieldError
+from instrument.plans.adaptive import AdaptiveDriver, AdaptivePlan, rebuild
 from instrument.plans.build import Plan
 from instrument.plans.commands import ScanPoint
 from instrument.plans.planfile import PlanError, parse_plan
@@ -26,9 +29,11 @@ from instrument.run.catalog import Catalog, RepairRow, RunRow
 from instrument.run.engine import RunEngine
 from instrument.run.events import Event, Paused, Progress, RunFinished, RunStarted
 from instrument.run.health import inspect_run_file
+from instrument.run.journal import read_journal
+from instrument.run.layout import STATUS_OK, journal_path
 from instrument.run.paths import DEFAULT_RUNS_DIR
 from instrument.run.recovery import RecoveryReport, journal_usable, recover, salvage
-from instrument.run.runfile import read_planned
+from instrument.run.runfile import open_run, read_planned
 from instrument.run.storage import RunHeader, RunStore
 from instrument.version import software_version
 
@@ -174,18 +179,24 @@ def check_bench_for_plan(plan: Plan, bench: Bench) -> None:
 def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_DIR,
               fsync: bool = True, sync_interval_s: float = 0.25,
               min_free_bytes: int = 64 << 20, catalog: bool = True,
-              run_id: str | None = None) -> RunEngine:
-    """Create the run file and catalog row; return the (not yet started) engine."""
+              run_id: str | None = None, adaptive: AdaptivePlan | None = None) -> RunEngine:
+    """Create the run file and catalog row; return the (not yet started) engine.
+
+    With ``adaptive`` (:mod:`instrument.plans.adaptive`), ``plan`` is its base plan built
+    for this bench, and the run asks the adaptive plan for more points when they are done.
+    """
     check_bench_for_plan(plan, bench)
     runs_dir = Path(runs_dir).resolve()  # messages name the file unambiguously
     run_id = run_id or new_run_id(plan.kind)
     header = header_for(plan, bench, run_id)
+    if adaptive is not None:
+        header = replace(header, adaptive=json.dumps(adaptive.describe()))
     path = runs_dir / f"{run_id}.h5"
     store = RunStore.create(path, header, fsync=fsync, sync_interval_s=sync_interval_s,
                             min_free_bytes=min_free_bytes)
     engine = RunEngine(bench, plan, store, reopen_store=_reopener(
         path, fsync=fsync, sync_interval_s=sync_interval_s, min_free_bytes=min_free_bytes,
-        catalog=catalog))
+        catalog=catalog), adaptive=None if adaptive is None else AdaptiveDriver(adaptive))
     if catalog:
         cat = Catalog(runs_dir)
         cat.add(RunRow(run_id, plan.spec.sample_name, plan.kind, plan.spec.name,
@@ -209,6 +220,27 @@ def plan_from_run(path: str | Path, bench: Bench) -> Plan:
                 else ())
         points.append(ScanPoint(k, tg, a, label, bool(stored.light[k]), e, meta))
     return Plan(replace(spec), bench.profile, stored.axes, tuple(points))
+
+
+def _adaptive_driver(path: Path, plan: Plan, description: str,
+                     given: AdaptivePlan | None) -> AdaptiveDriver:
+    """The driver of a resumed adaptive run, replayed through its stored decisions."""
+    obj = given if given is not None else rebuild(description)
+    records, _ = read_journal(journal_path(path))
+    stored = [r for r in records if r.get("t") == "planned"]
+    n_base = stored[0]["first"] if stored else len(plan.points)
+    driver = AdaptiveDriver(obj)
+    with open_run(path) as f:
+        pts = f["entry/points"]
+        index = pts["index"][()]
+        status = pts["status"][()]
+        signal = pts["signal"][()]
+        angles = np.stack([pts[k][()] for k in ("theta_i", "phi_i", "theta_r", "phi_r")], -1)
+    for k in np.argsort(index, kind="stable"):
+        a = None if np.isnan(angles[k, 0]) else angles[k]
+        driver.observe_point(int(index[k]), a, float(signal[k]), int(status[k]) == STATUS_OK)
+    driver.replay(replace(plan, points=plan.points[:n_base]), stored)
+    return driver
 
 
 def recover_run(path: str | Path, *, catalog: bool = True) -> RecoveryReport:
@@ -261,18 +293,28 @@ def _reopener(path: Path, *, fsync: bool, sync_interval_s: float, min_free_bytes
 
 def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
                sync_interval_s: float = 0.25, min_free_bytes: int = 64 << 20,
-               catalog: bool = True, remeasure_lost: bool = False) -> RunEngine:
+               catalog: bool = True, remeasure_lost: bool = False,
+               adaptive: AdaptivePlan | None = None) -> RunEngine:
     """Recover the run file from its journal and return an engine for the missing points.
 
     With ``remeasure_lost`` the points whose frames a damaged file lost are measured
     again too, into the same file (their rows are rewritten; the journal keeps both
     records, the newer one stands). Raises :class:`StorageError` when there is nothing
     to resume from (see :func:`recover_run`).
+
+    An adaptive run (ADR 0091) rebuilds its plan from the description the file holds
+    (or takes ``adaptive``, the same plan made by the caller), asks it again through the
+    stored decisions with the stored measurements, and goes on asking it after the
+    stored points. Raises :class:`~instrument.plans.adaptive.UnknownAdaptivePlan` or
+    :class:`~instrument.plans.adaptive.AdaptiveReplayError` before anything moves when
+    that is not possible.
     """
     path = Path(path).resolve()
-    recover_run(path, catalog=catalog)
+    report = recover_run(path, catalog=catalog)
     plan = plan_from_run(path, bench)
     check_bench_for_plan(plan, bench)
+    driver = (_adaptive_driver(path, plan, report.header.adaptive, adaptive)
+              if report.header.adaptive else None)
     store, done = RunStore.reopen(path, fsync=fsync, sync_interval_s=sync_interval_s,
                                   min_free_bytes=min_free_bytes)
     again = set(store.lost) if remeasure_lost else set()
@@ -282,7 +324,7 @@ def resume_run(path: str | Path, bench: Bench, *, fsync: bool = True,
     store.event(event)
     engine = RunEngine(bench, plan, store, done=done - again, reopen_store=_reopener(
         path, fsync=fsync, sync_interval_s=sync_interval_s, min_free_bytes=min_free_bytes,
-        catalog=catalog, remeasure=remeasure_lost))
+        catalog=catalog, remeasure=remeasure_lost), adaptive=driver)
     if catalog:
         cat = Catalog(path.parent)
         h = store.header

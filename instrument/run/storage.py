@@ -54,6 +54,7 @@ from instrument.run.layout import (
     clean_error,
     detector_columns,
     end_of_allocation,
+    grow_plan_tables,
     iso_time,
     journal_path,
     new_run_file,
@@ -223,6 +224,33 @@ class RunStore:
             del self._rows[rec.index]
             self.lost = tuple(i for i in self.lost if i != rec.index)
         self.n_frames = frame_start + len(entry["frames"])
+
+    def extend_plan(self, rows: list[dict[str, Any]], decision: dict[str, Any]) -> None:
+        """Commit points an adaptive plan has just decided (ADR 0091): the journal's
+        ``planned`` record first (when it returns, the points are part of the run), then
+        the file's planned tables, flushed. A kill between the two leaves the file's tables
+        behind the journal, and :func:`recover` extends them from it; no point of the new
+        rows is measured before this returns.
+
+        ``rows`` hold, per point, ``targets`` (one per axis, NaN where it has none),
+        ``angles`` (θi, φi, θr, φr), ``label``, ``light``, ``exposure_us`` (NaN: the
+        policy's) and optionally ``meta``; ``decision`` is what the plan said about them
+        (JSON), kept with the record.
+        """
+        if not self.header.adaptive:
+            raise ValueError(f"{self.path} holds a fixed plan: its planned points cannot grow")
+        first = len(self.header.planned_label)
+        try:
+            self._journal.append({"t": "planned", "first": first, "points": rows,
+                                  "decision": decision})
+            self.header = self.header.with_planned(rows)
+            grow_plan_tables(self._h5["entry/plan"], self.header)
+            self._h5.flush()
+        except (OSError, RuntimeError) as err:
+            if isinstance(err, StorageError):
+                raise
+            raise StorageError(_errno_of(err), f"adding planned points to {self.path} "
+                               f"failed: {_first_line(err)}") from err
 
     def event(self, record: dict[str, Any]) -> None:
         """Log an event (fault, pause, resume): journal now, HDF5 at the next sync."""

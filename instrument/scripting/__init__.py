@@ -7,6 +7,8 @@ The facade is small on purpose; what it returns is documented here and in the us
 """
 
 from instrument.scripting.bench import DryRun, ScriptBench, open_bench
+
+# connect (instrument.scripting.remote) is not imported here: it brings the HTTP client.
 from instrument.scripting.handle import RunHandle, RunProgress, RunTimeout
 from instrument.scripting.results import Run, fit, locate, open_run, reconstruct, spheres
 

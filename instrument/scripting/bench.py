@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from instrument.bench.profile import BenchProfile, load_profile
+from instrument.plans.adaptive import AdaptivePlan
 from instrument.plans.build import Plan, PlanEstimate, build_plan
 from instrument.plans.planfile import PlanSpec, load_plan
 from instrument.run.paths import DEFAULT_RUNS_DIR
@@ -114,30 +115,28 @@ class ScriptBench:
         return dict(self._bench.devices)
 
     # ------------------------------------------------------------------ plans
-    def _plan(self, plan: PlanLike) -> Plan:
+    def _plan(self, plan: PlanLike | AdaptivePlan) -> Plan:
+        if isinstance(plan, AdaptivePlan):
+            plan = plan.base  # its first points; the rest are decided during the run
         spec = plan if isinstance(plan, PlanSpec) else load_plan(plan)
         return build_plan(spec, self._bench.profile)  # validated and guarded
 
-    def dry_run(self, plan: PlanLike) -> DryRun:
-        """Points, travel and duration of ``plan`` on this bench; nothing moves.
+    def dry_run(self, plan: PlanLike | AdaptivePlan) -> DryRun:
+        """Points, travel and duration of ``plan`` on this bench; nothing moves. For an
+        adaptive plan, of its first points (the rest are decided during the run).
 
         Raises :class:`~instrument.bench.guard.GuardError` with the guard's reasons when
         a point is not allowed, as ``run`` would before anything moves.
         """
-        import numpy as np
-
-        built = self._plan(plan)
-        nan4 = (np.nan,) * 4
-        angles = np.array([nan4 if (a := p.angles) is None
-                           else (a.theta_i, a.phi_i, a.theta_r, a.phi_r)
-                           for p in built.points], dtype=float).reshape(-1, 4)
-        return DryRun(built, built.estimate(), built.targets_array(), built.axes, angles,
-                      built.dropped_in_beam)
+        return dry_run_of(self._plan(plan))
 
     # ------------------------------------------------------------------- runs
-    def run(self, plan: PlanLike, *, block: bool = True, progress: bool | None = None,
+    def run(self, plan: PlanLike | AdaptivePlan, *, block: bool = True,
+            progress: bool | None = None,
             on_event: Callable[[Event], Any] | None = None) -> RunHandle:
-        """Run ``plan`` (a plan object or a plan file) into a new run file.
+        """Run ``plan`` (a plan object, a plan file, or an adaptive plan such as
+        ``plans.sharp_lobe(...)``, :mod:`instrument.plans.adaptive`) into a new run file.
+        An adaptive run's progress counts the points planned so far.
 
         ``block``: wait for the end, showing a progress bar (``progress``, default on with
         ``block``; tqdm's notebook bar in Jupyter when tqdm is installed). A pause the
@@ -162,16 +161,20 @@ class ScriptBench:
             raise RuntimeError(f"{self._active.path.name} is still running on this bench; "
                                "wait() for it or abort() it first")
         built = self._plan(plan)
-        engine = start_run(built, self._bench, runs_dir=self.runs_dir, fsync=self._fsync)
+        engine = start_run(built, self._bench, runs_dir=self.runs_dir, fsync=self._fsync,
+                           adaptive=plan if isinstance(plan, AdaptivePlan) else None)
         return self._drive(engine, block=block, progress=progress, on_event=on_event)
 
     def resume(self, path: str | Path, *, block: bool = True, progress: bool | None = None,
-               on_event: Callable[[Event], Any] | None = None) -> RunHandle:
+               on_event: Callable[[Event], Any] | None = None,
+               adaptive: AdaptivePlan | None = None) -> RunHandle:
         """Continue an interrupted run in its own file (``scatterlab resume``): the
-        points its journal holds are kept, the missing ones measured."""
+        points its journal holds are kept, the missing ones measured. An adaptive run's
+        plan is rebuilt from the file (or is ``adaptive``, for a plan class this program
+        has not registered) and asked again from where it was."""
         from instrument.run.runner import resume_run
 
-        engine = resume_run(path, self._bench, fsync=self._fsync)
+        engine = resume_run(path, self._bench, fsync=self._fsync, adaptive=adaptive)
         return self._drive(engine, block=block, progress=progress, on_event=on_event)
 
     def _drive(self, engine, *, block: bool, progress: bool | None,
@@ -212,6 +215,18 @@ class ScriptBench:
 
     def __repr__(self) -> str:
         return f"<ScriptBench {self.profile.name!r}: {len(self._bench.devices)} devices>"
+
+
+def dry_run_of(built: Plan) -> DryRun:
+    """The :class:`DryRun` of a plan built (and guarded) for a bench."""
+    import numpy as np
+
+    nan4 = (np.nan,) * 4
+    angles = np.array([nan4 if (a := p.angles) is None
+                       else (a.theta_i, a.phi_i, a.theta_r, a.phi_r)
+                       for p in built.points], dtype=float).reshape(-1, 4)
+    return DryRun(built, built.estimate(), built.targets_array(), built.axes, angles,
+                  built.dropped_in_beam)
 
 
 def _progress_bar(handle: RunHandle) -> Callable[[Event | None], None]:

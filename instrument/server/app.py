@@ -301,6 +301,11 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         from instrument.protocol import schema
         return schema()
 
+    @app.get(f"{p}/bench/profile")
+    def bench_profile(caller: Caller = observer) -> dict[str, Any]:
+        """The bench profile's text: a client builds and dry-runs plans against it."""
+        return {"name": service.profile.name, "text": service.profile.source_text}
+
     @app.get(f"{p}/control")
     def control_get(caller: Caller = observer) -> dict[str, Any]:
         return service.status()["control"]

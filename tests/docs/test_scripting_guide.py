@@ -45,13 +45,24 @@ def test_the_chapter_and_the_example_scripts_use_only_the_facade():
 
 @pytest.mark.slow
 def test_every_python_block_of_the_chapter_runs(tmp_path, monkeypatch, capsys):
+    from tests.instrument.server.helpers import ServerProcess, fast_profile_text
+
     monkeypatch.chdir(tmp_path)
     (tmp_path / "examples").symlink_to(ROOT / "examples")
+    # the server the section "The same script against the bench server" connects to
+    profile = tmp_path / "sim-fast.toml"
+    profile.write_text(fast_profile_text(), encoding="utf-8")
+    server = ServerProcess(profile, tmp_path / "server-runs")
+    monkeypatch.setenv("SCATTERLAB_SERVER", server.url)
+    monkeypatch.delenv("SCATTERLAB_KEY", raising=False)
     namespace: dict = {}
     blocks = python_blocks(CHAPTER.read_text())
-    assert len(blocks) >= 6
-    for k, code in enumerate(blocks):
-        exec(compile(code, f"{CHAPTER.name} block {k + 1}", "exec"), namespace)
+    assert len(blocks) >= 8
+    try:
+        for k, code in enumerate(blocks):
+            exec(compile(code, f"{CHAPTER.name} block {k + 1}", "exec"), namespace)
+    finally:
+        server.kill()
     out = capsys.readouterr().out
     assert "finished" in out and "1/sr" in out
     assert (tmp_path / "runs" / "brdf.png").stat().st_size > 1000
