@@ -338,6 +338,8 @@ class SimulatedCamera(Camera):
         def part(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
                  cols: NDArray[np.intp]) -> NDArray:
             acc = np.zeros(rows.size)
+            bundle = (grid.pupil_bundle(rows, cols, right, down, forward)
+                      if projected is not None else None)
             for k in range(len(rule)):
                 if rule.x[k] == 0.0 and rule.y[k] == 0.0:
                     # the pupil centre's ray is the chief ray, traced already
@@ -345,16 +347,18 @@ class SimulatedCamera(Camera):
                     acc += rule.weights[k] * chief[rows, cols] * (cos2 * cos2)
                     continue
                 a = center + rho * (rule.x[k] * right + rule.y[k] * down)
-                if projected is not None:  # the scene takes the rays' projections
-                    project, cos_g = grid.pupil_ray_projector(
-                        rule.x[k], rule.y[k], rows, cols, right, down, forward)
+                if bundle is not None:  # the scene takes the rays' projections
+                    project, cos_g = bundle.rays(rule.x[k], rule.y[k])
                     radiance = projected(a, project, cos_g.shape, state)
                 else:
                     d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right,
                                                down, forward)
                     radiance = state.scene.radiance(a, d, state)
-                cos2 = cos_g * cos_g
-                acc += rule.weights[k] * radiance * (cos2 * cos2)
+                cos_g *= cos_g
+                cos_g *= cos_g
+                cos_g *= radiance
+                cos_g *= rule.weights[k]
+                acc += cos_g
             return acc
 
         def estimate(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
