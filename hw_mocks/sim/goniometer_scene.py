@@ -493,9 +493,15 @@ class GoniometerScene:
         unit = vec / r[..., None]
         cos_r = unit @ n
         cos_a = -(unit @ f)
-        tr, pr = pose.local_angles(unit)
-        ti, pi = pose.local_angles(pose.source_dir)
-        values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
+        fixed = getattr(brdf, "fixed_incidence", None)
+        if fixed is not None:  # the same values from the vectors (no angles in between)
+            loc = pose.to_sample(unit)
+            values = fixed(pose.to_sample(pose.source_dir))(
+                loc[..., 0], loc[..., 1], loc[..., 2])
+        else:
+            tr, pr = pose.local_angles(unit)
+            ti, pi = pose.local_angles(pose.source_dir)
+            values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
         integrand = (values * irradiance[:, None] * np.clip(cos_r, 0.0, None)
                      * np.clip(cos_a, 0.0, None) / (r2 * 1e-6))
         power += float(integrand.sum() * da_spot * da_ap)
