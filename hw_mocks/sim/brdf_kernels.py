@@ -154,8 +154,8 @@ def fixed_incidence(model, params: NDArray[np.float64]
         return kernel
 
     def at(omega_i: NDArray[np.float64]) -> Kernel:
-        wi = np.asarray(omega_i, dtype=float)
-        wi = wi / np.linalg.norm(wi)
-        return checked((float(wi[0]), float(wi[1]), float(wi[2])))
+        x, y, z = (float(c) for c in omega_i)
+        norm = math.sqrt(x * x + y * y + z * z)
+        return checked((x / norm, y / norm, z / norm))
 
     return at

@@ -289,7 +289,14 @@ class SimulatedCamera(Camera):
             rows = slice(max(rows.start, box[0].start), min(rows.stop, box[0].stop))
             cols = slice(max(cols.start, box[1].start), min(cols.stop, box[1].stop))
         rows = rows if rows.stop > rows.start and cols.stop > cols.start else slice(0, 0)
+        projected = getattr(state.scene, "radiance_projected", None)
+
         def trace(rows: slice, cols: slice) -> NDArray[np.float64]:
+            if projected is not None:  # the rays through the pupil centre, projected
+                r = np.arange(rows.start, rows.stop)[:, None]
+                c = np.arange(cols.start, cols.stop)[None, :]
+                project, cos_g = grid.pupil_bundle(r, c, right, down, forward).rays(0.0, 0.0)
+                return projected(center, project, cos_g.shape, state)
             dirs = grid.chief_directions(rows, cols, right, down, forward)
             return state.scene.radiance(center, dirs, state)
 

@@ -119,9 +119,8 @@ class PupilBundle:
         hit = self._per_pixel.get(key)
         if hit is None:
             a_r, a_d, a_f = (float(axis @ a) for axis in self._axes)
-            p = self._fu * a_r
-            p += self._fv * a_d
-            p += self._f * a_f
+            p = self._fu * a_r + self._fv * a_d  # (broadcast: rows and columns may be
+            p += self._f * a_f  # index arrays of shapes (h, 1) and (1, w))
             hit = self._per_pixel[key] = (p, a_r, a_d)
         return hit
 
@@ -133,10 +132,10 @@ class PupilBundle:
         dy = self._fv - rho * y
         dx *= dx
         dy *= dy
-        dx += dy
-        dx += f * f
-        np.sqrt(dx, out=dx)
-        inv = np.divide(1.0, dx, out=dx)
+        s = dx + dy
+        s += f * f
+        np.sqrt(s, out=s)
+        inv = np.divide(1.0, s, out=s)
         rx, ry = rho * x, rho * y
 
         def project(a: NDArray) -> NDArray[np.float64]:
