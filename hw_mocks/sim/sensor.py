@@ -237,15 +237,17 @@ class Sensor:
 
         def block(rows: slice, stream: np.random.SeedSequence) -> None:
             sub = rate[rows.start * b:rows.stop * b]
-            lam = self.mean_electrons(sub, exposure_us, binning=b,
-                                      roi=(x, y + rows.start * b, w, sub.shape[0]))
-            np.maximum(lam, 0.0, out=lam)
+            rng = np.random.default_rng(stream)
             # a block without light has every pixel at λ₀ (a pixel has light or not:
             # rates are ≥ 0, so a binned sum is 0 only where all its pixels are)
-            unlit: NDArray[np.bool_] | bool = not sub.any()
-            if not unlit and counts is not None:
-                unlit = self._bin(sub, b) == 0.0
-            e = noise.electrons(lam, unlit, rows, np.random.default_rng(stream))
+            if counts is not None and not sub.any():
+                e = noise.unlit(rows, rng)
+            else:
+                lam = self.mean_electrons(sub, exposure_us, binning=b,
+                                          roi=(x, y + rows.start * b, w, sub.shape[0]))
+                np.maximum(lam, 0.0, out=lam)
+                unlit = self._bin(sub, b) == 0.0 if counts is not None else False
+                e = noise.electrons(lam, unlit, rows, rng)
             e += self._bin(self.dsnu_map_e[y + rows.start * b:y + rows.stop * b,
                                            x:x + w], b)
             e *= k
@@ -300,18 +302,22 @@ class _TemporalNoise:
         self.lam0 = lam0
         self.counts = counts
 
+    def unlit(self, rows: slice, rng: np.random.Generator) -> NDArray[np.float32]:
+        """Electrons of the block ``rows`` where no pixel has light (the common block):
+        the split counts plus the read noise."""
+        e = self.counts[rows].astype(np.float32)
+        z = rng.standard_normal(e.shape, dtype=np.float32)
+        z *= self.sigma
+        e += z
+        return e
+
     def electrons(self, lam: NDArray[np.float32], unlit: NDArray[np.bool_] | bool,
                   rows: slice, rng: np.random.Generator) -> NDArray[np.float32]:
         """Electrons of the block ``rows`` with means ``lam``; ``unlit`` marks the pixels
-        at λ₀ (an array, or True: all of them; used where the split counts exist)."""
+        at λ₀ (used where the split counts exist)."""
         sigma = self.sigma
         z = rng.standard_normal(lam.shape, dtype=np.float32)
         counts = self.counts[rows] if self.counts is not None else None
-        if counts is not None and unlit is True:  # the common block: no light at all
-            e = counts.astype(np.float32)
-            z *= sigma
-            e += z
-            return e
         e = lam + sigma * sigma
         np.sqrt(e, out=e)
         e *= z
