@@ -143,8 +143,12 @@ def lambertian_brdf(reflectance: float) -> BrdfFunction:
     def from_components(omega_i, rx, ry, rz):
         return np.full(np.shape(rz), value)
 
+    def fixed_incidence(omega_i):
+        return lambda rx, ry, rz: np.full(np.shape(rz), value)
+
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     brdf.from_components = from_components  # type: ignore[attr-defined]
+    brdf.fixed_incidence = fixed_incidence  # type: ignore[attr-defined]
     return brdf
 
 

@@ -13,7 +13,7 @@ import pytest
 from analysis.brdf import get_model
 from analysis.brdf.geometry import geometry_from_vectors
 from hw_mocks.sim.brdf_kernels import fixed_incidence, rounding_rtol
-from hw_mocks.sim.goniometer_scene import brdf_from_model
+from hw_mocks.sim.goniometer_scene import brdf_from_model, lambertian_brdf
 
 
 # Rounding alone separates the two forms: ~10 roundings each, amplified by 1/α² where D's
@@ -93,3 +93,10 @@ def test_ground_truth_brdf_carries_the_kernel():
     np.testing.assert_allclose(
         kernel(wr[:, 0].copy(), wr[:, 1].copy(), wr[:, 2].copy()),
         brdf.from_vectors(wi, wr), rtol=rounding_rtol([0.2]), atol=0.0)
+
+
+def test_reference_standard_has_a_constant_kernel():
+    brdf = lambertian_brdf(0.99)
+    wr = hemisphere(np.random.default_rng(4), 50)
+    values = brdf.fixed_incidence(np.array([0.0, 0.3, 0.9]))(wr[:, 0], wr[:, 1], wr[:, 2])
+    np.testing.assert_array_equal(values, np.full(wr.shape[0], 0.99 / math.pi))
