@@ -289,7 +289,14 @@ class SimulatedCamera(Camera):
             rows = slice(max(rows.start, box[0].start), min(rows.stop, box[0].stop))
             cols = slice(max(cols.start, box[1].start), min(cols.stop, box[1].stop))
         rows = rows if rows.stop > rows.start and cols.stop > cols.start else slice(0, 0)
+        projected = getattr(state.scene, "radiance_projected", None)
+
         def trace(rows: slice, cols: slice) -> NDArray[np.float64]:
+            if projected is not None:  # the rays through the pupil centre, projected
+                r = np.arange(rows.start, rows.stop)[:, None]
+                c = np.arange(cols.start, cols.stop)[None, :]
+                project, cos_g = grid.pupil_bundle(r, c, right, down, forward).rays(0.0, 0.0)
+                return projected(center, project, cos_g.shape, state)
             dirs = grid.chief_directions(rows, cols, right, down, forward)
             return state.scene.radiance(center, dirs, state)
 
@@ -338,6 +345,8 @@ class SimulatedCamera(Camera):
         def part(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],
                  cols: NDArray[np.intp]) -> NDArray:
             acc = np.zeros(rows.size)
+            bundle = (grid.pupil_bundle(rows, cols, right, down, forward)
+                      if projected is not None else None)
             for k in range(len(rule)):
                 if rule.x[k] == 0.0 and rule.y[k] == 0.0:
                     # the pupil centre's ray is the chief ray, traced already
@@ -345,16 +354,18 @@ class SimulatedCamera(Camera):
                     acc += rule.weights[k] * chief[rows, cols] * (cos2 * cos2)
                     continue
                 a = center + rho * (rule.x[k] * right + rule.y[k] * down)
-                if projected is not None:  # the scene takes the rays' projections
-                    project, cos_g = grid.pupil_ray_projector(
-                        rule.x[k], rule.y[k], rows, cols, right, down, forward)
+                if bundle is not None:  # the scene takes the rays' projections
+                    project, cos_g = bundle.rays(rule.x[k], rule.y[k])
                     radiance = projected(a, project, cos_g.shape, state)
                 else:
                     d, cos_g = grid.pupil_rays(rule.x[k], rule.y[k], rows, cols, right,
                                                down, forward)
                     radiance = state.scene.radiance(a, d, state)
-                cos2 = cos_g * cos_g
-                acc += rule.weights[k] * radiance * (cos2 * cos2)
+                cos_g *= cos_g
+                cos_g *= cos_g
+                cos_g *= radiance
+                cos_g *= rule.weights[k]
+                acc += cos_g
             return acc
 
         def estimate(rule: pupil_rules.DiskRule, rows: NDArray[np.intp],

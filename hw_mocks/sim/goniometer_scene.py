@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from hw_mocks.sim.brdf_kernels import fixed_incidence
 from hw_mocks.sim.state import WorldState
 
 __all__ = ["BrdfFunction", "GoniometerScene", "aperture_rule", "brdf_from_model",
@@ -91,7 +92,8 @@ def _dot3(v: NDArray[np.float64], a: NDArray[np.float64]) -> NDArray[np.float64]
 #: f(θi, φi, θr, φr) in 1/sr; angles in radians, broadcasting arrays. A function may also
 #: carry ``from_vectors(ω_i, ω_r)`` (unit vectors in the sample frame) or
 #: ``from_components(ω_i, x_r, y_r, z_r)`` (ω_r by its components), which the renderer
-#: prefers.
+#: prefers, and ``fixed_incidence`` (None or ω_i ↦ a function of ω_r's components in any
+#: frame turned about the normal: an isotropic BRDF for one incidence), preferred to both.
 BrdfFunction = Callable[[Any, Any, Any, Any], NDArray[np.float64]]
 
 
@@ -149,6 +151,9 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
 
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     brdf.from_components = from_components  # type: ignore[attr-defined]
+    # ω_i ↦ f(ω_r components) fused for one incidence, exact (hw_mocks.sim.brdf_kernels);
+    # None where the model has a part without a kernel
+    brdf.fixed_incidence = fixed_incidence(model, vector)  # type: ignore[attr-defined]
     brdf.model_name = name  # type: ignore[attr-defined]
     brdf.params = tuple(float(v) for v in vector)  # type: ignore[attr-defined]
     return brdf
@@ -169,8 +174,12 @@ def lambertian_brdf(reflectance: float) -> BrdfFunction:
     def from_components(omega_i, rx, ry, rz):
         return np.full(np.shape(rz), value)
 
+    def fixed_incidence(omega_i):
+        return lambda rx, ry, rz: np.full(np.shape(rz), value)
+
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     brdf.from_components = from_components  # type: ignore[attr-defined]
+    brdf.fixed_incidence = fixed_incidence  # type: ignore[attr-defined]
     return brdf
 
 
@@ -347,64 +356,90 @@ class GoniometerScene:
         pose = state.pose
         o = np.asarray(origin_mm, dtype=float)
         n = pose.normal
-        dist = float(np.linalg.norm(o))
+        dist = math.sqrt(float(o @ o))  # (np.linalg.norm costs more than the rest here)
         observer_dir = o / dist if dist > 0 else pose.detector_dir
         peak = state.source.peak_intensity_w_m2()
         veil = self.ambient_radiance + self._signature(observer_dir, state) * peak
-        out = np.full(shape, veil, dtype=float)
         brdf = self._active_brdf(state)
         cos_i = float(n @ pose.source_dir)
         height = float(o @ n)
         if brdf is None or cos_i <= 0.0 or peak == 0.0 or height <= 0.0:
-            return out  # nothing lit, or we look at the back of the sample
+            # nothing lit, or we look at the back of the sample
+            return np.full(shape, veil, dtype=float)
         x_s, y_s = pose.sample_axes[0], pose.sample_axes[1]
-        # Towards the observer, −d, in the sample frame (what the BRDF takes), written per
-        # component (a (..., 3) @ (3,) product is several times slower in numpy for large
-        # ray bundles); the ray meets the plane at x = o − t·(−d), t = height / (−d)·n,
-        # in front of the observer where (−d)·n > 0.
-        lz, lx, ly = project(-n), project(-x_s), project(-y_s)
-        # On the plane, r⊥² = u'² cos²θi + v'² in beam-aligned sample coordinates (u', v').
+        # The beam-aligned sample axes (e_u along the beam's projection on the sample,
+        # e_v across it): on the plane, r⊥² = u'² cos²θi + v'² in these coordinates.
         s_loc = pose.to_sample(pose.source_dir)
         proj = math.hypot(s_loc[0], s_loc[1])
         eu = (s_loc[0] / proj, s_loc[1] / proj) if proj > 1e-12 else (1.0, 0.0)
+        e_u = eu[0] * x_s + eu[1] * y_s
+        e_v = eu[0] * y_s - eu[1] * x_s
         w2 = state.source.beam_radius_mm ** 2
+        # Towards the observer, −d, on the normal and the beam-aligned axes (the ray meets
+        # the plane at x = o − t·(−d), t = height / (−d)·n, in front of the observer where
+        # (−d)·n > 0), by the rays' projections: a (..., 3) @ (3,) product is several times
+        # slower in numpy for large ray bundles.
+        lz, lu, lv = project(-n), project(-e_u), project(-e_v)
         # (rays along the plane or away from it give ±inf or NaN here, and are not lit)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t = height / lz
-            u = float(o @ x_s) - t * lx
-            v = float(o @ y_s) - t * ly
-            up = u * eu[0] + v * eu[1]
-            vp = v * eu[0] - u * eu[1]
+            t = np.divide(height, lz)
+            up = t * lu
+            np.subtract(float(o @ e_u), up, out=up)
+            vp = t * lv
+            np.subtract(float(o @ e_v), vp, out=vp)
             up *= up
             vp *= vp
-            r_perp2 = up * (cos_i * cos_i) + vp
-            lit = ((lz > 0.0) & (up + vp <= self.sample_radius_mm**2)
-                   & (r_perp2 <= BEAM_CUTOFF_W2 * w2))
-        if not lit.any():
-            return out
-        if lit.all():  # the common case of a pupil's rays onto the footprint: no gathers
-            irradiance = np.exp(r_perp2 * (-2.0 / w2))
-        else:
-            irradiance = np.exp(r_perp2[lit] * (-2.0 / w2))
-            lx, ly, lz = lx[lit], ly[lit], lz[lit]
-        irradiance *= peak * cos_i
+            r_perp2 = up * (cos_i * cos_i)
+            r_perp2 += vp
+            up += vp
+            lit = up <= self.sample_radius_mm**2
+            lit &= lz > 0.0
+            lit &= r_perp2 <= BEAM_CUTOFF_W2 * w2
+        n_lit = int(np.count_nonzero(lit))
+        if n_lit == 0:
+            return np.full(shape, veil, dtype=float)
+        every = n_lit == lit.size  # the common case of a pupil's rays onto the footprint
+        if not every:
+            r_perp2, lz, lu, lv = r_perp2[lit], lz[lit], lu[lit], lv[lit]
+        irradiance = np.multiply(r_perp2, -2.0 / w2, out=r_perp2)
+        np.exp(irradiance, out=irradiance)
+        values = self._brdf_values(brdf, pose, (e_u, e_v, n), lu, lv, lz)
+        values *= irradiance
+        values *= peak * cos_i
+        if every:
+            if veil != 0.0:
+                values += veil
+            return values
+        out = np.full(shape, veil, dtype=float)
+        out[lit] += values
+        return out
+
+    @staticmethod
+    def _brdf_values(brdf: BrdfFunction, pose, frame: tuple[NDArray, NDArray, NDArray],
+                     lu: NDArray, lv: NDArray, lz: NDArray) -> NDArray[np.float64]:
+        """f(ω_i, ω_r) for ω_r given by its components (lu, lv, lz) on the beam-aligned
+        sample axes ``frame`` = (e_u, e_v, n); a new array."""
+        fixed = getattr(brdf, "fixed_incidence", None)
+        if fixed is not None:  # isotropic: the beam-aligned frame will do
+            s = pose.source_dir
+            return fixed(np.array([s @ frame[0], s @ frame[1], s @ frame[2]]))(lu, lv, lz)
+        # the sample frame's x and y from the beam-aligned components
+        x_s, y_s = pose.sample_axes[0], pose.sample_axes[1]
+        cu, su = float(frame[0] @ x_s), float(frame[0] @ y_s)
+        lx = cu * lu - su * lv
+        ly = su * lu + cu * lv
+        s_loc = pose.to_sample(pose.source_dir)
         from_components = getattr(brdf, "from_components", None)
         from_vectors = getattr(brdf, "from_vectors", None)
         if from_components is not None:
-            values = np.asarray(from_components(s_loc, lx, ly, lz), dtype=float)
-        elif from_vectors is not None:
-            values = np.asarray(from_vectors(s_loc, np.stack([lx, ly, lz], axis=-1)),
-                                dtype=float)
-        else:
-            ti, pi = pose.local_angles(pose.source_dir)
-            tr = np.arccos(np.clip(lz, -1.0, 1.0))
-            pr = np.arctan2(ly, lx)
-            values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
-        if lit.all():
-            out += values * irradiance
-        else:
-            out[lit] += values * irradiance
-        return out
+            return np.array(from_components(s_loc, lx, ly, lz), dtype=float)
+        if from_vectors is not None:
+            return np.array(from_vectors(s_loc, np.stack([lx, ly, lz], axis=-1)),
+                            dtype=float)
+        ti, pi = pose.local_angles(pose.source_dir)
+        tr = np.arccos(np.clip(lz, -1.0, 1.0))
+        pr = np.arctan2(ly, lx)
+        return np.array(brdf(float(ti), float(pi), tr, pr), dtype=float)
 
     def power_on_aperture(
         self, center_mm: NDArray[np.float64], facing: NDArray[np.float64],
@@ -499,9 +534,15 @@ class GoniometerScene:
         unit = vec / r[..., None]
         cos_r = unit @ n
         cos_a = -(unit @ f)
-        tr, pr = pose.local_angles(unit)
-        ti, pi = pose.local_angles(pose.source_dir)
-        values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
+        fixed = getattr(brdf, "fixed_incidence", None)
+        if fixed is not None:  # the same values from the vectors (no angles in between)
+            loc = pose.to_sample(unit)
+            values = fixed(pose.to_sample(pose.source_dir))(
+                loc[..., 0], loc[..., 1], loc[..., 2])
+        else:
+            tr, pr = pose.local_angles(unit)
+            ti, pi = pose.local_angles(pose.source_dir)
+            values = np.asarray(brdf(float(ti), float(pi), tr, pr), dtype=float)
         integrand = (values * irradiance[:, None] * np.clip(cos_r, 0.0, None)
                      * np.clip(cos_a, 0.0, None) / (r2 * 1e-6))
         power += float((integrand @ a_weights).sum() * da_spot * aperture_area_m2)

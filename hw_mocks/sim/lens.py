@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from hw_mocks.sim import pupil as pupil_rules
 
-__all__ = ["LensGrid", "lens_grid"]
+__all__ = ["LensGrid", "PupilBundle", "lens_grid"]
 
 
 @dataclass(frozen=True)
@@ -83,23 +83,66 @@ class LensGrid:
         return d.T, cos_g
 
 
-    def pupil_ray_projector(self, x: float, y: float, rows: NDArray[np.intp],
-                            cols: NDArray[np.intp], right: NDArray, down: NDArray,
-                            forward: NDArray):
-        """The rays of :meth:`pupil_rays` as a projector ``a ↦ d · a`` (M,) for lab
-        vectors a, and their cos γ: each projection is formed from the rays' camera-frame
-        components, without the (M, 3) directions."""
-        f, rho = self.focus_mm, self.pupil_radius_mm
-        dx = f * self.u[cols] - rho * x
-        dy = f * self.v[rows] - rho * y
-        inv = 1.0 / np.sqrt(dx * dx + dy * dy + f * f)
+    def pupil_bundle(self, rows: NDArray[np.intp], cols: NDArray[np.intp], right: NDArray,
+                     down: NDArray, forward: NDArray) -> PupilBundle:
+        """The rays from every pupil point to the conjugate points of the pixels
+        (``rows``, ``cols``), as projectors (:class:`PupilBundle`)."""
+        return PupilBundle(self, rows, cols, (right, down, forward))
+
+
+class PupilBundle:
+    """The rays of :meth:`LensGrid.pupil_rays` for a set of pixels and any pupil point, as
+    projectors ``a ↦ d · a`` (a scene asks for a few projections of each ray and never
+    needs the (M, 3) directions).
+
+    For the pupil point ρ(x, y) and the pixel's conjugate point F(u, v, 1) (camera frame)
+    the ray is d = (Fu − ρx, Fv − ρy, F)/|·|, so for a lab vector a with camera-frame
+    components (a_r, a_d, a_f)
+
+        d · a = (P_a − ρ(x a_r + y a_d)) / |·|,    P_a = Fu a_r + Fv a_d + F a_f,
+
+    where P_a depends on the pixel alone: it is computed once per pixel set and vector a
+    and reused by every pupil point of every rule (two passes a ray instead of five)."""
+
+    def __init__(self, grid: LensGrid, rows: NDArray[np.intp], cols: NDArray[np.intp],
+                 axes: tuple[NDArray, NDArray, NDArray]) -> None:
+        self._f, self._rho = grid.focus_mm, grid.pupil_radius_mm
+        self._fu = self._f * grid.u[cols]
+        self._fv = self._f * grid.v[rows]
+        self._axes = axes
+        self._per_pixel: dict[bytes, tuple[NDArray[np.float64], float, float]] = {}
+
+    def _pixel_part(self, a: NDArray) -> tuple[NDArray[np.float64], float, float]:
+        """(P_a, a_r, a_d) for the lab vector a, cached."""
+        a = np.asarray(a, dtype=float)
+        key = a.tobytes()
+        hit = self._per_pixel.get(key)
+        if hit is None:
+            a_r, a_d, a_f = (float(axis @ a) for axis in self._axes)
+            p = self._fu * a_r + self._fv * a_d  # (broadcast: rows and columns may be
+            p += self._f * a_f  # index arrays of shapes (h, 1) and (1, w))
+            hit = self._per_pixel[key] = (p, a_r, a_d)
+        return hit
+
+    def rays(self, x: float, y: float):
+        """The rays from the pupil point ρ·(x, y) (unit-disk coordinates): a projector
+        ``a ↦ d · a`` (M,) for lab vectors a, and their cos γ (M,)."""
+        f, rho = self._f, self._rho
+        dx = self._fu - rho * x
+        dy = self._fv - rho * y
+        dx *= dx
+        dy *= dy
+        s = dx + dy
+        s += f * f
+        np.sqrt(s, out=s)
+        inv = np.divide(1.0, s, out=s)
+        rx, ry = rho * x, rho * y
 
         def project(a: NDArray) -> NDArray[np.float64]:
-            p = dx * float(right @ a)
-            p += dy * float(down @ a)
-            p += f * float(forward @ a)
-            p *= inv
-            return p
+            p, a_r, a_d = self._pixel_part(a)
+            out = p - (rx * a_r + ry * a_d)
+            out *= inv
+            return out
 
         return project, f * inv
 

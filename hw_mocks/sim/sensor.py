@@ -13,7 +13,7 @@ This module implements it pixel by pixel, with what the standard characterises a
 * dark current ``dark_current_e_per_s`` (electrons ∝ exposure time, R3.1 §3);
 * shot noise: electrons are Poisson distributed (a Gaussian with the same mean and
   variance for means ≥ 50 e⁻, where the two agree to far better than any test resolves,
-  for speed; how each pixel is drawn: ``_temporal_electrons``);
+  for speed; how each pixel is drawn: ``_TemporalNoise``);
 * full-well saturation: at most ``full_well_e`` electrons per (binned) pixel;
 * temporal dark (read) noise σ_d (e⁻, Gaussian) and a dark-signal non-uniformity
   (DSNU) offset map (e⁻, fixed);
@@ -43,8 +43,8 @@ from hw_mocks.sim import workers
 __all__ = ["Sensor", "SensorParams"]
 
 _POISSON_EXACT_BELOW_E = 50.0
-#: The pixels at a frame's least mean draw their Poisson counts by splitting (see
-#: ``_temporal_electrons``) up to this mean: beyond it the split's ∝-electrons cost
+#: The unlit pixels (dark current alone) draw their Poisson counts by splitting (see
+#: ``_split_counts``) up to this mean: beyond it the split's ∝-electrons cost
 #: exceeds numpy's per-pixel draw (measured, BENCHMARKS.md "main job").
 _SPLIT_BELOW_E = 1.0
 
@@ -214,27 +214,50 @@ class Sensor:
             Selects the temporal noise realisation (with the sensor's seed).
         """
         p = self.params
-        rng = np.random.default_rng([self.seed, int(frame_index), 0xF4A3E])
-        lam = self.mean_electrons(photon_rate, exposure_us, roi=roi, binning=binning)
-        lam = np.maximum(lam, 0.0, dtype=np.float32)
-        well = p.full_well_e * binning * binning
-        sy, sx = self._slices(roi)
-        electrons = _temporal_electrons(lam, p.read_noise_e, well, rng)
-        dsnu = self._bin(self.dsnu_map_e[sy, sx], binning)
+        b = int(binning)
+        rate = np.asarray(photon_rate, dtype=np.float32)
+        shape = (rate.shape[0] // b, rate.shape[1] // b)
+        x, y, w, _ = roi
+        well = p.full_well_e * b * b
         k = np.float32(p.system_gain(gain_db, bits))
         black = np.float32(p.black_level(bits))
-        dn = np.empty(lam.shape, dtype=np.uint8 if bits <= 8 else np.uint16)
+        dn = np.empty(shape, dtype=np.uint8 if bits <= 8 else np.uint16)
+        blocks = _row_blocks(shape)
+        # every row block draws from its own stream of the frame's seed: the blocks are
+        # fixed by the frame's shape, so a frame is the same whatever the threads
+        streams = np.random.SeedSequence([self.seed, int(frame_index), 0xF4A3E]).spawn(
+            len(blocks) + 1)
+        # The unlit pixels (photon rate 0: dark current alone, most of a frame) share the
+        # mean λ₀; up to _SPLIT_BELOW_E their Poisson counts come from one split total
+        # (_split_counts), drawn before the blocks.
+        lam0 = p.dark_current_e_per_s * exposure_us * 1e-6 * b * b
+        counts = (_split_counts(lam0, shape, np.random.default_rng(streams[0]))
+                  if lam0 <= _SPLIT_BELOW_E else None)
+        noise = _TemporalNoise(p.read_noise_e, well, lam0, counts)
 
-        def digitise(rows: slice) -> None:
-            e = electrons[rows]
-            e += dsnu[rows]
+        def block(rows: slice, stream: np.random.SeedSequence) -> None:
+            sub = rate[rows.start * b:rows.stop * b]
+            rng = np.random.default_rng(stream)
+            # a block without light has every pixel at λ₀ (a pixel has light or not:
+            # rates are ≥ 0, so a binned sum is 0 only where all its pixels are)
+            if counts is not None and not sub.any():
+                e = noise.unlit(rows, rng)
+            else:
+                lam = self.mean_electrons(sub, exposure_us, binning=b,
+                                          roi=(x, y + rows.start * b, w, sub.shape[0]))
+                np.maximum(lam, 0.0, out=lam)
+                unlit = self._bin(sub, b) == 0.0 if counts is not None else False
+                e = noise.electrons(lam, unlit, rows, rng)
+            e += self._bin(self.dsnu_map_e[y + rows.start * b:y + rows.stop * b,
+                                           x:x + w], b)
             e *= k
             e += black
             np.rint(e, out=e)
             np.clip(e, 0, 2**bits - 1, out=e)
             dn[rows] = e
 
-        workers.in_blocks([(digitise, rows) for rows in _row_blocks(lam.shape)])
+        workers.in_blocks([(block, rows, stream)
+                           for rows, stream in zip(blocks, streams[1:], strict=True)])
         return dn
 
 
@@ -245,67 +268,76 @@ def _row_blocks(shape: tuple[int, ...]) -> list[slice]:
     return [slice(r, min(r + step, shape[0])) for r in range(0, shape[0], step)]
 
 
-def _temporal_electrons(lam: NDArray[np.float32], read_noise_e: float, well_e: float,
-                        rng: np.random.Generator) -> NDArray[np.float32]:
-    """One frame's electrons: shot noise on the mean ``lam``, clipped at the full well
-    ``well_e``, plus the read noise σ_d (module docstring), each pixel drawn in a form
-    that is exact for it and cheap. One standard normal z per pixel carries the noise:
+def _split_counts(lam0: float, shape: tuple[int, int], rng: np.random.Generator
+                  ) -> NDArray[np.intp]:
+    """Independent Poisson(λ₀) counts on every pixel of ``shape``, drawn as a Poisson(N λ₀)
+    number T of electrons dropped uniformly on the N pixels: splitting a Poisson count
+    leaves independent Poisson counts (e^(−Nλ₀)(Nλ₀)^T/T! · T!/∏n_i! · N^(−T) =
+    ∏ e^(−λ₀) λ₀^(n_i)/n_i!), at a cost ∝ N λ₀ rather than N."""
+    n = shape[0] * shape[1]
+    drops = rng.integers(0, n, size=int(rng.poisson(lam0 * n)))
+    return np.bincount(drops, minlength=n).reshape(shape)
+
+
+class _TemporalNoise:
+    """A frame's electrons, block by block: shot noise on the mean, clipped at the full
+    well, plus the read noise σ_d (module docstring), each pixel drawn in a form that is
+    exact for it and cheap. One standard normal z per pixel carries the noise:
 
     * mean ≥ 50 e⁻ (shot noise Gaussian, module docstring): the shot and the read noise
       are independent Gaussians, so their sum is one, ``lam + √(lam + σ_d²) z`` — the
       distribution of drawing them apart; within 8 σ of the full well, where the clip
       acts between the two, they are drawn apart (a second draw for these pixels only);
-    * mean < 50 e⁻: exact Poisson electrons plus ``σ_d z``. The pixels at the frame's
-      least mean (the unlit ones: dark current alone, most of a frame) share one mean
-      λ₀; for λ₀ ≤ :data:`_SPLIT_BELOW_E` their counts are drawn as a Poisson(N λ₀)
-      number T of electrons dropped uniformly on all N pixels, which leaves independent
-      Poisson(λ₀) counts n_i (splitting of a Poisson count: e^(−Nλ₀)(Nλ₀)^T/T! ·
-      T!/∏n_i! · N^(−T) = ∏ e^(−λ₀) λ₀^(n_i)/n_i!), at a cost ∝ N λ₀ rather than N;
-      the other pixels draw their own counts.
+    * mean < 50 e⁻: exact Poisson electrons plus ``σ_d z``. The unlit pixels (mean λ₀,
+      dark current alone) take their counts from :func:`_split_counts` where it was
+      drawn (λ₀ ≤ :data:`_SPLIT_BELOW_E`); the other pixels draw their own.
     """
-    z = rng.standard_normal(lam.shape, dtype=np.float32)
-    sigma = np.float32(read_noise_e)
-    least = lam.min()
-    counts = None
-    if least <= _SPLIT_BELOW_E:
-        # Poisson(least) on every pixel from a Poisson(N·least) number of electrons
-        # dropped uniformly, kept where the mean is the least
-        n = lam.size
-        drops = rng.integers(0, n, size=int(rng.poisson(float(least) * n)))
-        counts = np.bincount(drops, minlength=n).reshape(lam.shape)
-    out = np.empty_like(lam)
-    low, high = np.float32(_POISSON_EXACT_BELOW_E), np.float32(well_e - 8.0 * np.sqrt(well_e))
-    width = lam.shape[1]
 
-    def block(rows: slice) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """Every pixel of ``rows`` as a Gaussian one, the least-mean ones from the split;
-        the flat indices of the others below 50 e⁻ and of those near the well."""
-        lb, zb = lam[rows], z[rows]
-        ob = np.sqrt(lb + sigma * sigma)
-        ob *= zb
-        ob += lb
-        rest = lb < low
-        if counts is not None:
-            at_least = lb == least
-            split = counts[rows].astype(np.float32)
-            split += sigma * zb
-            np.copyto(ob, split, where=at_least)
-            rest &= ~at_least
-        out[rows] = ob
-        offset = rows.start * width
-        return np.flatnonzero(rest) + offset, np.flatnonzero(lb > high) + offset
+    def __init__(self, read_noise_e: float, well_e: float, lam0: float,
+                 counts: NDArray[np.intp] | None) -> None:
+        self.sigma = np.float32(read_noise_e)
+        self.well = well_e
+        self.low = np.float32(_POISSON_EXACT_BELOW_E)
+        self.high = np.float32(well_e - 8.0 * np.sqrt(well_e))
+        self.lam0 = lam0
+        self.counts = counts
 
-    found = workers.in_blocks([(block, rows) for rows in _row_blocks(lam.shape)])
-    # drawn in row-major order, as boolean indexing of the whole frame would
-    rest = np.concatenate([f[0] for f in found])
-    flat_out, flat_lam, flat_z = out.reshape(-1), lam.reshape(-1), z.reshape(-1)
-    if rest.size:
-        flat_out[rest] = (rng.poisson(flat_lam[rest].astype(np.float64)).astype(np.float32)
-                          + sigma * flat_z[rest])
-    near_well = np.concatenate([f[1] for f in found])
-    near_well = near_well[flat_lam[near_well] >= low]
-    if near_well.size:
-        ln = flat_lam[near_well]
-        shot = np.clip(ln + np.sqrt(ln) * flat_z[near_well], 0.0, well_e)
-        flat_out[near_well] = shot + sigma * rng.standard_normal(ln.shape, dtype=np.float32)
-    return out
+    def unlit(self, rows: slice, rng: np.random.Generator) -> NDArray[np.float32]:
+        """Electrons of the block ``rows`` where no pixel has light (the common block):
+        the split counts plus the read noise."""
+        e = self.counts[rows].astype(np.float32)
+        z = rng.standard_normal(e.shape, dtype=np.float32)
+        z *= self.sigma
+        e += z
+        return e
+
+    def electrons(self, lam: NDArray[np.float32], unlit: NDArray[np.bool_] | bool,
+                  rows: slice, rng: np.random.Generator) -> NDArray[np.float32]:
+        """Electrons of the block ``rows`` with means ``lam``; ``unlit`` marks the pixels
+        at λ₀ (used where the split counts exist)."""
+        sigma = self.sigma
+        z = rng.standard_normal(lam.shape, dtype=np.float32)
+        counts = self.counts[rows] if self.counts is not None else None
+        e = lam + sigma * sigma
+        np.sqrt(e, out=e)
+        e *= z
+        e += lam
+        rest = lam < self.low
+        if counts is not None and np.any(unlit):
+            mask = np.broadcast_to(unlit, lam.shape)
+            split = counts.astype(np.float32)
+            split += sigma * z
+            np.copyto(e, split, where=mask)
+            rest &= ~mask
+        flat_e, flat_lam, flat_z = e.reshape(-1), lam.reshape(-1), z.reshape(-1)
+        idx = np.flatnonzero(rest)
+        if idx.size:
+            flat_e[idx] = (rng.poisson(flat_lam[idx].astype(np.float64)).astype(np.float32)
+                           + sigma * flat_z[idx])
+        near = np.flatnonzero(lam > self.high)
+        near = near[flat_lam[near] >= self.low]
+        if near.size:
+            ln = flat_lam[near]
+            shot = np.clip(ln + np.sqrt(ln) * flat_z[near], 0.0, self.well)
+            flat_e[near] = shot + sigma * rng.standard_normal(ln.shape, dtype=np.float32)
+        return e

@@ -27,8 +27,6 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from analysis.lightfield.brdf import MATERIALS
-
 __all__ = ["NODE_S", "VIEW_S", "lightfield_render_s", "nodes_per_ray"]
 
 #: Seconds per view besides the quadrature: the lens grid, the flatland mapping of the
@@ -45,6 +43,10 @@ _PANEL_RAD = 2e-3
 def _width_rad(scene: Mapping[str, Any]) -> float:
     if "brdf" in scene:
         return math.radians(float(scene["brdf"]["specular_width_deg"]))
+    # imported here: analysis.lightfield pulls in scipy.optimize and scipy.stats (~0.6 s
+    # CPU), and every `scatterlab run` and `plan` imports this module for other benches
+    from analysis.lightfield.brdf import MATERIALS
+
     name = str(scene.get("material", "brushed_metal"))
     material = MATERIALS.get(name)
     if material is None:

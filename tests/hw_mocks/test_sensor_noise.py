@@ -1,4 +1,4 @@
-"""The sensor's temporal noise draw (hw_mocks/sim/sensor.py, ``_temporal_electrons``):
+"""The sensor's temporal noise draw (hw_mocks/sim/sensor.py, ``_TemporalNoise``):
 exact Poisson counts where the mean is small (split from one Poisson total on the unlit
 pixels, drawn per pixel elsewhere), one Gaussian for shot + read noise where the mean is
 ≥ 50 e⁻, and the two drawn apart next to the full well. Each test reads electrons back

@@ -187,3 +187,28 @@ def test_threaded_pupil_integral_is_the_single_threaded_one(monkeypatch):
     monkeypatch.setattr(workers, "BLOCK_PIXELS", 64)
     split = np.array(SimulatedCamera(world=world, sensor=SENSOR).photon_rate())
     np.testing.assert_array_equal(split, one)
+
+
+def test_pupil_bundle_projections_are_the_rays():
+    """The bundle's projections (per-pixel part computed once) equal the pupil rays'
+    directions projected, to rounding, for index arrays and broadcast rows × columns."""
+    grid = lens.lens_grid((0, 0, 64, 48), (64, 48), 5.5 * 16, 50.0, 6.25, 300.0)
+    rng = np.random.default_rng(5)
+    axes = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    right, down, forward = axes[:, 0], axes[:, 1], axes[:, 2]
+    rows, cols = rng.integers(0, 48, 500), rng.integers(0, 64, 500)
+    bundle = grid.pupil_bundle(rows, cols, right, down, forward)
+    for x, y in ((0.0, 0.0), (0.8, -0.1), (-0.3, 0.9)):
+        d, cos_g = grid.pupil_rays(x, y, rows, cols, right, down, forward)
+        project, cos_b = bundle.rays(x, y)
+        np.testing.assert_allclose(cos_b, cos_g, rtol=1e-15, atol=0.0)
+        for a in (np.array([0.3, -1.2, 0.5]), -forward, right):
+            # a few roundings of unit-scale terms in either order: 4 ε |a|
+            np.testing.assert_allclose(project(a), d @ a, rtol=0.0,
+                                       atol=4.0 * 2.0**-52 * np.linalg.norm(a))
+    r, c = np.arange(10, 20)[:, None], np.arange(3, 40)[None, :]
+    project, cos_b = grid.pupil_bundle(r, c, right, down, forward).rays(0.0, 0.0)
+    dirs = grid.chief_directions(slice(10, 20), slice(3, 40), right, down, forward)
+    assert cos_b.shape == (10, 37)
+    np.testing.assert_allclose(project(forward), dirs @ forward, rtol=0.0,
+                               atol=4.0 * 2.0**-52)

@@ -289,7 +289,14 @@ def test_merged_hdr_radiance_is_the_scene_radiance(capture_run):
     # PRNU (1 %) and shot noise scatter single pixels; the scale must be exact
     assert abs(np.median(ratio) - 1.0) < 0.005, np.median(ratio)
     assert np.percentile(np.abs(ratio - 1.0), 90) < 0.04
-    assert np.all(capture.radiance[0, 0][truth == 0] < 1e-3 * truth.max())
+    # Where the scene sends nothing, the merged radiance is noise: a dark-subtracted
+    # bracket (σ = √2 × the model's per-frame σ, which `variance` holds at zero signal)
+    # that passed the merge's 5 σ_read threshold, or none. 6 σ of that over the ~2300
+    # background pixels is exceeded with probability ~10⁻⁵. (A bound at 10⁻³ of the peak
+    # is not one: a 3 DN fluctuation in the 39 µs bracket alone reaches 3.6·10⁻³.)
+    background = truth == 0
+    sigma = np.sqrt(2.0 * capture.variance[0, 0][background])
+    assert np.all(np.abs(capture.radiance[0, 0][background]) <= 6.0 * sigma)
 
 
 @pytest.fixture(scope="module")
