@@ -29,6 +29,7 @@ from instrument.server.db import SERVER_DB_NAME
 from instrument.server.hub import ClientBuffer
 from instrument.server.keys import KeyStore
 from instrument.server.plans import MAX_PLAN_BYTES
+from instrument.server.points import MAX_POINTS_PAGE, RunPoints
 from instrument.server.service import BenchService, Caller, ServiceError
 
 __all__ = ["MAX_BODY_BYTES", "create_app"]
@@ -155,6 +156,8 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     """
     keys = KeyStore(service.db)
     audit = AuditLog(service.db)
+    run_points = RunPoints()
+    service.hub.listen(run_points.on_message)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -272,6 +275,14 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         if not target.is_file():
             raise ServiceError(404, f"{path}: no such file in the runs folder")
         return FileResponse(target, filename=target.name)
+
+    @app.get(f"{p}/runs/current/points")
+    def current_points(since: int = 0, limit: int = MAX_POINTS_PAGE,
+                       caller: Caller = observer) -> dict[str, Any]:
+        """The current run's points published so far, from ordinal ``since`` (a client
+        that connects mid-run draws the plot from the first point; see
+        :mod:`instrument.server.points`)."""
+        return run_points.page(since, limit)
 
     @app.get(f"{p}/events/schema")
     def events_schema(caller: Caller = observer) -> dict[str, Any]:
