@@ -13,7 +13,7 @@ import sys
 
 from instrument.run.paths import DEFAULT_RUNS_DIR
 
-HELP = "the operator GUI (bench, camera, plans, runs, analyses)"
+HELP = "the operator GUI: a client of the bench server (a local one is started if needed)"
 
 #: The GUI's entry point, imported by name when the command runs.
 GUI_ENTRY = "gui.app"
@@ -31,20 +31,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None,
                    help=f"folder for run files and the catalog (default: the last one used, "
                    f"or {DEFAULT_RUNS_DIR})")
+    p.add_argument("--server", default=None, metavar="URL",
+                   help="the bench server to connect to (default: $SCATTERLAB_SERVER; "
+                   "without either, the local server of --out, started for --bench if "
+                   "none runs); the key is $SCATTERLAB_KEY")
+    p.add_argument("--stop-server", action="store_true",
+                   help="stop the local server of --out (a run in progress is aborted, "
+                   "resumable) and exit")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.stop_server:
+        from instrument.client.local import stop_local_server
+
+        print(stop_local_server(args.out or DEFAULT_RUNS_DIR))
+        return 0
     try:
         app = importlib.import_module(GUI_ENTRY)
     except ImportError as err:
         print(f"error: the GUI cannot start: {err} (install scatterlab with its "
               "dependencies: pip install -e .)", file=sys.stderr)
         return 2
-    return int(app.main(bench=args.bench, out=args.out))
+    return int(app.main(bench=args.bench, out=args.out, server=args.server))
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``scatterlab-gui [--bench PROFILE] [--out FOLDER]``."""
+    """``scatterlab-gui [--server URL] [--bench PROFILE] [--out FOLDER] [--stop-server]``."""
     parser = argparse.ArgumentParser(prog="scatterlab-gui",
                                      description="The scatterlab operator GUI.")
     add_arguments(parser)

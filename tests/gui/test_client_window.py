@@ -1,0 +1,147 @@
+"""The GUI as a client of a real bench server process on a random loopback port.
+
+The operator's actions go through the window's buttons and methods to the server; what is
+checked is what the window shows and what the server did (its queue history, its run
+files). Every wait is on a condition with a generous limit (ADR 0020); no timing asserts.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from instrument.client import BenchClient
+from instrument.server.db import ServerDB
+from instrument.server.keys import KeyStore
+from tests.instrument.server.helpers import ServerProcess, fast_profile_text, plan_text
+
+WAIT_MS = 120_000
+THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
+
+
+@pytest.fixture
+def server(tmp_path):
+    started: list[ServerProcess] = []
+
+    def start(*, fault: str | None = None, pause_on_fault: bool = False) -> ServerProcess:
+        bench = tmp_path / "sim-fast.toml"
+        bench.write_text(fast_profile_text(pause_on_detector_fault=pause_on_fault),
+                         encoding="utf-8")
+        env = {"SCATTERLAB_TEST_FAULT": fault} if fault else None
+        s = ServerProcess(bench, tmp_path / "runs", env=env)
+        started.append(s)
+        return s
+
+    yield start
+    for s in started:
+        s.kill()
+
+
+@pytest.fixture
+def open_window(qtbot):
+    from gui.qt.client_window import ClientWindow
+
+    windows: list[ClientWindow] = []
+
+    def make(url: str, key: str | None = None) -> ClientWindow:
+        w = ClientWindow(url, key)
+        qtbot.addWidget(w)
+        w.show()
+        windows.append(w)
+        qtbot.waitUntil(lambda: w.state.stream_up, timeout=WAIT_MS)
+        return w
+
+    yield make
+    for w in windows:
+        w.close()
+
+
+def _result(window, what: str):
+    return next((r for r in window.results if r[0] == what), None)
+
+
+@pytest.mark.timeout(900)
+def test_three_plans_queued_from_the_gui_survive_its_closing_and_reopening_shows_the_plot(
+        server, open_window, qtbot):
+    srv = server()
+    w = open_window(srv.url)
+    assert w.add_button.isEnabled() and w.stop_all_button.isEnabled()
+    long_scan = [float(t) for t in (*range(-85, -44), *range(10, 86))]  # 117 points
+    w.add_plan_text(plan_text("first", long_scan))
+    w.add_plan_text(plan_text("second", THETA_R))
+    w.add_plan_text(plan_text("third", THETA_R, theta_i=30.0))
+    qtbot.waitUntil(lambda: len(w.state.queue_items) == 3, timeout=WAIT_MS)
+    assert [i["name"] for i in w.state.queue_items] == ["first", "second", "third"]
+    w.start_queue_button.click()
+    qtbot.waitUntil(lambda: w.state.run is not None and w.state.run.live is not None
+                    and w.state.run.live.n_received >= 3, timeout=WAIT_MS)
+    w.pause_button.click()  # at the end of the point: the run stays live for the reopening
+    qtbot.waitUntil(lambda: w.state.run.state == "paused", timeout=WAIT_MS)
+    n_before = w.state.run.n_done
+    w.close()
+
+    with BenchClient(srv.url) as c:  # the server still has the run
+        st = c.status()
+        assert st["run"] is not None and st["run"]["state"] == "paused"
+
+    again = open_window(srv.url)
+    qtbot.waitUntil(lambda: again.state.run is not None and again.state.run.live is not None
+                    and again.state.run.live.n_received >= n_before, timeout=WAIT_MS)
+    snap = again.state.run.live.snapshot()
+    assert 0 in snap.index.tolist()  # the plot holds the run from its first point
+    assert sorted(snap.index.tolist()) == list(range(snap.n_received))
+    qtbot.waitUntil(lambda: again.plot.n_plotted > 0, timeout=WAIT_MS)
+    assert again.fault_box.isVisible() and again.resume_button.isEnabled()
+    again.resume_button.click()
+    qtbot.waitUntil(lambda: not again.state.queue_items and not again.state.queue_running,
+                    timeout=WAIT_MS * 3)
+    with BenchClient(srv.url) as c:
+        history = c.history()
+    done = [h for h in history if h["outcome"] == "finished"]
+    assert [h["name"] for h in sorted(done, key=lambda h: h["item_id"])] == \
+        ["first", "second", "third"]
+
+
+def _keys(runs) -> dict[str, str]:
+    runs.mkdir(parents=True, exist_ok=True)
+    with ServerDB(runs) as db:
+        store = KeyStore(db)
+        return {role: store.add(f"{role}-user", role)[1] for role in ("observer", "operator")}
+
+
+@pytest.mark.timeout(600)
+def test_an_observer_key_sees_the_controls_greyed_with_the_reason(server, open_window,
+                                                                   qtbot, tmp_path):
+    tokens = _keys(tmp_path / "runs")
+    srv = server()
+    obs = open_window(srv.url, tokens["observer"])
+    assert obs.state.you == {"name": "observer-user", "role": "observer"}
+    for b in (obs.add_button, obs.start_queue_button, obs.pause_button, obs.abort_button,
+              obs.light_button, obs.take_button, obs.stop_all_button):
+        assert not b.isEnabled()
+    assert "observer" in obs.add_button.toolTip()
+    assert "View only" in obs.banner.text()
+    qtbot.waitUntil(lambda: bool(obs.axis_rows), timeout=WAIT_MS)  # device states arrive
+
+    op = open_window(srv.url, tokens["operator"])
+    assert op.add_button.isEnabled()
+    op.take_button.click()
+    qtbot.waitUntil(lambda: obs.state.lease_holder() == "operator-user", timeout=WAIT_MS)
+    assert "operator-user" in obs.control_label.text()
+    assert op.release_button.isEnabled() and not op.take_button.isEnabled()
+
+
+@pytest.mark.timeout(900)
+def test_a_fault_is_shown_and_answered_retry_from_the_gui(server, open_window, qtbot):
+    srv = server(fault="simsmc:detector_theta:1", pause_on_fault=True)
+    w = open_window(srv.url)
+    w.add_plan_text(plan_text("faulty", THETA_R), "faulty")
+    w.start_queue_button.click()
+    qtbot.waitUntil(lambda: w.fault_box.isVisible() and w.retry_button.isVisible(),
+                    timeout=WAIT_MS)
+    assert w.state.run.answers == ["retry", "skip", "abort"]
+    assert "FAULT detector_theta" in w.log_view.toPlainText()
+    w.retry_button.click()
+    qtbot.waitUntil(lambda: w.state.run.state == "finished", timeout=WAIT_MS)
+    assert w.state.run.n_done == w.state.run.n_total == len(THETA_R)
+    assert _result(w, "retry")[1]
+    assert not w.fault_box.isVisible()
