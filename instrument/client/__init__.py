@@ -246,7 +246,9 @@ class EventStream:
     """An open event stream (:meth:`BenchClient.open_events`)."""
 
     def __init__(self, conn) -> None:
-        self._conn = conn
+        # entered as its context (the websockets library's way to own the connection);
+        # :meth:`close` ends it
+        self._conn = conn.__enter__()
 
     def recv(self, timeout_s: float | None = None) -> Message | None:
         """The next message; None when ``timeout_s`` passed without one.
