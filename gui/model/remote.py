@@ -74,18 +74,17 @@ class RemoteRun:
     def alive(self) -> bool:
         return self.state in ("running", "paused")
 
-    def add_points(self, items: list[dict[str, Any]]) -> int:
-        """Points into the live arrays, each index once (the points read at connection
-        and the stream overlap by a batch); returns how many were new."""
+    def add_points(self, points: list[tuple[int, PointCompleted]]) -> int:
+        """Points (index, event: :func:`point_event`) into the live arrays, each index once
+        (the points read at connection and the stream overlap by a batch); returns how
+        many were new."""
         if self.live is None:
             return 0
         n = 0
-        for item in items:
-            index = int(item["index"])
+        for index, event in points:
             if index in self.seen:
                 continue
             self.seen.add(index)
-            event = point_event(item)
             if event.angles is not None:
                 self.live.plan_angles(index, event.angles)
             self.live.on_event(event)
@@ -191,14 +190,15 @@ class RemoteState:
         run.pause_reason = r.get("pause_reason") or ""
         run.elapsed_s = _num(r.get("elapsed_s"))
 
-    def prefill(self, run: dict[str, Any] | None, items: list[dict[str, Any]]) -> int:
+    def prefill(self, run: dict[str, Any] | None,
+                points: list[tuple[int, PointCompleted]]) -> int:
         """The current run's points published before this client connected (``GET
         /runs/current/points``); returns how many were added."""
         if run is None or self.run is None or not self.run.alive:
             return 0
         if self.run.live is None or self.run.run_id != run.get("run_id"):
             self._start_live(self.run, run)
-        return self.run.add_points(items)
+        return self.run.add_points(points)
 
     def _start_live(self, target: RemoteRun, d: dict[str, Any]) -> None:
         target.run_id = str(d.get("run_id") or "")
@@ -217,9 +217,12 @@ class RemoteState:
         return "run"
 
     def _on_points(self, msg: Message, d: dict[str, Any]) -> str:
-        if self.run is not None:
-            self.run.add_points(list(d.get("items") or []))
+        self.add_points([(int(i["index"]), point_event(i)) for i in d.get("items") or []])
         return "points"
+
+    def add_points(self, points: list[tuple[int, PointCompleted]]) -> int:
+        """Points of the current run (parsed by :func:`point_event`, on any thread)."""
+        return 0 if self.run is None else self.run.add_points(points)
 
     def _on_progress(self, msg: Message, d: dict[str, Any]) -> str:
         if self.run is not None:

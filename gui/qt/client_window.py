@@ -64,6 +64,8 @@ class ClientWindow(QMainWindow):
         self._plot_version = -1
         self._plot_run: object | None = None
         self._operator_controls: list[QWidget] = []
+        self._dirty: set[str] = set()
+        self._access: tuple | None = None
         self._build()
         self.link.changed.connect(self._on_changed)
         self.link.result.connect(self._on_result)
@@ -260,6 +262,14 @@ class ClientWindow(QMainWindow):
         self.statusBar().showMessage(text.splitlines()[0], 10_000)
 
     def _on_changed(self, parts: set[str]) -> None:
+        """Note what changed; the redraw timer puts it on screen, at most
+        :data:`REDRAW_HZ` times a second however fast the messages come."""
+        self._dirty |= parts
+
+    def _refresh_dirty(self) -> None:
+        parts, self._dirty = self._dirty, set()
+        if not parts:
+            return
         self._flush_log()
         if parts & {"queue", "bench"}:
             self._refresh_queue()
@@ -367,6 +377,11 @@ class ClientWindow(QMainWindow):
         """Grey what the server would refuse, saying why."""
         s = self.state
         may, why = s.may_operate()
+        key = (may, why, s.lease_holder(), s.control.get("until"), len(self._operator_controls),
+               s.you.get("name"), s.you.get("role"), s.bench, s.stream_up)
+        if key == self._access:
+            return  # nothing to change: no relayout
+        self._access = key
         for w in self._operator_controls:
             w.setEnabled(may)
             w.setToolTip(why)
@@ -389,7 +404,9 @@ class ClientWindow(QMainWindow):
         self.banner.setText(head if may else f"{head}<br><i>View only: {why}</i>")
 
     def _redraw(self) -> None:
-        """The plot, from the live arrays, when something new arrived."""
+        """What changed since the last tick; the plot, from the live arrays, when
+        something new arrived."""
+        self._refresh_dirty()
         run = self.state.run
         live = None if run is None else run.live
         if live is None:

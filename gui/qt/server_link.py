@@ -27,7 +27,7 @@ from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
-from gui.model.remote import RemoteState
+from gui.model.remote import RemoteState, point_event
 from instrument.client import BenchClient, ClientError
 from instrument.protocol import Message
 
@@ -130,10 +130,13 @@ class ServerLink(QObject):
             msg = stream.recv(timeout_s=0.5)
             if msg is None:
                 continue
+            if msg.type == "points":  # parsed here, off the GUI thread
+                self._put("points", _parsed(msg.data.get("items") or []))
+                continue
             self._put("message", msg)
             if msg.type == "hello":
                 run, items = client.all_run_points()
-                self._put("prefill", (run, items))
+                self._put("prefill", (run, _parsed(items)))
 
     # GUI thread ---------------------------------------------------------------------------
     def drain(self) -> set[str]:
@@ -153,6 +156,9 @@ class ServerLink(QObject):
                 if msg.type in SUPERSEDED and newest[msg.type] != k:
                     continue
                 parts.add(self.state.apply(msg))
+            elif kind == "points":
+                if self.state.add_points(payload):
+                    parts.add("points")
             elif kind == "prefill":
                 if self.state.prefill(*payload):
                     parts.add("points")
@@ -162,3 +168,8 @@ class ServerLink(QObject):
                 parts.update({"bench", "log"})
         self.changed.emit(parts)
         return parts
+
+
+def _parsed(items: list[dict[str, Any]]) -> list[tuple[int, Any]]:
+    """``points`` items as (index, :class:`PointCompleted`), parsed on the reader thread."""
+    return [(int(i["index"]), point_event(i)) for i in items]
