@@ -12,7 +12,7 @@ Measured on the real main window (offscreen, ``QT_QPA_PLATFORM=offscreen``):
 
 With ``--server`` the scan runs in a bench server process of its own (the ideal bench
 behind ``scatterlab serve``'s service and app, started by this script as a child) and the
-GUI is the client window (docs/decisions/0091): its plot is fed by the event stream.
+GUI is the client window (docs/decisions/0084): its plot is fed by the event stream.
 
 Latency is measured by a heartbeat: a 5 ms ``QTimer`` on the GUI thread records when it
 fires; the worst (and 99th-percentile) delay beyond its period is how long the GUI thread

@@ -1,6 +1,6 @@
 """Start the operator GUI: ``scatterlab gui [--server URL] [--bench PROFILE] [--out FOLDER]``.
 
-:func:`main` is the GUI as a client of the bench server (docs/decisions/0091): it opens a
+:func:`main` is the GUI as a client of the bench server (docs/decisions/0084): it opens a
 :class:`gui.qt.client_window.ClientWindow` on the server named by ``--server`` or
 ``SCATTERLAB_SERVER`` (key: ``SCATTERLAB_KEY``), or on the local server of the runs
 folder, started as a child process for the chosen bench (``sim`` unless told otherwise or

@@ -142,7 +142,7 @@ class LiveData:
     def plan_angles(self, index: int, angles) -> None:
         """The planned θi of point ``index`` from its read-back angles (θi, φi, θr, φr),
         rounded to 0.1° (beyond any stage tolerance): for a client of the bench server,
-        which receives the points but not the plan (docs/decisions/0091)."""
+        which receives the points but not the plan (docs/decisions/0084)."""
         if not 0 <= index < self._planned_ti.size:
             return
         ti, pi = float(angles[0]), float(angles[1])

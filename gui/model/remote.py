@@ -1,6 +1,6 @@
 """What the GUI knows of a bench server, without Qt: the state its event messages describe.
 
-In client mode (docs/decisions/0091) the engine and the bench live in the server process;
+In client mode (docs/decisions/0084) the engine and the bench live in the server process;
 the GUI holds :class:`RemoteState`, which :meth:`RemoteState.apply` updates from the event
 stream's messages (:mod:`instrument.protocol`) and which the widgets read on a timer. It
 keeps the queue, the current run and its live points (a :class:`gui.model.live.LiveData`,
@@ -102,6 +102,7 @@ class RemoteState:
         self.you = {"name": "", "role": ""}
         self.bench = ""
         self.bench_connected = False
+        self.runs_dir = ""
         self.queue_items: list[dict[str, Any]] = []
         self.queue_running = False
         self.run: RemoteRun | None = None
@@ -171,6 +172,7 @@ class RemoteState:
     def apply_status(self, st: dict[str, Any]) -> None:
         """A ``GET /status`` answer (also inside ``hello``)."""
         self.bench_connected = bool(st.get("connected"))
+        self.runs_dir = str(st.get("runs_dir") or "")
         self.queue_running = bool(st.get("queue_running"))
         self.queue_items = list(st.get("queue") or [])
         self.control = dict(st.get("control") or {"holder": None, "until": None})

@@ -1,4 +1,4 @@
-"""The operator's window on a bench server: the GUI as a client (docs/decisions/0091).
+"""The operator's window on a bench server: the GUI as a client (docs/decisions/0084).
 
 Everything the operator does goes through :class:`gui.qt.server_link.ServerLink` to the
 server, which owns the bench and runs the engine: queue a plan, start and stop the
@@ -35,11 +35,15 @@ from PySide6.QtWidgets import (
     QProgressBar,
     QPushButton,
     QSplitter,
+    QTabWidget,
     QVBoxLayout,
     QWidget,
 )
 
+from gui.qt.background import Background
 from gui.qt.live_plot import LivePlot
+from gui.qt.plan_editor import PlanEditor
+from gui.qt.run_browser import RunBrowser
 from gui.qt.server_link import ServerLink
 
 __all__ = ["ClientWindow"]
@@ -66,6 +70,7 @@ class ClientWindow(QMainWindow):
         self._operator_controls: list[QWidget] = []
         self._dirty: set[str] = set()
         self._access: tuple | None = None
+        self._profile = None
         self._build()
         self.link.changed.connect(self._on_changed)
         self.link.result.connect(self._on_result)
@@ -181,7 +186,15 @@ class ClientWindow(QMainWindow):
         views = QSplitter(Qt.Orientation.Horizontal)
         views.addWidget(self.plot)
         views.addWidget(self.camera)
-        right.addWidget(views)
+        self.tabs = QTabWidget()
+        self.tabs.addTab(views, "Live")
+        self.background = Background(parent=self)
+        self.plan_editor = PlanEditor(self.background, self._validation_profile)
+        self.plan_editor.start.setText("Queue plan")
+        self.plan_editor.startRequested.connect(self._queue_edited_plan)
+        self.tabs.addTab(self.plan_editor, "Plan")
+        self.browser: RunBrowser | None = None
+        right.addWidget(self.tabs)
         right.addWidget(self.log_view)
 
         body = QSplitter(Qt.Orientation.Horizontal)
@@ -207,6 +220,32 @@ class ClientWindow(QMainWindow):
         path, _ = QFileDialog.getOpenFileName(self, "Queue a plan", "", "Plans (*.toml)")
         if path:
             self.add_plan_file(path)
+
+    def _queue_edited_plan(self, plan) -> None:
+        """The plan editor's plan, queued on the server as its TOML text."""
+        self.add_plan_text(self.plan_editor.form.to_toml(), plan.name or None)
+
+    def _validation_profile(self):
+        """The server's bench, for checking plans as they are edited (built-in profiles
+        and files reachable from here; the server checks every plan again)."""
+        from instrument.bench.profile import ProfileError, load_profile
+
+        if self._profile is None and self.state.bench:
+            try:
+                self._profile = load_profile(self.state.bench)
+            except (ProfileError, OSError):
+                return None
+        return self._profile
+
+    def _show_runs(self, runs_dir: str) -> None:
+        """The run browser, when the server's runs folder is on this PC (a local server)."""
+        if self.browser is not None or not runs_dir or not Path(runs_dir).is_dir():
+            return
+        self.browser = RunBrowser(self.background, Path(runs_dir))
+        self.browser.resumeRequested.connect(lambda details: self.log_view.appendPlainText(
+            "resume through the server: an interrupted queue item continues its run file "
+            "when the queue starts"))
+        self.tabs.addTab(self.browser, "Runs")
 
     def _selected_id(self) -> int | None:
         item = self.queue_list.currentItem()
@@ -382,6 +421,8 @@ class ClientWindow(QMainWindow):
         if key == self._access:
             return  # nothing to change: no relayout
         self._access = key
+        self.plan_editor.set_can_start(may)
+        self._show_runs(s.runs_dir)
         for w in self._operator_controls:
             w.setEnabled(may)
             w.setToolTip(why)
@@ -426,4 +467,7 @@ class ClientWindow(QMainWindow):
         """Close the connection; the server and its run go on."""
         self._timer.stop()
         self.link.close()
+        self.background.shutdown(wait=False)
+        if self.browser is not None:
+            self.browser.analysis_pool.shutdown(wait=False)
         super().closeEvent(event)

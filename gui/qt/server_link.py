@@ -1,7 +1,7 @@
 """The GUI's connection to a bench server, off the GUI thread.
 
 Two worker threads, so that neither the network nor the server's pace ever blocks Qt's
-event loop (docs/decisions/0091):
+event loop (docs/decisions/0084):
 
 * the **event reader** holds the WebSocket event stream (:meth:`BenchClient.open_events`),
   decodes each message and puts it in an inbox; when the inbox goes from empty to not

@@ -65,6 +65,7 @@ def test_three_plans_queued_from_the_gui_survive_its_closing_and_reopening_shows
     srv = server()
     w = open_window(srv.url)
     assert w.add_button.isEnabled() and w.stop_all_button.isEnabled()
+    qtbot.waitUntil(lambda: w.browser is not None, timeout=WAIT_MS)  # runs folder is local
     long_scan = [float(t) for t in (*range(-85, -44), *range(10, 86))]  # 117 points
     w.add_plan_text(plan_text("first", long_scan))
     w.add_plan_text(plan_text("second", THETA_R))
