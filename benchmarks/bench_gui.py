@@ -206,7 +206,8 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int) -> dict:
         run = window.state.run
         out.update(points=run.n_done, status=run.state, seconds=elapsed,
                    plotted=window.plot.n_plotted, drains=window.link.n_drains,
-                   slot_max_ms=1e3 * max(busy), slot_total_s=sum(busy))
+                   slot_max_ms=1e3 * max(busy), slot_total_s=sum(busy),
+                   slot_p99_ms=1e3 * float(np.percentile(busy, 99)), slots=len(busy))
         window.close()
         window.deleteLater()
         app.processEvents()
@@ -311,7 +312,8 @@ def main() -> int:
               f"({scan['status']}) in {scan['seconds']:.1f} s "
               f"({scan['points'] / scan['seconds']:.0f} points/s), live plot "
               f"{scan['plotted']} points, {scan['drains']} drains; GUI-thread work per "
-              f"redraw or drain at most {scan['slot_max_ms']:.1f} ms CPU, "
+              f"redraw or drain ({scan['slots']} calls) p99 {scan['slot_p99_ms']:.1f} ms, "
+              f"at most {scan['slot_max_ms']:.1f} ms CPU, "
               f"{scan['slot_total_s']:.2f} s CPU in all; GUI heartbeat worst "
               f"{scan['max_ms']:.1f} ms (after the first 0.5 s: "
               f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "

@@ -48,8 +48,10 @@ from gui.qt.server_link import ServerLink
 
 __all__ = ["ClientWindow"]
 
-#: Redraws per second of the plot and readouts (the state is applied as it arrives).
+#: Redraws per second of the readouts (the state is applied as it arrives); the plot is
+#: redrawn every PLOT_EVERY-th tick (10 Hz: each redraw repaints its axes).
 REDRAW_HZ = 20
+PLOT_EVERY = 2
 
 
 class ClientWindow(QMainWindow):
@@ -67,6 +69,7 @@ class ClientWindow(QMainWindow):
         self.results: list[tuple[str, bool, str, list[str]]] = []
         self._plot_version = -1
         self._plot_run: object | None = None
+        self._ticks = 0
         self._operator_controls: list[QWidget] = []
         self._dirty: set[str] = set()
         self._access: tuple | None = None
@@ -134,6 +137,9 @@ class ClientWindow(QMainWindow):
         self.run_label = QLabel("no run")
         self.run_label.setWordWrap(True)
         self.progress = QProgressBar()
+        # no text: a changed percentage makes QProgressBar repaint at once, not on the
+        # next paint (the run label says n of N)
+        self.progress.setTextVisible(False)
         self.pause_button = self._button("Pause", lambda: self.link.call(
             "pause", lambda c: c.pause()))
         self.resume_button = self._button("Resume", lambda: self.answer("resume"))
@@ -456,7 +462,8 @@ class ClientWindow(QMainWindow):
             self._plot_run = live
             self._plot_version = -1
             self.plot.start(live.plan_kind)
-        if live.version != self._plot_version:
+        self._ticks += 1
+        if live.version != self._plot_version and self._ticks % PLOT_EVERY == 0:
             snap = live.snapshot()
             self._plot_version = snap.version
             self.plot.update_from(snap)
