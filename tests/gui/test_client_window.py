@@ -146,3 +146,29 @@ def test_a_fault_is_shown_and_answered_retry_from_the_gui(server, open_window, q
     assert w.state.run.n_done == w.state.run.n_total == len(THETA_R)
     assert _result(w, "retry")[1]
     assert not w.fault_box.isVisible()
+
+
+def test_closing_the_gui_leaves_a_local_server_with_a_run_going_and_stops_an_idle_one(
+        tmp_path):
+    import subprocess
+    import sys
+    from types import SimpleNamespace
+
+    from gui.app import _after_close
+    from gui.model.remote import RemoteRun, RemoteState
+    from instrument.client.local import LocalServer
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    try:
+        local = LocalServer("http://127.0.0.1:1", child.pid, "sim", tmp_path, True)
+        state = RemoteState(local.url)
+        state.stream_up = True
+        state.run = RemoteRun(state="running")
+        said = _after_close(SimpleNamespace(state=state), local)
+        assert "keeps running" in said and "--stop-server" in said and local.alive()
+        state.run.state = "finished"
+        said = _after_close(SimpleNamespace(state=state), local)
+        assert said.startswith("stopped the local server") and not local.alive()
+    finally:
+        child.kill()
+        child.wait(60)
