@@ -51,8 +51,20 @@ class LocalServer:
         return _alive(self.pid)
 
     def stop(self, timeout_s: float = 60.0) -> bool:
-        """SIGTERM (a run in progress is aborted, resumable); whether it ended in time."""
-        return _terminate(self.pid, timeout_s)
+        """SIGTERM (a run in progress is aborted, resumable); whether it ended in time
+        (then its record in the runs folder is removed)."""
+        ended = _terminate(self.pid, timeout_s)
+        if ended:
+            _forget(self.runs_dir, self.pid)
+        return ended
+
+
+def _forget(runs: Path, pid: int) -> None:
+    """Remove the record of the local server ``pid`` (not a newer server's)."""
+    rec = _recorded(runs)
+    if rec is not None and int(rec.get("pid", -1)) == pid:
+        with contextlib.suppress(OSError):
+            (runs / LOCAL_STATE).unlink()
 
 
 def _alive(pid: int) -> bool:
@@ -146,7 +158,6 @@ def stop_local_server(runs_dir: str | Path, timeout_s: float = 60.0) -> str:
         return f"no local server is running for {runs}"
     ok = _terminate(int(rec["pid"]), timeout_s)
     if ok:
-        with contextlib.suppress(OSError):
-            (runs / LOCAL_STATE).unlink()
+        _forget(runs, int(rec["pid"]))
         return f"stopped the local server (process {rec['pid']}) at {rec['url']}"
     return f"the local server (process {rec['pid']}) did not stop within {timeout_s:.0f} s"
