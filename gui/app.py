@@ -1,4 +1,5 @@
-"""Start the operator GUI: ``scatterlab gui [--server URL] [--bench PROFILE] [--out FOLDER]``.
+"""Start the operator GUI: ``scatterlab gui [--server URL | --in-process] [--bench PROFILE]
+[--out FOLDER]``.
 
 :func:`main` is the GUI as a client of the bench server (docs/decisions/0084): it opens a
 :class:`gui.qt.client_window.ClientWindow` on the server named by ``--server`` or
@@ -8,8 +9,11 @@ a bench was used last time) when none is running. The engine never runs in the G
 process. Closing the window leaves a run going on the server; a local server with no run
 going is stopped.
 
-:func:`create_window` builds the in-process window (bench session, bridge, settings) on
-which the GUI's widget tests, the screenshot script and the in-process benchmark run.
+:func:`main_in_process` (``scatterlab gui --in-process``) opens the full in-process
+window instead, the engine in the GUI's process: the fallback for what the client window
+does not show yet. :func:`create_window` builds that window (bench session, bridge,
+settings); the GUI's widget tests, the screenshot script and the in-process benchmark run
+on it.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from PySide6.QtCore import QSettings
-from PySide6.QtWidgets import QApplication
+from PySide6.QtWidgets import QApplication, QMainWindow
 
 from gui.model.session import BenchSession
 from gui.qt.bridge import SessionBridge
@@ -33,7 +37,7 @@ from instrument.client import ENV_KEY, server_from_env
 from instrument.client.local import LocalServer, LocalServerError, local_server
 from instrument.run.runner import DEFAULT_RUNS_DIR
 
-__all__ = ["create_window", "main"]
+__all__ = ["create_window", "main", "main_in_process"]
 
 ORGANIZATION = "scatterlab"
 APPLICATION = "scatterlab-gui"
@@ -65,9 +69,7 @@ def main(*, bench: str | None = None, out: str | None = None, server: str | None
          key: str | None = None, say: Callable[[str], None] = print) -> int:
     """Run the GUI, a client of the bench server, until its window closes; returns the
     exit status."""
-    app = QApplication.instance() or QApplication(sys.argv[:1])
-    app.setOrganizationName(ORGANIZATION)
-    app.setApplicationName(APPLICATION)
+    app = _application()
     settings = QSettings(ORGANIZATION, APPLICATION)
     key = key or os.environ.get(ENV_KEY) or None
     url = server or server_from_env()
@@ -88,11 +90,38 @@ def main(*, bench: str | None = None, out: str | None = None, server: str | None
                 "leaves a run going on it; `scatterlab gui --stop-server` stops it.")
         settings.setValue("runs_dir", str(runs_dir))
         settings.setValue("bench", profile)
-    window = ClientWindow(url, key, note=note)
+    after = None if local is None else (lambda w: say(_after_close(w, local)))
+    return _exec(app, ClientWindow(url, key, note=note), after)
+
+
+def main_in_process(*, bench: str | None = None, out: str | None = None,
+                    settings: QSettings | None = None) -> int:
+    """Run the full in-process window (``scatterlab gui --in-process``) until it closes:
+    the engine runs in the GUI's process, with the goniometer drawing, camera settings
+    and per-device panels that the client window does not show yet (docs/decisions/0084).
+    Closing the window ends a run (resumable). ``settings``: the window's settings (default:
+    the user's). Returns the exit status."""
+    app = _application()
+    window = create_window(bench=bench, out=out, settings=settings, connect=True)
+    if out is not None:
+        window.settings.setValue("runs_dir", str(out))
+    return _exec(app, window)
+
+
+def _application() -> QApplication:
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    app.setOrganizationName(ORGANIZATION)
+    app.setApplicationName(APPLICATION)
+    return app
+
+
+def _exec(app: QApplication, window: QMainWindow,
+          after: Callable[[QMainWindow], None] | None = None) -> int:
+    """Show the window, run the event loop until it closes, then ``after(window)``."""
     window.show()
     status = app.exec()
-    if local is not None:
-        say(_after_close(window, local))
+    if after is not None:
+        after(window)
     # Destroy the widgets while Qt and Python are both alive (a pyqtgraph view left to
     # the interpreter's final garbage collection can crash it).
     window.deleteLater()
