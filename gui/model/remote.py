@@ -115,6 +115,12 @@ class RemoteState:
         self.log: collections.deque[str] = collections.deque(maxlen=LOG_LINES)
         self.version = 0
 
+    def homed_positions(self) -> dict[str, float]:
+        """Read-back positions of the homed axes (an unhomed axis's counter is not a
+        position), for the goniometer drawing."""
+        return {role: float(ax["position"]) for role, ax in self.axes.items()
+                if ax.get("homed") and ax.get("position") is not None}
+
     # who may do what --------------------------------------------------------------------
     def may_operate(self, now: float | None = None) -> tuple[bool, str]:
         """Whether queue edits, run control and manual moves are allowed, and why not."""

@@ -5,9 +5,10 @@ server, which owns the bench and runs the engine: queue a plan, start and stop t
 queue, pause, resume, abort, answer a fault (retry, skip, abort), home, jog, move, light,
 Stop all, take and release control. What the window shows is what the server's event
 stream says: the queue, the current run with its live plot (from its first point, also
-when the window opens mid-run), device states, the latest camera frame, faults and the
-control lease. Controls the server would refuse are greyed, with the reason in their
-tooltip and in the banner (an observer key; another operator's lease).
+when the window opens mid-run), device states and the goniometer drawing from their
+read-back positions, the latest camera frame, faults and the control lease. Controls
+the server would refuse are greyed, with the reason in their tooltip and in the banner
+(an observer key; another operator's lease).
 
 Closing the window leaves the server and its run going.
 """
@@ -41,6 +42,7 @@ from PySide6.QtWidgets import (
 )
 
 from gui.qt.background import Background
+from gui.qt.goniometer_view import GoniometerView
 from gui.qt.live_plot import LivePlot
 from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_browser import RunBrowser
@@ -194,6 +196,8 @@ class ClientWindow(QMainWindow):
         views.addWidget(self.camera)
         self.tabs = QTabWidget()
         self.tabs.addTab(views, "Live")
+        self.goniometer = GoniometerView()
+        self.tabs.addTab(self.goniometer, "Goniometer")
         self.background = Background(parent=self)
         self.plan_editor = PlanEditor(self.background, self._validation_profile)
         self.plan_editor.start.setText("Queue plan")
@@ -321,6 +325,8 @@ class ClientWindow(QMainWindow):
         if parts & {"run", "bench", "control", "queue"}:
             self._refresh_run()
             self._refresh_access()
+        if "bench" in parts:
+            self._refresh_goniometer_profile()
         if "devices" in parts:
             self._refresh_devices()
         if "frame" in parts:
@@ -335,8 +341,21 @@ class ClientWindow(QMainWindow):
         self._flush_log()
         self._refresh_queue()
         self._refresh_run()
+        self._refresh_goniometer_profile()
         self._refresh_devices()
         self._refresh_access()
+
+    def _refresh_goniometer_profile(self) -> None:
+        """The drawing needs the server's bench profile: a built-in one or a file
+        reachable from this PC (a local server's), else it says why it is empty."""
+        profile = self._validation_profile()
+        if profile is not self.goniometer.profile:
+            self.goniometer.set_profile(profile)
+            self.goniometer.set_positions(self.state.homed_positions())
+        if profile is None and self.state.bench:
+            self.goniometer.caption.setText(
+                f"the server's bench {self.state.bench!r} is not a built-in profile nor "
+                "a file readable from this PC: no drawing (the other tabs work)")
 
     def _refresh_queue(self) -> None:
         s = self.state
@@ -384,6 +403,7 @@ class ClientWindow(QMainWindow):
                           f"{'' if ax.get('homed') else ' (not homed)'}")
         light = "?" if s.light is None else ("on" if s.light else "off")
         self.light_label.setText(f"light: {light}; bench {s.owner or '?'}")
+        self.goniometer.set_positions(s.homed_positions())
         self.light_button.setText("Light off" if s.light else "Light on")
 
     def _add_axis_row(self, role: str) -> None:

@@ -172,3 +172,39 @@ def test_closing_the_gui_leaves_a_local_server_with_a_run_going_and_stops_an_idl
     finally:
         child.kill()
         child.wait(60)
+
+
+def _arm_deg(view) -> float | None:
+    """The detector arm's azimuth in the drawing (None: no arm drawn)."""
+    import math
+
+    arms = view.scene.by_role("arm") if view.scene is not None else []
+    if not arms:
+        return None
+    x, y = arms[0].xy[1]
+    return math.degrees(math.atan2(y, x))
+
+
+@pytest.mark.timeout(600)
+def test_the_goniometer_drawing_follows_the_servers_read_back_positions(
+        server, open_window, qtbot):
+    srv = server()
+    w = open_window(srv.url)
+    view = w.goniometer
+    qtbot.waitUntil(lambda: view.profile is not None, timeout=WAIT_MS)  # the server's bench
+    w.tabs.setCurrentWidget(view)  # the drawing redraws only while it is shown
+    qtbot.waitUntil(lambda: view.scene is not None and "detector_theta" in w.axis_rows,
+                    timeout=WAIT_MS)
+    assert _arm_deg(view) is None  # not homed: the arm's position is unknown
+    w.home("detector_theta")
+    qtbot.waitUntil(lambda: _result(w, "home detector_theta") is not None, timeout=WAIT_MS)
+    assert _result(w, "home detector_theta")[1]
+    w.move_to("detector_theta", 40.0)
+    qtbot.waitUntil(lambda: _result(w, "move detector_theta") is not None, timeout=WAIT_MS)
+    assert _result(w, "move detector_theta")[1]
+    # the drawing settles where the server's read-back says the stage is (steps of 1e-3°)
+    qtbot.waitUntil(lambda: not w.state.axes["detector_theta"].get("moving")
+                    and _arm_deg(view) is not None
+                    and abs(_arm_deg(view) - 40.0) < 0.01, timeout=WAIT_MS)
+    assert abs(w.state.homed_positions()["detector_theta"] - 40.0) < 0.01
+    assert "detector_theta 40.0" in view.caption.text()

@@ -84,3 +84,14 @@ def test_observers_watch_and_another_operators_lease_greys_the_controls():
     assert s.may_operate() == (True, "") and s.holds_control()
     s.apply(msg("control", holder="carl", until=time.time() - 1))  # ran out
     assert s.may_operate() == (True, "")
+
+
+def test_the_drawing_gets_the_homed_axes_positions_only():
+    s = RemoteState("http://127.0.0.1:1")
+    s.apply(hello())
+    assert s.apply(msg("devices", 2, owner="manual", light=False, axes={
+        "detector_theta": {"position": 40.0, "homed": True, "moving": False},
+        "sample_theta": {"position": 3.0, "homed": False, "moving": False},  # a counter
+        "camera_z": {"position": None, "homed": True, "moving": False},
+    })) == "devices"
+    assert s.homed_positions() == {"detector_theta": 40.0}
