@@ -1,14 +1,14 @@
 """The operator's window on a bench server: the GUI as a client (docs/decisions/0084).
 
 Everything the operator does goes through :class:`gui.qt.server_link.ServerLink` to the
-server, which owns the bench and runs the engine: queue a plan, start and stop the
-queue, pause, resume, abort, answer a fault (retry, skip, abort), home, jog, move, light,
-Stop all, take and release control. What the window shows is what the server's event
-stream says: the queue, the current run with its live plot (from its first point, also
-when the window opens mid-run), device states and the goniometer drawing from their
-read-back positions, the latest camera frame, faults and the control lease. Controls
-the server would refuse are greyed, with the reason in their tooltip and in the banner
-(an observer key; another operator's lease).
+server, which owns the bench and runs the engine: queue a plan, approve or deny a
+proposed one, start and stop the queue, pause, resume, abort, answer a fault (retry,
+skip, abort), home, jog, move, light, Stop all, take and release control. What the
+window shows is what the server's event stream says: the queue, the current run with its
+live plot (from its first point, also when the window opens mid-run), device states and
+the goniometer drawing from their read-back positions, the latest camera frame, faults
+and the control lease. Controls the server would refuse are greyed, with the reason in
+their tooltip and in the banner (an observer key; another operator's lease).
 
 Closing the window leaves the server and its run going.
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtGui import QImage, QKeySequence, QPixmap, QShortcut
+from PySide6.QtGui import QColor, QImage, QKeySequence, QPixmap, QShortcut
 from PySide6.QtWidgets import (
     QDoubleSpinBox,
     QFileDialog,
@@ -121,6 +121,11 @@ class ClientWindow(QMainWindow):
             "start queue", lambda c: c.start_queue()))
         self.stop_queue_button = self._button("Stop queue", lambda: self.link.call(
             "stop queue", lambda c: c.stop_queue()))
+        self.approve_button = self._button("Approve", self.approve_selected)
+        self.deny_button = self._button("Deny", self.deny_selected)
+        for b in (self.approve_button, self.deny_button):
+            b.setStatusTip("a proposal (a plan added by an observer or a script): select "
+                           "it, then approve it into the queue or deny it")
         qbox = QGroupBox("Queue")
         ql = QVBoxLayout(qbox)
         self.queue_label = QLabel()
@@ -129,7 +134,8 @@ class ClientWindow(QMainWindow):
         grid = QGridLayout()
         for k, b in enumerate((self.add_button, self.add_stop_button, self.remove_button,
                                self.up_button, self.start_queue_button,
-                               self.stop_queue_button)):
+                               self.stop_queue_button, self.approve_button,
+                               self.deny_button)):
             grid.addWidget(b, k // 2, k % 2)
         ql.addLayout(grid)
 
@@ -266,6 +272,26 @@ class ClientWindow(QMainWindow):
         if item_id is not None:
             self.link.call(f"remove item {item_id}", lambda c: c.remove(item_id))
 
+    def approve_selected(self) -> None:
+        """Approve the selected proposal: it joins the queue where it stands."""
+        item_id = self._selected_id()
+        if item_id is not None:
+            self.link.call(f"approve item {item_id}", lambda c: c.approve(item_id))
+
+    def deny_selected(self) -> None:
+        """Deny the selected proposal: it goes to the history, never run."""
+        item_id = self._selected_id()
+        if item_id is not None:
+            self.link.call(f"deny item {item_id}", lambda c: c.deny(item_id))
+
+    def select_item(self, item_id: int) -> bool:
+        """Select the queue row of ``item_id``; False when the queue has no such item."""
+        for row in range(self.queue_list.count()):
+            if int(self.queue_list.item(row).data(Qt.ItemDataRole.UserRole)) == item_id:
+                self.queue_list.setCurrentRow(row)
+                return True
+        return False
+
     def move_selected(self, by: int) -> None:
         item_id = self._selected_id()
         if item_id is not None:
@@ -361,15 +387,23 @@ class ClientWindow(QMainWindow):
         s = self.state
         selected = self._selected_id()
         self.queue_list.clear()
+        proposals = 0
         for it in s.queue_items:
             text = f"{it.get('id')}  {it.get('name')}  [{it.get('state')}]"
+            proposed = it.get("state") == "proposed"
+            if proposed:
+                proposals += 1
+                text += f"  proposed by {it.get('added_by') or '?'}: approve or deny"
             row = QListWidgetItem(text)
+            if proposed:
+                row.setForeground(QColor("#ef6c00"))
             row.setData(Qt.ItemDataRole.UserRole, int(it.get("id")))
             self.queue_list.addItem(row)
             if it.get("id") == selected:
                 self.queue_list.setCurrentItem(row)
+        waiting = f"; {proposals} proposed, waiting for an operator" if proposals else ""
         self.queue_label.setText(f"{len(s.queue_items)} items; the queue "
-                                 f"{'runs' if s.queue_running else 'is stopped'}")
+                                 f"{'runs' if s.queue_running else 'is stopped'}{waiting}")
 
     def _refresh_run(self) -> None:
         run = self.state.run

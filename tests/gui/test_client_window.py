@@ -208,3 +208,43 @@ def test_the_goniometer_drawing_follows_the_servers_read_back_positions(
                     and abs(_arm_deg(view) - 40.0) < 0.01, timeout=WAIT_MS)
     assert abs(w.state.homed_positions()["detector_theta"] - 40.0) < 0.01
     assert "detector_theta 40.0" in view.caption.text()
+
+
+@pytest.mark.timeout(600)
+def test_an_operator_approves_and_denies_an_observers_proposals_from_the_gui(
+        server, open_window, qtbot, tmp_path):
+    tokens = _keys(tmp_path / "runs")
+    srv = server()
+    with BenchClient(srv.url, tokens["observer"]) as c:
+        keep = c.propose(plan_text("keep-me", THETA_R), "keep-me")["id"]
+        drop = c.propose(plan_text("drop-me", THETA_R), "drop-me")["id"]
+    obs = open_window(srv.url, tokens["observer"])
+    assert not obs.approve_button.isEnabled() and not obs.deny_button.isEnabled()
+    op = open_window(srv.url, tokens["operator"])
+    # the list is redrawn by the window's timer, after the state changed
+    qtbot.waitUntil(lambda: "2 proposed" in op.queue_label.text(), timeout=WAIT_MS)
+    assert "proposed by observer-user" in op.queue_list.item(0).text()
+    assert op.approve_button.isEnabled() and op.deny_button.isEnabled()
+
+    assert op.select_item(drop)
+    op.deny_button.click()
+    qtbot.waitUntil(lambda: _result(op, f"deny item {drop}") is not None, timeout=WAIT_MS)
+    assert op.select_item(keep)
+    op.approve_button.click()
+    qtbot.waitUntil(lambda: _result(op, f"approve item {keep}") is not None, timeout=WAIT_MS)
+    assert _result(op, f"deny item {drop}")[1] and _result(op, f"approve item {keep}")[1]
+    # every window shows the server's queue: the kept one queued, the other gone
+    for w in (op, obs):
+        qtbot.waitUntil(lambda w=w: [(i["id"], i["state"]) for i in w.state.queue_items]
+                        == [(keep, "queued")], timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: "proposed" not in op.queue_label.text(), timeout=WAIT_MS)
+
+    # approving what is not a proposal is refused by the server, with its reason
+    op.approve_button.click()
+    qtbot.waitUntil(lambda: len([r for r in op.results if r[0] == f"approve item {keep}"])
+                    == 2, timeout=WAIT_MS)
+    refused = [r for r in op.results if r[0] == f"approve item {keep}"][1]
+    assert not refused[1] and "not a proposal" in refused[2]
+    with BenchClient(srv.url, tokens["operator"]) as c:
+        history = c.history()
+    assert [(h["item_id"], h["outcome"]) for h in history] == [(drop, "denied")]
