@@ -173,6 +173,13 @@ class BenchClient:
     def light(self, on: bool) -> str:
         return self.request("POST", "/bench/light", {"on": on})["message"]
 
+    def camera_settings(self, *, exposure_us: float | None = None,
+                        gain: float | None = None) -> str:
+        """Set the camera's exposure (µs) and/or gain (its own units) between runs."""
+        body = {k: v for k, v in (("exposure_us", exposure_us), ("gain", gain))
+                if v is not None}
+        return self.request("POST", "/bench/camera", body)["message"]
+
     def stop_all(self) -> str:
         return self.request("POST", "/bench/stop-all")["message"]
 

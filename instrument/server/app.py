@@ -88,6 +88,14 @@ class LightBody(_Body):
     on: bool
 
 
+class CameraBody(_Body):
+    """Camera settings to change (at least one); each is checked against the camera's
+    own range by its driver."""
+
+    exposure_us: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    gain: Annotated[float, Field(allow_inf_nan=False)] | None = None
+
+
 class TakeControl(_Body):
     timeout_s: Annotated[float, Field(gt=0, le=86400)] | None = None
     force: bool = False
@@ -386,6 +394,12 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     def bench_light(body: LightBody, request: Request, caller: Caller = control):
         ctl(request, caller)
         return done(request, service.light(caller, body.on))
+
+    @app.post(f"{p}/bench/camera")
+    def bench_camera(body: CameraBody, request: Request, caller: Caller = control):
+        ctl(request, caller)
+        return done(request, service.camera_settings(caller, exposure_us=body.exposure_us,
+                                                     gain=body.gain))
 
     @app.post(f"{p}/bench/stop-all")
     def bench_stop_all(request: Request, caller: Caller = operator):
