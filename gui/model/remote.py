@@ -109,6 +109,8 @@ class RemoteState:
         self.control: dict[str, Any] = {"holder": None, "until": None}
         self.axes: dict[str, dict[str, Any]] = {}
         self.light: bool | None = None
+        #: The camera's exposure_us and gain between runs (None: during a run, no camera)
+        self.camera: dict[str, float | None] | None = None
         self.owner = ""
         self.frame: tuple[int, np.ndarray, float] | None = None
         self.missed: collections.Counter[str] = collections.Counter()
@@ -301,6 +303,10 @@ class RemoteState:
         if d.get("light") is not None or d.get("owner") != "run":
             self.light = d.get("light")
         self.owner = str(d.get("owner") or "")
+        cam = d.get("camera")
+        self.camera = None if not isinstance(cam, dict) else {
+            k: (None if cam.get(k) is None else _num(cam.get(k)))
+            for k in ("exposure_us", "gain")}
         return "devices"
 
     def _on_frame(self, msg: Message, d: dict[str, Any]) -> str:

@@ -6,9 +6,10 @@ proposed one, start and stop the queue, pause, resume, abort, answer a fault (re
 skip, abort), home, jog, move, light, Stop all, take and release control. What the
 window shows is what the server's event stream says: the queue, the current run with its
 live plot (from its first point, also when the window opens mid-run), device states and
-the goniometer drawing from their read-back positions, the latest camera frame, faults
-and the control lease. Controls the server would refuse are greyed, with the reason in
-their tooltip and in the banner (an observer key; another operator's lease).
+the goniometer drawing from their read-back positions, the latest camera frame and its
+exposure and gain (set here between runs), faults and the control lease. Controls the
+server would refuse are greyed, with the reason in their tooltip and in the banner (an
+observer key; another operator's lease).
 
 Closing the window leaves the server and its run going.
 """
@@ -44,9 +45,11 @@ from PySide6.QtWidgets import (
 from gui.qt.background import Background
 from gui.qt.goniometer_view import GoniometerView
 from gui.qt.live_plot import LivePlot
+from gui.qt.panels import spin_box
 from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_browser import RunBrowser
 from gui.qt.server_link import ServerLink
+from gui.qt.setpoint import SetpointField
 
 __all__ = ["ClientWindow"]
 
@@ -199,7 +202,7 @@ class ClientWindow(QMainWindow):
         right = QSplitter(Qt.Orientation.Vertical)
         views = QSplitter(Qt.Orientation.Horizontal)
         views.addWidget(self.plot)
-        views.addWidget(self.camera)
+        views.addWidget(self._camera_box())
         self.tabs = QTabWidget()
         self.tabs.addTab(views, "Live")
         self.goniometer = GoniometerView()
@@ -224,7 +227,41 @@ class ClientWindow(QMainWindow):
         self.setCentralWidget(central)
         self.resize(1280, 800)
 
+    def _camera_box(self) -> QWidget:
+        """The latest frame with the camera's exposure and gain: fields that follow the
+        server's values, each sent with its *Set* button (between runs: a run sets the
+        camera from its plan)."""
+        box = QWidget()
+        lay = QVBoxLayout(box)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addWidget(self.camera, 1)
+        grid = QGridLayout()
+        self.exposure_box = spin_box(0.01, 1e8, 2, 1000.0, "µs")
+        self.gain_box = spin_box(-100.0, 1000.0, 2, 0.0)
+        self.camera_fields = {"exposure_us": SetpointField(self.exposure_box, "exposure"),
+                              "gain": SetpointField(self.gain_box, "gain")}
+        self.set_exposure_button = QPushButton("Set")
+        self.set_exposure_button.clicked.connect(
+            lambda: self.set_camera("exposure_us", self.exposure_box.value()))
+        self.set_gain_button = QPushButton("Set")
+        self.set_gain_button.clicked.connect(
+            lambda: self.set_camera("gain", self.gain_box.value()))
+        for r, (name, field, button) in enumerate((
+                ("exposure", self.exposure_box, self.set_exposure_button),
+                ("gain", self.gain_box, self.set_gain_button))):
+            grid.addWidget(QLabel(name), r, 0)
+            grid.addWidget(field, r, 1)
+            grid.addWidget(button, r, 2)
+        self.camera_controls = (self.exposure_box, self.gain_box, self.set_exposure_button,
+                                self.set_gain_button)
+        lay.addLayout(grid)
+        return box
+
     # operator actions (all through the server) ------------------------------------------
+    def set_camera(self, name: str, value: float) -> None:
+        """Set the camera's ``exposure_us`` or ``gain`` on the server (between runs)."""
+        self.link.call(f"camera {name}", lambda c: c.camera_settings(**{name: value}))
+
     def add_plan_text(self, text: str, name: str | None = None) -> None:
         self.link.call(f"add plan {name or ''}".strip(), lambda c: c.add_plan(text, name))
 
@@ -330,6 +367,9 @@ class ClientWindow(QMainWindow):
     # state to widgets -------------------------------------------------------------------
     def _on_result(self, what: str, ok: bool, message: str, reasons) -> None:
         self.results.append((what, ok, message, list(reasons or [])))
+        field = self.camera_fields.get(what.removeprefix("camera "))
+        if what.startswith("camera ") and field is not None:
+            field.settled()  # done or refused: the field shows the camera's value again
         text = f"{what}: {message}" if ok else f"{what} refused: {message}"
         if reasons:
             text += "".join(f"\n    - {r}" for r in reasons)
@@ -439,6 +479,23 @@ class ClientWindow(QMainWindow):
         self.light_label.setText(f"light: {light}; bench {s.owner or '?'}")
         self.goniometer.set_positions(s.homed_positions())
         self.light_button.setText("Light off" if s.light else "Light on")
+        for name, field in self.camera_fields.items():
+            field.follow(None if s.camera is None else s.camera.get(name))
+        self._refresh_camera_controls()
+
+    def _refresh_camera_controls(self) -> None:
+        """The camera's settings may change between runs only, by an operator who may
+        act; greyed with the reason otherwise."""
+        may, why = self.state.may_operate()
+        if may and self.state.camera is None:
+            may, why = False, ("a run sets the camera from its plan: change it between runs"
+                               if self.state.owner == "run" else "the server's bench has "
+                               "no camera, or it has not said its settings yet")
+        for w in self.camera_controls:
+            if w.isEnabled() != may:
+                w.setEnabled(may)
+            if w.toolTip() != why:
+                w.setToolTip(why)
 
     def _add_axis_row(self, role: str) -> None:
         r = len(self.axis_rows) + 1
@@ -486,6 +543,7 @@ class ClientWindow(QMainWindow):
         for w in self._operator_controls:
             w.setEnabled(may)
             w.setToolTip(why)
+        self._refresh_camera_controls()
         stop_ok, stop_why = s.may_stop_all()
         self.stop_all_button.setEnabled(stop_ok)
         self.stop_all_button.setToolTip(stop_why or "stop every axis now; a run is aborted "

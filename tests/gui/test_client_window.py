@@ -119,7 +119,7 @@ def test_an_observer_key_sees_the_controls_greyed_with_the_reason(server, open_w
     for b in (obs.add_button, obs.start_queue_button, obs.pause_button, obs.abort_button,
               obs.light_button, obs.take_button, obs.stop_all_button):
         assert not b.isEnabled()
-    assert "observer" in obs.add_button.toolTip()
+    qtbot.waitUntil(lambda: "observer" in obs.add_button.toolTip(), timeout=WAIT_MS)
     assert "View only" in obs.banner.text()
     qtbot.waitUntil(lambda: bool(obs.axis_rows), timeout=WAIT_MS)  # device states arrive
 
@@ -127,8 +127,10 @@ def test_an_observer_key_sees_the_controls_greyed_with_the_reason(server, open_w
     assert op.add_button.isEnabled()
     op.take_button.click()
     qtbot.waitUntil(lambda: obs.state.lease_holder() == "operator-user", timeout=WAIT_MS)
-    assert "operator-user" in obs.control_label.text()
-    assert op.release_button.isEnabled() and not op.take_button.isEnabled()
+    # the labels and buttons follow the state on the window's redraw timer
+    qtbot.waitUntil(lambda: "operator-user" in obs.control_label.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: op.release_button.isEnabled() and not op.take_button.isEnabled(),
+                    timeout=WAIT_MS)
 
 
 @pytest.mark.timeout(900)
@@ -248,3 +250,51 @@ def test_an_operator_approves_and_denies_an_observers_proposals_from_the_gui(
     with BenchClient(srv.url, tokens["operator"]) as c:
         history = c.history()
     assert [(h["item_id"], h["outcome"]) for h in history] == [(drop, "denied")]
+
+
+@pytest.mark.timeout(900)
+def test_the_camera_settings_are_set_through_the_server_between_runs_only(
+        server, open_window, qtbot):
+    srv = server()
+    w = open_window(srv.url)
+    qtbot.waitUntil(lambda: w.state.camera is not None and w.set_gain_button.isEnabled(),
+                    timeout=WAIT_MS)
+    w.exposure_box.setValue(2500.0)  # an edit: pending until the server answers
+    w.set_exposure_button.click()
+    qtbot.waitUntil(lambda: _result(w, "camera exposure_us") is not None, timeout=WAIT_MS)
+    assert _result(w, "camera exposure_us")[1]
+    qtbot.waitUntil(lambda: w.state.camera["exposure_us"] == 2500.0, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: w.exposure_box.value() == 2500.0, timeout=WAIT_MS)
+
+    # a gain outside the camera's range: refused with the range; the field shows the
+    # camera's gain again
+    gain = w.state.camera["gain"]
+    w.gain_box.setValue(99.0)
+    w.set_gain_button.click()
+    qtbot.waitUntil(lambda: _result(w, "camera gain") is not None, timeout=WAIT_MS)
+    _, ok, message, _ = _result(w, "camera gain")
+    assert not ok and "outside [0, 24]" in message
+    assert w.gain_box.value() == gain and not w.camera_fields["gain"].pending
+
+    # while a run owns the bench the fields are greyed, and the server refuses anyway
+    long_scan = [float(t) for t in (*range(-85, -44), *range(10, 86))]
+    w.add_plan_text(plan_text("long", long_scan))
+    qtbot.waitUntil(lambda: len(w.state.queue_items) == 1, timeout=WAIT_MS)
+    w.start_queue_button.click()
+    qtbot.waitUntil(lambda: w.state.owner == "run" and not w.set_gain_button.isEnabled(),
+                    timeout=WAIT_MS)
+    assert "between runs" in w.set_gain_button.toolTip()
+    w.pause_button.click()  # a paused run keeps the bench: the refusal does not race it
+    qtbot.waitUntil(lambda: w.state.run.state == "paused", timeout=WAIT_MS)
+    w.set_camera("gain", 3.0)
+    qtbot.waitUntil(lambda: len([r for r in w.results if r[0] == "camera gain"]) == 2,
+                    timeout=WAIT_MS)
+    refused = [r for r in w.results if r[0] == "camera gain"][1]
+    assert not refused[1] and "a run owns the bench" in refused[2]
+    w.abort_button.click()
+    qtbot.waitUntil(lambda: w.state.run is not None and not w.state.run.alive,
+                    timeout=WAIT_MS)
+    with BenchClient(srv.url) as c:
+        rows = [(r["what"], r["status"]) for r in c.request("GET", "/audit")
+                if r["what"].endswith("/bench/camera")]
+    assert [s for _, s in rows] == [200, 422, 409]  # every one audited
