@@ -417,7 +417,8 @@ class ClientWindow(QMainWindow):
         profile = self._validation_profile()
         if profile is not self.goniometer.profile:
             self.goniometer.set_profile(profile)
-            self.goniometer.set_positions(self.state.homed_positions())
+            if profile is not None:
+                self.goniometer.set_positions(self.state.homed_positions())
         if profile is None and self.state.bench:
             self.goniometer.caption.setText(
                 f"the server's bench {self.state.bench!r} is not a built-in profile nor "
@@ -477,7 +478,8 @@ class ClientWindow(QMainWindow):
                           f"{'' if ax.get('homed') else ' (not homed)'}")
         light = "?" if s.light is None else ("on" if s.light else "off")
         self.light_label.setText(f"light: {light}; bench {s.owner or '?'}")
-        self.goniometer.set_positions(s.homed_positions())
+        if self.goniometer.profile is not None:  # else its caption says why it is empty
+            self.goniometer.set_positions(s.homed_positions())
         self.light_button.setText("Light off" if s.light else "Light on")
         for name, field in self.camera_fields.items():
             field.follow(None if s.camera is None else s.camera.get(name))

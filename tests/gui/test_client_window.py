@@ -298,3 +298,22 @@ def test_the_camera_settings_are_set_through_the_server_between_runs_only(
         rows = [(r["what"], r["status"]) for r in c.request("GET", "/audit")
                 if r["what"].endswith("/bench/camera")]
     assert [s for _, s in rows] == [200, 422, 409]  # every one audited
+
+
+def test_a_server_bench_profile_unreadable_here_leaves_the_drawing_empty_saying_why(
+        qtbot, tmp_path):
+    from gui.qt.client_window import ClientWindow
+
+    w = ClientWindow("http://127.0.0.1:1")  # no server: the state is set by hand
+    qtbot.addWidget(w)
+    try:
+        w.state.bench = str(tmp_path / "elsewhere" / "bench.toml")  # not on this PC
+        w.state.axes = {"detector_theta": {"position": 40.0, "homed": True}}
+        w._refresh_goniometer_profile()
+        w._refresh_devices()
+        assert w.goniometer.profile is None and w.goniometer.scene is None
+        assert "not a built-in profile nor a file readable" in w.goniometer.caption.text()
+        assert not w.goniometer._dirty  # no redraw pending that would say only "no bench"
+        assert "detector_theta" in w.axis_rows  # the other tabs work
+    finally:
+        w.close()
