@@ -48,6 +48,10 @@ def open_window(qtbot):
         w.show()
         windows.append(w)
         qtbot.waitUntil(lambda: w.state.stream_up, timeout=WAIT_MS)
+        # the widgets follow the state on the window's redraw timer: wait until they show
+        # who this key is (the controls are enabled or greyed for it by then)
+        qtbot.waitUntil(lambda: bool(w.state.you.get("role")) and
+                        f"({w.state.you['role']})" in w.banner.text(), timeout=WAIT_MS)
         return w
 
     yield make
