@@ -251,7 +251,7 @@ def test_query_gives_up_after_retries_with_typed_error():
 def test_constructor_without_answer_is_connection_failed():
     port = TranscriptSerial([(b"1TS\r\n", b"")] * 3, baudrate=57600)
     with pytest.raises(ConnectionFailed) as info:
-        Smc100Axis(port, name="theta", reply_timeout=0.02)
+        Smc100Axis(port, name="theta", reply_timeout=0.5)
     assert isinstance(info.value.__cause__, DeviceTimeout)
     assert "address 1" in str(info.value)
 
@@ -373,8 +373,10 @@ def test_limit_switch_stop_raises_limit_error_and_recovers(homed):
 
 
 def test_move_while_moving_is_refused_with_state_error(homed):
-    homed.velocity = 0.5
-    homed.move_to(10.0)
+    # 3000 s of emulated motion (15 s at SPEED): still moving when the second command
+    # arrives however late a loaded machine schedules it (10 mm at 0.5 was over in 0.1 s)
+    homed.velocity = 0.05
+    homed.move_to(150.0)
     with pytest.raises(CommandRefused) as info:
         homed.move_to(2.0)
     assert info.value.code == "M"

@@ -51,7 +51,7 @@ CHECK_OK = [(b"*ESR?\n", b"0\r"), (b"ERRS?\n", b"0\r")]
 
 def transcript_lockin(steps, **kw) -> tuple[Sr830LockIn, TranscriptSerial]:
     port = TranscriptSerial(steps, baudrate=9600)
-    kw.setdefault("reply_timeout", 0.02)
+    kw.setdefault("reply_timeout", 0.5)
     return Sr830LockIn(port, name="lockin", **kw), port
 
 
@@ -176,12 +176,12 @@ def test_other_models_are_refused_and_silence_is_connection_failed():
     port = TranscriptSerial([(b"OUTX 0\n", b""),
                              (b"*IDN?\n", b"Stanford_Research_Systems,SR860,003456,v1.51\r")])
     with pytest.raises(UnsupportedFeature) as info:
-        Sr830LockIn(port, name="lockin", reply_timeout=0.02)
+        Sr830LockIn(port, name="lockin", reply_timeout=0.5)
     assert "SR860" in str(info.value)
     assert port.is_open  # a port handed in stays the caller's when the constructor fails
     port = TranscriptSerial([(b"OUTX 0\n", b""), *[(b"*IDN?\n", b"")] * 3])
     with pytest.raises(ConnectionFailed) as info:
-        Sr830LockIn(port, name="lockin", reply_timeout=0.02)
+        Sr830LockIn(port, name="lockin", reply_timeout=0.5)
     assert isinstance(info.value.__cause__, DeviceTimeout)
 
 

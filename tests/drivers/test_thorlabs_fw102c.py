@@ -162,7 +162,7 @@ def test_garbled_position_is_retried():
 def test_connect_failures_are_connection_failed(steps, message):
     port = TranscriptSerial(steps, baudrate=115200)
     with pytest.raises(ConnectionFailed) as info:
-        Fw102cWheel(port, name="wheel", reply_timeout=0.02)
+        Fw102cWheel(port, name="wheel", reply_timeout=0.5)
     assert message in str(info.value)
 
 

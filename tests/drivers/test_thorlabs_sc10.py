@@ -178,13 +178,13 @@ def test_rejected_query_is_a_typed_error():
 def test_silent_unit_is_connection_failed_and_wrong_unit_is_refused():
     port = TranscriptSerial([(b"\r", b""), *[(b"id?\r", b"")] * 3], baudrate=9600)
     with pytest.raises(ConnectionFailed) as info:
-        Sc10Shutter(port, name="shutter", reply_timeout=0.02)
+        Sc10Shutter(port, name="shutter", reply_timeout=0.5)
     assert isinstance(info.value.__cause__, DeviceTimeout)
     port = TranscriptSerial(
         [RESYNC, (b"id?\r", b"id?\rTHORLABS FW102C/FW212C Filter Wheel version 1.07\r> ")],
         baudrate=9600)
     with pytest.raises(ConnectionFailed) as info:
-        Sc10Shutter(port, name="shutter", reply_timeout=0.02)
+        Sc10Shutter(port, name="shutter", reply_timeout=0.5)
     assert "not an SC10" in str(info.value)
 
 

@@ -349,7 +349,7 @@ def test_constructor_failures_are_connection_failed():
                             + [(f"/1 0 {n} get system.axiscount\n".encode(), b"")
                                for n in (1, 2)], baudrate=115200)
     with pytest.raises(ConnectionFailed) as info:
-        ZaberAxis(port, name="theta", microstep_size=MS, reply_timeout=0.02, flush_s=0)
+        ZaberAxis(port, name="theta", microstep_size=MS, reply_timeout=0.5, flush_s=0)
     assert isinstance(info.value.__cause__, DeviceTimeout) and "address 1" in str(info.value)
     assert port.is_open  # a port handed in stays the caller's after a failed constructor
     port = TranscriptSerial([CONNECT[0]], baudrate=115200)

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[3]
 def test_write_error_pauses_with_clear_error_and_file_stays_valid(tmp_path):
     out = subprocess.run(
         [sys.executable, "-m", "tests.instrument.run.full_disk_run", str(tmp_path), "1000000"],
-        cwd=ROOT, capture_output=True, text=True, timeout=60)
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
     lines = out.stdout.splitlines()
     path = Path(lines[0])
     assert any(line.startswith("FAULT storage:") and line.endswith("-> pause")
@@ -51,7 +51,7 @@ def test_write_failing_inside_hdf5_leaves_a_repairable_file(tmp_path):
     """Fallback without the space reservation: HDF5's own flush fails half-way."""
     out = subprocess.run(
         [sys.executable, "-m", "tests.instrument.run.full_disk_run", str(tmp_path), "300000",
-         "unreserved"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+         "unreserved"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     lines = out.stdout.splitlines()
     path = Path(lines[0])
     assert any(line.startswith("FAULT storage:") and "File too large" in line
