@@ -214,8 +214,9 @@ def test_sharp_lobe_sigma_match_the_scatter_over_seeds() -> None:
     true model as ``scatterlab fit`` does, ten sensor seeds: the pulls' χ² over the seeds,
     with the fits' own correlations, lies between the 0.5 % tails of χ²₃₀ (an RMS pull of
     0.68–1.34). An earlier round measured a spread of 1.6–1.7 σ for ks and α on this
-    sample; BENCHMARKS.md (honest3) has the sweep that did not reproduce it. About 6 min
-    on the loaded 2-core box (the render, then ten fits)."""
+    sample; BENCHMARKS.md (honest_sigma_meter, "the sharp lobe's excess") has the sweep
+    that did not reproduce it. About 6 min on the loaded 2-core box (the render, then ten
+    fits)."""
     from instrument.pipelines.brdf.analyse import analyse
 
     sample = next(m for m in MATRIX if m.name == "sharp-ggx-0.05")
