@@ -1,0 +1,241 @@
+"""The dashboard in a real Chromium against a real server process on the emulated bench.
+
+Every wait is on a page condition (or an event) with a generous limit; nothing is timed
+(ADR 0020). Where Chromium or Playwright is missing these tests skip, saying why in one
+line; CI installs Chromium (.ci/run), so there they always run.
+"""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from instrument.client import BenchClient, ClientError
+from instrument.server.db import ServerDB
+from instrument.server.keys import KeyStore
+from tests.instrument.server.browser import (
+    chromium,
+    chromium_missing,
+    sign_in,
+    wait_live,
+    wait_run_state,
+)
+from tests.instrument.server.helpers import ServerProcess, plan_text
+from tests.waiting import wait_for
+
+pytestmark = [pytest.mark.skipif(chromium_missing() is not None,
+                                 reason=chromium_missing() or ""),
+              pytest.mark.timeout(900)]
+
+THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
+#: Many points, so that a pause asked for at the run's start lands long before its end.
+LONG_THETA_R = [float(t) for t in np.arange(-80.0, 81.0, 3.0) if abs(t + 20.0) > 12.0]
+#: A camera scan a fit can use (two incidence angles, dark frames): for the report.
+CAMERA_PLAN = """
+[plan]
+kind = "brdf_in_plane"
+name = "camera scan for a fit"
+[sample]
+name = "sim-grey"
+[scan]
+theta_i = [20.0, 45.0]
+theta_r = { start = -70.0, stop = 80.0, step = 15.0 }
+skip_beam_points = true
+[acquisition]
+mode = "auto"
+exposure_us = 2000
+max_exposure_us = 200000
+dark = "per_point"
+detectors = ["camera", "power_meter"]
+"""
+
+
+def add_keys(runs: Path) -> dict[str, str]:
+    """An observer's and an operator's key (the server then needs a key for everything)."""
+    with ServerDB(runs) as db:
+        store = KeyStore(db)
+        return {"observer": store.add("olga", "observer")[1],
+                "operator": store.add("oscar", "operator")[1]}
+
+
+def page_int(page, selector: str, attr: str) -> int:
+    return int(page.eval_on_selector(selector, f"e => e.dataset.{attr} || '0'"))
+
+
+def wait_idle(client: BenchClient) -> None:
+    def idle():
+        s = client.status()
+        return s["run"] is None and not s["queue_running"]
+    wait_for(idle, what="the queue to run out", timeout=600)
+
+
+def test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it(bench_file, start_server,
+                                                                    tmp_path):
+    runs = tmp_path / "runs"
+    keys = add_keys(runs)
+    server = start_server(bench_file(), runs)
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, keys["observer"])
+        assert page.inner_text("#who") == "signed in as olga (observer)"
+        # the operator's buttons are greyed, with the reason
+        for button in ("pause", "resume", "abort", "stop-all", "queue-add", "answer-skip"):
+            assert page.is_disabled(f"#{button}"), button
+            assert "observer key" in page.get_attribute(f"#{button}", "title")
+        assert "only operators may pause" in page.inner_text("#role-reason")
+        with BenchClient(server.url, keys["operator"]) as op:
+            op.add_plan(plan_text("watched", THETA_R))
+            op.start_queue()
+            wait_run_state(page, "finished")
+            # ... and the API refuses the observer's pause, from the page itself
+            status = page.evaluate("api('POST', '/run/pause', {now: false}).then(r => r.status)")
+            assert status == 403
+            with BenchClient(server.url, keys["observer"]) as obs, \
+                    pytest.raises(ClientError) as err:
+                obs.pause()
+            assert err.value.status == 403
+            (h,) = op.history()
+        assert h["outcome"] == "finished"
+        n = len(THETA_R)
+        page.wait_for_function(f"() => document.getElementById('run-numbers').dataset.done == {n}")
+        assert page.inner_text("#run-numbers").startswith(f"{n} of {n} points")
+        # every point plotted (the page watched from the start), axes labelled with units
+        assert page_int(page, "#plot", "plotted") == n
+        labels = page.evaluate("[Plot.fig.below[0].axis_label, Plot.fig.left[0].axis_label]")
+        assert labels == ["θr (signed: > 0 specular side) (deg)", "power (W)"]
+        log = page.inner_text("#log")
+        assert "run started" in log and "run finished" in log
+        assert "watched" in page.inner_text("#runs")
+        assert page.errors == []
+
+
+def test_an_operator_pauses_and_resumes_a_run_and_adds_a_plan_file(bench_file, start_server,
+                                                                    tmp_path):
+    runs = tmp_path / "runs"
+    keys = add_keys(runs)
+    server = start_server(bench_file(speed=20), runs)
+    plan = tmp_path / "long.toml"
+    plan.write_text(plan_text("paused and resumed", LONG_THETA_R), encoding="utf-8")
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, keys["operator"])
+        assert page.inner_text("#role-reason") == ""
+        page.set_input_files("#plan-file", str(plan))
+        page.click("#queue-add")
+        page.wait_for_function("() => document.querySelector('#queue tbody').innerText"
+                               ".includes('paused and resumed')")
+        assert "oscar" in page.inner_text("#queue")  # who added it
+        page.click("#queue-start")
+        wait_run_state(page, "running")
+        page.click("#pause")
+        wait_run_state(page, "paused")
+        with BenchClient(server.url, keys["observer"]) as obs:
+            assert obs.status()["run"]["state"] == "paused"
+        assert page.is_enabled("#resume") and page.is_disabled("#pause")
+        assert "paused by oscar" in page.inner_text("#log")
+        page.click("#resume")
+        wait_run_state(page, "finished")
+        assert "resumed" in page.inner_text("#log")
+        with BenchClient(server.url, keys["observer"]) as obs:
+            (h,) = obs.history()
+        assert h["outcome"] == "finished"
+        with h5py.File(h["run_file"]) as f:
+            assert sorted(f["entry/points/index"][:].tolist()) == \
+                list(range(len(LONG_THETA_R)))
+        assert page.errors == []
+
+
+def test_an_operator_answers_an_injected_fault_with_skip(bench_file, start_server, tmp_path):
+    runs = tmp_path / "runs"
+    keys = add_keys(runs)
+    server = start_server(bench_file(pause_on_detector_fault=True), runs,
+                          env={"SCATTERLAB_TEST_FAULT": "simsmc:detector_theta:1"})
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, keys["operator"])
+        with BenchClient(server.url, keys["operator"]) as op:
+            op.add_plan(plan_text("faulty", THETA_R))
+        page.click("#queue-start")
+        page.wait_for_selector("#fault-box:not([hidden])")
+        assert "detector_theta" in page.inner_text("#fault-box")
+        for answer in ("retry", "skip", "abort"):
+            assert page.is_enabled(f"#answer-{answer}")
+        assert "fault: detector_theta" in page.inner_text("#log")
+        page.click("#answer-skip")
+        wait_run_state(page, "finished")
+        assert page.is_hidden("#fault-box")
+        assert "(1 skipped)" in page.inner_text("#run-numbers")
+        with BenchClient(server.url, keys["observer"]) as obs:
+            (h,) = obs.history()
+        with h5py.File(h["run_file"]) as f:
+            assert (f["entry/points/status"][:] == 1).sum() == 1  # one point skipped
+        assert page.errors == []
+
+
+@pytest.mark.slow  # a camera run and its fit: about a minute (run by CI: ADR 0021)
+def test_an_observer_sees_the_camera_opens_a_finished_runs_report_and_downloads_it(
+        bench_file, start_server, tmp_path):
+    from instrument.pipelines.brdf.pipeline import fit_run
+
+    runs = tmp_path / "runs"
+    keys = add_keys(runs)
+    server = start_server(bench_file(), runs)
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, keys["observer"])
+        with BenchClient(server.url, keys["operator"]) as op:
+            op.add_plan(CAMERA_PLAN)
+            op.start_queue()
+            wait_run_state(page, "finished")
+            wait_idle(op)
+            (h,) = op.history()
+        caption = page.inner_text("#frame-caption")
+        assert "exposure" in caption and "saturated" in caption
+        assert page.is_visible("#frame")
+        fit_run(h["run_file"])  # what `scatterlab fit RUN.h5` does: DIR/RUN/fit/index.html
+        page.click("#runs-refresh")
+        name = Path(h["run_file"]).name
+        row = page.locator("#runs tbody tr", has_text=name)
+        row.locator(".open-report").click()
+        page.wait_for_selector("#report:not([hidden])")
+        report = page.frame_locator("#report")
+        assert report.locator("h1").first.inner_text().startswith("BRDF of sim-grey")
+        sources = report.locator("img").evaluate_all("imgs => imgs.map(i => i.src)")
+        assert sources and all(s.startswith("data:image/png;base64,") for s in sources)
+        assert page.inner_text("#report-title") == f"fit report of {name}"
+        with page.expect_download() as dl:
+            row.locator(".download").click()
+        assert dl.value.suggested_filename == name
+        assert Path(dl.value.path()).read_bytes() == Path(h["run_file"]).read_bytes()
+        assert page.errors == []
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_the_page_reconnects_by_itself_after_the_server_restarts(bench_file, tmp_path):
+    bench, runs = bench_file(), tmp_path / "runs"
+    listen = f"127.0.0.1:{_free_port()}"
+    servers = [ServerProcess(bench, runs, listen=listen)]
+    try:
+        with chromium(tmp_path / "profile") as page:
+            sign_in(page, servers[0].url, None)  # no keys: loopback acts as admin
+            servers[0].kill()  # kill -9: no goodbye to the page
+            page.wait_for_function(
+                "() => document.getElementById('conn').textContent === 'reconnecting…'")
+            servers.append(ServerProcess(bench, runs, listen=listen))
+            wait_live(page)
+            assert page.inner_text("#log").count("connected to bench sim") == 2
+            assert "lost the server" in page.inner_text("#log")
+            # and the events flow again: a run after the restart is seen to its end
+            with BenchClient(servers[1].url) as c:
+                c.add_plan(plan_text("after the restart", THETA_R))
+                c.start_queue()
+            wait_run_state(page, "finished")
+            assert page.errors == []
+    finally:
+        for s in servers:
+            s.kill()
