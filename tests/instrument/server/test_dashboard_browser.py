@@ -239,3 +239,42 @@ def test_the_page_reconnects_by_itself_after_the_server_restarts(bench_file, tmp
     finally:
         for s in servers:
             s.kill()
+
+
+#: The page's memory bound (dashboard.js MAX_PLOT_POINTS, MAX_LOG).
+MAX_PLOT_POINTS, MAX_LOG = 4000, 300
+
+
+def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_server,
+                                                           tmp_path):
+    """An 8-hour run's worth of points (100,000, in the server's batches) and 1,000 log
+    lines through the page's own message handler: the plot keeps ≤ 4,000 points spread
+    over the whole run, the log 300 lines."""
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)
+        kept = page.evaluate("""() => {
+            const n = 100000;
+            handle({type: 'run_started', data: {n_total: n, n_done: 0, estimated_s: 28800,
+                    path: '/runs/long.h5', item_id: 1, plan_kind: 'brdf_in_plane'}});
+            for (let start = 0; start < n; start += 250) {
+                const items = [];
+                for (let i = start; i < start + 250; i++) {
+                    const tr = -80 + 160 * ((i * 7919) % n) / n;
+                    items.push({index: i, status: 'ok', angles: [20 + 5 * (i % 3), 0, tr, 180],
+                                signal: 1 + Math.cos(tr / 60), power_w: null});
+                }
+                handle({type: 'points', data: {items}});
+            }
+            for (let i = 0; i < 1000; i++) addLog('info', 'line ' + i);
+            Plot.draw();
+            const idx = Plot.kept.map(k => k.i);
+            return {n: idx.length, first: Math.min(...idx), last: Math.max(...idx),
+                    stride: Plot.stride, log: S.log.length,
+                    curves: Plot.sources.size};
+        }""")
+    assert MAX_PLOT_POINTS // 2 <= kept["n"] <= MAX_PLOT_POINTS
+    assert kept["first"] == 0 and kept["last"] >= 100_000 - 2 * kept["stride"]
+    assert kept["stride"] == 32  # 100,000 / 32 = 3,125 points kept
+    assert kept["curves"] == 3  # one per θi
+    assert kept["log"] == MAX_LOG

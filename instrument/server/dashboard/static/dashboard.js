@@ -150,6 +150,7 @@ function handle(msg) {
       Plot.reset(d.plan_kind, d.n_total);
       addLog("info", "run started: " + baseName(d.path) + " (" + d.plan_kind + ", " +
              d.n_total + " points" + (d.n_done ? ", " + d.n_done + " already done" : "") + ")");
+      loadRuns();
       break;
     case "points":
       if (S.run && !S.run.plan_kind) Plot.guess(d.items);
