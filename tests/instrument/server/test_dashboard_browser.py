@@ -27,9 +27,10 @@ from tests.instrument.server.browser import (
 from tests.instrument.server.helpers import ServerProcess, plan_text
 from tests.waiting import wait_for
 
-pytestmark = [pytest.mark.skipif(chromium_missing() is not None,
-                                 reason=chromium_missing() or ""),
-              pytest.mark.timeout(900)]
+if (_why := chromium_missing()) is not None:
+    pytest.skip(_why, allow_module_level=True)  # one line for the whole file
+
+pytestmark = pytest.mark.timeout(900)
 
 THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
 #: Many points, so that a pause asked for at the run's start lands long before its end.
