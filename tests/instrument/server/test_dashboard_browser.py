@@ -113,6 +113,7 @@ def test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it(bench_file, st
         assert page.errors == []
 
 
+@pytest.mark.slow  # a 45-point run, so that the pause lands early: about a minute
 def test_an_operator_pauses_and_resumes_a_run_and_adds_a_plan_file(bench_file, start_server,
                                                                     tmp_path):
     runs = tmp_path / "runs"
