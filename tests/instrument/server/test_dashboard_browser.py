@@ -280,3 +280,32 @@ def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_ser
     assert kept["stride"] == 32  # 100,000 / 32 = 3,125 points kept
     assert kept["curves"] == 3  # one per θi
     assert kept["log"] == MAX_LOG
+
+
+def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, start_server,
+                                                                  tmp_path):
+    """As the GUI's: x = θr cos φr, y = θr sin φr, the colour mapping log10 of the signal
+    over the range plotted."""
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)
+        drawn = page.evaluate("""() => {
+            handle({type: 'run_started', data: {n_total: 3, n_done: 0, estimated_s: 10,
+                    path: '/runs/h.h5', item_id: 1, plan_kind: 'brdf_hemisphere'}});
+            handle({type: 'points', data: {items: [
+                {index: 0, status: 'ok', angles: [30, 180, 60, 0], signal: 10, power_w: null},
+                {index: 1, status: 'ok', angles: [30, 180, 30, 90], signal: 1000, power_w: null},
+                {index: 2, status: 'skipped', angles: [30, 180, 45, 180], signal: null,
+                 power_w: null}]}});
+            Plot.draw();
+            const d = Plot.sources.get(0).data;
+            return {x: Array.from(d.x), y: Array.from(d.y), v: Array.from(d.v),
+                    low: Plot.mapper.low, high: Plot.mapper.high,
+                    labels: [Plot.fig.below[0].axis_label, Plot.fig.left[0].axis_label]};
+        }""")
+        assert page.errors == []
+    assert drawn["x"] == pytest.approx([60.0, 0.0], abs=1e-9)
+    assert drawn["y"] == pytest.approx([0.0, 30.0], abs=1e-9)
+    assert drawn["v"] == pytest.approx([1.0, 3.0])
+    assert (drawn["low"], drawn["high"]) == (pytest.approx(1.0), pytest.approx(3.0))
+    assert drawn["labels"] == ["θr cos φr (deg)", "θr sin φr (deg)"]

@@ -264,13 +264,16 @@ async function reconnect() {
 // ---------------------------------------------------------------- the live plot (Bokeh)
 // The same pictures as the GUI's live plot (gui/qt/live_plot.py) for the plans a server
 // runs: in-plane BRDF and the calibrations that share its picture: signal against signed
-// θr, one curve per θi, log signal axis; every other plan: signal per point.
+// θr, one curve per θi, log signal axis; hemisphere scans: a polar map of the scattered
+// directions (radius θr, angle φr) coloured by log signal; every other plan: signal per
+// point (a light-field or sphere capture's latest frame is in the camera panel).
 const Plot = {
   kind: null, nTotal: 0, stride: 1, kept: [], quantity: null, fig: null, viewPromise: null,
   needsBuild: false,
   sources: new Map(), drawnVersion: -1, version: 0,
 
   pictureOf(planKind) {
+    if (planKind === "brdf_hemisphere") return "hemisphere";
     return ["brdf_in_plane", "reference", "signature"].includes(planKind) ? "in_plane" : "series";
   },
 
@@ -310,6 +313,12 @@ const Plot = {
         x = Math.abs(d - 180) < 90 ? tr : -tr;                     // > 0: specular side
         group = Math.round((Math.abs(((phii % 360) + 360) % 360 - 180) < 90 ? -ti : ti) * 10) / 10;
         if (!(y > 0)) continue;                                    // a log axis
+      } else if (this.kind === "hemisphere") {
+        if (!p.angles || p.angles[2] === null || !(y > 0)) continue;
+        const [tr, phir] = [p.angles[2], p.angles[3] * Math.PI / 180];
+        this.kept.push({i: p.index, x: tr * Math.cos(phir), y: tr * Math.sin(phir),
+                        v: Math.log10(y), g: 0});
+        continue;
       }
       this.kept.push({i: p.index, x, y, g: group});
     }
@@ -332,6 +341,7 @@ const Plot = {
     $("plot").innerHTML = "";
     const yLabel = this.quantity === "power" ? "power (W)" : "signal (DN/µs)";
     const inPlane = this.kind === "in_plane";
+    if (this.kind === "hemisphere") return this.makePolar(yLabel);
     this.fig = Bokeh.Plotting.figure({
       height: 300, sizing_mode: "stretch_width",
       x_axis_label: inPlane ? "θr (signed: > 0 specular side) (deg)" : "point",
@@ -341,9 +351,38 @@ const Plot = {
     this.viewPromise = Bokeh.Plotting.show(this.fig, $("plot"));
   },
 
+  makePolar(quantity) {   // rings at θr = 30°, 60°, 90°; colour: log10 of the quantity
+    this.fig = Bokeh.Plotting.figure({
+      height: 360, sizing_mode: "stretch_width", match_aspect: true,
+      x_axis_label: "θr cos φr (deg)", y_axis_label: "θr sin φr (deg)",
+      tools: "pan,wheel_zoom,box_zoom,reset,save", toolbar_location: "right",
+    });
+    for (const r of [30, 60, 90]) {
+      const a = Array.from({length: 181}, (_, k) => k * 2 * Math.PI / 180);
+      this.fig.line(a.map((t) => r * Math.cos(t)), a.map((t) => r * Math.sin(t)),
+                    {line_color: "#9e9e9e"});
+    }
+    this.mapper = new Bokeh.LinearColorMapper({palette: Bokeh.Palettes.Viridis256});
+    const src = new Bokeh.ColumnDataSource({data: {x: [], y: [], v: []}});
+    this.fig.scatter({field: "x"}, {field: "y"}, {source: src, size: 9, line_color: null,
+                     fill_color: {field: "v", transform: this.mapper}});
+    this.fig.add_layout(new Bokeh.ColorBar({color_mapper: this.mapper,
+                                            title: "log10 " + quantity}), "right");
+    this.sources.set(0, src);
+    this.viewPromise = Bokeh.Plotting.show(this.fig, $("plot"));
+  },
+
+  drawPolar() {
+    const k = this.kept;
+    const v = k.map((p) => p.v);
+    if (v.length) { this.mapper.low = Math.min(...v); this.mapper.high = Math.max(...v); }
+    this.sources.get(0).data = {x: k.map((p) => p.x), y: k.map((p) => p.y), v};
+  },
+
   draw() {
     if (this.kind === null || this.drawnVersion === this.version) return;
     if (this.needsBuild) this.make();
+    if (this.kind === "hemisphere") { this.drawPolar(); this.caption(); return; }
     this.drawnVersion = this.version;
     const groups = new Map();
     for (const k of this.kept) {
@@ -373,6 +412,10 @@ const Plot = {
       }
       src.data = {x: xy.x, y: xy.y};
     }
+    this.caption();
+  },
+
+  caption() {
     const n = S.run ? S.run.n_done : 0;
     $("plot-caption").textContent = (S.run && S.run.plan_kind ? S.run.plan_kind + ": " : "") +
       n + " of " + (S.run ? S.run.n_total : "?") + " points, " + this.kept.length + " plotted" +
