@@ -7,7 +7,9 @@ What is served, and from where:
   this package's ``static/`` folder; no build step);
 * ``/dashboard/bokeh/...``: BokehJS, the plotting library, from the installed ``bokeh``
   package's own files (nothing is fetched from the internet; a lab network often has no
-  route to it). Without ``bokeh`` the page says how to install it (HTTP 503).
+  route to it). Without ``bokeh`` the page says how to install it (HTTP 503);
+* ``/api/v1/bench/axes`` (observer key): each axis's units and limits, for the device
+  table (the ``devices`` messages carry bare numbers).
 
 Nothing here grants access: the page and its scripts are public (they hold no data), and
 every request the page makes carries the key the user signed in with. A browser cannot put

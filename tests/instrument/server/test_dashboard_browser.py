@@ -309,3 +309,17 @@ def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, sta
     assert drawn["v"] == pytest.approx([1.0, 3.0])
     assert (drawn["low"], drawn["high"]) == (pytest.approx(1.0), pytest.approx(3.0))
     assert drawn["labels"] == ["θr cos φr (deg)", "θr sin φr (deg)"]
+
+
+@pytest.mark.slow  # two camera scans' worth of the sim bench and a fit: minutes
+def test_the_screenshot_script_renders_the_dashboards_pictures_none_blank(tmp_path):
+    import matplotlib.image
+
+    from instrument.server.dashboard.screenshots import DASHBOARD_VIEWS, render_dashboard
+
+    shots = render_dashboard(tmp_path)
+    assert tuple(shots) == DASHBOARD_VIEWS
+    for name, path in shots.items():
+        px = matplotlib.image.imread(path)[..., :3]
+        assert px.shape[0] > 400 and px.shape[1] > 800, name
+        assert len(np.unique(px.reshape(-1, 3)[::7], axis=0)) > 50, f"{name} looks blank"
