@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from instrument.client import BenchClient, ClientError
+from instrument.server.dashboard.screenshots import PLAN as SCREENSHOT_PLAN
 from instrument.server.db import ServerDB
 from instrument.server.keys import KeyStore
 from tests.instrument.server.browser import (
@@ -36,23 +37,7 @@ THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
 #: Many points, so that a pause asked for at the run's start lands long before its end.
 LONG_THETA_R = [float(t) for t in np.arange(-80.0, 81.0, 3.0) if abs(t + 20.0) > 12.0]
 #: A camera scan a fit can use (two incidence angles, dark frames): for the report.
-CAMERA_PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "camera scan for a fit"
-[sample]
-name = "sim-grey"
-[scan]
-theta_i = [20.0, 45.0]
-theta_r = { start = -70.0, stop = 80.0, step = 15.0 }
-skip_beam_points = true
-[acquisition]
-mode = "auto"
-exposure_us = 2000
-max_exposure_us = 200000
-dark = "per_point"
-detectors = ["camera", "power_meter"]
-"""
+CAMERA_PLAN = SCREENSHOT_PLAN.format(step=15.0)
 
 
 def add_keys(runs: Path) -> dict[str, str]:
