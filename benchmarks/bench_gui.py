@@ -10,12 +10,18 @@ Measured on the real main window (offscreen, ``QT_QPA_PLATFORM=offscreen``):
 3. **Camera.** The simulated camera streaming at 1024² and at 2048² px: the camera's own
    frame rate (frames into the view's slot) against frames displayed per second.
 
+With ``--server`` the scan runs in a bench server process of its own (the ideal bench
+behind ``scatterlab serve``'s service and app, started by this script as a child) and the
+GUI is the client window (docs/decisions/0084): its plot is fed by the event stream.
+
 Latency is measured by a heartbeat: a 5 ms ``QTimer`` on the GUI thread records when it
 fires; the worst (and 99th-percentile) delay beyond its period is how long the GUI thread
 was unable to react. Target: ≤ 50 ms.
 
     python benchmarks/bench_gui.py                 # everything
     python benchmarks/bench_gui.py --quick         # 2,000 scan points, 3 s of camera
+    python benchmarks/bench_gui.py --server        # the scan only, engine in a server process
+    python benchmarks/bench_gui.py --scan-only     # the scan only, engine in this process
 """
 
 from __future__ import annotations
@@ -130,6 +136,87 @@ def bench_scan(app: QApplication, work: Path, n_points: int) -> dict:
     return out
 
 
+def serve_ideal(runs: str) -> None:
+    """The child of ``--server``: the ideal bench's server on a free loopback port; prints
+    its address, serves until killed."""
+    import socket
+
+    import uvicorn
+
+    from instrument.server.app import create_app
+    from instrument.server.service import BenchService
+
+    bench = ideal_bench()
+    service = BenchService(bench.profile, runs, fsync=False, opener=lambda p: bench)
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(128)
+    print(f"serving on http://127.0.0.1:{sock.getsockname()[1]}", flush=True)
+    uvicorn.Server(uvicorn.Config(create_app(service), log_level="warning",
+                                  ws="websockets-sansio")).run(sockets=[sock])
+
+
+def _gui_thread_costs(window_cls) -> list[float]:
+    """Record the CPU time (``time.thread_time``, not wall time: on a loaded machine the
+    wall time includes waiting for a CPU) of each call of the client window's redraw and
+    of the link's drain: the work the GUI thread itself does for the scan."""
+    from gui.qt.server_link import ServerLink
+
+    costs: list[float] = []
+
+    def timed(f):
+        def call(*a, **k):
+            t = time.thread_time()
+            try:
+                return f(*a, **k)
+            finally:
+                costs.append(time.thread_time() - t)
+        return call
+    window_cls._redraw = timed(window_cls._redraw)
+    ServerLink.drain = timed(ServerLink.drain)
+    return costs
+
+
+def bench_scan_client(app: QApplication, work: Path, n_points: int) -> dict:
+    """The scan in a server process, watched and driven from the client window."""
+    import subprocess
+
+    from gui.qt.client_window import ClientWindow
+
+    busy = _gui_thread_costs(ClientWindow)
+    child = subprocess.Popen([sys.executable, __file__, "--serve-ideal", str(work / "srv")],
+                             stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        url = child.stdout.readline().split()[-1]
+        window = ClientWindow(url)
+        window.show()
+        spin(app, lambda: window.state.stream_up, 60)
+        hb = Heartbeat()
+        hb.start()
+        t0 = time.perf_counter()
+        window.add_plan_text(scan_plan(n_points))
+        window.start_queue_button.click()
+        spin(app, lambda: window.state.run is not None and window.state.run.live is not None,
+             120)
+        spin(app, lambda: window.state.run.state == "finished"
+             and window.state.run.live.n_received >= window.state.run.n_done, 3600)
+        elapsed = time.perf_counter() - t0
+        spin(app, lambda: window.plot.n_plotted >= window.state.run.n_done, 30)
+        out = hb.stop(settle_s=0.5)
+        run = window.state.run
+        out.update(points=run.n_done, status=run.state, seconds=elapsed,
+                   plotted=window.plot.n_plotted, drains=window.link.n_drains,
+                   slot_max_ms=1e3 * max(busy), slot_total_s=sum(busy),
+                   slot_p99_ms=1e3 * float(np.percentile(busy, 99)), slots=len(busy))
+        window.close()
+        window.deleteLater()
+        app.processEvents()
+        return out
+    finally:
+        child.kill()
+        child.wait(60)
+
+
 def bench_fit(app: QApplication, work: Path) -> dict:
     from tests.instrument.sim_scan import SAMPLES, ScanSetup, render, write_run_file
 
@@ -206,17 +293,40 @@ def _close(app: QApplication, window) -> None:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
+    p.add_argument("--server", action="store_true",
+                   help="only the scan, with the engine in a server process")
+    p.add_argument("--scan-only", action="store_true",
+                   help="only the scan, with the engine in this process (the baseline)")
+    p.add_argument("--serve-ideal", default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
+    if args.serve_ideal:
+        serve_ideal(args.serve_ideal)
+        return 0
     app = QApplication.instance() or QApplication([])
     work = Path(tempfile.mkdtemp(prefix="bench-gui-"))
     n = 2000 if args.quick else 10_000
     secs = 3.0 if args.quick else 10.0
+    if args.server:
+        scan = bench_scan_client(app, work, n)
+        print(f"scan (engine in a server process, GUI a client): {scan['points']} points "
+              f"({scan['status']}) in {scan['seconds']:.1f} s "
+              f"({scan['points'] / scan['seconds']:.0f} points/s), live plot "
+              f"{scan['plotted']} points, {scan['drains']} drains; GUI-thread work per "
+              f"redraw or drain ({scan['slots']} calls) p99 {scan['slot_p99_ms']:.1f} ms, "
+              f"at most {scan['slot_max_ms']:.1f} ms CPU, "
+              f"{scan['slot_total_s']:.2f} s CPU in all; GUI heartbeat worst "
+              f"{scan['max_ms']:.1f} ms (after the first 0.5 s: "
+              f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "
+              f"({scan['beats']} beats)")
+        return 0
     scan = bench_scan(app, work, n)
     print(f"scan: {scan['points']} points ({scan['status']}) in {scan['seconds']:.1f} s "
           f"({scan['points'] / scan['seconds']:.0f} points/s), live plot {scan['plotted']} "
           f"points; GUI heartbeat worst {scan['max_ms']:.1f} ms (after the first 0.5 s: "
           f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "
           f"({scan['beats']} beats)")
+    if args.scan_only:
+        return 0
     fit = bench_fit(app, work)
     print(f"fit: {fit['seconds']:.1f} s ({fit['summary']}); GUI heartbeat worst "
           f"{fit['max_ms']:.1f} ms, p99 {fit['p99_ms']:.1f} ms")

@@ -100,10 +100,11 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
        holder="string|null", until="number|null"),
     _t("bench", True, "the bench was connected or disconnected", connected="boolean",
        bench="string", message="string"),
-    _t("manual", True, "a manual command (home, jog, move, light, stop all) was carried out",
-       who="string", what="string", message="string"),
-    _t("devices", False, "device states (at most 10 per second)", axes="object",
-       light="boolean|null", owner="string"),
+    _t("manual", True, "a manual command (home, jog, move, light, camera settings, stop "
+       "all) was carried out", who="string", what="string", message="string"),
+    _t("devices", False, "device states (at most 10 per second); camera: its exposure_us "
+       "and gain between runs (null during a run, or without a camera)", axes="object",
+       light="boolean|null", owner="string", camera="object|null"),
     _t("frame", False, "the latest camera frame, decimated for display (8-bit, base64)",
        index="integer", shape="array", scale="number", data="string",
        exposure_us="number|null", saturated="number|null"),

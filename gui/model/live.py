@@ -139,6 +139,17 @@ class LiveData:
             self._version += 1
         return m
 
+    def plan_angles(self, index: int, angles) -> None:
+        """The planned θi of point ``index`` from its read-back angles (θi, φi, θr, φr),
+        rounded to 0.1° (beyond any stage tolerance): for a client of the bench server,
+        which receives the points but not the plan (docs/decisions/0084)."""
+        if not 0 <= index < self._planned_ti.size:
+            return
+        ti, pi = float(angles[0]), float(angles[1])
+        signed = -ti if abs(math.fmod(pi, 360.0) % 360.0 - 180.0) < 90.0 else ti
+        with self._lock:
+            self._planned_ti[index] = round(signed, 1)
+
     # worker thread -----------------------------------------------------------------
     def on_event(self, ev: Event) -> None:
         if isinstance(ev, PointCompleted):

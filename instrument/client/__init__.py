@@ -24,7 +24,8 @@ import httpx
 
 from instrument.protocol import API_PREFIX, Message, decode
 
-__all__ = ["ENV_KEY", "ENV_SERVER", "BenchClient", "ClientError", "server_from_env"]
+__all__ = ["ENV_KEY", "ENV_SERVER", "BenchClient", "ClientError", "EventStream",
+           "server_from_env"]
 
 ENV_SERVER = "SCATTERLAB_SERVER"
 ENV_KEY = "SCATTERLAB_KEY"
@@ -172,6 +173,13 @@ class BenchClient:
     def light(self, on: bool) -> str:
         return self.request("POST", "/bench/light", {"on": on})["message"]
 
+    def camera_settings(self, *, exposure_us: float | None = None,
+                        gain: float | None = None) -> str:
+        """Set the camera's exposure (µs) and/or gain (its own units) between runs."""
+        body = {k: v for k, v in (("exposure_us", exposure_us), ("gain", gain))
+                if v is not None}
+        return self.request("POST", "/bench/camera", body)["message"]
+
     def stop_all(self) -> str:
         return self.request("POST", "/bench/stop-all")["message"]
 
@@ -201,11 +209,25 @@ class BenchClient:
     def audit(self, limit: int = 200) -> list[dict[str, Any]]:
         return self.request("GET", "/audit", params={"limit": limit})
 
+    def run_points(self, since: int = 0) -> dict[str, Any]:
+        """One page of the current run's points published so far, from ordinal ``since``:
+        ``{"run", "since", "next", "total", "items"}`` (``GET /runs/current/points``)."""
+        return self.request("GET", "/runs/current/points", params={"since": int(since)})
+
+    def all_run_points(self) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
+        """The current run (None before the first) and every point it published so far."""
+        page = self.run_points(0)
+        items = list(page["items"])
+        while page["next"] < page["total"] and page["items"]:
+            page = self.run_points(page["next"])
+            items.extend(page["items"])
+        return page["run"], items
+
     # events -----------------------------------------------------------------------------
-    def events(self, *, open_timeout_s: float = 30.0) -> Iterator[Message]:
-        """The event stream, message by message, starting with ``hello``; ends when the
-        server closes the connection. Close the generator (``break``) to disconnect."""
-        from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
+    def open_events(self, *, open_timeout_s: float = 30.0) -> EventStream:
+        """The event stream as an object: iterate it, or :meth:`EventStream.recv` with a
+        timeout; :meth:`EventStream.close` (from any thread) ends it."""
+        from websockets.exceptions import InvalidHandshake, InvalidStatus
         from websockets.sync.client import connect
 
         ws_url = "ws" + self.url[len("http"):] + API_PREFIX + "/events"
@@ -218,9 +240,52 @@ class BenchClient:
                               "the server refused the event stream (check the key)") from err
         except (OSError, InvalidHandshake, TimeoutError) as err:
             raise ClientError(0, f"cannot reach the server at {self.url}: {err}") from err
-        with conn:
+        return EventStream(conn)
+
+    def events(self, *, open_timeout_s: float = 30.0) -> Iterator[Message]:
+        """The event stream, message by message, starting with ``hello``; ends when the
+        server closes the connection. Close the generator (``break``) to disconnect."""
+        with self.open_events(open_timeout_s=open_timeout_s) as stream:
+            yield from stream
+
+
+class EventStream:
+    """An open event stream (:meth:`BenchClient.open_events`)."""
+
+    def __init__(self, conn) -> None:
+        # entered as its context (the websockets library's way to own the connection);
+        # :meth:`close` ends it
+        self._conn = conn.__enter__()
+
+    def recv(self, timeout_s: float | None = None) -> Message | None:
+        """The next message; None when ``timeout_s`` passed without one.
+
+        Raises
+        ------
+        EOFError
+            The stream ended (the server closed it, or :meth:`close` was called).
+        """
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            return decode(self._conn.recv(timeout=timeout_s))
+        except TimeoutError:
+            return None
+        except ConnectionClosed as err:
+            raise EOFError("the event stream ended") from err
+
+    def __iter__(self) -> Iterator[Message]:
+        while True:
             try:
-                for text in conn:
-                    yield decode(text)
-            except ConnectionClosed:
+                yield self.recv()
+            except EOFError:
                 return
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self) -> EventStream:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -30,6 +30,7 @@ from instrument.server.db import SERVER_DB_NAME
 from instrument.server.hub import ClientBuffer
 from instrument.server.keys import KeyStore
 from instrument.server.plans import MAX_PLAN_BYTES
+from instrument.server.points import MAX_POINTS_PAGE, RunPoints
 from instrument.server.service import BenchService, Caller, ServiceError
 
 __all__ = ["MAX_BODY_BYTES", "create_app"]
@@ -86,6 +87,14 @@ class MoveBody(_Body):
 
 class LightBody(_Body):
     on: bool
+
+
+class CameraBody(_Body):
+    """Camera settings to change (at least one); each is checked against the camera's
+    own range by its driver."""
+
+    exposure_us: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    gain: Annotated[float, Field(allow_inf_nan=False)] | None = None
 
 
 class TakeControl(_Body):
@@ -156,6 +165,8 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     """
     keys = KeyStore(service.db)
     audit = AuditLog(service.db)
+    run_points = RunPoints()
+    service.hub.listen(run_points.on_message)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -274,6 +285,14 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
             raise ServiceError(404, f"{path}: no such file in the runs folder")
         return FileResponse(target, filename=target.name)
 
+    @app.get(f"{p}/runs/current/points")
+    def current_points(since: int = 0, limit: int = MAX_POINTS_PAGE,
+                       caller: Caller = observer) -> dict[str, Any]:
+        """The current run's points published so far, from ordinal ``since`` (a client
+        that connects mid-run draws the plot from the first point; see
+        :mod:`instrument.server.points`)."""
+        return run_points.page(since, limit)
+
     @app.get(f"{p}/events/schema")
     def events_schema(caller: Caller = observer) -> dict[str, Any]:
         from instrument.protocol import schema
@@ -376,6 +395,12 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     def bench_light(body: LightBody, request: Request, caller: Caller = control):
         ctl(request, caller)
         return done(request, service.light(caller, body.on))
+
+    @app.post(f"{p}/bench/camera")
+    def bench_camera(body: CameraBody, request: Request, caller: Caller = control):
+        ctl(request, caller)
+        return done(request, service.camera_settings(caller, exposure_us=body.exposure_us,
+                                                     gain=body.gain))
 
     @app.post(f"{p}/bench/stop-all")
     def bench_stop_all(request: Request, caller: Caller = operator):

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -452,6 +453,29 @@ class BenchService:
             return f"light {'on' if on else 'off'}"
         return self._manual(caller, f"light {'on' if on else 'off'}", do)
 
+    def camera_settings(self, caller: Caller, *, exposure_us: float | None = None,
+                        gain: float | None = None) -> str:
+        """Set the camera's exposure and/or gain between runs (a run sets its own from
+        its plan); a value outside the camera's range is refused with the range."""
+        if exposure_us is None and gain is None:
+            raise ServiceError(422, "give exposure_us, gain or both")
+
+        def do(bench: Bench) -> str:
+            cam = bench.camera
+            if cam is None:
+                raise ServiceError(422, f"bench {self.profile.name!r} has no camera")
+            try:
+                if exposure_us is not None:
+                    cam.exposure_us = exposure_us
+                if gain is not None:
+                    cam.gain = gain
+            except ValueError as err:
+                raise ServiceError(422, f"camera settings refused: {err}") from err
+            return f"camera: exposure {cam.exposure_us:g} µs, gain {cam.gain:g}"
+        what = ", ".join(f"{k} {v:g}" for k, v in (("exposure_us", exposure_us),
+                                                    ("gain", gain)) if v is not None)
+        return self._manual(caller, f"camera {what}", do)
+
     def stop_all(self, caller: Caller) -> str:
         """Stop every axis now; during a run, abort it (the engine stops every axis and
         turns the light off). Never refused for want of control."""
@@ -697,7 +721,14 @@ class BenchService:
             light = None
             with contextlib.suppress(DeviceError):
                 light = self._light_on(bench)
-            return {"axes": axes, "light": light, "owner": "idle"}
+            camera = None
+            if bench.camera is not None:
+                with contextlib.suppress(DeviceError):
+                    # NaN where a backend cannot report it: null in the message
+                    camera = {k: (v if math.isfinite(v) else None) for k, v in (
+                        ("exposure_us", float(bench.camera.exposure_us)),
+                        ("gain", float(bench.camera.gain)))}
+            return {"axes": axes, "light": light, "owner": "idle", "camera": camera}
         finally:
             self._bench_lock.release()
 

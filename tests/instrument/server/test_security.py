@@ -113,6 +113,7 @@ def test_revoked_and_expired_keys_are_401(server):
     ("observer", "POST", "/bench/move", {"targets": {"sample_theta": 10.0}}),
     ("observer", "POST", "/bench/stop-all", None),
     ("observer", "POST", "/control/take", None),
+    ("observer", "POST", "/bench/camera", {"exposure_us": 2000.0}),
     ("operator", "POST", "/keys", {"name": "x", "role": "admin"}),
     ("operator", "POST", "/bench/disconnect", None),
     ("operator", "GET", "/audit", None),
@@ -142,6 +143,8 @@ def test_the_event_stream_needs_a_key_once_keys_exist(server):
     ("/bench/jog", b'{"role": "sample_theta", "step": NaN}'),
     ("/bench/move", json.dumps({"targets": {}}).encode()),
     ("/queue/1/move", json.dumps({"index": -1}).encode()),
+    ("/bench/camera", b'{"exposure_us": NaN}'),
+    ("/bench/camera", json.dumps({"exposure_us": -5.0}).encode()),
     ("/keys", json.dumps({"name": "x", "role": "root"}).encode()),
 ])
 def test_malformed_bodies_are_422_and_change_nothing(server, path, content):
@@ -223,6 +226,28 @@ def test_light_on_with_the_detector_in_the_beam_is_refused(server):
     # detector at 0 with the sample at 0 and the source at 0: the detector is in the beam
     r = refused(server, 422, "POST", "/bench/light", "operator", json={"on": True})
     assert "beam" in r.json()["detail"]
+
+
+def test_camera_settings_outside_the_cameras_range_are_refused_with_the_range(server):
+    cam = server.service.bench.camera
+    before = (cam.exposure_us, cam.gain)
+    r = refused(server, 422, "POST", "/bench/camera", "operator", json={"gain": 99.0})
+    assert "gain 99 outside [0, 24]" in r.json()["detail"]
+    refused(server, 422, "POST", "/bench/camera", "operator", json={})  # nothing to set
+    assert (cam.exposure_us, cam.gain) == before
+
+
+def test_camera_settings_are_set_audited_and_published(server):
+    r = server.call("POST", "/bench/camera", "operator",
+                    json={"exposure_us": 2500.0, "gain": 6.0})
+    assert r.status_code == 200, r.text
+    assert r.json()["message"] == "camera: exposure 2500 µs, gain 6"
+    cam = server.service.bench.camera
+    assert (cam.exposure_us, cam.gain) == (2500.0, 6.0)
+    row = server.audit()[-1]
+    assert (row.who, row.what, row.status) == ("operator-1", f"POST {P}/bench/camera", 200)
+    assert row.result == "camera: exposure 2500 µs, gain 6"
+    assert server.service._device_states()["camera"] == {"exposure_us": 2500.0, "gain": 6.0}
 
 
 # the control lease ---------------------------------------------------------------------

@@ -1,0 +1,250 @@
+"""The GUI as a client of a real bench server process on a random loopback port.
+
+The operator's actions go through the window's buttons and methods to the server; what is
+checked is what the window shows and what the server did (its queue history, its run
+files). Every wait is on a condition with a generous limit (ADR 0020); no timing asserts.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from instrument.client import BenchClient
+from instrument.server.db import ServerDB
+from instrument.server.keys import KeyStore
+from tests.instrument.server.helpers import ServerProcess, fast_profile_text, plan_text
+
+WAIT_MS = 120_000
+THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
+
+
+@pytest.fixture
+def server(tmp_path):
+    started: list[ServerProcess] = []
+
+    def start(*, fault: str | None = None, pause_on_fault: bool = False) -> ServerProcess:
+        bench = tmp_path / "sim-fast.toml"
+        bench.write_text(fast_profile_text(pause_on_detector_fault=pause_on_fault),
+                         encoding="utf-8")
+        env = {"SCATTERLAB_TEST_FAULT": fault} if fault else None
+        s = ServerProcess(bench, tmp_path / "runs", env=env)
+        started.append(s)
+        return s
+
+    yield start
+    for s in started:
+        s.kill()
+
+
+@pytest.fixture
+def open_window(qtbot):
+    from gui.qt.client_window import ClientWindow
+
+    windows: list[ClientWindow] = []
+
+    def make(url: str, key: str | None = None) -> ClientWindow:
+        w = ClientWindow(url, key)
+        qtbot.addWidget(w)
+        w.show()
+        windows.append(w)
+        qtbot.waitUntil(lambda: w.state.stream_up, timeout=WAIT_MS)
+        return w
+
+    yield make
+    for w in windows:
+        w.close()
+
+
+def _result(window, what: str):
+    return next((r for r in window.results if r[0] == what), None)
+
+
+@pytest.mark.timeout(900)
+def test_three_plans_queued_from_the_gui_survive_its_closing_and_reopening_shows_the_plot(
+        server, open_window, qtbot):
+    srv = server()
+    w = open_window(srv.url)
+    assert w.add_button.isEnabled() and w.stop_all_button.isEnabled()
+    qtbot.waitUntil(lambda: w.browser is not None, timeout=WAIT_MS)  # runs folder is local
+    long_scan = [float(t) for t in (*range(-85, -44), *range(10, 86))]  # 117 points
+    w.add_plan_text(plan_text("first", long_scan))
+    w.add_plan_text(plan_text("second", THETA_R))
+    w.add_plan_text(plan_text("third", THETA_R, theta_i=30.0))
+    qtbot.waitUntil(lambda: len(w.state.queue_items) == 3, timeout=WAIT_MS)
+    assert [i["name"] for i in w.state.queue_items] == ["first", "second", "third"]
+    w.start_queue_button.click()
+    qtbot.waitUntil(lambda: w.state.run is not None and w.state.run.live is not None
+                    and w.state.run.live.n_received >= 3, timeout=WAIT_MS)
+    w.pause_button.click()  # at the end of the point: the run stays live for the reopening
+    qtbot.waitUntil(lambda: w.state.run.state == "paused", timeout=WAIT_MS)
+    n_before = w.state.run.n_done
+    w.close()
+
+    with BenchClient(srv.url) as c:  # the server still has the run
+        st = c.status()
+        assert st["run"] is not None and st["run"]["state"] == "paused"
+
+    again = open_window(srv.url)
+    qtbot.waitUntil(lambda: again.state.run is not None and again.state.run.live is not None
+                    and again.state.run.live.n_received >= n_before, timeout=WAIT_MS)
+    snap = again.state.run.live.snapshot()
+    assert 0 in snap.index.tolist()  # the plot holds the run from its first point
+    assert sorted(snap.index.tolist()) == list(range(snap.n_received))
+    qtbot.waitUntil(lambda: again.plot.n_plotted > 0, timeout=WAIT_MS)
+    assert again.fault_box.isVisible() and again.resume_button.isEnabled()
+    again.resume_button.click()
+    qtbot.waitUntil(lambda: not again.state.queue_items and not again.state.queue_running,
+                    timeout=WAIT_MS * 3)
+    with BenchClient(srv.url) as c:
+        history = c.history()
+    done = [h for h in history if h["outcome"] == "finished"]
+    assert [h["name"] for h in sorted(done, key=lambda h: h["item_id"])] == \
+        ["first", "second", "third"]
+
+
+def _keys(runs) -> dict[str, str]:
+    runs.mkdir(parents=True, exist_ok=True)
+    with ServerDB(runs) as db:
+        store = KeyStore(db)
+        return {role: store.add(f"{role}-user", role)[1] for role in ("observer", "operator")}
+
+
+@pytest.mark.timeout(600)
+def test_an_observer_key_sees_the_controls_greyed_with_the_reason(server, open_window,
+                                                                   qtbot, tmp_path):
+    tokens = _keys(tmp_path / "runs")
+    srv = server()
+    obs = open_window(srv.url, tokens["observer"])
+    assert obs.state.you == {"name": "observer-user", "role": "observer"}
+    for b in (obs.add_button, obs.start_queue_button, obs.pause_button, obs.abort_button,
+              obs.light_button, obs.take_button, obs.stop_all_button):
+        assert not b.isEnabled()
+    assert "observer" in obs.add_button.toolTip()
+    assert "View only" in obs.banner.text()
+    qtbot.waitUntil(lambda: bool(obs.axis_rows), timeout=WAIT_MS)  # device states arrive
+
+    op = open_window(srv.url, tokens["operator"])
+    assert op.add_button.isEnabled()
+    op.take_button.click()
+    qtbot.waitUntil(lambda: obs.state.lease_holder() == "operator-user", timeout=WAIT_MS)
+    assert "operator-user" in obs.control_label.text()
+    assert op.release_button.isEnabled() and not op.take_button.isEnabled()
+
+
+@pytest.mark.timeout(900)
+def test_a_fault_is_shown_and_answered_retry_from_the_gui(server, open_window, qtbot):
+    srv = server(fault="simsmc:detector_theta:1", pause_on_fault=True)
+    w = open_window(srv.url)
+    w.add_plan_text(plan_text("faulty", THETA_R), "faulty")
+    w.start_queue_button.click()
+    qtbot.waitUntil(lambda: w.fault_box.isVisible() and w.retry_button.isVisible(),
+                    timeout=WAIT_MS)
+    assert w.state.run.answers == ["retry", "skip", "abort"]
+    assert "FAULT detector_theta" in w.log_view.toPlainText()
+    w.retry_button.click()
+    qtbot.waitUntil(lambda: w.state.run.state == "finished", timeout=WAIT_MS)
+    assert w.state.run.n_done == w.state.run.n_total == len(THETA_R)
+    assert _result(w, "retry")[1]
+    assert not w.fault_box.isVisible()
+
+
+def test_closing_the_gui_leaves_a_local_server_with_a_run_going_and_stops_an_idle_one(
+        tmp_path):
+    import subprocess
+    import sys
+    from types import SimpleNamespace
+
+    from gui.app import _after_close
+    from gui.model.remote import RemoteRun, RemoteState
+    from instrument.client.local import LocalServer
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    try:
+        local = LocalServer("http://127.0.0.1:1", child.pid, "sim", tmp_path, True)
+        state = RemoteState(local.url)
+        state.stream_up = True
+        state.run = RemoteRun(state="running")
+        said = _after_close(SimpleNamespace(state=state), local)
+        assert "keeps running" in said and "--stop-server" in said and local.alive()
+        state.run.state = "finished"
+        said = _after_close(SimpleNamespace(state=state), local)
+        assert said.startswith("stopped the local server") and not local.alive()
+    finally:
+        child.kill()
+        child.wait(60)
+
+
+def _arm_deg(view) -> float | None:
+    """The detector arm's azimuth in the drawing (None: no arm drawn)."""
+    import math
+
+    arms = view.scene.by_role("arm") if view.scene is not None else []
+    if not arms:
+        return None
+    x, y = arms[0].xy[1]
+    return math.degrees(math.atan2(y, x))
+
+
+@pytest.mark.timeout(600)
+def test_the_goniometer_drawing_follows_the_servers_read_back_positions(
+        server, open_window, qtbot):
+    srv = server()
+    w = open_window(srv.url)
+    view = w.goniometer
+    qtbot.waitUntil(lambda: view.profile is not None, timeout=WAIT_MS)  # the server's bench
+    w.tabs.setCurrentWidget(view)  # the drawing redraws only while it is shown
+    qtbot.waitUntil(lambda: view.scene is not None and "detector_theta" in w.axis_rows,
+                    timeout=WAIT_MS)
+    assert _arm_deg(view) is None  # not homed: the arm's position is unknown
+    w.home("detector_theta")
+    qtbot.waitUntil(lambda: _result(w, "home detector_theta") is not None, timeout=WAIT_MS)
+    assert _result(w, "home detector_theta")[1]
+    w.move_to("detector_theta", 40.0)
+    qtbot.waitUntil(lambda: _result(w, "move detector_theta") is not None, timeout=WAIT_MS)
+    assert _result(w, "move detector_theta")[1]
+    # the drawing settles where the server's read-back says the stage is (steps of 1e-3°)
+    qtbot.waitUntil(lambda: not w.state.axes["detector_theta"].get("moving")
+                    and _arm_deg(view) is not None
+                    and abs(_arm_deg(view) - 40.0) < 0.01, timeout=WAIT_MS)
+    assert abs(w.state.homed_positions()["detector_theta"] - 40.0) < 0.01
+    assert "detector_theta 40.0" in view.caption.text()
+
+
+@pytest.mark.timeout(600)
+def test_an_operator_approves_and_denies_an_observers_proposals_from_the_gui(
+        server, open_window, qtbot, tmp_path):
+    tokens = _keys(tmp_path / "runs")
+    srv = server()
+    with BenchClient(srv.url, tokens["observer"]) as c:
+        keep = c.propose(plan_text("keep-me", THETA_R), "keep-me")["id"]
+        drop = c.propose(plan_text("drop-me", THETA_R), "drop-me")["id"]
+    obs = open_window(srv.url, tokens["observer"])
+    assert not obs.approve_button.isEnabled() and not obs.deny_button.isEnabled()
+    op = open_window(srv.url, tokens["operator"])
+    # the list is redrawn by the window's timer, after the state changed
+    qtbot.waitUntil(lambda: "2 proposed" in op.queue_label.text(), timeout=WAIT_MS)
+    assert "proposed by observer-user" in op.queue_list.item(0).text()
+    assert op.approve_button.isEnabled() and op.deny_button.isEnabled()
+
+    assert op.select_item(drop)
+    op.deny_button.click()
+    qtbot.waitUntil(lambda: _result(op, f"deny item {drop}") is not None, timeout=WAIT_MS)
+    assert op.select_item(keep)
+    op.approve_button.click()
+    qtbot.waitUntil(lambda: _result(op, f"approve item {keep}") is not None, timeout=WAIT_MS)
+    assert _result(op, f"deny item {drop}")[1] and _result(op, f"approve item {keep}")[1]
+    # every window shows the server's queue: the kept one queued, the other gone
+    for w in (op, obs):
+        qtbot.waitUntil(lambda w=w: [(i["id"], i["state"]) for i in w.state.queue_items]
+                        == [(keep, "queued")], timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: "proposed" not in op.queue_label.text(), timeout=WAIT_MS)
+
+    # approving what is not a proposal is refused by the server, with its reason
+    op.approve_button.click()
+    qtbot.waitUntil(lambda: len([r for r in op.results if r[0] == f"approve item {keep}"])
+                    == 2, timeout=WAIT_MS)
+    refused = [r for r in op.results if r[0] == f"approve item {keep}"][1]
+    assert not refused[1] and "not a proposal" in refused[2]
+    with BenchClient(srv.url, tokens["operator"]) as c:
+        history = c.history()
+    assert [(h["item_id"], h["outcome"]) for h in history] == [(drop, "denied")]
