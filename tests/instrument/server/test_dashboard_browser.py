@@ -98,6 +98,49 @@ def test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it(bench_file, st
         assert page.errors == []
 
 
+def plotted_indices(page) -> list[int]:
+    return sorted(page.evaluate("Plot.kept.map((k) => k.i)"))
+
+
+@pytest.mark.slow  # a 45-point run, paused after a few points: about a minute
+def test_a_page_opened_mid_run_plots_the_run_from_its_first_point(bench_file, start_server,
+                                                                   tmp_path):
+    runs = tmp_path / "runs"
+    keys = add_keys(runs)
+    server = start_server(bench_file(speed=20), runs)
+    n = len(LONG_THETA_R)
+    with BenchClient(server.url, keys["operator"]) as op:
+        op.add_plan(plan_text("joined late", LONG_THETA_R))
+        op.start_queue()
+        # held at a point boundary, so what "so far" means cannot move under the test
+        wait_for(lambda: (op.status()["run"] or {}).get("n_done", 0) >= 3,
+                 what="three points done", timeout=300)
+        op.pause()
+        wait_for(lambda: (op.status()["run"] or {}).get("state") == "paused",
+                 what="the run to pause", timeout=300)
+        done = op.status()["run"]["n_done"]
+        assert 3 <= done < n
+        with chromium(tmp_path / "profile") as page:
+            page.goto(server.url.rstrip("/") + "/")
+            page.evaluate("Backfill.pageSize = 2")  # several pages, as a long run has
+            page.wait_for_selector("#signin:not([hidden])")
+            page.fill("#key", keys["observer"])
+            page.click("#signin-button")
+            wait_live(page)
+            page.wait_for_function(f"() => Plot.kept.length === {done}")
+            assert plotted_indices(page) == list(range(done))  # from index 0, each once
+            assert "plotted the run's points so far" in page.inner_text("#log")
+            op.resume()
+            wait_run_state(page, "finished")
+            page.wait_for_function(
+                f"() => document.getElementById('run-numbers').dataset.done == {n}")
+            # the stream's points joined the ones read before them, none twice
+            assert plotted_indices(page) == list(range(n))
+            assert page_int(page, "#plot", "plotted") == n
+            assert page.evaluate("Plot.kind") == "in_plane"
+            assert page.errors == []
+
+
 @pytest.mark.slow  # a 45-point run, so that the pause lands early: about a minute
 def test_an_operator_pauses_and_resumes_a_run_and_adds_a_plan_file(bench_file, start_server,
                                                                     tmp_path):

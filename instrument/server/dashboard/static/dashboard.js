@@ -6,13 +6,18 @@
 // Messages only change `S` (the state) and mark it dirty; the page is redrawn at most
 // RENDER_HZ times a second, whatever the message rate. Everything kept grows to a bound:
 // the plot keeps at most MAX_PLOT_POINTS points (every 2^k-th point of the run, k growing
-// as the run does), the log MAX_LOG lines.
+// as the run does) and remembers the last SEEN_MAX point indices, the log MAX_LOG lines.
+// A page that connects (or reconnects) mid-run reads the run's points so far page by page
+// (GET /runs/current/points) while it follows the stream; a point in both is plotted once.
 "use strict";
 
 const API = "/api/v1";
 const RENDER_HZ = 5;
 const MAX_PLOT_POINTS = 4000;
 const MAX_LOG = 300;
+// The stream and the points so far overlap by what was published between the stream's
+// start and the last page read (a few batches); remembering this many indices covers it.
+const SEEN_MAX = 10000;
 const MARKERS_UP_TO = 600;   // plans up to this many points get a marker per point (as the GUI)
 const PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f",
                  "#4e342e", "#ad1457"];
@@ -140,19 +145,22 @@ function handle(msg) {
       S.me = {name: d.name, role: d.role};
       applyStatus(d.status);
       addLog("info", "connected to bench " + d.bench + " (protocol " + d.protocol + ")" +
-             (d.status.run ? "; a run is in progress: the plot shows its points from now on" : ""));
+             (d.status.run ? "; a run is in progress: reading its points so far" : ""));
+      if (d.status.run) Backfill.start();
       break;
     case "run_started":
       S.run = {state: "running", n_done: d.n_done, n_total: d.n_total, n_skipped: 0,
                elapsed_s: 0, eta_s: d.estimated_s, path: d.path, item_id: d.item_id,
                plan_kind: d.plan_kind};
       S.fault = null; S.answers = []; S.pauseReason = "";
+      Backfill.stop();   // its pages were the previous run's
       Plot.reset(d.plan_kind, d.n_total);
       addLog("info", "run started: " + baseName(d.path) + " (" + d.plan_kind + ", " +
              d.n_total + " points" + (d.n_done ? ", " + d.n_done + " already done" : "") + ")");
       loadRuns();
       break;
     case "points":
+      if (Backfill.holds(d.items)) break;
       if (S.run && !S.run.plan_kind) Plot.guess(d.items);
       Plot.add(d.items);
       break;
@@ -261,6 +269,60 @@ async function reconnect() {
   connect();
 }
 
+// ---------------------------------------------------------------- the run's points so far
+// After the stream's hello (so nothing published since is missed: the server stores a
+// point before it sends it), the pages of GET /runs/current/points from ordinal 0 up to
+// its total. Stream points that arrive before the first page (which names the plan, and so
+// the picture) wait for it; later ones are plotted at once. Plot.add skips an index it has
+// seen, whichever of the two brought it first.
+const Backfill = {
+  gen: 0, early: null,
+  pageSize: 5000,   // the server's largest page (instrument/server/points.py)
+
+  async start() {
+    const gen = ++this.gen;
+    this.early = [];
+    Plot.clear();
+    let since = 0;
+    for (;;) {
+      const r = await api("GET", "/runs/current/points?since=" + since + "&limit=" + this.pageSize);
+      if (gen !== this.gen) return;   // a new run, or a newer connection, took over
+      if (!r.ok) {
+        addLog("fault", "could not read the run's points so far: " + refusal(r));
+        break;
+      }
+      const page = r.data;
+      if (since === 0) this.first(page.run);
+      Plot.add(page.items);
+      since = page.next;
+      if (since >= page.total || page.items.length === 0) break;
+    }
+    this.flush();
+    addLog("info", "plotted the run's points so far (" + since + ")");
+  },
+
+  first(run) {   // the first page: the plan's picture, then what the stream brought meanwhile
+    const kind = run ? run.plan_kind : null;
+    if (S.run && kind && !S.run.plan_kind) S.run.plan_kind = kind;
+    Plot.reset(kind || "series", run ? run.n_total : (S.run ? S.run.n_total : 0));
+    this.flush();
+  },
+
+  flush() {
+    const early = this.early;
+    this.early = null;
+    if (early && early.length) Plot.add(early);
+  },
+
+  holds(items) {   // before the first page: keep the stream's points for it
+    if (this.early === null) return false;
+    for (const p of items) this.early.push(p);
+    return true;
+  },
+
+  stop() { this.gen += 1; this.early = null; },
+};
+
 // ---------------------------------------------------------------- the live plot (Bokeh)
 // The same pictures as the GUI's live plot (gui/qt/live_plot.py) for the plans a server
 // runs: in-plane BRDF and the calibrations that share its picture: signal against signed
@@ -270,7 +332,7 @@ async function reconnect() {
 const Plot = {
   kind: null, nTotal: 0, stride: 1, kept: [], quantity: null, fig: null, viewPromise: null,
   needsBuild: false,
-  sources: new Map(), drawnVersion: -1, version: 0,
+  sources: new Map(), drawnVersion: -1, version: 0, seen: new Set(),
 
   pictureOf(planKind) {
     if (planKind === "brdf_hemisphere") return "hemisphere";
@@ -278,13 +340,26 @@ const Plot = {
   },
 
   reset(planKind, nTotal) {
+    this.clear();
     this.kind = this.pictureOf(planKind);
     this.nTotal = nTotal || 0;
+    this.build();
+  },
+
+  clear() {   // no picture until the next reset (or the first points)
+    this.kind = null;
     this.stride = 1;
     this.kept = [];
+    this.seen = new Set();
     this.quantity = null;
     this.version += 1;
-    this.build();
+  },
+
+  isNew(index) {   // each index once; the Set keeps insertion order, so the oldest go first
+    if (this.seen.has(index)) return false;
+    this.seen.add(index);
+    if (this.seen.size > SEEN_MAX) this.seen.delete(this.seen.values().next().value);
+    return true;
   },
 
   guess(items) {  // joined mid-run, before any run_started: points with angles are in-plane
@@ -296,7 +371,7 @@ const Plot = {
   add(items) {
     if (this.kind === null) this.reset("series", S.run ? S.run.n_total : 0);
     for (const p of items) {
-      if (p.status !== "ok") continue;
+      if (!this.isNew(p.index) || p.status !== "ok") continue;
       if (this.quantity === null) {
         if (p.signal !== null) this.quantity = "signal";
         else if (p.power_w !== null) this.quantity = "power";
@@ -322,7 +397,7 @@ const Plot = {
       }
       this.kept.push({i: p.index, x, y, g: group});
     }
-    if (this.kept.length > MAX_PLOT_POINTS) {   // decimate: every other point kept so far
+    while (this.kept.length > MAX_PLOT_POINTS) {   // decimate: every other point kept so far
       this.stride *= 2;
       this.kept = this.kept.filter((k) => k.i % this.stride === 0);
     }
