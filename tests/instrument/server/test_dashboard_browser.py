@@ -351,3 +351,27 @@ def test_the_screenshot_script_renders_the_dashboards_pictures_none_blank(tmp_pa
         px = matplotlib.image.imread(path)[..., :3]
         assert px.shape[0] > 400 and px.shape[1] > 800, name
         assert len(np.unique(px.reshape(-1, 3)[::7], axis=0)) > 50, f"{name} looks blank"
+
+
+def test_the_device_table_has_the_cameras_settings_and_during_a_run_its_frames_exposure(
+        bench_file, start_server, tmp_path):
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)
+        page.wait_for_selector("#camera-row")
+        with BenchClient(server.url) as admin:  # loopback without keys: the local admin
+            admin.take_control()
+            admin.camera_settings(exposure_us=2500.0)
+            admin.release_control()
+        page.wait_for_function("() => document.getElementById('camera-row').innerText"
+                               ".includes('exposure 2500 µs')")
+        assert "gain" in page.inner_text("#camera-row")
+        # a run owns the bench: the latest frame's exposure, and who sets it
+        row = page.evaluate("""() => {
+            S.frame = {drawn: true, exposure_us: 1234.5};
+            handle({type: 'devices', data: {axes: {}, light: null, owner: 'run'}});
+            render();
+            return document.getElementById('camera-row').innerText;
+        }""")
+        assert "exposure 1234.5 µs" in row and "run controls it" in row
+        assert page.errors == []

@@ -622,10 +622,34 @@ function renderDevices() {
     cell(tr, a.position === null ? "—" : a.position.toFixed(units === "mm" ? 4 : 3) + " " + units, "num");
     cell(tr, (a.moving ? "moving" : "still") + (a.homed ? "" : ", not homed"));
   }
+  cameraRow(body, d);
   $("light").textContent = "light: " + (d.light === null ? (d.owner === "run" ? "run controls it" : "—")
                                         : d.light ? "on" : "off") +
     " · bench " + (d.owner === "run" ? "owned by the run" : "idle");
 }
+
+// The camera's settings come with the idle bench's devices messages; during a run the
+// run sets them, and the latest frame says the exposure it was taken with. (The power
+// meter's state is in no message: it has no row.)
+function cameraRow(body, d) {
+  let reading = null, state = "";
+  if (d.owner === "run") {
+    if (!S.frame || S.frame.exposure_us === null || S.frame.exposure_us === undefined) return;
+    reading = "exposure " + num(S.frame.exposure_us) + " µs";
+    state = "run controls it (latest frame)";
+  } else {
+    if (!d.camera) return;   // no camera on this bench (or it did not answer)
+    reading = d.camera.exposure_us === null ? "exposure —" : "exposure " + num(d.camera.exposure_us) + " µs";
+    state = d.camera.gain === null ? "gain —" : "gain " + num(d.camera.gain);
+  }
+  const tr = body.insertRow();
+  tr.id = "camera-row";
+  cell(tr, "camera");
+  cell(tr, reading, "num");
+  cell(tr, state);
+}
+
+function num(v) { return Number(v.toPrecision(6)).toString(); }
 
 function renderFrame() {
   const f = S.frame;
