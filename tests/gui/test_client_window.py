@@ -127,8 +127,10 @@ def test_an_observer_key_sees_the_controls_greyed_with_the_reason(server, open_w
     assert op.add_button.isEnabled()
     op.take_button.click()
     qtbot.waitUntil(lambda: obs.state.lease_holder() == "operator-user", timeout=WAIT_MS)
-    assert "operator-user" in obs.control_label.text()
-    assert op.release_button.isEnabled() and not op.take_button.isEnabled()
+    # the windows put the change on screen at their next redraw tick: wait for it
+    qtbot.waitUntil(lambda: "operator-user" in obs.control_label.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: op.release_button.isEnabled() and not op.take_button.isEnabled(),
+                    timeout=WAIT_MS)
 
 
 @pytest.mark.timeout(900)
