@@ -301,13 +301,44 @@ def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_ser
             const idx = Plot.kept.map(k => k.i);
             return {n: idx.length, first: Math.min(...idx), last: Math.max(...idx),
                     stride: Plot.stride, log: S.log.length,
-                    curves: Plot.sources.size};
+                    curves: Plot.sources.size, seen: Plot.seen.size, seenMax: SEEN_MAX};
         }""")
     assert MAX_PLOT_POINTS // 2 <= kept["n"] <= MAX_PLOT_POINTS
     assert kept["first"] == 0 and kept["last"] >= 100_000 - 2 * kept["stride"]
     assert kept["stride"] == 32  # 100,000 / 32 = 3,125 points kept
     assert kept["curves"] == 3  # one per θi
     assert kept["log"] == MAX_LOG
+    assert kept["seen"] == kept["seenMax"] == 10_000  # the indices remembered, bounded too
+
+
+def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
+                                                                      start_server, tmp_path):
+    """The prefill's order of events, driven through the page's own handlers: stream points
+    that come before the first page wait for it (it names the plan), and points in both the
+    pages and the stream are plotted once."""
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)
+        got = page.evaluate("""() => {
+            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
+                                signal: 1 + i, power_w: null});
+            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));
+            S.run = {state: 'running', n_total: 12, n_done: 8, plan_kind: null};
+            Plot.clear();
+            Backfill.early = [];                                  // connected: reading pages
+            handle({type: 'points', data: {items: span(8, 10)}});  // before the first page
+            const held = Plot.kept.length;
+            Backfill.first({plan_kind: 'brdf_in_plane', n_total: 12});
+            Plot.add(span(0, 5));                                 // page 1
+            Plot.add(span(5, 10));                                // page 2 overlaps the stream
+            handle({type: 'points', data: {items: span(9, 12)}});  // and the stream the pages
+            return {held, kind: Plot.kind, planKind: S.run.plan_kind,
+                    idx: Plot.kept.map((k) => k.i).sort((a, b) => a - b)};
+        }""")
+        assert page.errors == []
+    assert got["held"] == 0
+    assert (got["kind"], got["planKind"]) == ("in_plane", "brdf_in_plane")
+    assert got["idx"] == list(range(12))
 
 
 def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, start_server,
