@@ -283,12 +283,14 @@ const Backfill = {
     const gen = ++this.gen;
     this.early = [];
     Plot.clear();
-    let since = 0;
+    let since = 0, read = true;
     for (;;) {
       const r = await api("GET", "/runs/current/points?since=" + since + "&limit=" + this.pageSize);
       if (gen !== this.gen) return;   // a new run, or a newer connection, took over
       if (!r.ok) {
-        addLog("fault", "could not read the run's points so far: " + refusal(r));
+        addLog("fault", "could not read the run's points so far: " + refusal(r) +
+               "; the plot shows the run's points from now on");
+        read = false;
         break;
       }
       const page = r.data;
@@ -298,7 +300,7 @@ const Backfill = {
       if (since >= page.total || page.items.length === 0) break;
     }
     this.flush();
-    addLog("info", "plotted the run's points so far (" + since + ")");
+    if (read) addLog("info", "plotted the run's points so far (" + since + ")");
   },
 
   first(run) {   // the first page: the plan's picture, then what the stream brought meanwhile
