@@ -129,14 +129,16 @@ def test_a_page_opened_mid_run_plots_the_run_from_its_first_point(bench_file, st
             wait_live(page)
             page.wait_for_function(f"() => Plot.kept.length === {done}")
             assert plotted_indices(page) == list(range(done))  # from index 0, each once
-            assert "plotted the run's points so far" in page.inner_text("#log")
+            # the log is drawn at the page's next redraw tick
+            page.wait_for_function("() => document.getElementById('log').innerText"
+                                   ".includes(\"plotted the run's points so far\")")
             op.resume()
             wait_run_state(page, "finished")
-            page.wait_for_function(
-                f"() => document.getElementById('run-numbers').dataset.done == {n}")
+            page.wait_for_function(f"() => Plot.kept.length === {n}")
             # the stream's points joined the ones read before them, none twice
             assert plotted_indices(page) == list(range(n))
-            assert page_int(page, "#plot", "plotted") == n
+            page.wait_for_function(
+                f"() => document.getElementById('plot').dataset.plotted == {n}")
             assert page.evaluate("Plot.kind") == "in_plane"
             assert page.errors == []
 
