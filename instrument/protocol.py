@@ -111,7 +111,8 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
        "and gain between runs (null during a run, or without a camera)", axes="object",
        light="boolean|null", owner="string", camera="object|null"),
     _t("frame", False, "the latest camera frame, decimated for display (8-bit, base64)",
-       index="integer", shape="array", scale="number", data="string"),
+       index="integer", shape="array", scale="number", data="string",
+       exposure_us="number|null", saturated="number|null"),
     _t("missed", True, "this client fell behind: display messages it did not receive",
        counts="object", first_seq="integer", last_seq="integer"),
 )}

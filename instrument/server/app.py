@@ -26,6 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from instrument.protocol import API_PREFIX, PROTOCOL_VERSION, Message, encode, role_allows
 from instrument.run.catalog import Catalog
 from instrument.server.audit import AuditLog
+from instrument.server.dashboard import install_dashboard
 from instrument.server.db import SERVER_DB_NAME
 from instrument.server.fanout import LoopFanout, RawSink
 from instrument.server.hub import ClientBuffer
@@ -532,6 +533,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
                 fanout.remove(buf)
             service.hub.detach(buf)
 
+    install_dashboard(app, service, observer)  # the web page at / (docs/decisions/0085)
     return app
 
 

@@ -121,6 +121,7 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
             "`scatterlab resume`) to continue its run file")
     say(f"serving bench {profile.name!r} on {scheme}://{shown}:{port} (runs in "
         f"{service.runs_dir}); Ctrl-C stops")
+    say(f"web dashboard: {scheme}://{shown}:{port}/ (open it in a browser)")
     if where.loopback and not has_keys:
         say("no API keys yet: local clients act as admin until one is added "
             "(scatterlab serve keys add)")

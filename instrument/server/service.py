@@ -817,4 +817,8 @@ def _frame_message(index: int, frame: FrameData) -> dict[str, Any]:
 
     img, scale = decimate(frame.data)
     return {"index": index, "shape": list(img.shape), "scale": scale,
-            "data": base64.b64encode(img.tobytes()).decode("ascii")}
+            "data": base64.b64encode(img.tobytes()).decode("ascii"),
+            # what the display cannot show: the exposure, and the saturated fraction of
+            # the full-resolution frame (the decimated one averages saturation away)
+            "exposure_us": _finite(float(frame.exposure_us)),
+            "saturated": _finite(float(frame.saturated))}

@@ -57,14 +57,15 @@ class ServerProcess:
     loopback port; :meth:`kill` sends SIGKILL."""
 
     def __init__(self, bench: Path, runs: Path, *, env: dict[str, str] | None = None,
-                 args: tuple[str, ...] = ()) -> None:
+                 args: tuple[str, ...] = (), listen: str = "127.0.0.1:0") -> None:
+        """``listen``: a fixed port to restart a server on where a killed one was."""
         self.bench, self.runs = bench, runs
         full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
         full_env.pop("SCATTERLAB_SERVER", None)
         full_env.pop("SCATTERLAB_KEY", None)
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "tests.instrument.server.sim_server", "--bench",
-             str(bench), "--runs", str(runs), "--listen", "127.0.0.1:0", "--no-fsync",
+             str(bench), "--runs", str(runs), "--listen", listen, "--no-fsync",
              *args],
             cwd=ROOT, env=full_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             text=True)
