@@ -32,14 +32,14 @@ class FaultyService(BenchService):
     def __init__(self, *args, **kw) -> None:
         scheme, name, after = os.environ["SCATTERLAB_TEST_FAULT"].split(":")
         self._target = (scheme, name)
-        self._after = int(after)
+        self._fault_after = int(after)
         self._armed = True
         super().__init__(*args, **kw)
 
     def _on_engine_event(self, event) -> None:
         super()._on_engine_event(event)
         faults = registry.get(*self._target).faults
-        if self._armed and isinstance(event, ev.PointCompleted) and event.index >= self._after:
+        if self._armed and isinstance(event, ev.PointCompleted) and event.index >= self._fault_after:
             self._armed = False
             faults.schedule(FaultKind.DISCONNECT, nth=1)  # the cable is pulled
         elif isinstance(event, ev.Paused):
