@@ -538,6 +538,31 @@ class _Candidate:
     open_ends: tuple[bool, bool] = (False, False)
 
 
+def _inseparable_notes(cands: list[_Candidate], res: list[Resolution]) -> list[str]:
+    """A note for each pair of reported objects within one transverse blur of each other
+    whose depth intervals overlap and of which one or both are not "resolved": two objects
+    there, but where along that line of sight each lies the data do not say (a pair one
+    blur apart side by side behind the brushed metal came back as two components at
+    y = 0, 17 mm apart in depth, both intervals holding the true −200 mm)."""
+    out = []
+    for i, c in enumerate(cands):
+        for j in range(i + 1, len(cands)):
+            o = cands[j]
+            blur = max(res[i].transverse_mm, res[j].transverse_mm)
+            overlap = c.interval[0] <= o.interval[1] and o.interval[0] <= c.interval[1]
+            if (abs(c.y - o.y) <= blur and overlap
+                    and "resolved" not in (c.quality, o.quality)):
+                out.append(
+                    f"the objects at ({c.y:.1f}, {c.z:.1f}) and ({o.y:.1f}, {o.z:.1f}) mm lie "
+                    f"within one blur across (δy = {blur:.1f} mm) with overlapping depth "
+                    f"intervals: two objects, not separable in depth — both lie within "
+                    f"y = {min(c.y, o.y) - blur:.1f}…{max(c.y, o.y) + blur:.1f} mm, "
+                    f"z = {min(c.interval[0], o.interval[0]):.1f}…"
+                    f"{max(c.interval[1], o.interval[1]):.1f} mm, in an order the data do "
+                    f"not fix")
+    return out
+
+
 def detect_objects(
     lf_wall: LightField2D,
     *,
@@ -1004,6 +1029,7 @@ def detect_objects(
         res.append(resolution(c.z))
         intervals.append(c.interval)
     below.sort(key=lambda cs: -cs[1])
+    notes += _inseparable_notes(cands, res)
     n = len(cands)
     m = len(below)
     return Detection(
