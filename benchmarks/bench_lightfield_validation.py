@@ -326,7 +326,10 @@ def main() -> None:
             lf = None
             n_seeds = (args.empty_seeds if sname == "empty" and args.empty_seeds is not None
                        else args.seeds)
-            for seed in range(1, n_seeds + 1):
+            # --report tabulates every seed stored, however many
+            seeds = (sorted(sd for (w, sc, sd) in done if (w, sc) == (wname, sname))
+                     if args.report else range(1, n_seeds + 1))
+            for seed in seeds:
                 rec = done.get((wname, sname, seed))
                 if rec is None and args.report:
                     continue
