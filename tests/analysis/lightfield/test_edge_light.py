@@ -9,28 +9,13 @@ object beside it is still reported.  Renderer scenes (the validation matrix's ge
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from analysis.lightfield.edge_light import judged_on_clean_rows, line_of_sight, outside_rows
 from hw_mocks.sim.lightfield_scene import PointObject
 
-BENCH = Path(__file__).parents[3] / "benchmarks" / "bench_lightfield_validation.py"
 NEAR = PointObject(-30.0, -100.0, 1.5, 1.0)
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_lightfield_validation_edge", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop(spec.name, None)
 
 
 def test_outside_rows_are_where_the_ray_leaves_the_solvable_domain():

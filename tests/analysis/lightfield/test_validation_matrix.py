@@ -9,28 +9,12 @@ The matrix (seven walls, eleven scenes; the seeds run so far) is in BENCHMARKS.m
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from analysis.lightfield import Resolution
 from analysis.lightfield.localize import Detection, FocalStack
 from hw_mocks.sim.lightfield_scene import PointObject
-
-BENCH = Path(__file__).parents[3] / "benchmarks" / "bench_lightfield_validation.py"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_lightfield_validation", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop(spec.name, None)
 
 
 def _det(positions, intervals, quality, brightness, significance=None) -> Detection:
