@@ -26,7 +26,11 @@ seed is scored (:func:`score`):
 * confidently wrong — a reported object marked "resolved" that is a phantom, a split (a
   second reported object explaining the same true object), has a brightness ≤ 0 (wrong
   sign), or lies over a true object (within δy across) with an interval excluding its
-  depth (excluded truth).  Each kind is counted separately;
+  depth (excluded truth), or explains a true object but lies outside its blur (off blur);
+  and a true object missing without a word (neither reported nor among the candidates
+  examined below the threshold: missed silently).  Each kind is counted separately;
+* false alarms per scan on the empty scene, per wall and in all, with the 95 %
+  Clopper–Pearson interval of the rate (:func:`false_alarm_table`);
 * the significance of each true object: that of the reported object explaining it, else of
   the strongest candidate below the threshold within its blur (NaN: none examined), for
   the detection probability against significance.
@@ -114,6 +118,11 @@ class Score:
     phantom_resolved: int = 0
     wrong_sign: int = 0
     excluded: int = 0
+    #: a "resolved" object over a true object it explains but not within the blur of it
+    off_blur: int = 0
+    #: a true object neither reported nor among the candidates examined below the
+    #: threshold (nothing in the output points at it)
+    missed_silently: int = 0
     scans: int = 0
     seconds: float = 0.0
     #: (significance, detected) per true object
@@ -121,12 +130,13 @@ class Score:
 
     @property
     def confidently_wrong(self) -> int:
-        return self.split + self.phantom_resolved + self.wrong_sign + self.excluded
+        return (self.split + self.phantom_resolved + self.wrong_sign + self.excluded
+                + self.off_blur + self.missed_silently)
 
     def add(self, other: Score) -> None:
         for name in ("truths", "detected", "within_blur", "phantoms", "scans_with_phantom",
-                     "split", "phantom_resolved", "wrong_sign", "excluded", "scans",
-                     "seconds"):
+                     "split", "phantom_resolved", "wrong_sign", "excluded", "off_blur",
+                     "missed_silently", "scans", "seconds"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         self.truth_significance += other.truth_significance
 
@@ -165,6 +175,7 @@ def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
                      and abs(1 / abs(zb) - 1 / abs(o.z_mm)) < r.depth_mm / o.z_mm**2]
             sig = max((float(det.below_significance[i]) for i in close), default=np.nan)
         out.truth_significance.append((sig, bool(hits.size)))
+        out.missed_silently += int(not hits.size and np.isnan(sig))
     resolved = np.array([q == "resolved" for q in det.quality], dtype=bool)
     # each reported object is assigned to the nearest true object it explains; a second
     # one assigned to the same truth is a split
@@ -179,6 +190,10 @@ def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
         if mine.size > 1:
             best = mine[np.argmax(det.significance[mine])]
             out.split += int(sum(resolved[k] for k in mine if k != best))
+    for k in np.nonzero((owner >= 0) & resolved)[0]:
+        o, r = objects[owner[k]], det.resolutions[k]
+        out.off_blur += int(not (abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm
+                                 and abs(det.positions_mm[k, 1] - o.z_mm) < r.depth_mm))
     phantom = owner < 0
     out.phantoms = int(phantom.sum())
     out.scans_with_phantom = int(phantom.any())
@@ -195,7 +210,8 @@ def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
     return {"truths": out.truths, "detected": out.detected, "within_blur": out.within_blur,
             "phantoms": out.phantoms, "split": out.split,
             "phantom_resolved": out.phantom_resolved, "wrong_sign": out.wrong_sign,
-            "excluded": out.excluded,
+            "excluded": out.excluded, "off_blur": out.off_blur,
+            "missed_silently": out.missed_silently,
             "truth_significance": [[sg, d] for sg, d in out.truth_significance],
             "count": n, "quality": list(det.quality),
             "positions_mm": det.positions_mm.tolist(),
@@ -294,8 +310,10 @@ def main() -> None:
             rec = json.loads(line)
             done[(rec["wall"], rec["scene"], rec["seed"])] = rec
     total = Score()
+    empties: dict[str, tuple[int, int]] = {}
     print("| wall | scene | truths | detected | within blur | phantoms | scans w/ phantom "
-          "| confidently wrong (split/phantom/sign/excluded) | s/scan |")
+          "| confidently wrong (split/phantom/sign/excluded/off blur/missed silently) "
+          "| s/scan |")
     print("|---|---|---|---|---|---|---|---|---|")
     for wname, brdf in walls().items():
         if args.walls and wname not in args.walls:
@@ -308,7 +326,10 @@ def main() -> None:
             lf = None
             n_seeds = (args.empty_seeds if sname == "empty" and args.empty_seeds is not None
                        else args.seeds)
-            for seed in range(1, n_seeds + 1):
+            # --report tabulates every seed stored, however many
+            seeds = (sorted(sd for (w, sc, sd) in done if (w, sc) == (wname, sname))
+                     if args.report else range(1, n_seeds + 1))
+            for seed in seeds:
                 rec = done.get((wname, sname, seed))
                 if rec is None and args.report:
                     continue
@@ -327,11 +348,31 @@ def main() -> None:
             if not s.scans:
                 continue
             total.add(s)
+            if sname == "empty":
+                empties[wname] = (s.scans_with_phantom, s.scans)
             print(f"| {wname} | {sname} | {s.truths} | {s.detected} | {s.within_blur} | "
                   f"{s.phantoms} | {s.scans_with_phantom}/{s.scans} | {s.confidently_wrong} "
-                  f"({s.split}/{s.phantom_resolved}/{s.wrong_sign}/{s.excluded}) | "
+                  f"({s.split}/{s.phantom_resolved}/{s.wrong_sign}/{s.excluded}/"
+                  f"{s.off_blur}/{s.missed_silently}) | "
                   f"{s.seconds / max(s.scans, 1):.1f} |", flush=True)
     summary(total)
+    print("\n".join(false_alarm_table(empties)))
+
+
+def false_alarm_table(empties: dict[str, tuple[int, int]]) -> list[str]:
+    """Markdown rows: scans of the empty scene with a reported object, per wall and in
+    all, with the 95 % Clopper–Pearson interval of the rate per scan."""
+    rows = ["| wall | empty scans | with a reported object | rate | 95 % Clopper–Pearson |",
+            "|---|---|---|---|---|"]
+    items = [*empties.items()]
+    if len(items) > 1:
+        items.append(("all", (sum(k for k, _ in empties.values()),
+                              sum(n for _, n in empties.values()))))
+    for wname, (k, n) in items:
+        lo, hi = clopper_pearson(k, n)
+        rows.append(f"| {wname} | {n} | {k} | {100 * k / n:.2f} % | "
+                    f"{100 * lo:.2f} – {100 * hi:.2f} % |")
+    return rows
 
 
 def from_record(rec: dict) -> Score:
@@ -340,9 +381,28 @@ def from_record(rec: dict) -> Score:
                  within_blur=rec["within_blur"], phantoms=rec["phantoms"],
                  scans_with_phantom=int(rec["phantoms"] > 0), split=rec["split"],
                  phantom_resolved=rec["phantom_resolved"], wrong_sign=rec["wrong_sign"],
-                 excluded=rec["excluded"], scans=1, seconds=rec["seconds"],
+                 excluded=rec["excluded"], off_blur=rec.get("off_blur", 0),
+                 missed_silently=missed_silently(rec), scans=1, seconds=rec["seconds"],
                  truth_significance=[(float("nan") if sg is None else float(sg), bool(d))
                                      for sg, d in rec["truth_significance"]])
+
+
+def missed_silently(rec: dict) -> int:
+    """True objects of a stored scan neither found nor examined below the threshold (also
+    for lines written before the count was stored: their significance is NaN or null)."""
+    return sum(1 for sg, d in rec["truth_significance"]
+               if not d and (sg is None or np.isnan(sg)))
+
+
+def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Exact binomial interval of a rate from k events in n trials (Clopper & Pearson
+    1934, the equal-tailed beta quantiles)."""
+    from scipy.stats import beta
+
+    tail = 0.5 * (1.0 - confidence)
+    lo = 0.0 if k == 0 else float(beta.ppf(tail, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1.0 - tail, k + 1, n - k))
+    return lo, hi
 
 
 def summary(total: Score) -> None:
@@ -353,7 +413,8 @@ def summary(total: Score) -> None:
           f"({100 * total.scans_with_phantom / max(total.scans, 1):.2f} % per scan), "
           f"{total.confidently_wrong} confidently wrong (split {total.split}, phantom "
           f"{total.phantom_resolved}, wrong sign {total.wrong_sign}, excluded truth "
-          f"{total.excluded}); CPU {total.seconds:.0f} s\n")
+          f"{total.excluded}, resolved off the blur {total.off_blur}, missed silently "
+          f"{total.missed_silently}); CPU {total.seconds:.0f} s\n")
     print("\n".join(detection_table(total.truth_significance)))
 
 

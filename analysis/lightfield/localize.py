@@ -538,6 +538,31 @@ class _Candidate:
     open_ends: tuple[bool, bool] = (False, False)
 
 
+def _inseparable_notes(cands: list[_Candidate], res: list[Resolution]) -> list[str]:
+    """A note for each pair of reported objects within one transverse blur of each other
+    whose depth intervals overlap and of which one or both are not "resolved": two objects
+    there, but where along that line of sight each lies the data do not say (a pair one
+    blur apart side by side behind the brushed metal came back as two components at
+    y = 0, 17 mm apart in depth, both intervals holding the true −200 mm)."""
+    out = []
+    for i, c in enumerate(cands):
+        for j in range(i + 1, len(cands)):
+            o = cands[j]
+            blur = max(res[i].transverse_mm, res[j].transverse_mm)
+            overlap = c.interval[0] <= o.interval[1] and o.interval[0] <= c.interval[1]
+            if (abs(c.y - o.y) <= blur and overlap
+                    and "resolved" not in (c.quality, o.quality)):
+                out.append(
+                    f"the objects at ({c.y:.1f}, {c.z:.1f}) and ({o.y:.1f}, {o.z:.1f}) mm lie "
+                    f"within one blur across (δy = {blur:.1f} mm) with overlapping depth "
+                    f"intervals: two objects, not separable in depth — both lie within "
+                    f"y = {min(c.y, o.y) - blur:.1f}…{max(c.y, o.y) + blur:.1f} mm, "
+                    f"z = {min(c.interval[0], o.interval[0]):.1f}…"
+                    f"{max(c.interval[1], o.interval[1]):.1f} mm, in an order the data do "
+                    f"not fix")
+    return out
+
+
 def detect_objects(
     lf_wall: LightField2D,
     *,
@@ -618,6 +643,7 @@ def detect_objects(
     strongest peak) is then off unless given; without ``noise_power`` it defaults to 0.3
     and no significance is computed (NaN).
     """
+    from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
     from .significance import amplitude_fit, false_alarm_probability, snr_threshold
     from .spectral import fourier_orders
 
@@ -878,13 +904,57 @@ def detect_objects(
             kept.append(c)
     cands = kept
     signif = np.full(len(cands), np.nan)
+    #: components on the line of sight of an object partly outside the measured angles,
+    #: reported as one object with it (.edge_light), in indices of the reported cands
+    sight: list[list[int]] = []
     amps = np.zeros(len(cands))
     notes: list[str] = []
     if noise is not None and cands:
         amps, sig, mismatch = assess(np.asarray([(c.y, c.z) for c in cands]))
         order = [int(k) for k in np.argsort(-sig)]
         keep = [k for k in order if sig[k] >= s_star and amps[k] > 0]
+        # light from outside the solvable angles (.edge_light): the rows a stronger
+        # object's unmodelled light reaches are no evidence for a weaker candidate
+        pos_all = np.asarray([(c.y, c.z) for c in cands]).reshape(-1, 2)
+
+        def significance_on(rows: NDArray[np.bool_], idx: list[int]) -> NDArray:
+            assert noise is not None
+            r, _, _ = _ray_model(lf_wall, use, phi, pos_all[idx])
+            return amplitude_fit(g_rays[rows], r[:, rows], use, phi, noise).significance
+
+        keep, attributed = judged_on_clean_rows(keep, lf_wall.y_mm, pos_all, (a, b), s_star,
+                                                significance_on)
         below += [(cands[k], float(sig[k])) for k in order if k not in keep]
+        partly = [k for k in keep if outside_rows(lf_wall.y_mm, pos_all[k:k + 1], (a, b)).any()]
+        along = line_of_sight(pos_all[keep], [keep.index(k) for k in partly],
+                              lambda z: resolution(z).transverse_mm)
+        along = {keep[s]: [keep[j] for j in js] for s, js in along.items()}
+        # flagged only where its outside light disturbed the fit: a candidate attributed
+        # to it, or components on its line of sight
+        partly = [k for k in partly if k in attributed or k in along]
+        for src in sorted({*attributed, *along}, key=keep.index):
+            gone, merged_in = attributed.get(src, []), along.get(src, [])
+            text = (f"the object at ({cands[src].y:.1f}, {cands[src].z:.1f}) mm is partly "
+                    f"outside the measured angles: part of its light reaches the wall beyond "
+                    f"the solvable domain ({np.rad2deg(a):.1f}…{np.rad2deg(b):.1f}°), where "
+                    f"the reconstruction has no model for it, and its depth is flagged "
+                    f"unresolved")
+            if gone:
+                k0, s0 = gone[0]
+                text += (f"; {len(gone)} candidate(s) that only the rows of that light "
+                         f"support are attributed to it, not reported (strongest at "
+                         f"({cands[k0].y:.1f}, {cands[k0].z:.1f}) mm: {sig[k0]:.1f}σ on all "
+                         f"rows, {max(s0, 0.0):.1f}σ on the others)")
+            if merged_in:
+                text += (f"; {len(merged_in)} more component(s) on its line of sight (at z = "
+                         + ", ".join(f"{cands[j].z:.1f}" for j in merged_in)
+                         + " mm) are reported as one object with it: two objects there "
+                           "would not be separable in depth")
+            notes.append(text)
+        sight = [[keep.index(src), *(keep.index(j) for j in along.get(src, []))]
+                 for src in partly]
+        cands = [_replace_quality(c, "unresolved") if k in partly else c for k, c in
+                 enumerate(cands)]
         cands = [cands[k] for k in keep]
         signif, amps = sig[keep], amps[keep]
         if mismatch > MISMATCH_LIMIT and cands:
@@ -910,6 +980,13 @@ def detect_objects(
     groups, pair_tests = extended_groups(g_rays, lf_wall, use, phi,
                                          np.asarray(cands_pos, dtype=float).reshape(-1, 2),
                                          pairs, n_eff=n_eff, bounds=box)
+    for line in sight:
+        if len(line) > 1:
+            joined = [gr for gr in groups if set(gr) & set(line)]
+            groups = [gr for gr in groups if gr not in joined]
+            groups.append(sorted({j for gr in joined for j in gr}))
+    groups.sort(key=lambda gr: gr[0])
+    on_sight = {line[0] for line in sight if len(line) > 1}
     members = [[(cands[j].y, cands[j].z) for j in gr] for gr in groups]
     merged, extent, group_sig = [], [], []
     for gr in groups:
@@ -918,7 +995,7 @@ def detect_objects(
         ys_, zs_ = np.array([cands[j].y for j in gr]), np.array([cands[j].z for j in gr])
         if len(gr) > 1:
             c0 = _Candidate(float(np.average(ys_, weights=w)), float(np.average(zs_, weights=w)),
-                            "extended", c0.estimates,
+                            "unresolved" if on_sight & set(gr) else "extended", c0.estimates,
                             (min(cands[j].interval[0] for j in gr),
                              max(cands[j].interval[1] for j in gr)), c0.profile, c0.model,
                             (any(cands[j].open_ends[0] for j in gr),
@@ -952,6 +1029,7 @@ def detect_objects(
         res.append(resolution(c.z))
         intervals.append(c.interval)
     below.sort(key=lambda cs: -cs[1])
+    notes += _inseparable_notes(cands, res)
     n = len(cands)
     m = len(below)
     return Detection(

@@ -9,28 +9,12 @@ The matrix (seven walls, eleven scenes; the seeds run so far) is in BENCHMARKS.m
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from analysis.lightfield import Resolution
 from analysis.lightfield.localize import Detection, FocalStack
 from hw_mocks.sim.lightfield_scene import PointObject
-
-BENCH = Path(__file__).parents[3] / "benchmarks" / "bench_lightfield_validation.py"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_lightfield_validation", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop(spec.name, None)
 
 
 def _det(positions, intervals, quality, brightness, significance=None) -> Detection:
@@ -134,3 +118,26 @@ def test_matrix_walls_have_no_confident_error(bench, wall, scene):
     assert s.confidently_wrong == 0
     assert s.phantoms == 0
     assert s.within_blur == s.detected
+
+
+def test_clopper_pearson_interval_of_the_false_alarm_rate(bench):
+    # no event in n trials: the upper end solves (1 − p)^n = 0.025 (two-sided 95 %)
+    lo, hi = bench.clopper_pearson(0, 300)
+    assert lo == 0.0 and hi == pytest.approx(1 - 0.025 ** (1 / 300), rel=1e-9)
+    # the textbook case 1 of 10: 0.25 % to 44.5 %
+    lo, hi = bench.clopper_pearson(1, 10)
+    assert lo == pytest.approx(0.00253, abs=1e-5) and hi == pytest.approx(0.4450, abs=1e-4)
+    rows = bench.false_alarm_table({"matte": (0, 300), "mirror": (1, 10)})
+    assert rows[2].startswith("| matte | 300 | 0 | 0.00 % | 0.00 – 1.22 % |")
+    assert rows[-1].startswith("| all | 310 | 1 | 0.32 % |")
+
+
+def test_off_blur_and_silent_misses_count_as_confident_errors(bench):
+    truth = [PointObject(0.0, -200.0, 1.5, 1.0), PointObject(60.0, -200.0, 1.5, 0.01)]
+    # resolved, over the truth, interval holding it, but 40 mm deep of it (δz = 30 mm);
+    # the dim object has no candidate near it (the one below sits at y = 40)
+    det = _det([(1.0, -240.0)], [(-260, -190)], ["resolved"], [0.3])
+    s = bench.Score()
+    rec = bench.score(det, truth, _blur, s)
+    assert (s.off_blur, s.missed_silently, s.confidently_wrong) == (1, 1, 2)
+    assert bench.from_record({**rec, "seconds": 0.0}).confidently_wrong == 2
