@@ -39,7 +39,8 @@ class FaultyService(BenchService):
     def _on_engine_event(self, event) -> None:
         super()._on_engine_event(event)
         faults = registry.get(*self._target).faults
-        if self._armed and isinstance(event, ev.PointCompleted) and event.index >= self._fault_after:
+        if (self._armed and isinstance(event, ev.PointCompleted)
+                and event.index >= self._fault_after):
             self._armed = False
             faults.schedule(FaultKind.DISCONNECT, nth=1)  # the cable is pulled
         elif isinstance(event, ev.Paused):
