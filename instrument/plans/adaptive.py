@@ -127,7 +127,9 @@ def register(name: str) -> Callable[[Callable[..., AdaptivePlan]], Callable[...,
 
 
 def rebuild(description: str | dict[str, Any]) -> AdaptivePlan:
-    """The plan a run file describes (:meth:`AdaptivePlan.describe`).
+    """The plan a run file describes (:meth:`AdaptivePlan.describe`), among the plans
+    registered so far (the runner imports the ones this package ships,
+    :mod:`instrument.plans.adaptive_lobe`, before it asks).
 
     Raises
     ------
@@ -137,8 +139,6 @@ def rebuild(description: str | dict[str, Any]) -> AdaptivePlan:
     """
     d = json.loads(description) if isinstance(description, str) else dict(description)
     name = d.get("name")
-    if name not in _REGISTRY:
-        import instrument.plans.adaptive_lobe  # noqa: F401  the plans this package ships
     if name not in _REGISTRY:
         raise UnknownAdaptivePlan(
             f"the run's adaptive plan {name!r} is not known here (known: "

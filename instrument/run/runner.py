@@ -225,6 +225,10 @@ def plan_from_run(path: str | Path, bench: Bench) -> Plan:
 def _adaptive_driver(path: Path, plan: Plan, description: str,
                      given: AdaptivePlan | None) -> AdaptiveDriver:
     """The driver of a resumed adaptive run, replayed through its stored decisions."""
+    if given is None:
+        # the adaptive plans this package ships register themselves on import (here, not
+        # in instrument.plans.adaptive, which they import)
+        import instrument.plans.adaptive_lobe  # noqa: F401
     obj = given if given is not None else rebuild(description)
     records, _ = read_journal(journal_path(path))
     stored = [r for r in records if r.get("t") == "planned"]
