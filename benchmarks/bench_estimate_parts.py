@@ -51,14 +51,15 @@ EXPOSURES: list[tuple[float, bool]] = []
 _CALLER = threading.local()
 
 
-def _timed(name: str, fn):
+def _timed(name: str, fn, clock=time.process_time, counts=COUNTS, totals=CPU):
+    """``fn`` counting its calls and the seconds of ``clock`` they take under ``name``."""
     def wrapper(*args, **kwargs):
-        t0 = time.process_time()
+        t0 = clock()
         try:
             return fn(*args, **kwargs)
         finally:
-            COUNTS[name] += 1
-            CPU[name] += time.process_time() - t0
+            counts[name] += 1
+            totals[name] += clock() - t0
     return wrapper
 
 
@@ -69,20 +70,10 @@ STAGES = ("_move", "_set_light", "_select_filter", "_frame", "_read_power", "_re
           "_read_lockin_dark", "_submit", "_commit_wait_or_pause")
 
 
-def _wall(name: str, fn):
-    def wrapper(*args, **kwargs):
-        t0 = time.monotonic()
-        try:
-            return fn(*args, **kwargs)
-        finally:
-            WALL_N[name] += 1
-            WALL[name] += time.monotonic() - t0
-    return wrapper
-
-
 def _instrument() -> None:
     for name in STAGES:
-        setattr(RunEngine, name, _wall(name, getattr(RunEngine, name)))
+        setattr(RunEngine, name, _timed(name, getattr(RunEngine, name), time.monotonic,
+                                         WALL_N, WALL))
     integral = GoniometerScene.power_on_aperture
     timed = {(who, on): _timed(f"aperture integral, {who}, light {'on' if on else 'off'}",
                                integral)

@@ -28,23 +28,16 @@ from instrument.run.runner import start_run
 
 ROOT = Path(__file__).resolve().parents[3]
 
-LOCKIN_PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "integrals"
-[sample]
-name = "spectral"
-[scan]
-skip_beam_points = true
-theta_i = [20]
-theta_r = [-50, 50]
-[acquisition]
-detectors = ["lockin", "power_meter"]
-dark = "{dark}"
-frames = 4
-[spectral]
-filters = [1, 2]
-"""
+
+
+def _lockin_plan(dark: str) -> str:
+    """The spectral bench's lock-in scan (three angles) with the power meter beside the
+    lock-in, through two filters."""
+    from tests.instrument.bench.test_spectral_bench import LOCKIN_PLAN
+
+    return (LOCKIN_PLAN.replace('detectors = ["lockin"]',
+                                'detectors = ["lockin", "power_meter"]')
+            .replace('dark = "none"', f'dark = "{dark}"') + "[spectral]\nfilters = [1, 2]\n")
 
 
 @pytest.fixture
@@ -79,7 +72,7 @@ def _run(plan, profile, tmp_path) -> None:
 
 @pytest.mark.parametrize("dark", ["none", "per_point"])
 def test_the_estimate_counts_the_emulated_detectors_integrals(tmp_path, integrals, dark):
-    """Two angles through two filters on sim-spectral: four world states with the light
+    """Three angles through two filters on sim-spectral: six world states with the light
     on (every point moves or turns the filter), each integrated once by the power meter
     and twice by the lock-in's photodiode (the light, and its ambient part with the
     source off), and the lock-in's first reading as the bench opens (light off); with
@@ -87,16 +80,16 @@ def test_the_estimate_counts_the_emulated_detectors_integrals(tmp_path, integral
     change what the detectors see, and the emulators cache it). Counted where the scene
     integrates, they are the estimate's counts."""
     profile = load_profile("sim-spectral")
-    plan = build_plan(parse_plan(LOCKIN_PLAN.format(dark=dark)), profile)
+    plan = build_plan(parse_plan(_lockin_plan(dark)), profile)
     est = plan.estimate()
     _run(plan, profile, tmp_path)
     ev = est.events
-    assert integrals["power_meter", True] == ev["power_meter_integrals_lit"] == 4
-    assert integrals["lockin", True] == ev["lockin_integrals_lit"] == 4
+    assert integrals["power_meter", True] == ev["power_meter_integrals_lit"] == 6
+    assert integrals["lockin", True] == ev["lockin_integrals_lit"] == 6
     assert integrals["power_meter", False] == ev["power_meter_integrals_dark"] \
-        == (2 if dark == "per_point" else 0)
+        == (3 if dark == "per_point" else 0)
     assert integrals["lockin", False] == ev["lockin_integrals_dark"] \
-        == 1 + 4 + (2 if dark == "per_point" else 0)
+        == 1 + 6 + (3 if dark == "per_point" else 0)
     # and the seconds they add are the measured costs of this scene
     lit_s, dark_s = SIM_APERTURE_INTEGRAL_S["spectral"]
     timing = bench_timing(profile, plan.axes)
