@@ -29,6 +29,17 @@ as the emulator models it: hw_mocks/firmware/fw102c.py); twice as long at its no
 (``wheel_speed=0``), and an emulated wheel's clock ``speed=`` times faster. The engine's
 neutral-density turns near a specular peak are predicted by the plan
 (:meth:`instrument.plans.build.Plan.estimate`).
+
+An emulated power meter or lock-in on the simulated goniometer bench (a ``simusb://`` or
+``simsr830://`` URL with ``world=``) integrates the scattered light over its aperture
+once per world state it is read in (a move, the light switched, a filter turned;
+``hw_mocks.sim.goniometer_scene.GoniometerScene.power_on_aperture``): the power meter one
+integral, the lock-in's photodiode two with the light on (the light as it is, and the
+ambient part the chopper does not modulate) and one with it off. A real detector has no
+such cost, but the simulated bench's wall clock does, like the simulated camera's render:
+:data:`SIM_APERTURE_INTEGRAL_S` (CPU seconds measured on the project's dev box,
+``benchmarks/bench_estimate_parts.py``: a shared box stretches wall time with its load,
+not CPU time).
 """
 
 from __future__ import annotations
@@ -41,8 +52,8 @@ from drivers.base import LockIn
 from instrument.bench.profile import BenchProfile, DeviceSpec
 from instrument.bench.render_cost import lightfield_render_s
 
-__all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "BenchTiming", "bench_timing",
-           "clock_speed", "exposes_in_wall_time"]
+__all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "SIM_APERTURE_INTEGRAL_S", "BenchTiming",
+           "bench_timing", "clock_speed", "exposes_in_wall_time"]
 
 #: A camera's costs when the profile does not give them, by driver: seconds per frame
 #: beyond the exposure and seconds of the first frame after the scene changed. The
@@ -50,8 +61,19 @@ __all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "BenchTiming", "bench_timing",
 #: noise, rendering the view through the pupil); a USB camera's one frame period at
 #: 30 frames/s, and two after a change (its queue flushed).
 CAMERA_DEFAULTS: dict[str, dict[str, float]] = {
-    "sim_camera": {"frame_overhead_s": 0.11, "scene_change_s": 0.27},
+    "sim_camera": {"frame_overhead_s": 0.055, "scene_change_s": 0.32},
     "opencv_camera": {"frame_overhead_s": 1 / 30, "scene_change_s": 2 / 30},
+}
+#: CPU seconds of one scattered-light integral over an emulated detector's aperture on the
+#: simulated goniometer bench, (light on, light off), by the scene's ``brdf`` (the
+#: wavelength-dependent sample evaluates its albedo table and Fresnel factor per sample
+#: point; off, only the ambient term is left). The power meter's head and the lock-in's
+#: photodiode integrate over the same aperture with the same function. Measured with
+#: ``benchmarks/bench_estimate_parts.py`` (examples/brdf_inplane.toml on ``sim``,
+#: examples/brdf_spectral_lockin.toml on ``sim-spectral``; BENCHMARKS.md, honest_sigma).
+SIM_APERTURE_INTEGRAL_S: dict[str, tuple[float, float]] = {
+    "spectral": (0.093, 0.0003),
+    "default": (0.030, 0.0003),
 }
 #: The SR830's output filter at power-up (time constant, slope): 100 ms, 12 dB/oct.
 LOCKIN_POWER_UP = (0.1, 12)
@@ -127,6 +149,10 @@ class BenchTiming:
     #: (the light-field wall's cost model, :mod:`instrument.bench.render_cost`; 0 where
     #: the camera's ``scene_change_s`` already holds the render).
     render_s: float = 0.0
+    #: CPU seconds of one aperture integral of the emulated power meter and of the
+    #: emulated lock-in's photodiode, (light on, light off); zeros for real detectors.
+    power_meter_integral_s: tuple[float, float] = (0.0, 0.0)
+    lockin_integral_s: tuple[float, float] = (0.0, 0.0)
 
     @property
     def emulated(self) -> bool:
@@ -187,7 +213,22 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
                        costs["frame_overhead_s"], costs["scene_change_s"],
                        lockin_settle_s=settle, wheel_slots=slots, wheel_speed=wheel_speed,
                        assumed=tuple(assumed),
-                       render_s=_scene_render_s(profile, camera))
+                       render_s=_scene_render_s(profile, camera),
+                       power_meter_integral_s=_integral_s(profile, "pm100usb"),
+                       lockin_integral_s=_integral_s(profile, "sr830"))
+
+
+def _integral_s(profile: BenchProfile, driver: str) -> tuple[float, float]:
+    """(light on, light off) seconds of one aperture integral of the bench's emulated
+    ``driver`` detector bound to a simulated goniometer world; zeros for a real one."""
+    spec = next((d for d in profile.devices.values() if d.driver == driver), None)
+    scene = (profile.simulation or {}).get("scene")
+    scene = scene if isinstance(scene, dict) else {}
+    if spec is None or not urlsplit(spec.url).scheme.startswith("sim") \
+            or "world" not in _query(spec.url) or scene.get("kind") is not None:
+        return 0.0, 0.0  # a real detector, or a light-field or spheres scene (not measured)
+    return SIM_APERTURE_INTEGRAL_S.get(str(scene.get("brdf")),
+                                       SIM_APERTURE_INTEGRAL_S["default"])
 
 
 def _scene_render_s(profile: BenchProfile, camera: DeviceSpec | None) -> float:

@@ -33,7 +33,14 @@ from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
 from instrument.plans.ranges import float_range
 
-__all__ = ["Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points", "in_plane_angles"]
+__all__ = ["EVENTS", "Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points",
+           "in_plane_angles"]
+
+#: The events :attr:`PlanEstimate.events` counts: aperture integrals of the emulated power
+#: meter and lock-in photodiode with the light on and off (:mod:`instrument.bench.timing`),
+#: and the auto-exposure's frames at exposures it did not keep (:meth:`Plan._climb_frames`).
+EVENTS = ("power_meter_integrals_lit", "power_meter_integrals_dark", "lockin_integrals_lit",
+          "lockin_integrals_dark", "auto_exposure_climb_frames")
 
 #: Used for planning when a profile gives no velocity/acceleration for an axis.
 DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
@@ -66,6 +73,10 @@ class PlanEstimate:
     #: What the estimate predicted about the run beyond the plan's points (in words): the
     #: neutral-density turns near a specular peak.
     predicted: tuple[str, ...] = ()
+    #: How many of the bench's countable events the acquisition time holds (name →
+    #: count, :data:`EVENTS`): the emulated detectors' aperture integrals and the
+    #: auto-exposure's extra frames after a neutral-density filter changed the light.
+    events: dict[str, float] = field(default_factory=dict)
 
     @property
     def total_s(self) -> float:
@@ -130,9 +141,22 @@ class Plan:
         bench_motion, _ = route_time(t, self.axes, fast)
         speedup = motion / bench_motion if bench_motion > 0 else 1.0
         nd_s, nd_note = self._nd_turns(timing)
+        events = dict.fromkeys(EVENTS, 0.0)
+        acquisition = self._acquisition_on(timing, events)
         return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
-                            self._acquisition_on(timing) + nd_s, speedup, dict(timing.home_s),
-                            timing.assumed, nd_note)
+                            acquisition + nd_s, speedup, dict(timing.home_s),
+                            timing.assumed, nd_note + self._events_note(events), events)
+
+    @staticmethod
+    def _events_note(events: dict[str, float]) -> tuple[str, ...]:
+        notes = []
+        integrals = sum(v for k, v in events.items() if "integrals" in k)
+        if integrals:
+            notes.append(f"{integrals:.0f} aperture integrals of the emulated detectors")
+        if events["auto_exposure_climb_frames"]:
+            notes.append(f"{events['auto_exposure_climb_frames']:.0f} auto-exposure frames "
+                         "at exposures not kept, after the ND filters changed the light")
+        return tuple(notes)
 
     #: Points within this angle of the mirror direction are taken to clip the camera at
     #: its shortest exposure when the plan does not refine a specular window itself.
@@ -176,32 +200,45 @@ class Plan:
                          f"to clip, {2 * runs} wheel turns of {turn:.2g} s and {runs} "
                          f"point(s) read again: {seconds:.3g} s (none on a matt sample)",)
 
-    def _acquisition_on(self, timing: BenchTiming) -> float:
-        """Wall-clock seconds of every point's acquisition and storage on a bench.
+    def _acquisition_on(self, timing: BenchTiming, events: dict[str, float]) -> float:
+        """Wall-clock seconds of every point's acquisition and storage on a bench; counts
+        the :data:`EVENTS` into ``events``.
 
         Per point: the light brackets (1; with auto-exposure and HDR, half of
         ``max_brackets`` and one more, the middle of what a scene needs) and as many dark
         frames with ``dark = "per_point"``, each of ``frames`` averaged frames costing the
         exposure (when the camera exposes in wall time) and the camera's per-frame time;
-        the camera's scene-change time (and a simulated scene's render time) for a lit
-        point after a move or after the light came on; the lock-in's settling for its
-        readings (twice with per-point darks); the filter wheel's turn where the slot
-        changes; the engine's and storage's time per point.
+        the auto-exposure's frames climbing to the new light after a neutral-density
+        filter (:meth:`_climb_frames`); the camera's scene-change time (and a simulated
+        scene's render time) for a lit point after a move or after the light came on; the
+        emulated detectors' aperture integrals at a new world state (a move, the light
+        switched, a filter turned; :mod:`instrument.bench.timing`); the lock-in's
+        settling for its readings (twice with per-point darks); the filter wheel's turn
+        where the slot changes; the engine's and storage's time per point.
         """
         pol = self.spec.acquisition
         total = 0.0
         lit: bool | None = None
         where: tuple | None = None
         slot: int | None = None
+        climb = _ExposureClimb(pol, self.profile)
+        dark_seen: set = set()
+        if pol.uses_lockin and timing.lockin_integral_s != (0.0, 0.0):
+            # the emulated lock-in computes its input once as the bench opens (light off)
+            events["lockin_integrals_dark"] += 1
+            total += timing.lockin_integral_s[1]
         for p in self.points:
             moved = bool(p.targets) and p.targets != where
             if p.targets:
                 where = p.targets
             want = dict(p.meta).get("filter")
+            turned = want is not None and int(want) != slot
             if want is not None:
                 # the first filter: the wheel may stand anywhere; count a turn from slot 1
                 total += timing.wheel_move_s(1 if slot is None else slot, int(want))
                 slot = int(want)
+            total += self._integrals_s(timing, p.light, moved or turned or lit is not p.light,
+                                       where, dark_seen, events)
             if pol.uses_lockin and timing.lockin_settle_s > 0:
                 reads = 2 if (pol.dark == "per_point" and p.light
                               and pol.reads_dark("lockin")) else 1
@@ -219,11 +256,83 @@ class Plan:
             per_frame = (exposure_s * timing.exposure_factor
                          + max(timing.frame_overhead_s, pol.readout_s))
             total += (brackets + darks) * pol.frames * per_frame
+            if p.light and p.exposure_us is None and pol.mode == "auto":
+                extra = climb.frames(slot)
+                events["auto_exposure_climb_frames"] += extra
+                total += extra * pol.frames * (climb.exposure_s * timing.exposure_factor
+                                               + max(timing.frame_overhead_s, pol.readout_s))
             if p.light and (moved or lit is not True):
                 total += timing.scene_change_s + timing.render_s
             lit = p.light
             total += timing.point_overhead_s
         return total
+
+    def _integrals_s(self, timing: BenchTiming, light: bool, new_state: bool,
+                     where: tuple | None, dark_seen: set, events: dict[str, float]) -> float:
+        """Seconds of the emulated detectors' aperture integrals at one point, counted into
+        ``events``. With the light on, at a new world state (the emulators cache the last
+        ones): the power meter one, the lock-in's photodiode two (the light, and its
+        ambient part with the source off). With the light off (a dark point, or the
+        per-point dark phase) one per detector at a pose not read dark before: dark, the
+        filter in the beam does not change the world, so the emulators' caches hold it."""
+        pol = self.spec.acquisition
+        dark_phase = pol.dark == "per_point" and light
+        seconds = 0.0
+        for name, used, cost, ambient in (
+                ("power_meter", pol.uses_power_meter, timing.power_meter_integral_s, 1),
+                ("lockin", pol.uses_lockin, timing.lockin_integral_s, 2)):
+            if not used or cost == (0.0, 0.0):
+                continue
+            n_lit = n_dark = 0
+            if light and new_state:
+                n_lit, n_dark = 1, ambient - 1
+            if (not light or (dark_phase and pol.reads_dark(name))) \
+                    and (name, where) not in dark_seen:
+                dark_seen.add((name, where))
+                n_dark += 1
+            events[f"{name}_integrals_lit"] += n_lit
+            events[f"{name}_integrals_dark"] += n_dark
+            seconds += n_lit * cost[0] + n_dark * cost[1]
+        return seconds
+
+
+class _ExposureClimb:
+    """The auto-exposure's frames at exposures it does not keep, after a neutral-density
+    filter of the plan's filters changed the light.
+
+    The engine's auto-exposure (``instrument.run.engine.RunEngine._brackets``) starts
+    at the exposure it kept last and multiplies it by ``hdr_factor`` f per frame while
+    the peak is below ``target_fraction``/f of full scale (divides it while the frame
+    clips), one frame per step. Light dimmed by a factor R = 10^ΔOD therefore costs
+    about log R / log f frames: rounded, the count for a peak anywhere within the
+    accepted range of one factor f, and none beyond the exposure limits. The first
+    point's exposure is taken as the plan's (the scene's brightness is not known to the
+    plan); the filters' densities are the profile's nominal ones (``od``)."""
+
+    def __init__(self, policy, profile: BenchProfile) -> None:
+        self.factor = float(policy.hdr_factor)
+        self.lo = float(policy.min_exposure_us)
+        self.hi = float(policy.max_exposure_us)
+        self.exposure_us = min(max(float(policy.exposure_us), self.lo), self.hi)
+        self.od = nd_densities(profile)
+        self.current: float | None = None
+
+    @property
+    def exposure_s(self) -> float:
+        return self.exposure_us * 1e-6
+
+    def frames(self, slot: int | None) -> int:
+        """Frames not kept at a lit point through ``slot`` (None: no filter)."""
+        od = self.od.get(slot, 0.0) if slot is not None else 0.0
+        before, self.current = self.current, od
+        if before is None or od == before:
+            return 0
+        want = min(max(self.exposure_us * 10.0 ** (od - before), self.lo), self.hi)
+        steps = round(abs(math.log(want / self.exposure_us)) / math.log(self.factor))
+        grown = self.exposure_us * self.factor ** (steps if want > self.exposure_us
+                                                   else -steps)
+        self.exposure_us = min(max(grown, self.lo), self.hi)
+        return steps
 
 
 def _from_mirror_deg(a: Angles) -> float:
@@ -491,10 +600,17 @@ def filter_bands(profile: BenchProfile) -> dict[int, tuple[float, float]] | None
 def nd_slots_of(profile: BenchProfile) -> set[int]:
     """The slots of the bench's filter wheel that hold a neutral-density filter (``od``
     in its ``options.filters``)."""
+    return set(nd_densities(profile))
+
+
+def nd_densities(profile: BenchProfile) -> dict[int, float]:
+    """Slot → optical density of the bench's neutral-density filters (``od`` in its
+    filter wheel's ``options.filters``); empty without any."""
     wheels = [d for d in profile.devices.values() if d.driver == "fw102c"]
     if not wheels:
-        return set()
-    return {int(k) for k, v in dict(wheels[0].options.get("filters", {})).items()
+        return {}
+    return {int(k): float(v["od"]) for k, v in dict(wheels[0].options.get("filters",
+                                                                           {})).items()
             if isinstance(v, dict) and "od" in v}
 
 

@@ -203,9 +203,11 @@ def test_lock_in_settling_and_filter_turns_are_in_the_estimate():
     assert reading == pytest.approx(6 * 0.21)
     one = _lockin_estimate()
     assert one.bench_acquisition_s >= 3 * reading
-    # with per-point darks every point is read twice
+    # with per-point darks every point is read twice, and the emulated photodiode
+    # integrates each point's dark pose once (tests/instrument/bench/test_estimate_events.py)
     dark = _lockin_estimate("per_point")
-    assert dark.bench_acquisition_s - one.bench_acquisition_s == pytest.approx(3 * reading)
+    assert dark.bench_acquisition_s - one.bench_acquisition_s == pytest.approx(
+        3 * reading + 3 * timing.lockin_integral_s[1])
     # the wheel: 1 → 3 on a six-slot wheel is 120° at 3 s per half turn, + 0.1 s to settle
     assert timing.wheel_move_s(1, 3) == pytest.approx(2.1)
     assert timing.wheel_move_s(1, 6) == pytest.approx(1.1)  # the shorter way round
