@@ -157,10 +157,14 @@ def test_bootstrap_sigma_checks_the_covariance(glossy_run, tmp_path, capsys) -> 
     res = analyse(red.points, ["lambert+ggx"], run_cv=False, n_bootstrap=60, seed=5)
     boot = res.chosen_fit.bootstrap
     assert boot is not None and boot.samples.shape == (60, 3)
-    # case resampling of the independent noise: compare with the noise-only covariance σ;
-    # B = 60 estimates a σ to ±1/√(2B) ≈ 9 % (1σ), so a 35 % band is ≈ 4σ wide
+    # case resampling of the independent noise: compare with the noise-only covariance σ.
+    # B = 60 alone would estimate a σ to ±1/√(2B) ≈ 9 %, but the bootstrap's σ also varies
+    # with the data: 57 readings, the lobe's parameters fixed by the ten or so near the
+    # peak, so case resampling draws them 0–3 times. Over four noise draws of this scan the
+    # ratio was 0.59–1.15, so the check is for a factor of two (a covariance or a bootstrap
+    # that is wrong, not a fluctuation): log₂ of the ratio within ±1
     noise_only = res.selection.fits["lambert+ggx"].stderr
-    np.testing.assert_allclose(boot.stderr / noise_only, 1.0, atol=0.35)
+    assert np.all(np.abs(np.log2(boot.stderr / noise_only)) < 1.0), boot.stderr / noise_only
     assert np.all((boot.ci_low < res.chosen_fit.params) & (res.chosen_fit.params < boot.ci_high))
     out = tmp_path / "boot"
     assert main(["fit", str(glossy_run), "--models", "lambert+ggx", "--no-cv", "--no-write",
