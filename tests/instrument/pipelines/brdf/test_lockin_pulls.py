@@ -87,7 +87,9 @@ def test_the_lock_in_fit_passes_chi2_and_its_rho_pull_is_within_3_sigma(tmp_path
     assert gof.dof == wf.reduced.points.n - 1
     # χ² test: fails 0.1 % of the time with the right σ (two-sided)
     assert 5e-4 < gof.p_value < 1 - 5e-4, (gof.chi2, gof.dof)
-    assert wf.result.inflation["lambert"] == 1.0  # nothing inflated
+    # σ are inflated only by the goodness-of-fit rule (p below its α = 1e-3), which the
+    # bound above admits 0.05 % of the time
+    assert wf.result.inflation["lambert"] == (1.0 if gof.adequate else gof.birge_ratio)
     z = (fit.params[0] - 0.5) / fit.stderr[0]
     assert abs(z) < stats.norm.ppf(1 - 0.0015), (fit.params, fit.stderr)
     assert np.isfinite(z)
