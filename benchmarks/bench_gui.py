@@ -41,6 +41,7 @@ import numpy as np  # noqa: E402
 from PySide6.QtCore import QSettings, QTimer  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
+from benchmarks.power_meter_scan import power_meter_scan  # noqa: E402
 from gui.app import create_window  # noqa: E402
 from gui.model.session import StartRun  # noqa: E402
 from instrument.bench.profile import load_profile, parse_profile  # noqa: E402
@@ -91,24 +92,7 @@ def spin(app: QApplication, cond, timeout: float) -> None:
 
 
 def scan_plan(n_target: int) -> str:
-    n_i = 20
-    n_r = max(3, n_target // n_i)
-    step = 170.0 / (n_r - 1)
-    return f"""
-[plan]
-kind = "brdf_in_plane"
-name = "gui benchmark"
-[sample]
-name = "ideal"
-[scan]
-theta_i = {{ start = 5.0, stop = 81.0, step = 4.0 }}
-theta_r = {{ start = -85.0, stop = 85.0, step = {step:.6f} }}
-skip_beam_points = true
-[acquisition]
-mode = "fixed"
-exposure_us = 1000
-detectors = ["power_meter"]
-"""
+    return power_meter_scan(n_target, "gui benchmark")
 
 
 def bench_scan(app: QApplication, work: Path, n_points: int) -> dict:

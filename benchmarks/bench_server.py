@@ -44,6 +44,7 @@ import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 import uvicorn  # noqa: E402
 
+from benchmarks.power_meter_scan import power_meter_scan  # noqa: E402
 from instrument.bench.profile import load_profile, parse_profile  # noqa: E402
 from instrument.protocol import API_PREFIX  # noqa: E402
 from instrument.server.app import create_app  # noqa: E402
@@ -55,22 +56,7 @@ N_CLIENTS = 50
 
 
 def scan_plan(n_target: int) -> str:
-    n_r = max(3, n_target // 20)
-    return f"""
-[plan]
-kind = "brdf_in_plane"
-name = "server benchmark"
-[sample]
-name = "ideal"
-[scan]
-theta_i = {{ start = 5.0, stop = 81.0, step = 4.0 }}
-theta_r = {{ start = -85.0, stop = 85.0, step = {170.0 / (n_r - 1):.6f} }}
-skip_beam_points = true
-[acquisition]
-mode = "fixed"
-exposure_us = 1000
-detectors = ["power_meter"]
-"""
+    return power_meter_scan(n_target, "server benchmark")
 
 
 #: A power-meter scan on the emulated sim bench (the detector arm's moves set the pace).

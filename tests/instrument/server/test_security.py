@@ -127,7 +127,7 @@ def test_the_event_stream_needs_a_key_once_keys_exist(server):
     from starlette.websockets import WebSocketDisconnect
 
     with pytest.raises(WebSocketDisconnect), server.http.websocket_connect(P + "/events"):
-        pass
+        pass  # opening the stream without a key is the request under test: it is refused
     with server.http.websocket_connect(
             P + "/events", headers={"Authorization": f"Bearer {server.tokens['observer']}"}
     ) as ws:
