@@ -203,7 +203,9 @@ class VirtualBench:
         (see :meth:`hw_mocks.sim.goniometer_scene.GoniometerScene.from_config`; with
         ``kind = "lightfield"``
         :meth:`hw_mocks.sim.lightfield_bench.LightFieldBenchScene.from_config`; with
-        ``kind = "spheres"`` :meth:`hw_mocks.sim.sphere_bench.SphereBenchScene.from_config`),
+        ``kind = "spheres"`` :meth:`hw_mocks.sim.sphere_bench.SphereBenchScene.from_config`;
+        with ``kind = "integrating_sphere"`` a uniform target,
+        :meth:`hw_mocks.sim.uniform_target.IntegratingSphereTarget.from_config`),
         ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
         ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}),
         ``shutter`` (a ``simsc10://`` URL) and ``filter_wheel`` ({url, filters}; see
@@ -224,6 +226,10 @@ class VirtualBench:
             from hw_mocks.sim.sphere_bench import SphereBenchScene
 
             scene = SphereBenchScene.from_config(scene_cfg)
+        elif scene_cfg.get("kind") == "integrating_sphere":
+            from hw_mocks.sim.uniform_target import IntegratingSphereTarget
+
+            scene = IntegratingSphereTarget.from_config(scene_cfg)
         else:
             from hw_mocks.sim.goniometer_scene import GoniometerScene
 

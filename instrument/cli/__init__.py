@@ -21,7 +21,7 @@ __all__ = ["main"]
 
 #: Subcommand modules under instrument.cli, in the order `--help` lists them.
 SUBCOMMANDS = ("gui", "devices", "serve_sim", "plan", "run", "resume", "runs", "fit",
-               "reconstruct", "locate", "spheres", "batch", "serve", "queue", "status",
+               "reconstruct", "locate", "spheres", "calibrate", "batch", "serve", "queue", "status",
                "watch", "pause", "abort", "control", "manual")
 
 
