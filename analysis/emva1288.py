@@ -48,8 +48,10 @@ Tibshirani 1993, "An Introduction to the Bootstrap", ch. 6); K's is at least the
 error of its regression residuals (scatter beyond the model, e.g. a drifting source).
 The saturation point can be resolved no better than the sweep's step there: half a step
 is added as a rectangular uncertainty (GUM 4.3.7). LE is a range statistic, biased upward
-by noise even for an ideal camera; its bias-corrected value 2 LE − mean(LE*) (Efron &
-Tibshirani ch. 10) is reported beside the EMVA value. The non-uniformities' uncertainties
+by noise even for an ideal camera: its noise floor, the mean LE of a perfectly linear
+camera with the sweep's noise (the fitted line plus each mean's sampling error, evaluated
+in the same way), is subtracted for the noise-corrected value reported beside the EMVA
+value (its expectation is 0 for a linear camera). The non-uniformities' uncertainties
 come from the spread of the per-pixel squared deviations, var(d²)/N, which includes the
 sampling of the pixel population, and from K's.
 """
@@ -133,7 +135,7 @@ class CameraCharacterization:
     Values: ``system_gain_dn_per_e`` (K), ``dark_noise_e`` (σ_d) and ``dark_noise_dn``
     (σ_y.dark without quantisation), ``saturation_dn`` (μ_y.sat, raw),
     ``saturation_capacity_e`` (μ_e.sat), ``linearity_error_percent`` (LE) and
-    ``linearity_error_unbiased_percent`` (bias-corrected), ``dark_current_e_per_s``,
+    ``linearity_error_unbiased_percent`` (LE less its noise floor), ``dark_current_e_per_s``,
     ``dsnu_e``, ``prnu_rel``, ``quantum_efficiency`` (None without the photon count).
     Arrays per exposure for the report: ``exposures_us``, ``mean_dn``, ``mean_dark_dn``,
     ``var_dn2``, ``var_dark_dn2``, ``gain_fit_mask``, ``linearity_fit_mask``,
@@ -334,7 +336,18 @@ def characterize(stats: SweepStatistics, uniformity: Uniformity, *,
     sat_e = best.sat_signal_dn / k
     u_sat_e = sat_e * float(np.hypot(u_sat_dn / best.sat_signal_dn, u_k / k))
 
-    le_unbiased = float(2.0 * best.le - boot[:, 4].mean())
+    # LE of a perfectly linear camera with this sweep's noise: the line fitted to the data
+    # plus each mean's sampling error, evaluated as the data are (the noise floor)
+    se = np.sqrt(np.maximum(var_p, 0.0).mean(axis=1) / (2.0 * n * mu_p.shape[1])
+                 + np.maximum(var_dp, 0.0).mean(axis=1) / (2.0 * n * mu_dp.shape[1]))
+    lin, t_s = best.lin_mask, t[best.lin_mask] * 1e-6
+    floor = np.empty(n_bootstrap)
+    for b in range(n_bootstrap):
+        y = best.lin_fit[lin] + se[lin] * rng.standard_normal(t_s.size)
+        line = np.polyval(np.polyfit(t_s, y, 1), t_s)
+        dev = 100.0 * (y - line) / line
+        floor[b] = 0.5 * (dev.max() - dev.min())
+    le_unbiased = float(best.le - floor.mean())
     u_le = float(sd[4])
     dark_current = best.dark_slope_dn_per_s / k
     u_dark_current = float(np.hypot(sd[6], abs(dark_current) * u_k / k))

@@ -80,6 +80,14 @@ def _option_error(args: argparse.Namespace) -> str | None:
     return None
 
 
+def _settings(data) -> dict:
+    """The camera's gain and pixel format during the sweep as the run recorded them (None:
+    not recorded; the calibration holds for these settings only), and its identity."""
+    cam = data.identities.get("camera", {})
+    return {"gain_db": data.acquisition.get("gain_db"), "pixel_format": cam.get("pixel_format"),
+            "camera": " ".join(str(cam[k]) for k in ("vendor", "model", "serial") if k in cam)}
+
+
 def run(args: argparse.Namespace) -> int:
     from instrument.pipelines.camera.characterize import (
         calibration_json,
@@ -106,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
                             focal_length_mm=args.focal_length_mm)
         content = calibration_json(res, optics, quantum_efficiency=args.quantum_efficiency,
                                    u_quantum_efficiency=args.quantum_efficiency_u,
-                                   source=f"scatterlab calibrate camera {data.path.name}")
+                                   source=f"scatterlab calibrate camera {data.path.name}",
+                                   settings=_settings(data))
         out = (Path(args.output) if args.output
                else run_folder(args.run) / "camera" / CALIBRATION_NAME)
         written = write_calibration(content, out)
@@ -129,15 +138,13 @@ def run(args: argparse.Namespace) -> int:
     print(line("saturation μ_y.sat", "saturation_dn", "DN"))
     print(line("saturation capacity μ_e.sat", "saturation_capacity_e", "e⁻"))
     print(line("linearity error LE", "linearity_error_percent", "%")
-          + f" (noise bias removed: {e['linearity_error_unbiased_percent']:.2g} %)")
+          + f" (less its noise floor: {e['linearity_error_unbiased_percent']:.2g} %)")
     print(line("dark current", "dark_current_e_per_s", "e⁻/s"))
     print(line("DSNU", "dsnu_e", "e⁻"))
     print(line("PRNU", "prnu_rel", "%", 100.0))
-    if e["quantum_efficiency"][1] is not None:
-        print(line("quantum efficiency η", "quantum_efficiency", "")
-              + f" ({e['quantum_efficiency_from']})")
-    else:
-        print(f"  {'quantum efficiency η':<28} {e['quantum_efficiency'][0]:.4g} (given)")
+    qe, u_qe = e["quantum_efficiency"]
+    print(f"  {'quantum efficiency η':<28} {qe:.5g}"
+          + (f" ± {u_qe:.2g}" if u_qe is not None else "") + f", {e['quantum_efficiency_from']}")
     for w in e["warnings"]:
         print(f"warning: {w}")
     print(f"calibration: {written}")

@@ -160,11 +160,13 @@ def optics_for(run: RunData, *, wavelength_nm: float | None = None,
 def calibration_json(result: CameraCharacterization, optics: CameraOptics, *,
                      quantum_efficiency: float | None = None,
                      u_quantum_efficiency: float | None = None,
-                     source: str = "") -> dict[str, Any]:
+                     source: str = "", settings: dict[str, Any] | None = None
+                     ) -> dict[str, Any]:
     """The calibration file's content (module docstring).
 
     η is the measured one when the sweep's photon count was known, else the one given (a
-    data sheet's); without either it cannot be written.
+    data sheet's); without either it cannot be written. ``settings`` (the camera's gain and
+    pixel format during the sweep) are recorded: the calibration holds for them only.
 
     Raises
     ------
@@ -172,13 +174,13 @@ def calibration_json(result: CameraCharacterization, optics: CameraOptics, *,
         Neither a measured nor a given quantum efficiency.
     """
     qe, u_qe = result.quantum_efficiency, result.u_quantum_efficiency
-    qe_from = "measured (photon count given)"
+    qe_from = "measured from the given photon count"
     if qe is None:
         if quantum_efficiency is None:
             raise ValueError("the quantum efficiency is unknown: give --photons-per-pixel-s "
                              "(the sweep's photon count from a calibrated photodiode) to "
                              "measure it, or --quantum-efficiency from the data sheet")
-        qe, u_qe, qe_from = quantum_efficiency, u_quantum_efficiency, "given"
+        qe, u_qe, qe_from = quantum_efficiency, u_quantum_efficiency, "given (data sheet)"
     u_resp = math.hypot(result.u_system_gain_dn_per_e / result.system_gain_dn_per_e,
                         (u_qe or 0.0) / qe)
     out: dict[str, Any] = {
@@ -201,6 +203,7 @@ def calibration_json(result: CameraCharacterization, optics: CameraOptics, *,
     out["emva1288"] = {
         "standard": "EMVA 1288 Release 4.0 Linear",
         "source": source,
+        "camera_settings": dict(settings or {}),
         "system_gain_dn_per_e": [r.system_gain_dn_per_e, r.u_system_gain_dn_per_e],
         "dark_noise_e": [r.dark_noise_e, r.u_dark_noise_e],
         "dark_noise_dn": r.dark_noise_dn,

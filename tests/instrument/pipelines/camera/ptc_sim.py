@@ -60,3 +60,18 @@ def truth() -> dict[str, float]:
                 "photons_per_pixel_s": photons}
     finally:
         cam.close()
+
+
+#: Parameters compared with the truth, by their key in the calibration file's "emva1288".
+CHECKED = ("system_gain_dn_per_e", "dark_noise_e", "saturation_capacity_e",
+           "dark_current_e_per_s", "dsnu_e", "prnu_rel", "quantum_efficiency")
+
+
+def z_scores(content: dict, truth_values: dict) -> dict[str, float]:
+    """(recovered − truth)/u of every checked parameter of a calibration file, and of LE
+    less its noise floor (the simulated sensor is linear: truth 0)."""
+    e = content["emva1288"]
+    z = {k: (e[k][0] - truth_values[k]) / e[k][1] for k in CHECKED}
+    z["linearity_error_percent"] = (e["linearity_error_unbiased_percent"]
+                                    / e["linearity_error_percent"][1])
+    return z

@@ -15,12 +15,8 @@ from instrument.bench.camera_calibration import CameraCalibration, simulated_cam
 from instrument.cli import main
 from instrument.pipelines.brdf.analyse import analyse
 from instrument.pipelines.brdf.reduce import ReductionOptions, reduce_run
-from tests.instrument.pipelines.camera.ptc_sim import run_ptc, truth
+from tests.instrument.pipelines.camera.ptc_sim import run_ptc, truth, z_scores
 from tests.instrument.sim_scan import SAMPLES, ScanSetup, render, write_run_file
-
-#: Recovered parameter → key in the calibration file's "emva1288" table.
-CHECKED = ("system_gain_dn_per_e", "dark_noise_e", "saturation_capacity_e",
-           "dark_current_e_per_s", "dsnu_e", "prnu_rel", "quantum_efficiency")
 
 
 @pytest.fixture(scope="module")
@@ -42,15 +38,6 @@ def recovered(ptc_run, truth_values, tmp_path_factory):
     return out
 
 
-def z_scores(content: dict, truth_values: dict) -> dict[str, float]:
-    """(recovered − truth)/u of every checked parameter, and of the bias-corrected LE."""
-    e = content["emva1288"]
-    z = {k: (e[k][0] - truth_values[k]) / e[k][1] for k in CHECKED}
-    z["linearity_error_percent"] = (e["linearity_error_unbiased_percent"]
-                                    / e["linearity_error_percent"][1])
-    return z
-
-
 def test_recovers_the_simulated_sensor_within_two_sigma(recovered, truth_values) -> None:
     content = json.loads(recovered.read_text(encoding="utf-8"))
     z = z_scores(content, truth_values)
@@ -61,6 +48,7 @@ def test_recovers_the_simulated_sensor_within_two_sigma(recovered, truth_values)
     assert e["prnu_rel"][1] < 0.05 * 0.01 and e["dsnu_e"][1] < 0.05 * 1.5
     assert e["saturation_capacity_e"][1] < 0.02 * truth_values["saturation_capacity_e"]
     assert e["warnings"] == []
+    assert e["camera_settings"]["camera"] == "scatterlab SimCam EMVA1288 SIM000007"
 
 
 def test_writes_the_file_fit_reads_and_the_report(recovered, ptc_run) -> None:
@@ -89,8 +77,8 @@ def test_default_output_next_to_the_run_and_given_quantum_efficiency(ptc_run, ca
     folder = ptc_run.with_suffix("") / "camera"
     content = json.loads((folder / "camera_calibration.json").read_text(encoding="utf-8"))
     assert content["quantum_efficiency"] == 0.55
-    assert content["emva1288"]["quantum_efficiency_from"] == "given"
-    assert "system gain K" in out and "(given)" in out
+    assert content["emva1288"]["quantum_efficiency_from"] == "given (data sheet)"
+    assert "system gain K" in out and "0.55 ± 0.02, given (data sheet)" in out
     assert not (folder / "emva1288.png").exists()
 
 
