@@ -22,9 +22,13 @@ dark pairs at the same exposures:
 * K: the slope of σ²_y − σ²_y.dark against μ_y − μ_y.dark, fitted through the origin over
   the points between 0 and 70 % of the saturation signal (R4.0 §6, photon-transfer
   method; R3.1 §6.6 and its eq. 28);
-* σ_d = √(σ²_y.dark − σ²_q)/K from the dark pair at the shortest exposure (R4.0 §6);
-  below σ²_y.dark ≈ 0.24 DN² the quantisation dominates and σ_d is only an upper bound
-  (reported as a warning);
+* σ_d = √(σ²_y.dark − σ²_q)/K with σ²_y.dark at zero exposure: the intercept of a
+  straight line through the dark pairs' variances against the exposure time, which the
+  dark current's shot noise raises as K² μ_I t (R4.0 §7, the dark-current model; the
+  shortest exposure's dark pair alone, R4.0 §6, gives the same value with a larger
+  error); σ²_q = 1/12 holds only for offsets spread over the quantisation step, so its
+  possible error (:func:`quantisation_deviation_dn2`) enters u(σ_d); below σ²_y.dark ≈
+  0.24 DN² the quantisation dominates and σ_d is only an upper bound (a warning);
 * linearity: a straight line μ_y − μ_y.dark = a₀ + a₁ H fitted between 5 % and 95 % of
   the saturation signal; δ = (y − fit)/fit and LE = (max δ − min δ)/2 in per cent
   (R4.0 §6, linearity; R3.1 §6.7);
@@ -66,7 +70,7 @@ from numpy.typing import ArrayLike, NDArray
 from analysis.photon_transfer import QUANTISATION_VARIANCE_DN2
 
 __all__ = ["CameraCharacterization", "SweepStatistics", "Uniformity", "characterize",
-           "spatial_variance", "uniformity_exposure_index"]
+           "quantisation_deviation_dn2", "spatial_variance", "uniformity_exposure_index"]
 
 #: Below this dark variance (DN²) the quantisation dominates the dark noise (R4.0 §6).
 QUANTISATION_LIMIT_DN2 = 0.24
@@ -225,8 +229,36 @@ def _evaluate(t_us: NDArray, mu: NDArray, var: NDArray, mu_d: NDArray, var_d: ND
     dev = np.where(fit != 0, 100.0 * (signal - fit) / safe, 0.0)
     le = float(0.5 * (dev[lin_mask].max() - dev[lin_mask].min()))
     dark_slope = float(np.polyfit(t_s, mu_d, 1)[0])
-    return _Point(k, k_se, float(var_d[int(np.argmin(t_us))]), i_sat, float(mu[i_sat]),
+    # σ²_y.dark = K²(σ²_d + μ_I t) + σ²_q (R4.0 §7): the intercept at t = 0 uses every dark
+    # pair instead of the shortest exposure's alone
+    dark_var0 = float(np.polyfit(t_s, var_d, 1)[1])
+    return _Point(k, k_se, dark_var0, i_sat, float(mu[i_sat]),
                   sat_signal, le, float(a1), dark_slope, gain_mask, lin_mask, fit, dev)
+
+
+def quantisation_deviation_dn2(sigma_dn: float) -> float:
+    """How far the variance of a quantised Gaussian can lie from σ² + 1/12 DN² (DN²).
+
+    σ²_q = 1/12 is exact when the offsets' fractional parts are spread uniformly over the
+    quantisation step (Sheppard's correction); a camera whose offsets cluster (a black
+    level on a whole DN and a DSNU well below 1 DN) can show any value in between. For a
+    pixel at offset phase x the variance of round(x + σZ) is Σ k² p_k − (Σ k p_k)² with
+    p_k = Φ((k + ½ − x)/σ) − Φ((k − ½ − x)/σ); the largest deviation over x ∈ [0, 1) is
+    returned (±0.0079 DN² at σ = 0.5 DN, 1e-5 at 0.8 DN). It bounds σ²_y.dark's model
+    error, entered as a rectangular uncertainty (GUM 4.3.7).
+    """
+    from scipy.special import ndtr
+
+    if not sigma_dn > 0:
+        return 1.0 / 12.0
+    if sigma_dn > 2.0:
+        return 0.0
+    k = np.arange(-int(6 * sigma_dn) - 3, int(6 * sigma_dn) + 4)[None, :]
+    x = np.linspace(0.0, 1.0, 101)[:, None]
+    p = ndtr((k + 0.5 - x) / sigma_dn) - ndtr((k - 0.5 - x) / sigma_dn)
+    m = (p * k).sum(axis=1)
+    var = (p * k * k).sum(axis=1) - m * m
+    return float(np.max(np.abs(var - sigma_dn**2 - 1.0 / 12.0)))
 
 
 def spatial_variance(mean_frame: ArrayLike, temporal_var_dn2: float, n_frames: int
@@ -323,7 +355,9 @@ def characterize(stats: SweepStatistics, uniformity: Uniformity, *,
                         "upper bound (EMVA 1288 R4.0 §6)")
     read_dn = float(np.sqrt(max(read_var, 0.0)))
     sigma_d = read_dn / k
-    u_sigma_d = sigma_d * float(np.hypot(sd[1] / max(read_dn, 1e-300), u_k / k))
+    u_read_dn = float(np.hypot(sd[1], quantisation_deviation_dn2(read_dn) / np.sqrt(3.0)
+                               / (2.0 * max(read_dn, 1e-300))))
+    u_sigma_d = sigma_d * float(np.hypot(u_read_dn / max(read_dn, 1e-300), u_k / k))
 
     # the saturation point is known to the sweep's step there (rectangular, half-width
     # half the mean neighbouring step): GUM 4.3.7

@@ -80,3 +80,14 @@ def test_bad_sweeps_are_refused():
     uni = Uniformity(np.ones((4, 4)), np.ones((4, 4)), 2, 2, 10.0)
     with pytest.raises(ValueError, match="is the light on"):
         characterize(dark, uni, n_bootstrap=50)
+
+
+def test_quantisation_deviation_bounds_the_sheppard_correction():
+    from analysis.emva1288 import quantisation_deviation_dn2
+
+    assert quantisation_deviation_dn2(0.5) == pytest.approx(0.00792, rel=0.01)
+    assert quantisation_deviation_dn2(0.8) < 1e-4
+    # a camera whose offsets all sit on a whole DN shows a variance within the bound
+    rng = np.random.default_rng(5)
+    y = np.rint(0.5 * rng.standard_normal(200_000))
+    assert abs(y.var() - 0.25 - 1 / 12) < quantisation_deviation_dn2(0.5) + 0.003
