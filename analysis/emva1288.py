@@ -67,11 +67,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.photon_transfer import QUANTISATION_VARIANCE_DN2
-
-__all__ = ["CameraCharacterization", "SweepStatistics", "Uniformity", "characterize",
+__all__ = ["QUANTISATION_VARIANCE_DN2", "CameraCharacterization", "MeansEvaluation",
+           "SweepStatistics", "Uniformity", "characterize", "evaluate_means",
            "quantisation_deviation_dn2", "spatial_variance", "uniformity_exposure_index"]
 
+#: σ²_q of an ideal quantiser with a step of 1 DN (R4.0 §2).
+QUANTISATION_VARIANCE_DN2 = 1.0 / 12.0
 #: Below this dark variance (DN²) the quantisation dominates the dark noise (R4.0 §6).
 QUANTISATION_LIMIT_DN2 = 0.24
 
@@ -182,8 +183,11 @@ class CameraCharacterization:
 
 
 @dataclass(frozen=True)
-class _Point:
-    """One evaluation of the sweep's per-exposure means (the bootstrap repeats it)."""
+class MeansEvaluation:
+    """One evaluation of a sweep's per-exposure statistics (the bootstrap repeats it):
+    K and its residual standard error, σ²_y.dark at zero exposure, the saturation point,
+    LE, the linearity slope (DN/s), the dark mean's slope (DN/s), the fit masks, the
+    fitted line and the deviations δ (%)."""
 
     k: float
     k_residual_se: float
@@ -200,8 +204,20 @@ class _Point:
     deviation: NDArray[np.float64]
 
 
-def _evaluate(t_us: NDArray, mu: NDArray, var: NDArray, mu_d: NDArray, var_d: NDArray,
-              gain_fit_fraction: float, linearity_range: tuple[float, float]) -> _Point:
+def evaluate_means(t_us: NDArray, mu: NDArray, var: NDArray, mu_d: NDArray, var_d: NDArray,
+                   gain_fit_fraction: float = 0.7,
+                   linearity_range: tuple[float, float] = (0.05, 0.95)) -> MeansEvaluation:
+    """K, σ²_y.dark, saturation and linearity from per-exposure means and temporal
+    variances of light and dark frames (module docstring; no uncertainties).
+
+    Raises
+    ------
+    ValueError
+        No light at the variance maximum, or too few exposures in a fit range.
+    """
+    lo, hi = linearity_range
+    if not 0.0 <= lo < hi <= 1.0:
+        raise ValueError("linearity_range must satisfy 0 <= low < high <= 1")
     signal = mu - mu_d
     excess = var - var_d
     i_sat = int(np.argmax(var))
@@ -217,7 +233,6 @@ def _evaluate(t_us: NDArray, mu: NDArray, var: NDArray, mu_d: NDArray, var_d: ND
     resid = y - k * x
     dof = max(int(gain_mask.sum()) - 1, 1)
     k_se = float(np.sqrt(np.dot(resid, resid) / dof / np.dot(x, x)))
-    lo, hi = linearity_range
     t_s = t_us * 1e-6
     lin_mask = (signal >= lo * sat_signal) & (signal <= hi * sat_signal) & (t_us <= t_us[i_sat])
     if lin_mask.sum() < 3:
@@ -232,7 +247,7 @@ def _evaluate(t_us: NDArray, mu: NDArray, var: NDArray, mu_d: NDArray, var_d: ND
     # σ²_y.dark = K²(σ²_d + μ_I t) + σ²_q (R4.0 §7): the intercept at t = 0 uses every dark
     # pair instead of the shortest exposure's alone
     dark_var0 = float(np.polyfit(t_s, var_d, 1)[1])
-    return _Point(k, k_se, dark_var0, i_sat, float(mu[i_sat]),
+    return MeansEvaluation(k, k_se, dark_var0, i_sat, float(mu[i_sat]),
                   sat_signal, le, float(a1), dark_slope, gain_mask, lin_mask, fit, dev)
 
 
@@ -318,8 +333,8 @@ def characterize(stats: SweepStatistics, uniformity: Uniformity, *,
     mu_p, var_p = stats.mean_dn, stats.var_dn2
     mu_dp, var_dp = stats.dark_mean_dn, stats.dark_var_dn2
 
-    def reduce(mp, vp, mdp, vdp) -> _Point:
-        return _evaluate(t, mp.mean(axis=1), vp.mean(axis=1), mdp.mean(axis=1),
+    def reduce(mp, vp, mdp, vdp) -> MeansEvaluation:
+        return evaluate_means(t, mp.mean(axis=1), vp.mean(axis=1), mdp.mean(axis=1),
                          vdp.mean(axis=1), gain_fit_fraction, linearity_range)
 
     best = reduce(mu_p, var_p, mu_dp, var_dp)

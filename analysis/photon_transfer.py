@@ -17,10 +17,14 @@ to the photon transfer method") and §6.7 ("Evaluation of linearity"):
 * The saturation point μ_y.sat is the mean at which σ²_y is largest (R3.1 §6.6).
 * K is the slope of σ²_y − σ²_y.dark against μ_y − μ_y.dark, fitted through the origin over
   the points up to 70 % of the saturation signal (R3.1 §6.6).
-* σ_d = √(σ²_y.dark − σ²_q) / K from the shortest exposure's dark pair.
+* σ_d = √(σ²_y.dark − σ²_q) / K, σ²_y.dark extrapolated to zero exposure from the dark
+  pairs (the shortest exposure's alone when one dark pair is given).
 * Linearity: a straight line μ_y − μ_y.dark = a₀ + a₁·H fitted to the points between 5 % and
   95 % of the saturation signal (H ∝ exposure at constant irradiance); the relative
   deviations δ = (y − fit)/fit give LE = (max δ − min δ)/2 in per cent (R3.1 §6.7).
+
+The evaluation itself is :func:`analysis.emva1288.evaluate_means`, shared with the full
+characterization with uncertainties (:func:`analysis.emva1288.characterize`).
 """
 
 from __future__ import annotations
@@ -30,9 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from analysis.emva1288 import QUANTISATION_VARIANCE_DN2, evaluate_means
+
 __all__ = ["PhotonTransferResult", "pair_statistics", "photon_transfer"]
 
-QUANTISATION_VARIANCE_DN2 = 1.0 / 12.0
 
 
 def pair_statistics(pair: ArrayLike) -> tuple[float, float]:
@@ -151,53 +156,23 @@ def photon_transfer(
         dstats = np.repeat(dstats, m, axis=0)
     mu, var = stats[:, 0], stats[:, 1]
     mu_d, var_d = dstats[:, 0], dstats[:, 1]
-    signal = mu - mu_d
-    excess = var - var_d
-
-    i_sat = int(np.argmax(var))
-    saturation_dn = float(mu[i_sat])
-    sat_signal = float(signal[i_sat])
-    if not sat_signal > 0:
-        raise ValueError("no positive signal at the variance maximum: is the light on?")
-
-    gain_mask = (signal > 0) & (signal <= gain_fit_fraction * sat_signal)
-    if gain_mask.sum() < 2:
-        raise ValueError("fewer than two exposures below the gain-fit limit; extend the sweep")
-    x, y = signal[gain_mask], excess[gain_mask]
-    k = float(np.dot(x, y) / np.dot(x, x))
-    dof = max(int(gain_mask.sum()) - 1, 1)
-    resid = y - k * x
-    k_err = float(np.sqrt(np.dot(resid, resid) / dof / np.dot(x, x)))
-
-    i_short = int(np.argmin(t)) if darks.shape[0] == m else 0
-    read_var_dn = max(float(var_d[i_short]) - QUANTISATION_VARIANCE_DN2, 0.0)
-    read_noise_dn = float(np.sqrt(read_var_dn))
-
-    lo, hi = linearity_range
-    if not 0.0 <= lo < hi <= 1.0:
-        raise ValueError("linearity_range must satisfy 0 <= low < high <= 1")
-    lin_mask = (signal >= lo * sat_signal) & (signal <= hi * sat_signal) & (t <= t[i_sat])
-    if lin_mask.sum() < 2:
-        raise ValueError("fewer than two exposures inside the linearity range")
-    a1, a0 = np.polyfit(t[lin_mask], signal[lin_mask], 1)
-    fit = a0 + a1 * t
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dev = np.where(fit != 0, 100.0 * (signal - fit) / np.where(fit != 0, fit, 1.0), 0.0)
-    le = float(0.5 * (dev[lin_mask].max() - dev[lin_mask].min()))
+    ev = evaluate_means(t, mu, var, mu_d, var_d, gain_fit_fraction, linearity_range)
+    k = ev.k
+    read_noise_dn = float(np.sqrt(max(ev.dark_var_dn2 - QUANTISATION_VARIANCE_DN2, 0.0)))
 
     return PhotonTransferResult(
         system_gain_dn_per_e=k,
-        system_gain_stderr=k_err,
+        system_gain_stderr=ev.k_residual_se,
         read_noise_dn=read_noise_dn,
         read_noise_e=read_noise_dn / k,
-        saturation_dn=saturation_dn,
-        saturation_capacity_e=sat_signal / k,
-        linearity_error_percent=le,
+        saturation_dn=ev.sat_dn,
+        saturation_capacity_e=ev.sat_signal_dn / k,
+        linearity_error_percent=ev.le,
         mean_dn=mu,
         mean_dark_dn=mu_d,
         variance_dn2=var,
         variance_dark_dn2=var_d,
-        gain_fit_mask=gain_mask,
-        linearity_fit_mask=lin_mask,
-        linearity_deviation_percent=dev,
+        gain_fit_mask=ev.gain_mask,
+        linearity_fit_mask=ev.lin_mask,
+        linearity_deviation_percent=ev.deviation,
     )
