@@ -133,3 +133,18 @@ def test_ten_seeds_within_two_sigma(truth_values, tmp_path) -> None:
         z = z_scores(json.loads(out.read_text(encoding="utf-8")), truth_values)
         worst = {k: max(abs(v), worst.get(k, 0.0)) for k, v in z.items()}
     assert all(v < 2.0 for v in worst.values()), worst
+
+
+def test_a_real_camera_needs_its_wavelength_and_pupil(ptc_run) -> None:
+    from dataclasses import replace as dc_replace
+
+    from instrument.pipelines.camera.characterize import optics_for
+    from instrument.run.runfile import read_run
+
+    real = dc_replace(read_run(ptc_run), profile_text=(
+        '[devices.camera]\ndriver = "opencv_camera"\nurl = "opencv://0"\n'))
+    with pytest.raises(ValueError, match="--wavelength-nm and --pupil-diameter-mm"):
+        optics_for(real)
+    optics = optics_for(real, wavelength_nm=532.0, pupil_diameter_mm=10.0)
+    assert (optics.wavelength_nm, optics.pupil_diameter_mm) == (532.0, 10.0)
+    assert optics.chief_ray_only is False and optics.pixel_pitch_um is None
