@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -96,7 +97,8 @@ def test_errors_name_the_fix(ptc_run, tmp_path, capsys) -> None:
     assert "photon_transfer" in capsys.readouterr().out
 
 
-def test_fit_with_the_recovered_calibration_matches_the_true_one(recovered, tmp_path) -> None:
+def test_fit_with_the_recovered_calibration_matches_the_true_one(recovered, tmp_path,
+                                                                 capsys) -> None:
     """The same BRDF, within the fit's σ (which now includes u(Kη)), as with the
     simulator's exact calibration."""
     glossy = write_run_file(render(ScanSetup(), SAMPLES[1]), 3, tmp_path / "glossy.h5")
@@ -119,6 +121,19 @@ def test_fit_with_the_recovered_calibration_matches_the_true_one(recovered, tmp_
     t, r = fits["true"], fits["recovered"]
     assert np.all(np.abs(r.params - t.params) < r.stderr), (r.params, t.params, r.stderr)
     assert np.all(np.abs(r.params - np.array(SAMPLES[1].params)) < 4 * r.stderr)
+    # the same through the command: `scatterlab fit --camera-calibration FILE`
+    printed = {}
+    for name, path in (("true", true_file), ("recovered", recovered)):
+        capsys.readouterr()
+        assert main(["fit", str(glossy), "--camera-calibration", str(path), "--models",
+                     "lambert+ggx", "--no-cv", "--no-write", "--incident-power-u", "0",
+                     "--distance-u-mm", "0"]) == 0
+        printed[name] = {m[1]: (float(m[2]), float(m[3])) for m in re.finditer(
+            r"^\s+(lambert\.rho|ggx\.ks|ggx\.alpha)\s+(\S+) ± (\S+)",
+            capsys.readouterr().out, re.MULTILINE)}
+    assert len(printed["recovered"]) == 3
+    for key, (value, u) in printed["recovered"].items():
+        assert abs(value - printed["true"][key][0]) < u, (key, printed)
 
 
 @pytest.mark.slow
