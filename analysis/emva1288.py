@@ -21,7 +21,7 @@ dark pairs at the same exposures:
   saturation capacity;
 * K: the slope of σ²_y − σ²_y.dark against μ_y − μ_y.dark, fitted through the origin over
   the points between 0 and 70 % of the saturation signal (R4.0 §6, photon-transfer
-  method; R3.1 §6.6 and its eq. 28);
+  method; R3.1 §6.6);
 * σ_d = √(σ²_y.dark − σ²_q)/K with σ²_y.dark at zero exposure: the intercept of a
   straight line through the dark pairs' variances against the exposure time, which the
   dark current's shot noise raises as K² μ_I t (R4.0 §7, the dark-current model; the

@@ -4,7 +4,8 @@ EMVA 1288 (Release 4.0 Linear, §6 "Methods for Sensitivity, Linearity, and Nois
 characterizes a camera under a homogeneous irradiance; a common set-up is the exit port of
 an integrating sphere filling the camera's view. The port of a sphere of inner wall area
 A_s and reflectance ρ, fed with the flux Φ, has the radiance (Labsphere, "A guide to
-integrating sphere theory and applications", eq. 13, the sphere multiplier M)
+integrating sphere theory and applications", the sphere radiance equation
+with the sphere multiplier M)
 
     L = Φ / (π A_s) · ρ / (1 − ρ (1 − f)),
 
