@@ -20,9 +20,9 @@ accumulates however many frames are taken.
 
 * ``software`` trigger (the default): every frame :meth:`~drivers.base.Camera.acquire`
   needs is one ``TriggerSoftware``, sent when the camera reports it is ready for a frame
-  trigger; :meth:`~drivers.base.Camera.trigger` sends one ahead and the next ``acquire``
-  returns its frame. The exposure of an acquired frame therefore always starts after the
-  call.
+  trigger, so the exposure of an acquired frame always starts after the call.
+  :meth:`~drivers.base.Camera.trigger` sends one and collects its frame before it returns
+  (like the other cameras of the project); the next ``acquire`` returns that frame.
 * ``hardware`` trigger: ``TriggerSource`` is the input line (``hardware_line``, default
   ``Line1``, rising edge); a frame comes when the pulse comes, and an ``acquire`` with no
   pulse within its timeout raises :class:`~drivers.errors.DeviceTimeout` naming the line.
@@ -54,6 +54,7 @@ import math
 import threading
 import time
 from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -222,7 +223,7 @@ class GenICamCamera(Camera):
         self._buffers = int(buffers)
         self._hardware_line = str(hardware_line)
         self._index = 0
-        self._pending = 0  # software triggers sent whose frames are not yet returned
+        self._pending: deque[Frame] = deque()  # software-triggered frames
         self._lost: ConnectionFailed | None = None
         try:
             self._configure_fixed()
@@ -336,7 +337,7 @@ class GenICamCamera(Camera):
     def _reconnect(self) -> None:
         self._t.reconnect()
         self._lost = None
-        self._pending = 0
+        self._pending.clear()
         snap = self._snapshot
         self._configure_fixed()
         self._set_format(snap["format"])
@@ -354,7 +355,7 @@ class GenICamCamera(Camera):
     def _grab_paused(self) -> Iterator[None]:
         """Format, ROI, binning and trigger features are locked while the camera grabs."""
         self._t.stop()
-        self._pending = 0
+        self._pending.clear()
         try:
             yield
         finally:
@@ -457,7 +458,7 @@ class GenICamCamera(Camera):
         self._t.set("OffsetY", 0)
         for feature, value in (("Width", roi.width // b), ("Height", roi.height // b),
                                ("OffsetX", roi.x // b), ("OffsetY", roi.y // b)):
-            low, high, inc = self._t.limits(feature)
+            low, _high, inc = self._t.limits(feature)
             if inc > 1 and (value - low) % inc:
                 raise UnsupportedFeature(
                     f"{feature} {value} (binned px) is not on the camera's {inc:g}-pixel grid",
@@ -517,23 +518,25 @@ class GenICamCamera(Camera):
         return self._snapshot["binning"]
 
     def _do_set_binning(self, value: int) -> None:
-        if value != 1 and not self._t.has("BinningHorizontal"):
-            raise UnsupportedFeature("the camera has no binning", device=self.name,
-                                     command="set binning")
-        low, high, _ = self._t.limits("BinningHorizontal") if value != 1 else (1, 1, 0)
-        if not low <= value <= high:
-            raise UnsupportedFeature(f"binning {value} is not supported ({low:g} to {high:g})",
-                                     device=self.name, command="set binning")
-        roi = self._snapshot["roi"]
-        # keep the region: its edges snap inwards to the new binning's grid
-        x, y = -(-roi.x // value) * value, -(-roi.y // value) * value
-        w = (roi.x + roi.width - x) // value * value
-        h = (roi.y + roi.height - y) // value * value
-        with self._device("set binning"), self._grab_paused():
-            try:
-                self._apply_binning_roi(value, Roi(x, y, max(w, value), max(h, value)))
-            finally:
-                self._snapshot = self._read_settings()
+        with self._device("set binning"):
+            if value != 1 and not self._t.has("BinningHorizontal"):
+                raise UnsupportedFeature("the camera has no binning", device=self.name,
+                                         command="set binning")
+            low, high, _ = self._t.limits("BinningHorizontal") if value != 1 else (1, 1, 0)
+            if not low <= value <= high:
+                raise UnsupportedFeature(
+                    f"binning {value} is not supported ({low:g} to {high:g})",
+                    device=self.name, command="set binning")
+            roi = self._snapshot["roi"]
+            # keep the region: its edges snap inwards to the new binning's grid
+            x, y = -(-roi.x // value) * value, -(-roi.y // value) * value
+            w = (roi.x + roi.width - x) // value * value
+            h = (roi.y + roi.height - y) // value * value
+            with self._grab_paused():
+                try:
+                    self._apply_binning_roi(value, Roi(x, y, max(w, value), max(h, value)))
+                finally:
+                    self._snapshot = self._read_settings()
 
     def _do_get_pixel_format(self) -> PixelFormat:
         return self._snapshot["format"]
@@ -551,7 +554,7 @@ class GenICamCamera(Camera):
         # (well under a millisecond on pylon) next to a move.
         with self._device("invalidate"):
             self._t.stop()
-            self._pending = 0
+            self._pending.clear()
             self._t.start(self._buffers)
 
     def _do_trigger(self) -> None:
@@ -562,35 +565,41 @@ class GenICamCamera(Camera):
                     f"a software trigger is refused in {mode.value} mode", device=self.name,
                     command="trigger", hint="set trigger_mode = 'software' first")
             self._send_trigger()
-            self._pending += 1
+            self._pending.append(self._grab("trigger", 2.0 + 2.0 * self._exposure_s()))
 
     def _send_trigger(self) -> None:
         self._t.wait_trigger_ready(TRIGGER_READY_S + self._snapshot["exposure_us"] * 1e-6)
         self._t.execute("TriggerSoftware")
 
+    def _exposure_s(self) -> float:
+        return self._snapshot["exposure_us"] * 1e-6
+
     def _do_acquire_one(self, timeout: float) -> Frame:
         with self._device("acquire"):
-            snap = self._snapshot
-            mode = snap["trigger"]
-            if mode is TriggerMode.SOFTWARE:
-                if self._pending:
-                    self._pending -= 1
-                else:
-                    self._send_trigger()
-            try:
-                grabbed = self._t.retrieve(timeout)
-            except DeviceTimeout as err:
-                if mode is TriggerMode.HARDWARE:
-                    raise DeviceTimeout(
-                        f"no frame within {timeout:g} s: no trigger pulse on "
-                        f"{self._hardware_line}?", device=self.name, command="acquire",
-                        hint="check the trigger cable and the pulse source, or use "
-                        "trigger_mode 'software'") from err
-                raise DeviceTimeout(f"no frame within {timeout:g} s", device=self.name,
-                                    command="acquire", hint=err.hint) from err
-            stamp = time.time()
-            index = self._index
-            self._index += 1
+            if self._pending:
+                return self._pending.popleft()
+            if self._snapshot["trigger"] is TriggerMode.SOFTWARE:
+                self._send_trigger()
+            return self._grab("acquire", timeout)
+
+    def _grab(self, command: str, timeout: float) -> Frame:
+        """The next frame from the transport as a :class:`Frame` (lock held)."""
+        snap = self._snapshot
+        mode = snap["trigger"]
+        try:
+            grabbed = self._t.retrieve(timeout)
+        except DeviceTimeout as err:
+            if mode is TriggerMode.HARDWARE:
+                raise DeviceTimeout(
+                    f"no frame within {timeout:g} s: no trigger pulse on "
+                    f"{self._hardware_line}?", device=self.name, command=command,
+                    hint="check the trigger cable and the pulse source, or use "
+                    "trigger_mode 'software'") from err
+            raise DeviceTimeout(f"no frame within {timeout:g} s", device=self.name,
+                                command=command, hint=err.hint) from err
+        stamp = time.time()
+        index = self._index
+        self._index += 1
         fmt, b = snap["format"], snap["binning"]
         chunks = grabbed.chunks
         exposure = chunks.get("ExposureTime", snap["exposure_us"])

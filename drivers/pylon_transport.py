@@ -28,6 +28,7 @@ What is pylon-specific, and therefore here:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from typing import Any
@@ -143,10 +144,9 @@ class PylonTransport(GenICamTransport):
     def reconnect(self) -> None:
         old, self._cam = self._cam, None
         if old is not None:
-            try:
-                old.DestroyDevice()  # closes it and frees pylon's handle on the lost device
-            except self._genicam.GenericException:
-                pass
+            # closes it and frees pylon's handle on the lost device
+            with contextlib.suppress(self._genicam.GenericException):
+                old.DestroyDevice()
         self._cam = self._open()
 
     def is_removed(self) -> bool:
@@ -174,10 +174,7 @@ class PylonTransport(GenICamTransport):
         except g.GenericException as err:
             text = _first_line(err)
             if self._cam.IsCameraDeviceRemoved():
-                raise ConnectionFailed(
-                    f"the camera (s/n {self.serial}) was removed", device=self.name,
-                    command=what, hint="plug it back in; the next operation reopens it"
-                ) from err
+                raise self._removed(what) from err
             if isinstance(err, g.TimeoutException):
                 raise DeviceTimeout(text, device=self.name, command=what) from err
             if isinstance(err, g.OutOfRangeException):
@@ -190,6 +187,11 @@ class PylonTransport(GenICamTransport):
                 raise UnsupportedFeature(f"not available on this camera: {text}",
                                          device=self.name, command=what) from err
             raise ControllerError(text, device=self.name, command=what) from err
+
+    def _removed(self, what: str) -> ConnectionFailed:
+        return ConnectionFailed(
+            "the camera was removed", device=self.name, command=what,
+            hint=f"plug it back in (s/n {self.serial}); the next operation reopens it")
 
     def _node(self, feature: str):
         nodemap = self._call(feature, self._cam.GetNodeMap)
@@ -248,9 +250,7 @@ class PylonTransport(GenICamTransport):
         low = self._call(feature, node.GetMin)
         high = self._call(feature, node.GetMax)
         inc = 0.0
-        if isinstance(node, self._genicam.IInteger):
-            inc = float(self._call(feature, node.GetInc))
-        elif self._call(feature, node.HasInc):
+        if isinstance(node, self._genicam.IInteger) or self._call(feature, node.HasInc):
             inc = float(self._call(feature, node.GetInc))
         return float(low), float(high), inc
 
@@ -288,9 +288,7 @@ class PylonTransport(GenICamTransport):
                             pylon.TimeoutHandling_Return)
         if result is None or not result.IsValid():
             if self._cam.IsCameraDeviceRemoved():
-                raise ConnectionFailed(f"the camera (s/n {self.serial}) was removed",
-                                       device=self.name, command="RetrieveResult",
-                                       hint="plug it back in; the next operation reopens it")
+                raise self._removed("RetrieveResult")
             raise DeviceTimeout(f"no frame within {timeout:g} s", device=self.name,
                                 command="RetrieveResult")
         try:

@@ -50,6 +50,13 @@ def flat_bench(radiance: float) -> VirtualBench:
 
 
 class TestSimulatedCameraContract(CameraContract):
+    def change_scene(self, camera):
+        camera.world.update_source(on=False)  # the lit sample goes dark
+
+    def stop_frames(self, camera):
+        camera.realtime = True  # exposures take wall time: 5 s is past any short timeout
+        camera.exposure_us = 5e6
+
     @pytest.fixture
     def camera_factory(self):
         opened = []
