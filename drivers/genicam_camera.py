@@ -225,6 +225,7 @@ class GenICamCamera(Camera):
         self._index = 0
         self._pending: deque[Frame] = deque()  # software-triggered frames
         self._lost: ConnectionFailed | None = None
+        self._loss_reported = True
         try:
             self._configure_fixed()
             fmt = pixel_format or self._format_from_camera()
@@ -319,18 +320,22 @@ class GenICamCamera(Camera):
         transport says it is gone."""
         with self._lock:
             if self._lost is not None:
+                if not self._loss_reported:  # noticed by invalidate(): say so once
+                    self._loss_reported = True
+                    raise ConnectionFailed(self._lost.message, device=self.name,
+                                           command=command, hint=self._lost.hint)
                 self._reconnect()
             try:
                 yield
             except ConnectionFailed as err:
-                self._lost = err
+                self._lost, self._loss_reported = err, True
                 raise
             except DeviceError as err:
                 if self._t.is_removed():
-                    self._lost = ConnectionFailed(
+                    self._lost, self._loss_reported = ConnectionFailed(
                         "the camera was removed", device=self.name, command=command,
-                        hint=f"reconnect it (s/n {self._t.serial}); the next operation "
-                        "reopens it")
+                        hint=f"plug it back in (s/n {self._t.serial}); the next operation "
+                        "reopens it"), True
                     raise self._lost from err
                 raise
 
@@ -552,10 +557,18 @@ class GenICamCamera(Camera):
     def _do_invalidate(self) -> None:
         # Restarting the grab discards queued buffers and the exposure in flight; cheap
         # (well under a millisecond on pylon) next to a move.
-        with self._device("invalidate"):
-            self._t.stop()
+        try:
+            with self._device("invalidate"):
+                self._t.stop()
+                self._pending.clear()
+                self._t.start(self._buffers)
+        except ConnectionFailed:
+            # A camera that is gone holds no stale frame, and the reconnect starts a fresh
+            # grab. The engine invalidates after every move, outside its retry policy: the
+            # loss is reported by the next operation that needs the camera (an acquire,
+            # inside the retry policy), and the one after it reopens the camera.
             self._pending.clear()
-            self._t.start(self._buffers)
+            self._loss_reported = False
 
     def _do_trigger(self) -> None:
         with self._device("trigger"):

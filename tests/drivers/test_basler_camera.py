@@ -247,3 +247,13 @@ def test_frames_rendered_by_the_simulated_camera_arrive_unchanged(tmp_path):
                 got = cam.acquire(1)[0]
                 assert got.data.dtype == rendered.dtype and got.bit_depth == fmt.bit_depth
                 np.testing.assert_array_equal(got.data, rendered)
+
+
+def test_a_loss_seen_by_invalidate_is_reported_by_the_next_acquire(cam):
+    """The engine invalidates after every move, outside its retry policy: a camera removed
+    then says so at the next acquire (inside the policy), and the retry reopens it."""
+    unplug(cam)
+    cam.invalidate()  # nothing stale can come from a camera that is gone: no error here
+    with pytest.raises(ConnectionFailed, match="removed"):
+        cam.acquire(1)
+    assert cam.acquire(1)[0].data.shape == (SMALL.height, SMALL.width)
