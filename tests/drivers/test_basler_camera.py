@@ -257,3 +257,26 @@ def test_a_loss_seen_by_invalidate_is_reported_by_the_next_acquire(cam):
     with pytest.raises(ConnectionFailed, match="removed"):
         cam.acquire(1)
     assert cam.acquire(1)[0].data.shape == (SMALL.height, SMALL.width)
+
+
+@pytest.mark.hardware
+def test_real_basler_camera():
+    """Opt-in: ``SCATTERLAB_HW_BASLER=<serial>``. What the emulation cannot show: device
+    timestamps, chunk exposure where the camera sends chunks, every offered format."""
+    import os
+
+    serial = os.environ.get("SCATTERLAB_HW_BASLER")
+    if not serial:
+        pytest.skip("set SCATTERLAB_HW_BASLER to the camera's serial number to run")
+    with open_basler_camera(serial, name="hw_basler") as cam:
+        assert cam.identity.serial == serial and cam.identity.vendor == "Basler"
+        low, high = cam.exposure_range_us
+        cam.exposure_us = min(max(1000.0, low), high)
+        for fmt in cam.pixel_formats:
+            cam.pixel_format = fmt
+            frames = cam.acquire(2)
+            assert all(f.bit_depth == fmt.bit_depth for f in frames)
+            assert int(frames[-1].data.max()) <= 2**fmt.bit_depth - 1
+            assert frames[1].metadata["device_timestamp"] >= frames[0].metadata[
+                "device_timestamp"]
+        assert cam.buffer_counts()["ready"] == 0
