@@ -23,6 +23,21 @@ from drivers.base import Camera, PixelFormat, Roi
 from drivers.errors import DeviceTimeout, StateError, UnsupportedFeature
 
 
+def closing_factory(make):
+    """A ``camera_factory`` fixture body: ``make`` wrapped so that every camera it opened is
+    closed at teardown (``yield from closing_factory(make)``)."""
+    opened = []
+
+    def factory():
+        cam = make()
+        opened.append(cam)
+        return cam
+
+    yield factory
+    for cam in opened:
+        cam.close()
+
+
 class CameraContract:
     """Mixin of contract tests; needs a ``camera_factory`` fixture.
 

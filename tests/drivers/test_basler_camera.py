@@ -26,7 +26,7 @@ from tests.drivers.basler_emulation import (
     unplug,
     write_frame_file,
 )
-from tests.drivers.camera_contract import CameraContract
+from tests.drivers.camera_contract import CameraContract, closing_factory
 
 require_pylon()
 
@@ -56,16 +56,7 @@ class TestBaslerEmulationContract(CameraContract):
 
     @pytest.fixture
     def camera_factory(self):
-        opened = []
-
-        def make():
-            camera = open_emulated(ring_capacity=4)
-            opened.append(camera)
-            return camera
-
-        yield make
-        for camera in opened:
-            camera.close()
+        yield from closing_factory(lambda: open_emulated(ring_capacity=4))
 
 
 def test_identity_from_the_device():

@@ -18,12 +18,16 @@ require_pylon()
 T = 60000  # ms: bounds a hang only
 
 
-def test_the_basler_panel_shows_and_sets_the_cameras_settings(qtbot, make_window,
-                                                              fast_bench_file):
+def open_panel(qtbot, make_window, fast_bench_file):
+    """The main window on sim-basler, connected: (session, the camera's panel, camera)."""
     w = make_window(fast_bench_file("sim-basler"))
     connect(qtbot, w, timeout=T)
-    session, panel = w.session, w.bench_panel.panels["camera"]
-    cam = session._bench.devices["camera"]
+    return w.session, w.bench_panel.panels["camera"], w.session._bench.devices["camera"]
+
+
+def test_the_basler_panel_shows_and_sets_the_cameras_settings(qtbot, make_window,
+                                                              fast_bench_file):
+    session, panel, cam = open_panel(qtbot, make_window, fast_bench_file)
     assert isinstance(panel, GenICamCameraPanel)
     assert kind_of(cam).name == "genicam_camera" and is_camera_kind("genicam_camera")
     # what the camera offers, from its node map
@@ -62,10 +66,7 @@ def test_the_basler_panel_shows_and_sets_the_cameras_settings(qtbot, make_window
 
 def test_a_setting_the_camera_refuses_shows_the_drivers_error(qtbot, make_window,
                                                               fast_bench_file):
-    w = make_window(fast_bench_file("sim-basler"))
-    connect(qtbot, w, timeout=T)
-    session, panel = w.session, w.bench_panel.panels["camera"]
-    cam = session._bench.devices["camera"]
+    session, panel, cam = open_panel(qtbot, make_window, fast_bench_file)
     before = cam.exposure_us
     panel.new_exposure.setValue(30e6)  # past the node map's 10 s
     panel.findChild(type(panel.reconnect), "set_exposure_us").click()
