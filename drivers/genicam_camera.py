@@ -340,8 +340,9 @@ class GenICamCamera(Camera):
                 raise
 
     def _reconnect(self) -> None:
+        """Reopen by serial and reapply the settings; the camera counts as lost until all
+        of it succeeded (a failure midway is retried whole by the next operation)."""
         self._t.reconnect()
-        self._lost = None
         self._pending.clear()
         snap = self._snapshot
         self._configure_fixed()
@@ -355,6 +356,7 @@ class GenICamCamera(Camera):
         self._set_trigger(snap["trigger"])
         self._snapshot = self._read_settings()
         self._t.start(self._buffers)
+        self._lost = None
 
     @contextmanager
     def _grab_paused(self) -> Iterator[None]:

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 from instrument.bench.devices import open_bench
@@ -79,3 +80,15 @@ def test_a_camera_removed_mid_run_is_retried_and_reopened_by_serial(bench, tmp_p
     _attrs, shape, (status, log) = _camera_attrs(engine.store.path)
     assert set(status) == {0} and shape[0] == len(plan.points)  # every point taken
     assert any(e["kind"] == "fault" and e["device"] == "camera" for e in log)
+
+
+def test_the_run_file_holds_the_exposure_the_camera_took(bench, tmp_path):
+    """The emulated camera takes whole microseconds: a plan's 1000.4 µs is stored as the
+    1000 µs the frames were exposed for (the signal is divided by it)."""
+    text = inplane_plan(step=60.0).replace("exposure_us = 1000", "exposure_us = 1000.4")
+    engine, plan, _ = _run(bench, text, tmp_path)
+    with h5py.File(engine.store.path) as f:
+        taken = f["entry/data/frame_exposure_us"][:]
+        planned = f["entry/plan/planned_exposure_us"][:]
+    assert len(taken) == len(plan.points) and set(taken) == {1000.0}
+    assert set(planned[~np.isnan(planned)]) <= {1000.4}
