@@ -81,3 +81,17 @@ def test_a_setting_the_camera_refuses_shows_the_drivers_error(qtbot, make_window
     session.submit(Action("camera", "set_bit_depth", (14,)))
     qtbot.waitUntil(lambda: "no mono format of 14 bits" in panel.outcome.text(), timeout=T)
     assert cam.bit_depth == 12
+
+
+
+def test_the_camera_view_streams_the_basler_camera(qtbot, make_window, fast_bench_file):
+    w = make_window(fast_bench_file("sim-basler"))
+    connect(qtbot, w, timeout=T)
+    view = w.camera
+    qtbot.waitUntil(lambda: view.role == "camera", timeout=T)  # found by its kind's ABC
+    view.stream.click()
+    qtbot.waitUntil(lambda: view.shown >= 3, timeout=T)
+    frame = view.last_frame
+    assert frame.data.shape == (1040, 1024) and frame.saturation_dn == 4095  # Mono12
+    view.stream.click()
+    qtbot.waitUntil(lambda: not w.session.states()["camera"].value("streaming"), timeout=T)
