@@ -216,7 +216,8 @@ class GenICamCamera(Camera):
         ring_capacity: int = 16,
     ) -> None:
         super().__init__(name, ring_capacity=ring_capacity)
-        if int(buffers) != buffers or buffers < 1:
+        if isinstance(buffers, bool) or int(buffers) != buffers or buffers < 1:
+            transport.close()  # the camera owns it from here: nothing stays open
             raise ValueError(f"{name}: buffers must be a positive integer, got {buffers}")
         self._t = transport
         self._lock = threading.RLock()

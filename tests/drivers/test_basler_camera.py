@@ -271,3 +271,12 @@ def test_real_basler_camera():
             assert frames[1].metadata["device_timestamp"] >= frames[0].metadata[
                 "device_timestamp"]
         assert cam.buffer_counts()["ready"] == 0
+
+
+def test_a_failed_open_leaves_the_camera_free():
+    with pytest.raises(ValueError):
+        open_basler_camera(EMULATED_SERIAL, name="cam", emulation=True, buffers=0)
+    with pytest.raises(ValueError):
+        open_basler_camera(EMULATED_SERIAL, name="cam", emulation=True, trigger_mode="often")
+    with open_emulated() as cam:  # not held by the failed attempts
+        assert cam.acquire(1)[0].data.shape == (SMALL.height, SMALL.width)
