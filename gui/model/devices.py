@@ -33,6 +33,7 @@ from drivers.base import (
     LightSource,
     LockIn,
     MotionAxis,
+    PixelFormat,
     PowerMeter,
     ReferenceSource,
     Shutter,
@@ -40,6 +41,7 @@ from drivers.base import (
     WheelSpeed,
 )
 from drivers.errors import ConnectionFailed, DeviceError
+from drivers.genicam_camera import GenICamCamera, TriggerMode
 
 __all__ = [
     "AUTO_RANGE_TIMEOUT_S",
@@ -47,6 +49,7 @@ __all__ = [
     "DeviceKind",
     "DeviceState",
     "axis_status_values",
+    "is_camera_kind",
     "kind_of",
     "kinds",
     "read_state",
@@ -120,6 +123,11 @@ def kind_of(device: Device) -> DeviceKind | None:
         return None
     mro = type(device).__mro__
     return min(matches, key=lambda kind: mro.index(kind.base))
+
+
+def is_camera_kind(name: str) -> bool:
+    """Whether the registered kind ``name`` is a camera (the camera view shows it)."""
+    return any(k.name == name and issubclass(k.base, Camera) for k in _KINDS)
 
 
 def identity_info(device: Device) -> dict[str, Any]:
@@ -217,6 +225,41 @@ register_kind(DeviceKind("camera", "Camera", Camera, _camera_info, _camera_value
                          poll_s=1.0, settings=("exposure_us", "gain")))
 register_kind(DeviceKind("light_source", "Light source", LightSource, _source_info,
                          _source_values, poll_s=0.5, settings=("power_w",)))
+
+
+# A GenICam camera (the Basler driver, ADR 0096) is a camera with more to set: its bit
+# depth (pixel format), trigger mode and black level, within what its node map offers.
+
+
+def _genicam_info(cam: GenICamCamera) -> dict[str, Any]:
+    return {**_camera_info(cam),
+            "bit_depths": tuple(f.bit_depth for f in cam.pixel_formats),
+            "trigger_modes": tuple(m.value for m in TriggerMode),
+            "hardware_line": cam.hardware_line,
+            "black_level_range": tuple(cam.black_level_range)}
+
+
+def _genicam_values(cam: GenICamCamera) -> dict[str, Any]:
+    return {**_camera_values(cam), "bit_depth": cam.bit_depth,
+            "trigger_mode": cam.trigger_mode.value, "black_level": cam.black_level}
+
+
+def _set_bit_depth(cam: GenICamCamera, bits: Any) -> None:
+    """Choose the mono pixel format of ``bits`` significant bits (8, 10, 12, 16)."""
+    if isinstance(bits, bool) or not isinstance(bits, int | float) or bits != int(bits):
+        raise TypeError(f"{cam.name}: a bit depth is an integer, got {bits!r}")
+    try:
+        fmt = PixelFormat(int(bits))
+    except ValueError:
+        raise ValueError(f"{cam.name}: no mono format of {bits} bits (8, 10, 12 or 16)"
+                         ) from None
+    cam.pixel_format = fmt  # the driver refuses a format the camera lacks, in its words
+
+
+register_kind(DeviceKind("genicam_camera", "GenICam camera", GenICamCamera, _genicam_info,
+                         _genicam_values, poll_s=1.0,
+                         settings=("exposure_us", "gain", "trigger_mode", "black_level"),
+                         actions={"set_bit_depth": _set_bit_depth}))
 
 
 # The lock-in, the shutter and the filter wheel (issue 15). What their values mean and how

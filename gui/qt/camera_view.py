@@ -29,7 +29,7 @@ from PySide6.QtWidgets import (
 
 from gui.model import format as fmt
 from gui.model.camera import RoiBox, save_frame
-from gui.model.devices import DeviceState
+from gui.model.devices import DeviceState, is_camera_kind
 from gui.model.session import (
     BenchSession,
     CommandResult,
@@ -183,7 +183,7 @@ class CameraView(QWidget):
             self._roi_moved()
 
     def on_states(self, states: dict[str, DeviceState]) -> None:
-        cams = [(r, s) for r, s in states.items() if s.kind == "camera"]
+        cams = [(r, s) for r, s in states.items() if is_camera_kind(s.kind)]
         if cams:
             self.set_camera(*cams[0])
         elif self.role is not None:

@@ -372,6 +372,85 @@ class CameraPanel(DevicePanel):
                                     good=False))
 
 
+class GenICamCameraPanel(CameraPanel):
+    """A GenICam camera (Basler): besides the camera summary, its exposure, gain, bit depth,
+    trigger mode and black level, each shown as read back and set through the driver; a
+    value the camera refuses leaves the driver's own words under the panel."""
+
+    def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
+                 ) -> None:
+        super().__init__(role, session, parent)
+        # The fields' ranges are wide: the driver checks against the camera's node map
+        # and its refusal is shown (as an axis target's range leaves it to the guard).
+        self.new_exposure = spin_box(0.001, 60e6, 3, 1000.0, "µs")
+        self.new_exposure.setObjectName("new_exposure")
+        self.new_gain = spin_box(-100.0, 100.0, 2, 0.0, "dB")
+        self.new_gain.setObjectName("new_gain")
+        self.new_black = spin_box(-1e5, 1e5, 2, 0.0)
+        self.new_black.setObjectName("new_black_level")
+        self.bit_depth = QComboBox()
+        self.bit_depth.setObjectName("bit_depth")
+        self.bit_depth.setToolTip("the camera's pixel format: Mono8, Mono10, Mono12, Mono16")
+        self.trigger = QComboBox()
+        self.trigger.setObjectName("trigger_mode")
+        self.trigger.setToolTip("software: one trigger per frame (each exposure starts after "
+                                "the call); hardware: the frame waits for a pulse on the "
+                                "input line; free run: the camera exposes continuously")
+        self.fields: dict[str, tuple[SetpointField, QDoubleSpinBox]] = {}
+        form = QFormLayout()
+        form.setContentsMargins(0, 0, 0, 0)
+        for name, label, box in (("exposure_us", "exposure", self.new_exposure),
+                                 ("gain", "gain", self.new_gain),
+                                 ("black_level", "black level", self.new_black)):
+            field = SetpointField(box, label)
+            button = QPushButton("Set")
+            button.setObjectName(f"set_{name}")
+            button.clicked.connect(lambda _=False, n=name, b=box: self.session.submit(
+                SetSetting(self.role, n, b.value())))
+            row = QHBoxLayout()
+            row.addWidget(box, 1)
+            row.addWidget(button)
+            form.addRow(label, row)
+            self.fields[name] = (field, box)
+            self.controls(box, button)
+        form.addRow("bit depth", self.bit_depth)
+        form.addRow("trigger", self.trigger)
+        self.body.layout().addLayout(form)
+        self.bit_depth.activated.connect(lambda k: self.session.submit(
+            Action(self.role, "set_bit_depth", (self.bit_depth.itemData(k),))))
+        self.trigger.activated.connect(lambda k: self.session.submit(
+            SetSetting(self.role, "trigger_mode", self.trigger.itemData(k))))
+        self.controls(self.bit_depth, self.trigger)
+        self._choices: tuple = ()
+
+    def show_state(self, state: DeviceState) -> None:
+        super().show_state(state)
+        v, info = state.values, state.info
+        choices = (tuple(info.get("bit_depths", ())), tuple(info.get("trigger_modes", ())))
+        if choices != self._choices:
+            self._choices = choices
+            fill(self.bit_depth, [(f"{b}-bit (Mono{b})", b) for b in choices[0]])
+            line = info.get("hardware_line", "")
+            fill(self.trigger, [(_TRIGGER_TEXT.get(m, m).format(line=line), m)
+                                for m in choices[1]])
+        for box, key in ((self.bit_depth, "bit_depth"), (self.trigger, "trigger_mode")):
+            k = box.findData(v.get(key))
+            if k >= 0 and not box.view().isVisible():  # not while choosing
+                box.setCurrentIndex(k)
+        for name, (field, _box) in self.fields.items():
+            field.follow(v.get(name))
+
+    def show_result(self, result: CommandResult) -> None:
+        super().show_result(result)
+        cmd = result.command
+        if isinstance(cmd, SetSetting) and cmd.name in self.fields:
+            self.fields[cmd.name][0].settled()
+
+
+_TRIGGER_TEXT = {"software": "software", "hardware": "hardware ({line})",
+                 "free_run": "free run"}
+
+
 class SourcePanel(DevicePanel):
     """A light source (or a shutter in front of one): on/off."""
 
@@ -631,6 +710,7 @@ def fill(box: QComboBox, items: list[tuple[str, Any]]) -> None:
 
 register_panel("motion_axis", AxisPanel)
 register_panel("camera", CameraPanel)
+register_panel("genicam_camera", GenICamCameraPanel)
 register_panel("light_source", SourcePanel)
 register_panel("power_meter", PowerMeterPanel)
 register_panel("lockin", LockInPanel)

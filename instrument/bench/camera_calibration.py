@@ -18,12 +18,10 @@ from typing import Any
 
 from analysis.brdf.reduction import DetectorNoise
 from instrument.bench.devices import sim_entry_point
+from instrument.bench.profile import CAMERA_DRIVERS
 
 __all__ = ["CAMERA_DRIVERS", "CameraCalibration", "camera_calibration_for", "camera_spec",
            "camera_url", "simulated_camera_calibration"]
-
-#: Drivers whose devices are cameras.
-CAMERA_DRIVERS = ("sim_camera", "opencv_camera")
 
 
 @dataclass(frozen=True)

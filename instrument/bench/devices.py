@@ -148,6 +148,12 @@ def _open_opencv(spec: DeviceSpec) -> Device:
     return OpenCVCamera(spec.url, name=spec.role, **spec.options)
 
 
+def _open_basler(spec: DeviceSpec) -> Device:
+    from drivers.pylon_transport import open_basler_camera
+
+    return open_basler_camera(spec.url, name=spec.role, **spec.options)  # url: the serial
+
+
 def _open_simulated(spec: DeviceSpec) -> Device:
     scheme = _scheme(spec.url)
     if scheme not in ("simcam", "simsource"):
@@ -170,6 +176,7 @@ DRIVERS: dict[str, Callable[[DeviceSpec], Device]] = {
     "sr830": _open_sr830,
     "sc10": _open_sc10,
     "fw102c": _open_fw102c,
+    "basler": _open_basler,
 }
 
 

@@ -14,6 +14,7 @@ Schema (all lengths in mm, angles in degrees)::
     [devices.<role>]                   # one table per device; the key is its role
     driver = "thorlabs_apt"            # see instrument.bench.devices.DRIVERS
     url = "simapt://sample_theta?model=K10CR1"   # device path or pyserial/sim URL
+    serial = "40123456"                # instead of url: a Basler camera's serial number
     stage = "K10CR1"                   # motion drivers: stage model
     limits = [-90.0, 90.0]             # motion: soft limits in axis units
     velocity = 10.0                    # motion: units/s (written to the controller)
@@ -62,6 +63,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -94,7 +96,7 @@ AXIS_ROLES = (
 #: Motion drivers and the kind of axis they drive by default.
 MOTION_DRIVERS = ("thorlabs_apt", "newport_smc100", "zaber")
 OTHER_DRIVERS = ("pm100usb", "opencv_camera", "sim_camera", "sim_source", "sr830", "sc10",
-                 "fw102c")
+                 "fw102c", "basler")
 #: URL schemes of the emulated serial controllers (each a pyserial URL handler in
 #: ``hw_mocks.urlhandler``): registered when a profile uses one, served by ``serve-sim``.
 SIM_SERIAL_SCHEMES = ("simapt", "simsmc", "simzaber", "simsr830", "simsc10", "simfw102c")
@@ -107,7 +109,19 @@ PHOTODIODE_KEYS = {
     "aperture_diameter_mm": (0.01, 1000.0), "distance_mm": (1.0, 1e5),
     "chopper_hz": (0.01, 1e5),
 }
-CAMERA_DRIVERS = ("opencv_camera", "sim_camera")
+CAMERA_DRIVERS = ("opencv_camera", "sim_camera", "basler")
+#: Drivers that find their device by its serial number (``serial``) rather than a ``url``.
+SERIAL_DRIVERS = ("basler",)
+#: A serial number: letters, digits and inner dashes (Basler: 8 digits; its camera
+#: emulation: ``0815-0000``).
+SERIAL_PATTERN = re.compile(r"[A-Za-z0-9]+(-[A-Za-z0-9]+)*")
+#: ``options`` of a Basler camera (drivers.pylon_transport.open_basler_camera): name →
+#: accepted values (a tuple of words, or a type).
+BASLER_OPTIONS: dict[str, Any] = {
+    "emulation": bool, "pixel_format": ("MONO8", "MONO10", "MONO12", "MONO16"),
+    "trigger_mode": ("software", "hardware", "free_run"), "hardware_line": str,
+    "buffers": int,
+}
 #: Camera timing keys (seconds, for duration estimates) and their upper bound.
 CAMERA_TIMING = {"frame_overhead_s": 60.0, "scene_change_s": 600.0}
 ON_FAILURE = ("pause", "skip", "rehome", "abort")
@@ -378,7 +392,7 @@ def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
 
 
 def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
-    known = {"driver", "url", "stage", "limits", "velocity", "acceleration",
+    known = {"driver", "url", "serial", "stage", "limits", "velocity", "acceleration",
              "position_tolerance", "options", "retry", "settle_s", "settings",
              "home_s", "readback_resolution", "repeatability", "relative_noise",
              "noise_floor_w", *CAMERA_TIMING}
@@ -388,9 +402,15 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
         v.error(f"{path}.driver", f"unknown driver {driver!r}; use one of "
                 f"{', '.join(MOTION_DRIVERS + OTHER_DRIVERS)}")
         driver = None
-    url = v.string(t, "url", path, required=True)
-    if url is not None and not url.strip():
-        v.error(f"{path}.url", "must not be empty")
+    if driver in SERIAL_DRIVERS:
+        url = _serial(v, t, path)
+    else:
+        url = v.string(t, "url", path, required=True)
+        if url is not None and not url.strip():
+            v.error(f"{path}.url", "must not be empty")
+        if "serial" in t and driver is not None:
+            v.error(f"{path}.serial", f"only {', '.join(SERIAL_DRIVERS)} cameras take "
+                    "'serial'; other devices are named by their url")
     is_axis = driver in MOTION_DRIVERS
     if is_axis and role not in AXIS_ROLES:
         v.error(path, f"motion driver on unknown role {role!r}; axis roles are "
@@ -433,6 +453,8 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
     if not isinstance(options, dict):
         v.error(f"{path}.options", "must be a table")
         options = {}
+    elif driver == "basler":
+        _basler_options(v, options, f"{path}.options")
     retry = _retry(v, t.get("retry", {}), f"{path}.retry")
     settle = t.get("settle_s", 0.0)
     if not _is_number(settle) or not 0 <= settle <= 10:
@@ -461,12 +483,47 @@ def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
                       timing_declared=frozenset(timing))
 
 
+def _serial(v: _Validator, t: dict, path: str) -> str | None:
+    """The ``serial`` of a device found by serial number (it stands in for the url)."""
+    if "url" in t:
+        v.error(f"{path}.url", "a Basler camera is found by its serial number: give "
+                "serial = \"...\" (on its label, or from scatterlab devices) instead")
+    serial = v.string(t, "serial", path, required=True)
+    if serial is not None and not SERIAL_PATTERN.fullmatch(serial):
+        v.error(f"{path}.serial", f"{serial!r} is not a serial number (letters, digits and "
+                "inner dashes, as on the camera's label)")
+        return None
+    return serial
+
+
+def _basler_options(v: _Validator, options: dict, path: str) -> None:
+    v.unknown(options, path, set(BASLER_OPTIONS))
+    for key, accepted in BASLER_OPTIONS.items():
+        if key not in options:
+            continue
+        value = options[key]
+        if isinstance(accepted, tuple):
+            ok = isinstance(value, str) and value in accepted
+            what = "one of " + ", ".join(repr(a) for a in accepted)
+        elif accepted is int:
+            ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 64
+            what = "an integer from 1 to 64"
+        else:
+            ok = isinstance(value, accepted) and (accepted is not str or bool(value.strip()))
+            what = "true or false" if accepted is bool else "a non-empty string"
+        if not ok:
+            v.error(f"{path}.{key}", f"must be {what}, got {value!r}")
+
+
 #: Settings a profile may apply after opening, per driver: name → (type, low, high).
 DEVICE_SETTINGS: dict[str, dict[str, tuple[type, float, float]]] = {
     "pm100usb": {"wavelength_nm": (float, 100.0, 25000.0), "averaging": (int, 1, 100000),
                  "auto_range": (bool, 0, 1)},
     "sim_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0)},
     "opencv_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 1000.0)},
+    # the camera's node map holds the true limits; the driver checks against them
+    "basler": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0),
+               "black_level": (float, 0.0, 4095.0)},
     "sim_source": {"power_w": (float, 0.0, 10.0)},
     # the SR830's ranges (manual, Rev. 2.5, ch. 5: SENS 2 nV…1 V, OFLT 10 µs…30 ks)
     "sr830": {"time_constant_s": (float, 1e-5, 3e4), "sensitivity_v": (float, 2e-9, 1.0),

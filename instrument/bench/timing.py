@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from urllib.parse import parse_qs, urlsplit
 
 from drivers.base import LockIn
-from instrument.bench.profile import BenchProfile, DeviceSpec
+from instrument.bench.profile import CAMERA_DRIVERS, BenchProfile, DeviceSpec
 from instrument.bench.render_cost import lightfield_render_s
 
 __all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "SIM_APERTURE_INTEGRAL_S", "BenchTiming",
@@ -63,6 +63,9 @@ __all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "SIM_APERTURE_INTEGRAL_S", "Be
 CAMERA_DEFAULTS: dict[str, dict[str, float]] = {
     "sim_camera": {"frame_overhead_s": 0.055, "scene_change_s": 0.32},
     "opencv_camera": {"frame_overhead_s": 1 / 30, "scene_change_s": 2 / 30},
+    # a GenICam camera, software-triggered: one frame period at 50 frames/s (the transfer
+    # of a few-megapixel Mono12 frame over USB3); nothing stale to flush after a change
+    "basler": {"frame_overhead_s": 1 / 50, "scene_change_s": 0.0},
 }
 #: CPU seconds of one scattered-light integral over an emulated detector's aperture on the
 #: simulated goniometer bench, (light on, light off), by the scene's ``brdf`` (the
@@ -184,7 +187,7 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
         home[role] = 0.0 if spec is None else spec.home_s / speed[role]
     assumed: list[str] = []
     camera = next((d for d in profile.devices.values()
-                   if d.driver in ("sim_camera", "opencv_camera")), None)
+                   if d.driver in CAMERA_DRIVERS), None)
     costs = {"frame_overhead_s": 0.0, "scene_change_s": 0.0}
     if camera is not None:
         for key in costs:

@@ -1108,7 +1108,11 @@ class RunEngine:
             data = np.mean([f.data for f in frames], axis=0, dtype=np.float64).astype(np.float32)
         sat = frames[0].saturation_dn
         saturated = float(np.mean(np.max([f.data for f in frames], axis=0) >= sat))
-        return FrameData(data, float(exposure_us), light, frames[-1].timestamp, saturated)
+        # The exposure the camera took, where it reports one: a GenICam camera rounds a
+        # request to its own step (1 µs, a line time), and the signal is divided by it.
+        taken = frames[0].exposure_us
+        exposure = float(taken) if math.isfinite(taken) else float(exposure_us)
+        return FrameData(data, exposure, light, frames[-1].timestamp, saturated)
 
     def _brackets(self, cam: Camera, policy: AcquisitionPolicy, acq: Acquire
                   ) -> list[FrameData]:

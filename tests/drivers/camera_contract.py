@@ -4,6 +4,12 @@ A driver's test module subclasses :class:`CameraContract` and provides a fixture
 ``camera_factory`` returning a *callable* that opens a fresh camera (closed by the fixture
 afterwards). The source behind it must deliver at least 100 frames; the suite keeps frames
 small and never waits on real exposures longer than a few milliseconds.
+
+Two checks need the test to act on what is in front of the camera, which only the driver's
+own test module knows how to do; it overrides :meth:`CameraContract.change_scene` (the
+simulated camera turns its light off, the emulated Basler switches its test image) and
+:meth:`CameraContract.stop_frames` (no trigger pulse, a recording played to its end).
+Where a source offers neither, the check is skipped with the reason.
 """
 
 from __future__ import annotations
@@ -17,6 +23,21 @@ from drivers.base import Camera, PixelFormat, Roi
 from drivers.errors import DeviceTimeout, StateError, UnsupportedFeature
 
 
+def closing_factory(make):
+    """A ``camera_factory`` fixture body: ``make`` wrapped so that every camera it opened is
+    closed at teardown (``yield from closing_factory(make)``)."""
+    opened = []
+
+    def factory():
+        cam = make()
+        opened.append(cam)
+        return cam
+
+    yield factory
+    for cam in opened:
+        cam.close()
+
+
 class CameraContract:
     """Mixin of contract tests; needs a ``camera_factory`` fixture.
 
@@ -25,6 +46,15 @@ class CameraContract:
     """
 
     finite_source = False
+
+    def change_scene(self, camera: Camera) -> None:
+        """Change what ``camera`` sees, so that its next frames differ in their mean."""
+        pytest.skip("this source has no scene the test can change")
+
+    def stop_frames(self, camera: Camera) -> None:
+        """Put ``camera`` in a state in which no frame comes (no trigger pulse, the end of
+        a recording)."""
+        pytest.skip("this source cannot be made to stop delivering frames")
 
     @pytest.fixture
     def camera(self, camera_factory) -> Camera:
@@ -137,6 +167,21 @@ class CameraContract:
         camera.trigger()
         camera.invalidate()  # discards the triggered frame; acquiring still works
         assert camera.acquire(1)[0].timestamp > after_trigger
+
+    def test_frames_change_when_the_scene_changes(self, camera):
+        """A new scene reaches the next frame: its mean moves by far more than between two
+        frames of the unchanged scene (noise, or a moving test pattern)."""
+        a1, a2 = (f.data.astype(np.float64).mean() for f in camera.acquire(2))
+        self.change_scene(camera)
+        camera.invalidate()
+        b = camera.acquire(1)[0].data.astype(np.float64).mean()
+        assert abs(b - a1) > 10.0 * abs(a2 - a1) and b != a1
+
+    def test_no_frame_within_the_timeout_is_a_device_timeout(self, camera):
+        self.stop_frames(camera)
+        with pytest.raises(DeviceTimeout) as err:
+            camera.acquire(1, timeout=0.3)
+        assert err.value.device == camera.name
 
     # streaming ----------------------------------------------------------------------------
     def test_streaming_fills_a_bounded_ring_and_counts_drops(self, camera):

@@ -48,8 +48,20 @@ def open_png(path: str, **kw) -> OpenCVCamera:
     return OpenCVCamera(path, api_preference=cv2.CAP_IMAGES, **kw)
 
 
+def play_to_end(camera: OpenCVCamera) -> None:
+    """Read a recording until it has no frame left."""
+    for _ in range(N_FRAMES + 1):
+        try:
+            camera.acquire(1)
+        except DeviceTimeout:
+            return
+
+
 class TestPngSequenceContract(CameraContract):
     finite_source = True
+
+    def stop_frames(self, camera):
+        play_to_end(camera)
 
     @pytest.fixture
     def camera_factory(self, png_sequence):
@@ -58,6 +70,9 @@ class TestPngSequenceContract(CameraContract):
 
 class TestVideoContract(CameraContract):
     finite_source = True
+
+    def stop_frames(self, camera):
+        play_to_end(camera)
 
     @pytest.fixture
     def camera_factory(self, grey_video):

@@ -24,7 +24,7 @@ from hw_mocks.sim.camera import OpticsParams, SimulatedCamera, open_from_url
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import SensorParams
 from hw_mocks.sim.world import VirtualBench, configure_world, reset_worlds
-from tests.drivers.camera_contract import CameraContract
+from tests.drivers.camera_contract import CameraContract, closing_factory
 
 SMALL = SensorParams(width=128, height=96)
 
@@ -50,20 +50,22 @@ def flat_bench(radiance: float) -> VirtualBench:
 
 
 class TestSimulatedCameraContract(CameraContract):
+    def change_scene(self, camera):
+        camera.world.update_source(on=False)  # the lit sample goes dark
+
+    def stop_frames(self, camera):
+        camera.realtime = True  # exposures take wall time: 5 s is past any short timeout
+        camera.exposure_us = 5e6
+
     @pytest.fixture
     def camera_factory(self):
-        opened = []
-
         def make():
             cam = SimulatedCamera("cam", world=lit_bench(), seed=3, sensor=SMALL,
                                   ring_capacity=4)
             cam.exposure_us = 200.0
-            opened.append(cam)
             return cam
 
-        yield make
-        for cam in opened:
-            cam.close()
+        yield from closing_factory(make)
 
 
 def test_open_from_url_options():
