@@ -36,6 +36,7 @@ import numpy as np
 
 from drivers.base import LightSource, MotionAxis
 from drivers.errors import DeviceError
+from instrument.bench.device_state import kind_of, read_state, state_message
 from instrument.bench.devices import Bench, open_bench
 from instrument.bench.guard import GuardError
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
@@ -60,6 +61,10 @@ __all__ = ["LEASE_S", "BenchService", "Caller", "ServiceError"]
 LEASE_S = 300.0
 #: Device states are published at most this often (Hz), camera frames at most FRAME_HZ.
 STATE_HZ = 10.0
+#: Device kinds whose whole state (values and settings, ``instrument.bench.device_state``)
+#: the ``devices`` message carries under ``states``, each read at its kind's poll interval
+#: while no run owns the bench (the axes, the light and the camera have their own fields).
+STATE_KINDS = ("lockin", "filter_wheel", "power_meter")
 FRAME_HZ = 2.0
 #: Display frames are decimated to at most this many pixels on their longer side.
 FRAME_MAX_PX = 160
@@ -163,6 +168,8 @@ class BenchService:
         self._display_lock = threading.Lock()
         self._points: list[dict[str, Any]] = []
         self._progress: dict[str, Any] | None = None
+        # role -> (monotonic time read, message); sampler thread only
+        self._states: dict[str, tuple[float, dict[str, Any]]] = {}
         self.interrupted = self.queue.after_restart()
         if connect:
             self.connect(Caller("server", "admin"))
@@ -784,7 +791,9 @@ class BenchService:
         if engine is not None and engine.alive:
             axes = {r: {"position": s.position, "moving": s.is_moving, "homed": s.is_homed}
                     for r, (s, _) in engine.axis_readbacks().items()}
-            return {"axes": axes, "light": None, "owner": "run"}
+            # the engine owns the devices: the states read before the run, with their age
+            return {"axes": axes, "light": None, "owner": "run",
+                    "states": {r: m for r, (_, m) in self._states.items()}}
         if not self._bench_lock.acquire(timeout=0.05):
             return None  # a manual command is talking to the bench: next time
         try:
@@ -807,9 +816,26 @@ class BenchService:
                     camera = {k: (v if math.isfinite(v) else None) for k, v in (
                         ("exposure_us", float(bench.camera.exposure_us)),
                         ("gain", float(bench.camera.gain)))}
-            return {"axes": axes, "light": light, "owner": "idle", "camera": camera}
+            return {"axes": axes, "light": light, "owner": "idle", "camera": camera,
+                    "states": self._poll_states(bench)}
         finally:
             self._bench_lock.release()
+
+    def _poll_states(self, bench: Bench) -> dict[str, dict[str, Any]]:
+        """The :data:`STATE_KINDS` devices' states, each read again once its kind's poll
+        interval has passed (a lock-in's flags latch between reads; its settings are read
+        with every poll, so a change made at the instrument's front panel shows)."""
+        now = time.monotonic()
+        for role, device in bench.devices.items():
+            kind = kind_of(device)
+            if kind is None or kind.name not in STATE_KINDS:
+                continue
+            last = self._states.get(role)
+            if last is not None and now - last[0] < kind.poll_s:
+                continue
+            state = read_state(role, device, with_info=True)
+            self._states[role] = (now, state_message(state, time.time()))
+        return {r: m for r, (_, m) in self._states.items() if r in bench.devices}
 
 
 def _frame_message(index: int, frame: FrameData) -> dict[str, Any]:
