@@ -7,6 +7,10 @@ files). Every wait is on a condition with a generous limit (ADR 0020); no timing
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -18,7 +22,12 @@ from instrument.bench.profile import load_profile
 from instrument.client import BenchClient
 from instrument.server.db import ServerDB
 from instrument.server.keys import KeyStore
-from tests.instrument.server.helpers import ServerProcess, fast_profile_text, plan_text
+from tests.instrument.server.helpers import (
+    ROOT,
+    ServerProcess,
+    fast_profile_text,
+    plan_text,
+)
 
 WAIT_MS = 120_000
 THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
@@ -423,3 +432,22 @@ def test_the_power_meter_panel_shows_the_servers_reading(server, open_window, qt
             nd.bands(nd.state), nd.state.values["position"])
     finally:
         observer.close()
+
+
+@pytest.mark.timeout(600)
+def test_the_first_redraws_import_no_scipy_stats_on_the_gui_thread(server):
+    """The run browser, built on the redraw that first knows the runs folder, imports
+    nothing heavy: the fit's candidate models come from the registry, not from the fit
+    pipeline (which imports scipy.stats, 0.4 s of CPU on the GUI thread). A fresh process,
+    so that what other tests imported does not hide an import."""
+    srv = server()
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen"}
+    out = subprocess.run([sys.executable, "-m", "tests.gui.first_redraw", srv.url],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    found = json.loads(out.stdout.strip().splitlines()[-1])
+    assert found["browser"], "the window never built its run browser"
+    assert not found["stats_before_show"]
+    assert "scipy.stats" not in found["imported"]
+    assert not any(m.startswith("instrument.pipelines.brdf.analyse")
+                   for m in found["imported"])
