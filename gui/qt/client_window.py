@@ -488,14 +488,13 @@ class ClientWindow(QMainWindow):
         run = self.state.run
         if run is None:
             self.run_label.setText("no run")
-            self.progress.setValue(0)
+            self._set_progress(0, 1)
             self.fault_box.hide()
             return
         eta = "" if not math.isfinite(run.eta_s) else f", about {run.eta_s:.0f} s left"
         self.run_label.setText(f"run {run.run_id or Path(run.path).stem} ({run.plan_kind}): "
                                f"{run.state}, {run.n_done} of {run.n_total} points{eta}")
-        self.progress.setMaximum(max(run.n_total, 1))
-        self.progress.setValue(min(run.n_done, max(run.n_total, 1)))
+        self._set_progress(run.n_done, run.n_total)
         fault = run.state == "paused" and "retry" in run.answers
         self.fault_box.setVisible(run.state == "paused")
         self.fault_box.setTitle("A device fault: the run waits for an answer" if fault
@@ -503,6 +502,21 @@ class ClientWindow(QMainWindow):
         self.fault_label.setText(run.pause_reason)
         for b in (self.retry_button, self.skip_button):
             b.setVisible(fault)
+
+    def _set_progress(self, done: int, total: int) -> None:
+        """The progress bar at ``done`` of ``total``, painted with the window's next paint:
+        QProgressBar.setValue repaints at once (synchronously, the window's backing store
+        included) whenever the bar grows by a pixel, which during a fast scan is at every
+        redraw (BENCHMARKS.md gui)."""
+        total = max(total, 1)
+        bar = self.progress
+        if bar.maximum() == total and bar.value() == min(done, total):
+            return
+        bar.setUpdatesEnabled(False)  # repaint() does nothing; update() below is queued
+        bar.setMaximum(total)
+        bar.setValue(min(done, total))
+        bar.setUpdatesEnabled(True)
+        bar.update()
 
     def _refresh_devices(self) -> None:
         s = self.state
