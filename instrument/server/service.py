@@ -168,8 +168,11 @@ class BenchService:
         self._display_lock = threading.Lock()
         self._points: list[dict[str, Any]] = []
         self._progress: dict[str, Any] | None = None
-        # role -> (monotonic time read, message); sampler thread only
+        # STATE_KINDS devices (sampler thread only): role -> (monotonic time read,
+        # message), their static information, and the bench they were read from
         self._states: dict[str, tuple[float, dict[str, Any]]] = {}
+        self._state_info: dict[str, dict[str, Any]] = {}
+        self._states_of: Bench | None = None
         self.interrupted = self.queue.after_restart()
         if connect:
             self.connect(Caller("server", "admin"))
@@ -816,26 +819,44 @@ class BenchService:
                     camera = {k: (v if math.isfinite(v) else None) for k, v in (
                         ("exposure_us", float(bench.camera.exposure_us)),
                         ("gain", float(bench.camera.gain)))}
-            return {"axes": axes, "light": light, "owner": "idle", "camera": camera,
-                    "states": self._poll_states(bench)}
+            state = {"axes": axes, "light": light, "owner": "idle", "camera": camera}
         finally:
             self._bench_lock.release()
+        state["states"] = self._poll_states(bench)
+        return state
 
     def _poll_states(self, bench: Bench) -> dict[str, dict[str, Any]]:
         """The :data:`STATE_KINDS` devices' states, each read again once its kind's poll
-        interval has passed (a lock-in's flags latch between reads; its settings are read
-        with every poll, so a change made at the instrument's front panel shows)."""
-        now = time.monotonic()
+        interval has passed (a lock-in's flags latch between reads; its settings are among
+        the values, so a change made at the instrument's front panel shows); the static
+        information (identity, tables) once per connection. The bench's lock is taken for
+        one device at a time, so that a manual command or Stop all waits for at most one
+        device's read (a lock-in's: a few ms, up to ~0.1 s on a loaded machine)."""
+        if self._states_of is not bench:  # (re)connected: read everything afresh
+            self._states_of = bench
+            self._states.clear()
+            self._state_info.clear()
         for role, device in bench.devices.items():
             kind = kind_of(device)
             if kind is None or kind.name not in STATE_KINDS:
                 continue
             last = self._states.get(role)
-            if last is not None and now - last[0] < kind.poll_s:
+            if last is not None and time.monotonic() - last[0] < kind.poll_s:
                 continue
-            state = read_state(role, device, with_info=True)
-            self._states[role] = (now, state_message(state, time.time()))
-        return {r: m for r, (_, m) in self._states.items() if r in bench.devices}
+            if not self._bench_lock.acquire(timeout=0.05):
+                continue  # a manual command is talking to the bench: next time
+            try:
+                if self.bench is not bench or (self.engine is not None and
+                                               self.engine.alive):
+                    break  # disconnected, or a run took the bench meanwhile
+                info = self._state_info.get(role)
+                state = read_state(role, device, with_info=info is None, info=info)
+            finally:
+                self._bench_lock.release()
+            if info is None and state.error is None:
+                self._state_info[role] = state.info
+            self._states[role] = (time.monotonic(), state_message(state, time.time()))
+        return {r: m for r, (_, m) in self._states.items()}
 
 
 def _frame_message(index: int, frame: FrameData) -> dict[str, Any]:

@@ -307,7 +307,9 @@ def test_the_camera_settings_are_set_through_the_server_between_runs_only(
                     timeout=WAIT_MS)
     assert "between runs" in w.set_gain_button.toolTip()
     w.pause_button.click()  # a paused run keeps the bench: the refusal does not race it
-    qtbot.waitUntil(lambda: w.state.run.state == "paused", timeout=WAIT_MS)
+    # the sampler may say "owner: run" before the run_started message arrives
+    qtbot.waitUntil(lambda: w.state.run is not None and w.state.run.state == "paused",
+                    timeout=WAIT_MS)
     w.set_camera("gain", 3.0)
     qtbot.waitUntil(lambda: len([r for r in w.results if r[0] == "camera gain"]) == 2,
                     timeout=WAIT_MS)
