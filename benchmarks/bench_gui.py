@@ -82,12 +82,21 @@ class Heartbeat:
                 "steady_max_ms": 1e3 * float(steady.max()), "beats": len(t)}
 
 
-def spin(app: QApplication, cond, timeout: float) -> None:
+def spin(app: QApplication, cond, timeout: float, costs: list[float] | None = None
+         ) -> None:
+    """Run the event loop until ``cond()``; ``costs``: append each event-loop pass's CPU
+    time on this thread (``time.thread_time``: its own work, painting included, without
+    the waits for a CPU that a loaded machine adds to wall time)."""
     deadline = time.monotonic() + timeout
     while not cond():
         if time.monotonic() > deadline:
             raise TimeoutError("benchmark step did not finish")
-        app.processEvents()
+        if costs is None:
+            app.processEvents()
+        else:
+            t = time.thread_time()
+            app.processEvents()
+            costs.append(time.thread_time() - t)
         time.sleep(0.001)
 
 
@@ -161,10 +170,14 @@ def _gui_thread_costs(window_cls) -> list[float]:
     return costs
 
 
-def bench_scan_client(app: QApplication, work: Path, n_points: int) -> dict:
-    """The scan in a server process, watched and driven from the client window."""
+def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
+                      stalls: bool = False) -> dict:
+    """The scan in a server process, watched and driven from the client window;
+    ``stalls``: also sample where the GUI thread is when its heartbeat is late
+    (:mod:`benchmarks.gui_stalls`)."""
     import subprocess
 
+    from benchmarks.gui_stalls import StallSampler
     from gui.qt.client_window import ClientWindow
 
     busy = _gui_thread_costs(ClientWindow)
@@ -181,20 +194,29 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int) -> dict:
         spin(app, window.start_queue_button.isEnabled, 60)
         hb = Heartbeat()
         hb.start()
+        sampler = StallSampler(hb.t) if stalls else None
+        if sampler is not None:
+            sampler.start()
         t0 = time.perf_counter()
         window.start_queue_button.click()
         spin(app, lambda: window.state.run is not None and window.state.run.live is not None,
              120)
+        passes: list[float] = []
         spin(app, lambda: window.state.run.state == "finished"
-             and window.state.run.live.n_received >= window.state.run.n_done, 3600)
+             and window.state.run.live.n_received >= window.state.run.n_done, 3600, passes)
         elapsed = time.perf_counter() - t0
         spin(app, lambda: window.plot.n_plotted >= window.state.run.n_done, 30)
         out = hb.stop(settle_s=0.5)
+        if sampler is not None:
+            sampler.stop()
+            out["stalls"] = sampler.report()
         run = window.state.run
         out.update(points=run.n_done, status=run.state, seconds=elapsed,
                    plotted=window.plot.n_plotted, drains=window.link.n_drains,
                    slot_max_ms=1e3 * max(busy), slot_total_s=sum(busy),
-                   slot_p99_ms=1e3 * float(np.percentile(busy, 99)), slots=len(busy))
+                   slot_p99_ms=1e3 * float(np.percentile(busy, 99)), slots=len(busy),
+                   pass_p99_ms=1e3 * float(np.percentile(passes, 99)),
+                   pass_max_ms=1e3 * max(passes), pass_total_s=sum(passes))
         window.close()
         window.deleteLater()
         app.processEvents()
@@ -284,6 +306,8 @@ def main() -> int:
                    help="only the scan, with the engine in a server process")
     p.add_argument("--scan-only", action="store_true",
                    help="only the scan, with the engine in this process (the baseline)")
+    p.add_argument("--stalls", action="store_true",
+                   help="with --server: where the GUI thread is when its heartbeat is late")
     p.add_argument("--serve-ideal", default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.serve_ideal:
@@ -294,7 +318,7 @@ def main() -> int:
     n = 2000 if args.quick else 10_000
     secs = 3.0 if args.quick else 10.0
     if args.server:
-        scan = bench_scan_client(app, work, n)
+        scan = bench_scan_client(app, work, n, stalls=args.stalls)
         print(f"scan (engine in a server process, GUI a client): {scan['points']} points "
               f"({scan['status']}) in {scan['seconds']:.1f} s "
               f"({scan['points'] / scan['seconds']:.0f} points/s), live plot "
@@ -304,7 +328,11 @@ def main() -> int:
               f"{scan['slot_total_s']:.2f} s CPU in all; GUI heartbeat worst "
               f"{scan['max_ms']:.1f} ms (after the first 0.5 s: "
               f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "
-              f"({scan['beats']} beats)")
+              f"({scan['beats']} beats); event-loop passes (painting included) p99 "
+              f"{scan['pass_p99_ms']:.1f} ms, at most {scan['pass_max_ms']:.1f} ms CPU, "
+              f"{scan['pass_total_s']:.2f} s CPU in all")
+        if args.stalls:
+            print(scan["stalls"])
         return 0
     scan = bench_scan(app, work, n)
     print(f"scan: {scan['points']} points ({scan['status']}) in {scan['seconds']:.1f} s "

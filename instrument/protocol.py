@@ -108,8 +108,11 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
     _t("manual", True, "a manual command (home, jog, move, light, camera settings, stop "
        "all) was carried out", who="string", what="string", message="string"),
     _t("devices", False, "device states (at most 10 per second); camera: its exposure_us "
-       "and gain between runs (null during a run, or without a camera)", axes="object",
-       light="boolean|null", owner="string", camera="object|null"),
+       "and gain between runs (null during a run, or without a camera); states: the "
+       "lock-in's, filter wheel's and power meter's state by role (kind, connected, "
+       "values, info: identity and settings' tables, error, read_at: unix s; during a run "
+       "the state read before it)", axes="object",
+       light="boolean|null", owner="string", camera="object|null", states="object"),
     _t("frame", False, "the latest camera frame, decimated for display (8-bit, base64)",
        index="integer", shape="array", scale="number", data="string",
        exposure_us="number|null", saturated="number|null"),

@@ -64,8 +64,8 @@ class FitSettings:
         ValueError
             A value out of range, named by its control in the Analysis tab.
         """
+        from analysis.brdf.registry import default_candidates  # = the fit's DEFAULT_MODELS
         from instrument.batch.analyses import reduction_defaults
-        from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
 
         for label, v in (("Distance (mm)", self.distance_mm),
                          ("Distance uncertainty (mm)", self.distance_u_mm),
@@ -80,7 +80,7 @@ class FitSettings:
                      "receiver_distance_mm": self.distance_mm,
                      "u_distance_mm": self.distance_u_mm,
                      "u_incident_power_rel": self.incident_power_u}
-        return {"reduction": reduction, "models": list(self.models or DEFAULT_MODELS),
+        return {"reduction": reduction, "models": list(self.models or default_candidates()),
                 "criterion": "bic", "run_cv": True, "n_bootstrap": 0}
 
 

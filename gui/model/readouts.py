@@ -1,8 +1,9 @@
 """What the lock-in and shutter panels say, from a polled :class:`DeviceState` (Qt-free).
 
-The values come from :mod:`gui.model.devices` (read on the device worker); this module only
-turns them into the operator's words: the reading, the instrument's range and time-constant
-tables as choices, and what an overload or a lost reference means and what to do about it.
+The values come from :mod:`instrument.bench.device_state` (read on the device worker, or
+by the bench server); this module only turns them into the operator's words: the reading,
+the instrument's range and time-constant tables as choices, and what an overload or a lost
+reference means and what to do about it.
 """
 
 from __future__ import annotations

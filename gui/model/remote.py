@@ -4,8 +4,9 @@ In client mode (docs/decisions/0084) the engine and the bench live in the server
 the GUI holds :class:`RemoteState`, which :meth:`RemoteState.apply` updates from the event
 stream's messages (:mod:`instrument.protocol`) and which the widgets read on a timer. It
 keeps the queue, the current run and its live points (a :class:`gui.model.live.LiveData`,
-so the plots are the same as for a run in this process), device states, the newest
-camera frame, the control lease and a log of lifecycle messages.
+so the plots are the same as for a run in this process), device states (the lock-in's,
+filter wheel's and power meter's as the :class:`DeviceState` the device panels show),
+the newest camera frame, the control lease and a log of lifecycle messages.
 
 Who may do what is decided here too (:meth:`RemoteState.may_operate`), so that the window
 greys exactly the controls the server would refuse and says why: an observer key may only
@@ -25,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from gui.model.live import LiveData
+from instrument.bench.device_state import DeviceState, state_from_message
 from instrument.protocol import Message, role_allows
 from instrument.run.events import PointCompleted
 
@@ -112,6 +114,10 @@ class RemoteState:
         #: The camera's exposure_us and gain between runs (None: during a run, no camera)
         self.camera: dict[str, float | None] | None = None
         self.owner = ""
+        #: The lock-in's, filter wheel's and power meter's states by role; an entry is
+        #: replaced only when the server's message for it changed (the panels redraw then)
+        self.device_states: dict[str, DeviceState] = {}
+        self._device_raw: dict[str, Any] = {}
         self.frame: tuple[int, np.ndarray, float] | None = None
         self.missed: collections.Counter[str] = collections.Counter()
         self.log: collections.deque[str] = collections.deque(maxlen=LOG_LINES)
@@ -307,6 +313,13 @@ class RemoteState:
         self.camera = None if not isinstance(cam, dict) else {
             k: (None if cam.get(k) is None else _num(cam.get(k)))
             for k in ("exposure_us", "gain")}
+        states = d.get("states") or {}
+        for role, raw in states.items():
+            if isinstance(raw, dict) and raw != self._device_raw.get(role):
+                self._device_raw[role] = raw
+                self.device_states[role] = state_from_message(role, raw)
+        for role in set(self.device_states) - set(states):
+            del self.device_states[role], self._device_raw[role]
         return "devices"
 
     def _on_frame(self, msg: Message, d: dict[str, Any]) -> str:

@@ -38,8 +38,8 @@ import numpy as np
 from drivers.base import Camera, Device, LightSource, MotionAxis
 from drivers.errors import DeviceError
 from gui.model.camera import FramePump, FrameSlot
-from gui.model.devices import DeviceState, axis_status_values, kind_of, read_state
 from gui.model.live import LiveData
+from instrument.bench.device_state import DeviceState, axis_status_values, kind_of, read_state
 from instrument.bench.devices import Bench, open_bench, open_device
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
 from instrument.bench.profile import BenchProfile, ProfileError, same_bench

@@ -18,7 +18,6 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from gui.model.devices import DeviceState
 from gui.model.session import (
     BenchSession,
     CommandResult,
@@ -32,6 +31,7 @@ from gui.model.session import (
 )
 from gui.qt.panels import DevicePanel, panel_for
 from gui.qt.wheel import install_wheel_guard
+from instrument.bench.device_state import DeviceState
 from instrument.bench.profile import (
     BenchProfile,
     ProfileError,

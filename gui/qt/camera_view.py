@@ -29,7 +29,6 @@ from PySide6.QtWidgets import (
 
 from gui.model import format as fmt
 from gui.model.camera import RoiBox, save_frame
-from gui.model.devices import DeviceState, is_camera_kind
 from gui.model.session import (
     BenchSession,
     CommandResult,
@@ -41,6 +40,7 @@ from gui.model.session import (
 from gui.qt.background import Background, JobDone
 from gui.qt.panels import spin_box
 from gui.qt.setpoint import SetpointField
+from instrument.bench.device_state import DeviceState, is_camera_kind
 
 __all__ = ["CameraView"]
 

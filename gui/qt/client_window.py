@@ -36,6 +36,7 @@ from PySide6.QtWidgets import (
     QPlainTextEdit,
     QProgressBar,
     QPushButton,
+    QScrollArea,
     QSplitter,
     QTabWidget,
     QVBoxLayout,
@@ -45,7 +46,7 @@ from PySide6.QtWidgets import (
 from gui.qt.background import Background
 from gui.qt.goniometer_view import GoniometerView
 from gui.qt.live_plot import LivePlot
-from gui.qt.panels import spin_box
+from gui.qt.panels import DevicePanel, panel_for, spin_box
 from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_browser import RunBrowser
 from gui.qt.server_link import ServerLink
@@ -57,6 +58,25 @@ __all__ = ["ClientWindow"]
 #: redrawn every PLOT_EVERY-th tick (10 Hz: each redraw repaints its axes).
 REDRAW_HZ = 20
 PLOT_EVERY = 2
+#: Why the device panels' controls are greyed in this window (they show the server's state).
+PANEL_SETTINGS_WHY = ("the server shows this device's state but does not set it yet: change "
+                      "it in the in-process window (scatterlab gui --in-process)")
+
+
+class _PanelSession:
+    """What a device panel (:mod:`gui.qt.panels`) asks of its session, in this window: the
+    bench profile (the filter wheel's bands named in it). Its controls are greyed
+    (:data:`PANEL_SETTINGS_WHY`), so it submits nothing."""
+
+    def __init__(self, window: ClientWindow) -> None:
+        self._window = window
+
+    @property
+    def profile(self):
+        return self._window._validation_profile()
+
+    def submit(self, command) -> None:
+        self._window.log_view.appendPlainText(f"{command}: {PANEL_SETTINGS_WHY}")
 
 
 class ClientWindow(QMainWindow):
@@ -207,6 +227,7 @@ class ClientWindow(QMainWindow):
         self.tabs.addTab(views, "Live")
         self.goniometer = GoniometerView()
         self.tabs.addTab(self.goniometer, "Goniometer")
+        self.tabs.addTab(self._devices_tab(), "Devices")
         self.background = Background(parent=self)
         self.plan_editor = PlanEditor(self.background, self._validation_profile)
         self.plan_editor.start.setText("Queue plan")
@@ -226,6 +247,23 @@ class ClientWindow(QMainWindow):
         cl.addWidget(body, 1)
         self.setCentralWidget(central)
         self.resize(1280, 800)
+
+    def _devices_tab(self) -> QWidget:
+        """The lock-in's, filter wheel's and power meter's panels (the in-process window's
+        panels, fed the server's ``devices`` messages), one added per device the server
+        names."""
+        self.panels: dict[str, DevicePanel] = {}
+        self._panel_session = _PanelSession(self)
+        inner = QWidget()
+        self.panel_layout = QVBoxLayout(inner)
+        self.no_panels = QLabel("the server has named no lock-in, filter wheel or power "
+                                "meter")
+        self.panel_layout.addWidget(self.no_panels)
+        self.panel_layout.addStretch(1)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setWidget(inner)
+        return scroll
 
     def _camera_box(self) -> QWidget:
         """The latest frame with the camera's exposure and gain: fields that follow the
@@ -450,14 +488,13 @@ class ClientWindow(QMainWindow):
         run = self.state.run
         if run is None:
             self.run_label.setText("no run")
-            self.progress.setValue(0)
+            self._set_progress(0, 1)
             self.fault_box.hide()
             return
         eta = "" if not math.isfinite(run.eta_s) else f", about {run.eta_s:.0f} s left"
         self.run_label.setText(f"run {run.run_id or Path(run.path).stem} ({run.plan_kind}): "
                                f"{run.state}, {run.n_done} of {run.n_total} points{eta}")
-        self.progress.setMaximum(max(run.n_total, 1))
-        self.progress.setValue(min(run.n_done, max(run.n_total, 1)))
+        self._set_progress(run.n_done, run.n_total)
         fault = run.state == "paused" and "retry" in run.answers
         self.fault_box.setVisible(run.state == "paused")
         self.fault_box.setTitle("A device fault: the run waits for an answer" if fault
@@ -465,6 +502,21 @@ class ClientWindow(QMainWindow):
         self.fault_label.setText(run.pause_reason)
         for b in (self.retry_button, self.skip_button):
             b.setVisible(fault)
+
+    def _set_progress(self, done: int, total: int) -> None:
+        """The progress bar at ``done`` of ``total``, painted with the window's next paint:
+        QProgressBar.setValue repaints at once (synchronously, the window's backing store
+        included) whenever the bar grows by a pixel, which during a fast scan is at every
+        redraw (BENCHMARKS.md gui)."""
+        total = max(total, 1)
+        bar = self.progress
+        if bar.maximum() == total and bar.value() == min(done, total):
+            return
+        bar.setUpdatesEnabled(False)  # repaint() does nothing; update() below is queued
+        bar.setMaximum(total)
+        bar.setValue(min(done, total))
+        bar.setUpdatesEnabled(True)
+        bar.update()
 
     def _refresh_devices(self) -> None:
         s = self.state
@@ -484,6 +536,23 @@ class ClientWindow(QMainWindow):
         for name, field in self.camera_fields.items():
             field.follow(None if s.camera is None else s.camera.get(name))
         self._refresh_camera_controls()
+        self._refresh_panels()
+
+    def _refresh_panels(self) -> None:
+        """Each panel redraws when its device's state changed; the age of every shown
+        state is kept current (during a run they are the states read before it)."""
+        for role, state in self.state.device_states.items():
+            panel = self.panels.get(role)
+            if panel is None:
+                panel = panel_for(state.kind)(role, self._panel_session)
+                panel.set_read_only(PANEL_SETTINGS_WHY)
+                self.panel_layout.insertWidget(self.panel_layout.count() - 1, panel)
+                self.panels[role] = panel
+                self.no_panels.hide()
+            if panel.state is not state:
+                panel.set_state(state)
+            else:
+                panel.refresh_age()
 
     def _refresh_camera_controls(self) -> None:
         """The camera's settings may change between runs only, by an operator who may

@@ -26,7 +26,11 @@ from gui.model.live import LiveSnapshot, decade_label, log_ticks, plot_kind, sig
 
 __all__ = ["DecadeAxis", "LivePlot"]
 
-#: Plans up to this many points get a marker per point; larger ones lines only.
+#: Plans up to this many points get a marker per point and 2-px lines; larger ones
+#: 1-px lines only: Qt's raster engine draws a 1-px (cosmetic) line several times faster
+#: than a wider one, and each redraw of a 10,000-point in-plane plot repaints every curve
+#: (20 curves of 470 points: 19 ms of CPU per repaint at 2 px, 5.5 ms at 1 px;
+#: BENCHMARKS.md gui).
 MARKERS_UP_TO = 600
 PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#4e342e",
            "#ad1457"]
@@ -68,7 +72,8 @@ class LivePlot(QWidget):
         self.in_plane.setLabel("left", "signal (DN/µs)")
         self.in_plane.getAxis("left").enableAutoSIPrefix(False)
         self.in_plane.setLogMode(y=True)
-        self.in_plane.showGrid(x=True, y=True, alpha=0.3)
+        self._grid = False
+        self._set_grid(True)
         # the legend is a label beside the plot, not an item on it: it never covers data
         self.in_plane_legend = QLabel("")
         self.in_plane_legend.setObjectName("in_plane_legend")
@@ -130,6 +135,15 @@ class LivePlot(QWidget):
         lay.addWidget(self.caption)
         lay.addWidget(self.stack, 1)
 
+    def _set_grid(self, on: bool) -> None:
+        """The in-plane plot's grid, for plans up to :data:`MARKERS_UP_TO` points. The
+        axes draw the grid across the whole view, so with it every curve's redraw repaints
+        both axes too, their tick labels included (6.5 ms of CPU per axis and repaint on
+        the 10,000-point scan, BENCHMARKS.md gui); without it an axis repaints only when
+        its range changes."""
+        self._grid = on
+        self.in_plane.showGrid(x=on, y=on, alpha=0.3)
+
     def start(self, plan_kind: str) -> None:
         """A new run of ``plan_kind``: pick its picture and clear it."""
         self.kind = plot_kind(plan_kind)
@@ -179,6 +193,8 @@ class LivePlot(QWidget):
         plotted = 0
         # markers cost a paint per point: above a few hundred points lines alone
         markers = snap.n_total <= MARKERS_UP_TO
+        if markers != self._grid:
+            self._set_grid(markers)
         for k, value in enumerate(sorted(set(ti[sel].tolist()))):
             rows = sel & (ti == value)
             n = int(rows.sum())
@@ -191,7 +207,8 @@ class LivePlot(QWidget):
             if curve is None:
                 colour = PALETTE[k % len(PALETTE)]
                 style = dict(symbol="o", symbolSize=6, symbolBrush=colour) if markers else {}
-                curve = self.in_plane.plot([], [], pen=pg.mkPen(colour, width=2), **style)
+                curve = self.in_plane.plot([], [], pen=pg.mkPen(colour, width=2 if markers
+                                                                else 1), **style)
                 self._legend_rows.append(f"<span style='color:{colour}'>━━</span> "
                                          f"θi = {value:g}°")
                 self.in_plane_legend.setText("<br>".join(self._legend_rows))

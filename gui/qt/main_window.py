@@ -39,7 +39,6 @@ from PySide6.QtWidgets import (
 )
 
 from gui.model.analyses import resume_refusal
-from gui.model.devices import DeviceState
 from gui.model.remedies import event_for_gui, for_gui
 from gui.model.session import (
     BenchSession,
@@ -64,6 +63,7 @@ from gui.qt.plan_editor import PlanEditor
 from gui.qt.run_browser import RunBrowser
 from gui.qt.run_control import FaultPanel, RunControl
 from gui.qt.wheel import install_wheel_guard
+from instrument.bench.device_state import DeviceState
 from instrument.bench.profile import ProfileError, load_profile, parse_profile
 
 __all__ = ["SHORTCUTS", "MainWindow", "homed_positions", "unhomed_axes"]

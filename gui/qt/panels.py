@@ -1,12 +1,12 @@
 """Device panels, one class per device kind, chosen from a kind → panel registry.
 
-A panel shows one device's :class:`gui.model.devices.DeviceState` (identity, state flags,
-live values) and turns the operator's clicks into session commands; it never calls a
+A panel shows one device's :class:`instrument.bench.device_state.DeviceState` (identity,
+state flags, live values) and turns the operator's clicks into session commands; it never calls a
 driver. The panel for a device is looked up by its kind's name (``motion_axis``,
 ``camera``, ``light_source``, ``power_meter``); a device of a kind without a panel gets
 :class:`GenericPanel` (identity and raw values).
 
-**Extension point.** A new kind registered in :mod:`gui.model.devices` gets its panel
+**Extension point.** A new kind registered in :mod:`instrument.bench.device_state` gets its panel
 with ``register_panel("lock_in", LockInPanel)``, a :class:`DevicePanel` subclass that
 implements :meth:`DevicePanel.show_state` and sends :class:`gui.model.session.SetSetting`
 or :class:`gui.model.session.Action` commands for its controls.
@@ -35,7 +35,6 @@ from PySide6.QtWidgets import (
 
 from gui.model import filters, readouts
 from gui.model import format as fmt
-from gui.model.devices import AUTO_RANGE_TIMEOUT_S, DeviceState
 from gui.model.session import (
     Action,
     BenchSession,
@@ -49,6 +48,7 @@ from gui.model.session import (
     Stop,
 )
 from gui.qt.setpoint import SetpointField
+from instrument.bench.device_state import AUTO_RANGE_TIMEOUT_S, DeviceState
 
 __all__ = ["DevicePanel", "GenericPanel", "panel_for", "register_panel", "reserve_space",
            "spin_box"]
@@ -165,6 +165,15 @@ class DevicePanel(QGroupBox):
         usable = manual and (self.state is None or self.state.connected)
         for w in self._controls:
             w.setEnabled(usable)
+
+    def set_read_only(self, why: str) -> None:
+        """Show the state only: every control greyed for good, ``why`` its tooltip (the
+        client window's panels, whose device the server reads but does not set)."""
+        self._controls.append(self.reconnect)
+        for w in self._controls:
+            w.setEnabled(False)
+            w.setToolTip(why)
+        self._controls.clear()  # set_owned no longer enables them
 
     def show_state(self, state: DeviceState) -> None:
         """Draw the kind's live values (subclasses)."""

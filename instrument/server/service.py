@@ -36,6 +36,7 @@ import numpy as np
 
 from drivers.base import LightSource, MotionAxis
 from drivers.errors import DeviceError
+from instrument.bench.device_state import kind_of, read_state, state_message
 from instrument.bench.devices import Bench, open_bench
 from instrument.bench.guard import GuardError
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
@@ -60,6 +61,10 @@ __all__ = ["LEASE_S", "BenchService", "Caller", "ServiceError"]
 LEASE_S = 300.0
 #: Device states are published at most this often (Hz), camera frames at most FRAME_HZ.
 STATE_HZ = 10.0
+#: Device kinds whose whole state (values and settings, ``instrument.bench.device_state``)
+#: the ``devices`` message carries under ``states``, each read at its kind's poll interval
+#: while no run owns the bench (the axes, the light and the camera have their own fields).
+STATE_KINDS = ("lockin", "filter_wheel", "power_meter")
 FRAME_HZ = 2.0
 #: Display frames are decimated to at most this many pixels on their longer side.
 FRAME_MAX_PX = 160
@@ -163,6 +168,11 @@ class BenchService:
         self._display_lock = threading.Lock()
         self._points: list[dict[str, Any]] = []
         self._progress: dict[str, Any] | None = None
+        # STATE_KINDS devices (sampler thread only): role -> (monotonic time read,
+        # message), their static information, and the bench they were read from
+        self._states: dict[str, tuple[float, dict[str, Any]]] = {}
+        self._state_info: dict[str, dict[str, Any]] = {}
+        self._states_of: Bench | None = None
         self.interrupted = self.queue.after_restart()
         if connect:
             self.connect(Caller("server", "admin"))
@@ -784,7 +794,9 @@ class BenchService:
         if engine is not None and engine.alive:
             axes = {r: {"position": s.position, "moving": s.is_moving, "homed": s.is_homed}
                     for r, (s, _) in engine.axis_readbacks().items()}
-            return {"axes": axes, "light": None, "owner": "run"}
+            # the engine owns the devices: the states read before the run, with their age
+            return {"axes": axes, "light": None, "owner": "run",
+                    "states": {r: m for r, (_, m) in self._states.items()}}
         if not self._bench_lock.acquire(timeout=0.05):
             return None  # a manual command is talking to the bench: next time
         try:
@@ -807,9 +819,44 @@ class BenchService:
                     camera = {k: (v if math.isfinite(v) else None) for k, v in (
                         ("exposure_us", float(bench.camera.exposure_us)),
                         ("gain", float(bench.camera.gain)))}
-            return {"axes": axes, "light": light, "owner": "idle", "camera": camera}
+            state = {"axes": axes, "light": light, "owner": "idle", "camera": camera}
         finally:
             self._bench_lock.release()
+        state["states"] = self._poll_states(bench)
+        return state
+
+    def _poll_states(self, bench: Bench) -> dict[str, dict[str, Any]]:
+        """The :data:`STATE_KINDS` devices' states, each read again once its kind's poll
+        interval has passed (a lock-in's flags latch between reads; its settings are among
+        the values, so a change made at the instrument's front panel shows); the static
+        information (identity, tables) once per connection. The bench's lock is taken for
+        one device at a time, so that a manual command or Stop all waits for at most one
+        device's read (a lock-in's: a few ms, up to ~0.1 s on a loaded machine)."""
+        if self._states_of is not bench:  # (re)connected: read everything afresh
+            self._states_of = bench
+            self._states.clear()
+            self._state_info.clear()
+        for role, device in bench.devices.items():
+            kind = kind_of(device)
+            if kind is None or kind.name not in STATE_KINDS:
+                continue
+            last = self._states.get(role)
+            if last is not None and time.monotonic() - last[0] < kind.poll_s:
+                continue
+            if not self._bench_lock.acquire(timeout=0.05):
+                continue  # a manual command is talking to the bench: next time
+            try:
+                if self.bench is not bench or (self.engine is not None and
+                                               self.engine.alive):
+                    break  # disconnected, or a run took the bench meanwhile
+                info = self._state_info.get(role)
+                state = read_state(role, device, with_info=info is None, info=info)
+            finally:
+                self._bench_lock.release()
+            if info is None and state.error is None:
+                self._state_info[role] = state.info
+            self._states[role] = (time.monotonic(), state_message(state, time.time()))
+        return {r: m for r, (_, m) in self._states.items()}
 
 
 def _frame_message(index: int, frame: FrameData) -> dict[str, Any]:

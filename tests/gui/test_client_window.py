@@ -7,12 +7,27 @@ files). Every wait is on a condition with a generous limit (ADR 0020); no timing
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+import threading
+
 import pytest
 
+from gui.model import filters, readouts
+from gui.model import format as fmt
+from instrument.bench.device_state import state_from_message
+from instrument.bench.profile import load_profile
 from instrument.client import BenchClient
 from instrument.server.db import ServerDB
 from instrument.server.keys import KeyStore
-from tests.instrument.server.helpers import ServerProcess, fast_profile_text, plan_text
+from tests.instrument.server.helpers import (
+    ROOT,
+    ServerProcess,
+    fast_profile_text,
+    plan_text,
+)
 
 WAIT_MS = 120_000
 THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
@@ -22,9 +37,12 @@ THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
 def server(tmp_path):
     started: list[ServerProcess] = []
 
-    def start(*, fault: str | None = None, pause_on_fault: bool = False) -> ServerProcess:
-        bench = tmp_path / "sim-fast.toml"
-        bench.write_text(fast_profile_text(pause_on_detector_fault=pause_on_fault),
+    def start(*, fault: str | None = None, pause_on_fault: bool = False,
+              profile: str | None = None) -> ServerProcess:
+        """``profile``: a built-in bench as it is (else the fast sim bench)."""
+        bench = tmp_path / f"{profile or 'sim-fast'}.toml"
+        bench.write_text(load_profile(profile).source_text if profile else
+                         fast_profile_text(pause_on_detector_fault=pause_on_fault),
                          encoding="utf-8")
         env = {"SCATTERLAB_TEST_FAULT": fault} if fault else None
         s = ServerProcess(bench, tmp_path / "runs", env=env)
@@ -289,7 +307,9 @@ def test_the_camera_settings_are_set_through_the_server_between_runs_only(
                     timeout=WAIT_MS)
     assert "between runs" in w.set_gain_button.toolTip()
     w.pause_button.click()  # a paused run keeps the bench: the refusal does not race it
-    qtbot.waitUntil(lambda: w.state.run.state == "paused", timeout=WAIT_MS)
+    # the sampler may say "owner: run" before the run_started message arrives
+    qtbot.waitUntil(lambda: w.state.run is not None and w.state.run.state == "paused",
+                    timeout=WAIT_MS)
     w.set_camera("gain", 3.0)
     qtbot.waitUntil(lambda: len([r for r in w.results if r[0] == "camera gain"]) == 2,
                     timeout=WAIT_MS)
@@ -321,3 +341,115 @@ def test_a_server_bench_profile_unreadable_here_leaves_the_drawing_empty_saying_
         assert "detector_theta" in w.axis_rows  # the other tabs work
     finally:
         w.close()
+
+
+# the device panels ---------------------------------------------------------------------
+class _Observer:
+    """An independent client of the event stream that keeps every ``states`` entry the
+    server published, by role: what the server said, to compare the window with."""
+
+    def __init__(self, url: str) -> None:
+        self.seen: dict[str, list[dict]] = {}
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._client = BenchClient(url)
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+        assert self._ready.wait(60)
+
+    def _read(self) -> None:
+        with self._client.open_events(open_timeout_s=60) as stream:
+            self._ready.set()
+            while not self._stop.is_set():
+                msg = stream.recv(timeout_s=0.2)
+                if msg is not None and msg.type == "devices":
+                    for role, raw in (msg.data.get("states") or {}).items():
+                        self.seen.setdefault(role, []).append(raw)
+
+    def published(self, role: str, state) -> bool:
+        """Whether the server published ``state`` (the window's) for ``role``."""
+        return any(state_from_message(role, raw).values == state.values
+                   and state_from_message(role, raw).info == state.info
+                   for raw in list(self.seen.get(role, ())))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(60)
+        self._client.close()
+
+
+def _shown(window, qtbot, roles: tuple[str, ...], observer: _Observer) -> None:
+    """Wait until the window has a panel for each role showing a state the server
+    published (the observer saw it too)."""
+    qtbot.waitUntil(lambda: all(
+        r in window.panels and window.panels[r].state is not None
+        and window.panels[r].state is window.state.device_states.get(r)
+        and observer.published(r, window.panels[r].state) for r in roles),
+        timeout=WAIT_MS)
+
+
+@pytest.mark.timeout(600)
+def test_the_lock_in_and_filter_wheel_panels_show_the_servers_state(server, open_window,
+                                                                      qtbot):
+    srv = server(profile="sim-spectral")
+    observer = _Observer(srv.url)
+    try:
+        w = open_window(srv.url)
+        _shown(w, qtbot, ("lockin", "filter_wheel", "power_meter"), observer)
+        lockin, wheel = w.panels["lockin"], w.panels["filter_wheel"]
+        v, info = lockin.state.values, lockin.state.info
+        assert v["sensitivity_v"] == 1.0 and v["reference"] == "external"
+        assert v["frequency_hz"] == 137.0 and info["identity"]["model"] == "SR830"
+        assert lockin.reading.text() == readouts.lockin_reading(v)
+        assert lockin.detail.text() == readouts.lockin_detail(v)
+        assert lockin.sensitivity.currentData() == v["sensitivity_v"]
+        assert lockin.time_constant.currentData() == v["time_constant_s"]
+        assert lockin.reference.currentData() == "external"
+        assert lockin.sensitivity.count() == len(info["sensitivities_v"]) == 27
+        wv = wheel.state.values
+        assert wv == {"position": 1, "speed": "high"}
+        assert wheel.position.text().startswith("slot 1: 450 nm")
+        assert wheel.count.text() == "6" and wheel.speed.currentData() == "high"
+        # shown, not set here: the panels' controls are greyed with the reason
+        for b in (lockin.sensitivity, lockin.auto, wheel.go, wheel.speed):
+            assert not b.isEnabled() and "in-process" in b.toolTip()
+    finally:
+        observer.close()
+
+
+@pytest.mark.timeout(600)
+def test_the_power_meter_panel_shows_the_servers_reading(server, open_window, qtbot):
+    srv = server(profile="sim")
+    observer = _Observer(srv.url)
+    try:
+        w = open_window(srv.url)
+        _shown(w, qtbot, ("power_meter", "filter_wheel"), observer)
+        pm = w.panels["power_meter"]
+        v = pm.state.values
+        assert v["wavelength_nm"] == 633.0 and pm.wavelength.text() == "633 nm"
+        assert pm.reading.text() == fmt.si(v["power_w"], "W") != "—"
+        assert pm.state.info["identity"]["model"] == "PM100USB"
+        nd = w.panels["filter_wheel"]
+        assert nd.position.text() == filters.slot_label(
+            nd.bands(nd.state), nd.state.values["position"])
+    finally:
+        observer.close()
+
+
+@pytest.mark.timeout(600)
+def test_the_first_redraws_import_no_scipy_stats_on_the_gui_thread(server):
+    """The run browser, built on the redraw that first knows the runs folder, imports
+    nothing heavy: the fit's candidate models come from the registry, not from the fit
+    pipeline (which imports scipy.stats, 0.4 s of CPU on the GUI thread). A fresh process,
+    so that what other tests imported does not hide an import."""
+    srv = server()
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen"}
+    out = subprocess.run([sys.executable, "-m", "tests.gui.first_redraw", srv.url],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    found = json.loads(out.stdout.strip().splitlines()[-1])
+    assert found["browser"], "the window never built its run browser"
+    assert not found["stats_before_show"]
+    assert "scipy.stats" not in found["imported"]
+    assert not any(m.startswith("instrument.pipelines.brdf.analyse")
+                   for m in found["imported"])

@@ -7,9 +7,9 @@ from __future__ import annotations
 import pytest
 
 from drivers.genicam_camera import TriggerMode
-from gui.model.devices import is_camera_kind, kind_of
 from gui.model.session import Action, SetSetting
 from gui.qt.panels import GenICamCameraPanel
+from instrument.bench.device_state import is_camera_kind, kind_of
 from tests.drivers.basler_emulation import require_pylon
 from tests.gui.conftest import connect
 

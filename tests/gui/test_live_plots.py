@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from instrument.run.runfile import read_run
 from tests.gui.conftest import connect
@@ -112,3 +113,28 @@ def test_in_plane_legend_beside_the_data_and_log_labels_with_decades(qtbot):
     labels = axis.tickStrings([v for _, vs in axis.tickValues(lo, hi, 400) for v in vs],
                               1.0, 1.0)
     assert "10⁻²" in labels and all("×10" in t or t.startswith("10") for t in labels)
+
+
+@pytest.mark.parametrize("n_total", [20, 2000])
+def test_a_large_in_plane_plot_is_drawn_thin_without_markers_or_grid(qtbot, n_total):
+    """Above MARKERS_UP_TO points the curves are 1-px lines without markers and the plot
+    has no grid: what each redraw of a fast scan repaints (BENCHMARKS.md gui)."""
+    from gui.model.live import LiveData
+    from gui.qt.live_plot import MARKERS_UP_TO, LivePlot
+    from instrument.run.events import PointCompleted
+
+    plot = LivePlot()
+    qtbot.addWidget(plot)
+    plot.start("brdf_in_plane")
+    angles = np.array([(20.0, 180.0, -60 + k, 0.0) for k in range(n_total)])
+    live = LiveData("brdf_in_plane", n_total, planned_angles=angles)
+    for k in range(20):
+        live.on_event(PointCompleted(k, "", "ok", {}, tuple(angles[k]), 1000.0,
+                                     float("nan"), 2e-3 * (1 + k), 0))
+    plot.update_from(live.snapshot())
+    (curve,) = plot._curves.values()
+    large = n_total > MARKERS_UP_TO
+    assert curve.opts["pen"].width() == (1 if large else 2)
+    assert (curve.opts["symbol"] is None) == large
+    grid = plot.in_plane.getAxis("bottom").grid
+    assert (grid is False or grid == 0) == large

@@ -8,9 +8,9 @@ from __future__ import annotations
 import pytest
 
 from drivers.base import LightSource, Shutter
-from gui.model.devices import kind_of
 from gui.model.session import Home, SetSetting
 from gui.qt.panels import FilterWheelPanel, LockInPanel, ShutterPanel
+from instrument.bench.device_state import kind_of
 from tests.gui.conftest import connect
 
 

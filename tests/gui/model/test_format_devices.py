@@ -8,9 +8,9 @@ import pytest
 
 from drivers.base import Device, DeviceIdentity
 from drivers.errors import ConnectionFailed
-from gui.model import devices
 from gui.model.format import duration, position, si
 from hw_mocks.sim.ideal import IdealAxis, IdealPowerMeter, IdealSource
+from instrument.bench import device_state as devices
 
 
 @pytest.mark.parametrize(("value", "unit", "text"), [

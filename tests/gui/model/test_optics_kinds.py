@@ -12,7 +12,6 @@ from drivers.thorlabs_fw102c import Fw102cWheel
 from drivers.thorlabs_sc10 import Sc10Shutter
 from drivers.transport import add_url_handler_package
 from gui.model import readouts
-from gui.model.devices import kind_of
 from gui.model.filters import bands_from_info, slot_label
 from gui.model.session import (
     Action,
@@ -24,6 +23,7 @@ from gui.model.session import (
     SetSetting,
 )
 from hw_mocks import registry
+from instrument.bench.device_state import kind_of
 from instrument.bench.devices import Bench
 from tests.gui.helpers import Recorder, fast_profile
 from tests.waiting import wait_for

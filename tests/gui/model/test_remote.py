@@ -95,3 +95,27 @@ def test_the_drawing_gets_the_homed_axes_positions_only():
         "camera_z": {"position": None, "homed": True, "moving": False},
     })) == "devices"
     assert s.homed_positions() == {"detector_theta": 40.0}
+
+
+def test_device_states_are_kept_by_role_and_replaced_only_when_they_change():
+    s = RemoteState("http://127.0.0.1:1")
+    s.apply(hello())
+    now = time.time()
+    meter = {"kind": "power_meter", "connected": True, "error": None, "read_at": now - 5.0,
+             "values": {"power_w": 1.5e-6, "wavelength_nm": 633.0},
+             "info": {"wavelength_range_nm": [400.0, 1100.0]}}
+    wheel = {"kind": "filter_wheel", "connected": True, "error": None, "read_at": now,
+             "values": {"position": 2, "speed": "high"},
+             "info": {"count": 6, "filters": {"2": [None, None, "ND1", 1.0]}}}
+    s.apply(msg("devices", 2, owner="idle", axes={}, states={"pm": meter, "fw": wheel}))
+    pm, fw = s.device_states["pm"], s.device_states["fw"]
+    assert (pm.role, pm.kind, pm.value("power_w")) == ("pm", "power_meter", 1.5e-6)
+    assert 5.0 <= time.monotonic() - pm.t < 60.0  # its age as the server read it
+    assert fw.info["filters"] == {"2": [None, None, "ND1", 1.0]}
+    # the same state again: the same object (its panel does not redraw); a new reading
+    # replaces it; a role the server no longer names is dropped
+    s.apply(msg("devices", 3, owner="idle", axes={}, states={"pm": meter, "fw": wheel}))
+    assert s.device_states["pm"] is pm and s.device_states["fw"] is fw
+    s.apply(msg("devices", 4, owner="run", axes={}, states={
+        "pm": {**meter, "values": {"power_w": 2e-6, "wavelength_nm": 633.0}}}))
+    assert s.device_states["pm"].value("power_w") == 2e-6 and "fw" not in s.device_states

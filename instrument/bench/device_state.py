@@ -1,4 +1,5 @@
-"""Device kinds the GUI knows, and how to read a device's state (Qt-free).
+"""Device kinds, and how to read a device's state (Qt-free): the GUI's device worker and
+the bench server's sampler both read devices through here.
 
 A kind is one abstract class of :mod:`drivers.base` (motion axis, camera, light source,
 shutter, power meter, lock-in amplifier, filter wheel); a device takes the most derived
@@ -54,6 +55,8 @@ __all__ = [
     "kinds",
     "read_state",
     "register_kind",
+    "state_from_message",
+    "state_message",
 ]
 
 
@@ -157,6 +160,44 @@ def read_state(role: str, device: Device, *, with_info: bool,
         return DeviceState(role, name, not device.closed, {}, base_info, str(err))
     error = values.get("error") if isinstance(values.get("error"), str) else None
     return DeviceState(role, name, not device.closed, values, base_info, error)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON can carry it: tuples as lists, keys as strings, NaN and ±inf as
+    None (the event stream's JSON has no NaN), enums as their values."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, bool | int | float | str) or value is None:
+        return value
+    return _plain(getattr(value, "value", str(value)))
+
+
+def state_message(state: DeviceState, read_at: float) -> dict[str, Any]:
+    """One device's state as the bench server's ``devices`` message carries it (plain JSON
+    values); ``read_at``: when it was read (unix seconds), so a client can say how old a
+    state it shows is (a run reads only what it uses)."""
+    return {"kind": state.kind, "connected": state.connected,
+            "values": _plain(state.values), "info": _plain(state.info),
+            "error": state.error, "read_at": read_at}
+
+
+def state_from_message(role: str, data: Mapping[str, Any], now: float | None = None
+                       ) -> DeviceState:
+    """A :func:`state_message` back as a :class:`DeviceState` whose ``t`` is on this
+    process's monotonic clock (its age as the server saw it, at least 0; ``now``: the
+    wall clock)."""
+    now = time.time() if now is None else now
+    read_at = data.get("read_at")
+    age = 0.0 if not isinstance(read_at, int | float) else max(0.0, now - read_at)
+    return DeviceState(role, str(data.get("kind") or UNKNOWN_KIND),
+                       bool(data.get("connected")), dict(data.get("values") or {}),
+                       dict(data.get("info") or {}),
+                       data.get("error") if isinstance(data.get("error"), str) else None,
+                       time.monotonic() - age)
 
 
 # --------------------------------------------------------------------------- the kinds
