@@ -5,7 +5,7 @@ the architecture, the decisions) and from the docstrings of the public modules (
 NumPy-style sections by napoleon). Build it, with every warning an error and every
 cross-reference checked::
 
-    .venv/bin/sphinx-build -W --keep-going -n -b html docs docs/_build/html
+    .venv/bin/sphinx-build -W --keep-going -n -b html docs build/docs
 """
 
 from __future__ import annotations
@@ -32,14 +32,13 @@ version = release
 extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
-    "sphinx.ext.autosummary",
     "sphinx.ext.mathjax",
     "scatterlab_docstrings",
+    "scatterlab_api",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
-templates_path = ["_templates"]
 exclude_patterns = ["_build", "screenshots/render.py", "api/generated/*.rst.tmp"]
 
 # --- Markdown (MyST) -------------------------------------------------------------------
@@ -48,9 +47,18 @@ exclude_patterns = ["_build", "screenshots/render.py", "api/generated/*.rst.tmp"
 myst_enable_extensions = ["dollarmath", "colon_fence"]
 myst_heading_anchors = 4
 
-# --- API reference (autodoc, autosummary, napoleon) -------------------------------------
-autosummary_generate = True  # writes docs/api/generated/ (ignored by git)
-autodoc_default_options = {"members": True, "show-inheritance": True}
+# --- API reference (autodoc) ---------------------------------------------------------
+# The modules the reference covers, with their submodules: one page each, written into
+# docs/api/generated/ (ignored by git) by docs/_ext/scatterlab_api.py.
+api_packages = ["drivers.base", "drivers.errors", "instrument.plans", "instrument.run",
+                "instrument.bench", "instrument.pipelines", "analysis",
+                "instrument.scripting", "instrument.client", "instrument.protocol"]
+# undoc-members: module constants without a doc comment are targets too (the docstrings
+# name them: MAX_POINTS, SELECTION_DELTA, ...)
+# ignore-module-all: every object on the page of the module that defines it, once (a
+# package's __all__ re-exports its submodules' objects).
+autodoc_default_options = {"members": True, "undoc-members": True, "show-inheritance": True,
+                           "ignore-module-all": True}
 autodoc_member_order = "bysource"
 autodoc_typehints = "signature"
 autodoc_preserve_defaults = True
@@ -72,6 +80,13 @@ _EXTERNAL = ("numpy", "np", "npt", "h5py", "scipy", "pathlib", "collections", "t
              "array", "mmap", "tempfile", "shutil", "signal", "time", "math", "random")
 nitpick_ignore_regex = [
     (r"py:.*", rf"({'|'.join(_EXTERNAL)})(\..+)?"),
+    (r"py:class", r"Path"),  # pathlib.Path imported for type checking only
+    # Private helpers (a leading underscore) are not in the reference: a docstring that
+    # names one points the reader at the source, where it is rendered as code.
+    (r"py:.*", r"(.+\.)?_[A-Za-z]\w*(\.\w+)?"),
+    # Pieces of an annotation that autodoc could not evaluate (a type-checking-only
+    # import inside a generic: 'dict[str, Foo]'): the signature shows it as written.
+    (r"py:class", r"'?\w+\[.*"),
 ]
 
 # --- HTML -------------------------------------------------------------------------------

@@ -8,8 +8,11 @@
 * A reference is resolved as Python resolves the name where the docstring stands: a short
   name (``receiver_factor``) through the namespace of the docstring's module, a name
   re-exported by a package (``analysis.brdf.reduction.fit_forward``) to the object's own
-  documented place (``analysis.brdf.reduction.values.fit_forward``). A name that does not
-  lead to a documented object stays a warning (an error in the build).
+  documented place (``analysis.brdf.reduction.values.fit_forward``), and a name that is
+  not in the module's namespace at run time (imported for type checking only, or
+  ``Class.attribute`` of a class documented elsewhere) to the one documented object whose
+  dotted name ends with it. A name that does not lead to a documented object
+  stays a warning (an error in the build).
 """
 
 from __future__ import annotations
@@ -93,15 +96,24 @@ def _documented_name(obj: Any, short: str, objects: dict) -> str | None:
     return None
 
 
+def _only_documented(path: str, objects: dict) -> str | None:
+    """The one documented object whose dotted name ends with ``path`` (a name imported for
+    type checking only, ``Class.attribute`` of a class the module does not import)."""
+    found = [full for full in objects if full == path or full.endswith(f".{path}")]
+    return found[0] if len(found) == 1 else None
+
+
 def resolve_missing(app, env, node, contnode):
     if node.get("refdomain") != "py":
         return None
     target = node["reftarget"].lstrip("~.")
-    obj = _lookup(target, node.get("py:module"), node.get("py:class"))
-    if obj is _MISSING:
-        return None
     domain = env.get_domain("py")
-    name = _documented_name(obj, target.rsplit(".", 1)[-1], domain.objects)
+    obj = _lookup(target, node.get("py:module"), node.get("py:class"))
+    name = None
+    if obj is not _MISSING:
+        name = _documented_name(obj, target.rsplit(".", 1)[-1], domain.objects)
+    if name is None:
+        name = _only_documented(target, domain.objects)
     if name is None or name == target:
         return None
     results = domain.resolve_any_xref(env, node["refdoc"], app.builder, name, node, contnode)

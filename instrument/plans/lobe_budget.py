@@ -2,8 +2,8 @@
 
 A promise of the lobe planner (:mod:`instrument.plans.lobe`) holds only if it weighs each
 candidate reading as the fit will weigh the reading once it exists. The fit
-(:func:`instrument.pipelines.brdf.analyse.analyse` on :func:`instrument.pipelines.brdf.
-reduce.reduce_run`) takes
+(:func:`instrument.pipelines.brdf.analyse.analyse` on
+:func:`instrument.pipelines.brdf.reduce.reduce_run`) takes
 
 1. **the detector's noise**: shot noise and the dark-subtracted frame's read and
    dark-current noise at the exposure the point gets (the speed/accuracy planner's camera
