@@ -54,9 +54,10 @@ from instrument.plans.tradeoff import (
 __all__ = ["CLIPPED", "OPEN", "ErrorBudget", "NDStep", "PointBudget", "angular_sigma",
            "point_budget", "predicted_covariance", "shared_covariance"]
 
-#: ``PointBudget.level`` of a reading in the open beam, and of one that clips whatever
-#: filter is in the beam (not measurable).
+#: ``PointBudget.level`` of a reading in the open beam.
 OPEN = -1
+#: ``PointBudget.level`` of a reading that clips whatever filter is in the beam (not
+#: measurable).
 CLIPPED = -2
 #: Finite-difference step of the model slopes (radians), as the fit's
 #: (:data:`analysis.brdf.reduction.forward._SLOPE_STEP`).
