@@ -44,10 +44,37 @@ def _escape_bars(line: str) -> str:
                    for i, p in enumerate(parts))
 
 
+# directives whose body is not reST (the rest, note:: or seealso::, hold prose)
+_RAW_DIRECTIVE = re.compile(r"\.\.\s+(math|code|code-block|highlight)::")
+
+
+def _opens_raw_block(line: str) -> bool:
+    """A paragraph ending in ``::`` (a literal block follows) or a raw directive."""
+    text = line.strip()
+    if text.startswith(".. "):
+        return bool(_RAW_DIRECTIVE.match(text))
+    return text.endswith("::")
+
+
+def _escape_prose(lines: list[str]) -> list[str]:
+    """Bars escaped outside literal blocks and maths (what is indented deeper than the
+    line that opened such a block is left as written)."""
+    out: list[str] = []
+    block_indent: int | None = None
+    for line in lines:
+        indent = len(line) - len(line.lstrip())
+        if block_indent is not None and (not line.strip() or indent > block_indent):
+            out.append(line)
+            continue
+        block_indent = indent if _opens_raw_block(line) else None
+        out.append(_escape_bars(line))
+    return out
+
+
 def process_docstring(app, what, name, obj, options, lines: list[str]) -> None:
     if what not in ("attribute", "property", "data"):
         lines[:] = NumpyDocstring(lines, NAPOLEON, app, what, name, obj, options).lines()
-    lines[:] = [_escape_bars(line) for line in lines]
+    lines[:] = _escape_prose(lines)
 
 
 _MISSING = object()
