@@ -8,6 +8,7 @@ by √N" remark after eq. 2-38).  M_0 is the mean of the measured curve.
 * Degree of specularity ``γ = 1 / (1 + Σ_p |D_p|²/S_pp)`` (eq. 2-37 text);
 * ``SNR = M_0/√PSD`` and the effective ``SNR_eff = M_0 γ/√PSD``;
 * relative noise error per term ``Δ_p = |S_00/S_pp| √PSD_p / (M_0 γ)`` (eq. 2-37, eq. 2-38).
+
 The sums over p skip orders where ``|S_pp| < rel_floor·max|S|``: there the specular
 response is numerically zero, and dividing a small D_p by it only measures round-off.
 """

@@ -494,7 +494,8 @@ def point_response(
 
     Row c sees the point at ``θ*(c) = atan((c − y)/(−z))``; its reconstruction is the
     filtered delta ``G(θ) = Σ_p φ_p φ_p(θ) φ_p*(θ*)`` divided by the obliquity cos θ
-    (module :mod:`.reconstruct`).  ``filter_factors`` has shape (N,) in fftfreq order.
+    (module :mod:`analysis.lightfield.reconstruct`).  ``filter_factors`` has shape (N,) in
+    fftfreq order.
     """
     from .spectral import fourier_orders, synthesize
 

@@ -6,6 +6,7 @@ Procedure of Sasaki 2020 (ch. 2, eqs. 2-6 … 2-38), vectorised over points c_r:
 2. take Fourier coefficients ``M_p`` on the domain [a, b] (eq. 2-13);
 3. solve ``M = B̃ Õ`` in the cosine-weighted basis (eq. 2-18), where
    ``G(θ_o) = cos(θ_o − Θ_r) O(θ_o) = Σ_q Õ_q φ_q(θ_o)`` so the obliquity cancels:
+
    * ``solver="closed_form"`` (separable diffuse + shift-invariant specular, flat window):
      ``α = Σ_p (D_p*/S_pp) M_p / (1 + Σ_p |D_p|²/S_pp)``, ``Õ_p = (M_p − α D_p)/S_pp``
      (eq. 2-32, eq. 2-33), then regularised mode by mode (:mod:`.regularize`);
@@ -13,6 +14,7 @@ Procedure of Sasaki 2020 (ch. 2, eqs. 2-6 … 2-38), vectorised over points c_r:
      (:func:`.spectral.brdf_fourier_matrix`, or ``S_pp W_{p−q} + D_p D_q*`` for a
      separable model with a window), an SVD, and the same regularisation on the
      singular modes (truncated SVD / Wiener / Tikhonov);
+
 4. synthesise ``G`` and divide by the obliquity: ``O_r(θ_o)``, which is the object light
    field on the object-side curve, ``L_obj(c_r − d1,r tan θ_o, θ_o) = O_r(θ_o)``.
 

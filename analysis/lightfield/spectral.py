@@ -8,6 +8,7 @@ band-limited x) by one FFT: ``X_p = e^{iπp(1 − 1/N)} FFT(x)_p / N``; orders a
 numpy ``fftfreq`` order, ``p = −N/2 … N/2 − 1``.
 
 Matrices (M_p = Σ_q B_pq O_q):
+
 * plain basis  ``B_pq  = (1/(b−a)) ∬ f(θ_o, θ_m) cos θ_o φ_q(θ_o) φ_p*(θ_m) dθ_o dθ_m`` (eq. 2-13);
 * weighted basis (eq. 2-18) — the unknown is ``G(θ_o) = cos θ_o · O(θ_o)`` — so that
   ``B̃_pq = (1/(b−a)) ∬ f φ_q(θ_o) φ_p*(θ_m)``, the plain 2-D Fourier coefficient of f;

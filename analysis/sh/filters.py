@@ -130,8 +130,11 @@ PHONG_EXACT_MAX = 1e7
 def phong_filter(lmax: int, s: float, *, exact: bool = True, tol: float = 1e-2) -> SHFilter:
     """Phong filter in the reflected parameterisation, A_0 = 1 (Ramamoorthi & Hanrahan 2001).
 
-    Exact:  A_l = (s+1) ∫₀¹ x^s P_l(x) dx
-                = (s+1) √π Γ(s+1) / (2^{s+1} Γ((s−l)/2+1) Γ((s+l+3)/2)),
+    Exact::
+
+        A_l = (s+1) ∫₀¹ x^s P_l(x) dx
+            = (s+1) √π Γ(s+1) / (2^{s+1} Γ((s−l)/2+1) Γ((s+l+3)/2)),
+
     evaluated in log space with the sign of 1/Γ((s−l)/2+1) from ``gammasgn``; the poles of
     that Γ (integer s, l > s, l − s even) are exact zeros. Approximate:
     exp(−l(l+1)/(2s)), better than R&H's exp(−l²/(2s)) for s ≳ 30.

@@ -14,7 +14,7 @@ tells where the stage really is:
 
 Both are keys of a motion device in the bench profile. Without them, defaults by driver
 kind: the resolution from the controller's counts per unit (Thorlabs APT stages:
-:data:`drivers.thorlabs_apt.STAGES`, e.g. K10CR1 409600 µsteps per 3°); the
+``drivers.thorlabs_apt.STAGES``, e.g. K10CR1 409600 µsteps per 3°); the
 repeatability of an emulated stage (``sim…`` URLs) is 0, since its read-back *is* the
 simulated world's position; a real stage without a declared repeatability is reported
 as unknown (taken as 0, with a warning naming the key to set).

@@ -1,7 +1,7 @@
 """Open the devices a bench profile names, and close them safely.
 
-Real drivers are imported from :mod:`drivers` by driver name. Devices that exist only in
-simulation (camera, source) and the emulated USB backend live in :mod:`hw_mocks`; they are
+Real drivers are imported from ``drivers`` by driver name. Devices that exist only in
+simulation (camera, source) and the emulated USB backend live in ``hw_mocks``; they are
 reached *only* through the URL scheme in the profile (``simcam://``, ``simsource://``,
 ``simusb://``), by a string import, so no code path that real hardware takes imports the
 mocks. Likewise the pyserial handlers of the emulated serial controllers

@@ -22,7 +22,7 @@ __all__ = ["main"]
 #: Subcommand modules under instrument.cli, in the order `--help` lists them.
 SUBCOMMANDS = ("gui", "devices", "serve_sim", "plan", "run", "resume", "runs", "fit",
                "reconstruct", "locate", "spheres", "calibrate", "batch", "serve", "queue", "status",
-               "watch", "pause", "abort", "control", "manual")
+               "watch", "pause", "abort", "control", "manual", "examples")
 
 
 def _command_of(argv: list[str]) -> str | None:

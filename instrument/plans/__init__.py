@@ -82,8 +82,9 @@ __all__ = [
 
 
 def sharp_lobe(theta_i: float = 30.0, **options: Any) -> AdaptivePlan:
-    """The sharp-lobe refinement, an adaptive plan (:class:`instrument.plans.adaptive_lobe.
-    SharpLobe`: its options as keyword arguments): a coarse pass finds the specular peak,
+    """The sharp-lobe refinement, an adaptive plan
+    (:class:`instrument.plans.adaptive_lobe.SharpLobe`: its options as keyword arguments):
+    a coarse pass finds the specular peak,
     then batches of points go where the lobe fit's σ(α) drops most, until
     ``target_sigma_alpha`` or ``budget_s`` (estimated seconds) is reached."""
     from instrument.plans.adaptive_lobe import SharpLobe  # scipy: loaded when used

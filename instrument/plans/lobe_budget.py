@@ -2,8 +2,8 @@
 
 A promise of the lobe planner (:mod:`instrument.plans.lobe`) holds only if it weighs each
 candidate reading as the fit will weigh the reading once it exists. The fit
-(:func:`instrument.pipelines.brdf.analyse.analyse` on :func:`instrument.pipelines.brdf.
-reduce.reduce_run`) takes
+(:func:`instrument.pipelines.brdf.analyse.analyse` on
+:func:`instrument.pipelines.brdf.reduce.reduce_run`) takes
 
 1. **the detector's noise**: shot noise and the dark-subtracted frame's read and
    dark-current noise at the exposure the point gets (the speed/accuracy planner's camera
@@ -54,9 +54,10 @@ from instrument.plans.tradeoff import (
 __all__ = ["CLIPPED", "OPEN", "ErrorBudget", "NDStep", "PointBudget", "angular_sigma",
            "point_budget", "predicted_covariance", "shared_covariance"]
 
-#: ``PointBudget.level`` of a reading in the open beam, and of one that clips whatever
-#: filter is in the beam (not measurable).
+#: ``PointBudget.level`` of a reading in the open beam.
 OPEN = -1
+#: ``PointBudget.level`` of a reading that clips whatever filter is in the beam (not
+#: measurable).
 CLIPPED = -2
 #: Finite-difference step of the model slopes (radians), as the fit's
 #: (:data:`analysis.brdf.reduction.forward._SLOPE_STEP`).

@@ -81,6 +81,7 @@ from instrument.plans.ranges import FloatRange
 
 __all__ = ["KINDS", "PlanError", "PlanSpec", "load_plan", "parse_plan"]
 
+#: The plan kinds a plan file may name (``[plan] kind``).
 KINDS = ("brdf_in_plane", "brdf_hemisphere", "lightfield", "dark", "reference", "signature",
          "flat_field", "photon_transfer", "sphere_capture")
 #: Rotary roles a sphere capture may use as the sample changer or the lighting axis.

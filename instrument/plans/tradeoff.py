@@ -3,8 +3,8 @@
 For a candidate scan — angular density (θr step), exposure cap and frames averaged — the
 planner predicts
 
-* the **duration** with the engine's own estimator (:meth:`instrument.plans.build.Plan.
-  estimate` for the motion along the optimised route, and
+* the **duration** with the engine's own estimator
+  (:meth:`instrument.plans.build.Plan.estimate` for the motion along the optimised route, and
   :meth:`~instrument.plans.commands.AcquisitionPolicy.estimated_seconds` per point at the
   exposure that point will get);
 * the **parameter uncertainties** of a fit of a *prior* model (what the sample is expected
@@ -229,7 +229,7 @@ def sweep(spec: PlanSpec, profile: BenchProfile, options: Iterable[ScanOption], 
     """:func:`predict` for every option, in order.
 
     ``mapper(fn, items, **shared)`` must return ``[fn(item, **shared) for item in items]``
-    in that order, e.g. on a Dask cluster (:func:`instrument.batch.cluster.cluster_map`);
+    in that order, e.g. on a Dask cluster (``instrument.batch.cluster.cluster_map``);
     the predictions are deterministic, so the results equal the loop's. Default: the loop.
     """
     options = list(options)

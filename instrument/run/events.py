@@ -102,6 +102,7 @@ class RunFinished:
     message: str
 
 
+#: Any event of a run, as subscribers receive them.
 Event = (RunStarted | PointCompleted | Progress | Fault | Paused | Resumed | RunFinished
          | AxisHomed)
 

@@ -2,7 +2,7 @@
 
 Each record is one line ``<crc32 as 8 hex digits> <json>\\n``. A record counts only when
 its line is complete and its checksum matches; a line torn by a crash (kill -9, power
-loss) fails the check and it and everything after it are discarded by :func:`read`. The
+loss) fails the check and it and everything after it are discarded by :func:`read_journal`. The
 writer appends and, when ``fsync`` is set, forces the line to stable storage before
 returning, so "append returned" means "committed". See docs/decisions/0010.
 """

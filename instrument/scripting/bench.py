@@ -29,6 +29,8 @@ if TYPE_CHECKING:
 
 __all__ = ["DryRun", "ScriptBench", "open_bench"]
 
+#: A plan as a script gives it: a parsed plan (what the builders return) or the path of a
+#: plan file.
 PlanLike = PlanSpec | str | Path
 
 

@@ -49,7 +49,7 @@ than a fraction of the noise):
   3-point Gauss–Hermite product (degree 5) above.
 
 This model is written from the sample's side (footprint × aperture); the simulated camera
-renders from the image side (pixels × pupil, :mod:`hw_mocks.sim.camera`), so agreement of
+renders from the image side (pixels × pupil, ``hw_mocks.sim.camera``), so agreement of
 the two is a check of both (tests/analysis/brdf/test_forward_model.py).
 """
 

@@ -155,7 +155,8 @@ def absolute_brdf(
     incident_power_w, u_incident_power_w : float
         P_i on the sample (W) and its standard uncertainty.
     solid_angle, u_solid_angle : float
-        Receiver solid angle Ω (sr), e.g. from :func:`solid_angle_sr`.
+        Receiver solid angle Ω (sr), e.g. from
+        :func:`~analysis.brdf.reduction.detector.solid_angle_sr`.
     u_responsivity_rel : float
         Relative uncertainty of the detector's responsivity that does not cancel against
         P_i (e.g. the camera's Kη when P_i comes from a power meter).

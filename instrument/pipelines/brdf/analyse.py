@@ -12,8 +12,9 @@ the data:
    (:func:`analysis.brdf.reduction.fit_forward`). Readings the detector clipped (lower
    bounds, not values) are left out and named.
 2. **Selection.** Information criterion (BIC by default) with grouped-by-θi
-   cross-validation as the check (:func:`analysis.brdf.reduction.candidates.
-   select_forward`). Without a receiver geometry the BRDF is fitted at the nominal angles
+   cross-validation as the check
+   (:func:`analysis.brdf.reduction.candidates.select_forward`). Without a receiver
+   geometry the BRDF is fitted at the nominal angles
    (:func:`analysis.brdf.selection.select_model`).
 3. **Uncertainties.** The run's common scale uncertainty and the errors correlated between
    points (camera pixel response) are added to every fit's covariance

@@ -2,8 +2,10 @@
 
 :func:`fit_run` is what ``scatterlab fit`` does, callable from scripts, the GUI and batch
 analyses: check the run (:func:`instrument.run.runfile.check_run_file`), reduce
-(:mod:`.reduce`), fit and select (:mod:`.analyse`), draw the report (:mod:`.report`) and
-write the results (:mod:`.results`). Everything goes under ``DIR/RUN/fit/`` next to the run
+(:mod:`~instrument.pipelines.brdf.reduce`), fit and select
+(:mod:`~instrument.pipelines.brdf.analyse`), draw the report
+(:mod:`~instrument.pipelines.brdf.report`) and write the results
+(:mod:`~instrument.pipelines.brdf.results`). Everything goes under ``DIR/RUN/fit/`` next to the run
 file ``DIR/RUN.h5`` (ADR 0013): ``index.html``, the figures and ``results.h5``; the run file
 is only read, unless ``into_run`` asks for the results in it as well.
 """

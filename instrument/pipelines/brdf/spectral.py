@@ -10,8 +10,9 @@ run's detector (:func:`detector_of`):
   route through the photodiode's responsivity R(λ) at the filter's centre wavelength and
   the incident power at that filter, or the ratio route against a direct-beam reading of
   the same photodiode at that filter (responsivity and chopper factor cancel);
-* **camera**: the run's camera reduction (:func:`instrument.pipelines.brdf.reduce.
-  reduce_run`), rescaled per filter for the photon energy at the filter's wavelength
+* **camera**: the run's camera reduction
+  (:func:`instrument.pipelines.brdf.reduce.reduce_run`), rescaled per filter for the photon
+  energy at the filter's wavelength
   (the camera converts counts to watts with hν at its calibration wavelength) and the
   incident power at that filter;
 

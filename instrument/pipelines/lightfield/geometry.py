@@ -1,7 +1,7 @@
 """The light-field bench's geometry and the wall's BRDF: from a geometry file or the run's profile.
 
 The camera is a pinhole carried by the ``camera_z`` linear stage parallel to the wall. Lab frame
-as in :mod:`hw_mocks.sim.world`: wall in the plane z = 0, flatland transverse axis
+as in ``hw_mocks.sim.world``: wall in the plane z = 0, flatland transverse axis
 ``y = x_lab``, measurement plane z = d2. The pinhole sits at
 ``y_m = x0_mm + direction · (scale · camera_z + offset)``. The optical axis makes the angle ψ
 (``yaw_deg``, the ``detector_theta`` convention) with the wall normal; a pixel in column j has
@@ -176,6 +176,8 @@ def load_geometry(path: str | Path) -> LightFieldGeometry:
         x0_mm = 0.0                 # pinhole y at camera_z = 0
         direction = 1.0
         yaw_deg = 0.0               # optical axis from the wall normal
+
+    The units are in the key names.
     """
     p = Path(path)
     try:

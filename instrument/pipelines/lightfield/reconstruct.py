@@ -4,7 +4,8 @@
 :func:`analysis.lightfield.reconstruct` (per scattering point, closed form of Sasaki's thesis
 eqs. 2-32/33, Wiener filter from the pooled signal spectrum; ADR 0030) on the scattering
 points whose curves lie inside the measured y range; results and figures as in
-:mod:`.results` and :mod:`.figures`.
+:mod:`~instrument.pipelines.lightfield.results` and
+:mod:`~instrument.pipelines.lightfield.figures`.
 """
 
 from __future__ import annotations

@@ -20,7 +20,8 @@
    sphere's horizon, the finite view, orders above ``lmax``): on the simulated bench the
    measured false-alarm rate is above α (:data:`CONSISTENCY_LIMIT`);
 
-Storage is :mod:`.results`, the figure :mod:`.figures`.
+Storage is :mod:`~instrument.pipelines.spheres.results`, the figure
+:mod:`~instrument.pipelines.spheres.figures`.
 
 Units and frames: angles in degrees at the interface; image frame of
 :mod:`analysis.sh.sphere_image` (x along columns, y up, z towards the camera), which is the
