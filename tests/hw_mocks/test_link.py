@@ -96,13 +96,18 @@ def test_error_state_and_probabilistic_faults_are_reproducible():
     def run(seed, name):
         port = open_echo(name=f"{name}?seed={seed}")
         port.emulator.faults.randomly(FaultKind.DROP, probability=0.3)
-        # An in-process reply is readable as soon as the write returns: a short timeout
-        # only shortens the wait for the dropped ones.
-        port.timeout = 0.01
+        # An in-process reply has arrived when the write returns (no delay fault), so
+        # in_waiting says whether it was dropped without any timeout. A read_until with a
+        # short timeout did not: descheduled mid-line on a loaded box, it returned half a
+        # reply and the next read took the rest, shifting every later answer.
+        port.timeout = 5.0
         got = []
         for i in range(40):
             port.write(b"%d\n" % i)
-            got.append(port.read_until(b"\r\n") != b"")
+            arrived = port.in_waiting > 0
+            if arrived:
+                assert port.read_until(b"\r\n") == b"OK %d\r\n" % i
+            got.append(arrived)
         return got
 
     first = run(7, "a")

@@ -285,6 +285,9 @@ def test_plan_target_uncertainty_on_two_workers_prints_the_serial_answer(client,
             "5e-5", "--readout-s", "0.02"]
     assert main(argv) == 0
     here = capsys.readouterr().out
+    # A worker the nanny restarted (after a heartbeat missed on a loaded box) takes a moment
+    # to join again; the sweep itself would run on one, but the printed count would differ.
+    client.wait_for_workers(2, timeout=120)
     assert main([*argv, "--scheduler", client.scheduler.address]) == 0
     there = capsys.readouterr().out
     assert "Dask cluster: 2 worker(s)" in there
