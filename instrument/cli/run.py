@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 HELP = "run a plan (BRDF, light field, calibration) on a bench"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("run", help=HELP)
     p.add_argument("plan", help="plan file (TOML), e.g. examples/brdf_inplane.toml")
     add_common(p)

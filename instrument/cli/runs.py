@@ -16,7 +16,7 @@ from instrument.run.paths import DEFAULT_RUNS_DIR
 HELP = "list runs from the catalog (filter by status, sample...)"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("runs", help=HELP)
     p.add_argument("--out", default=str(DEFAULT_RUNS_DIR),
                    help=f"folder of the catalog (default: {DEFAULT_RUNS_DIR})")

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from typing import Any
 
 from instrument.server.db import ServerDB
 
@@ -57,7 +58,7 @@ class QueueItem:
     added: float
     run_file: str | None
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """The item as clients see it (without the plan text)."""
         d = asdict(self)
         d.pop("plan_text")

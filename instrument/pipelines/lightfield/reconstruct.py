@@ -82,6 +82,7 @@ def reconstruct_run(
     measured = assemble(scan, d2_mm=geometry.d2_mm, domain_rad=domain_rad, n_theta=n_theta)
     lf = measured.field
     points = scattering_points(lf, geometry.d2_mm)
+    # method: a str that reconstruct checks itself (ValueError), not narrowed to its Literal
     rec = reconstruct(lf, brdf, d2_mm=geometry.d2_mm, points_mm=points,
                       method=method)  # type: ignore[arg-type]
     p_hat = effective_p_max(rec.regularization.filter_factors, rec.orders)
