@@ -7,6 +7,7 @@ import argparse
 import signal
 import threading
 from pathlib import Path
+from types import FrameType
 from typing import TYPE_CHECKING
 
 from instrument.run.paths import DEFAULT_RUNS_DIR
@@ -50,7 +51,7 @@ def drive(engine: RunEngine, quiet: bool) -> int:
     engine.subscribe(progress)
     interrupted = threading.Event()
 
-    def on_sigint(signum, frame) -> None:
+    def on_sigint(signum: int, frame: FrameType | None) -> None:
         if interrupted.is_set():
             raise KeyboardInterrupt
         interrupted.set()
