@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -60,7 +60,7 @@ def _signed_theta_r(p: Any) -> float:
     a = p.angles
     dphi = math.fmod(abs(a.phi_r - a.phi_i), 360.0)
     far = 90.0 < dphi < 270.0
-    return a.theta_r if far else -a.theta_r
+    return cast(float, a.theta_r if far else -a.theta_r)  # p: a plan point, typed loosely
 
 
 def _draw_in_plane(plt: Any, plan: Plan, groups: list[Any], title: str) -> Any:

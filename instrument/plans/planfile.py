@@ -73,7 +73,7 @@ import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from instrument.bench.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
@@ -220,7 +220,7 @@ def number(v: _Validator, t: dict[str, Any], key: str, path: str, *, lo: float, 
     if not _num(x) or not lo <= x <= hi:
         v.error(f"{path}.{key}", f"must be a number from {lo:g} to {hi:g}, got {x!r}")
         return None
-    return x
+    return cast(float, x)  # a number in range: checked above
 
 
 def values(v: _Validator, t: dict[str, Any], key: str, path: str, *, lo: float, hi: float,
