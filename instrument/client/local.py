@@ -23,7 +23,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 __all__ = ["LOCAL_LOG", "LOCAL_STATE", "LocalServer", "LocalServerError", "local_server",
            "stop_local_server"]
@@ -104,7 +104,9 @@ def _answers(url: str, key: str | None) -> bool:
 
 def _recorded(runs_dir: Path) -> dict[str, Any] | None:
     try:
-        return json.loads((runs_dir / LOCAL_STATE).read_text(encoding="utf-8"))
+        # the state file is the JSON object this module writes
+        return cast(dict[str, Any],
+                    json.loads((runs_dir / LOCAL_STATE).read_text(encoding="utf-8")))
     except (OSError, ValueError):
         return None
 

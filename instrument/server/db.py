@@ -103,5 +103,5 @@ class ServerDB:
     def __enter__(self) -> ServerDB:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

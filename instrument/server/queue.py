@@ -120,7 +120,7 @@ class PlanQueue:
                 "VALUES (?,?,?,?,?,?,?)",
                 (pos, kind, name, plan_text, "proposed" if proposed else "queued", who,
                  time.time()))
-            item_id = int(cur.lastrowid)
+            item_id = int(cur.lastrowid)  # type: ignore[arg-type]  # an INSERT sets it
         return self.get(item_id)
 
     def move(self, item_id: int, index: int) -> QueueItem:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,7 +47,7 @@ def scattering_points(lf: LightField2D, d2_mm: float) -> NDArray[np.float64]:
         raise ValueError("the scan is too short for any complete curve: widen the camera_z "
                          "range or narrow the angle domain")
     n = math.floor((hi - lo) / lf.dy_mm + 1e-9) + 1
-    return lo + lf.dy_mm * np.arange(n)
+    return cast(np.ndarray, lo + lf.dy_mm * np.arange(n))  # numpy's stubs: Any
 
 
 def reconstruct_run(
