@@ -27,6 +27,7 @@ OpenCV documentation of ``cv::MergeDebevec``) and are not used.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -63,7 +64,7 @@ class HdrResult:
     underexposed: NDArray[np.bool_]
 
 
-def _per_frame(value: ArrayLike | None, n: int, default: float, what: str) -> NDArray:
+def _per_frame(value: ArrayLike | None, n: int, default: float, what: str) -> NDArray[Any]:
     if value is None:
         return np.full(n, default, dtype=np.float64)
     arr = np.asarray(value, dtype=np.float64)
@@ -204,7 +205,7 @@ def merge_hdr(
 
     variance: NDArray[np.float64] | None = None
     if have_model:
-        k = float(system_gain_dn_per_e)  # type: ignore[arg-type]
+        k = float(system_gain_dn_per_e)  # type: ignore[arg-type]  # not None: have_model says so
         predicted = np.maximum(rate, 0.0)
         wsum = np.zeros(shape)
         wacc = np.zeros(shape)

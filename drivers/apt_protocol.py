@@ -28,8 +28,9 @@ from __future__ import annotations
 import enum
 import struct
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from drivers.errors import ProtocolError
 
@@ -364,7 +365,7 @@ class AptUnpacker:
 # --------------------------------------------------------------------------- payloads
 
 
-def _unpack(fmt: str, msg: AptMessage | bytes, what: str) -> tuple:
+def _unpack(fmt: str, msg: AptMessage | bytes, what: str) -> tuple[Any, ...]:
     data = msg.data if isinstance(msg, AptMessage) else msg
     if data is None:
         raise ProtocolError(f"{what}: expected a data packet, got a header-only message")
@@ -495,7 +496,7 @@ def decode_rich_response(msg: AptMessage) -> RichResponse:
     return RichResponse(msg_id, code, _cstr(notes))
 
 
-_DECODERS = {
+_DECODERS: dict[int, Callable[[AptMessage], object]] = {
     M.HW_GET_INFO: decode_hw_info,
     M.HW_RICHRESPONSE: decode_rich_response,
     M.MOT_GET_POSCOUNTER: lambda m: decode_chan_value(m, "MOT_GET_POSCOUNTER"),

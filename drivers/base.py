@@ -22,9 +22,9 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -109,10 +109,10 @@ class Device(ABC):
     def closed(self) -> bool:
         return self._closed
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def _check_open(self, command: str) -> None:
@@ -405,7 +405,8 @@ class MotionAxis(Device):
             raise NotHomedError("axis is not homed", device=self.name, command=command,
                                 hint="call home() first")
 
-    def _wait_for(self, done, timeout: float, command: str) -> AxisStatus:
+    def _wait_for(self, done: Callable[[AxisStatus], bool], timeout: float,
+                  command: str) -> AxisStatus:
         if not timeout > 0:
             raise ValueError("timeout must be > 0")
         deadline = time.monotonic() + timeout
@@ -760,7 +761,7 @@ class Camera(Device):
         if timeout is None:
             timeout = int(n) * (2.0 + 2.0 * self._exposure_s_for_timeout())
         deadline = time.monotonic() + timeout
-        frames = []
+        frames: list[Frame] = []
         for _ in range(int(n)):
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -1467,7 +1468,7 @@ class LockIn(Device):
     #: Relative slack accepted when a value is meant to be exactly a table entry.
     _TABLE_RTOL = 1e-6
 
-    def __init__(self, name: str, *, sleep=time.sleep) -> None:
+    def __init__(self, name: str, *, sleep: Callable[[float], None] = time.sleep) -> None:
         super().__init__(name)
         self._sleep = sleep
 

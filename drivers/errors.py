@@ -39,6 +39,9 @@ UnsupportedFeature
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 __all__ = [
     "ConnectionFailed",
     "ControllerError",
@@ -94,14 +97,16 @@ class DeviceError(Exception):
             text = f"{text}. {self.hint}"
         return text
 
-    def __reduce__(self):  # keep pickling (multiprocessing, logging) lossless
+    # keep pickling (multiprocessing, logging) lossless
+    def __reduce__(self) -> tuple[Callable[..., DeviceError], tuple[object, ...]]:
         return (
             _rebuild,
             (type(self), self.message, self.device, self.command, self.hint, self.__dict__),
         )
 
 
-def _rebuild(cls, message, device, command, hint, state):
+def _rebuild(cls: type[DeviceError], message: str, device: str | None, command: str | None,
+             hint: str | None, state: dict[str, object]) -> DeviceError:
     err = cls.__new__(cls)
     DeviceError.__init__(err, message, device=device, command=command, hint=hint)
     err.__dict__.update(state)
@@ -123,7 +128,7 @@ class ProtocolError(DeviceError):
 class ControllerError(DeviceError):
     """The controller reported an error; ``code`` is its raw error code."""
 
-    def __init__(self, message: str, *, code: object = None, **kw) -> None:
+    def __init__(self, message: str, *, code: object = None, **kw: Any) -> None:
         super().__init__(message, **kw)
         self.code = code
 

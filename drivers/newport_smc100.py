@@ -45,6 +45,8 @@ import math
 import re
 import threading
 import time
+from collections.abc import Callable
+from typing import TypeVar
 
 import serial
 
@@ -95,6 +97,8 @@ _STATE_LETTERS = frozenset("DEIJKLM")
 _LIMIT_LETTERS = frozenset("GN")
 #: Largest line we accept before declaring the stream garbage.
 _MAX_LINE = 256
+
+T = TypeVar("T")
 #: Any controller's reply to anything: skipped as stale or foreign, not counted as noise.
 _ANY_REPLY = re.compile(rb"\d{1,2}[A-Z]{2}[\x20-\x7e]*\r\n")
 
@@ -256,8 +260,9 @@ class Smc100Axis(MotionAxis):
             if not _ANY_REPLY.fullmatch(line):
                 noise.append(line)
 
-    def _ask(self, command: str, value: str | None = None, parse=str, *,
-             attempts: int | None = None, timeout: float | None = None):
+    def _ask(self, command: str, value: str | None = None,
+             parse: Callable[[str], T] = str,  # type: ignore[assignment]  # T is str when parse is left out; mypy cannot tie a default to a type variable
+             *, attempts: int | None = None, timeout: float | None = None) -> T:
         """An idempotent query, retried after a timeout or a garbled reply.
 
         Returns ``parse(value_text)``; stale input is discarded before every attempt.
@@ -347,8 +352,8 @@ class Smc100Axis(MotionAxis):
 
     # MotionAxis hooks ---------------------------------------------------------
     def _do_identity(self) -> DeviceIdentity:
-        stage = self._ask("ID", "?")
-        version = self._ask("VE")
+        stage: str = self._ask("ID", "?")
+        version: str = self._ask("VE")
         model, _, serial_number = stage.partition("_")
         return DeviceIdentity(
             vendor="Newport",
@@ -489,7 +494,8 @@ class Smc100Axis(MotionAxis):
             self._read_error("TE")
             return status
 
-    def _wait_phase(self, done, command: str, timeout: float = 30.0) -> Smc100Status:
+    def _wait_phase(self, done: Callable[[Smc100Status], bool], command: str,
+                    timeout: float = 30.0) -> Smc100Status:
         deadline = time.monotonic() + timeout
         while True:
             status = self._status_query()

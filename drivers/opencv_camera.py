@@ -44,7 +44,7 @@ import math
 import threading
 import time
 from collections import deque
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -202,7 +202,7 @@ class OpenCVCamera(Camera):
         if self._backend == "V4L2" and raw > 0:
             return raw * _V4L2_EXPOSURE_UNIT_US
         if self._backend in ("MSMF", "DSHOW") and raw != -1:
-            return 2.0**raw * 1e6
+            return cast(float, 2.0**raw * 1e6)  # float ** float is Any in typeshed
         return self._nominal_exposure_us
 
     def _read_frame(self, img: np.ndarray, timestamp: float) -> Frame:
@@ -313,7 +313,7 @@ class OpenCVCamera(Camera):
                     f"(frames are {self._format.name})",
                     device=self.name, command="set pixel_format",
                 )
-            self._set_checked(cv2.CAP_PROP_FOURCC, float(cv2.VideoWriter_fourcc(*code)),
+            self._set_checked(cv2.CAP_PROP_FOURCC, float(cv2.VideoWriter_fourcc(*code)),  # type: ignore[attr-defined]  # in cv2 at run time; its stubs omit it
                               "pixel format", tolerance=0.0)
             probe = self._probe()
             if probe.dtype != fmt.dtype:

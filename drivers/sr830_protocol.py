@@ -255,7 +255,7 @@ def parse_status_byte(text: str) -> int:
     return parse_int(text, 0, 255)
 
 
-def index_of(table: tuple, value: float, what: str) -> int:
+def index_of(table: tuple[float, ...], value: float, what: str) -> int:
     """Index of ``value`` in an instrument table (exact up to 1 ppm); ValueError if absent."""
     for i, entry in enumerate(table):
         if abs(entry - value) <= 1e-6 * abs(entry):

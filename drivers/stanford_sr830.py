@@ -63,7 +63,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 import serial
@@ -123,6 +125,8 @@ _AGAN_MAX_TIME_CONSTANT_S = 1.0
 _BUFFER_POINTS = 16383
 #: Points per ``TRCB?`` request (4 kB: a few seconds at 9600 baud).
 _TRACE_CHUNK = 1024
+
+T = TypeVar("T")
 
 
 class CommandRejected(ControllerError, StateError):
@@ -189,7 +193,7 @@ class Sr830LockIn(LockIn):
         reply_timeout: float = 0.5,
         retries: int = 2,
         auto_gain_timeout: float = 120.0,
-        sleep=time.sleep,
+        sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         if isinstance(baudrate, bool) or not isinstance(baudrate, int) or baudrate <= 0:
             raise ValueError(f"baudrate must be a positive integer, got {baudrate!r}")
@@ -303,8 +307,9 @@ class Sr830LockIn(LockIn):
                 return
             time.sleep(min(0.005, quiet / 10))
 
-    def _ask(self, mnemonic: str, *args: int | float, parse=str, attempts: int | None = None,
-             read=None):
+    def _ask(self, mnemonic: str, *args: int | float,
+             parse: Callable[[Any], T] = str,  # type: ignore[assignment]  # T is str when parse is left out; mypy cannot tie a default to a type variable
+             attempts: int | None = None, read: Callable[[str], Any] | None = None) -> T:
         """A query that changes nothing, retried after a timeout or an unusable reply.
         ``read(text)`` reads the raw reply (default: one reply line)."""
         read = self._read_reply if read is None else read
@@ -330,8 +335,8 @@ class Sr830LockIn(LockIn):
                          hint=last.hint or "check the connection and the lock-in",
                          ) from last
 
-    def _ask_once(self, mnemonic: str, parse, *args: int | float, after: str | None = None,
-                  timeout: float | None = None):
+    def _ask_once(self, mnemonic: str, parse: Callable[[str], T], *args: int | float,
+                  after: str | None = None, timeout: float | None = None) -> T:
         """A query that clears what it reads: asked once, never retried."""
         text = command_text(mnemonic, *args)
         context = after or text
@@ -551,7 +556,8 @@ class Sr830LockIn(LockIn):
 
             out[done:done + n] = self._ask(
                 "TRCB?", channel, start + done, n, read=read,
-                parse=lambda data, n=n: parse_trace_binary(data, n))
+                # mypy cannot solve _ask's type variable through a lambda with a default
+                parse=lambda data, n=n: parse_trace_binary(data, n))  # type: ignore[misc]
             done += n
         return out
 

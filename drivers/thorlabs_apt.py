@@ -53,7 +53,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import serial
 
@@ -113,7 +113,7 @@ class AptStage:
     position_tolerance: float
 
 
-def _kdc_stage(name: str, kind: AxisKind, cpu: float, stage_id: int, **kw) -> AptStage:
+def _kdc_stage(name: str, kind: AxisKind, cpu: float, stage_id: int, **kw: Any) -> AptStage:
     return AptStage(
         name=name, controller="KDC101", kind=kind, counts_per_unit=cpu,
         velocity_scale=cpu * _KDC_PERIOD_S * 65536.0,

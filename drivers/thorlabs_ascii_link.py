@@ -129,7 +129,7 @@ class PromptLink:
         self.resync()
         command = f"{keyword}?"
         try:
-            answer = self.query(keyword)
+            answer: str = self.query(keyword)
         except (DeviceTimeout, ProtocolError, CommandRejected) as err:
             raise ConnectionFailed(
                 f"no {model} answers", device=self.device, command=command,
@@ -143,7 +143,9 @@ class PromptLink:
         return answer
 
     # public -------------------------------------------------------------------
-    def query(self, keyword: str, parse: Callable[[str], T] = str, *,
+    def query(self, keyword: str,
+              parse: Callable[[str], T] = str,  # type: ignore[assignment]  # T is str when parse is left out; mypy cannot tie a default to a type variable
+              *,
               attempts: int | None = None, timeout: float | None = None) -> T:
         """Ask ``keyword?`` and return ``parse(answer line)``; retried (it changes nothing).
 

@@ -173,7 +173,9 @@ class SerialChannel:
 
     def _read_waiting(self, command: str) -> bytes:
         try:
-            waiting = self.port.in_waiting
+            # every concrete port (Serial, the URL handlers' classes) has it; the stubs'
+            # SerialBase does not declare it
+            waiting = self.port.in_waiting  # type: ignore[attr-defined]
             data = self.port.read(waiting) if waiting else b""
         except (serial.SerialException, OSError) as err:
             raise ConnectionFailed(f"read failed: {err}", device=self.device,
@@ -185,7 +187,7 @@ class SerialChannel:
         """Drop buffered input (stale replies); return how many bytes were dropped."""
         dropped = len(self.read_available(command="discard_input"))
         try:
-            self.port.reset_input_buffer()
+            self.port.reset_input_buffer()  # type: ignore[attr-defined]  # as in_waiting
         except (serial.SerialException, OSError) as err:
             raise ConnectionFailed(f"flush failed: {err}", device=self.device,
                                    command="discard_input") from err

@@ -38,7 +38,7 @@ import struct
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import usb.core
 import usb.util
@@ -242,7 +242,7 @@ class UsbtmcDevice:
             if serial is None:
                 return True
             try:
-                return dev.serial_number == serial
+                return cast(bool, dev.serial_number == serial)  # pyusb is untyped
             except (usb.core.USBError, ValueError):
                 return False   # unreadable strings (permissions): not the one asked for
 
@@ -320,8 +320,8 @@ class UsbtmcDevice:
         if active != self._config_value:
             self.dev.set_configuration(self._config_value)
 
-    def _bulk_endpoints(self, intf: usb.core.Interface):
-        def find(direction: int):
+    def _bulk_endpoints(self, intf: usb.core.Interface) -> tuple[Any, Any]:
+        def find(direction: int) -> Any:  # pyusb has no type information: endpoints are Any
             return usb.util.find_descriptor(
                 intf, custom_match=lambda e: (
                     usb.util.endpoint_direction(e.bEndpointAddress) == direction
@@ -384,7 +384,7 @@ class UsbtmcDevice:
 
     def _string(self, attr: str) -> str | None:
         try:
-            return getattr(self.dev, attr)
+            return cast(str | None, getattr(self.dev, attr))  # pyusb is untyped
         except (usb.core.USBError, ValueError) as err:
             raise self._map_error(err, f"read {attr}") from err
 

@@ -7,6 +7,7 @@ both pointing away from the surface). Values in 1/sr.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,10 +22,10 @@ _INV_PI = 1.0 / np.pi
 def lambertian() -> BRDFModel:
     """Lambertian f = ρ/π (Lambert 1760; Nicodemus et al. 1977). DHR = ρ for every θi."""
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return np.full(g.shape, p[0] * _INV_PI)
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return np.full((*g.shape, 1), _INV_PI)
 
     return BRDFModel(
@@ -48,7 +49,7 @@ def _on_ab(sigma: float) -> tuple[float, float, float, float]:
     return a, b, da, db
 
 
-def _on_term(g: Geometry) -> NDArray:
+def _on_term(g: Geometry) -> NDArray[Any]:
     # max(0, cos(φr−φi)) sin α tan β = max(0, xi xr + yi yr) / max(μi, μr): the stable form
     # (cos(φr−φi) sin θi sin θr = xi xr + yi yr), no tan β → ∞ at β → 90°.
     return np.maximum(0.0, g.xi * g.xr + g.yi * g.yr) / np.maximum(
@@ -68,11 +69,11 @@ def oren_nayar() -> BRDFModel:
     by quadrature in tests/analysis/brdf/test_models.py).
     """
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         a, b, _, _ = _on_ab(float(p[1]))
         return p[0] * _INV_PI * (a + b * _on_term(g))
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         a, b, da, db = _on_ab(float(p[1]))
         t = _on_term(g)
         return np.stack([_INV_PI * (a + b * t), p[0] * _INV_PI * (da + db * t)], axis=-1)
@@ -100,10 +101,10 @@ def lommel_seeliger() -> BRDFModel:
     DHR(μ0) = (w/2)[1 − μ0 ln((1+μ0)/μ0)] (:func:`lommel_seeliger_dhr`), ≤ w/2.
     """
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return p[0] / (4.0 * np.pi) / (g.mu_i + g.mu_r)
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return (1.0 / (4.0 * np.pi) / (g.mu_i + g.mu_r))[..., None]
 
     return BRDFModel(
@@ -150,7 +151,7 @@ def hapke_h1981(x: ArrayLike, w: float | ArrayLike) -> NDArray[np.float64]:
 
 
 @lru_cache(maxsize=32)
-def _h_nodes(w: float, n_nodes: int) -> tuple[NDArray, NDArray, NDArray]:
+def _h_nodes(w: float, n_nodes: int) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
     t, wt = np.polynomial.legendre.leggauss(n_nodes)
     mu = 0.5 * (t + 1.0)
     wt = 0.5 * wt
@@ -195,7 +196,7 @@ def hapke(*, h_function: str = "2002", opposition: bool = False) -> BRDFModel:
     if hfun is None:
         raise ValueError("h_function must be '2002' or '1981'")
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         w = float(p[0])
         core = hfun(g.mu_i, w) * hfun(g.mu_r, w)
         if opposition:

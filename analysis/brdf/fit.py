@@ -45,6 +45,7 @@ Method
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -221,15 +222,15 @@ class _Problem:
         return cached
 
 
-def _to_internal(p: NDArray, log_mask: NDArray) -> NDArray:
+def _to_internal(p: NDArray[Any], log_mask: NDArray[Any]) -> NDArray[Any]:
     return np.where(log_mask, np.log(np.where(log_mask, p, 1.0)), p)
 
 
-def _to_natural(u: NDArray, log_mask: NDArray) -> NDArray:
+def _to_natural(u: NDArray[Any], log_mask: NDArray[Any]) -> NDArray[Any]:
     return np.where(log_mask, np.exp(np.where(log_mask, u, 0.0)), u)
 
 
-def _residuals(u: NDArray, pr: _Problem) -> NDArray:
+def _residuals(u: NDArray[Any], pr: _Problem) -> NDArray[Any]:
     p = _to_natural(u, pr.log_mask)
     m = pr.model.value_fn(p, pr.geometry)
     if pr.residual == "log":
@@ -239,7 +240,7 @@ def _residuals(u: NDArray, pr: _Problem) -> NDArray:
     return (pr.y - m) * pr.inv_scale
 
 
-def _jacobian(u: NDArray, pr: _Problem) -> NDArray:
+def _jacobian(u: NDArray[Any], pr: _Problem) -> NDArray[Any]:
     p = _to_natural(u, pr.log_mask)
     jf = pr.model.jacobian_geometry(p, pr.geometry)  # (n, k), ∂m/∂p; a fresh array
     jf *= -np.where(pr.log_mask, p, 1.0)  # ∂p/∂u and the sign of r = y − m
@@ -282,7 +283,7 @@ def _internal_bounds(model: BRDFModel) -> tuple[NDArray[np.float64], NDArray[np.
     return lo, np.where(np.isinf(model.upper), np.inf, hi)
 
 
-def _random_starts(model: BRDFModel, n: int, rng: np.random.Generator) -> list[NDArray]:
+def _random_starts(model: BRDFModel, n: int, rng: np.random.Generator) -> list[NDArray[Any]]:
     """Random starts: log-uniform over the bounds for log parameters; uniform between the
     lower bound and 4× the default start's distance from it for linear ones (scale bounds
     such as ks ≤ 100 are deliberately wide, while the values that matter lie near the
@@ -304,8 +305,8 @@ def _random_starts(model: BRDFModel, n: int, rng: np.random.Generator) -> list[N
 
 
 def _covariance(
-    jac: NDArray, s2: float, p: NDArray, log_mask: NDArray
-) -> tuple[NDArray, bool]:
+    jac: NDArray[Any], s2: float, p: NDArray[Any], log_mask: NDArray[Any]
+) -> tuple[NDArray[Any], bool]:
     """s²(JᵀJ)⁺ in natural units and a rank-deficiency flag.
 
     Works on the k×k matrix JᵀJ with its columns equilibrated (unit diagonal) and an
@@ -650,7 +651,7 @@ def _finish(
 def _bootstrap(
     model: BRDFModel,
     pr: _Problem,
-    p_best: NDArray,
+    p_best: NDArray[Any],
     *,
     loss: str,
     f_scale: float,

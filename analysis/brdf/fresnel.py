@@ -21,6 +21,7 @@ angle tan θB = n for a dielectric; R → 1 at grazing; total internal reflectio
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,7 +49,7 @@ class FresnelResult:
     delta: NDArray[np.float64]
 
 
-def _safe_ratio(num: NDArray, den: NDArray) -> NDArray:
+def _safe_ratio(num: NDArray[Any], den: NDArray[Any]) -> NDArray[Any]:
     # den = 0 only for n = 1 at exactly grazing incidence (no interface); the limit
     # along grazing is −1 there, as for every other index.
     ok = den != 0

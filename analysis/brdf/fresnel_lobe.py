@@ -28,6 +28,8 @@ they are separated — fix k (``ggx_fresnel``) when it is known to be 0.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -60,10 +62,10 @@ def fresnel_microfacet(*, absorbing: bool = False) -> BRDFModel:
     """
     name = "ggx_conductor" if absorbing else "ggx_fresnel"
 
-    def index(p: NDArray) -> complex:
+    def index(p: NDArray[Any]) -> complex:
         return complex(p[0], p[1]) if absorbing else complex(p[0], 0.0)
 
-    def fres(p: NDArray, g: Geometry) -> tuple[NDArray, NDArray, NDArray]:
+    def fres(p: NDArray[Any], g: Geometry) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
         n = index(p)
         key = ("fresnel_dn", n)
         hit = g.cache.get(key)
@@ -72,7 +74,7 @@ def fresnel_microfacet(*, absorbing: bool = False) -> BRDFModel:
             g.cache[key] = hit
         return hit
 
-    def shape_terms(a: float, g: Geometry) -> tuple[NDArray, NDArray]:
+    def shape_terms(a: float, g: Geometry) -> tuple[NDArray[Any], NDArray[Any]]:
         """(D·V, ∂(D·V)/∂α) at width a."""
         c = g.cos_theta_h
         v, si, sr = mf.ggx_smith_visibility_parts(g.mu_i, g.mu_r, a)
@@ -80,13 +82,13 @@ def fresnel_microfacet(*, absorbing: bool = False) -> BRDFModel:
         dv = mf.ggx_smith_dv_dalpha(g.mu_i, g.mu_r, a, v, si, sr)
         return d * v, mf.ggx_d_dalpha(c, a) * v + d * dv
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         r, _, _ = fres(p, g)
         c = g.cos_theta_h
         v, _, _ = mf.ggx_smith_visibility_parts(g.mu_i, g.mu_r, float(p[-1]))
         return r * mf.ggx_d(c, float(p[-1])) * v
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         r, dn, dk = fres(p, g)
         dv, ddv = shape_terms(float(p[-1]), g)
         cols = [dn * dv] + ([dk * dv] if absorbing else []) + [r * ddv]

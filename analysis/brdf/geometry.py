@@ -30,6 +30,7 @@ exactly opposite, i.e. the grazing mirror configuration) the half vector is take
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,7 +62,7 @@ def angles_from_vector(vec: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.
     return theta, phi
 
 
-def mirror_direction(theta_i: ArrayLike, phi_i: ArrayLike) -> tuple[NDArray, NDArray]:
+def mirror_direction(theta_i: ArrayLike, phi_i: ArrayLike) -> tuple[NDArray[Any], NDArray[Any]]:
     """(θ, φ) of the specular direction for incidence (θi, φi): (θi, φi + π) wrapped to (−π, π]."""
     t = np.asarray(theta_i, dtype=float)
     p = np.asarray(phi_i, dtype=float) + np.pi
@@ -176,7 +177,7 @@ class Geometry:
     def sin_theta_r(self) -> NDArray[np.float64]:
         return np.sqrt(np.clip(self.xr**2 + self.yr**2, 0.0, 1.0))
 
-    def _get(self, key: str, compute: Any) -> NDArray[np.float64]:
+    def _get(self, key: Hashable, compute: Any) -> NDArray[np.float64]:
         if key not in self.cache:
             self.cache[key] = compute()
         return self.cache[key]

@@ -17,7 +17,9 @@ Offset directions that fall below the horizon get weight 0 (the aperture is clip
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,7 +54,7 @@ def cone_quadrature(half_angle: float, *, n_radial: int = 3, n_azimuth: int = 8)
     return ConeQuadrature(float(half_angle), dd, chi.reshape(-1), ww)
 
 
-def _offset_dirs(center: NDArray, q: ConeQuadrature) -> NDArray:
+def _offset_dirs(center: NDArray[Any], q: ConeQuadrature) -> NDArray[Any]:
     """Directions of shape (len(q), N, 3) around unit vectors ``center`` (N, 3)."""
     helper = np.where(
         (np.abs(center[:, 0]) < 0.9)[:, None], np.array([1.0, 0.0, 0.0]), np.array([0, 1.0, 0])
@@ -117,7 +119,7 @@ def convolve_instrument(
     qs = cone_quadrature(divergence_half_angle, n_radial=n_radial, n_azimuth=n_azimuth)
     key = ("instrument", qd.half_angle, qs.half_angle, n_radial, n_azimuth, near_specular)
 
-    def prepared(g: Geometry) -> tuple[NDArray, Geometry, NDArray]:
+    def prepared(g: Geometry) -> tuple[NDArray[Any], Geometry, NDArray[Any]]:
         if key not in g.cache:
             if near_specular is None:
                 mask = np.ones(g.shape, dtype=bool)
@@ -128,7 +130,7 @@ def convolve_instrument(
             g.cache[key] = (mask, og, w)
         return g.cache[key]
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         mask, og, w = prepared(g)
         out = model.value_fn(p, g) if near_specular is not None else np.empty(g.shape)
         out = np.array(out, dtype=float, copy=True)
@@ -136,11 +138,11 @@ def convolve_instrument(
             out[mask] = np.sum(model.value_fn(p, og) * w, axis=0)
         return out
 
-    jac = None
+    jac: Callable[[NDArray[Any], Geometry], NDArray[Any]] | None = None
     if model.jac_fn is not None:
         mjac = model.jac_fn
 
-        def jac(p: NDArray, g: Geometry) -> NDArray:
+        def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
             mask, og, w = prepared(g)
             out = np.array(mjac(p, g), dtype=float, copy=True)
             if og.shape[-1]:

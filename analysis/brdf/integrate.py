@@ -158,7 +158,8 @@ def flatland_reflectance(
     phi_r = np.where(tm >= 0, 0.0, np.pi)[None, :]
     f = model.evaluate(params, theta_i, phi_i, theta_r, phi_r)
     res = np.trapezoid(f * np.cos(tm)[None, :], tm, axis=1)
-    return res.reshape(np.shape(theta_in)) if np.ndim(theta_in) else res[0]
+    # np.trapezoid's stubs allow a scalar; along axis 1 of a 2-D array it is an array
+    return res.reshape(np.shape(theta_in)) if np.ndim(theta_in) else res[0]  # type: ignore[index, return-value]
 
 
 @dataclass(frozen=True)

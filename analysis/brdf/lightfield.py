@@ -24,6 +24,8 @@ exactly only for q = 0 (the window breaks it at order q·w·tan θ) — ``recipr
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -61,12 +63,12 @@ def flatland_brdf(
 def separable_specular() -> BRDFModel:
     """:class:`BRDFModel` of eq. 2-14 with parameters (rho_d, ks, width [rad], q)."""
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return flatland_brdf(
             g.s_i, g.s_r, rho_d=float(p[0]), ks=float(p[1]), width=float(p[2]), q=float(p[3])
         )
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         _rho_d, ks, w, q = (float(x) for x in p)
         to, tm = g.s_i, g.s_r
         z = tm - to

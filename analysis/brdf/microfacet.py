@@ -14,11 +14,14 @@ width parameter (``d…_dalpha``) are provided for analytic Jacobians in fitting
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import erf
 
-from analysis.brdf.geometry import MU_FLOOR
+from analysis.brdf.geometry import MU_FLOOR as MU_FLOOR  # re-exported: rough_surface uses it
 
 _SQRT_PI = float(np.sqrt(np.pi))
 _DEN_FLOOR = 1e-300
@@ -41,7 +44,7 @@ def ggx_d_dalpha(c: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
     return 2.0 * a / (np.pi * t * t) * (1.0 - 2.0 * a * a * c * c / t)
 
 
-def beckmann_d(c: ArrayLike, alpha: ArrayLike, tan2: ArrayLike | None = None) -> NDArray:
+def beckmann_d(c: ArrayLike, alpha: ArrayLike, tan2: ArrayLike | None = None) -> NDArray[Any]:
     """Beckmann D(h) = exp(−tan²θh/α²) / (π α² cos⁴θh) (Beckmann & Spizzichino 1963;
     Walter et al. 2007, eq. 25). ``alpha`` is the rms slope m.
 
@@ -58,7 +61,8 @@ def beckmann_d(c: ArrayLike, alpha: ArrayLike, tan2: ArrayLike | None = None) ->
     return np.exp(logd) / (np.pi * a * a)
 
 
-def beckmann_d_dalpha(c: ArrayLike, alpha: ArrayLike, tan2: ArrayLike | None = None) -> NDArray:
+def beckmann_d_dalpha(c: ArrayLike, alpha: ArrayLike,
+                      tan2: ArrayLike | None = None) -> NDArray[Any]:
     """∂D_Beckmann/∂α = D (2 tan²θh/α³ − 2/α)."""
     c = np.asarray(c, dtype=float)
     a = np.asarray(alpha, dtype=float)
@@ -122,14 +126,14 @@ def beckmann_mu_lambda_dalpha(mu: ArrayLike, alpha: ArrayLike) -> NDArray[np.flo
     return s * e / (2.0 * _SQRT_PI)
 
 
-def smith_g1(mu: ArrayLike, alpha: ArrayLike, *, distribution: str = "ggx") -> NDArray:
+def smith_g1(mu: ArrayLike, alpha: ArrayLike, *, distribution: str = "ggx") -> NDArray[Any]:
     """Smith masking G₁ = 1/(1 + Λ) = μ/(μ + μΛ) (Heitz 2014, eq. 43)."""
     mu = np.maximum(np.asarray(mu, dtype=float), MU_FLOOR)
     ml = _mu_lambda(distribution)(mu, alpha)
     return mu / (mu + ml)
 
 
-def _mu_lambda(distribution: str):
+def _mu_lambda(distribution: str) -> Callable[[ArrayLike, ArrayLike], NDArray[np.float64]]:
     if distribution == "ggx":
         return ggx_mu_lambda
     if distribution == "beckmann":
@@ -196,7 +200,8 @@ def ggx_smith_visibility_parts(
 
 
 def ggx_smith_dv_dalpha(
-    mu_i: ArrayLike, mu_r: ArrayLike, alpha: float, v: NDArray, si: NDArray, sr: NDArray
+    mu_i: ArrayLike, mu_r: ArrayLike, alpha: float, v: NDArray[Any], si: NDArray[Any],
+    sr: NDArray[Any],
 ) -> NDArray[np.float64]:
     """∂V/∂α = −2V² α (μr(1−μi²)/Si + μi(1−μr²)/Sr) from the parts above."""
     mi = np.maximum(np.asarray(mu_i, dtype=float), MU_FLOOR)
@@ -234,7 +239,7 @@ def vcavity_visibility(
     return np.minimum(v1, np.minimum(v2, v3))
 
 
-def vcavity_g1(mu: ArrayLike, cos_theta_h: ArrayLike, cos_beta: ArrayLike) -> NDArray:
+def vcavity_g1(mu: ArrayLike, cos_theta_h: ArrayLike, cos_beta: ArrayLike) -> NDArray[Any]:
     """V-cavity masking of one direction, min(1, 2 cosθh μ / cos β)."""
     mu = np.asarray(mu, dtype=float)
     cb = np.maximum(np.asarray(cos_beta, dtype=float), MU_FLOOR)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -245,7 +246,7 @@ def sum_models(*models: BRDFModel) -> BRDFModel:
         # analytic where a part has it, central differences of that part alone where not
         # (a sum's columns are its parts' columns: no need to difference the whole sum)
 
-        def part_jac(m: BRDFModel, q: NDArray[np.float64], g: Geometry) -> NDArray:
+        def part_jac(m: BRDFModel, q: NDArray[np.float64], g: Geometry) -> NDArray[Any]:
             if m.jac_fn is not None:
                 return m.jac_fn(q, g)
             return numeric_jacobian(m.value_fn, q, g)

@@ -8,6 +8,8 @@ spatial frequencies in 1/µm. Values in 1/sr.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -29,12 +31,12 @@ def beckmann_kirchhoff() -> BRDFModel:
     grazing and energy bounded (DHR ≤ R). R is a constant (angle-averaged) reflectance.
     """
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         m = float(p[1])
         d = mf.beckmann_d(g.cos_theta_h, m, g.tan2_theta_h)
         return p[0] * d * mf.separable_smith_visibility(g.mu_i, g.mu_r, m)
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         # V = 1/(4 a_i a_r), a = μ + μΛ(μ): ∂V/∂m = −V (∂a_i/a_i + ∂a_r/a_r), ∂a = ∂(μΛ)/∂m
         m = float(p[1])
         mi = np.maximum(g.mu_i, mf.MU_FLOOR)
@@ -100,7 +102,8 @@ def spatial_frequency(g: Geometry, wavelength_um: float) -> NDArray[np.float64]:
     return np.hypot(g.vx, g.vy) / wavelength_um
 
 
-def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328, q: float = 1.0):
+def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328,
+                  q: float = 1.0) -> BRDFModel:
     """Rayleigh–Rice first-order vector perturbation BRDF (Church, Jenkinson & Zavada 1979;
     Elson & Bennett 1979; Stover, *Optical Scattering*):
 
@@ -123,7 +126,7 @@ def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328, q: fl
 
     if psd == "gaussian":
 
-        def value(p: NDArray, g: Geometry) -> NDArray:
+        def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
             fr = spatial_frequency(g, lam)
             s2 = psd_gaussian(fr, float(p[0]) * 1e-3, float(p[1]))
             return pref * g.mu_i * g.mu_r * s2
@@ -134,7 +137,7 @@ def rayleigh_rice(*, psd: str = "gaussian", wavelength_um: float = 0.6328, q: fl
         )
     else:
 
-        def value(p: NDArray, g: Geometry) -> NDArray:
+        def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
             fr = spatial_frequency(g, lam)
             return pref * g.mu_i * g.mu_r * psd_abc(fr, float(p[0]), float(p[1]), float(p[2]))
 

@@ -7,6 +7,8 @@ lobe only*; add a diffuse term with ``+`` (e.g. ``lambertian() + cook_torrance()
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -26,11 +28,11 @@ def phong() -> BRDFModel:
     symmetric in ωi, ωr).
     """
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         ca = np.maximum(g.cos_alpha, 0.0)
         return p[0] * (p[1] + 2.0) / (2.0 * np.pi) * ca ** p[1]
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         ca = np.maximum(g.cos_alpha, 0.0)
         lobe = (p[1] + 2.0) / (2.0 * np.pi) * ca ** p[1]
         logc = np.log(np.where(ca > 0, ca, 1.0))
@@ -87,17 +89,17 @@ def cook_torrance(
     if masking not in ("smith", "vcavity"):
         raise ValueError("masking must be 'smith' or 'vcavity'")
 
-    def dist(c: NDArray, a: float, g: Geometry) -> NDArray:
+    def dist(c: NDArray[Any], a: float, g: Geometry) -> NDArray[Any]:
         if distribution == "ggx":
             return mf.ggx_d(c, a)
         return mf.beckmann_d(c, a, g.tan2_theta_h)
 
-    def ddist(c: NDArray, a: float, g: Geometry) -> NDArray:
+    def ddist(c: NDArray[Any], a: float, g: Geometry) -> NDArray[Any]:
         if distribution == "ggx":
             return mf.ggx_d_dalpha(c, a)
         return mf.beckmann_d_dalpha(c, a, g.tan2_theta_h)
 
-    def vis(a: float, g: Geometry) -> NDArray:
+    def vis(a: float, g: Geometry) -> NDArray[Any]:
         if masking == "smith":
             return mf.smith_visibility(g.mu_i, g.mu_r, a, distribution=distribution)
         return g._get(
@@ -105,12 +107,12 @@ def cook_torrance(
             lambda: mf.vcavity_visibility(g.mu_i, g.mu_r, g.cos_theta_h, g.cos_beta),
         )
 
-    def dvis(a: float, g: Geometry) -> NDArray:
+    def dvis(a: float, g: Geometry) -> NDArray[Any]:
         if masking == "smith":
             return mf.smith_visibility_dalpha(g.mu_i, g.mu_r, a, distribution=distribution)
         return np.zeros(g.shape)
 
-    def fres(g: Geometry) -> NDArray | float:
+    def fres(g: Geometry) -> NDArray[Any] | float:
         if n is None:
             return 1.0
         return g._get(("fresnel", n), lambda: fresnel_unpolarized(g.cos_beta, n))
@@ -121,7 +123,7 @@ def cook_torrance(
 
     fused = distribution == "ggx" and masking == "smith"
 
-    def terms(a: float, g: Geometry) -> tuple[NDArray, ...]:
+    def terms(a: float, g: Geometry) -> tuple[Any, ...]:
         """(F·D·V, F·D, V, extra) at width a, memoised for the last a; extra holds the GGX
         Smith S terms reused by the derivative."""
         hit = g.cache.get(key)
@@ -130,25 +132,25 @@ def cook_torrance(
         fd = fres(g) * dist(g.cos_theta_h, a, g)
         if fused:
             v, si, sr = mf.ggx_smith_visibility_parts(g.mu_i, g.mu_r, a)
-            extra: tuple[NDArray, ...] = (si, sr)
+            extra: tuple[NDArray[Any], ...] = (si, sr)
         else:
             v, extra = vis(a, g), ()
         out = (fd * v, fd, v, extra)
         g.cache[key] = (a, out)
         return out
 
-    def lobe(a: float, g: Geometry) -> NDArray:
+    def lobe(a: float, g: Geometry) -> NDArray[Any]:
         return terms(a, g)[0]
 
-    def dlobe(a: float, g: Geometry) -> NDArray:
+    def dlobe(a: float, g: Geometry) -> NDArray[Any]:
         _, fd, v, extra = terms(a, g)
         dv = mf.ggx_smith_dv_dalpha(g.mu_i, g.mu_r, a, v, *extra) if fused else dvis(a, g)
         return fres(g) * ddist(g.cos_theta_h, a, g) * v + fd * dv
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return p[0] * lobe(float(p[1]), g)
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         a = float(p[1])
         return np.stack(np.broadcast_arrays(lobe(a, g), p[0] * dlobe(a, g)), axis=-1)
 
@@ -178,15 +180,15 @@ def blinn_phong() -> BRDFModel:
     D_BP = (s+2)/(2π) cos^s θh (Blinn 1977). DHR ≤ ρs (normalised D and V-cavity
     masking satisfy the weak white furnace test)."""
 
-    def vis(g: Geometry) -> NDArray:
+    def vis(g: Geometry) -> NDArray[Any]:
         return g._get(
             "vcavity_v", lambda: mf.vcavity_visibility(g.mu_i, g.mu_r, g.cos_theta_h, g.cos_beta)
         )
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         return p[0] * mf.blinn_phong_d(g.cos_theta_h, p[1]) * vis(g)
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         v = vis(g)
         c = g.cos_theta_h
         return np.stack(
@@ -219,17 +221,17 @@ def ward(*, anisotropic: bool = False) -> BRDFModel:
     Unlike the original Ward 1992 form there is no 1/√(μiμr) singularity.
     """
 
-    def expo(g: Geometry, ax: float, ay: float) -> NDArray:
+    def expo(g: Geometry, ax: float, ay: float) -> NDArray[Any]:
         return (g.vx / ax) ** 2 + (g.vy / ay) ** 2
 
-    def value(p: NDArray, g: Geometry) -> NDArray:
+    def value(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         ax = float(p[1])
         ay = float(p[2]) if anisotropic else ax
         vz2 = g.vz**2
         vv = g.vx**2 + g.vy**2 + vz2
         return p[0] * vv / (np.pi * ax * ay * vz2 * vz2) * np.exp(-expo(g, ax, ay) / vz2)
 
-    def jac(p: NDArray, g: Geometry) -> NDArray:
+    def jac(p: NDArray[Any], g: Geometry) -> NDArray[Any]:
         f = value(p, g)
         vz2 = g.vz**2
         ax = float(p[1])

@@ -16,6 +16,7 @@ response is numerically zero, and dividing a small D_p by it only measures round
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,7 +38,7 @@ __all__ = [
 REL_FLOOR = 1e-6
 
 
-def _safe_ratio(num: NDArray, s: NDArray, rel_floor: float) -> NDArray:
+def _safe_ratio(num: NDArray[Any], s: NDArray[Any], rel_floor: float) -> NDArray[Any]:
     smax = np.max(np.abs(s), axis=-1, keepdims=True)
     ok = np.abs(s) >= rel_floor * np.where(smax > 0, smax, 1.0)
     ok &= smax > 0

@@ -31,6 +31,7 @@ components 8 mm before and behind it, 12–13σ each.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +40,7 @@ __all__ = ["judged_on_clean_rows", "line_of_sight", "outside_rows"]
 
 
 def outside_rows(
-    wall_mm: NDArray, positions_mm: NDArray, solvable_rad: tuple[float, float]
+    wall_mm: NDArray[Any], positions_mm: NDArray[Any], solvable_rad: tuple[float, float]
 ) -> NDArray[np.bool_]:
     """(R,) wall rows where the ray from any of ``positions_mm`` (K, 2) arrives outside
     the solvable domain ``solvable_rad``."""
@@ -51,9 +52,9 @@ def outside_rows(
 
 
 def judged_on_clean_rows(
-    order: list[int], wall_mm: NDArray, positions_mm: NDArray,
+    order: list[int], wall_mm: NDArray[Any], positions_mm: NDArray[Any],
     solvable_rad: tuple[float, float], threshold: float,
-    significance_on: Callable[[NDArray[np.bool_], list[int]], NDArray],
+    significance_on: Callable[[NDArray[np.bool_], list[int]], NDArray[Any]],
 ) -> tuple[list[int], dict[int, list[tuple[int, float]]]]:
     """Split the candidates ``order`` (indices into ``positions_mm``, strongest first, all
     above the threshold on every row) into those reported and those attributed to a
@@ -82,7 +83,7 @@ def judged_on_clean_rows(
 
 
 def line_of_sight(
-    positions_mm: NDArray, sources: list[int], blur_mm: Callable[[float], float]
+    positions_mm: NDArray[Any], sources: list[int], blur_mm: Callable[[float], float]
 ) -> dict[int, list[int]]:
     """Per source index, the other candidates on its line of sight: within its transverse
     blur across (``blur_mm(z)`` at the source's depth), at any depth (module doc)."""

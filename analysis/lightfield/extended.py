@@ -35,6 +35,7 @@ test_extended.py`` and ADR 0032.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -80,8 +81,8 @@ class OneOrTwo:
 
 
 def _segment_model(
-    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray, ends: NDArray
-) -> tuple[NDArray, NDArray]:
+    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any], ends: NDArray[Any]
+) -> tuple[NDArray[Any], NDArray[Any]]:
     """Unit-amplitude response of a uniform segment (R, n_use) and its derivatives in the
     four end coordinates (4, R, n_use) — (y₁, z₁, y₂, z₂) — by the chain rule through
     the nodes ``E₁ + t (E₂ − E₁)``."""
@@ -95,9 +96,10 @@ def _segment_model(
 
 
 def _fit_segment(
-    g: NDArray, lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray, ends: NDArray,
+    g: NDArray[Any], lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any],
+    ends: NDArray[Any],
     bounds: tuple[tuple[float, float], tuple[float, float]],
-) -> tuple[NDArray, float, float]:
+) -> tuple[NDArray[Any], float, float]:
     """Least squares of one uniform segment (amplitude and ends) to the rays ``g``
     (R, n_use), started at ``ends`` (2, 2): (ends, amplitude, RSS)."""
     from scipy.optimize import least_squares
@@ -109,11 +111,11 @@ def _fit_segment(
     x0r = r0.ravel()
     amp0 = float(x0r @ flat / max(float(x0r @ x0r), 1e-300))
 
-    def resid(x: NDArray) -> NDArray:
+    def resid(x: NDArray[Any]) -> NDArray[Any]:
         r, _ = _segment_model(lf_wall, use, phi, x[1:].reshape(2, 2))
         return x[0] * r.ravel() - flat
 
-    def jac(x: NDArray) -> NDArray:
+    def jac(x: NDArray[Any]) -> NDArray[Any]:
         r, d = _segment_model(lf_wall, use, phi, x[1:].reshape(2, 2))
         return np.column_stack([r.ravel(), (x[0] * d).reshape(4, -1).T])
 
@@ -127,8 +129,8 @@ def _fit_segment(
 
 
 def one_or_two(
-    g: NDArray, lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray,
-    pair_mm: NDArray, *, sigma2: float, n_eff: float,
+    g: NDArray[Any], lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any],
+    pair_mm: NDArray[Any], *, sigma2: float, n_eff: float,
     bounds: tuple[tuple[float, float], tuple[float, float]],
 ) -> OneOrTwo:
     """Decide whether two components at ``pair_mm`` (2, 2) — rows (y, z) — are one extended
@@ -153,8 +155,8 @@ def one_or_two(
 
 
 def extended_groups(
-    g: NDArray, lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray,
-    positions_mm: NDArray, pairs: list[tuple[int, int]], *, n_eff: float,
+    g: NDArray[Any], lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any],
+    positions_mm: NDArray[Any], pairs: list[tuple[int, int]], *, n_eff: float,
     bounds: tuple[tuple[float, float], tuple[float, float]],
 ) -> tuple[list[list[int]], dict[tuple[int, int], OneOrTwo]]:
     """Group the components at ``positions_mm`` (K, 2) into objects: each candidate pair

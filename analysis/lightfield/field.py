@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,7 +63,7 @@ def _check_theta(theta: NDArray[np.float64], domain: tuple[float, float], name: 
         raise ValueError(f"{name} must be the cell-centred grid of its domain [{a}, {b}]")
 
 
-def _frozen(a: NDArray) -> NDArray:
+def _frozen(a: NDArray[Any]) -> NDArray[Any]:
     out = np.array(a, copy=True)
     out.setflags(write=False)
     return out
@@ -88,7 +89,7 @@ class LightField2D:
     Arrays are copied and made read-only, so a field never changes after creation.
     """
 
-    radiance: NDArray
+    radiance: NDArray[Any]
     y_mm: NDArray[np.float64]
     theta_rad: NDArray[np.float64]
     domain_rad: tuple[float, float]
@@ -124,9 +125,9 @@ class LightField2D:
     @property
     def shape(self) -> tuple[int, int]:
         """(N_y, N_θ)."""
-        return self.radiance.shape  # type: ignore[return-value]
+        return self.radiance.shape
 
-    def with_radiance(self, radiance: NDArray, *, z_mm: float | None = None) -> LightField2D:
+    def with_radiance(self, radiance: NDArray[Any], *, z_mm: float | None = None) -> LightField2D:
         """A field on the same grids with new samples (and optionally a new plane z)."""
         return LightField2D(
             radiance, self.y_mm, self.theta_rad, self.domain_rad,
@@ -136,7 +137,7 @@ class LightField2D:
     @classmethod
     def from_function(
         cls,
-        func: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray],
+        func: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[Any]],
         y_mm: NDArray[np.float64],
         domain_rad: tuple[float, float],
         n_theta: int,
@@ -163,7 +164,7 @@ class LightField4D:
     z_mm : axial position of the plane (mm)
     """
 
-    radiance: NDArray
+    radiance: NDArray[Any]
     x_mm: NDArray[np.float64]
     y_mm: NDArray[np.float64]
     u_rad: NDArray[np.float64]
@@ -213,7 +214,7 @@ class LightField4D:
         """Angular spacing along v (rad)."""
         return (self.v_domain_rad[1] - self.v_domain_rad[0]) / self.v_rad.size
 
-    def with_radiance(self, radiance: NDArray, *, z_mm: float | None = None) -> LightField4D:
+    def with_radiance(self, radiance: NDArray[Any], *, z_mm: float | None = None) -> LightField4D:
         """A field on the same grids with new samples (and optionally a new plane z)."""
         return LightField4D(
             radiance, self.x_mm, self.y_mm, self.u_rad, self.v_rad,

@@ -50,6 +50,7 @@ z < 0).  A trial point (y, z) collects the rays ``L(y − z tan θ, θ)`` (a she
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -103,8 +104,8 @@ class FocalStack:
 
 
 def _filtered_masked(
-    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray
-) -> tuple[NDArray, NDArray]:
+    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any]
+) -> tuple[NDArray[Any], NDArray[Any]]:
     """Data and model norms of the exact matched filter (module doc).
 
     Returns ``H`` (R, N): each row's ``g = L cos θ`` restricted to the solvable domain and
@@ -123,9 +124,9 @@ def _filtered_masked(
 
 
 def _stacks(
-    lf_wall: LightField2D, y: NDArray, zs: NDArray, a: float, b: float,
-    phi: NDArray | None = None,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    lf_wall: LightField2D, y: NDArray[Any], zs: NDArray[Any], a: float, b: float,
+    phi: NDArray[Any] | None = None,
+) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]:
     """One pass over the sheared samples: conventional, RP, measure, MF numerator, MF norm.
 
     Without ``phi`` the matched-filter numerator is the line-sample form
@@ -174,7 +175,7 @@ def _stacks(
     return conv, rp, meas, num, norm2
 
 
-def _normalised(num: NDArray, norm2: NDArray) -> NDArray:
+def _normalised(num: NDArray[Any], norm2: NDArray[Any]) -> NDArray[Any]:
     """Matched-filter numerator over the model norm (0 where no ray is available)."""
     return np.where(norm2 > 0, num / np.sqrt(np.where(norm2 > 0, norm2, 1.0)), 0.0)
 
@@ -211,6 +212,7 @@ def refocus_4d(
 
     Returns the image of shape (N_x, N_y) (radiance averaged over the angle domains).
     """
+    # method: a str checked by propagate_4d itself (ValueError), not narrowed to its Literal
     moved = propagate_4d(lf, z_mm, method=method)  # type: ignore[arg-type]
     area = (lf.u_domain_rad[1] - lf.u_domain_rad[0]) * (lf.v_domain_rad[1] - lf.v_domain_rad[0])
     return project_4d(moved) / area
@@ -311,7 +313,8 @@ def depth_profile(
     peak = prof.max(axis=0, keepdims=True)
     prof = prof / np.where(peak > 0, peak, 1.0)
     logp = np.log(np.clip(prof, 1e-300, None)).mean(axis=1)
-    return np.exp(logp), f[band]
+    # float64 both: numpy's stubs widen rfftfreq's and the mean's dtypes
+    return np.exp(logp), f[band]  # type: ignore[return-value]
 
 
 def depth_interval(
@@ -445,7 +448,7 @@ def _replace_quality(c: _Candidate, quality: str) -> _Candidate:
     return replace(c, quality=quality)
 
 
-def _parabolic(v: NDArray, i: int) -> float:
+def _parabolic(v: NDArray[Any], i: int) -> float:
     if 0 < i < v.size - 1:
         den = v[i - 1] - 2 * v[i] + v[i + 1]
         if den < 0:
@@ -453,7 +456,7 @@ def _parabolic(v: NDArray, i: int) -> float:
     return float(i)
 
 
-def _peak_in(v: NDArray, grid: NDArray, allowed: NDArray[np.bool_]) -> float:
+def _peak_in(v: NDArray[Any], grid: NDArray[Any], allowed: NDArray[np.bool_]) -> float:
     """Sub-sample position of the largest ``v`` where ``allowed`` (parabolic refinement)."""
     j = int(np.argmax(np.where(allowed, v, -np.inf)))
     return float(np.interp(_parabolic(v, j), np.arange(grid.size), grid))
@@ -471,7 +474,7 @@ def _inv_span(z_far: float, z_near: float) -> float:
     return abs(1.0 / abs(z_near) - 1.0 / abs(z_far))
 
 
-def _half_max_span(v: NDArray, grid: NDArray) -> tuple[float, float]:
+def _half_max_span(v: NDArray[Any], grid: NDArray[Any]) -> tuple[float, float]:
     """Grid values bounding the contiguous run around ``argmax(v)`` where v ≥ max/2."""
     j = int(np.argmax(v))
     above = v >= 0.5 * v[j]
@@ -516,9 +519,9 @@ class _Stacks:
     """The three stacks the detector works on (all (N_z, N_y), zero outside ``enough``):
     matched filter (peak picking, subtraction), its numerator (depth filter), RP."""
 
-    mf: NDArray
-    num: NDArray
-    rp: NDArray
+    mf: NDArray[Any]
+    num: NDArray[Any]
+    rp: NDArray[Any]
 
     def __sub__(self, other: _Stacks) -> _Stacks:
         return _Stacks(self.mf - other.mf, self.num - other.num, self.rp - other.rp)
@@ -534,7 +537,7 @@ class _Candidate:
     quality: str
     estimates: tuple[float, float, float]
     interval: tuple[float, float]
-    profile: NDArray
+    profile: NDArray[Any]
     model: _Stacks
     open_ends: tuple[bool, bool] = (False, False)
 
@@ -784,7 +787,7 @@ def detect_objects(
                     / max(r_row.transverse_mm * r_row.depth_mm, 1e-12))
     s_star = snr_threshold(false_alarm, n_cells) if noise is not None else float("nan")
 
-    def assess(pos: NDArray) -> tuple[NDArray, NDArray, float]:
+    def assess(pos: NDArray[Any]) -> tuple[NDArray[Any], NDArray[Any], float]:
         """Joint amplitudes, significances (σ) and the residual's excess over the noise
         of point responses at ``pos`` (K, 2)."""
         assert noise is not None
@@ -797,16 +800,16 @@ def detect_objects(
         sd = np.hypot(fit.sigma, MODEL_MISMATCH * leak.sum(axis=1))
         return fit.amplitudes, fit.amplitudes / np.where(sd > 0, sd, np.inf), fit.mismatch
 
-    def fit_of(pos: NDArray) -> _JointFit:
+    def fit_of(pos: NDArray[Any]) -> _JointFit:
         return _fit_points(g_rays, lf_wall, use, phi, pos, box)
 
-    def strengths(f: _JointFit) -> NDArray:
+    def strengths(f: _JointFit) -> NDArray[Any]:
         """Matched-filter numerator of each fitted response at its own position on the
         rays, ``a_k ‖K_k‖²``: the ray-domain counterpart of the greedy threshold."""
         r, _, _ = _ray_model(lf_wall, use, phi, f.positions)
         return f.amplitudes * np.sum(r.reshape(len(f.amplitudes), -1) ** 2, axis=1)
 
-    def as_cand(p_: NDArray) -> _Candidate:
+    def as_cand(p_: NDArray[Any]) -> _Candidate:
         return _Candidate(float(p_[0]), float(p_[1]), "unresolved", (0.0, 0.0, 0.0),
                           (0.0, 0.0), np.zeros(0), data)
 
@@ -918,7 +921,7 @@ def detect_objects(
         # object's unmodelled light reaches are no evidence for a weaker candidate
         pos_all = np.asarray([(c.y, c.z) for c in cands]).reshape(-1, 2)
 
-        def significance_on(rows: NDArray[np.bool_], idx: list[int]) -> NDArray:
+        def significance_on(rows: NDArray[np.bool_], idx: list[int]) -> NDArray[Any]:
             assert noise is not None
             r, _, _ = _ray_model(lf_wall, use, phi, pos_all[idx])
             return amplitude_fit(g_rays[rows], r[:, rows], use, phi, noise).significance

@@ -15,7 +15,7 @@ Projection ``S[L](y) = ∫_a^b L(y, θ) dθ`` is the midpoint rule on the cell-c
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,13 +37,13 @@ Interpolation = Literal["linear", "cubic", "fourier"]
 
 
 def sample_columns(
-    values: NDArray,
+    values: NDArray[Any],
     y0_mm: float,
     dy_mm: float,
     y_query_mm: NDArray[np.float64],
     *,
     method: Literal["linear", "cubic"] = "linear",
-) -> NDArray:
+) -> NDArray[Any]:
     """Interpolate each column ``values[:, j]`` at the positions ``y_query_mm[:, j]``.
 
     Parameters
@@ -85,7 +85,8 @@ def sample_columns(
     return np.where(inside, out, 0.0)
 
 
-def _fourier_shift_columns(values: NDArray, shift_samples: NDArray[np.float64]) -> NDArray:
+def _fourier_shift_columns(values: NDArray[Any],
+                           shift_samples: NDArray[np.float64]) -> NDArray[Any]:
     """out[i, j] = values(i − shift_j) for a band-limited column, zero-padded ×2."""
     n_y = values.shape[0]
     n_pad = 2 * n_y
@@ -120,7 +121,7 @@ def sample_along_curves(
     distance_mm: ArrayLike,
     *,
     method: Literal["linear", "cubic"] = "cubic",
-) -> tuple[NDArray, NDArray[np.bool_]]:
+) -> tuple[NDArray[Any], NDArray[np.bool_]]:
     """Sample ``L(c_r + d_r tan θ_j, θ_j)`` for every point c_r (the curve of eq. 2-6).
 
     Parameters
@@ -145,7 +146,7 @@ def sample_along_curves(
     return vals, (q >= lo - tol) & (q <= hi + tol)
 
 
-def project(lf: LightField2D) -> NDArray:
+def project(lf: LightField2D) -> NDArray[Any]:
     """Projection over angle ``S[L](y) = ∫_a^b L(y, θ) dθ`` (midpoint rule), shape (N_y,)."""
     return lf.radiance.sum(axis=1) * lf.dtheta_rad
 
@@ -185,6 +186,6 @@ def propagate_4d(
     return lf.with_radiance(out, z_mm=lf.z_mm + d)
 
 
-def project_4d(lf: LightField4D) -> NDArray:
+def project_4d(lf: LightField4D) -> NDArray[Any]:
     """Projection over both angles ``∬ L du dv``, shape (N_x, N_y)."""
     return lf.radiance.sum(axis=(2, 3)) * lf.du_rad * lf.dv_rad

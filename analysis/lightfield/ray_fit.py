@@ -7,6 +7,7 @@ wall, z < 0 in front of it (unfolded), mm; θ the ray angle on the wall, rad.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,15 +23,15 @@ class JointFit:
     :func:`fit_points`): positions (K, 2) as (y, z) in mm, amplitudes (K,) in radiance
     units, the residual sum of squares and the number of rays fitted."""
 
-    positions: NDArray
-    amplitudes: NDArray
+    positions: NDArray[Any]
+    amplitudes: NDArray[Any]
     rss: float
     n_rays: int
 
 
 def ray_model(
-    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray, pos: NDArray
-) -> tuple[NDArray, NDArray, NDArray]:
+    lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any], pos: NDArray[Any]
+) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
     """``g = L cos θ`` of unit point responses on the rays in the solvable domain, and its
     derivatives in y and z.
 
@@ -59,7 +60,8 @@ def ray_model(
 
 
 def fit_points(
-    g: NDArray, lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray, pos: NDArray,
+    g: NDArray[Any], lf_wall: LightField2D, use: NDArray[np.bool_], phi: NDArray[Any],
+    pos: NDArray[Any],
     bounds: tuple[tuple[float, float], tuple[float, float]],
 ) -> JointFit:
     """Joint least squares of K point responses with free (y, z) and amplitude.
@@ -80,15 +82,15 @@ def fit_points(
     r0, _, _ = ray_model(lf_wall, use, phi, start)
     amp0 = np.linalg.lstsq(r0.reshape(k, -1).T, flat, rcond=None)[0]
 
-    def unpack(x: NDArray) -> tuple[NDArray, NDArray]:
+    def unpack(x: NDArray[Any]) -> tuple[NDArray[Any], NDArray[Any]]:
         return x[:k], x[k:].reshape(k, 2)
 
-    def resid(x: NDArray) -> NDArray:
+    def resid(x: NDArray[Any]) -> NDArray[Any]:
         amp, p_ = unpack(x)
         r, _, _ = ray_model(lf_wall, use, phi, p_)
         return np.tensordot(amp, r, axes=1).ravel() - flat
 
-    def jac(x: NDArray) -> NDArray:
+    def jac(x: NDArray[Any]) -> NDArray[Any]:
         amp, p_ = unpack(x)
         r, dy, dz = ray_model(lf_wall, use, phi, p_)
         cols = np.empty((flat.size, 3 * k))

@@ -25,7 +25,7 @@ to any depth, including the object plane (−d1), is a shear of it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,6 +44,7 @@ from .propagate import propagate, sample_along_curves
 from .regularize import Method, RegularizationResult, regularize
 from .scatter import BRDFCallable
 from .spectral import (
+    SeparableSpectra,
     brdf_fourier_matrix,
     coefficients,
     fourier_orders,
@@ -91,7 +92,7 @@ class Reconstruction:
 
     def object_samples(
         self, d1_mm: ArrayLike
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[Any]]:
         """The result placed on the object-side curves: ``(y_o, θ, L)``.
 
         ``y_o[r, j] = c_r − d1,r tan θ_j`` (mm, shape (R, N)), θ (N,), L (R, N).
@@ -103,6 +104,7 @@ class Reconstruction:
 
     def object_field(self, d1_mm: float, *, method: str = "cubic") -> LightField2D:
         """The object-plane light field on the wall's y grid (a shear by −d1)."""
+        # method: a str checked by propagate itself (ValueError), not narrowed to its Literal
         return propagate(self.incident_field, -float(d1_mm), method=method)  # type: ignore[arg-type]
 
 
@@ -194,6 +196,7 @@ def solve_curves(
     pts = None if points_mm is None else np.broadcast_to(np.asarray(points_mm, float), (n_r,))
 
     if separable:
+        # separable: brdf is a FlatlandBRDF or SpatiallyVaryingBRDF (the test above says so)
         spec = separable_spectra(brdf, domain_rad, n, points_mm=pts,  # type: ignore[arg-type]
                                  normal_angle_rad=tn if per_point_tilt else float(tn[0]))
         s_all, d_all = spec.s, spec.d
@@ -265,7 +268,7 @@ def _flat_window(brdf: object) -> bool:
 
 def _b_matrix(
     brdf: BRDFCallable,
-    spec: object,
+    spec: SeparableSpectra | None,
     domain: tuple[float, float],
     n: int,
     r: int,

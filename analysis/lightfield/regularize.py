@@ -25,7 +25,7 @@ whole light field.  Modes with s_k = 0 are unobservable: φ = 0 there, never NaN
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -94,7 +94,7 @@ def truncation_level_mse(
     return uniq, np.cumsum(diff)
 
 
-def _tikhonov(s2: NDArray, lam: float) -> NDArray:
+def _tikhonov(s2: NDArray[Any], lam: float) -> NDArray[Any]:
     return s2 / (s2 + lam)
 
 
@@ -260,7 +260,7 @@ def regularize(
         parameter_name=name,
         parameter=param,
         filter_factors=phi,
-        solution=x,
+        solution=x,  # type: ignore[arg-type]  # complex: φ (real) times the complex m/s
         effective_dof=dof,
         residual_norm2=resid2,
         noise_norm2=noise2,

@@ -40,6 +40,7 @@ linear in the data, so their noise follows from the noise of ``g``:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -75,7 +76,7 @@ class AmplitudeFit:
 
 
 def amplitude_fit(
-    g_rays: NDArray, responses: NDArray, use: NDArray[np.bool_], phi: ArrayLike,
+    g_rays: NDArray[Any], responses: NDArray[Any], use: NDArray[np.bool_], phi: ArrayLike,
     noise_power: ArrayLike,
 ) -> AmplitudeFit:
     """Amplitudes of ``responses`` (K, R, n_use) in the data ``g_rays`` (R, n_use) with the

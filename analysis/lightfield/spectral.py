@@ -21,6 +21,7 @@ Matrices (M_p = Σ_q B_pq O_q):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -74,7 +75,7 @@ def _fine_n(n: int, width: float, lobe_rad: float | None, oversample: int) -> in
     return int(2 ** np.ceil(np.log2(k)))
 
 
-def _resample_orders(c_fine: NDArray, n: int) -> NDArray:
+def _resample_orders(c_fine: NDArray[Any], n: int) -> NDArray[Any]:
     """Pick the orders of an N-grid from coefficients computed on a finer grid."""
     k = c_fine.shape[-1]
     p = fourier_orders(n)
@@ -144,7 +145,8 @@ def separable_spectra(
         c = np.atleast_1d(np.asarray(points_mm, dtype=float))
         s = s * np.asarray(brdf.specular_scale(c), dtype=float)[:, None]
         d = d * np.sqrt(np.asarray(brdf.diffuse_scale(c), dtype=float))[:, None]
-    return SeparableSpectra(fourier_orders(n), s, d, w, base.window_exponent == 0)
+    # s is complex (Fourier coefficients); numpy's stubs lose the dtype through the scalings
+    return SeparableSpectra(fourier_orders(n), s, d, w, base.window_exponent == 0)  # type: ignore[arg-type]
 
 
 def brdf_fourier_matrix(

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -97,7 +97,7 @@ def lm_index(l: int | np.ndarray, m: int | np.ndarray) -> int | np.ndarray:
     return l * l + l + m
 
 
-def band_slice(l: int) -> slice:
+def band_slice(l: int | np.integer[Any]) -> slice:
     """Slice of the flat vector holding the 2l+1 coefficients of degree l (m = −l … l)."""
     l = check_degree("l", l)
     return slice(l * l, (l + 1) * (l + 1))

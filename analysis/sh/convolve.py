@@ -293,6 +293,7 @@ def wiener_deconvolve(
                 noise_sigma = estimate_coefficient_noise(b, a, null_tol=null_tol).sigma
             except SHInputError:
                 noise_sigma = 0.0  # the fitted floor alone sets the level
+        assert noise_sigma is not None  # given, or estimated just above
         p_l, slope, sigma_used = _fit_lighting_spectrum(b, a, float(noise_sigma), observable,
                                                         fixed_floor=known)
         k_arr = sigma_used**2 / p_l

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Literal, cast
 
 import ducc0
 import numpy as np
@@ -75,10 +75,10 @@ def transform_defaults() -> TransformDefaults:
     return _defaults
 
 
-def _check_backend(backend: str) -> str:
+def _check_backend(backend: str) -> Backend:
     if backend not in BACKENDS:
         raise SHInputError("backend", f"must be one of {BACKENDS}, got {backend!r}")
-    return backend
+    return cast(Backend, backend)  # one of BACKENDS: checked above
 
 
 def _check_threads(nthreads: int) -> int:

@@ -14,6 +14,7 @@ error that noise alone produces (:mod:`analysis.sh.consistency`), never with zer
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,6 +88,7 @@ def _checked(**coeffs: np.ndarray) -> tuple[int, list[np.ndarray]]:
                                "coefficient vectors must have the same band limit")
         lmax = l
         out.append(arr)
+    assert lmax is not None  # at least one array was given
     return int(lmax), out
 
 
@@ -102,7 +104,8 @@ def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     return i, j
 
 
-def _collect(name: str, lmin: int, lmax: int, per_l) -> IdentityError:
+def _collect(name: str, lmin: int, lmax: int,
+             per_l: Callable[[int], tuple[float, bool, float]]) -> IdentityError:
     orders = np.arange(lmin, lmax + 1)
     err = np.zeros(orders.size)
     ok = np.zeros(orders.size, dtype=bool)
@@ -118,7 +121,7 @@ def _product_identity(name: str, arrays: dict[str, np.ndarray], lmin: int) -> Id
     lmax, (x, y, u, v) = _checked(**arrays)
     check_degree("lmin", lmin)
 
-    def per_l(l: int):
+    def per_l(l: int) -> tuple[float, bool, float]:
         s = band_slice(l)
         e, ok = _normalised(x[s] * y[s], u[s] * v[s])
         return e, ok, np.nan
@@ -134,7 +137,7 @@ def known_lighting(image: np.ndarray, lighting: np.ndarray, *, lmin: int = 1) ->
     lmax, (b, lig) = _checked(image=image, lighting=lighting)
     check_degree("lmin", lmin)
 
-    def per_l(l: int):
+    def per_l(l: int) -> tuple[float, bool, float]:
         bl, ll = b[band_slice(l)], lig[band_slice(l)]
         i, j = _pairs(2 * l + 1)
         e, ok = _normalised(bl[i] * ll[j], bl[j] * ll[i])
@@ -164,7 +167,7 @@ def diffuse_plus_specular(
     lmax, (b, lig, d) = _checked(image=image, lighting=lighting, irradiance=irradiance)
     check_degree("lmin", lmin)
 
-    def per_l(l: int):
+    def per_l(l: int) -> tuple[float, bool, float]:
         s = band_slice(l)
         bl, ll, dl = b[s], lig[s], d[s]
         i, j = _pairs(2 * l + 1)
@@ -190,7 +193,7 @@ def two_objects_one_lighting(
     lmax, (b1, b2) = _checked(image1=image1, image2=image2)
     check_degree("lmin", lmin)
 
-    def per_l(l: int):
+    def per_l(l: int) -> tuple[float, bool, float]:
         s = band_slice(l)
         x1, x2 = b1[s], b2[s]
         i, j = _pairs(2 * l + 1)
@@ -247,7 +250,7 @@ def rank_one(images: np.ndarray, *, lmin: int = 0) -> IdentityError:
         raise SHInputError("images", f"must have shape (r, s, (L+1)²), got {imgs.shape}")
     check_degree("lmin", lmin)
 
-    def per_l(l: int):
+    def per_l(l: int) -> tuple[float, bool, float]:
         blk = imgs[:, :, band_slice(l)]  # (r, s, 2l+1)
         mat = np.moveaxis(blk, 2, 1).reshape(-1, imgs.shape[1])
         sv = np.linalg.svd(mat, compute_uv=False)

@@ -33,6 +33,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from analysis.sh.validation import SHInputError, check_degree, check_finite
 
@@ -92,7 +93,7 @@ def sectoral_seeds(sin_theta: np.ndarray, mmax: int) -> tuple[np.ndarray, np.nda
     return mant, expo
 
 
-def step_coefficients(m: np.ndarray, l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def step_coefficients(m: ArrayLike, l: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Coefficients (a_lm, a_lm·b_lm) of the l-recurrence for l ≥ m+2 (arrays broadcast)."""
     m = np.asarray(m, dtype=float)
     l = np.asarray(l, dtype=float)

@@ -70,7 +70,7 @@ def _parameterisation(value: str) -> str:
     return value
 
 
-def _geometry(geometry) -> SphereGeometry:
+def _geometry(geometry: object) -> SphereGeometry:
     if not isinstance(geometry, SphereGeometry):
         raise SHInputError("geometry", "must be a SphereGeometry (sphere_geometry())")
     return geometry

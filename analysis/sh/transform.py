@@ -39,10 +39,13 @@ module's backend): for L ≲ 64 one dense
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.fft
+from numpy.typing import ArrayLike
 
 from analysis.sh.convention import (
     PROJECT_CONVENTION,
@@ -126,7 +129,7 @@ class _ChunkPlan:
     chunks: tuple of (m0, k0, nc, n, mu of shape (nc, n, n_north), scale of shape (n, nc)).
     """
 
-    chunks: tuple
+    chunks: tuple[Any, ...]
 
 
 @dataclass(frozen=True)
@@ -231,7 +234,7 @@ def _dense_plan(grid: GLGrid) -> _DensePlan:
 
 
 @functools.lru_cache(maxsize=2)
-def _recurrence_setup(lmax: int, theta_key: bytes) -> tuple:
+def _recurrence_setup(lmax: int, theta_key: bytes) -> tuple[Any, ...]:
     """Per-grid constants of the recurrence: northern x, seeds and per-block coefficients."""
     th = np.frombuffer(theta_key, dtype=float)
     x, s = np.cos(th), np.sin(th)
@@ -244,7 +247,7 @@ def _recurrence_setup(lmax: int, theta_key: bytes) -> tuple:
     return x, mant, expo, tuple(blocks)
 
 
-def _recurrence_chunks(grid: GLGrid):
+def _recurrence_chunks(grid: GLGrid) -> Iterator[tuple[Any, ...]]:
     """(m0, k0, nc, n, skip, buf, scale) from :func:`degree_chunks` over all blocks."""
     lmax = grid.lmax
     nh = (lmax + 2) // 2
@@ -256,7 +259,7 @@ def _recurrence_chunks(grid: GLGrid):
             yield m0, k0, nc, n, skip, buf, sc
 
 
-def _chunks(grid: GLGrid):
+def _chunks(grid: GLGrid) -> Iterator[tuple[Any, ...]]:
     """(m0, k0, nc, n, skip, mu (nc, n, n_north − skip), scale (n, nc)): stored or recomputed.
 
     Rings before ``skip`` (polar) hold only values below 2^−300 in this chunk.
@@ -620,7 +623,7 @@ def _tikhonov_svd(a: np.ndarray, ridge: float
     return u, filt, vt, rank, condition, dof
 
 
-def _samples(theta, phi, weights, n: int | None
+def _samples(theta: ArrayLike, phi: ArrayLike, weights: ArrayLike | None, n: int | None
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Checked flat θ, φ and weights (≥ 0, default 1) of n samples (n: θ's size if None)."""
     th = check_finite("theta", theta).ravel()

@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import math
 from numbers import Integral, Real
+from typing import Any
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 __all__ = [
     "SHInputError",
@@ -42,7 +44,8 @@ class SHInputError(ValueError):
         super().__init__(f"{argument} {problem}")
 
 
-def check_finite(name: str, value, *, dtype=float, ndim: int | None = None) -> np.ndarray:
+def check_finite(name: str, value: Any, *, dtype: DTypeLike = float,
+                 ndim: int | None = None) -> np.ndarray:
     """``value`` as an array of ``dtype`` whose entries are all finite.
 
     Raises
@@ -65,7 +68,8 @@ def check_finite(name: str, value, *, dtype=float, ndim: int | None = None) -> n
     return arr
 
 
-def check_coefficients(name: str, value, *, dtype=float) -> tuple[np.ndarray, int]:
+def check_coefficients(name: str, value: Any, *, dtype: DTypeLike = float,
+                       ) -> tuple[np.ndarray, int]:
     """A finite coefficient array of shape ((L+1)², ...) and its band limit L."""
     arr = check_finite(name, value, dtype=dtype)
     if arr.ndim == 0:
@@ -77,7 +81,7 @@ def check_coefficients(name: str, value, *, dtype=float) -> tuple[np.ndarray, in
     return arr, lmax
 
 
-def check_degree(name: str, value, *, minimum: int = 0) -> int:
+def check_degree(name: str, value: Any, *, minimum: int = 0) -> int:
     """An integer degree (band limit) ≥ ``minimum``; floats, bools and NaN are refused."""
     if isinstance(value, bool) or not isinstance(value, Integral):
         raise SHInputError(name, f"must be an integer ≥ {minimum}, got {value!r}")
@@ -88,7 +92,7 @@ def check_degree(name: str, value, *, minimum: int = 0) -> int:
 
 def check_scalar(
     name: str,
-    value,
+    value: Any,
     *,
     low: float | None = None,
     high: float | None = None,

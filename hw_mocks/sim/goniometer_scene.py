@@ -149,6 +149,7 @@ def brdf_from_model(name: str, params: Sequence[float] | Mapping[str, float] | N
             mu_i=np.broadcast_to(max(float(wi[2]), MU_FLOOR), shape),
             xr=rx, yr=ry, mu_r=np.maximum(rz, MU_FLOOR)))
 
+    # attributes the scene reads, set on the function object
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     brdf.from_components = from_components  # type: ignore[attr-defined]
     # ω_i ↦ f(ω_r components) fused for one incidence, exact (hw_mocks.sim.brdf_kernels);
@@ -177,6 +178,7 @@ def lambertian_brdf(reflectance: float) -> BrdfFunction:
     def fixed_incidence(omega_i):
         return lambda rx, ry, rz: np.full(np.shape(rz), value)
 
+    # attributes the scene reads, set on the function object
     brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
     brdf.from_components = from_components  # type: ignore[attr-defined]
     brdf.fixed_incidence = fixed_incidence  # type: ignore[attr-defined]

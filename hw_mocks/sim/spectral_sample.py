@@ -296,6 +296,7 @@ class SpectralSample:
         def from_vectors(omega_i, omega_r):
             return self.brdf_vectors(omega_i, omega_r, wavelength_nm, bandwidth_nm)
 
+        # attributes the scene reads, set on the function object
         brdf.from_vectors = from_vectors  # type: ignore[attr-defined]
         brdf.wavelength_nm = wavelength_nm  # type: ignore[attr-defined]
         return brdf

@@ -36,4 +36,5 @@ class UsbFaults(FaultSchedule):
     def next_write(self) -> UsbFaultKind | None:
         """Count one bulk-OUT write; the fault it suffers, if any (first rule wins)."""
         firing = self.next_event()
+        # this schedule holds only UsbFaultKind rules; the base class types them loosely
         return firing[0].kind if firing else None  # type: ignore[return-value]

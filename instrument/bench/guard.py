@@ -30,11 +30,17 @@ __all__ = ["GuardError", "GuardedPoint", "Violation", "check", "enforce"]
 
 class GuardedPoint(Protocol):
     """What the guard reads of a point: a plan's :class:`instrument.plans.commands.ScanPoint`
-    or an operator's manual move."""
+    or an operator's manual move (both frozen: the guard only reads them, so the members
+    are read-only properties here)."""
 
-    index: int
-    angles: Angles | None
-    light: bool
+    @property
+    def index(self) -> int: ...
+
+    @property
+    def angles(self) -> Angles | None: ...
+
+    @property
+    def light(self) -> bool: ...
 
     def target_dict(self) -> dict[str, float]: ...
 

@@ -391,7 +391,7 @@ def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
     return out
 
 
-def _device(v: _Validator, role: str, t: dict, path: str) -> DeviceSpec | None:
+def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpec | None:
     known = {"driver", "url", "serial", "stage", "limits", "velocity", "acceleration",
              "position_tolerance", "options", "retry", "settle_s", "settings",
              "home_s", "readback_resolution", "repeatability", "relative_noise",
@@ -580,7 +580,7 @@ def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:
     return RetryPolicy(int(attempts), float(backoff), str(on_failure))
 
 
-def _geometry(v: _Validator, t: dict, path: str) -> GeometrySpec:
+def _geometry(v: _Validator, t: dict[str, Any], path: str) -> GeometrySpec:
     v.unknown(t, path, {"kind", "detector_distance_mm", "detector_aperture_mm",
                         "min_bistatic_deg", "source_theta_deg", "collision",
                         "beam_radius_mm", "beam_divergence_mrad", "sample_radius_mm"})
@@ -656,7 +656,7 @@ class _Validator:
     def error(self, path: str, message: str) -> None:
         self.errors.append(FieldError(path or "(top level)", message))
 
-    def table(self, data: dict, key: str, *, required: bool = False) -> dict:
+    def table(self, data: dict[str, Any], key: str, *, required: bool = False) -> dict[str, Any]:
         if key not in data:
             if required:
                 self.error(key, "missing table")
@@ -667,7 +667,8 @@ class _Validator:
             return {}
         return value
 
-    def string(self, t: dict, key: str, path: str, *, required: bool = False) -> str | None:
+    def string(self, t: dict[str, Any], key: str, path: str, *,
+               required: bool = False) -> str | None:
         if key not in t:
             if required:
                 self.error(f"{path}.{key}", "is required")
@@ -678,7 +679,7 @@ class _Validator:
             return None
         return value
 
-    def positive(self, t: dict, key: str, path: str) -> float | None:
+    def positive(self, t: dict[str, Any], key: str, path: str) -> float | None:
         if key not in t:
             return None
         value = t[key]
@@ -687,7 +688,7 @@ class _Validator:
             return None
         return float(value)
 
-    def unknown(self, t: dict, path: str, known: set[str]) -> None:
+    def unknown(self, t: dict[str, Any], path: str, known: set[str]) -> None:
         for key in t:
             if key not in known:
                 where = f"{path}.{key}" if path else key

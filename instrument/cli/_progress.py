@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import TextIO
 
 from instrument.cli._format import fmt_s
 from instrument.run.events import (
@@ -25,7 +26,8 @@ __all__ = ["ConsoleProgress", "fmt_s", "print_summary"]
 class ConsoleProgress:
     """Event subscriber printing to a terminal (called on the engine's worker thread)."""
 
-    def __init__(self, stream=None, *, width: int = 30, min_interval_s: float = 0.1) -> None:
+    def __init__(self, stream: TextIO | None = None, *, width: int = 30,
+                 min_interval_s: float = 0.1) -> None:
         self.stream = stream or sys.stdout
         self.width = width
         self.min_interval_s = min_interval_s
@@ -92,7 +94,7 @@ class ConsoleProgress:
                     self.stream.write("\n")
 
 
-def print_summary(ev: RunFinished, faults: int, stream=None) -> None:
+def print_summary(ev: RunFinished, faults: int, stream: TextIO | None = None) -> None:
     """What happened and what the run file holds (only what the bench recorded)."""
     out = stream or sys.stdout
     print(f"\nrun {ev.status}: {ev.n_done} of {ev.n_total} points in {fmt_s(ev.elapsed_s)}"

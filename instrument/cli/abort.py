@@ -10,7 +10,7 @@ from instrument.cli._client import add_server, call
 HELP = "abort the bench server's run (it stays at the head, resumable)"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("abort", help=HELP)
     add_server(p)
     p.set_defaults(func=run)

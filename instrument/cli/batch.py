@@ -23,7 +23,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from instrument.cli import fit, locate, reconstruct, spheres
 from instrument.cli._cluster import ClusterUnavailable, add_cluster_options, open_cluster
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
 HELP = "analyse many runs at once, on this machine or a Dask cluster"
 
 #: name → (help, the single-run command's option adder, its plain-options function)
-_ANALYSES: dict[str, tuple[str, Callable, Callable]] = {
+_ANALYSES: dict[str, tuple[str, Callable[..., Any], Callable[..., Any]]] = {
     "fit": ("BRDF reduction, model fits and selection of each run",
             fit.add_fit_options, fit.fit_options),
     "reconstruct": ("the hidden object's light field of each light-field run",
@@ -49,7 +49,7 @@ _ANALYSES: dict[str, tuple[str, Callable, Callable]] = {
 }
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("batch", help="analyse many runs at once, on this machine or a Dask "
                        "cluster (fit, reconstruct, locate, spheres)",
                        description="One analysis (fit, reconstruct, locate or spheres, with "

@@ -11,7 +11,7 @@ from instrument.cli._client import add_server, call
 HELP = "take, release or show the bench server's operator control"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("control", help=HELP)
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True

@@ -7,7 +7,7 @@ import argparse
 HELP = "list the bench's devices: identity, state, position"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("devices", help=HELP)
     p.add_argument("--bench", default="sim", help="profile name or path (default: sim)")
     p.add_argument("--home", action="store_true", help="home every axis first")

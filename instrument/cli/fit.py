@@ -10,11 +10,12 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import Any
 
 HELP = "BRDF of a run: reduce, fit models, select, report"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
 
     p = sub.add_parser("fit", help=HELP)
@@ -96,7 +97,7 @@ _COMPANIONS = (("--reference-table", "reference_table"),
                ("--camera-calibration", "camera_calibration"))
 
 
-def fit_options(args: argparse.Namespace) -> dict:
+def fit_options(args: argparse.Namespace) -> dict[str, Any]:
     """The fit options as plain data (companion files as absolute paths), the form
     :func:`instrument.batch.analyses.fit_arguments` takes and a batch records.
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from typing import Any
 
 from instrument.run.paths import DEFAULT_RUNS_DIR
 
@@ -20,7 +21,7 @@ HELP = ("the operator GUI: a client of the bench server (a local one is started 
 GUI_ENTRY = "gui.app"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("gui", help=HELP)
     add_arguments(p)
     p.set_defaults(func=run)
@@ -46,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "does not show yet")
 
 
-def gui_call(args: argparse.Namespace) -> tuple[str, dict]:
+def gui_call(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     """The function of :data:`GUI_ENTRY` that the arguments open, with its keyword
     arguments: ``main_in_process`` for ``--in-process`` (the full in-process window),
     else ``main`` (the client window on a server). Raises ValueError for options that

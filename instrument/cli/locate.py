@@ -11,6 +11,7 @@ stack, z-profiles) into the same folder (ADR 0013).
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from instrument.cli.reconstruct import (
     add_figure_options,
@@ -31,7 +32,7 @@ QUALITY_WORDS = {
 }
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("locate", help=HELP)
     p.add_argument("run", help="run file (.h5) of a lightfield plan")
     add_locate_options(p)
@@ -54,7 +55,7 @@ def add_locate_options(p: argparse.ArgumentParser) -> None:
     add_reconstruction_options(p)
 
 
-def locate_options(args: argparse.Namespace) -> dict:
+def locate_options(args: argparse.Namespace) -> dict[str, Any]:
     """The localisation options as plain data, the form :func:`instrument.batch.analyses.
     locate_arguments` takes: ``reconstruct`` holds the reconstruction options when the
     run must be reconstructed again (``--again`` or any reconstruction option other than
@@ -77,6 +78,7 @@ def locate_options(args: argparse.Namespace) -> dict:
 def depth_text(z: float, interval: object, open_ends: object, quality: str) -> str:
     """A detection's depth in words: an open end of its interval is the search range's
     edge, not a measured bound, and is said so."""
+    # interval and open_ends are pairs (typed object: the detections' own types vary)
     far, near = (float(v) for v in interval)  # type: ignore[attr-defined]
     open_far, open_near = (bool(v) for v in open_ends)  # type: ignore[attr-defined]
     if open_far:

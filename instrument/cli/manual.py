@@ -28,7 +28,7 @@ def _target(text: str) -> tuple[str, float]:
             f"{text!r}: give ROLE=VALUE, e.g. sample_theta=30 (axis units)") from None
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("manual", help=HELP, description=__doc__.splitlines()[0])
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True

@@ -10,7 +10,7 @@ from instrument.cli._client import add_server, call
 HELP = "pause the bench server's run (at the end of the point, or --now)"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("pause", help=HELP)
     add_server(p)
     p.add_argument("--now", action="store_true",

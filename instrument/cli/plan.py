@@ -15,7 +15,7 @@ from instrument.run.paths import DEFAULT_RUNS_DIR
 HELP = "dry run of a plan: points, travel, duration, coverage PNG"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("plan", help=HELP)
     p.add_argument("plan", help="plan file (TOML)")
     p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")

@@ -7,13 +7,14 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from instrument.cli._client import add_server, call
 
 HELP = "the bench server's plan queue: add, list, remove, move, start, stop"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("queue", help=HELP)
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True
@@ -59,7 +60,7 @@ def _add(c, args) -> int:
     return 0
 
 
-def print_items(items: list[dict], running: bool) -> None:
+def print_items(items: list[dict[str, Any]], running: bool) -> None:
     print(f"queue {'running' if running else 'stopped'}: {len(items)} item(s)")
     for k, i in enumerate(items):
         extra = f"  {i['run_file']}" if i.get("run_file") else ""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from instrument.pipelines.lightfield.results import ReconstructionResult
@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 HELP = "reconstruct the hidden object's light field from a light-field run"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("reconstruct", help=HELP)
     p.add_argument("run", help="run file (.h5) of a lightfield plan")
     add_reconstruction_options(p)
@@ -66,7 +66,7 @@ def _n_theta(text: str) -> int:
     return n
 
 
-def reconstruction_options(args: argparse.Namespace) -> dict:
+def reconstruction_options(args: argparse.Namespace) -> dict[str, Any]:
     """The reconstruction options as plain data (geometry file as an absolute path, BRDF
     text, domain in degrees), the form :func:`instrument.batch.analyses.
     reconstruct_arguments` takes and a results file records.

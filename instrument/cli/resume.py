@@ -18,7 +18,7 @@ from instrument.cli.run import add_common
 HELP = "continue a run that did not finish, or repair one (same file)"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("resume", help=HELP)
     p.add_argument("run", nargs="?", default=None,
                    help="run id (looked up in the --out catalog) or run file path; "

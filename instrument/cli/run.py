@@ -7,6 +7,7 @@ import argparse
 import signal
 import threading
 from pathlib import Path
+from types import FrameType
 from typing import TYPE_CHECKING
 
 from instrument.run.paths import DEFAULT_RUNS_DIR
@@ -17,7 +18,7 @@ if TYPE_CHECKING:
 HELP = "run a plan (BRDF, light field, calibration) on a bench"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("run", help=HELP)
     p.add_argument("plan", help="plan file (TOML), e.g. examples/brdf_inplane.toml")
     add_common(p)
@@ -50,7 +51,7 @@ def drive(engine: RunEngine, quiet: bool) -> int:
     engine.subscribe(progress)
     interrupted = threading.Event()
 
-    def on_sigint(signum, frame) -> None:
+    def on_sigint(signum: int, frame: FrameType | None) -> None:
         if interrupted.is_set():
             raise KeyboardInterrupt
         interrupted.set()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Set as AbstractSet
 from pathlib import Path
 
 from instrument.run.paths import DEFAULT_RUNS_DIR
@@ -16,7 +17,7 @@ from instrument.run.paths import DEFAULT_RUNS_DIR
 HELP = "list runs from the catalog (filter by status, sample...)"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("runs", help=HELP)
     p.add_argument("--out", default=str(DEFAULT_RUNS_DIR),
                    help=f"folder of the catalog (default: {DEFAULT_RUNS_DIR})")
@@ -34,7 +35,7 @@ def _t(t: float | None) -> str:
     return "-" if t is None else time.strftime("%Y-%m-%d %H:%M", time.localtime(t))
 
 
-def table(rows: list[list[str]], right: set[int] = frozenset()) -> list[str]:
+def table(rows: list[list[str]], right: AbstractSet[int] = frozenset()) -> list[str]:
     """Rows of cells as lines, each column as wide as its widest cell (the last one not
     padded); columns in ``right`` aligned right."""
     widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]

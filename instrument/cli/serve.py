@@ -16,7 +16,7 @@ HELP = "run the bench server (queue, run control, events); serve keys | audit"
 DEFAULT_LISTEN = "127.0.0.1:8765"  # instrument.server.main.DEFAULT_LISTEN (no import here)
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("serve", help=HELP)
     p.add_argument("--bench", default="sim", help="bench profile name or path (default: sim)")
     p.add_argument("--listen", default=DEFAULT_LISTEN, metavar="HOST:PORT",

@@ -21,7 +21,7 @@ PTY_ENTRY = ("hw_mocks.pty_server", "serve_url")
 HELP = "serve the emulated serial controllers on ptys"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("serve-sim", help=HELP)
     p.add_argument("--bench", default="sim", help="profile name or path (default: sim)")
     p.add_argument("--duration", type=float, default=None,

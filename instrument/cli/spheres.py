@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from analysis.sh.consistency import ConsistencyReport
@@ -66,7 +66,7 @@ def verdict_words(rep: ConsistencyReport) -> str:
     return "consistent within the noise"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("spheres", help=HELP)
     p.add_argument("run", help="run file (.h5) of a sphere_capture plan")
     add_sphere_options(p)
@@ -117,7 +117,7 @@ def _option_error(args: argparse.Namespace) -> str | None:
     return None
 
 
-def sphere_options(args: argparse.Namespace) -> dict:
+def sphere_options(args: argparse.Namespace) -> dict[str, Any]:
     """The analysis options as plain data: the keyword arguments of
     :func:`instrument.pipelines.spheres.analyse.analyse_capture`.
 

@@ -10,7 +10,7 @@ from instrument.cli._client import add_server, call
 HELP = "the bench server's state: run, queue, control"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("status", help=HELP)
     add_server(p)
     p.set_defaults(func=run)

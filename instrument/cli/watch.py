@@ -11,7 +11,7 @@ from instrument.cli._client import add_server, call
 HELP = "watch the bench server's runs live: progress and faults"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("watch", help=HELP)
     add_server(p)
     p.add_argument("--until-idle", action="store_true",

@@ -79,8 +79,8 @@ class BenchClient:
         self.close()
 
     # plumbing ---------------------------------------------------------------------------
-    def request(self, method: str, path: str, body: dict | None = None,
-                params: dict | None = None) -> Any:
+    def request(self, method: str, path: str, body: dict[str, Any] | None = None,
+                params: dict[str, Any] | None = None) -> Any:
         """One request; the decoded JSON answer, or :class:`ClientError`."""
         try:
             r = self._http.request(method, path, json=body, params=params)
@@ -109,7 +109,7 @@ class BenchClient:
     def runs(self, limit: int = 100) -> list[dict[str, Any]]:
         return self.request("GET", "/runs", params={"limit": limit})
 
-    def download(self, path: str, to: str | os.PathLike) -> None:
+    def download(self, path: str, to: str | os.PathLike[str]) -> None:
         """Copy the run file ``path`` (relative to the server's runs folder) to ``to``."""
         try:
             with self._http.stream("GET", f"/runs/files/{path}") as r:

@@ -23,6 +23,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 __all__ = ["LOCAL_LOG", "LOCAL_STATE", "LocalServer", "LocalServerError", "local_server",
            "stop_local_server"]
@@ -101,9 +102,11 @@ def _answers(url: str, key: str | None) -> bool:
         return err.status != 0  # it answered, if only to refuse the key
 
 
-def _recorded(runs_dir: Path) -> dict | None:
+def _recorded(runs_dir: Path) -> dict[str, Any] | None:
     try:
-        return json.loads((runs_dir / LOCAL_STATE).read_text(encoding="utf-8"))
+        # the state file is the JSON object this module writes
+        return cast(dict[str, Any],
+                    json.loads((runs_dir / LOCAL_STATE).read_text(encoding="utf-8")))
     except (OSError, ValueError):
         return None
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -47,7 +47,8 @@ from instrument.plans.scripted import in_plane
 __all__ = ["LobeFit", "SharpLobe", "fit_lobe", "lobe_model"]
 
 
-def lobe_model(theta_r_deg: np.ndarray, theta_i_deg: float, p: Sequence[float]) -> np.ndarray:
+def lobe_model(theta_r_deg: np.ndarray, theta_i_deg: float,
+               p: Sequence[float] | np.ndarray) -> np.ndarray:
     """y(θr) of the module docstring for p = (b, A, δ in degrees, α)."""
     b, a, delta, alpha = p
     th = np.radians(np.asarray(theta_r_deg, float) - theta_i_deg - delta) / 2.0
@@ -86,7 +87,7 @@ class LobeFit:
 
     def variance(self, y: np.ndarray) -> np.ndarray:
         """The variance model at readings ``y`` (module docstring, step 2)."""
-        return self.scale * (np.maximum(y, 0.0) + self.floor)
+        return cast(np.ndarray, self.scale * (np.maximum(y, 0.0) + self.floor))  # stubs: Any
 
 
 def fit_lobe(points: Sequence[Measured], theta_i: float) -> LobeFit | None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Container, Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -219,10 +220,10 @@ class Plan:
         pol = self.spec.acquisition
         total = 0.0
         lit: bool | None = None
-        where: tuple | None = None
+        where: tuple[Any, ...] | None = None
         slot: int | None = None
         climb = _ExposureClimb(pol, self.profile)
-        dark_seen: set = set()
+        dark_seen: set[Any] = set()
         if pol.uses_lockin and timing.lockin_integral_s != (0.0, 0.0):
             # the emulated lock-in computes its input once as the bench opens (light off)
             events["lockin_integrals_dark"] += 1
@@ -268,7 +269,8 @@ class Plan:
         return total
 
     def _integrals_s(self, timing: BenchTiming, light: bool, new_state: bool,
-                     where: tuple | None, dark_seen: set, events: dict[str, float]) -> float:
+                     where: tuple[Any, ...] | None, dark_seen: set[Any],
+                     events: dict[str, float]) -> float:
         """Seconds of the emulated detectors' aperture integrals at one point, counted into
         ``events``. With the light on, at a new world state (the emulators cache the last
         ones): the power meter one, the lock-in's photodiode two (the light, and its
@@ -573,7 +575,7 @@ def _dark_per_row(body: list[ScanPoint]) -> list[ScanPoint]:
     """A dark point (light off, no move) before every row: each run of points at one θi
     and one filter, in execution order."""
     out: list[ScanPoint] = []
-    row: tuple | None = None
+    row: tuple[Any, ...] | None = None
     for p in body:
         key = (None if p.angles is None else round(p.angles.theta_i, 6),
                dict(p.meta).get("filter"))

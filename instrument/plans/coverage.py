@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -60,10 +60,10 @@ def _signed_theta_r(p: Any) -> float:
     a = p.angles
     dphi = math.fmod(abs(a.phi_r - a.phi_i), 360.0)
     far = 90.0 < dphi < 270.0
-    return a.theta_r if far else -a.theta_r
+    return cast(float, a.theta_r if far else -a.theta_r)  # p: a plan point, typed loosely
 
 
-def _draw_in_plane(plt: Any, plan: Plan, groups: list, title: str) -> Any:
+def _draw_in_plane(plt: Any, plan: Plan, groups: list[Any], title: str) -> Any:
     bistatic = plan.profile.geometry.min_bistatic_deg
     n = len(groups)
     fig, axes = plt.subplots(n, 1, figsize=(8.0, 1.2 + 1.15 * n), sharex=True, squeeze=False)
@@ -87,7 +87,7 @@ def _draw_in_plane(plt: Any, plan: Plan, groups: list, title: str) -> Any:
     return fig
 
 
-def _draw_hemisphere(plt: Any, groups: list, title: str) -> Any:
+def _draw_hemisphere(plt: Any, groups: list[Any], title: str) -> Any:
     n = len(groups)
     cols = min(n, 3)
     rows = math.ceil(n / cols)

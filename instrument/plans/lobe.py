@@ -343,12 +343,13 @@ def plan_seconds(plan: Plan, pb: PointBudget, readout_s: float, frames_per_point
     return float(plan.estimate().motion_s + acq[pb.measurable].sum())
 
 
-def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float], *,
+def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float] | np.ndarray, *,
                 det: DetectorSetup, option: ScanOption, budget: ErrorBudget,
                 readout_s: float) -> tuple[np.ndarray, PointBudget]:
     """The angles (n, 4; radians) of ``plan``'s scattering points and their budget."""
     pts = [q for q in plan.points if q.angles is not None and q.light]
-    ang = np.radians(np.array([q.angles.as_tuple() for q in pts]))
+    # pts holds only points with angles (filtered just above)
+    ang = np.radians(np.array([q.angles.as_tuple() for q in pts]))  # type: ignore[union-attr]
     return ang, point_budget(model, np.asarray(params, dtype=float), ang, det=det,
                              option=option, budget=budget, readout_s=readout_s)
 

@@ -38,6 +38,7 @@ candidate is *not measurable* and is never placed.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -136,7 +137,7 @@ class PointBudget:
 
     @property
     def measurable(self) -> np.ndarray:
-        return self.level != CLIPPED
+        return cast(np.ndarray, self.level != CLIPPED)  # numpy's stubs: Any
 
     def slots(self, budget: ErrorBudget) -> np.ndarray:
         """The wheel slot each reading is read through (-1: open beam or clipped)."""

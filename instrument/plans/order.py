@@ -47,7 +47,8 @@ def serpentine(targets: np.ndarray) -> np.ndarray:
     return np.array(order)
 
 
-def _nearest(t: np.ndarray, axes, dyn, start: np.ndarray | None) -> np.ndarray:
+def _nearest(t: np.ndarray, axes: Sequence[str], dyn: Mapping[str, AxisDynamics],
+             start: np.ndarray | None) -> np.ndarray:
     n = len(t)
     left = np.ones(n, bool)
     cur = t[0] if start is None else start
@@ -62,7 +63,8 @@ def _nearest(t: np.ndarray, axes, dyn, start: np.ndarray | None) -> np.ndarray:
     return np.array(order)
 
 
-def _two_opt(t: np.ndarray, order: np.ndarray, axes, dyn, start: np.ndarray | None,
+def _two_opt(t: np.ndarray, order: np.ndarray, axes: Sequence[str],
+             dyn: Mapping[str, AxisDynamics], start: np.ndarray | None,
              max_passes: int) -> np.ndarray:
     path = np.vstack([t[:1] if start is None else start[None, :], t[order]])
     idx = np.concatenate([[-1], order])

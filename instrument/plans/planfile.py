@@ -73,7 +73,7 @@ import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from instrument.bench.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
@@ -207,7 +207,7 @@ def _num(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def number(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
+def number(v: _Validator, t: dict[str, Any], key: str, path: str, *, lo: float, hi: float,
            required: bool = False, integer: bool = False) -> float | None:
     """A number in [lo, hi] (an int if ``integer``), or None with an error recorded."""
     if key not in t:
@@ -221,10 +221,10 @@ def number(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
     if not _num(x) or not lo <= x <= hi:
         v.error(f"{path}.{key}", f"must be a number from {lo:g} to {hi:g}, got {x!r}")
         return None
-    return x
+    return cast(float, x)  # a number in range: checked above
 
 
-def values(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
+def values(v: _Validator, t: dict[str, Any], key: str, path: str, *, lo: float, hi: float,
            required: bool = True, allow_range: bool = True) -> Sequence[float] | None:
     """An explicit list of numbers, or an inclusive range table {start, stop, step} (a
     lazy :class:`~instrument.plans.ranges.FloatRange`)."""
@@ -262,13 +262,13 @@ def values(v: _Validator, t: dict, key: str, path: str, *, lo: float, hi: float,
     return None
 
 
-def _boolean(v: _Validator, t: dict, key: str, path: str) -> None:
+def _boolean(v: _Validator, t: dict[str, Any], key: str, path: str) -> None:
     if key in t and not isinstance(t[key], bool):
         v.error(f"{path}.{key}", "must be true or false")
 
 
-def _subtable(v: _Validator, t: dict, key: str, path: str, keys: set[str],
-              hint: str = "") -> dict | None:
+def _subtable(v: _Validator, t: dict[str, Any], key: str, path: str, keys: set[str],
+              hint: str = "") -> dict[str, Any] | None:
     """``t[key]`` when it is a table of known ``keys`` (errors recorded), else None."""
     if key not in t:
         return None
@@ -280,7 +280,7 @@ def _subtable(v: _Validator, t: dict, key: str, path: str, keys: set[str],
     return sub
 
 
-def _specular(v: _Validator, t: dict, path: str, keys: set[str]) -> None:
+def _specular(v: _Validator, t: dict[str, Any], path: str, keys: set[str]) -> None:
     s = _subtable(v, t, "specular", path, keys)
     if s is None:
         return
@@ -293,7 +293,7 @@ def _specular(v: _Validator, t: dict, path: str, keys: set[str]) -> None:
         number(v, s, "per_ring", where, lo=3, hi=360, integer=True)
 
 
-def _in_plane(v: _Validator, t: dict, path: str) -> None:
+def _in_plane(v: _Validator, t: dict[str, Any], path: str) -> None:
     v.unknown(t, path, {"theta_i", "theta_r", "specular", "reciprocity", "reference_name",
                         "reflectance", "skip_beam_points", "points", "first_pass", "lobe"})
     _boolean(v, t, "skip_beam_points", path)
@@ -315,7 +315,7 @@ def _in_plane(v: _Validator, t: dict, path: str) -> None:
     number(v, t, "reflectance", path, lo=0.0, hi=1.0)
 
 
-def _point_pairs(v: _Validator, t: dict, path: str) -> None:
+def _point_pairs(v: _Validator, t: dict[str, Any], path: str) -> None:
     """``points = [[θi, θr], ...]``: explicit signed in-plane pairs (degrees)."""
     where = f"{path}.points"
     pts = t["points"]
@@ -333,7 +333,7 @@ def _point_pairs(v: _Validator, t: dict, path: str) -> None:
                 f"degrees, got {pts[i]!r}")
 
 
-def _lobe(v: _Validator, t: dict, path: str) -> None:
+def _lobe(v: _Validator, t: dict[str, Any], path: str) -> None:
     """``lobe = {points, step_deg, search_half_width_deg, search_step_deg, prior}``: sample
     the lobe in two passes (:mod:`instrument.plans.lobe`)."""
     lb = _subtable(v, t, "lobe", path, {"points", "step_deg", "search_half_width_deg",
@@ -353,7 +353,7 @@ def _lobe(v: _Validator, t: dict, path: str) -> None:
                 "lobe.search_step_deg in a two-pass lobe plan")
 
 
-def _hemisphere(v: _Validator, t: dict, path: str) -> None:
+def _hemisphere(v: _Validator, t: dict[str, Any], path: str) -> None:
     v.unknown(t, path, {"theta_i", "phi_i", "n_directions", "theta_max_deg", "specular",
                         "reciprocity", "isotropic", "skip_beam_points"})
     _boolean(v, t, "skip_beam_points", path)
@@ -366,14 +366,14 @@ def _hemisphere(v: _Validator, t: dict, path: str) -> None:
     _boolean(v, t, "isotropic", path)
 
 
-def _lightfield(v: _Validator, t: dict, path: str) -> None:
+def _lightfield(v: _Validator, t: dict[str, Any], path: str) -> None:
     v.unknown(t, path, {"camera_z", "sample_theta", "detector_theta"})
     values(v, t, "camera_z", path, lo=-1000.0, hi=1000.0)
     number(v, t, "sample_theta", path, lo=-360.0, hi=360.0)
     number(v, t, "detector_theta", path, lo=-360.0, hi=360.0)
 
 
-def _positions(v: _Validator, t: dict, path: str) -> None:
+def _positions(v: _Validator, t: dict[str, Any], path: str) -> None:
     if "positions" not in t:
         return
     pos = t["positions"]
@@ -387,14 +387,14 @@ def _positions(v: _Validator, t: dict, path: str) -> None:
             v.error(f"{path}.positions.{role}", "must be a finite number")
 
 
-def _frames_at(v: _Validator, t: dict, path: str) -> None:
+def _frames_at(v: _Validator, t: dict[str, Any], path: str) -> None:
     v.unknown(t, path, {"exposures_us", "frames", "positions"})
     values(v, t, "exposures_us", path, lo=1.0, hi=60e6)
     number(v, t, "frames", path, lo=1, hi=10000, integer=True)
     _positions(v, t, path)
 
 
-def _ptc(v: _Validator, t: dict, path: str) -> None:
+def _ptc(v: _Validator, t: dict[str, Any], path: str) -> None:
     v.unknown(t, path, {"exposures_us", "pairs", "dark", "positions"})
     x = t.get("exposures_us")
     if isinstance(x, dict) and "n" in x:
@@ -413,7 +413,7 @@ def _ptc(v: _Validator, t: dict, path: str) -> None:
     _positions(v, t, path)
 
 
-def _sphere_capture(v: _Validator, t: dict, path: str) -> None:
+def _sphere_capture(v: _Validator, t: dict[str, Any], path: str) -> None:
     v.unknown(t, path, {"objects", "lighting_deg", "selector", "lighting_role"})
     roles = {}
     for key, default in (("selector", "sample_phi"), ("lighting_role", "source_theta")):
@@ -485,7 +485,7 @@ _SCAN_CHECKS = {
 }
 
 
-def _dark_detectors(v: _Validator, t: dict, path: str, detectors: tuple[str, ...]
+def _dark_detectors(v: _Validator, t: dict[str, Any], path: str, detectors: tuple[str, ...]
                     ) -> tuple[str, ...] | None:
     """Which detectors read a dark at every point: the list given, else every detector the
     plan names; a plan that leaves ``detectors`` at its default measures with the camera,
@@ -508,7 +508,7 @@ def _dark_detectors(v: _Validator, t: dict, path: str, detectors: tuple[str, ...
     return None
 
 
-def _acquisition(v: _Validator, t: dict, path: str) -> AcquisitionPolicy:
+def _acquisition(v: _Validator, t: dict[str, Any], path: str) -> AcquisitionPolicy:
     d = AcquisitionPolicy()
     v.unknown(t, path, set(d.__dataclass_fields__))
     mode = v.string(t, "mode", path) or d.mode

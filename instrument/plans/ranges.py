@@ -32,7 +32,7 @@ class FloatRange(Sequence[float]):
     @overload
     def __getitem__(self, k: slice) -> list[float]: ...
 
-    def __getitem__(self, k):
+    def __getitem__(self, k: int | slice) -> float | list[float]:
         if isinstance(k, slice):
             return [self[j] for j in range(*k.indices(self._n))]
         if k < 0:

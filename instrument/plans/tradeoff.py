@@ -191,7 +191,8 @@ def predict(spec: PlanSpec, profile: BenchProfile, option: ScanOption, *, prior:
     """Duration and predicted parameter σ of ``spec`` changed by ``option``."""
     plan = build_plan(spec_for(spec, option), profile)
     pts = [p for p in plan.points if p.angles is not None]
-    ang = np.radians(np.array([p.angles.as_tuple() for p in pts]))
+    # pts holds only points with angles (filtered just above)
+    ang = np.radians(np.array([p.angles.as_tuple() for p in pts]))  # type: ignore[union-attr]
     model = get_model(prior.model)
     g = make_geometry(ang[:, 0], ang[:, 1], ang[:, 2], ang[:, 3])
     p = np.array(prior.params, dtype=float)

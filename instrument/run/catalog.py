@@ -100,7 +100,7 @@ class Catalog:
     def __enter__(self) -> Catalog:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def add(self, row: RunRow) -> None:
@@ -174,7 +174,8 @@ class Catalog:
              kind: str | None = None, since: float | None = None,
              limit: int | None = None) -> list[RunRow]:
         """Runs matching every filter given (``sample`` is a substring), newest first."""
-        where, args = [], []
+        where: list[str] = []
+        args: list[object] = []
         if status:
             where.append("status = ?")
             args.append(status)

@@ -33,6 +33,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -434,7 +435,7 @@ class RunEngine:
     def _loop(self) -> str:
         while True:
             try:
-                group: list = []
+                group: list[Any] = []
                 for cmd in self.plan.commands(self._done.snapshot()):
                     match cmd:
                         case SetLight(on=on):
@@ -479,7 +480,7 @@ class RunEngine:
         return True
 
     # points -----------------------------------------------------------------------
-    def _run_point(self, group: list) -> None:
+    def _run_point(self, group: list[Any]) -> None:
         move: Move = group[0]
         acq: Acquire = group[1]
         while True:
@@ -985,7 +986,7 @@ class RunEngine:
                 "lockin_time_constant_s": float(li.time_constant_s),
                 "lockin_overload": 0.0}
 
-    def _lockin_snapshots(self, n: int) -> list:
+    def _lockin_snapshots(self, n: int) -> list[Any]:
         """``max(n, 4)`` settled snapshots of the lock-in on a range that does not overload
         (:meth:`_read_lockin`)."""
         li = self._lockin
@@ -1208,7 +1209,7 @@ class _Writer:
 
     def __init__(self, store: RunStore) -> None:
         self._store = store
-        self._q: queue.Queue = queue.Queue(maxsize=1)
+        self._q: queue.Queue[Any] = queue.Queue(maxsize=1)
         self._cond = threading.Condition()
         self._busy = 0
         self._error: BaseException | None = None

@@ -18,14 +18,18 @@ from __future__ import annotations
 import contextlib
 import io
 import re
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
 
 from instrument.run.layout import header_from_file
+
+if TYPE_CHECKING:
+    from _typeshed import WriteableBuffer
 
 __all__ = ["OPTIONAL_COLUMNS", "SALVAGE_WORDS", "FileState", "Readable", "ZeroPadded",
            "held_by_this_process", "inspect_run_file", "is_lock_refusal", "open_damaged",
@@ -109,7 +113,7 @@ class ZeroPadded(io.RawIOBase):
     def tell(self) -> int:
         return self._pos
 
-    def readinto(self, buffer) -> int:
+    def readinto(self, buffer: WriteableBuffer) -> int:
         view = memoryview(buffer).cast("B")
         end = min(self._pos + len(view), self._length)
         n = max(0, end - self._pos)
@@ -253,7 +257,7 @@ def row_count(f: h5py.File) -> int:
         return int(f["entry"].attrs.get("n_points", 0))
 
 
-def _points_text(indices) -> str:
+def _points_text(indices: Iterable[int]) -> str:
     idx = sorted(int(i) for i in indices)
     if len(idx) > 12:
         return ", ".join(map(str, idx[:10])) + f" … ({len(idx)} in all)"

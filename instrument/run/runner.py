@@ -10,6 +10,7 @@ import json
 import math
 import secrets
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -48,7 +49,7 @@ def new_run_id(kind: str) -> str:
     return f"{time.strftime('%Y%m%d-%H%M%S')}-{kind}-{secrets.token_hex(2)}"
 
 
-def _nx_class(device) -> str:
+def _nx_class(device: object) -> str:
     if isinstance(device, MotionAxis):
         return "NXpositioner"
     if isinstance(device, Camera):
@@ -282,7 +283,8 @@ def record_repair(path: Path, report: RecoveryReport) -> None:
 
 
 def _reopener(path: Path, *, fsync: bool, sync_interval_s: float, min_free_bytes: int,
-              catalog: bool, remeasure: bool = False):
+              catalog: bool, remeasure: bool = False,
+              ) -> Callable[[], tuple[RunStore, set[int]]]:
     """How the engine reopens the run file after a storage error: recover it (recording
     any repair in the catalog), open it to append; with ``remeasure`` the points whose
     frames are lost are still to do."""

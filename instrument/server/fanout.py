@@ -31,7 +31,7 @@ import contextlib
 import struct
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 from instrument.server.hub import ClientBuffer
 
@@ -83,7 +83,7 @@ class RawSink:
         return not self._protocol.close_sent and not self._transport.is_closing()
 
     def backlog(self) -> int:
-        return self._transport.get_write_buffer_size()
+        return cast(int, self._transport.get_write_buffer_size())  # the transport is untyped
 
     def write(self, data: bytes) -> None:
         self._transport.write(data)

@@ -74,7 +74,7 @@ class KeyStore:
         with self.db.transaction() as db:
             cur = db.execute("INSERT INTO keys (name, role, digest, created, expires) "
                              "VALUES (?,?,?,?,?)", (name, role, digest(token), now, expires))
-            key_id = int(cur.lastrowid)
+            key_id = int(cur.lastrowid)  # type: ignore[arg-type]  # an INSERT sets it
         return ApiKey(key_id, name, role, now, expires, None), token
 
     def list(self) -> list[ApiKey]:

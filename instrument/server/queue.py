@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from typing import Any
 
 from instrument.server.db import ServerDB
 
@@ -57,7 +58,7 @@ class QueueItem:
     added: float
     run_file: str | None
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """The item as clients see it (without the plan text)."""
         d = asdict(self)
         d.pop("plan_text")
@@ -119,7 +120,7 @@ class PlanQueue:
                 "VALUES (?,?,?,?,?,?,?)",
                 (pos, kind, name, plan_text, "proposed" if proposed else "queued", who,
                  time.time()))
-            item_id = int(cur.lastrowid)
+            item_id = int(cur.lastrowid)  # type: ignore[arg-type]  # an INSERT sets it
         return self.get(item_id)
 
     def move(self, item_id: int, index: int) -> QueueItem:

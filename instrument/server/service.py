@@ -773,7 +773,7 @@ class BenchService:
 
     # sampler ----------------------------------------------------------------------------
     def _sample(self) -> None:
-        last_state: dict | None = None
+        last_state: dict[str, Any] | None = None
         last_sent = 0.0
         last_frame_t = 0.0
         while not self._closed:

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from analysis.brdf.geometry import flat_angles
 
 
-def _cluster(x: NDArray, tol: float) -> NDArray[np.int64]:
+def _cluster(x: NDArray[Any], tol: float) -> NDArray[np.int64]:
     """Integer labels grouping values whose sorted neighbours lie within ``tol`` (one label
     per set angle despite read-back jitter)."""
     order = np.argsort(x, kind="stable")
@@ -18,7 +20,7 @@ def _cluster(x: NDArray, tol: float) -> NDArray[np.int64]:
     return out
 
 
-def _combine(*labels: NDArray) -> NDArray[np.int64]:
+def _combine(*labels: NDArray[Any]) -> NDArray[np.int64]:
     """One label per distinct tuple of labels."""
     _, inv = np.unique(np.stack(labels, axis=1), axis=0, return_inverse=True)
     return inv.reshape(-1).astype(np.int64)
@@ -77,7 +79,7 @@ def angular_uncertainty(
         azimuth = np.zeros(f.shape, dtype=np.int64)
         coord_r = tr
 
-    def slopes(groups: NDArray, coord: NDArray, max_step: float = np.inf) -> NDArray:
+    def slopes(groups: NDArray[Any], coord: NDArray[Any], max_step: float = np.inf) -> NDArray[Any]:
         out = np.zeros_like(f)
         for k in np.unique(groups):
             sel = np.flatnonzero(groups == k)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -96,8 +97,8 @@ def _starts(model: BRDFModel, fitted: dict[str, ForwardFit]) -> list[np.ndarray]
     return starts
 
 
-def _levels_from_parts(model: BRDFModel, fitted: dict[str, ForwardFit]) -> dict:
-    levels: dict = {}
+def _levels_from_parts(model: BRDFModel, fitted: dict[str, ForwardFit]) -> dict[Any, Any]:
+    levels: dict[Any, Any] = {}
     if isinstance(model, CompositeModel):
         for p in model.parts:
             if p.name in fitted:
@@ -106,7 +107,8 @@ def _levels_from_parts(model: BRDFModel, fitted: dict[str, ForwardFit]) -> dict:
     return levels
 
 
-def _fit_candidate(model: BRDFModel, y, angles, *, sigma, receiver, geometry, fitted,
+def _fit_candidate(model: BRDFModel, y: Any, angles: Any, *, sigma: Any, receiver: Any,
+                   geometry: Any, fitted: dict[str, ForwardFit],
                    seed: int, tau: float) -> ForwardFit:
     """One candidate from its first start (a sum: its parts' optima), at the inherited
     levels."""
@@ -116,8 +118,9 @@ def _fit_candidate(model: BRDFModel, y, angles, *, sigma, receiver, geometry, fi
                        effective_variance=False, ftol=_SCREEN_FTOL)
 
 
-def _restart(ff: ForwardFit, model: BRDFModel, y, angles, *, sigma, receiver, geometry,
-             fitted, seed: int, tau: float, n_starts: int) -> ForwardFit:
+def _restart(ff: ForwardFit, model: BRDFModel, y: Any, angles: Any, *, sigma: Any,
+             receiver: Any, geometry: Any, fitted: dict[str, ForwardFit], seed: int,
+             tau: float, n_starts: int) -> ForwardFit:
     """Look for a better optimum of a plausible candidate from its other starts (the
     default start of a sum, seeded random starts) at its final levels; refit from the best
     if one is lower."""
@@ -260,7 +263,7 @@ def _mean_se(x: np.ndarray) -> tuple[float, float]:
     return float(x.mean()), se
 
 
-def _cross_validate(ff: ForwardFit, y, angles, folds) -> np.ndarray:
+def _cross_validate(ff: ForwardFit, y: Any, angles: Any, folds: Any) -> np.ndarray:
     """Grouped-fold CV of a fitted candidate: each fold refitted from the full-data optimum
     with its final forward model and noise; the held-out mean r² of each fold."""
     g = make_geometry(*angles)

@@ -29,6 +29,7 @@ smooth model (level 0 already agrees with level 1 within the noise).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -74,7 +75,7 @@ def forward_model(model: BRDFModel, receiver: ReceiverGeometry,
     return _AtLevels(model, receiver, levels_for, label, by_geometry=True).as_model()
 
 
-def _evaluate(model: BRDFModel, receiver: ReceiverGeometry, p: NDArray, g: Geometry,
+def _evaluate(model: BRDFModel, receiver: ReceiverGeometry, p: NDArray[Any], g: Geometry,
               levels: NDArray[np.intp]) -> NDArray[np.float64]:
     nodes = prepared_nodes(g, receiver, levels)
     return nodes.sums(model.value_fn(p, nodes.geometry) * nodes.weights)
@@ -99,7 +100,7 @@ def _shift(g: Geometry, d_theta_i: float, d_theta_r: float) -> Geometry:
 
 
 def forward_slopes(model: BRDFModel, receiver: ReceiverGeometry, params: ArrayLike,
-                   g: Geometry, levels: ArrayLike) -> tuple[NDArray, NDArray]:
+                   g: Geometry, levels: ArrayLike) -> tuple[NDArray[Any], NDArray[Any]]:
     """(∂F/∂θi, ∂F/∂θr) of the forward model at every point of ``g`` (per radian),
     by central differences of step 10⁻⁴ rad at the given levels."""
     p = np.asarray(params, dtype=float)

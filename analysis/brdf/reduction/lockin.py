@@ -61,6 +61,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -269,7 +270,8 @@ def lockin_power_w(r_v: ArrayLike, u_r_v: ArrayLike, *, photodiode: Photodiode,
 
 
 def _check_readings(r_v: ArrayLike, u_r_v: ArrayLike, sensitivity_v: ArrayLike,
-                    overload: ArrayLike | None) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+                    overload: ArrayLike | None,
+                    ) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]:
     r = np.asarray(r_v, dtype=float).reshape(-1)
     u = np.broadcast_to(np.asarray(u_r_v, dtype=float), r.shape).copy()
     s = np.broadcast_to(np.asarray(sensitivity_v, dtype=float), r.shape).copy()
@@ -417,7 +419,7 @@ def expected_lockin_r_v(brdf: ArrayLike, theta_r: ArrayLike, *, photodiode: Phot
     return photodiode.volts_rms_per_watt(wavelength_nm) * p_s
 
 
-def photodiode_from_profile(section: dict, *, where: str = "[photodiode]") -> Photodiode:
+def photodiode_from_profile(section: dict[str, Any], *, where: str = "[photodiode]") -> Photodiode:
     """A :class:`Photodiode` from the bench profile's ``[photodiode]`` table (plain data):
     ``responsivity_a_per_w`` (a number, or a list with ``responsivity_nm``),
     ``u_responsivity_rel``, ``transimpedance_v_per_a`` and optional

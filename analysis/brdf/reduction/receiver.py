@@ -56,8 +56,10 @@ the two is a check of both (tests/analysis/brdf/test_forward_model.py).
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -166,7 +168,7 @@ class ReceiverGeometry:
 
 # ------------------------------------------------------------------------------ rules
 @lru_cache(maxsize=1)
-def _radon7() -> tuple[NDArray, NDArray, NDArray]:
+def _radon7() -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
     """Radon's 7-point disk rule (Stroud 1971, S2:5-1): (x, y, w) on the unit disk."""
     r = np.sqrt(2.0 / 3.0)
     chi = np.arange(6) * np.pi / 3.0
@@ -176,7 +178,7 @@ def _radon7() -> tuple[NDArray, NDArray, NDArray]:
 
 
 @lru_cache(maxsize=64)
-def _disk(n_x: int, n_y: int) -> tuple[NDArray, NDArray, NDArray]:
+def _disk(n_x: int, n_y: int) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
     """A product rule on the unit disk, exact for polynomials of degree
     < 2·min(n_x, n_y): Gauss–Chebyshev of the second kind in x (weight √(1 − x²), the
     chord's half-length; Abramowitz & Stegun 25.4.40) and Gauss–Legendre along each chord,
@@ -196,7 +198,7 @@ def _disk(n_x: int, n_y: int) -> tuple[NDArray, NDArray, NDArray]:
     return x, y, w / w.sum()
 
 
-def _aspect(wi: NDArray, wr: NDArray) -> NDArray[np.intp]:
+def _aspect(wi: NDArray[Any], wr: NDArray[Any]) -> NDArray[np.intp]:
     """How much narrower a lobe of the half vector h = (ωi + ωr)/|ωi + ωr| is across the
     plane of ωi and ωr than within it, as seen from the receiver: a receiver offset ε
     across the plane tilts h by ε/|v|, one within it by ε sin∠(t, h)/|v| (t the in-plane
@@ -213,19 +215,19 @@ def _aspect(wi: NDArray, wr: NDArray) -> NDArray[np.intp]:
 
 
 @lru_cache(maxsize=16)
-def _hermite(n: int) -> tuple[NDArray, NDArray]:
+def _hermite(n: int) -> tuple[NDArray[Any], NDArray[Any]]:
     """Gauss–Hermite nodes and weights of ∫ g(s) exp(−s²) ds / √π (Σw = 1)."""
     x, w = np.polynomial.hermite.hermgauss(n)
     return x, w / np.sqrt(np.pi)
 
 
 @lru_cache(maxsize=16)
-def _legendre(n: int) -> tuple[NDArray, NDArray]:
+def _legendre(n: int) -> tuple[NDArray[Any], NDArray[Any]]:
     return np.polynomial.legendre.leggauss(n)
 
 
 @lru_cache(maxsize=16)
-def _angular_rule(degree: int, dims: tuple[bool, bool, bool]) -> tuple[NDArray, NDArray]:
+def _angular_rule(degree: int, dims: tuple[bool, bool, bool]) -> tuple[NDArray[Any], NDArray[Any]]:
     """Nodes (K, 3) in units of σ and weights (K,) of a standard normal in the dimensions
     flagged in ``dims`` (the others stay 0): the centre (degree 1), Stroud's Gn 3-1
     (±√n on each axis, degree 3) or the 3-point Gauss–Hermite product (degree 5)."""
@@ -274,7 +276,7 @@ class NodeSet:
         return np.add.reduceat(values, self.starts, axis=0)
 
 
-def _frame(w: NDArray) -> tuple[NDArray, NDArray]:
+def _frame(w: NDArray[Any]) -> tuple[NDArray[Any], NDArray[Any]]:
     """Two unit vectors (N, 3) ⟂ to the unit vectors ``w`` (N, 3) and to each other."""
     helper = np.where((np.abs(w[:, 1]) < 0.9)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
     e1 = np.cross(w, helper)
@@ -282,7 +284,7 @@ def _frame(w: NDArray) -> tuple[NDArray, NDArray]:
     return e1, np.cross(w, e1)
 
 
-def _meridian_axis(w: NDArray) -> NDArray:
+def _meridian_axis(w: NDArray[Any]) -> NDArray[Any]:
     """Unit vector ⟂ to the meridian plane of ``w`` (the plane of w and the normal z):
     rotating about it changes w's polar angle only."""
     axis = np.stack([-w[:, 1], w[:, 0], np.zeros(len(w))], axis=-1)
@@ -290,13 +292,13 @@ def _meridian_axis(w: NDArray) -> NDArray:
     return np.where(norm > 1e-12, axis / np.where(norm > 1e-12, norm, 1.0), [0.0, 1.0, 0.0])
 
 
-def _rotate(v: NDArray, axis: NDArray, angle: NDArray) -> NDArray:
+def _rotate(v: NDArray[Any], axis: NDArray[Any], angle: NDArray[Any]) -> NDArray[Any]:
     """Rodrigues' rotation of v (..., 3) about unit ``axis`` (..., 3) by ``angle`` (...)."""
     c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
     return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=-1)[..., None] * (1 - c)
 
 
-def _chord_nodes(wi: NDArray, receiver: ReceiverGeometry, level: QuadratureLevel
+def _chord_nodes(wi: NDArray[Any], receiver: ReceiverGeometry, level: QuadratureLevel
                  ) -> NDArray[np.intp]:
     """Gauss–Legendre nodes along the footprint of each point (N,) where the sample's edge
     cuts it (0 where Gauss–Hermite serves): e^{−s²} on [−a, a] to 1e-9 takes about
@@ -318,9 +320,9 @@ def _chord_nodes(wi: NDArray, receiver: ReceiverGeometry, level: QuadratureLevel
 _GH_EDGE = 3.8
 
 
-def _level_nodes(wi: NDArray, wr: NDArray, receiver: ReceiverGeometry,
+def _level_nodes(wi: NDArray[Any], wr: NDArray[Any], receiver: ReceiverGeometry,
                  level: QuadratureLevel, aspect: int = 1, n_gl: int = 0
-                 ) -> tuple[NDArray, NDArray, NDArray]:
+                 ) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
     """Nodes of the points (wi, wr) (N, 3) at one level and aspect (:func:`_aspect`), with
     ``n_gl`` Gauss–Legendre nodes along a footprint the sample's edge cuts
     (:func:`_chord_nodes`; 0: Gauss–Hermite): incident and receiver directions (N, K, 3)
@@ -405,7 +407,7 @@ def _level_nodes(wi: NDArray, wr: NDArray, receiver: ReceiverGeometry,
             np.concatenate(out_w, axis=1))
 
 
-def _unit_vectors(geometry: Geometry) -> tuple[NDArray, NDArray]:
+def _unit_vectors(geometry: Geometry) -> tuple[NDArray[Any], NDArray[Any]]:
     wi = np.stack([geometry.xi, geometry.yi, geometry.mu_i], axis=-1).reshape(-1, 3)
     wr = np.stack([geometry.xr, geometry.yr, geometry.mu_r], axis=-1).reshape(-1, 3)
     return (wi / np.linalg.norm(wi, axis=-1, keepdims=True),
@@ -434,7 +436,7 @@ def receiver_nodes(geometry: Geometry, receiver: ReceiverGeometry,
     if n and (lev.min() < 0 or lev.max() >= len(LEVELS)):
         raise ValueError(f"levels must lie in 0..{len(LEVELS) - 1}")
     counts = np.zeros(n, dtype=np.intp)
-    blocks: list[tuple[NDArray, NDArray, NDArray, NDArray]] = []
+    blocks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]] = []
     for k in np.unique(lev):
         for idx_all, bi, br, bw in _level_blocks(geometry, receiver, int(k)):
             keep = lev[idx_all] == k
@@ -456,7 +458,7 @@ def receiver_nodes(geometry: Geometry, receiver: ReceiverGeometry,
 
 
 def _level_blocks(geometry: Geometry, receiver: ReceiverGeometry, level: int
-                  ) -> list[tuple[NDArray, NDArray, NDArray, NDArray]]:
+                  ) -> list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]]:
     """Every point's nodes at ``level``, in blocks of one shape (aspect, chord nodes):
     (point indices, incident (m, K, 3), receiver (m, K, 3), weights (m, K)); cached on the
     geometry, so that any mix of levels only gathers rows."""
@@ -543,7 +545,8 @@ class _AtLevels:
     """A model averaged over receiver nodes, with the level of each point from
     ``levels_for(g)`` (a callable of the number of points or of the geometry)."""
 
-    def __init__(self, model: BRDFModel, receiver: ReceiverGeometry, levels_for,
+    def __init__(self, model: BRDFModel, receiver: ReceiverGeometry,
+                 levels_for: Callable[[Any], Any],
                  label: str, *, by_geometry: bool = False) -> None:
         self.model, self.receiver, self.label = model, receiver, label
         self._levels_for, self._by_geometry = levels_for, by_geometry
@@ -564,6 +567,7 @@ class _AtLevels:
 
     def jac(self, p: NDArray[np.float64], g: Geometry) -> NDArray[np.float64]:
         nodes = self._nodes(g)
+        # jac_fn is not None: this class is only built for models that have one
         j = np.asarray(self.model.jac_fn(p, nodes.geometry), dtype=float)  # type: ignore[misc]
         return nodes.sums(j * nodes.weights[:, None]).reshape((*g.shape, p.size))
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,7 +55,7 @@ def reciprocity_check(
         key_b = np.stack([points.theta_r, points.theta_i,
                           np.cos(points.phi_r - points.phi_i)], -1)
     else:
-        def vec(t: NDArray, p: NDArray) -> NDArray:
+        def vec(t: NDArray[Any], p: NDArray[Any]) -> NDArray[Any]:
             return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
 
         wi = vec(points.theta_i, points.phi_i)

@@ -9,6 +9,7 @@ subtraction point by point. Conventions in the package docstring of
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -285,10 +286,11 @@ class ReferenceStandard:
         return f, u
 
 
-def _bilinear(gx: NDArray, gy: NDArray, table: NDArray, x: NDArray, y: NDArray) -> NDArray:
+def _bilinear(gx: NDArray[Any], gy: NDArray[Any], table: NDArray[Any], x: NDArray[Any],
+              y: NDArray[Any]) -> NDArray[Any]:
     """Bilinear interpolation on a rectilinear grid (size-1 axes are constant)."""
 
-    def locate(g: NDArray, v: NDArray) -> tuple[NDArray, NDArray]:
+    def locate(g: NDArray[Any], v: NDArray[Any]) -> tuple[NDArray[Any], NDArray[Any]]:
         if g.size == 1:
             return np.zeros(v.shape, dtype=int), np.zeros(v.shape)
         j = np.clip(np.searchsorted(g, v, side="right") - 1, 0, g.size - 2)

@@ -29,7 +29,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -83,7 +83,7 @@ def nd_slots(run: RunData, rows: np.ndarray) -> np.ndarray:
     col = run.nd_position
     if col is None:
         return np.full(rows.size, -1, dtype=np.int64)
-    return np.asarray(col)[rows].astype(np.int64)
+    return cast(np.ndarray, np.asarray(col)[rows].astype(np.int64))  # numpy's stubs: Any
 
 
 def calibration_run_path(run: RunData, src: str) -> Path:

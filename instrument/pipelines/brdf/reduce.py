@@ -156,7 +156,7 @@ class Reduced:
     warnings: tuple[str, ...] = ()
     scale_unknown: tuple[str, ...] = ()
 
-    def point_label(self, k: int) -> str:
+    def point_label(self, k: int | np.integer[Any]) -> str:
         """How a reduced point is named to the user: its run's point index (and the run,
         for a point of a first pass)."""
         idx = int(self.point_index[k]) if self.point_index.size else int(self.rows[k])

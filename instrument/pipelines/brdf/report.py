@@ -201,7 +201,7 @@ def _plot_inplane(points: BRDFPoints, res: AnalysisResult, path: Path,
     return sentence
 
 
-def _shown(res: AnalysisResult) -> dict:
+def _shown(res: AnalysisResult) -> dict[str, Any]:
     """The fits drawn as curves: the chosen model and the plausible ones (the comparison
     table lists every candidate)."""
     return {n: f for n, f in res.fits.items()

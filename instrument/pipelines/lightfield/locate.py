@@ -97,6 +97,7 @@ def locate_run(
         if stored is None:  # pragma: no cover - written just above
             raise RuntimeError("the reconstruction was not stored")
     dom = tuple(float(x) for x in stored["domain_rad"])
+    # dom has two entries (the stored domain's ends); mypy sees a tuple of any length
     field_ = LightField2D(stored["incident_radiance"], stored["points_mm"],
                           stored["theta_rad"], dom, 0.0)  # type: ignore[arg-type]
     p_hat = float(stored["p_hat"])
@@ -131,6 +132,7 @@ def locate_run(
         for note in det.notes:
             message += f"; {note}"
     else:
+        # solvable: two angles, as above
         det = detect_objects(field_, p_max=0.0, y_mm=ys, z_mm=zs,
                              solvable_domain_rad=solvable,  # type: ignore[arg-type]
                              max_objects=0)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,7 +48,7 @@ def scattering_points(lf: LightField2D, d2_mm: float) -> NDArray[np.float64]:
         raise ValueError("the scan is too short for any complete curve: widen the camera_z "
                          "range or narrow the angle domain")
     n = math.floor((hi - lo) / lf.dy_mm + 1e-9) + 1
-    return lo + lf.dy_mm * np.arange(n)
+    return cast(np.ndarray, lo + lf.dy_mm * np.arange(n))  # numpy's stubs: Any
 
 
 def reconstruct_run(
@@ -83,6 +83,7 @@ def reconstruct_run(
     measured = assemble(scan, d2_mm=geometry.d2_mm, domain_rad=domain_rad, n_theta=n_theta)
     lf = measured.field
     points = scattering_points(lf, geometry.d2_mm)
+    # method: a str that reconstruct checks itself (ValueError), not narrowed to its Literal
     rec = reconstruct(lf, brdf, d2_mm=geometry.d2_mm, points_mm=points,
                       method=method)  # type: ignore[arg-type]
     p_hat = effective_p_max(rec.regularization.filter_factors, rec.orders)

@@ -29,7 +29,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import h5py
 import numpy as np
@@ -230,7 +230,9 @@ def stored_options(path: str | Path) -> dict[str, Any]:
         return {}
     try:
         with h5py.File(path, "r") as f:
-            return json.loads(as_text(f["entry"].attrs.get("options_json", "{}")))
+            # a JSON object: written by this module
+            return cast(dict[str, Any],
+                        json.loads(as_text(f["entry"].attrs.get("options_json", "{}"))))
     except (OSError, KeyError, ValueError):
         return {}
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -86,7 +86,7 @@ def _match(values: np.ndarray, targets: list[float], what: str, tol: float) -> n
     if np.any(far):
         raise ValueError(f"{what}: read-back position(s) {values[far]} match no plan position "
                          f"within {tol:g} deg")
-    return idx
+    return cast(np.ndarray, idx)  # numpy's stubs: Any
 
 
 def read_capture(path: str | Path, *, position_tol_deg: float = 0.5) -> SphereCapture:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import h5py
 import numpy as np
@@ -137,4 +137,4 @@ def read_sphere_results(path: str | Path) -> dict[str, Any] | None:
         if g is None or g.attrs.get("program") != PROGRAM:
             return None
         raw = g["results_json"][()]
-        return json.loads(as_text(raw))
+        return cast(dict[str, Any], json.loads(as_text(raw)))  # a JSON object: written here

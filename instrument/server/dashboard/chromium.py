@@ -13,6 +13,7 @@ import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 __all__ = ["CHROMIUM", "FLAGS", "WAIT_MS", "browser", "chromium_missing", "open_page",
            "sign_in", "wait_live", "wait_run_state"]
@@ -40,7 +41,7 @@ def chromium_missing() -> str | None:
 
 
 @contextlib.contextmanager
-def browser() -> Iterator:
+def browser() -> Iterator[Any]:
     """A Playwright session; yields ``new_page(profile_dir, width=, height=, args=)``, which
     opens a headless Chromium (more flags in ``args``) with a fresh profile in
     ``profile_dir`` (its ``--user-data-dir``) and returns its page (``page.errors``: the
@@ -71,7 +72,7 @@ def browser() -> Iterator:
 
 
 @contextlib.contextmanager
-def open_page(profile_dir: str | Path, *, width: int = 1280, height: int = 900) -> Iterator:
+def open_page(profile_dir: str | Path, *, width: int = 1280, height: int = 900) -> Iterator[Any]:
     """One page of a fresh headless Chromium (see :func:`browser`)."""
     with browser() as new_page:
         yield new_page(profile_dir, width=width, height=height)

@@ -51,7 +51,7 @@ def _wait(cond, timeout: float, what: str) -> None:
         time.sleep(0.2)
 
 
-def serve_sim(runs: Path) -> tuple[subprocess.Popen, str]:
+def serve_sim(runs: Path) -> tuple[subprocess.Popen[bytes], str]:
     """``scatterlab serve --bench sim`` on a free loopback port: the process, its URL."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "instrument.cli", "serve", "--bench", "sim", "--runs",
