@@ -1,0 +1,121 @@
+"""A seeded lock-in scan's data are a function of the seed and the plan only.
+
+The same plan on the emulated spectral bench (SR830 firmware with a chopped photodiode,
+SC10, FW102C; real drivers through the engine) is run twice with the same lock-in seed:
+once as it comes, once on a slow host, every lock-in reply arriving 20 ms late on the
+wire (a seeded ``DELAY`` fault on every frame) while a thread burns the CPU beside the
+engine. Every lock-in column of the two run files must be identical to the bit.
+
+Before the emulated SR830 took its time from the host's waits (``clock=host``, ADR 0014
+amendment), its output filter and noise ran on the wall clock: the noise drawn between two
+queries, and the state the filter had reached, depended on how long the host took between
+them, and these two runs differed in every reading.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from hw_mocks import registry
+from hw_mocks.faults import FaultKind
+from hw_mocks.sim.world import reset_worlds
+from hw_mocks.urlhandler.protocol_simsr830 import make_emulator
+from instrument.cli import main
+from instrument.run.layout import DETECTOR_FIELDS
+from instrument.run.runfile import read_run
+from tests.instrument.pipelines.brdf.test_lockin_pulls import lockin_profile
+
+PLAN = """
+[plan]
+kind = "brdf_in_plane"
+name = "lock-in determinism"
+[sample]
+name = "lambert"
+[scan]
+skip_beam_points = true
+theta_i = [30]
+theta_r = [-40, 10, 60]
+[acquisition]
+detectors = ["lockin"]
+dark = "per_point"
+frames = 4
+[spectral]
+filters = [2]
+"""
+
+LOCKIN_COLUMNS = [f for f in DETECTOR_FIELDS if f.startswith("lockin_")]
+
+
+def _profile(seed: int) -> str:
+    # a 10 ms time constant: the same filter physics in a third of the settling time
+    text = lockin_profile("lambert", "{ rho = 0.5 }", seed)
+    return text.replace("time_constant_s = 0.03", "time_constant_s = 0.01")
+
+
+def _lockin_url(profile: str) -> str:
+    (url,) = re.findall(r'"(simsr830://[^"]+)"', profile)
+    return url
+
+
+def _run(tmp_path: Path, name: str, profile: str) -> dict[str, np.ndarray]:
+    bench = tmp_path / f"{name}.toml"
+    bench.write_text(profile, encoding="utf-8")
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN, encoding="utf-8")
+    out = tmp_path / name
+    assert main(["run", str(plan), "--bench", str(bench), "--out", str(out), "--no-fsync",
+                 "--quiet"]) == 0
+    (path,) = out.glob("*.h5")
+    run = read_run(path)
+    return {c: np.asarray(getattr(run, c), dtype=float) for c in LOCKIN_COLUMNS}
+
+
+def _power_on_again() -> None:
+    """Every emulated device switched off and on again (a fresh emulator per URL)."""
+    registry.reset()
+    reset_worlds()
+
+
+def test_a_seeded_lock_in_scan_gives_the_same_data_on_a_slow_host(tmp_path):
+    profile = _profile(7)
+    quiet = _run(tmp_path, "quiet", profile)
+
+    _power_on_again()
+    # The lock-in the run will open, made beforehand so that its replies can be delayed.
+    url = _lockin_url(profile)
+    scheme, name, options = registry.parse_url(url)
+    lockin = registry.get_or_create(scheme, name, make_emulator, options)
+    lockin.faults.randomly(FaultKind.DELAY, probability=1.0, delay_s=0.02)
+    stop = threading.Event()
+
+    def burn() -> None:
+        while not stop.is_set():
+            sum(range(10_000))
+
+    hog = threading.Thread(target=burn, name="cpu-hog", daemon=True)
+    hog.start()
+    try:
+        slow = _run(tmp_path, "slow", profile)
+    finally:
+        stop.set()
+        hog.join(timeout=60)
+    assert lockin.faults.frames_seen > 50  # the delays did happen
+
+    assert np.all(np.isfinite(quiet["lockin_r_v"])) and np.all(quiet["lockin_r_v"] > 0)
+    for column in LOCKIN_COLUMNS:
+        np.testing.assert_array_equal(slow[column], quiet[column], err_msg=column)
+
+
+def test_different_seeds_give_different_lock_in_noise(tmp_path):
+    """The check above is not passing because the noise is absent: another seed of the
+    same plan reads other values."""
+    first = _run(tmp_path, "seed7", _profile(7))
+    _power_on_again()
+    other = _run(tmp_path, "seed8", _profile(8))
+    assert not np.array_equal(first["lockin_r_v"], other["lockin_r_v"])
+    # the same light, so the same values within the noise (σ of one point's mean ≈ 1e-8 V)
+    np.testing.assert_allclose(other["lockin_r_v"], first["lockin_r_v"], rtol=0, atol=2e-7)
