@@ -4,7 +4,8 @@ The same plan on the emulated spectral bench (SR830 firmware with a chopped phot
 SC10, FW102C; real drivers through the engine) is run twice with the same lock-in seed:
 once as it comes, once on a slow host, every lock-in reply arriving 20 ms late on the
 wire (a seeded ``DELAY`` fault on every frame) while a thread burns the CPU beside the
-engine. Every lock-in column of the two run files must be identical to the bit.
+engine. Every lock-in column of the two run files must be identical to the bit. (That
+another seed reads other values: tests/hw_mocks/test_sr830_host_paced.py.)
 
 Before the emulated SR830 took its time from the host's waits (``clock=host``, ADR 0014
 amendment), its output filter and noise ran on the wall clock: the noise drawn between two
@@ -38,7 +39,7 @@ name = "lambert"
 [scan]
 skip_beam_points = true
 theta_i = [30]
-theta_r = [-40, 10, 60]
+theta_r = [-40, 60]
 [acquisition]
 detectors = ["lockin"]
 dark = "per_point"
@@ -105,17 +106,8 @@ def test_a_seeded_lock_in_scan_gives_the_same_data_on_a_slow_host(tmp_path):
         hog.join(timeout=60)
     assert lockin.faults.frames_seen > 50  # the delays did happen
 
-    assert np.all(np.isfinite(quiet["lockin_r_v"])) and np.all(quiet["lockin_r_v"] > 0)
+    # noisy readings (each point's snapshots differ), not a noiseless emulator
+    assert np.all(quiet["lockin_r_v"] > 0) and np.all(quiet["lockin_u_r_v"] > 0)
     for column in LOCKIN_COLUMNS:
         np.testing.assert_array_equal(slow[column], quiet[column], err_msg=column)
 
-
-def test_different_seeds_give_different_lock_in_noise(tmp_path):
-    """The check above is not passing because the noise is absent: another seed of the
-    same plan reads other values."""
-    first = _run(tmp_path, "seed7", _profile(7))
-    _power_on_again()
-    other = _run(tmp_path, "seed8", _profile(8))
-    assert not np.array_equal(first["lockin_r_v"], other["lockin_r_v"])
-    # the same light, so the same values within the noise (σ of one point's mean ≈ 1e-8 V)
-    np.testing.assert_allclose(other["lockin_r_v"], first["lockin_r_v"], rtol=0, atol=2e-7)
