@@ -28,25 +28,13 @@ from hw_mocks.urlhandler.protocol_simsr830 import make_emulator
 from instrument.cli import main
 from instrument.run.layout import DETECTOR_FIELDS
 from instrument.run.runfile import read_run
+from tests.instrument.pipelines.brdf.test_lockin_pulls import PLAN as PULLS_PLAN
 from tests.instrument.pipelines.brdf.test_lockin_pulls import lockin_profile
 
-PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "lock-in determinism"
-[sample]
-name = "lambert"
-[scan]
-skip_beam_points = true
-theta_i = [30]
-theta_r = [-40, 60]
-[acquisition]
-detectors = ["lockin"]
-dark = "per_point"
-frames = 4
-[spectral]
-filters = [2]
-"""
+#: The pull test's scan of a Lambertian sample (550 nm filter, per-point darks, 4
+#: snapshots), at two of its angles.
+PLAN = PULLS_PLAN.replace("theta_r = [-60, -40, -10, 0, 10, 20, 40, 50, 60, 70]",
+                          "theta_r = [-40, 60]")
 
 LOCKIN_COLUMNS = [f for f in DETECTOR_FIELDS if f.startswith("lockin_")]
 
@@ -54,6 +42,7 @@ LOCKIN_COLUMNS = [f for f in DETECTOR_FIELDS if f.startswith("lockin_")]
 def _profile(seed: int) -> str:
     # a 10 ms time constant: the same filter physics in a third of the settling time
     text = lockin_profile("lambert", "{ rho = 0.5 }", seed)
+    assert "time_constant_s = 0.03" in text and "clock=host" in text
     return text.replace("time_constant_s = 0.03", "time_constant_s = 0.01")
 
 
@@ -72,6 +61,7 @@ def _run(tmp_path: Path, name: str, profile: str) -> dict[str, np.ndarray]:
                  "--quiet"]) == 0
     (path,) = out.glob("*.h5")
     run = read_run(path)
+    assert run.n_points == 2
     return {c: np.asarray(getattr(run, c), dtype=float) for c in LOCKIN_COLUMNS}
 
 
