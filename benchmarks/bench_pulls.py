@@ -130,6 +130,17 @@ def over_samples(label: str, names: list[str] | None, scans) -> None:
                   time.perf_counter() - t_all), flush=True)
 
 
+def _fresh_emulators() -> None:
+    """Every emulated device powered up afresh, so that a scan's seed is the one its
+    profile names (emulators are shared by name within a process, and the lock-in pool's
+    workers run several scans each)."""
+    from hw_mocks import registry
+    from hw_mocks.sim.world import reset_worlds
+
+    registry.reset()
+    reset_worlds()
+
+
 def power_meter(n: int, names: list[str] | None) -> None:
     from instrument.cli import main as cli
     from instrument.pipelines.brdf.analyse import analyse
@@ -139,6 +150,7 @@ def power_meter(n: int, names: list[str] | None) -> None:
         name, brdf, params, model, truth = sample
         zs, ps = [], []
         for seed in range(n):
+            _fresh_emulators()
             with tempfile.TemporaryDirectory() as tmp:
                 tmp_p = Path(tmp)
                 (tmp_p / "bench.toml").write_text(_pm_profile(brdf, params, seed), "utf-8")
@@ -173,6 +185,7 @@ def lockin_scan(name: str, brdf: str, params: str, model: str, truth: tuple[floa
     from instrument.pipelines.brdf.spectral import SpectralOptions, analyse_spectral
     from instrument.run.runfile import read_run
 
+    _fresh_emulators()
     with tempfile.TemporaryDirectory() as tmp:
         tmp_p = Path(tmp)
         (tmp_p / "bench.toml").write_text(lockin_profile(brdf, params, 300 + seed,

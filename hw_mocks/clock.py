@@ -9,6 +9,12 @@ monotonic) whenever it processes a command or is polled, and computes motion fro
 - :class:`ManualClock` moves only when told (unit tests of motion profiles).
 - :class:`SteppingClock` advances a fixed step on every reading, so a driver's poll loop
   makes simulated time pass deterministically and without real waiting.
+- :class:`HostPacedClock` moves only when the host waits (its waits are routed to
+  :meth:`~_Holdable.advance`), when bytes cross the emulated wire, and, while the host
+  waits for a reply the device holds back, to the moment that reply is due
+  (:meth:`HostPacedClock.run_to`). An emulator whose readings depend on elapsed time (the
+  SR830's output filter and noise) then gives the same readings however fast or loaded
+  the machine is: a seeded run's data are a function of the seed and the plan only.
 
 Every clock can be *held* (:meth:`~_Holdable.held`): while held, emulated time stands still
 except for explicit :meth:`~_Holdable.advance` calls, and on release it runs on from where
@@ -26,7 +32,8 @@ import time
 from collections.abc import Iterator
 from typing import Protocol
 
-__all__ = ["Clock", "HoldableClock", "ManualClock", "ScaledClock", "SteppingClock"]
+__all__ = ["Clock", "HoldableClock", "HostPacedClock", "ManualClock", "ScaledClock",
+           "SteppingClock", "wire_time_s"]
 
 
 class Clock(Protocol):
@@ -173,3 +180,39 @@ class SteppingClock(_Holdable):
 
     def _thaw(self) -> None:
         pass
+
+
+def wire_time_s(n_bytes: int, baudrate: float) -> float:
+    """Seconds ``n_bytes`` take on an asynchronous serial line: ten bits a byte (start bit,
+    eight data bits, stop bit: 8N1)."""
+    return 10.0 * n_bytes / baudrate
+
+
+class HostPacedClock(ManualClock):
+    """Emulated time paced by the host instead of the wall clock.
+
+    It stands still except when
+
+    - the host waits: the driver's waiting function (``sleep=``) sleeps and then calls
+      :meth:`advance` with the same seconds (``hw_mocks.urlhandler.protocol_simsr830.host_sleep``
+      builds one);
+    - bytes cross the emulated wire: the emulator advances it by their
+      :func:`wire_time_s` (a query and its reply take their time at the line's rate);
+    - the host waits for a reply the device holds back (an SR830 busy with ``AGAN``): the
+      emulator lets it run to the moment the reply is due (:meth:`run_to`), as the real
+      time the host spends waiting would.
+
+    Everything else the host does (computing, being descheduled on a loaded machine,
+    moving other devices) takes no emulated time, so the emulated times of the device's
+    readings follow from the host's sequence of commands and waits alone. Holding it
+    (:meth:`~_Holdable.held`) changes nothing: it never runs by itself.
+    """
+
+    #: Emulators check this to advance the clock by wire time and run it to due replies.
+    paced_by_host = True
+
+    def run_to(self, t: float) -> float:
+        """Move time forward to ``t`` (nothing if it is there already); return the reading."""
+        with self._lock:
+            self._t = max(self._t, float(t))
+            return self._t

@@ -17,7 +17,7 @@ import threading
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
-from hw_mocks.clock import Clock, ScaledClock
+from hw_mocks.clock import Clock, ScaledClock, wire_time_s
 from hw_mocks.faults import FaultInjector
 
 __all__ = ["FirmwareEmulator", "clock_from_options"]
@@ -66,7 +66,15 @@ class FirmwareEmulator(ABC):
         with self.lock:
             self.received_log += data
             self._rx += data
-            return self._handle_input(self._rx)
+            # On a host-paced clock (hw_mocks.clock.HostPacedClock) the bytes take their
+            # wire time, the command's before it runs and the reply's after.
+            paced = getattr(self.clock, "paced_by_host", False)
+            if paced:
+                self.clock.advance(wire_time_s(len(data), self.baudrate))
+            frames = self._handle_input(self._rx)
+            if paced and frames:
+                self.clock.advance(wire_time_s(sum(map(len, frames)), self.baudrate))
+            return frames
 
     def poll(self) -> list[bytes]:
         """Frames the device sends unprompted at the present time (default: none)."""

@@ -86,6 +86,10 @@ def serve_url(url: str) -> PtyServer:
     from hw_mocks import registry
 
     scheme, name, options = registry.parse_url(url)
+    if options.get("clock") == "host":
+        # A host on the far side of a pty cannot pace the emulator's time (its waits do
+        # not reach this process): such a device runs on the wall clock here.
+        del options["clock"]
     handler = importlib.import_module(f"hw_mocks.urlhandler.protocol_{scheme}").Serial
     emulator = registry.get_or_create(scheme, name, handler.factory, options)
     return PtyServer(emulator)

@@ -411,6 +411,10 @@ class Sr830Emulator(FirmwareEmulator):
 
     def poll(self) -> list[bytes]:
         with self.lock:
+            if self._rx_lines and getattr(self.clock, "paced_by_host", False):
+                # The host waits for an answer held back by AGAN: on a host-paced clock
+                # its waiting is what lets the auto gain finish.
+                self.clock.run_to(self._busy_until)
             return self._run_queue()
 
     def unsolicited_frame(self) -> bytes:

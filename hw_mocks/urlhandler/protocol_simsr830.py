@@ -9,6 +9,15 @@ same instrument, as reconnecting a cable does):
     rate hears nothing.
 ``speed`` / ``step``
     Emulator clock (:func:`hw_mocks.emulator.clock_from_options`).
+``clock``
+    ``host``: emulated time paced by the host (:class:`hw_mocks.clock.HostPacedClock`)
+    instead of the wall clock. The driver's waits advance it (the bench opens the driver
+    with :func:`host_sleep` as its waiting function), as do the bytes on the wire, so the
+    output filter's state and the noise it has accumulated at each reading follow from the
+    host's commands and waits, not from how fast the machine ran them: a seeded run reads
+    the same values on a quiet and on a loaded machine. Not with ``speed``/``step``. A
+    host on the far side of a pty cannot pace it (:func:`hw_mocks.pty_server.serve_url`
+    serves such a URL on the wall clock).
 ``seed``
     Seeds the fault injector and the input noise.
 ``chopper``
@@ -31,14 +40,32 @@ same instrument, as reconnecting a cable does):
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+
+from hw_mocks import registry
+from hw_mocks.clock import Clock, HostPacedClock
 from hw_mocks.emulator import clock_from_options
 from hw_mocks.firmware.sr830 import Sr830Emulator
 from hw_mocks.link import EmulatedSerial
 
-__all__ = ["Serial", "make_emulator"]
+__all__ = ["Serial", "host_sleep", "make_emulator"]
 
-_KNOWN = {"baud", "speed", "step", "seed", "chopper", "noise", "outx", "agan", "serial",
-          "model", "world", "responsivity", "gain", "aperture_mm"}
+_KNOWN = {"baud", "speed", "step", "clock", "seed", "chopper", "noise", "outx", "agan",
+          "serial", "model", "world", "responsivity", "gain", "aperture_mm"}
+
+
+def _clock(options: dict[str, str]) -> Clock:
+    kind = options.get("clock")
+    if kind is None:
+        return clock_from_options(options)
+    if kind != "host":
+        raise ValueError(f"simsr830 clock={kind!r}: the only choice is 'host' (leave it out "
+                         "for the wall clock)")
+    if "speed" in options or "step" in options:
+        raise ValueError("simsr830: clock=host paces emulated time by the host's waits; it "
+                         "takes no speed= or step=")
+    return HostPacedClock()
 
 
 def make_emulator(name: str, options: dict[str, str]) -> Sr830Emulator:
@@ -56,7 +83,7 @@ def make_emulator(name: str, options: dict[str, str]) -> Sr830Emulator:
         agan_time_constants=float(options.get("agan", 10.0)),
         serial_number=options.get("serial", "00111"),
         model=options.get("model", "SR830"),
-        clock=clock_from_options(options),
+        clock=_clock(options),
         seed=int(options.get("seed", 0)),
     )
     if "world" in options:
@@ -73,6 +100,26 @@ def make_emulator(name: str, options: dict[str, str]) -> Sr830Emulator:
         )
         bind_lockin(emulator, options["world"], photodiode)
     return emulator
+
+
+def host_sleep(url: str) -> Callable[[float], None] | None:
+    """The waiting function for the driver of the SR830 that ``url`` names, when its
+    emulator runs on a host-paced clock (``clock=host``): it sleeps as a real wait would
+    (the run takes the time a real bench would) and then advances the emulator's clock by
+    the same seconds. ``None`` for an emulator on the wall clock (the driver's own
+    ``time.sleep`` is right there). Creates the emulator if it does not exist yet, as
+    opening the URL would."""
+    scheme, name, options = registry.parse_url(url)
+    emulator = registry.get_or_create(scheme, name, make_emulator, options)
+    clock = emulator.clock
+    if not isinstance(clock, HostPacedClock):
+        return None
+
+    def sleep(seconds: float) -> None:
+        time.sleep(seconds)
+        clock.advance(max(float(seconds), 0.0))
+
+    return sleep
 
 
 class Serial(EmulatedSerial):

@@ -48,6 +48,8 @@ SIM_ENTRY_POINTS = {
     "simcam": "hw_mocks.sim.camera:open_from_url",
     "simsource": "hw_mocks.sim.source:open_from_url",
     "simusb": "hw_mocks.usb:backend_from_url",
+    # the waiting function that paces an emulated SR830's clock (None: the wall clock)
+    "simsr830": "hw_mocks.urlhandler.protocol_simsr830:host_sleep",
 }
 SIM_WORLD_ENTRY = "hw_mocks.sim.world:configure_world"
 
@@ -114,7 +116,14 @@ def _open_zaber(spec: DeviceSpec) -> Device:
 def _open_sr830(spec: DeviceSpec) -> Device:
     from drivers.stanford_sr830 import Sr830LockIn
 
-    return Sr830LockIn(spec.url, name=spec.role, **spec.options)
+    kw: dict[str, Any] = {"name": spec.role, **spec.options}
+    if _scheme(spec.url) == "simsr830":
+        # An emulator on a host-paced clock (``clock=host``) lets time pass when the driver
+        # waits, so its readings do not depend on how fast the machine runs the host.
+        sleep = _entry(SIM_ENTRY_POINTS["simsr830"])(spec.url)
+        if sleep is not None:
+            kw.setdefault("sleep", sleep)
+    return Sr830LockIn(spec.url, **kw)
 
 
 def _open_sc10(spec: DeviceSpec) -> Device:

@@ -39,11 +39,13 @@ ambient part the chopper does not modulate) and one with it off. A real detector
 such cost, but the simulated bench's wall clock does, like the simulated camera's render:
 :data:`SIM_APERTURE_INTEGRAL_S` (CPU seconds measured on the project's dev box,
 ``benchmarks/bench_estimate_parts.py``: a shared box stretches wall time with its load,
-not CPU time).
+not CPU time), for the lit integral in proportion to the nodes of the emulator's rule
+over the aperture (the scene's ``aperture_samples``, :func:`aperture_nodes`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from urllib.parse import parse_qs, urlsplit
@@ -52,8 +54,9 @@ from drivers.base import LockIn
 from instrument.bench.profile import CAMERA_DRIVERS, BenchProfile, DeviceSpec
 from instrument.bench.render_cost import lightfield_render_s
 
-__all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "SIM_APERTURE_INTEGRAL_S", "BenchTiming",
-           "bench_timing", "clock_speed", "exposes_in_wall_time"]
+__all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "SIM_APERTURE_INTEGRAL_S",
+           "SIM_APERTURE_SAMPLES", "BenchTiming", "aperture_nodes", "bench_timing",
+           "clock_speed", "exposes_in_wall_time"]
 
 #: A camera's costs when the profile does not give them, by driver: seconds per frame
 #: beyond the exposure and seconds of the first frame after the scene changed. The
@@ -78,6 +81,12 @@ SIM_APERTURE_INTEGRAL_S: dict[str, tuple[float, float]] = {
     "spectral": (0.093, 0.0003),
     "default": (0.030, 0.0003),
 }
+#: The scene's ``aperture_samples`` those costs were measured at (the emulator's default).
+#: A lit integral's cost grows with the rule's nodes (:func:`aperture_nodes`): measured
+#: CPU per integral on sim-spectral 4.3× and 9.5× the default's at 144 and 324 nodes (4×
+#: and 9× the nodes), on sim 5.8× and 15× (BENCHMARKS.md, honest4); the estimate scales
+#: the lit cost by the node count.
+SIM_APERTURE_SAMPLES = 9
 #: The SR830's output filter at power-up (time constant, slope): 100 ms, 12 dB/oct.
 LOCKIN_POWER_UP = (0.1, 12)
 #: FW102C at high speed: seconds per degree of the wheel's turn, settling on the slot.
@@ -230,8 +239,23 @@ def _integral_s(profile: BenchProfile, driver: str) -> tuple[float, float]:
     if spec is None or not urlsplit(spec.url).scheme.startswith("sim") \
             or "world" not in _query(spec.url) or scene.get("kind") is not None:
         return 0.0, 0.0  # a real detector, or a light-field or spheres scene (not measured)
-    return SIM_APERTURE_INTEGRAL_S.get(str(scene.get("brdf")),
-                                       SIM_APERTURE_INTEGRAL_S["default"])
+    lit, dark = SIM_APERTURE_INTEGRAL_S.get(str(scene.get("brdf")),
+                                            SIM_APERTURE_INTEGRAL_S["default"])
+    try:
+        m = int(scene.get("aperture_samples", SIM_APERTURE_SAMPLES))
+    except (TypeError, ValueError):
+        m = SIM_APERTURE_SAMPLES  # the world refuses it when the bench opens
+    # The lit integral evaluates the BRDF at every footprint point for every aperture node;
+    # the dark one only the ambient term, whatever the rule.
+    return lit * aperture_nodes(m) / aperture_nodes(SIM_APERTURE_SAMPLES), dark
+
+
+def aperture_nodes(aperture_samples: int) -> int:
+    """Nodes of the emulator's rule over a detector aperture for a scene's
+    ``aperture_samples`` m: ⌈m/3⌉ rings of 4⌈m/3⌉ angles
+    (``hw_mocks.sim.goniometer_scene.aperture_rule``; 36 at the default 9, 324 at 27)."""
+    rings = max(1, math.ceil(aperture_samples / 3))
+    return 4 * rings * rings
 
 
 def _scene_render_s(profile: BenchProfile, camera: DeviceSpec | None) -> float:

@@ -96,6 +96,24 @@ def test_the_estimate_counts_the_emulated_detectors_integrals(tmp_path, integral
     assert timing.power_meter_integral_s == timing.lockin_integral_s == (lit_s, dark_s)
 
 
+def test_a_finer_aperture_rule_costs_in_proportion_to_its_nodes():
+    """A profile that asks the emulator for a finer rule over the aperture
+    (``aperture_samples = 27``: 324 nodes instead of 36) pays 9× for each lit integral;
+    the dark integral (the ambient term only) is the same."""
+    from instrument.bench.profile import parse_profile
+    from instrument.bench.timing import aperture_nodes
+
+    text = (ROOT / "instrument" / "bench" / "profiles" / "sim-spectral.toml").read_text(
+        encoding="utf-8")
+    fine = text.replace("[simulation.scene]\n", "[simulation.scene]\naperture_samples = 27\n")
+    assert fine != text
+    lit_s, dark_s = SIM_APERTURE_INTEGRAL_S["spectral"]
+    timing = bench_timing(parse_profile(fine))
+    assert timing.lockin_integral_s == pytest.approx((9 * lit_s, dark_s))
+    assert timing.power_meter_integral_s == timing.lockin_integral_s
+    assert [aperture_nodes(m) for m in (1, 3, 9, 10, 27)] == [4, 4, 36, 64, 324]
+
+
 def test_real_detectors_and_other_scenes_cost_no_integrals():
     """A real power meter (no simulated world) and the light-field bench's scene have no
     measured integral cost: nothing is added, nothing counted."""

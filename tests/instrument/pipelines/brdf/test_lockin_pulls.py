@@ -9,6 +9,12 @@ its ρ lies within 3σ of the truth (σ before the common scale and the range-ga
 covariance, which the emulator's exact gain and responsivity give nothing to scatter
 against); each check fails with probability ≈ 0.3 % and 0.1 % when the σ are right.
 Before them the same scans gave χ²/dof ≈ 3.
+
+The emulated lock-in runs on a host-paced clock (``clock=host`` in sim-spectral), so each
+seed's data, and these checks' outcome, are the same on a quiet and a loaded machine
+(tests/instrument/run/test_lockin_determinism.py): seed 0 gives χ² 5.23 for 9 degrees of
+freedom (p 0.81) and z −0.23, seed 1 χ² 8.10 (p 0.52) and z −0.74. (On the wall clock
+seed 1 had given p 0.77 on a quiet box and 9e-4 under load.)
 """
 
 from __future__ import annotations
@@ -87,9 +93,7 @@ def test_the_lock_in_fit_passes_chi2_and_its_rho_pull_is_within_3_sigma(tmp_path
     assert gof.dof == wf.reduced.points.n - 1
     # χ² test: fails 0.1 % of the time with the right σ (two-sided)
     assert 5e-4 < gof.p_value < 1 - 5e-4, (gof.chi2, gof.dof)
-    # σ are inflated only by the goodness-of-fit rule (p below its α = 1e-3), which the
-    # bound above admits 0.05 % of the time
-    assert wf.result.inflation["lambert"] == (1.0 if gof.adequate else gof.birge_ratio)
+    assert wf.result.inflation["lambert"] == 1.0  # nothing inflated
     z = (fit.params[0] - 0.5) / fit.stderr[0]
     assert abs(z) < stats.norm.ppf(1 - 0.0015), (fit.params, fit.stderr)
     assert np.isfinite(z)
