@@ -1,0 +1,115 @@
+"""The example plugin (``examples/plugin_driver``, installed into the test environment):
+a profile names its driver, a scan runs through it, the power-meter contract holds for
+it, over its emulator's URL and over a pseudo-terminal, and the GUI's device model shows
+it through the power-meter kind with no change to ``gui/``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from drivers.errors import ControllerError
+from hw_mocks import registry
+from hw_mocks.pty_server import serve_url
+from instrument.bench.devices import configure_simulation, open_bench, open_device
+from instrument.bench.profile import load_profile
+from instrument.cli import main
+from tests.drivers.power_meter_contract import PowerMeterContract
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "plugin_driver"
+BENCH = EXAMPLE / "bench_em1.toml"
+PLAN = EXAMPLE / "brdf_em1.toml"
+
+
+@pytest.fixture
+def profile():
+    profile = load_profile(BENCH)
+    configure_simulation(profile)
+    return profile
+
+
+def test_the_profile_names_the_plugin_driver_and_opens_it_with_its_settings(profile):
+    spec = profile.device("power_meter")
+    assert (spec.driver, spec.kind) == ("example_meter", "power_meter")
+    with open_bench(profile, roles=["power_meter"]) as bench:
+        meter = bench.power_meter
+        assert type(meter).__name__ == "Em1PowerMeter"
+        assert meter.identity.model == "EM-1" and meter.identity.serial == "EM0001"
+        assert meter.wavelength_nm == pytest.approx(633.0)
+        assert meter.averaging == 4
+
+
+def test_the_meter_reports_the_controllers_refusals_as_typed_errors(profile):
+    with open_device(profile.device("power_meter")) as meter:
+        registry.get("simem1", "power_meter").enter_error_state("2")
+        with pytest.raises(ControllerError, match="value out of range") as info:
+            meter.read_power_w()
+        assert info.value.device == "power_meter" and info.value.command == "POW?"
+        with pytest.raises(ValueError, match="at most 1000"):
+            meter.averaging = 5000
+        assert meter.averaging == 4  # nothing was sent
+
+
+def test_a_scan_runs_through_the_plugin_meter_with_the_engine(tmp_path, capsys):
+    out = tmp_path / "runs"
+    assert main(["run", str(PLAN), "--bench", str(BENCH), "--out", str(out),
+                 "--no-fsync"]) == 0
+    assert "run finished: 7 of 7 points" in capsys.readouterr().out
+    with h5py.File(next(out.glob("*.h5")), "r") as f:
+        e = f["entry"]
+        assert e.attrs["status"] == "finished"
+        assert e["instrument/power_meter"].attrs["driver"] == "example_meter"
+        assert e["instrument/power_meter"].attrs["model"] == "EM-1"
+        lit, dark = e["points/power_w"][:], e["points/power_dark_w"][:]
+    # The glossy sample scatters light into every direction of the scan: each lit reading
+    # stands far above the meter's 1e-10 W noise floor over its dark reading.
+    assert np.all(lit - dark > 1e-8)
+
+
+class _Em1Contract(PowerMeterContract):
+    @pytest.fixture
+    def light(self, profile):
+        source = open_device(profile.device("source"))
+        yield lambda on: source.turn_on() if on else source.turn_off()
+        source.close()
+
+
+class TestEm1ContractOverItsUrl(_Em1Contract):
+    @pytest.fixture
+    def meter_factory(self, profile):
+        return lambda: open_device(profile.device("power_meter"))
+
+
+class TestEm1ContractOverAPty(_Em1Contract):
+    @pytest.fixture
+    def meter_factory(self, profile):
+        from example_meter.driver import Em1PowerMeter
+
+        server = serve_url(profile.device("power_meter").url, handlers="example_meter.urlhandler")
+        yield lambda: Em1PowerMeter(server.path, name="power_meter")
+        server.close()
+
+
+def test_the_gui_shows_the_plugin_meter_through_the_power_meter_kind(profile):
+    from gui.model.devices import kind_of, read_state
+
+    with open_device(profile.device("power_meter")) as meter:
+        state = read_state("power_meter", meter, with_info=True)
+        assert state.kind == "power_meter" and state.connected and state.error is None
+        assert state.info["identity"]["model"] == "EM-1"
+        assert state.info["wavelength_range_nm"] == (300.0, 1100.0)
+        assert state.value("wavelength_nm") == pytest.approx(633.0)
+        assert np.isfinite(state.value("power_w"))
+        # what the operator may set and do on a power meter, the plugin meter takes
+        kind = kind_of(meter)
+        assert "wavelength_nm" in kind.settings and "zero" in kind.actions
+        kind.actions["zero"](meter)
+
+
+def test_the_gui_gives_the_plugin_meter_the_power_meter_panel():
+    from gui.qt.panels import PowerMeterPanel, panel_for
+
+    assert panel_for("power_meter") is PowerMeterPanel
