@@ -31,7 +31,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from importlib import metadata
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from drivers.base import (
     Camera,
@@ -44,8 +44,9 @@ from drivers.base import (
     Shutter,
 )
 
-if TYPE_CHECKING:
-    from instrument.bench.profile import DeviceSpec
+#: A profile's device table as validated (:class:`instrument.bench.profile.DeviceSpec`;
+#: not imported here: the profile's validator imports this module).
+DeviceSpec = Any
 
 __all__ = [
     "BUILTIN_DISTRIBUTION",
