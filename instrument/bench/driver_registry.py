@@ -195,32 +195,35 @@ class PluginError(RuntimeError):
 
 
 @dataclass(frozen=True)
-class PluginProblem:
-    """A driver registration that was refused (the others load regardless)."""
+class _Registration:
+    """One entry point: the driver name, the distribution and version that registered it,
+    and its ``module:attr``."""
 
     name: str
     distribution: str
     version: str
     target: str
-    message: str
 
     @property
     def origin(self) -> str:
         return f"{self.distribution} {self.version}".strip()
+
+
+@dataclass(frozen=True)
+class PluginProblem(_Registration):
+    """A driver registration that was refused (the others load regardless)."""
+
+    message: str
 
     def __str__(self) -> str:
         return f"driver {self.name!r} ({self.target}, from {self.origin}): {self.message}"
 
 
 @dataclass(frozen=True)
-class RegisteredDriver:
-    """A usable driver: its name, entry, and the distribution that registered it."""
+class RegisteredDriver(_Registration):
+    """A usable driver: its registration and its entry."""
 
-    name: str
     entry: DriverEntry
-    distribution: str
-    version: str
-    target: str
 
     @property
     def kind(self) -> str:
@@ -229,10 +232,6 @@ class RegisteredDriver:
     @property
     def builtin(self) -> bool:
         return self.distribution == BUILTIN_DISTRIBUTION
-
-    @property
-    def origin(self) -> str:
-        return f"{self.distribution} {self.version}".strip()
 
     def driver_class(self) -> type[Device]:
         """The driver's class, imported now; :class:`PluginError` naming the driver, its
@@ -366,7 +365,7 @@ def _load_one(ep: metadata.EntryPoint) -> RegisteredDriver | PluginProblem:
             _resolve_class(entry)
         except PluginError as err:
             return _problem(ep, str(err))
-    return RegisteredDriver(ep.name, entry, dist, version, ep.value)
+    return RegisteredDriver(ep.name, dist, version, ep.value, entry)
 
 
 def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> DriverRegistry:
