@@ -2,7 +2,7 @@
 ``[project.entry-points."scatterlab.drivers"]`` names each entry here; ADR 0092).
 
 Each entry says the device kind, the driver class (imported only when a device is opened:
-OpenCV and the simulation are not imported to validate a profile), the profile options
+neither OpenCV, the simulation nor NumPy is imported to validate a profile), the profile options
 the constructor takes, the settings applied after opening, and the pyserial scheme of the
 firmware emulator. The simulated camera and source live in :mod:`hw_mocks`: production
 code reaches them only by the strings here and their URL schemes (``simcam://``,
@@ -13,10 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from drivers.base import AxisKind, Device
 from drivers.errors import ConnectionFailed
-from instrument.bench.devices import sim_entry_point
-from instrument.bench.driver_registry import DriverEntry, Emulator, Option
+from instrument.bench.driver_registry import Device, DriverEntry, Emulator, Option
 from instrument.bench.profile import DeviceSpec
 
 __all__ = ["APT", "FW102C", "NEWPORT_SMC100", "OPENCV_CAMERA", "PM100USB", "SC10",
@@ -48,6 +46,8 @@ def _axis_kwargs(spec: DeviceSpec) -> dict[str, Any]:
 def _kind_kwargs(spec: DeviceSpec) -> dict[str, Any]:
     """The axis keywords with ``kind`` defaulted from the role (``camera_z`` is linear)."""
     kw = _axis_kwargs(spec)
+    from drivers.base import AxisKind
+
     kw.setdefault("kind", "linear" if spec.role == "camera_z" else "rotary")
     kw["kind"] = AxisKind.LINEAR if kw["kind"] == "linear" else AxisKind.ROTARY
     return kw
@@ -70,6 +70,7 @@ def _open_zaber(cls: type, spec: DeviceSpec) -> Device:
 
 
 def _open_pm100(cls: type, spec: DeviceSpec) -> Device:
+    from instrument.bench.devices import sim_entry_point
     kw: dict[str, Any] = {"name": spec.role, **spec.options}
     scheme = spec.url.split("://", 1)[0]
     if scheme == "simusb":
@@ -82,6 +83,7 @@ def _open_pm100(cls: type, spec: DeviceSpec) -> Device:
 
 
 def _open_simulated(cls: type, spec: DeviceSpec) -> Device:
+    from instrument.bench.devices import sim_entry_point
     scheme = spec.url.split("://", 1)[0]
     if scheme not in ("simcam", "simsource"):
         raise ConnectionFailed(f"driver {spec.driver!r} needs a simcam:// or simsource:// URL",

@@ -31,7 +31,7 @@ from drivers.base import (
 )
 from drivers.errors import ConnectionFailed, DeviceError
 from drivers.transport import add_url_handler_package
-from instrument.bench.driver_registry import KINDS, PluginError, driver_registry
+from instrument.bench.driver_registry import PluginError, driver_registry, kind_abc
 from instrument.bench.profile import (
     BenchProfile,
     DeviceSpec,
@@ -93,7 +93,7 @@ def open_device(spec: DeviceSpec) -> Device:
         raise ConnectionFailed(f"driver {spec.driver!r} is not available: {err}",
                                device=spec.role, command="open") from err
     kind = registry.kind_of(spec.driver)
-    if not isinstance(device, Device) or not isinstance(device, KINDS[kind]):
+    if not isinstance(device, Device) or not isinstance(device, kind_abc(kind)):
         with contextlib.suppress(Exception):
             device.close()
         raise ConnectionFailed(

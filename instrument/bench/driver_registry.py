@@ -30,23 +30,17 @@ import importlib
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from importlib import metadata
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from drivers.base import (
-    Camera,
-    Device,
-    FilterWheel,
-    LightSource,
-    LockIn,
-    MotionAxis,
-    PowerMeter,
-    Shutter,
-)
+if TYPE_CHECKING:  # importlib.metadata is imported when the registry is first read
+    from importlib import metadata
 
 #: A profile's device table as validated (:class:`instrument.bench.profile.DeviceSpec`;
 #: not imported here: the profile's validator imports this module).
 DeviceSpec = Any
+#: A device (:class:`drivers.base.Device`): the ABCs are imported only when a class is
+#: checked, so that validating a profile does not import NumPy.
+Device = Any
 
 __all__ = [
     "BUILTIN_DISTRIBUTION",
@@ -60,6 +54,7 @@ __all__ = [
     "PluginProblem",
     "RegisteredDriver",
     "driver_registry",
+    "kind_abc",
     "load_registry",
 ]
 
@@ -67,17 +62,25 @@ __all__ = [
 ENTRY_POINT_GROUP = "scatterlab.drivers"
 #: The distribution whose drivers are the built-in ones (they win a name clash).
 BUILTIN_DISTRIBUTION = "scatterlab"
-#: Device kinds by name: the ABC a driver of that kind subclasses. The names are the GUI's
-#: device kinds (:mod:`gui.model.devices`), so a plugin's device is shown through its kind.
-KINDS: dict[str, type[Device]] = {
-    "motion_axis": MotionAxis,
-    "camera": Camera,
-    "light_source": LightSource,
-    "shutter": Shutter,
-    "power_meter": PowerMeter,
-    "lockin": LockIn,
-    "filter_wheel": FilterWheel,
+#: Device kinds by name → the name of the ABC of :mod:`drivers.base` a driver of that kind
+#: subclasses. The names are the GUI's device kinds (:mod:`gui.model.devices`), so a
+#: plugin's device is shown through its kind.
+KINDS: dict[str, str] = {
+    "motion_axis": "MotionAxis",
+    "camera": "Camera",
+    "light_source": "LightSource",
+    "shutter": "Shutter",
+    "power_meter": "PowerMeter",
+    "lockin": "LockIn",
+    "filter_wheel": "FilterWheel",
 }
+
+
+def kind_abc(kind: str) -> type:
+    """The ABC of ``kind`` (a key of :data:`KINDS`), from :mod:`drivers.base`."""
+    return getattr(importlib.import_module("drivers.base"), KINDS[kind])
+
+
 _TYPE_WORDS = {float: "a number", int: "an integer", bool: "true or false", str: "a string",
                dict: "a table", list: "an array"}
 
@@ -268,7 +271,7 @@ def _resolve_class(entry: DriverEntry) -> type[Device]:
             raise PluginError(
                 f"its class {entry.driver!r} does not import ({type(err).__name__}: {err}); "
                 "install what it needs, fix the plugin, or uninstall it") from err
-    abc = KINDS[entry.kind]
+    abc = kind_abc(entry.kind)
     if not (isinstance(target, type) and issubclass(target, abc)):
         raise PluginError(
             f"{getattr(target, '__qualname__', target)!r} is not a subclass of "
@@ -331,6 +334,8 @@ class DriverRegistry:
 
 
 def _entry_points() -> Iterable[metadata.EntryPoint]:
+    from importlib import metadata
+
     return metadata.entry_points(group=ENTRY_POINT_GROUP)
 
 

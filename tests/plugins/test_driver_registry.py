@@ -20,6 +20,7 @@ from instrument.bench.driver_registry import (
     DriverEntry,
     Option,
     driver_registry,
+    kind_abc,
     load_registry,
 )
 from instrument.bench.profile import ProfileError, parse_profile
@@ -189,7 +190,9 @@ def test_a_plugins_options_and_settings_are_validated_like_builtin_fields():
 def test_the_kinds_are_the_abcs_of_drivers_base():
     from drivers import base
 
-    assert all(getattr(base, abc.__name__) is abc for abc in KINDS.values())
+    assert all(kind_abc(kind) is getattr(base, name) for kind, name in KINDS.items())
+    assert set(KINDS) == {"motion_axis", "camera", "light_source", "shutter", "power_meter",
+                          "lockin", "filter_wheel"}
 
 
 numbers = st.one_of(st.integers(-10**9, 10**9), st.floats(allow_nan=True,

@@ -120,3 +120,13 @@ def test_the_gui_gives_the_plugin_meter_the_power_meter_panel():
     from gui.qt.panels import PowerMeterPanel, panel_for
 
     assert panel_for("power_meter") is PowerMeterPanel
+
+
+def test_serve_sim_serves_the_plugins_emulator_on_a_pty(capsys):
+    """The plugin's registered scheme is an emulated serial controller like the built-in
+    ones: ``serve-sim`` puts it on a pseudo-terminal next to the stages."""
+    assert main(["serve-sim", "--bench", str(BENCH), "--duration", "0.01"]) == 0
+    out = capsys.readouterr().out
+    served = {line.split(":")[0]: line for line in out.splitlines() if "->" in line}
+    assert set(served) == {"sample_theta", "detector_theta", "power_meter"}
+    assert "simem1://power_meter" in served["power_meter"] and "/dev/pts/" in out
