@@ -225,3 +225,18 @@ def test_an_option_of_an_unsupported_type_is_a_type_error():
     with pytest.raises(TypeError, match="Option type"):
         Option(complex)
     assert DriverEntry("camera", "x:Y").options == {}
+
+
+def test_the_registrys_kinds_are_the_guis_device_kinds():
+    """A plugin's device is shown through the GUI kind of the same name: the two lists
+    agree, kind for kind and ABC for ABC."""
+    from gui.model.devices import kinds
+
+    assert {k.name: k.base for k in kinds()} == {name: kind_abc(name) for name in KINDS}
+
+
+def test_an_environment_without_scatterlabs_entry_points_is_told_to_reinstall():
+    from instrument.bench.driver_registry import DriverRegistry
+
+    message = DriverRegistry().unknown_driver_message("thorlabs_apt")
+    assert "entry points are missing" in message and "pip install -e ." in message
