@@ -87,6 +87,15 @@ def test_a_plugin_camera_found_by_serial_number_is_named_by_serial_like_basler(s
     head = '[bench]\nname = "b"\n[devices.camera]\ndriver = "lab_camera"\n'
     spec = parse_profile(head + 'serial = "AB-1234"\n').device("camera")
     assert (spec.url, spec.kind) == ("AB-1234", "camera")  # the serial stands for the url
+    # it is the bench's camera by its kind; its timing, with no default known, is zero
+    # and the estimate says to give it
+    from instrument.bench.timing import bench_timing
+
+    timing = bench_timing(parse_profile(head + 'serial = "AB-1234"\nframe_overhead_s = 0.1\n'))
+    assert (timing.frame_overhead_s, timing.scene_change_s) == (0.1, 0.0)
+    assert [a for a in timing.assumed if "lab_camera" in a] == [
+        "camera.scene_change_s not in the profile: 0 s assumed (no default for driver "
+        "'lab_camera'; give it in the profile)"]
     with pytest.raises(ProfileError) as info:
         parse_profile(head + 'url = "/dev/video0"\n')
     assert {e.path for e in info.value.errors} == {"devices.camera.url",
