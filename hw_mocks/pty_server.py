@@ -77,10 +77,11 @@ class PtyServer:
         self.close()
 
 
-def serve_url(url: str) -> PtyServer:
+def serve_url(url: str, *, handlers: str = "hw_mocks.urlhandler") -> PtyServer:
     """Serve the emulator named by a ``simapt://``, ``simsmc://``, ``simzaber://``,
     ``simsr830://``, ``simsc10://`` or ``simfw102c://`` URL (any scheme with a handler in
-    :mod:`hw_mocks.urlhandler`) on a new pty."""
+    the package ``handlers``: :mod:`hw_mocks.urlhandler`, or a driver plugin's) on a new
+    pty."""
     import importlib
 
     from hw_mocks import registry
@@ -90,6 +91,6 @@ def serve_url(url: str) -> PtyServer:
         # A host on the far side of a pty cannot pace the emulator's time (its waits do
         # not reach this process): such a device runs on the wall clock here.
         del options["clock"]
-    handler = importlib.import_module(f"hw_mocks.urlhandler.protocol_{scheme}").Serial
+    handler = importlib.import_module(f"{handlers}.protocol_{scheme}").Serial
     emulator = registry.get_or_create(scheme, name, handler.factory, options)
     return PtyServer(emulator)

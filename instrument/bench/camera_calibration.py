@@ -18,9 +18,9 @@ from typing import Any
 
 from analysis.brdf.reduction import DetectorNoise
 from instrument.bench.devices import sim_entry_point
-from instrument.bench.profile import CAMERA_DRIVERS
+from instrument.bench.driver_registry import driver_registry
 
-__all__ = ["CAMERA_DRIVERS", "CameraCalibration", "camera_calibration_for", "camera_spec",
+__all__ = ["CameraCalibration", "camera_calibration_for", "camera_spec",
            "camera_url", "simulated_camera_calibration"]
 
 
@@ -86,8 +86,9 @@ class CameraCalibration:
 def camera_spec(profile: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
     """(role, device table) of the camera a bench profile (parsed TOML) names, if any."""
     for role, spec in profile.get("devices", {}).items():
-        if spec.get("driver") in CAMERA_DRIVERS or str(spec.get("url", "")).startswith(
-                "simcam://"):
+        driver = spec.get("driver")
+        is_camera = isinstance(driver, str) and driver_registry().kind_of(driver) == "camera"
+        if is_camera or str(spec.get("url", "")).startswith("simcam://"):
             return role, spec
     return None
 

@@ -1,13 +1,14 @@
 """Open the devices a bench profile names, and close them safely.
 
-Real drivers are imported from ``drivers`` by driver name. Devices that exist only in
-simulation (camera, source) and the emulated USB backend live in ``hw_mocks``; they are
-reached *only* through the URL scheme in the profile (``simcam://``, ``simsource://``,
-``simusb://``), by a string import, so no code path that real hardware takes imports the
-mocks. Likewise the pyserial handlers of the emulated serial controllers
-(:data:`~instrument.bench.profile.SIM_SERIAL_SCHEMES`: ``simapt://``, ``simsmc://``,
-``simzaber://``, ``simsr830://``, ``simsc10://``, ``simfw102c://``) are registered by
-package name only when a profile uses those schemes.
+Drivers are found by name in the driver registry (:mod:`instrument.bench.driver_registry`:
+every driver, scatterlab's and plugins', is registered under the ``scatterlab.drivers``
+entry-point group). Devices that exist only in simulation (camera, source) and the emulated
+USB backend live in :mod:`hw_mocks`; they are reached *only* through the URL scheme in the
+profile (``simcam://``, ``simsource://``, ``simusb://``), by a string import, so no code
+path that real hardware takes imports the mocks. Likewise the pyserial handlers of the
+emulated serial controllers (each driver's registered emulator scheme: ``simapt://``,
+``simsmc://``... and a plugin's own) are registered by package name only when a profile
+uses their scheme.
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.base import (
-    AxisKind,
     Camera,
     Device,
     FilterWheel,
@@ -31,18 +31,16 @@ from drivers.base import (
 )
 from drivers.errors import ConnectionFailed, DeviceError
 from drivers.transport import add_url_handler_package
+from instrument.bench.driver_registry import PluginError, driver_registry, kind_abc
 from instrument.bench.profile import (
-    SIM_SERIAL_SCHEMES,
     BenchProfile,
     DeviceSpec,
     FieldError,
     ProfileError,
 )
 
-__all__ = ["DRIVERS", "Bench", "open_bench", "open_device"]
+__all__ = ["Bench", "open_bench", "open_device", "serial_emulator_schemes"]
 
-#: Package holding the pyserial URL handlers of the firmware emulators.
-SIM_URL_HANDLERS = "hw_mocks.urlhandler"
 #: Simulation entry points, by URL scheme, as "module:function" strings.
 SIM_ENTRY_POINTS = {
     "simcam": "hw_mocks.sim.camera:open_from_url",
@@ -71,135 +69,39 @@ def _scheme(url: str) -> str:
     return url.split("://", 1)[0] if "://" in url else ""
 
 
-def _axis_kwargs(spec: DeviceSpec) -> dict[str, Any]:
-    kw: dict[str, Any] = {"name": spec.role}
-    if spec.limits is not None:
-        kw["soft_limits"] = spec.limits
-    if spec.position_tolerance is not None:
-        kw["position_tolerance"] = spec.position_tolerance
-    kw.update(spec.options)
-    return kw
-
-
-def _open_apt(spec: DeviceSpec) -> Device:
-    from drivers.thorlabs_apt import AptMotor
-
-    return AptMotor(spec.url, stage=spec.stage or "K10CR1", **_axis_kwargs(spec))
-
-
-def _kind_kwargs(spec: DeviceSpec) -> dict[str, Any]:
-    """The axis options with ``kind`` defaulted from the role (``camera_z`` is linear)."""
-    kw = _axis_kwargs(spec)
-    kw.setdefault("kind", AxisKind.LINEAR if spec.role == "camera_z" else AxisKind.ROTARY)
-    if isinstance(kw["kind"], str):
-        kw["kind"] = AxisKind.LINEAR if kw["kind"] == "linear" else AxisKind.ROTARY
-    return kw
-
-
-def _open_smc100(spec: DeviceSpec) -> Device:
-    from drivers.newport_smc100 import Smc100Axis
-
-    return Smc100Axis(spec.url, **_kind_kwargs(spec))
-
-
-def _open_zaber(spec: DeviceSpec) -> Device:
-    from drivers.zaber_ascii import ZaberAxis
-
-    kw = _kind_kwargs(spec)
-    if "microstep_size" not in kw:
-        raise ConnectionFailed("a Zaber axis needs options.microstep_size (degrees or mm per "
-                               "microstep, from the product's specification)",
-                               device=spec.role, command="open")
-    return ZaberAxis(spec.url, **kw)
-
-
-def _open_sr830(spec: DeviceSpec) -> Device:
-    from drivers.stanford_sr830 import Sr830LockIn
-
-    kw: dict[str, Any] = {"name": spec.role, **spec.options}
-    if _scheme(spec.url) == "simsr830":
-        # An emulator on a host-paced clock (``clock=host``) lets time pass when the driver
-        # waits, so its readings do not depend on how fast the machine runs the host.
-        sleep = _entry(SIM_ENTRY_POINTS["simsr830"])(spec.url)
-        if sleep is not None:
-            kw.setdefault("sleep", sleep)
-    return Sr830LockIn(spec.url, **kw)
-
-
-def _open_sc10(spec: DeviceSpec) -> Device:
-    from drivers.thorlabs_sc10 import Sc10Shutter
-
-    return Sc10Shutter(spec.url, name=spec.role, **spec.options)
-
-
-def _open_fw102c(spec: DeviceSpec) -> Device:
-    from drivers.thorlabs_fw102c import Fw102cWheel
-
-    return Fw102cWheel(spec.url, name=spec.role, **spec.options)
-
-
-def _open_pm100(spec: DeviceSpec) -> Device:
-    from drivers.thorlabs_pm100 import PM100USB
-
-    kw: dict[str, Any] = {"name": spec.role, **spec.options}
-    if _scheme(spec.url) == "simusb":
-        kw["backend"] = _entry(SIM_ENTRY_POINTS["simusb"])(spec.url)
-    elif spec.url.startswith("usb://"):
-        serial = spec.url[len("usb://"):].strip("/")
-        if serial:
-            kw.setdefault("serial_number", serial)
-    return PM100USB(**kw)
-
-
-def _open_opencv(spec: DeviceSpec) -> Device:
-    from drivers.opencv_camera import OpenCVCamera
-
-    return OpenCVCamera(spec.url, name=spec.role, **spec.options)
-
-
-def _open_basler(spec: DeviceSpec) -> Device:
-    from drivers.pylon_transport import open_basler_camera
-
-    return open_basler_camera(spec.url, name=spec.role, **spec.options)  # url: the serial
-
-
-def _open_simulated(spec: DeviceSpec) -> Device:
-    scheme = _scheme(spec.url)
-    if scheme not in ("simcam", "simsource"):
-        raise ConnectionFailed(f"driver {spec.driver!r} needs a simcam:// or simsource:// URL",
-                               device=spec.role, command="open")
-    device = _entry(SIM_ENTRY_POINTS[scheme])(spec.url)
-    device.name = spec.role
-    return device
-
-
-#: Driver name → opener.
-DRIVERS: dict[str, Callable[[DeviceSpec], Device]] = {
-    "thorlabs_apt": _open_apt,
-    "newport_smc100": _open_smc100,
-    "pm100usb": _open_pm100,
-    "opencv_camera": _open_opencv,
-    "sim_camera": _open_simulated,
-    "sim_source": _open_simulated,
-    "zaber": _open_zaber,
-    "sr830": _open_sr830,
-    "sc10": _open_sc10,
-    "fw102c": _open_fw102c,
-    "basler": _open_basler,
-}
+def serial_emulator_schemes() -> dict[str, str]:
+    """URL scheme → package of its pyserial handler, of every registered driver's emulator
+    (``simapt`` → ``hw_mocks.urlhandler``; a plugin's own)."""
+    return driver_registry().emulator_schemes()
 
 
 def open_device(spec: DeviceSpec) -> Device:
     """Open one device and apply the profile's motion settings."""
-    if _scheme(spec.url) in SIM_SERIAL_SCHEMES:
-        add_url_handler_package(SIM_URL_HANDLERS)
+    registry = driver_registry()
+    handlers = registry.emulator_schemes().get(_scheme(spec.url))
+    if handlers is not None:
+        add_url_handler_package(handlers)
+    driver = registry.get(spec.driver)
+    if driver is None:
+        raise ConnectionFailed(registry.unknown_driver_message(spec.driver), device=spec.role,
+                               command="open")
     try:
-        device = DRIVERS[spec.driver](spec)
+        device = driver.open(spec)
     except DeviceError:
         raise
+    except PluginError as err:
+        raise ConnectionFailed(str(err), device=spec.role, command="open") from err
     except ImportError as err:
         raise ConnectionFailed(f"driver {spec.driver!r} is not available: {err}",
                                device=spec.role, command="open") from err
+    kind = registry.kind_of(spec.driver)
+    if not isinstance(device, Device) or not isinstance(device, kind_abc(kind)):
+        with contextlib.suppress(Exception):
+            device.close()
+        raise ConnectionFailed(
+            f"driver {spec.driver!r} (from {driver.origin}) opened a "
+            f"{type(device).__name__}, not a device of its kind {kind!r}; fix the driver's "
+            "open function", device=spec.role, command="open")
     try:
         if isinstance(device, MotionAxis):
             if spec.velocity is not None:
@@ -314,12 +216,16 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
     roles.update(config.get("roles", {}))
     config["roles"] = roles
     config.setdefault("arm_length_mm", profile.geometry.detector_distance_mm)
-    meters = [s.url for s in profile.devices.values() if _scheme(s.url) == "simusb"]
+    meters = [s.url for s in profile.devices.values()
+              if s.kind == "power_meter" and s.is_simulated]
     if meters:
         # The simulated head is the detector the geometry describes: same distance and
-        # limiting aperture, so an absolute BRDF uses the profile's solid angle.
+        # limiting aperture, so an absolute BRDF uses the profile's solid angle. An
+        # emulated meter of any driver reads it; a PM100USB's is bound by its URL.
         head = dict(config.get("power_meter", {}))
-        head.setdefault("url", meters[0])
+        usb = [url for url in meters if _scheme(url) == "simusb"]
+        if usb:
+            head.setdefault("url", usb[0])
         head.setdefault("distance_mm", profile.geometry.detector_distance_mm)
         head.setdefault("aperture_diameter_mm", profile.geometry.detector_aperture_mm)
         config["power_meter"] = head

@@ -12,9 +12,11 @@ Schema (all lengths in mm, angles in degrees)::
     description = "..."
 
     [devices.<role>]                   # one table per device; the key is its role
-    driver = "thorlabs_apt"            # see instrument.bench.devices.DRIVERS
+    driver = "thorlabs_apt"            # a registered driver: scatterlab devices
+                                       # --list-drivers (instrument.bench.driver_registry)
     url = "simapt://sample_theta?model=K10CR1"   # device path or pyserial/sim URL
-    serial = "40123456"                # instead of url: a Basler camera's serial number
+    serial = "40123456"                # instead of url, for a driver that finds its device
+                                       # by serial number (basler)
     stage = "K10CR1"                   # motion drivers: stage model
     limits = [-90.0, 90.0]             # motion: soft limits in axis units
     velocity = 10.0                    # motion: units/s (written to the controller)
@@ -34,7 +36,10 @@ Schema (all lengths in mm, angles in degrees)::
     scene_change_s = 0.1               # camera: extra time of the first frame after a
                                        # move or the light turned on (s); both for
                                        # duration estimates (instrument.bench.timing)
-    options = { ... }                  # driver-specific keyword arguments
+    options = { ... }                  # driver-specific keyword arguments (the keys
+                                       # the driver's registration declares)
+    settings = { ... }                 # public properties set after opening (the
+                                       # driver's declared settings, e.g. wavelength_nm)
 
     [devices.<role>.retry]             # recovery policy for this device (optional)
     attempts = 3                       # tries of an idempotent operation
@@ -70,6 +75,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from instrument.bench.driver_registry import DriverEntry, driver_registry
+
 __all__ = [
     "AXIS_ROLES",
     "BenchProfile",
@@ -93,13 +100,6 @@ AXIS_ROLES = (
     "source_theta",
     "camera_z",
 )
-#: Motion drivers and the kind of axis they drive by default.
-MOTION_DRIVERS = ("thorlabs_apt", "newport_smc100", "zaber")
-OTHER_DRIVERS = ("pm100usb", "opencv_camera", "sim_camera", "sim_source", "sr830", "sc10",
-                 "fw102c", "basler")
-#: URL schemes of the emulated serial controllers (each a pyserial URL handler in
-#: ``hw_mocks.urlhandler``): registered when a profile uses one, served by ``serve-sim``.
-SIM_SERIAL_SCHEMES = ("simapt", "simsmc", "simzaber", "simsr830", "simsc10", "simfw102c")
 #: ``[photodiode]``: the chopped photodiode a lock-in reads (its transimpedance amplifier
 #: and chopper), key → (low, high); ``responsivity_a_per_w`` may be a table over
 #: ``responsivity_nm``.
@@ -109,19 +109,9 @@ PHOTODIODE_KEYS = {
     "aperture_diameter_mm": (0.01, 1000.0), "distance_mm": (1.0, 1e5),
     "chopper_hz": (0.01, 1e5),
 }
-CAMERA_DRIVERS = ("opencv_camera", "sim_camera", "basler")
-#: Drivers that find their device by its serial number (``serial``) rather than a ``url``.
-SERIAL_DRIVERS = ("basler",)
 #: A serial number: letters, digits and inner dashes (Basler: 8 digits; its camera
-#: emulation: ``0815-0000``).
+#: emulation: ``0815-0000``), for a driver that finds its device by one (``by_serial``).
 SERIAL_PATTERN = re.compile(r"[A-Za-z0-9]+(-[A-Za-z0-9]+)*")
-#: ``options`` of a Basler camera (drivers.pylon_transport.open_basler_camera): name →
-#: accepted values (a tuple of words, or a type).
-BASLER_OPTIONS: dict[str, Any] = {
-    "emulation": bool, "pixel_format": ("MONO8", "MONO10", "MONO12", "MONO16"),
-    "trigger_mode": ("software", "hardware", "free_run"), "hardware_line": str,
-    "buffers": int,
-}
 #: Camera timing keys (seconds, for duration estimates) and their upper bound.
 CAMERA_TIMING = {"frame_overhead_s": 60.0, "scene_change_s": 600.0}
 ON_FAILURE = ("pause", "skip", "rehome", "abort")
@@ -173,7 +163,7 @@ class DeviceSpec:
     retry: RetryPolicy = field(default_factory=RetryPolicy)
     settle_s: float = 0.0
     #: Measurement settings applied after opening, through the device's validated public
-    #: properties (e.g. a power meter's ``wavelength_nm``): see :data:`DEVICE_SETTINGS`.
+    #: properties (e.g. a power meter's ``wavelength_nm``), as its driver declares them.
     settings: dict[str, Any] = field(default_factory=dict)
     #: Cameras: seconds per frame beyond the exposure, and extra seconds of the first
     #: frame after the scene changed (estimates only; :mod:`instrument.bench.timing`).
@@ -185,8 +175,14 @@ class DeviceSpec:
     timing_declared: frozenset[str] = frozenset()
 
     @property
+    def kind(self) -> str | None:
+        """The device kind of the driver (``"motion_axis"``...; :data:`KINDS`), None for a
+        driver that is not registered."""
+        return driver_registry().kind_of(self.driver)
+
+    @property
     def is_axis(self) -> bool:
-        return self.driver in MOTION_DRIVERS
+        return self.kind == "motion_axis"
 
     @property
     def is_simulated(self) -> bool:
@@ -344,9 +340,9 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
         v.error("simulation", "must be a table")
         simulation = None
     photodiode = _photodiode(v, data.get("photodiode"))
-    if photodiode is not None and not any(d.driver == "sr830" for d in devices.values()):
+    if photodiode is not None and not any(d.kind == "lockin" for d in devices.values()):
         v.error("photodiode", "describes the lock-in's detector: the bench needs a device "
-                "with driver 'sr830'")
+                "with driver 'sr830' (or another driver of kind 'lockin')")
     v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode"})
     if v.errors:
         raise ProfileError(source, v.errors)
@@ -398,20 +394,27 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
              "noise_floor_w", *CAMERA_TIMING}
     v.unknown(t, path, known)
     driver = v.string(t, "driver", path, required=True)
-    if driver is not None and driver not in MOTION_DRIVERS + OTHER_DRIVERS:
-        v.error(f"{path}.driver", f"unknown driver {driver!r}; use one of "
-                f"{', '.join(MOTION_DRIVERS + OTHER_DRIVERS)}")
-        driver = None
-    if driver in SERIAL_DRIVERS:
-        url = _serial(v, t, path)
+    registry = driver_registry()
+    entry = None
+    if driver is not None:
+        found = registry.get(driver)
+        if found is None:
+            v.error(f"{path}.driver", registry.unknown_driver_message(driver))
+            driver = None
+        else:
+            entry = found.entry
+    kind = None if entry is None else entry.kind
+    if entry is not None and entry.by_serial:
+        url = _serial(v, t, path, driver)
     else:
         url = v.string(t, "url", path, required=True)
         if url is not None and not url.strip():
             v.error(f"{path}.url", "must not be empty")
-        if "serial" in t and driver is not None:
-            v.error(f"{path}.serial", f"only {', '.join(SERIAL_DRIVERS)} cameras take "
-                    "'serial'; other devices are named by their url")
-    is_axis = driver in MOTION_DRIVERS
+        if "serial" in t and entry is not None:
+            v.error(f"{path}.serial", f"driver {driver!r} finds its device by its url; only "
+                    f"drivers that find theirs by serial number "
+                    f"({', '.join(registry.serial_drivers()) or 'none'}) take 'serial'")
+    is_axis = kind == "motion_axis"
     if is_axis and role not in AXIS_ROLES:
         v.error(path, f"motion driver on unknown role {role!r}; axis roles are "
                 f"{', '.join(AXIS_ROLES)}")
@@ -445,22 +448,18 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
                       ("noise_floor_w", "a power in W from 0 to 1 (1σ of a dark reading)")):
         if key not in t:
             continue
-        if driver is not None and driver != "pm100usb":
+        if kind is not None and kind != "power_meter":
             v.error(f"{path}.{key}", f"only power meters take {key!r}")
         elif not (_is_number(t[key]) and 0 <= t[key] < 1):
             v.error(f"{path}.{key}", f"must be {what}")
-    options = t.get("options", {})
-    if not isinstance(options, dict):
-        v.error(f"{path}.options", "must be a table")
-        options = {}
-    elif driver == "basler":
-        _basler_options(v, options, f"{path}.options")
+    options = _declared(v, t.get("options", {}), entry, driver, "options", f"{path}.options")
     retry = _retry(v, t.get("retry", {}), f"{path}.retry")
     settle = t.get("settle_s", 0.0)
     if not _is_number(settle) or not 0 <= settle <= 10:
         v.error(f"{path}.settle_s", "must be a number of seconds from 0 to 10")
         settle = 0.0
-    settings = _settings(v, t.get("settings", {}), driver, f"{path}.settings")
+    settings = _declared(v, t.get("settings", {}), entry, driver, "settings",
+                         f"{path}.settings")
     timing = {}
     home = t.get("home_s", 0.0)
     if not _is_number(home) or not 0 <= home <= 600:
@@ -470,7 +469,7 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
     for key, high in CAMERA_TIMING.items():
         if key not in t:
             continue
-        if driver is not None and driver not in CAMERA_DRIVERS:
+        if kind is not None and kind != "camera":
             v.error(f"{path}.{key}", f"only cameras take {key!r}")
         elif not _is_number(t[key]) or not 0 <= t[key] <= high:
             v.error(f"{path}.{key}", f"must be a number of seconds from 0 to {high:g}")
@@ -483,80 +482,43 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
                       timing_declared=frozenset(timing))
 
 
-def _serial(v: _Validator, t: dict, path: str) -> str | None:
-    """The ``serial`` of a device found by serial number (it stands in for the url)."""
+def _serial(v: _Validator, t: dict, path: str, driver: str | None) -> str | None:
+    """The ``serial`` of a device its driver finds by serial number (it stands in for the
+    url)."""
     if "url" in t:
-        v.error(f"{path}.url", "a Basler camera is found by its serial number: give "
+        v.error(f"{path}.url", f"driver {driver!r} finds its device by serial number: give "
                 "serial = \"...\" (on its label, or from scatterlab devices) instead")
     serial = v.string(t, "serial", path, required=True)
     if serial is not None and not SERIAL_PATTERN.fullmatch(serial):
         v.error(f"{path}.serial", f"{serial!r} is not a serial number (letters, digits and "
-                "inner dashes, as on the camera's label)")
+                "inner dashes, as on the device's label)")
         return None
     return serial
 
 
-def _basler_options(v: _Validator, options: dict, path: str) -> None:
-    v.unknown(options, path, set(BASLER_OPTIONS))
-    for key, accepted in BASLER_OPTIONS.items():
-        if key not in options:
-            continue
-        value = options[key]
-        if isinstance(accepted, tuple):
-            ok = isinstance(value, str) and value in accepted
-            what = "one of " + ", ".join(repr(a) for a in accepted)
-        elif accepted is int:
-            ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 64
-            what = "an integer from 1 to 64"
-        else:
-            ok = isinstance(value, accepted) and (accepted is not str or bool(value.strip()))
-            what = "true or false" if accepted is bool else "a non-empty string"
-        if not ok:
-            v.error(f"{path}.{key}", f"must be {what}, got {value!r}")
-
-
-#: Settings a profile may apply after opening, per driver: name → (type, low, high).
-DEVICE_SETTINGS: dict[str, dict[str, tuple[type, float, float]]] = {
-    "pm100usb": {"wavelength_nm": (float, 100.0, 25000.0), "averaging": (int, 1, 100000),
-                 "auto_range": (bool, 0, 1)},
-    "sim_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0)},
-    "opencv_camera": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 1000.0)},
-    # the camera's node map holds the true limits; the driver checks against them
-    "basler": {"exposure_us": (float, 1.0, 60e6), "gain": (float, 0.0, 48.0),
-               "black_level": (float, 0.0, 4095.0)},
-    "sim_source": {"power_w": (float, 0.0, 10.0)},
-    # the SR830's ranges (manual, Rev. 2.5, ch. 5: SENS 2 nV…1 V, OFLT 10 µs…30 ks)
-    "sr830": {"time_constant_s": (float, 1e-5, 3e4), "sensitivity_v": (float, 2e-9, 1.0),
-              "reference_source": (str, "internal", "external")},
-}
-
-
-def _settings(v: _Validator, t: Any, driver: str | None, path: str) -> dict[str, Any]:
+def _declared(v: _Validator, t: Any, entry: DriverEntry | None, driver: str | None,
+              table: str, path: str) -> dict[str, Any]:
+    """A device's ``options`` or ``settings`` table, each key checked against what its
+    driver's registration declares (:class:`~instrument.bench.driver_registry.Option`)."""
     if not isinstance(t, dict):
         v.error(path, "must be a table")
         return {}
-    allowed = DEVICE_SETTINGS.get(driver or "", {})
+    if entry is None:  # an unknown driver, already reported
+        return dict(t)
+    allowed = entry.options if table == "options" else entry.settings
     out: dict[str, Any] = {}
     for key, value in t.items():
-        if key not in allowed:
+        option = allowed.get(key)
+        if option is None:
             names = ", ".join(sorted(allowed)) or "none"
-            v.error(f"{path}.{key}", f"not a setting of driver {driver!r} (settings: {names})")
+            v.error(f"{path}.{key}", f"not {'an option' if table == 'options' else 'a setting'}"
+                    f" of driver {driver!r} ({table}: {names})")
             continue
-        kind, low, high = allowed[key]
-        if kind is str:  # a choice of the two words low and high
-            if value not in (low, high):
-                v.error(f"{path}.{key}", f"must be {low!r} or {high!r}")
-                continue
-        elif kind is bool:
-            if not isinstance(value, bool):
-                v.error(f"{path}.{key}", "must be true or false")
-                continue
-        elif (not _is_number(value) or (kind is int and not isinstance(value, int))
-              or not low <= value <= high):
-            v.error(f"{path}.{key}", f"must be a{'n integer' if kind is int else ' number'} "
-                    f"from {low:g} to {high:g}")
+        problem = option.problem(value)
+        if problem is not None:
+            v.error(f"{path}.{key}", problem)
             continue
-        out[key] = kind(value)
+        out[key] = option.convert(value)
     return out
 
 

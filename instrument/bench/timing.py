@@ -18,8 +18,9 @@ by its speed-up). :func:`bench_timing` collects these from
 a profile so that an estimate says what *this* bench will take.
 
 No cost counts as zero because a profile left it out: a camera without
-``frame_overhead_s`` or ``scene_change_s`` takes its driver kind's default
-(:data:`CAMERA_DEFAULTS`) and the estimate says which it assumed. A lock-in waits its
+``frame_overhead_s`` or ``scene_change_s`` takes its driver's default
+(:data:`CAMERA_DEFAULTS`) and the estimate says which it assumed (a plugin's camera, which
+has none, is taken as zero, and the estimate says to give them). A lock-in waits its
 output filter's 99 % settling time (τ from the profile's settings, else the SR830's
 power-up 100 ms; the slope's wait in time constants from the driver's table,
 :attr:`drivers.base.LockIn.SETTLE_TIME_CONSTANTS`) once per snapshot and twice more to
@@ -51,7 +52,7 @@ from dataclasses import dataclass, field
 from urllib.parse import parse_qs, urlsplit
 
 from drivers.base import LockIn
-from instrument.bench.profile import CAMERA_DRIVERS, BenchProfile, DeviceSpec
+from instrument.bench.profile import BenchProfile, DeviceSpec
 from instrument.bench.render_cost import lightfield_render_s
 
 __all__ = ["CAMERA_DEFAULTS", "POINT_OVERHEAD_S", "SIM_APERTURE_INTEGRAL_S",
@@ -196,15 +197,18 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
         home[role] = 0.0 if spec is None else spec.home_s / speed[role]
     assumed: list[str] = []
     camera = next((d for d in profile.devices.values()
-                   if d.driver in CAMERA_DRIVERS), None)
+                   if d.kind == "camera"), None)
     costs = {"frame_overhead_s": 0.0, "scene_change_s": 0.0}
     if camera is not None:
+        defaults = CAMERA_DEFAULTS.get(camera.driver)  # None: a plugin's camera
         for key in costs:
             costs[key] = getattr(camera, key)
             if key not in camera.timing_declared:
-                costs[key] = CAMERA_DEFAULTS[camera.driver][key]
+                costs[key] = 0.0 if defaults is None else defaults[key]
+                why = (f"no default for driver {camera.driver!r}; give it in the profile"
+                       if defaults is None else f"the {camera.driver} default")
                 assumed.append(f"{camera.role}.{key} not in the profile: {costs[key]:.3g} s "
-                               f"assumed (the {camera.driver} default)")
+                               f"assumed ({why})")
     lockin = next((d for d in profile.devices.values() if d.driver == "sr830"), None)
     settle = 0.0
     if lockin is not None:

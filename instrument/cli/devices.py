@@ -1,4 +1,6 @@
-"""``scatterlab devices``: open every device of a bench and say what it is and where."""
+"""``scatterlab devices``: open every device of a bench and say what it is and where;
+``--list-drivers``: the drivers a profile may name, built-in and plugins, and where each
+comes from."""
 
 from __future__ import annotations
 
@@ -11,7 +13,34 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("devices", help=HELP)
     p.add_argument("--bench", default="sim", help="profile name or path (default: sim)")
     p.add_argument("--home", action="store_true", help="home every axis first")
+    p.add_argument("--list-drivers", action="store_true",
+                   help="list the registered drivers (built-in and plugins: kind, "
+                        "distribution and version) instead of opening a bench")
     p.set_defaults(func=run)
+
+
+def list_drivers() -> int:
+    """Print every registered driver and every refused registration; 1 if any was refused."""
+    from instrument.bench.driver_registry import load_registry
+
+    registry = load_registry()
+    registry.verify()  # import each class: a broken one is reported, not listed as usable
+    rows = [(d.name, d.kind, d.origin, "built-in" if d.builtin else "plugin",
+             d.entry.emulator.scheme + "://" if d.entry.emulator else "", d.entry.summary)
+            for d in (registry.drivers[n] for n in registry.names())]
+    head = ("driver", "kind", "from", "", "emulator", "")
+    widths = [max(len(r[i]) for r in [*rows, head]) for i in range(5)]
+    print("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=False)).rstrip())
+    for row in rows:
+        cells = [c.ljust(w) for c, w in zip(row, widths, strict=False)]
+        print("  ".join([*cells, row[5]]).rstrip())
+    if registry.problems:
+        print(f"\n{len(registry.problems)} driver registration(s) refused (the drivers above "
+              "load regardless):")
+        for problem in registry.problems:
+            print(f"  {problem}")
+        return 1
+    return 0
 
 
 def describe(device) -> str:
@@ -40,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
     from instrument.bench.devices import open_bench
     from instrument.bench.profile import load_profile
 
+    if args.list_drivers:
+        return list_drivers()
     profile = load_profile(args.bench)
     print(f"bench {profile.name!r}: {profile.description}")
     failures = 0

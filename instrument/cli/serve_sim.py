@@ -33,7 +33,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from instrument.bench.profile import SIM_SERIAL_SCHEMES, load_profile
+    from instrument.bench.devices import serial_emulator_schemes
+    from instrument.bench.profile import load_profile
 
     profile = load_profile(args.bench)
     module, func = PTY_ENTRY
@@ -41,9 +42,11 @@ def run(args: argparse.Namespace) -> int:
     servers = []
     links: list[Path] = []
     try:
+        schemes = serial_emulator_schemes()  # every driver's emulator, plugins' too
         for role, spec in profile.devices.items():
-            if spec.url.split("://", 1)[0] in SIM_SERIAL_SCHEMES:
-                server = serve_url(spec.url)
+            handlers = schemes.get(spec.url.split("://", 1)[0])
+            if handlers is not None:
+                server = serve_url(spec.url, handlers=handlers)
                 servers.append(server)
                 where = server.path
                 if args.link_dir is not None:

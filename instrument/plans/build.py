@@ -623,7 +623,7 @@ def _check_power_meter_wavelength(spec: PlanSpec, profile: BenchProfile) -> None
     if not spec.acquisition.uses_power_meter or spec.spectral is not None:
         return
     src = dict((profile.simulation or {}).get("source", {}))
-    meters = [(role, d) for role, d in profile.devices.items() if d.driver == "pm100usb"]
+    meters = [(role, d) for role, d in profile.devices.items() if d.kind == "power_meter"]
     if "wavelength_nm" not in src or not meters:
         return
     lam, width = float(src["wavelength_nm"]), float(src.get("bandwidth_nm", 0.0))

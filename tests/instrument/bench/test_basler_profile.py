@@ -58,7 +58,7 @@ def test_serial_rules_are_reported_by_field():
     assert "1 to 64" in found["devices.camera.options.buffers"]
     assert "'software'" in found["devices.camera.options.trigger_mode"]
     assert "true or false" in found["devices.camera.options.emulation"]
-    assert "unknown field" in found["devices.camera.options.colour"]
+    assert "not an option" in found["devices.camera.options.colour"]
     assert "black_level" not in problems('serial = "1"\nsettings = { offset = 1.0 }')[
         "devices.camera.settings.offset"].split(":")[0]
 
