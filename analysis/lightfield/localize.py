@@ -764,6 +764,13 @@ def detect_objects(
         return (abs(c.y - o.y) <= frac * r_k.transverse_mm
                 and abs(1.0 / abs(c.z) - 1.0 / abs(o.z)) <= frac * r_k.depth_mm / ref**2)
 
+    def sightline(c: _Candidate, o: _Candidate) -> bool:
+        """On one line of sight: within one transverse blur across (at the nearer one's
+        depth), depth intervals overlapping."""
+        blur = resolution(max(c.z, o.z)).transverse_mm
+        return (abs(c.y - o.y) <= blur and c.interval[0] <= o.interval[1]
+                and o.interval[0] <= c.interval[1])
+
     use = (lf_wall.theta_rad >= a) & (lf_wall.theta_rad <= b)
     g_rays = (np.asarray(lf_wall.radiance, dtype=float)
               * np.cos(lf_wall.theta_rad)[None, :])[:, use]
@@ -975,11 +982,28 @@ def detect_objects(
     cands_pos = [(c.y, c.z) for c in cands]
     weight = (np.asarray(amps, dtype=float) if noise is not None
               else np.asarray([float(c.model.num.max()) for c in cands]))
+    # and every pair on one line of sight (within a transverse blur across, depth
+    # intervals overlapping), however far apart in depth: a disc wider than the blur on a
+    # near-mirror wall came out as two points on its line of sight 2.5 depth cells apart
     pairs = [(i, j) for i in range(len(cands)) for j in range(i + 1, len(cands))
-             if near(cands[i], cands[j], EXTENDED_RANGE)]
-    groups, pair_tests = extended_groups(g_rays, lf_wall, use, phi,
-                                         np.asarray(cands_pos, dtype=float).reshape(-1, 2),
-                                         pairs, n_eff=n_eff, bounds=box)
+             if near(cands[i], cands[j], EXTENDED_RANGE) or sightline(cands[i], cands[j])]
+    groups, pair_tests = extended_groups(
+        g_rays, lf_wall, use, phi, np.asarray(cands_pos, dtype=float).reshape(-1, 2), pairs,
+        n_eff=n_eff, bounds=box,
+        across_mm=[resolution(max(cands[i].z, cands[j].z)).transverse_mm for i, j in pairs])
+    # two points on one line of sight that fit better side by side (the test's fit started
+    # across): the search's arrangement is not the data's — flagged, never "resolved"
+    for (i, j), t in pair_tests.items():
+        if (not t.extended and sightline(cands[i], cands[j])
+                and abs(t.points_mm[1, 0] - t.points_mm[0, 0])
+                > resolution(max(cands[i].z, cands[j].z)).transverse_mm):
+            (y1, z1), (y2, z2) = t.points_mm
+            notes.append(f"the components at ({cands[i].y:.1f}, {cands[i].z:.1f}) and "
+                         f"({cands[j].y:.1f}, {cands[j].z:.1f}) mm, on one line of sight, "
+                         f"fit better as two points side by side at ({y1:.1f}, {z1:.1f}) and "
+                         f"({y2:.1f}, {z2:.1f}) mm: their depths are flagged unresolved")
+            cands[i] = _replace_quality(cands[i], "unresolved")
+            cands[j] = _replace_quality(cands[j], "unresolved")
     for line in sight:
         if len(line) > 1:
             joined = [gr for gr in groups if set(gr) & set(line)]
