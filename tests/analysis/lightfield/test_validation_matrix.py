@@ -85,7 +85,7 @@ def _run(bench, wall: str, scene: str, seeds) -> object:
     lf = bench.render(brdf, objects, None, "")
     s = bench.Score()
     for seed in seeds:
-        det, p_hat, solvable = bench.locate(lf, brdf, seed)
+        det, p_hat, solvable, _ = bench.locate(lf, brdf, seed)
         bench.score(det, objects, bench.blur_of(p_hat, solvable), s)
     return s
 
