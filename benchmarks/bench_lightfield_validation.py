@@ -345,8 +345,8 @@ def main() -> None:
     empties: dict[str, tuple[int, int]] = {}
     print("| wall | scene | truths | detected | within blur | phantoms | scans w/ phantom "
           "| confidently wrong (split/phantom/sign/excluded/off blur/missed silently) "
-          "| s/scan |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| of the missed silently, below the detection limit | s/scan |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for wname, brdf in walls().items():
         if args.walls and wname not in args.walls:
             continue
@@ -386,7 +386,7 @@ def main() -> None:
             print(f"| {wname} | {sname} | {s.truths} | {s.detected} | {s.within_blur} | "
                   f"{s.phantoms} | {s.scans_with_phantom}/{s.scans} | {s.confidently_wrong} "
                   f"({s.split}/{s.phantom_resolved}/{s.wrong_sign}/{s.excluded}/"
-                  f"{s.off_blur}/{s.missed_silently}) | "
+                  f"{s.off_blur}/{s.missed_silently}) | {s.missed_below_limit} | "
                   f"{s.seconds / max(s.scans, 1):.1f} |", flush=True)
     summary(total)
     print("\n".join(false_alarm_table(empties)))
