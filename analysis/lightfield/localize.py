@@ -656,7 +656,7 @@ def detect_objects(
     and no significance is computed (NaN).
     """
     from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
-    from .significance import amplitude_fit, false_alarm_probability, snr_threshold
+    from .significance import amplitude_fit, false_alarm_probability, snr_threshold, with_leak
     from .spectral import fourier_orders
 
     y = np.asarray(y_mm, dtype=float)
@@ -808,12 +808,7 @@ def detect_objects(
         assert noise is not None
         r, _, _ = _ray_model(lf_wall, use, phi, pos)
         fit = amplitude_fit(g_rays, r, use, phi, noise)
-        x = r.reshape(pos.shape[0], -1)
-        gram = x @ x.T
-        leak = np.abs(gram * fit.amplitudes[None, :]) / np.diag(gram)[:, None]
-        np.fill_diagonal(leak, 0.0)
-        sd = np.hypot(fit.sigma, MODEL_MISMATCH * leak.sum(axis=1))
-        return fit.amplitudes, fit.amplitudes / np.where(sd > 0, sd, np.inf), fit.mismatch
+        return fit.amplitudes, with_leak(fit, r, MODEL_MISMATCH), fit.mismatch
 
     def fit_of(pos: NDArray) -> _JointFit:
         return _fit_points(g_rays, lf_wall, use, phi, pos, box)

@@ -112,9 +112,12 @@ def test_a_disc_wider_than_the_blur_before_a_near_mirror_is_one_object_of_its_si
 
 def test_a_silent_miss_below_the_detection_limit_is_counted_as_such(bench):
     rec = {"truth_significance": [[20.0, True], [None, False], [None, False]],
-           "truth_oracle_sigma": [150.0, 1.2, 7.5], "threshold_sigma": 4.9}
+           "truth_limit_sigma": [150.0, 1.2, 7.5], "threshold_sigma": 4.9}
     assert bench.missed_silently(rec) == 2
     assert bench.missed_below_limit(rec) == 1
+    # the older field (no leak share: an upper bound) is read where the new one is absent
+    old = {**rec, "truth_oracle_sigma": rec.pop("truth_limit_sigma")}
+    assert bench.missed_below_limit(old) == 1
     # lines written before the field: none claimed below the limit
     assert bench.missed_below_limit({"truth_significance": [[None, False]]}) == 0
 
