@@ -28,7 +28,9 @@ seed is scored (:func:`score`):
   sign), or lies over a true object (within δy across) with an interval excluding its
   depth (excluded truth), or explains a true object but lies outside its blur (off blur);
   and a true object missing without a word (neither reported nor among the candidates
-  examined below the threshold: missed silently).  Each kind is counted separately;
+  examined below the threshold: missed silently; of those, the ones whose significance at
+  the true position, the search taken out, is under the threshold are counted as below
+  the detection limit, :func:`truth_significance`).  Each kind is counted separately;
 * false alarms per scan on the empty scene, per wall and in all, with the 95 %
   Clopper–Pearson interval of the rate (:func:`false_alarm_table`);
 * the significance of each true object: that of the reported object explaining it, else of
@@ -123,6 +125,10 @@ class Score:
     #: a true object neither reported nor among the candidates examined below the
     #: threshold (nothing in the output points at it)
     missed_silently: int = 0
+    #: of the missed silently, those whose significance at the true position (the search
+    #: taken out, :func:`truth_significance`) is below the threshold: below the detection
+    #: limit
+    missed_below_limit: int = 0
     scans: int = 0
     seconds: float = 0.0
     #: (significance, detected) per true object
@@ -136,7 +142,7 @@ class Score:
     def add(self, other: Score) -> None:
         for name in ("truths", "detected", "within_blur", "phantoms", "scans_with_phantom",
                      "split", "phantom_resolved", "wrong_sign", "excluded", "off_blur",
-                     "missed_silently", "scans", "seconds"):
+                     "missed_silently", "missed_below_limit", "scans", "seconds"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         self.truth_significance += other.truth_significance
 
@@ -241,8 +247,9 @@ def render(brdf: FlatlandBRDF, objects: list[PointObject], cache: Path | None,
     return lf
 
 
-def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int):
-    """Seeded noise on ``lf``, reconstruction, widened detection: (detection, p̂)."""
+def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int, truths: list | None = None):
+    """Seeded noise on ``lf``, reconstruction, widened detection: (detection, p̂, solvable
+    domain, significance of each true object at its true position)."""
     rng = np.random.default_rng(seed)
     noisy = lf.with_radiance(lf.radiance + rng.normal(0.0, NOISE, lf.shape))
     rec = reconstruct(noisy, brdf, d2_mm=D2, points_mm=WALL_POINTS)
@@ -252,7 +259,33 @@ def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int):
         solvable_domain_rad=rec.solvable_domain_rad,
         filter_factors=rec.regularization.filter_factors,
         noise_power=rec.regularization.noise_power, min_measure_fraction=0.1)
-    return det, p_hat, rec.solvable_domain_rad
+    return det, p_hat, rec.solvable_domain_rad, truth_significance(rec, truths or [])
+
+
+def truth_significance(rec, objects: list[PointObject]) -> list[float]:
+    """Each true object's significance with the search taken out: the point responses of
+    all true objects fitted jointly at their true positions, with the noise model the
+    detector uses (:func:`analysis.lightfield.significance.amplitude_fit`).  A true object
+    below the threshold here cannot be told from noise by any search at that false-alarm
+    rate: it is below the detection limit, not missed by the search.  The significance is
+    the detector's own: with the systematic share of a bright neighbour's leak
+    (``localize.MODEL_MISMATCH``)."""
+    if not objects:
+        return []
+    from analysis.lightfield.localize import MODEL_MISMATCH
+    from analysis.lightfield.ray_fit import ray_model
+    from analysis.lightfield.significance import amplitude_fit, with_leak
+
+    f = rec.incident_field
+    a, b = rec.solvable_domain_rad
+    use = (f.theta_rad >= a) & (f.theta_rad <= b)
+    phi = np.atleast_2d(np.asarray(rec.regularization.filter_factors, dtype=float)).mean(0)
+    g = (np.asarray(f.radiance, dtype=float) * np.cos(f.theta_rad)[None, :])[:, use]
+    pos = np.asarray([(o.y_mm, o.z_mm) for o in objects], dtype=float)
+    r, _, _ = ray_model(f, use, phi, pos)
+    noise = np.broadcast_to(np.asarray(rec.regularization.noise_power, dtype=float), phi.shape)
+    fit = amplitude_fit(g, r, use, phi, noise)
+    return [float(v) for v in with_leak(fit, r, MODEL_MISMATCH)]
 
 
 def blur_of(p_hat: float, solvable: tuple[float, float]):
@@ -268,7 +301,7 @@ def blur_of(p_hat: float, solvable: tuple[float, float]):
 def wall_blur(brdf: FlatlandBRDF, cache: Path | None, wname: str) -> float:
     """Transverse blur at −200 mm behind this wall (p̂ of a one-object scan, seed 0)."""
     one = scenes(10.0)["one"]
-    _, p_hat, solvable = locate(render(brdf, one, cache, f"{wname}__one"), brdf, 0)
+    _, p_hat, solvable, _ = locate(render(brdf, one, cache, f"{wname}__one"), brdf, 0)
     return blur_of(p_hat, solvable)(-200.0).transverse_mm
 
 
@@ -313,8 +346,8 @@ def main() -> None:
     empties: dict[str, tuple[int, int]] = {}
     print("| wall | scene | truths | detected | within blur | phantoms | scans w/ phantom "
           "| confidently wrong (split/phantom/sign/excluded/off blur/missed silently) "
-          "| s/scan |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| of the missed silently, below the detection limit | s/scan |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for wname, brdf in walls().items():
         if args.walls and wname not in args.walls:
             continue
@@ -337,10 +370,11 @@ def main() -> None:
                     if lf is None:
                         lf = render(brdf, objects, args.cache, f"{wname}__{sname}")
                     t0 = time.process_time()
-                    det, p_hat, solvable = locate(lf, brdf, seed)
+                    det, p_hat, solvable, oracle = locate(lf, brdf, seed, objects)
                     rec = score(det, objects, blur_of(p_hat, solvable), Score())
                     rec.update(wall=wname, scene=sname, seed=seed, p_hat=p_hat,
-                               seconds=time.process_time() - t0)
+                               seconds=time.process_time() - t0, truth_limit_sigma=oracle,
+                               threshold_sigma=float(det.threshold_sigma))
                     if args.jsonl is not None:
                         with args.jsonl.open("a") as f:
                             f.write(json.dumps(rec) + "\n")
@@ -353,7 +387,7 @@ def main() -> None:
             print(f"| {wname} | {sname} | {s.truths} | {s.detected} | {s.within_blur} | "
                   f"{s.phantoms} | {s.scans_with_phantom}/{s.scans} | {s.confidently_wrong} "
                   f"({s.split}/{s.phantom_resolved}/{s.wrong_sign}/{s.excluded}/"
-                  f"{s.off_blur}/{s.missed_silently}) | "
+                  f"{s.off_blur}/{s.missed_silently}) | {s.missed_below_limit} | "
                   f"{s.seconds / max(s.scans, 1):.1f} |", flush=True)
     summary(total)
     print("\n".join(false_alarm_table(empties)))
@@ -382,7 +416,8 @@ def from_record(rec: dict) -> Score:
                  scans_with_phantom=int(rec["phantoms"] > 0), split=rec["split"],
                  phantom_resolved=rec["phantom_resolved"], wrong_sign=rec["wrong_sign"],
                  excluded=rec["excluded"], off_blur=rec.get("off_blur", 0),
-                 missed_silently=missed_silently(rec), scans=1, seconds=rec["seconds"],
+                 missed_silently=missed_silently(rec),
+                 missed_below_limit=missed_below_limit(rec), scans=1, seconds=rec["seconds"],
                  truth_significance=[(float("nan") if sg is None else float(sg), bool(d))
                                      for sg, d in rec["truth_significance"]])
 
@@ -392,6 +427,19 @@ def missed_silently(rec: dict) -> int:
     for lines written before the count was stored: their significance is NaN or null)."""
     return sum(1 for sg, d in rec["truth_significance"]
                if not d and (sg is None or np.isnan(sg)))
+
+
+def missed_below_limit(rec: dict) -> int:
+    """Missed silently, though below the detection limit: the true object's significance at
+    its true position is under the scan's threshold (0 for lines without those fields).
+    Lines written before the leak share was included hold ``truth_oracle_sigma``, an upper
+    bound of it: a miss is claimed below the limit there only when even the bound is."""
+    oracle = rec.get("truth_limit_sigma", rec.get("truth_oracle_sigma"))
+    s_star = rec.get("threshold_sigma")
+    if oracle is None or s_star is None:
+        return 0
+    return sum(1 for (sg, d), so in zip(rec["truth_significance"], oracle, strict=True)
+               if not d and (sg is None or np.isnan(sg)) and so < s_star)
 
 
 def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -414,7 +462,8 @@ def summary(total: Score) -> None:
           f"{total.confidently_wrong} confidently wrong (split {total.split}, phantom "
           f"{total.phantom_resolved}, wrong sign {total.wrong_sign}, excluded truth "
           f"{total.excluded}, resolved off the blur {total.off_blur}, missed silently "
-          f"{total.missed_silently}); CPU {total.seconds:.0f} s\n")
+          f"{total.missed_silently}, of which {total.missed_below_limit} below the detection "
+          f"limit at their true position); CPU {total.seconds:.0f} s\n")
     print("\n".join(detection_table(total.truth_significance)))
 
 

@@ -53,6 +53,7 @@ __all__ = [
     "amplitude_fit",
     "false_alarm_probability",
     "snr_threshold",
+    "with_leak",
 ]
 
 
@@ -117,6 +118,19 @@ def amplitude_fit(
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None) * np.maximum(local, mismatch))
     signif = np.where(sigma > 0, amp / np.where(sigma > 0, sigma, 1.0), np.inf)
     return AmplitudeFit(amp, sigma, signif, mismatch)
+
+
+def with_leak(fit: AmplitudeFit, responses: NDArray, share: float) -> NDArray[np.float64]:
+    """Significances of ``fit`` with a systematic share of what every other response leaks
+    into each one: ``s_k = a_k / hypot(σ_k, share Σ_{j≠k} |a_j ⟨K_k, K_j⟩| / ⟨K_k, K_k⟩)``
+    (the localiser's model-mismatch term, :data:`.localize.MODEL_MISMATCH`).
+    ``responses`` (K, R, n_use) are those the amplitudes were fitted with."""
+    x = responses.reshape(responses.shape[0], -1)
+    gram = x @ x.T
+    leak = np.abs(gram * fit.amplitudes[None, :]) / np.diag(gram)[:, None]
+    np.fill_diagonal(leak, 0.0)
+    sd = np.hypot(fit.sigma, share * leak.sum(axis=1))
+    return fit.amplitudes / np.where(sd > 0, sd, np.inf)
 
 
 def snr_threshold(false_alarm_per_scan: float, n_cells: float) -> float:

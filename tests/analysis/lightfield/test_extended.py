@@ -63,9 +63,10 @@ def test_two_discs_113_cells_apart_stay_two_points():
                        atol=0.1 * res.transverse_mm)
 
 
-def _synthetic(truth: str, amp_noise: float, seed: int):
+def _synthetic(truth: str, amp_noise: float, seed: int, start=None, across_mm: float = 0.0):
     """Exact model rays (segment or two points, equal flux) behind the glossy wall's
-    filter, with white noise of ``amp_noise`` per ray."""
+    filter, with white noise of ``amp_noise`` per ray; the test started from the truth's
+    own pair or from ``start`` (2, 2)."""
     from analysis.lightfield import LightField2D, theta_grid
 
     th = theta_grid(DOMAIN, 128)
@@ -88,8 +89,9 @@ def _synthetic(truth: str, amp_noise: float, seed: int):
     g = g + rng.normal(0.0, amp_noise, g.shape)
     box = ((-60.0, 60.0), (-330.0, -120.0))
     # white noise per ray: every ray is an independent sample
-    return one_or_two(g, lf, use, phi, pair, sigma2=amp_noise**2, n_eff=float(g.size),
-                      bounds=box)
+    return one_or_two(g, lf, use, phi, pair if start is None else np.asarray(start, float),
+                      sigma2=amp_noise**2, n_eff=float(g.size), bounds=box,
+                      across_mm=across_mm)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -120,3 +122,28 @@ def test_one_or_two_refuses_a_noise_variance_that_is_not_positive():
         one_or_two(np.zeros((3, 16)), lf, np.ones(16, bool), np.ones(16),
                    np.array([[-1.0, -200.0], [1.0, -200.0]]), sigma2=0.0, n_eff=40.0,
                    bounds=((-60.0, 60.0), (-330.0, -120.0)))
+
+
+#: Two components on the bar's line of sight, 1.9 depth cells apart (δz/D² = δθ/W ≈
+#: 3.2·10⁻⁴ /mm at p̂ = 9): where the search on a near-mirror wall left a disc wider than
+#: the blur (2.5 cells apart there).
+ON_SIGHT = [[0.0, -1.0 / (1.0 / D1 - 3e-4)], [0.0, -1.0 / (1.0 / D1 + 3e-4)]]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_bar_across_seen_as_two_points_in_depth_is_one_extended_object(seed):
+    """Started from two components on its line of sight, the 32 mm bar across (≈ 2 δy) is
+    still one extended object of its width once the fits are also started across."""
+    t = _synthetic("segment", 2e-4, seed, start=ON_SIGHT, across_mm=16.0)
+    assert t.extended and t.statistic < t.penalty
+    assert abs(t.size_mm[0] - 32.0) < 1.0 and t.size_mm[1] < 5.0
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_pair_side_by_side_seen_in_depth_stays_two_at_its_true_places(seed):
+    """Two points 18 mm apart side by side (1.13 δy), started on one line of sight: two
+    points, fitted where they are (the across start), not one object."""
+    t = _synthetic("two", 2e-4, seed, start=ON_SIGHT, across_mm=16.0)
+    assert not t.extended and t.statistic > t.penalty
+    assert np.allclose(np.sort(t.points_mm[:, 0]), [-9.0, 9.0], atol=0.5)
+    assert np.allclose(t.points_mm[:, 1], -D1, atol=5.0)

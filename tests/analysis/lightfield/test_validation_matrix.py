@@ -85,9 +85,41 @@ def _run(bench, wall: str, scene: str, seeds) -> object:
     lf = bench.render(brdf, objects, None, "")
     s = bench.Score()
     for seed in seeds:
-        det, p_hat, solvable = bench.locate(lf, brdf, seed)
+        det, p_hat, solvable, _ = bench.locate(lf, brdf, seed)
         bench.score(det, objects, bench.blur_of(p_hat, solvable), s)
     return s
+
+
+def test_a_disc_wider_than_the_blur_before_a_near_mirror_is_one_object_of_its_size(bench):
+    """The 3 mm disc before the 0.1° wall (blur 2.6 mm at −200 mm) was two "resolved"
+    points on its line of sight, 6.5 mm apart in depth, in every seed: now one extended
+    object, its width 3 mm within the blur, and nothing confidently wrong."""
+    brdf = bench.walls()["brushed_metal_0.1deg"]
+    blur = bench.wall_blur(brdf, None, "brushed_metal_0.1deg")
+    objects = bench.scenes(blur)["one"]
+    lf = bench.render(brdf, objects, None, "")
+    det, p_hat, solvable, oracle = bench.locate(lf, brdf, 1, objects)
+    res = bench.blur_of(p_hat, solvable)(-200.0)
+    assert det.count == 1 and det.quality == ("extended",)
+    assert abs(det.extent_mm[0, 0] - 3.0) < res.transverse_mm
+    assert abs(det.positions_mm[0, 0]) < res.transverse_mm
+    assert abs(det.positions_mm[0, 1] + 200.0) < res.depth_mm
+    s = bench.Score()
+    bench.score(det, objects, bench.blur_of(p_hat, solvable), s)
+    assert s.confidently_wrong == 0 and s.detected == 1
+    assert oracle[0] > det.threshold_sigma
+
+
+def test_a_silent_miss_below_the_detection_limit_is_counted_as_such(bench):
+    rec = {"truth_significance": [[20.0, True], [None, False], [None, False]],
+           "truth_limit_sigma": [150.0, 1.2, 7.5], "threshold_sigma": 4.9}
+    assert bench.missed_silently(rec) == 2
+    assert bench.missed_below_limit(rec) == 1
+    # the older field (no leak share: an upper bound) is read where the new one is absent
+    old = {**rec, "truth_oracle_sigma": rec.pop("truth_limit_sigma")}
+    assert bench.missed_below_limit(old) == 1
+    # lines written before the field: none claimed below the limit
+    assert bench.missed_below_limit({"truth_significance": [[None, False]]}) == 0
 
 
 @pytest.mark.parametrize(("wall", "scene"), [
