@@ -27,7 +27,7 @@ import dataclasses
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -171,7 +171,7 @@ class BenchService:
         # STATE_KINDS devices (sampler thread only): role -> (monotonic time read,
         # message), their static information, and the bench they were read from
         self._states: dict[str, tuple[float, dict[str, Any]]] = {}
-        self._state_info: dict[str, dict[str, Any]] = {}
+        self._state_info: dict[str, Mapping[str, Any]] = {}
         self._states_of: Bench | None = None
         self.interrupted = self.queue.after_restart()
         if connect:
