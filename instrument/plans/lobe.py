@@ -50,6 +50,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from analysis.brdf.geometry import make_geometry
 from analysis.brdf.model import BRDFModel
@@ -210,7 +211,7 @@ def _joint_shared(first_f: np.ndarray, first_slots: np.ndarray | None,
 
 def place_points(
     model: BRDFModel,
-    params: Sequence[float],
+    params: Sequence[float] | NDArray[np.float64],
     *,
     first_angles_rad: np.ndarray,
     first_sigma: np.ndarray,
@@ -355,7 +356,8 @@ def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float] | np.ndarr
 
 
 def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
-                            params: Sequence[float], *, seconds: float, det: DetectorSetup,
+                            params: Sequence[float] | NDArray[np.float64], *, seconds: float,
+                            det: DetectorSetup,
                             option: ScanOption, budget: ErrorBudget, readout_s: float,
                             frames_per_point: int) -> SinglePass:
     """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two

@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -56,6 +56,8 @@ from instrument.server.plans import PlanRefused, check_plan
 from instrument.server.queue import RESUMABLE, PlanQueue, QueueError, QueueItem
 
 __all__ = ["LEASE_S", "BenchService", "Caller", "ServiceError"]
+
+_T = TypeVar("_T")
 
 #: Seconds an operator's control lease lasts after its last command.
 LEASE_S = 300.0
@@ -294,7 +296,7 @@ class BenchService:
         self._queue_changed()
         return item
 
-    def _queue_call(self, fn, *args):
+    def _queue_call(self, fn: Callable[..., _T], *args: Any) -> _T:
         try:
             return fn(*args)
         except QueueError as err:
