@@ -47,7 +47,7 @@ import math
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -313,7 +313,8 @@ def place_points(
     shared = _joint_shared(f1, first_slots, first_cov, pb, budget, chosen)
     cov_both = predicted_covariance(model, p, both, np.concatenate([sig1, pb.sigma[chosen]]),
                                     shared=shared, scale_rel=budget.scale_rel)
-    return Placement([tuple(candidates[k]) for k in chosen], float(cost[chosen].sum()),
+    return Placement([cast("tuple[float, float]", tuple(candidates[k])) for k in chosen],
+                     float(cost[chosen].sum()),
                      cost[chosen].tolist(), _sigmas(model, cov_first),
                      _sigmas(model, cov_both), pb.slots(budget)[chosen].tolist(),
                      int((~pb.measurable).sum()))
