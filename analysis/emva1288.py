@@ -204,7 +204,8 @@ class MeansEvaluation:
     deviation: NDArray[np.float64]
 
 
-def evaluate_means(t_us: NDArray, mu: NDArray, var: NDArray, mu_d: NDArray, var_d: NDArray,
+def evaluate_means(t_us: NDArray[np.float64], mu: NDArray[np.float64], var: NDArray[np.float64],
+                   mu_d: NDArray[np.float64], var_d: NDArray[np.float64],
                    gain_fit_fraction: float = 0.7,
                    linearity_range: tuple[float, float] = (0.05, 0.95)) -> MeansEvaluation:
     """K, σ²_y.dark, saturation and linearity from per-exposure means and temporal
@@ -333,14 +334,16 @@ def characterize(stats: SweepStatistics, uniformity: Uniformity, *,
     mu_p, var_p = stats.mean_dn, stats.var_dn2
     mu_dp, var_dp = stats.dark_mean_dn, stats.dark_var_dn2
 
-    def reduce(mp, vp, mdp, vdp) -> MeansEvaluation:
+    def reduce(mp: NDArray[np.float64], vp: NDArray[np.float64], mdp: NDArray[np.float64],
+               vdp: NDArray[np.float64]) -> MeansEvaluation:
         return evaluate_means(t, mp.mean(axis=1), vp.mean(axis=1), mdp.mean(axis=1),
                          vdp.mean(axis=1), gain_fit_fraction, linearity_range)
 
     best = reduce(mu_p, var_p, mu_dp, var_dp)
     rng = np.random.default_rng(seed)
 
-    def redraw(mean: NDArray, var: NDArray) -> tuple[NDArray, NDArray]:
+    def redraw(mean: NDArray[np.float64], var: NDArray[np.float64]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         v = np.maximum(var, 0.0)
         m = mean + np.sqrt(v / (2.0 * n)) * rng.standard_normal(mean.shape)
         return m, v * (1.0 + np.sqrt(2.0 / n) * rng.standard_normal(var.shape))

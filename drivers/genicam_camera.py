@@ -58,7 +58,7 @@ from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -248,7 +248,7 @@ class GenICamCamera(Camera):
     @property
     def trigger_mode(self) -> TriggerMode:
         self._check_open("trigger_mode")
-        return self._snapshot["trigger"]
+        return cast(TriggerMode, self._snapshot["trigger"])
 
     @trigger_mode.setter
     def trigger_mode(self, mode: TriggerMode | str) -> None:
@@ -280,7 +280,7 @@ class GenICamCamera(Camera):
         """Offset added to every pixel, in the camera's units (SFNC ``BlackLevel``; DN at
         the present pixel format on most cameras)."""
         self._check_open("black_level")
-        return self._snapshot["black_level"]
+        return cast(float, self._snapshot["black_level"])
 
     @black_level.setter
     def black_level(self, value: float) -> None:
@@ -378,7 +378,7 @@ class GenICamCamera(Camera):
         if self._t.has("ExposureMode") and "Timed" in self._t.choices("ExposureMode"):
             self._t.set("ExposureMode", "Timed")
         self._t.set("TriggerSelector", "FrameStart")
-        self._chunks = ()
+        self._chunks: tuple[str, ...] = ()
         if self._t.has("ChunkModeActive") and self._t.has("ChunkSelector"):
             offered = self._t.choices("ChunkSelector")
             self._t.set("ChunkModeActive", True)
@@ -491,7 +491,7 @@ class GenICamCamera(Camera):
             return int(self._t.get("HeightMax")) * b, int(self._t.get("WidthMax")) * b
 
     def _do_get_exposure_us(self) -> float:
-        return self._snapshot["exposure_us"]
+        return cast(float, self._snapshot["exposure_us"])
 
     def _do_set_exposure_us(self, value: float) -> None:
         with self._device("set exposure_us"):
@@ -500,7 +500,7 @@ class GenICamCamera(Camera):
             self._snapshot["exposure_us"] = float(self._t.get("ExposureTime"))
 
     def _do_get_gain(self) -> float:
-        return self._snapshot["gain"]
+        return cast(float, self._snapshot["gain"])
 
     def _do_set_gain(self, value: float) -> None:
         with self._device("set gain"):
@@ -511,7 +511,7 @@ class GenICamCamera(Camera):
             self._snapshot["gain"] = float(self._t.get("Gain"))
 
     def _do_get_roi(self) -> Roi:
-        return self._snapshot["roi"]
+        return cast(Roi, self._snapshot["roi"])
 
     def _do_set_roi(self, roi: Roi) -> None:
         b = self._snapshot["binning"]
@@ -523,7 +523,7 @@ class GenICamCamera(Camera):
                 self._snapshot = self._read_settings()
 
     def _do_get_binning(self) -> int:
-        return self._snapshot["binning"]
+        return cast(int, self._snapshot["binning"])
 
     def _do_set_binning(self, value: int) -> None:
         with self._device("set binning"):
@@ -547,7 +547,7 @@ class GenICamCamera(Camera):
                     self._snapshot = self._read_settings()
 
     def _do_get_pixel_format(self) -> PixelFormat:
-        return self._snapshot["format"]
+        return cast(PixelFormat, self._snapshot["format"])
 
     def _do_set_pixel_format(self, fmt: PixelFormat) -> None:
         with self._device("set pixel_format"), self._grab_paused():
@@ -588,7 +588,7 @@ class GenICamCamera(Camera):
         self._t.execute("TriggerSoftware")
 
     def _exposure_s(self) -> float:
-        return self._snapshot["exposure_us"] * 1e-6
+        return cast(float, self._snapshot["exposure_us"]) * 1e-6
 
     def _do_acquire_one(self, timeout: float) -> Frame:
         with self._device("acquire"):

@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -58,14 +59,14 @@ LEGACY_NAMES = {"ExposureTime": "ExposureTimeAbs", "Gain": "GainAbs",
 _PIXEL_BITS = {"Mono8": 8, "Mono10": 10, "Mono12": 12, "Mono16": 16}
 
 
-def _pixel_type_names(pylon) -> dict[int, str]:
+def _pixel_type_names(pylon: Any) -> dict[int, str]:
     """pylon's pixel-type codes of the unpacked mono formats → SFNC names."""
     return {getattr(pylon, f"PixelType_{name}"): name for name in _PIXEL_BITS}
 # pylon's runtime is process-wide; enumeration and device creation are serialised.
 _FACTORY_LOCK = threading.Lock()
 
 
-def import_pylon(device: str = "camera"):
+def import_pylon(device: str = "camera") -> tuple[Any, Any]:
     """``(pylon, genicam)`` from pypylon; a typed error naming the extra when it is missing."""
     try:
         from pypylon import genicam, pylon
@@ -117,7 +118,7 @@ class PylonTransport(GenICamTransport):
         self._cam = self._open()
 
     # ------------------------------------------------------------------ connection
-    def _open(self):
+    def _open(self) -> Any:
         pylon = self._pylon
         with _FACTORY_LOCK:
             factory = pylon.TlFactory.GetInstance()
@@ -163,7 +164,7 @@ class PylonTransport(GenICamTransport):
             cam.DestroyDevice()
 
     # ------------------------------------------------------------------ errors
-    def _call(self, what: str, fn, *args):
+    def _call(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
         """Run a pylon call; its exceptions become :mod:`drivers.errors` types."""
         g = self._genicam
         if self._cam is None:
@@ -193,7 +194,7 @@ class PylonTransport(GenICamTransport):
             "the camera was removed", device=self.name, command=what,
             hint=f"plug it back in (s/n {self.serial}); the next operation reopens it")
 
-    def _node(self, feature: str):
+    def _node(self, feature: str) -> Any:
         nodemap = self._call(feature, self._cam.GetNodeMap)
         for name in (feature, LEGACY_NAMES.get(feature)):
             if name is None:

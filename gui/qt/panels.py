@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import Any, cast
 
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
@@ -424,7 +424,7 @@ class GenICamCameraPanel(CameraPanel):
             self.controls(box, button)
         form.addRow("bit depth", self.bit_depth)
         form.addRow("trigger", self.trigger)
-        self.body.layout().addLayout(form)
+        cast(QVBoxLayout, self.body.layout()).addLayout(form)  # CameraPanel's layout
         self.bit_depth.activated.connect(lambda k: self.session.submit(
             Action(self.role, "set_bit_depth", (self.bit_depth.itemData(k),))))
         self.trigger.activated.connect(lambda k: self.session.submit(

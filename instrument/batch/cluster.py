@@ -27,7 +27,7 @@ import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import dask
 from distributed import Client, LocalCluster, as_completed
@@ -166,7 +166,7 @@ def run_on_cluster(client: Client, analysis: str, runs: Sequence[str | Path],
     return [o for o in out if o is not None]
 
 
-def _worker_deaths(key: str, dask_scheduler=None) -> int:
+def _worker_deaths(key: str, dask_scheduler: Any = None) -> int:
     """On the scheduler: how many worker processes died while they held task ``key``
     (Dask's count of them, which it gives the task to another worker after each)."""
     ts = dask_scheduler.tasks.get(key) if dask_scheduler is not None else None
@@ -183,7 +183,7 @@ def cluster_map(client: Client, fn: Callable[..., Any], items: Iterable[Any],
     sent = {k: client.scatter([v], broadcast=True, hash=False)[0] for k, v in shared.items()}
     futures = client.map(fn, list(items), pure=False, **sent)
     try:
-        return client.gather(futures)
+        return cast(list[Any], client.gather(futures))
     finally:
         client.cancel(futures)
         client.cancel(list(sent.values()))

@@ -83,7 +83,7 @@ tr.not-applicable { color: #888; }
 
 
 def write_html(outcomes: Sequence[Outcome], path: str | Path, *, title: str,
-               about: Mapping[str, str] = ()) -> Path:
+               about: Mapping[str, str] | Sequence[tuple[str, str]] = ()) -> Path:
     """The table as a stand-alone HTML page; ``about`` lines (options, cluster, counts)
     go above it."""
     path = Path(path)

@@ -159,7 +159,7 @@ def run_task(analysis: str, run_path: str | Path, options: Mapping[str, Any], *,
     c0 = time.thread_time()
     spec = get_analysis(analysis)
     run = str(run_path)
-    ident: dict[str, str] = {}
+    ident: dict[str, Any] = {}  # run_id, sample, kind: strings
 
     def outcome(status: str, **kw: Any) -> Outcome:
         return Outcome(run, analysis, status, seconds=time.perf_counter() - t0,

@@ -18,7 +18,7 @@ message lists each offending point and why.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -121,7 +121,7 @@ def check(points: Iterable[GuardedPoint], profile: BenchProfile) -> list[Violati
     return out
 
 
-def enforce(points: list[GuardedPoint], profile: BenchProfile) -> None:
+def enforce(points: Sequence[GuardedPoint], profile: BenchProfile) -> None:
     """Raise :class:`GuardError` if any point of ``points`` violates the bench."""
     violations = check(points, profile)
     if violations:

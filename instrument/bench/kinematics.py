@@ -46,6 +46,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -194,7 +195,7 @@ class Kinematics(ABC):
         a = self.source_theta_deg + float(positions.get("sample_theta", 0.0))
         tilt = float(positions.get("sample_tilt", 0.0))
         phi = float(positions.get("sample_phi", 0.0))
-        return _rz(a) @ _M0 @ _rx(tilt) @ _rz(phi)
+        return cast(np.ndarray, _rz(a) @ _M0 @ _rx(tilt) @ _rz(phi))
 
     def _angles_general(self, positions: Mapping[str, float]) -> Angles:
         m = self.sample_to_lab(positions)

@@ -17,7 +17,7 @@ def add_server(p: argparse.ArgumentParser) -> None:
                    f"${ENV_SERVER}); the key is read from $SCATTERLAB_KEY")
 
 
-def call(args: argparse.Namespace, fn: Callable[[Any], int], *, one_line: bool = False
+def call(args: argparse.Namespace, fn: Callable[[Any], int | None], *, one_line: bool = False
          ) -> int:
     """Run ``fn(client)``; a refusal or an unreachable server is reported on stderr (exit 2
     for a refusal, 3 when the server cannot be reached). ``one_line``: the refusal's

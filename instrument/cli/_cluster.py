@@ -13,7 +13,7 @@ import contextlib
 import functools
 import sys
 from collections.abc import Callable, Iterator
-from typing import Any, TextIO
+from typing import Any, TextIO, cast
 
 __all__ = ["ClusterUnavailable", "add_cluster_options", "mapper", "open_cluster"]
 
@@ -60,7 +60,7 @@ def _local_default(args: argparse.Namespace, local_by_default: bool) -> bool:
         return True
     if args.workers is None:
         return local_by_default
-    return args.workers > 0
+    return cast(bool, args.workers > 0)
 
 
 @contextlib.contextmanager

@@ -18,7 +18,7 @@ from instrument.run.events import (
     RunFinished,
     RunStarted,
 )
-from instrument.run.runfile import RunFileError, read_summary
+from instrument.run.runfile import RunFileError, RunSummary, read_summary
 
 __all__ = ["ConsoleProgress", "fmt_s", "print_summary"]
 
@@ -120,7 +120,7 @@ def print_summary(ev: RunFinished, faults: int, stream: TextIO | None = None) ->
         print(f"  continue it with: scatterlab resume {ev.path}", file=out)
 
 
-def holdings(s) -> str:
+def holdings(s: RunSummary) -> str:
     """What a run file holds, in one line: sample, points and what was recorded at each,
     frames, provenance, size (a :class:`~instrument.run.runfile.RunSummary`)."""
     recorded = ", ".join(s.recorded) or "nothing per point"

@@ -21,6 +21,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from instrument.run.runfile import RunData
 
 HELP = "camera characterization (EMVA 1288) from a photon-transfer run"
 
@@ -29,7 +33,7 @@ CALIBRATION_NAME = "camera_calibration.json"
 FIGURE_NAME = "emva1288.png"
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("calibrate", help=HELP)
     what = p.add_subparsers(dest="target", metavar="TARGET")
     what.required = True
@@ -80,7 +84,7 @@ def _option_error(args: argparse.Namespace) -> str | None:
     return None
 
 
-def _settings(data) -> dict:
+def _settings(data: RunData) -> dict[str, Any]:
     """The camera's gain and pixel format during the sweep as the run recorded them (None:
     not recorded; the calibration holds for these settings only), and its identity."""
     cam = data.identities.get("camera", {})

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import TYPE_CHECKING
 
 from instrument.cli._client import add_server, call
+
+if TYPE_CHECKING:
+    from instrument.client import BenchClient
 
 HELP = "take, release or show the bench server's operator control"
 
@@ -33,7 +37,7 @@ def _until(t: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    def act(c) -> int:
+    def act(c: BenchClient) -> int:
         if args.action == "take":
             lease = c.take_control(args.timeout, force=args.force)
             print(f"control held by {lease['holder']} until {_until(lease['until'])}")

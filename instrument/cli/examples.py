@@ -59,7 +59,7 @@ def example_files(source: Traversable | None = None) -> dict[str, Traversable]:
     return dict(sorted(found.items()))
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("examples", help=HELP, description=__doc__.split("\n\n")[0])
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True

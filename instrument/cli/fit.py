@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 HELP = "BRDF of a run: reduce, fit models, select, report"
 
@@ -37,6 +37,7 @@ def add_fit_options(p: argparse.ArgumentParser,
     """The analysis options of ``scatterlab fit``, shared with ``scatterlab batch fit``."""
     if default_models is None:
         from instrument.pipelines.brdf.analyse import DEFAULT_MODELS as default_models
+    assert default_models is not None
     p.add_argument("--models", default=",".join(default_models),
                    help="comma-separated candidates, '+' for sums "
                    f"(default: {','.join(default_models)})")
@@ -228,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
 def _spectral_wanted(args: argparse.Namespace) -> bool | None:
     """Whether to fit per wavelength (None: an error was printed)."""
     if args.per_wavelength != "auto":
-        return args.per_wavelength == "yes"
+        return cast(bool | None, args.per_wavelength == "yes")
     from instrument.pipelines.brdf.spectral import has_wavelength_axis
     from instrument.run.runfile import RunFileError, read_run
 

@@ -10,8 +10,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from instrument.cli._client import add_server, call
+
+if TYPE_CHECKING:
+    from instrument.client import BenchClient
 
 HELP = "manual commands on the bench server: home, jog, move, light, stop-all (guarded)"
 
@@ -50,7 +54,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    def act(c) -> int:
+    def act(c: BenchClient) -> int:
         if args.action == "home":
             message = c.home(args.role)
         elif args.action == "jog":

@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         unit = "mm" if role == "camera_z" else "deg"
         print(f"  travel {role:<15} {dist:10.1f} {unit}")
     homing = sum(est.homing_s.values())
+    assert est.bench_motion_s is not None and est.bench_acquisition_s is not None  # estimate()
     print(f"  estimated duration on this bench {fmt_s(est.total_s)} (motion "
           f"{fmt_s(est.bench_motion_s)}, acquisition and storage "
           f"{fmt_s(est.bench_acquisition_s)})"

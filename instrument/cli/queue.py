@@ -6,10 +6,14 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from instrument.cli._client import add_server, call
+
+if TYPE_CHECKING:
+    from instrument.client import BenchClient
 
 HELP = "the bench server's plan queue: add, list, remove, move, start, stop"
 
@@ -43,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     return call(args, lambda c: ACTIONS[args.action](c, args))
 
 
-def _add(c, args) -> int:
+def _add(c: BenchClient, args: argparse.Namespace) -> int:
     if not args.plans and not args.stop:
         print("error: give plan files, or --stop", file=sys.stderr)
         return 2
@@ -69,13 +73,13 @@ def print_items(items: list[dict[str, Any]], running: bool) -> None:
               f"{flag}{extra}")
 
 
-def _list(c, args) -> int:
+def _list(c: BenchClient, args: argparse.Namespace) -> int:
     q = c.queue()
     print_items(q["items"], q["running"])
     return 0
 
 
-def _history(c, args) -> int:
+def _history(c: BenchClient, args: argparse.Namespace) -> int:
     for h in c.history():
         when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(h["time"]))
         run_file = f"  {h['run_file']}" if h["run_file"] else ""
@@ -84,7 +88,7 @@ def _history(c, args) -> int:
     return 0
 
 
-ACTIONS = {
+ACTIONS: dict[str, Callable[[BenchClient, argparse.Namespace], int | None]] = {
     "add": _add,
     "list": _list,
     "history": _history,

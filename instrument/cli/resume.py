@@ -11,9 +11,13 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from instrument.cli._client import add_server, call
 from instrument.cli.run import add_common
+
+if TYPE_CHECKING:
+    from instrument.run.recovery import RecoveryReport
 
 HELP = "continue a run that did not finish, or repair one (same file)"
 
@@ -51,7 +55,7 @@ def find_run(run: str, out: str) -> Path:
     return Path(row.path)
 
 
-def print_repairs(report, path: Path) -> None:
+def print_repairs(report: RecoveryReport, path: Path) -> None:
     """Every repair a recovery made, and what it left lost."""
     for line in report.repairs:
         print(f"  repaired: {line}")

@@ -13,6 +13,10 @@ from typing import TYPE_CHECKING
 from instrument.run.paths import DEFAULT_RUNS_DIR
 
 if TYPE_CHECKING:
+    from instrument.bench.devices import Bench
+    from instrument.bench.profile import BenchProfile
+    from instrument.plans.build import Plan
+    from instrument.plans.planfile import PlanSpec
     from instrument.run.engine import RunEngine
 
 HELP = "run a plan (BRDF, light field, calibration) on a bench"
@@ -82,7 +86,7 @@ def drive(engine: RunEngine, quiet: bool) -> int:
     return 1
 
 
-def forced_stop_message(path) -> str:
+def forced_stop_message(path: str | Path) -> str:
     """What a forced stop (second Ctrl-C) left, and the command that continues the run."""
     return (f"\ninterrupted before the run file was closed: every committed point is in its "
             f"journal; continue the run with:\n  scatterlab resume {path}")
@@ -121,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         return _second_pass(Path(engine.store.path), spec, profile, bench, args)
 
 
-def _start(plan, bench, args: argparse.Namespace) -> RunEngine | None:
+def _start(plan: Plan, bench: Bench, args: argparse.Namespace) -> RunEngine | None:
     """The engine of a new run file, or None with the reason printed in one line (a disk
     below the free-space margin: no run file was made)."""
     from instrument.run.runner import start_run
@@ -134,7 +138,8 @@ def _start(plan, bench, args: argparse.Namespace) -> RunEngine | None:
         return None
 
 
-def _second_pass(first: Path, spec, profile, bench, args: argparse.Namespace) -> int:
+def _second_pass(first: Path, spec: PlanSpec, profile: BenchProfile, bench: Bench,
+                 args: argparse.Namespace) -> int:
     """A two-pass lobe plan (``[scan] lobe``): fit the first pass, place the second pass's
     points by Fisher information and run them (:mod:`instrument.plans.lobe`)."""
     from instrument.bench.guard import GuardError

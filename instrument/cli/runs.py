@@ -11,8 +11,12 @@ import argparse
 import time
 from collections.abc import Set as AbstractSet
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from instrument.run.paths import DEFAULT_RUNS_DIR
+
+if TYPE_CHECKING:
+    from instrument.run.catalog import RepairRow, RunRow
 
 HELP = "list runs from the catalog (filter by status, sample...)"
 
@@ -76,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def repair_notes(row, repairs) -> list[str]:
+def repair_notes(row: RunRow, repairs: list[RepairRow]) -> list[str]:
     """Under a repaired run: its last repair and what is still lost."""
     if not repairs:
         return []

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import TYPE_CHECKING
 
 from instrument.cli._client import add_server, call
+
+if TYPE_CHECKING:
+    from instrument.client import BenchClient
 
 HELP = "the bench server's state: run, queue, control"
 
@@ -20,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     return call(args, _status)
 
 
-def _status(c) -> int:
+def _status(c: BenchClient) -> int:
     from instrument.cli.queue import print_items
 
     s = c.status()

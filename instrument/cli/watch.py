@@ -5,8 +5,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING, TextIO, cast
 
 from instrument.cli._client import add_server, call
+
+if TYPE_CHECKING:
+    from instrument.client import BenchClient
+    from instrument.protocol import Message
 
 HELP = "watch the bench server's runs live: progress and faults"
 
@@ -27,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
 
-def line_for(msg) -> str | None:
+def line_for(msg: Message) -> str | None:
     """What the terminal shows for one event message (None: nothing)."""
     d = msg.data
     match msg.type:
@@ -67,14 +72,14 @@ def line_for(msg) -> str | None:
         case "manual":
             return f"{d['who']}: {d['what']}: {d['message']}"
         case "bench":
-            return d["message"]
+            return cast(str | None, d["message"])
         case "missed":
             counts = ", ".join(f"{n} {t}" for t, n in d["counts"].items())
             return f"(fell behind: missed {counts})"
     return None
 
 
-def watch(client, *, until_idle: bool = False, out=None) -> int:
+def watch(client: BenchClient, *, until_idle: bool = False, out: TextIO | None = None) -> int:
     out = out or sys.stdout
     last_progress = None
     running = True

@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 import ssl
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, cast
 
 import httpx
 
@@ -75,7 +75,7 @@ class BenchClient:
     def __enter__(self) -> BenchClient:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # plumbing ---------------------------------------------------------------------------
@@ -98,16 +98,17 @@ class BenchClient:
 
     # queries ----------------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
-        return self.request("GET", "/status")
+        return cast(dict[str, Any], self.request("GET", "/status"))
 
     def queue(self) -> dict[str, Any]:
-        return self.request("GET", "/queue")
+        return cast(dict[str, Any], self.request("GET", "/queue"))
 
     def history(self, limit: int = 200) -> list[dict[str, Any]]:
-        return self.request("GET", "/queue/history", params={"limit": limit})
+        return cast(list[dict[str, Any]],
+                    self.request("GET", "/queue/history", params={"limit": limit}))
 
     def runs(self, limit: int = 100) -> list[dict[str, Any]]:
-        return self.request("GET", "/runs", params={"limit": limit})
+        return cast(list[dict[str, Any]], self.request("GET", "/runs", params={"limit": limit}))
 
     def download(self, path: str, to: str | os.PathLike[str]) -> None:
         """Copy the run file ``path`` (relative to the server's runs folder) to ``to``."""
@@ -124,95 +125,104 @@ class BenchClient:
 
     # queue ------------------------------------------------------------------------------
     def add_plan(self, plan_text: str, name: str | None = None) -> dict[str, Any]:
-        return self.request("POST", "/queue", {"plan": plan_text, "name": name})["item"]
+        return cast(dict[str, Any],
+                    self.request("POST", "/queue", {"plan": plan_text, "name": name})["item"])
 
     def add_stop(self) -> dict[str, Any]:
-        return self.request("POST", "/queue", {"stop": True})["item"]
+        return cast(dict[str, Any], self.request("POST", "/queue", {"stop": True})["item"])
 
     def propose(self, plan_text: str, name: str | None = None) -> dict[str, Any]:
-        return self.request("POST", "/queue/propose", {"plan": plan_text, "name": name})["item"]
+        return cast(dict[str, Any],
+                    self.request("POST", "/queue/propose",
+                                 {"plan": plan_text, "name": name})["item"])
 
     def approve(self, item_id: int) -> str:
-        return self.request("POST", f"/queue/{int(item_id)}/approve")["message"]
+        return cast(str, self.request("POST", f"/queue/{int(item_id)}/approve")["message"])
 
     def deny(self, item_id: int) -> str:
-        return self.request("POST", f"/queue/{int(item_id)}/deny")["message"]
+        return cast(str, self.request("POST", f"/queue/{int(item_id)}/deny")["message"])
 
     def remove(self, item_id: int) -> str:
-        return self.request("DELETE", f"/queue/{int(item_id)}")["message"]
+        return cast(str, self.request("DELETE", f"/queue/{int(item_id)}")["message"])
 
     def move(self, item_id: int, index: int) -> str:
-        return self.request("POST", f"/queue/{int(item_id)}/move", {"index": index})["message"]
+        return cast(str,
+                    self.request("POST", f"/queue/{int(item_id)}/move",
+                                 {"index": index})["message"])
 
     def start_queue(self) -> str:
-        return self.request("POST", "/queue/start")["message"]
+        return cast(str, self.request("POST", "/queue/start")["message"])
 
     def stop_queue(self) -> str:
-        return self.request("POST", "/queue/stop")["message"]
+        return cast(str, self.request("POST", "/queue/stop")["message"])
 
     # run control ------------------------------------------------------------------------
     def pause(self, *, now: bool = False) -> str:
-        return self.request("POST", "/run/pause", {"now": now})["message"]
+        return cast(str, self.request("POST", "/run/pause", {"now": now})["message"])
 
     def resume(self, answer: str = "resume") -> str:
-        return self.request("POST", "/run/resume", {"answer": answer})["message"]
+        return cast(str, self.request("POST", "/run/resume", {"answer": answer})["message"])
 
     def abort(self) -> str:
-        return self.request("POST", "/run/abort")["message"]
+        return cast(str, self.request("POST", "/run/abort")["message"])
 
     # manual commands and control --------------------------------------------------------
     def home(self, role: str) -> str:
-        return self.request("POST", "/bench/home", {"role": role})["message"]
+        return cast(str, self.request("POST", "/bench/home", {"role": role})["message"])
 
     def jog(self, role: str, step: float) -> str:
-        return self.request("POST", "/bench/jog", {"role": role, "step": step})["message"]
+        return cast(str,
+                    self.request("POST", "/bench/jog", {"role": role, "step": step})["message"])
 
     def move_to(self, **targets: float) -> str:
-        return self.request("POST", "/bench/move", {"targets": targets})["message"]
+        return cast(str, self.request("POST", "/bench/move", {"targets": targets})["message"])
 
     def light(self, on: bool) -> str:
-        return self.request("POST", "/bench/light", {"on": on})["message"]
+        return cast(str, self.request("POST", "/bench/light", {"on": on})["message"])
 
     def camera_settings(self, *, exposure_us: float | None = None,
                         gain: float | None = None) -> str:
         """Set the camera's exposure (µs) and/or gain (its own units) between runs."""
         body = {k: v for k, v in (("exposure_us", exposure_us), ("gain", gain))
                 if v is not None}
-        return self.request("POST", "/bench/camera", body)["message"]
+        return cast(str, self.request("POST", "/bench/camera", body)["message"])
 
     def stop_all(self) -> str:
-        return self.request("POST", "/bench/stop-all")["message"]
+        return cast(str, self.request("POST", "/bench/stop-all")["message"])
 
     def take_control(self, timeout_s: float | None = None, *, force: bool = False
                      ) -> dict[str, Any]:
-        return self.request("POST", "/control/take", {"timeout_s": timeout_s, "force": force})
+        return cast(dict[str, Any],
+                    self.request("POST", "/control/take", {"timeout_s": timeout_s, "force": force}))
 
     def release_control(self) -> str:
-        return self.request("POST", "/control/release")["message"]
+        return cast(str, self.request("POST", "/control/release")["message"])
 
     def connect_bench(self) -> str:
-        return self.request("POST", "/bench/connect")["message"]
+        return cast(str, self.request("POST", "/bench/connect")["message"])
 
     def disconnect_bench(self) -> str:
-        return self.request("POST", "/bench/disconnect")["message"]
+        return cast(str, self.request("POST", "/bench/disconnect")["message"])
 
     # keys and audit (admin) -------------------------------------------------------------
     def keys(self) -> list[dict[str, Any]]:
-        return self.request("GET", "/keys")
+        return cast(list[dict[str, Any]], self.request("GET", "/keys"))
 
     def add_key(self, name: str, role: str, expires: float | None = None) -> dict[str, Any]:
-        return self.request("POST", "/keys", {"name": name, "role": role, "expires": expires})
+        return cast(dict[str, Any],
+                    self.request("POST", "/keys", {"name": name, "role": role, "expires": expires}))
 
     def revoke_key(self, key_id: int) -> str:
-        return self.request("DELETE", f"/keys/{int(key_id)}")["message"]
+        return cast(str, self.request("DELETE", f"/keys/{int(key_id)}")["message"])
 
     def audit(self, limit: int = 200) -> list[dict[str, Any]]:
-        return self.request("GET", "/audit", params={"limit": limit})
+        return cast(list[dict[str, Any]], self.request("GET", "/audit", params={"limit": limit}))
 
     def run_points(self, since: int = 0) -> dict[str, Any]:
         """One page of the current run's points published so far, from ordinal ``since``:
         ``{"run", "since", "next", "total", "items"}`` (``GET /runs/current/points``)."""
-        return self.request("GET", "/runs/current/points", params={"since": int(since)})
+        return cast(dict[str, Any],
+                    self.request("GET", "/runs/current/points", params={"since": int(since)}))
 
     def all_run_points(self) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
         """The current run (None before the first) and every point it published so far."""
@@ -252,7 +262,7 @@ class BenchClient:
 class EventStream:
     """An open event stream (:meth:`BenchClient.open_events`)."""
 
-    def __init__(self, conn) -> None:
+    def __init__(self, conn: Any) -> None:
         # entered as its context (the websockets library's way to own the connection);
         # :meth:`close` ends it
         self._conn = conn.__enter__()
@@ -277,7 +287,7 @@ class EventStream:
     def __iter__(self) -> Iterator[Message]:
         while True:
             try:
-                yield self.recv()
+                yield cast(Message, self.recv())  # no timeout: it never returns None
             except EOFError:
                 return
 
@@ -287,5 +297,5 @@ class EventStream:
     def __enter__(self) -> EventStream:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -9,7 +9,7 @@ typed commands the engine runs; it skips points already done (resume).
 from __future__ import annotations
 
 import math
-from collections.abc import Container, Iterator, Sequence
+from collections.abc import Container, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -22,6 +22,7 @@ from instrument.bench.profile import BenchProfile, FieldError
 from instrument.bench.timing import BenchTiming, bench_timing
 from instrument.plans.commands import (
     Acquire,
+    AcquisitionPolicy,
     Command,
     Move,
     PointDone,
@@ -311,7 +312,7 @@ class _ExposureClimb:
     point's exposure is taken as the plan's (the scene's brightness is not known to the
     plan); the filters' densities are the profile's nominal ones (``od``)."""
 
-    def __init__(self, policy, profile: BenchProfile) -> None:
+    def __init__(self, policy: AcquisitionPolicy, profile: BenchProfile) -> None:
         self.factor = float(policy.hdr_factor)
         self.lo = float(policy.min_exposure_us)
         self.hi = float(policy.max_exposure_us)
@@ -347,7 +348,8 @@ def _from_mirror_deg(a: Angles) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, dot))))
 
 
-def _fill_forward(t: np.ndarray, start: dict[str, float] | None, axes) -> np.ndarray:
+def _fill_forward(t: np.ndarray, start: dict[str, float] | None, axes: Sequence[str]
+                  ) -> np.ndarray:
     """Axes a point does not move keep their previous target (or start, or 0)."""
     t = t.copy()
     for k, r in enumerate(axes):
@@ -366,7 +368,7 @@ def _faster(d: AxisDynamics, speed: float) -> AxisDynamics:
                         d.settle_s / speed)
 
 
-def dynamics_of(profile: BenchProfile, axes) -> dict[str, AxisDynamics]:
+def dynamics_of(profile: BenchProfile, axes: Iterable[str]) -> dict[str, AxisDynamics]:
     out = {}
     for r in axes:
         spec = profile.devices.get(r)
@@ -499,13 +501,13 @@ def in_plane_angles(theta_i: float, theta_r_signed: float) -> Angles:
     return Angles(abs(theta_i), phi_i, abs(theta_r_signed), phi_r)
 
 
-def _expand(x) -> Sequence[float]:
+def _expand(x: Any) -> Sequence[float]:
     if isinstance(x, dict):
         return float_range(x)
     return [float(e) for e in x]
 
 
-def _ptc_exposures(x) -> list[float]:
+def _ptc_exposures(x: Any) -> Sequence[float]:
     if isinstance(x, dict) and "n" in x:
         n = int(x["n"])
         if x.get("log", True):

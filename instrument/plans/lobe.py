@@ -47,9 +47,10 @@ import math
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from analysis.brdf.geometry import make_geometry
 from analysis.brdf.model import BRDFModel
@@ -210,7 +211,7 @@ def _joint_shared(first_f: np.ndarray, first_slots: np.ndarray | None,
 
 def place_points(
     model: BRDFModel,
-    params: Sequence[float],
+    params: Sequence[float] | NDArray[np.float64],
     *,
     first_angles_rad: np.ndarray,
     first_sigma: np.ndarray,
@@ -312,7 +313,8 @@ def place_points(
     shared = _joint_shared(f1, first_slots, first_cov, pb, budget, chosen)
     cov_both = predicted_covariance(model, p, both, np.concatenate([sig1, pb.sigma[chosen]]),
                                     shared=shared, scale_rel=budget.scale_rel)
-    return Placement([tuple(candidates[k]) for k in chosen], float(cost[chosen].sum()),
+    return Placement([cast("tuple[float, float]", tuple(candidates[k])) for k in chosen],
+                     float(cost[chosen].sum()),
                      cost[chosen].tolist(), _sigmas(model, cov_first),
                      _sigmas(model, cov_both), pb.slots(budget)[chosen].tolist(),
                      int((~pb.measurable).sum()))
@@ -355,7 +357,8 @@ def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float] | np.ndarr
 
 
 def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
-                            params: Sequence[float], *, seconds: float, det: DetectorSetup,
+                            params: Sequence[float] | NDArray[np.float64], *, seconds: float,
+                            det: DetectorSetup,
                             option: ScanOption, budget: ErrorBudget, readout_s: float,
                             frames_per_point: int) -> SinglePass:
     """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two

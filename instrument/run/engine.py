@@ -31,11 +31,12 @@ import queue
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from drivers.base import AxisStatus, Camera, Frame, MotionAxis, PowerMeter
 from drivers.errors import ControllerError, DeviceError, LimitError, MotionError
@@ -218,7 +219,7 @@ class RunEngine:
         """Call ``callback(event)`` on the worker thread for every event."""
         self._subscribers.append(callback)
 
-    def unsubscribe(self, callback: Callable[[Event], None]) -> None:
+    def unsubscribe(self, callback: Callable[..., None]) -> None:
         """Stop calling ``callback`` (a closing GUI window); unknown callbacks are ignored."""
         with contextlib.suppress(ValueError):
             self._subscribers.remove(callback)
@@ -426,7 +427,9 @@ class RunEngine:
                 self._retry(role, policy, "enable", axis.enable)
             if not status.is_homed:
                 t0 = time.monotonic()
-                self._retry(role, policy, "home", lambda a=axis: a.home(timeout=300.0))
+                # a default argument binds the loop's value; mypy cannot infer such a lambda
+                self._retry(role, policy, "home",
+                            lambda a=axis: a.home(timeout=300.0))  # type: ignore[misc]
                 after = self._read_back(role, self._retry(role, policy, "status",
                                                           axis.status))
                 self.store_event("homed", device=role, position=after.position)
@@ -466,6 +469,8 @@ class RunEngine:
         with self._lock:
             if self._abort_requested:
                 raise _Abort
+        assert self._adaptive is not None  # only an adaptive plan grows
+        assert self._writer is not None
         decision = self._adaptive.decide(self.plan)
         if decision is None:
             self.store_event("adaptive_done", rounds=self._adaptive.rounds)
@@ -530,6 +535,7 @@ class RunEngine:
         self.bench.make_safe()
         self._light = None  # re-applied on resume
         if not self._store_broken:
+            assert self._writer is not None
             try:
                 self._writer.call(self.store.sync)
             except StorageError:
@@ -561,6 +567,7 @@ class RunEngine:
     _light_wanted: bool | None = None
 
     def _reopen_store(self) -> None:
+        assert self._writer is not None
         self._writer.stop()
         self.store.abandon()
         self.store, done = self._reopen()
@@ -571,9 +578,10 @@ class RunEngine:
         for line in self.store.repairs:  # what the recovery did, said where the run is shown
             self._emit(Fault("storage", f"repaired: {line}", "continue", None))
 
-    def store_event(self, kind: str, **fields) -> None:
+    def store_event(self, kind: str, **fields: Any) -> None:
         if self._store_broken:
             return
+        assert self._writer is not None
         try:
             self._writer.call(lambda: self.store.event({"kind": kind, **fields}))
         except StorageError:
@@ -586,6 +594,7 @@ class RunEngine:
         the uncommitted point is run again, so nothing is missing or duplicated.
         """
         while True:
+            assert self._writer is not None  # a new one after each storage recovery
             try:
                 self._writer.drain(stall_s=STORAGE_STALL_S,
                                    on_stall=lambda: self._storage_stalled(index))
@@ -653,6 +662,7 @@ class RunEngine:
                           st.exposure_us, st.power_w, st.signal,
                           STATUS_SKIPPED if skipped else STATUS_OK, st.retries,
                           skipped or "", st.frames, dict(st.extra))
+        assert self._writer is not None
         if st.frames:
             self._writer.submit(rec)  # frames: written while the next move runs
         else:
@@ -698,8 +708,9 @@ class RunEngine:
         spec = self.plan.profile.devices.get(role)
         return spec.retry if spec is not None else RetryPolicy()
 
-    def _retry(self, role: str, policy: RetryPolicy, what: str, fn, st: _PointState | None = None,
-               *, on_exhausted: Callable[[], object] | None = None):
+    def _retry(self, role: str, policy: RetryPolicy, what: str, fn: Callable[[], Any],
+               st: _PointState | None = None,
+               *, on_exhausted: Callable[[], object] | None = None) -> Any:
         """Run ``fn`` up to ``policy.attempts`` times with doubling back-off."""
         delay = policy.backoff_s
         last: DeviceError | None = None
@@ -750,11 +761,12 @@ class RunEngine:
             plan_time = max(plan_time, move_time(target - (here or 0.0), self._dyn[role]))
             self._position_cache.pop(role, None)
 
-            def start(a=axis, t=target) -> None:
+            def start(a: MotionAxis = axis, t: float = target) -> None:
                 a.move_to(t)
 
+            # a default argument binds the loop's value; mypy cannot infer such a lambda
             self._retry(role, self._policy(role), f"move to {target:g}", start, st,
-                        on_exhausted=lambda a=axis: self._rehome(a))
+                        on_exhausted=lambda a=axis: self._rehome(a))  # type: ignore[misc]
             moving[role] = axis
         if not moving:
             return
@@ -877,6 +889,7 @@ class RunEngine:
         level = min(self._nd_level, len(ladder) - 1) if ladder else 0
         while True:
             if ladder:
+                assert cam is not None  # a ladder only for the camera
                 self._select_filter(ladder[level][0], st)
             if pm is not None:
                 st.power_w = self._read_power(pm, st)
@@ -902,6 +915,7 @@ class RunEngine:
             st.exposure_us = main.exposure_us
             break
         if ladder:
+            assert cam is not None
             self._nd_level = self._next_level(ladder, level, st.main, cam, policy)
             st.extra["nd_position"] = float(ladder[level][0]) if level else math.nan
         if self._wheel is not None:
@@ -920,10 +934,12 @@ class RunEngine:
                                             lambda: self._read_lockin_dark(policy.frames),
                                             st))
             for b in brackets:
+                assert cam is not None  # brackets come from the camera
                 role = self._roles[id(cam)]
                 dark = self._retry(role, self._policy(role), "dark",
-                                   lambda e=b.exposure_us: self._frame(cam, e, policy.frames,
-                                                                       False), st)
+                                   # the default binds the loop's value; mypy cannot infer it
+                                   lambda e=b.exposure_us: self._frame(  # type: ignore[misc]
+                                       cam, e, policy.frames, False), st)
                 st.frames.append(dark)
                 if b is st.main:
                     dark_level = float(dark.data.mean())
@@ -949,8 +965,9 @@ class RunEngine:
             self._set_light(False)
             role = self._roles[id(cam)]
             dark = self._retry(role, self._policy(role), "dark",
-                               lambda e=b.exposure_us: self._frame(cam, e, policy.frames,
-                                                                   False), st)
+                               # the default binds the loop's value; mypy cannot infer it
+                               lambda e=b.exposure_us: self._frame(  # type: ignore[misc]
+                                   cam, e, policy.frames, False), st)
             self._set_light(True)
             st.frames.append(dark)
             self._dark_exposures.add(b.exposure_us)
@@ -975,6 +992,7 @@ class RunEngine:
         raises :class:`~drivers.errors.ControllerError`, which the device's retry policy
         handles like any failed reading (retry, then pause, skip or abort)."""
         li = self._lockin
+        assert li is not None
         readings = self._lockin_snapshots(n)
         r = np.array([x.r_v for x in readings])
         return {"lockin_r_v": float(r.mean()),
@@ -990,6 +1008,7 @@ class RunEngine:
         """``max(n, 4)`` settled snapshots of the lock-in on a range that does not overload
         (:meth:`_read_lockin`)."""
         li = self._lockin
+        assert li is not None
         n = max(int(n), 4)
         for _ in range(self.LOCKIN_OVERLOAD_RETRIES + 1):
             li.settle()
@@ -1027,6 +1046,7 @@ class RunEngine:
             if not nd:
                 self._nd_ladder = []
                 return []
+            assert wheel is not None  # it has the filters
             role = self._roles[id(wheel)]
             count = int(self._retry(role, self._policies[role], "read slot count",
                                     lambda: wheel.position_count, st))
@@ -1067,6 +1087,7 @@ class RunEngine:
         if slot == self._wheel_slot:
             return
         wheel = self._wheel
+        assert wheel is not None  # a plan with filters needs the wheel
         role = self._roles[id(wheel)]
         if self._wheel_slot is None:  # first filter of the run: the wheel may be there
             self._wheel_slot = int(self._retry(role, self._policies[role], "read position",
@@ -1088,6 +1109,7 @@ class RunEngine:
     def _filter_in_beam(self) -> dict[str, float]:
         """The filter-wheel slot in the beam and its band (NaN for an empty slot)."""
         wheel = self._wheel
+        assert wheel is not None
         role = self._roles[id(wheel)]
         slot = int(self._retry(role, self._policies[role], "read position",
                                lambda: wheel.position))
@@ -1113,7 +1135,8 @@ class RunEngine:
         # request to its own step (1 µs, a line time), and the signal is divided by it.
         taken = frames[0].exposure_us
         exposure = float(taken) if math.isfinite(taken) else float(exposure_us)
-        return FrameData(data, exposure, light, frames[-1].timestamp, saturated)
+        return FrameData(cast("NDArray[Any]", data), exposure, light, frames[-1].timestamp,
+                         saturated)
 
     def _brackets(self, cam: Camera, policy: AcquisitionPolicy, acq: Acquire
                   ) -> list[FrameData]:
@@ -1152,7 +1175,7 @@ class RunEngine:
 class _DoneSet:
     """Which points are done: a fixed bitmap, so memory stays flat on long runs."""
 
-    def __init__(self, n: int, initial=()) -> None:
+    def __init__(self, n: int, initial: Iterable[int] = ()) -> None:
         self._bits = np.zeros(max(n, 1), dtype=bool)
         self._count = 0
         for i in initial:
@@ -1168,14 +1191,14 @@ class _DoneSet:
         if n > self._bits.size:
             self._bits = np.concatenate([self._bits, np.zeros(n - self._bits.size, bool)])
 
-    def discard_all(self, indices) -> None:
+    def discard_all(self, indices: Iterable[int]) -> None:
         for i in indices:
             if self._bits[i]:
                 self._bits[i] = False
                 self._count -= 1
 
-    def __contains__(self, i: int) -> bool:
-        return bool(self._bits[i])
+    def __contains__(self, i: object) -> bool:  # Container's signature; i is an index
+        return bool(self._bits[cast(int, i)])
 
     def __len__(self) -> int:
         return self._count
@@ -1243,12 +1266,12 @@ class _Writer:
 
         self._put(job)
 
-    def _put(self, job) -> None:
+    def _put(self, job: Callable[[], object]) -> None:
         with self._cond:
             self._busy += 1
         self._q.put(job)
 
-    def call(self, fn, *, inline: bool = False) -> None:
+    def call(self, fn: Callable[[], object], *, inline: bool = False) -> None:
         """Run ``fn`` on the writer thread (it owns the store) and wait for it; with
         ``inline``, on the calling thread, which is safe only while the writer is idle."""
         if not inline:
@@ -1266,7 +1289,8 @@ class _Writer:
                 self._error = err
             raise
 
-    def drain(self, *, stall_s: float = math.inf, on_stall=None) -> None:
+    def drain(self, *, stall_s: float = math.inf,
+              on_stall: Callable[[], object] | None = None) -> None:
         """Wait until every submitted job is done; re-raise a storage error once.
 
         An HDF5 write in flight cannot be abandoned, so this waits for it however long it
@@ -1281,6 +1305,7 @@ class _Writer:
                 if not self._busy:
                     err = self._error  # sticky: this store is broken until replaced
                     break
+            assert on_stall is not None  # the deadline is finite only with on_stall
             on_stall()
             deadline = math.inf
         if err is not None:

@@ -30,10 +30,10 @@ import json
 import os
 import time
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import h5py
 import numpy as np
@@ -107,7 +107,7 @@ class RecoveryReport:
         return bool(self.repairs)
 
 
-def describe_points(indices) -> str:
+def describe_points(indices: Iterable[int]) -> str:
     """'3', '1, 2 and 5', or the first ten and a count for long lists."""
     idx = sorted(int(i) for i in indices)
     if len(idx) > 12:
@@ -415,8 +415,9 @@ def _rebuild(path: Path, j: _Journalled, cut: tuple[int, int] | None
             if ds is None:
                 if frame is None and old is None:
                     return f, [k for k in range(len(crcs)) if j.owners[k] >= 0], bad
-                shape = frame.shape if frame is not None else old.shape[1:]
-                dtype = frame.dtype if frame is not None else old.dtype
+                # old is not None here: a missing frame and no old file returned above
+                shape = frame.shape if frame is not None else cast(Any, old).shape[1:]
+                dtype = frame.dtype if frame is not None else cast(Any, old).dtype
                 ds = _frame_stack(f, len(crcs), shape, dtype)
             if frame is None:
                 if j.owners[k] >= 0:
@@ -426,7 +427,7 @@ def _rebuild(path: Path, j: _Journalled, cut: tuple[int, int] | None
     return f, lost, bad
 
 
-def _frame_stack(f: h5py.File, n: int, shape: tuple[int, ...], dtype) -> h5py.Dataset:
+def _frame_stack(f: h5py.File, n: int, shape: tuple[int, ...], dtype: Any) -> h5py.Dataset:
     ds = f["entry/data"].create_dataset(
         "frames", shape=(n, *shape), maxshape=(None, *shape), chunks=(1, *shape),
         dtype=dtype, compression="gzip", compression_opts=1, shuffle=True)
@@ -579,7 +580,9 @@ def salvage(path: str | Path) -> RecoveryReport:
                    points_lost=tuple(sorted(set(report.points_lost) | lost)))
 
 
-def _salvageable(path: Path, cut: tuple[int, int] | None):
+def _salvageable(path: Path, cut: tuple[int, int] | None
+                 ) -> tuple[RunHeader, list[dict[str, Any]], set[int], list[dict[str, Any]], str,
+                            list[int], int]:
     """Read what a run file still holds: (header, point records, points whose frames are
     lost, event records, status, old frame position per new frame, rows in the table)."""
     with contextlib.ExitStack() as stack:
@@ -596,16 +599,19 @@ def _salvageable(path: Path, cut: tuple[int, int] | None):
             # as inspect_run_file says: no point readable, the run is measured again
             found = Readable({}, {}, set(), row_count(f))
         rows, n_rows = found.rows, found.n_rows
-        order = sorted(rows, key=rows.get)
+        order = sorted(rows, key=cast("Callable[[int], int]", rows.get))
         at = np.array([rows[i] for i in order], dtype=np.int64)
         p = e["points"]
-        col = {name: _read_or_none(p[name], at) for name in
+        # col and fcol: arrays, or None for a column that did not read; the rows are used
+        # only when every column they need read (checked below)
+        col: dict[str, Any] = {name: _read_or_none(p[name], at) for name in
                (*FLOAT_FIELDS, *INT_FIELDS, *STR_FIELDS, "positions")}
         xcol = {name: _read_or_none(p[name], at) for name in DETECTOR_FIELDS if name in p}
         if any(v is None for c, v in col.items() if c not in OPTIONAL_COLUMNS):
             order = []  # a column the rows need did not read after all: none is readable
         d = e["data"]
-        fcol = {name: _read_or_none(d[name]) for name in FRAME_FIELDS if name in d}
+        fcol: dict[str, Any] = {name: _read_or_none(d[name]) for name in FRAME_FIELDS
+                                if name in d}
         if any(v is None for v in fcol.values()) or len(fcol) < len(FRAME_FIELDS):
             fcol = {}
         frames = d.get("frames")
@@ -670,7 +676,7 @@ def _read_or_none(ds: h5py.Dataset, rows: np.ndarray | None = None) -> np.ndarra
     unreadable."""
     try:
         if rows is None:
-            return ds[()]
+            return cast(np.ndarray | None, ds[()])
         return ds[rows] if rows.size else np.zeros((0, *ds.shape[1:]), dtype=ds.dtype)
     except (OSError, RuntimeError, ValueError, KeyError, TypeError):
         return None

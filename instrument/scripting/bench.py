@@ -25,6 +25,7 @@ from instrument.scripting.handle import RunHandle
 
 if TYPE_CHECKING:
     from instrument.bench.devices import Bench
+    from instrument.run.engine import RunEngine
     from instrument.run.events import Event
 
 __all__ = ["DryRun", "ScriptBench", "open_bench"]
@@ -179,7 +180,7 @@ class ScriptBench:
         engine = resume_run(path, self._bench, fsync=self._fsync, adaptive=adaptive)
         return self._drive(engine, block=block, progress=progress, on_event=on_event)
 
-    def _drive(self, engine, *, block: bool, progress: bool | None,
+    def _drive(self, engine: RunEngine, *, block: bool, progress: bool | None,
                on_event: Callable[[Event], Any] | None) -> RunHandle:
         handle = RunHandle(engine, on_event=on_event)
         bar = _progress_bar(handle) if (block if progress is None else progress) else None
@@ -212,7 +213,7 @@ class ScriptBench:
     def __enter__(self) -> ScriptBench:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def __repr__(self) -> str:

@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from instrument.bench.profile import BenchProfile, parse_profile
 from instrument.client import BenchClient, ClientError
@@ -62,7 +62,8 @@ class RemoteBench:
         self._stream_args = (url, key, ca)
         self._tmp = None if runs_dir is not None else tempfile.TemporaryDirectory(
             prefix="scatterlab-runs-")
-        self.runs_dir = Path(runs_dir if runs_dir is not None else self._tmp.name)
+        self.runs_dir = Path(runs_dir if runs_dir is not None
+                             else cast("tempfile.TemporaryDirectory[str]", self._tmp).name)
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         self._profile: BenchProfile | None = None
 
@@ -134,7 +135,7 @@ class RemoteBench:
     def __enter__(self) -> RemoteBench:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def __repr__(self) -> str:

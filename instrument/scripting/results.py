@@ -16,9 +16,10 @@ with, ``u_total`` with the common scale and the correlated terms added; ``u_scal
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -143,7 +144,8 @@ def fit(path: str | Path, models: Any = None, *, criterion: str = "bic",
     candidates); ``reduction``: :class:`~instrument.pipelines.brdf.reduce.ReductionOptions`
     fields. Returns the run, its reduction and the analysis (``.result.chosen``,
     ``.result.chosen_fit.params``, ``.result.verdict``)."""
-    from instrument.pipelines.brdf.pipeline import DEFAULT_MODELS, fit_run
+    from instrument.pipelines.brdf.analyse import DEFAULT_MODELS
+    from instrument.pipelines.brdf.pipeline import fit_run
     from instrument.pipelines.brdf.reduce import ReductionOptions
 
     return fit_run(path, ReductionOptions(**reduction) if reduction else None,
@@ -214,7 +216,8 @@ def _raw_dataset(xr: Any, run: RunData) -> xarray.Dataset:
     for name, values in run.detectors.items():
         if values is not None:
             data[name] = _var(values, UNITS.get(name, ""), name.replace("_", " "))
-    return xr.Dataset(data, coords=coords, attrs=_run_attrs(run, reduced=False))
+    return cast("xarray.Dataset",
+                xr.Dataset(data, coords=coords, attrs=_run_attrs(run, reduced=False)))
 
 
 def _reduced_dataset(xr: Any, run: RunData, reduction: dict[str, Any]) -> xarray.Dataset:
@@ -232,7 +235,7 @@ def _reduced_dataset(xr: Any, run: RunData, reduction: dict[str, Any]) -> xarray
     first = parts[0][0].points
     unit = "1/sr" + (" (f cos θr)" if first.cosine_corrected else "")
 
-    def cat(get) -> np.ndarray:
+    def cat(get: Callable[..., Any]) -> np.ndarray:  # get(reduction)
         return np.concatenate([np.asarray(get(red)) for red, _ in parts])
 
     coords = {name: _var(np.degrees(cat(lambda r, n=name: getattr(r.points, n))), "deg", text)
@@ -263,7 +266,7 @@ def _reduced_dataset(xr: Any, run: RunData, reduction: dict[str, Any]) -> xarray
                  cosine_corrected=int(first.cosine_corrected),
                  warnings="\n".join(dict.fromkeys(w for red, _ in parts
                                                   for w in red.warnings)))
-    return xr.Dataset(data, coords=coords, attrs=attrs)
+    return cast("xarray.Dataset", xr.Dataset(data, coords=coords, attrs=attrs))
 
 
 def _run_attrs(run: RunData, *, reduced: bool) -> dict[str, Any]:

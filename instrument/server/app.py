@@ -16,12 +16,15 @@ import asyncio
 import contextlib
 import time
 import weakref
-from typing import Annotated, Any, Literal
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Annotated, Any, Literal, cast
 
 from fastapi import Depends, FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import Message as ASGIMessage
 
 from instrument.protocol import API_PREFIX, PROTOCOL_VERSION, Message, encode, role_allows
 from instrument.run.catalog import Catalog
@@ -114,18 +117,20 @@ class _SizeLimit:
     """Refuse bodies over ``limit`` bytes (413) before any handler reads them, whether
     the client declared the length or sent it in chunks."""
 
-    def __init__(self, app, limit: int, on_refuse=None) -> None:
+    def __init__(self, app: ASGIApp, limit: int,
+                 on_refuse: Callable[[str, str], object] | None = None) -> None:
         self.app = app
         self.limit = limit
         self.on_refuse = on_refuse
 
-    async def __call__(self, scope, receive, send) -> None:
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
         declared = dict(scope.get("headers") or []).get(b"content-length")
         if declared is not None and (not declared.isdigit() or int(declared) > self.limit):
             return await self._refuse(scope, send)
-        chunks, total = [], 0
+        chunks: list[bytes] = []
+        total = 0
         while True:
             msg = await receive()
             if msg["type"] != "http.request":
@@ -139,7 +144,7 @@ class _SizeLimit:
         body = b"".join(chunks)
         done = False
 
-        async def replay():
+        async def replay() -> ASGIMessage:
             nonlocal done
             if not done:
                 done = True
@@ -147,7 +152,7 @@ class _SizeLimit:
             return await receive()
         return await self.app(scope, replay, send)
 
-    async def _refuse(self, scope, send) -> None:
+    async def _refuse(self, scope: Scope, send: Send) -> None:
         resp = JSONResponse({"detail": f"request body over {self.limit} bytes"}, 413)
         if self.on_refuse is not None:
             await asyncio.to_thread(self.on_refuse, scope["method"], scope["path"])
@@ -159,10 +164,10 @@ class _KeepSend:
     any middleware wraps it: the event stream writes frames to the connection's transport
     when the server is uvicorn (:class:`~instrument.server.fanout.RawSink`)."""
 
-    def __init__(self, app) -> None:
+    def __init__(self, app: ASGIApp) -> None:
         self.app = app
 
-    async def __call__(self, scope, receive, send) -> None:
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "websocket":
             scope[_RAW_SEND] = send
         await self.app(scope, receive, send)
@@ -171,7 +176,7 @@ class _KeepSend:
 _RAW_SEND = "scatterlab.server_send"
 
 
-async def _empty_receive():
+async def _empty_receive() -> ASGIMessage:
     return {"type": "http.disconnect"}
 
 
@@ -188,7 +193,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
     service.hub.listen(run_points.on_message)
 
     @contextlib.asynccontextmanager
-    async def lifespan(app: FastAPI):
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         yield
         await asyncio.to_thread(service.close)
 
@@ -210,7 +215,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
             return None, "wrong, revoked or expired key"
         return Caller(key.name, key.role), ""
 
-    def need(role: str):
+    def need(role: str) -> Any:  # FastAPI's Depends marker
         def dep(request: Request) -> Caller:
             caller, why = identify(request.headers.get("authorization"))
             if caller is None:
@@ -224,7 +229,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         return Depends(dep)
 
     @app.exception_handler(ServiceError)
-    async def service_error(request: Request, err: ServiceError):
+    async def service_error(request: Request, err: ServiceError) -> JSONResponse:
         request.state.audit_result = err.message
         body: dict[str, Any] = {"detail": err.message}
         if err.reasons:
@@ -233,13 +238,14 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         return JSONResponse(body, err.status, headers=headers)
 
     @app.exception_handler(RequestValidationError)
-    async def invalid(request: Request, err: RequestValidationError):
+    async def invalid(request: Request, err: RequestValidationError) -> JSONResponse:
         reasons = [f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in err.errors()]
         request.state.audit_result = "malformed request: " + "; ".join(reasons)[:300]
         return JSONResponse({"detail": "malformed request", "reasons": reasons}, 422)
 
     @app.middleware("http")
-    async def audited(request: Request, call_next):
+    async def audited(request: Request,
+                      call_next: Callable[[Request], Awaitable[Response]]) -> Response:
         response = await call_next(request)
         if request.method not in ("GET", "HEAD", "OPTIONS"):
             who, role = getattr(request.state, "audit_who", ("(no valid key)", ""))
@@ -298,7 +304,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
             return [vars(r) for r in cat.find(limit=max(1, min(limit, 10_000)))]
 
     @app.get(f"{p}/runs/files/{{path:path}}")
-    def run_file(path: str, caller: Caller = observer):
+    def run_file(path: str, caller: Caller = observer) -> FileResponse:
         target = (service.runs_dir / path).resolve()
         if not target.is_relative_to(service.runs_dir) or \
                 target.name.startswith(SERVER_DB_NAME):
@@ -328,11 +334,11 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
 
     @app.get(f"{p}/control")
     def control_get(caller: Caller = observer) -> dict[str, Any]:
-        return service.status()["control"]
+        return cast(dict[str, Any], service.status()["control"])
 
     # queue --------------------------------------------------------------------------
     @app.post(f"{p}/queue")
-    def queue_add(body: AddItem, request: Request, caller: Caller = control):
+    def queue_add(body: AddItem, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         if body.stop:
             if body.plan is not None:
@@ -345,114 +351,117 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         return done(request, f"added item {item.id} ({item.name})", item=item.summary())
 
     @app.post(f"{p}/queue/propose")
-    def queue_propose(body: Propose, request: Request, caller: Caller = observer):
+    def queue_propose(body: Propose, request: Request, caller: Caller = observer) -> dict[str, Any]:
         item = service.add_plan(caller, body.plan, body.name, propose=True)
         return done(request, f"proposed item {item.id} ({item.name}); an operator approves "
                     "or denies it", item=item.summary())
 
     @app.post(f"{p}/queue/{{item_id}}/approve")
-    def queue_approve(item_id: int, request: Request, caller: Caller = control):
+    def queue_approve(item_id: int, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         item = service.approve(caller, item_id)
         return done(request, f"approved item {item.id} ({item.name})", item=item.summary())
 
     @app.post(f"{p}/queue/{{item_id}}/deny")
-    def queue_deny(item_id: int, request: Request, caller: Caller = control):
+    def queue_deny(item_id: int, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         item = service.deny(caller, item_id)
         return done(request, f"denied item {item.id} ({item.name})")
 
     @app.post(f"{p}/queue/{{item_id}}/move")
-    def queue_move(item_id: int, body: MoveItem, request: Request, caller: Caller = control):
+    def queue_move(item_id: int, body: MoveItem, request: Request,
+                   caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         item = service.move_item(caller, item_id, body.index)
         return done(request, f"moved item {item.id} to place {body.index}")
 
     @app.delete(f"{p}/queue/{{item_id}}")
-    def queue_remove(item_id: int, request: Request, caller: Caller = control):
+    def queue_remove(item_id: int, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         item = service.remove(caller, item_id)
         return done(request, f"removed item {item.id} ({item.name})")
 
     @app.post(f"{p}/queue/start")
-    def queue_start(request: Request, caller: Caller = control):
+    def queue_start(request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         service.start_queue(caller)
         return done(request, "queue started")
 
     @app.post(f"{p}/queue/stop")
-    def queue_stop(request: Request, caller: Caller = control):
+    def queue_stop(request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         service.stop_queue(caller)
         return done(request, "queue stopped: the run in progress goes on to its end")
 
     # run control --------------------------------------------------------------------
     @app.post(f"{p}/run/pause")
-    def run_pause(request: Request, body: PauseBody | None = None, caller: Caller = control):
+    def run_pause(request: Request, body: PauseBody | None = None,
+                  caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.pause(caller, now=bool(body and body.now)))
 
     @app.post(f"{p}/run/resume")
     def run_resume(request: Request, body: ResumeBody | None = None,
-                   caller: Caller = control):
+                   caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.resume(caller, body.answer if body else "resume"))
 
     @app.post(f"{p}/run/abort")
-    def run_abort(request: Request, caller: Caller = control):
+    def run_abort(request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.abort(caller))
 
     # manual commands ----------------------------------------------------------------
     @app.post(f"{p}/bench/home")
-    def bench_home(body: RoleBody, request: Request, caller: Caller = control):
+    def bench_home(body: RoleBody, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.home(caller, body.role))
 
     @app.post(f"{p}/bench/jog")
-    def bench_jog(body: JogBody, request: Request, caller: Caller = control):
+    def bench_jog(body: JogBody, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.jog(caller, body.role, body.step))
 
     @app.post(f"{p}/bench/move")
-    def bench_move(body: MoveBody, request: Request, caller: Caller = control):
+    def bench_move(body: MoveBody, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.move_axes(caller, dict(body.targets)))
 
     @app.post(f"{p}/bench/light")
-    def bench_light(body: LightBody, request: Request, caller: Caller = control):
+    def bench_light(body: LightBody, request: Request, caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.light(caller, body.on))
 
     @app.post(f"{p}/bench/camera")
-    def bench_camera(body: CameraBody, request: Request, caller: Caller = control):
+    def bench_camera(body: CameraBody, request: Request,
+                     caller: Caller = control) -> dict[str, Any]:
         ctl(request, caller)
         return done(request, service.camera_settings(caller, exposure_us=body.exposure_us,
                                                      gain=body.gain))
 
     @app.post(f"{p}/bench/stop-all")
-    def bench_stop_all(request: Request, caller: Caller = operator):
+    def bench_stop_all(request: Request, caller: Caller = operator) -> dict[str, Any]:
         # any operator, whoever holds control: the safety path is never refused
         return done(request, service.stop_all(caller))
 
     @app.post(f"{p}/bench/connect")
-    def bench_connect(request: Request, caller: Caller = admin):
+    def bench_connect(request: Request, caller: Caller = admin) -> dict[str, Any]:
         return done(request, service.connect(caller))
 
     @app.post(f"{p}/bench/disconnect")
-    def bench_disconnect(request: Request, caller: Caller = admin):
+    def bench_disconnect(request: Request, caller: Caller = admin) -> dict[str, Any]:
         return done(request, service.disconnect(caller))
 
     # control lease ------------------------------------------------------------------
     @app.post(f"{p}/control/take")
     def control_take(request: Request, body: TakeControl | None = None,
-                     caller: Caller = operator):
+                     caller: Caller = operator) -> dict[str, Any]:
         lease = service.take_control(caller, force=bool(body and body.force),
                                      timeout_s=body.timeout_s if body else None)
         return done(request, f"control held by {lease['holder']}", **lease)
 
     @app.post(f"{p}/control/release")
-    def control_release(request: Request, caller: Caller = operator):
+    def control_release(request: Request, caller: Caller = operator) -> dict[str, Any]:
         service.release_control(caller)
         return done(request, "control released")
 
@@ -463,7 +472,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         return [{**vars(k), "state": k.state(now)} for k in keys.list()]
 
     @app.post(f"{p}/keys")
-    def keys_add(body: AddKey, request: Request, caller: Caller = admin):
+    def keys_add(body: AddKey, request: Request, caller: Caller = admin) -> dict[str, Any]:
         try:
             key, token = keys.add(body.name, body.role, expires=body.expires)
         except ValueError as err:
@@ -472,7 +481,7 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
                     token=token)
 
     @app.delete(f"{p}/keys/{{key_id}}")
-    def keys_revoke(key_id: int, request: Request, caller: Caller = admin):
+    def keys_revoke(key_id: int, request: Request, caller: Caller = admin) -> dict[str, Any]:
         try:
             key = keys.revoke(key_id)
         except KeyError as err:

@@ -33,7 +33,7 @@ class ClientBuffer:
     dispatcher thread) after each message is added, to wake the client's sender."""
 
     def __init__(self, capacity: int = 256, lifecycle_limit: int = 10_000,
-                 wake: Callable[[], None] | None = None) -> None:
+                 wake: Callable[[], object] | None = None) -> None:
         # ``wake`` is called by the hub's dispatcher (never under this buffer's lock)
         self.capacity = int(capacity)
         self.lifecycle_limit = int(lifecycle_limit)

@@ -13,6 +13,10 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from instrument.server.service import BenchService
 
 __all__ = ["DEFAULT_LISTEN", "WS_OPTIONS", "Listen", "ServeRefused", "check_listen",
            "parse_listen", "serve"]
@@ -23,7 +27,7 @@ DEFAULT_LISTEN = "127.0.0.1:8765"
 #: once per client (its own zlib stream each) was two thirds of the event loop's time with
 #: 50 clients, on the CPU the engine needs (docs/decisions/0086); the event stream is a
 #: few hundred kB/s per client at the engine's fastest, small for any lab network.
-WS_OPTIONS = {"ws": "websockets-sansio", "ws_per_message_deflate": False}
+WS_OPTIONS: dict[str, Any] = {"ws": "websockets-sansio", "ws_per_message_deflate": False}
 
 
 class ServeRefused(ValueError):
@@ -91,7 +95,7 @@ def _bind(listen: Listen) -> socket.socket:
 def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
           cert: str | None = None, key: str | None = None, allow: Sequence[str] = (),
           fsync: bool = True, say: Callable[[str], None] = print,
-          make_service=None) -> int:
+          make_service: Callable[..., BenchService] | None = None) -> int:
     """Run the server until SIGINT/SIGTERM; return an exit code.
 
     ``make_service(profile, runs_dir, fsync=..., allowed=...)`` builds the service

@@ -27,10 +27,10 @@ import dataclasses
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -56,6 +56,8 @@ from instrument.server.plans import PlanRefused, check_plan
 from instrument.server.queue import RESUMABLE, PlanQueue, QueueError, QueueItem
 
 __all__ = ["LEASE_S", "BenchService", "Caller", "ServiceError"]
+
+_T = TypeVar("_T")
 
 #: Seconds an operator's control lease lasts after its last command.
 LEASE_S = 300.0
@@ -171,7 +173,7 @@ class BenchService:
         # STATE_KINDS devices (sampler thread only): role -> (monotonic time read,
         # message), their static information, and the bench they were read from
         self._states: dict[str, tuple[float, dict[str, Any]]] = {}
-        self._state_info: dict[str, dict[str, Any]] = {}
+        self._state_info: dict[str, Mapping[str, Any]] = {}
         self._states_of: Bench | None = None
         self.interrupted = self.queue.after_restart()
         if connect:
@@ -294,7 +296,7 @@ class BenchService:
         self._queue_changed()
         return item
 
-    def _queue_call(self, fn, *args):
+    def _queue_call(self, fn: Callable[..., _T], *args: Any) -> _T:
         try:
             return fn(*args)
         except QueueError as err:

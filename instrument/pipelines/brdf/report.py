@@ -10,16 +10,19 @@ from __future__ import annotations
 
 import html
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from analysis.brdf.geometry import Geometry, make_geometry
 from analysis.brdf.reduction import BRDFPoints
 from instrument.pipelines.brdf.analyse import UNCERTAINTY_RULE, AnalysisResult, model_band_at
+
+if TYPE_CHECKING:
+    from matplotlib.projections.polar import PolarAxes
 
 __all__ = ["coincident_with", "unit_text", "write_report"]
 
@@ -114,10 +117,10 @@ def _in_plane(points: BRDFPoints) -> np.ndarray:
     """True where the receiver lies within _PLANE_TOL_DEG of the plane of incidence: its
     angular distance from that plane is arcsin|sin θr sin(φr − φi)|."""
     off = np.abs(np.sin(points.theta_r) * np.sin(points.phi_r - points.phi_i))
-    return np.degrees(np.arcsin(np.minimum(off, 1.0))) <= _PLANE_TOL_DEG
+    return cast(np.ndarray, np.degrees(np.arcsin(np.minimum(off, 1.0))) <= _PLANE_TOL_DEG)
 
 
-def _band_width_px(ax, x: np.ndarray, val: np.ndarray, sd: np.ndarray) -> float:
+def _band_width_px(ax: Any, x: np.ndarray, val: np.ndarray, sd: np.ndarray) -> float:
     """The widest ±1σ band on the panel, in display pixels (after autoscaling)."""
     ax.autoscale_view()
     ok = np.isfinite(val) & (val - sd > 0)
@@ -215,7 +218,7 @@ def _plot_polar(points: BRDFPoints, res: AnalysisResult, path: Path,
     f, _ = points.plain_brdf()
     signed = np.radians(_signed_deg(points))
     fig = plt.figure(figsize=(6.5, 5.0))
-    ax = fig.add_subplot(projection="polar")
+    ax = cast("PolarAxes", fig.add_subplot(projection="polar"))
     ax.set_theta_zero_location("N")
     ax.set_theta_direction(-1)  # specular side (signed θr > 0) on the right
     ax.set_thetamin(-90)
@@ -362,7 +365,7 @@ def write_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     curves = _curves(points)
-    figures = {
+    figures: dict[str, tuple[str, Callable[[BRDFPoints, AnalysisResult, Path], str | None]]] = {
         "inplane.png": ("In-plane BRDF per θi with fits (chosen model ±1σ band)",
                         partial(_plot_inplane, curves=curves)),
         "polar.png": ("Polar plot of the chosen model and the data",
@@ -417,7 +420,8 @@ def write_report(
                                             if k != "options"))
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in res.notes) or "<li>none</li>"
     figs = "".join(f'<h3>{html.escape(cap)}</h3><img src="{name}" alt="{html.escape(cap)}">'
-                   + (f"<p>{html.escape(captions[name])}</p>" if captions[name] else "")
+                   + (f"<p>{html.escape(cast(str, captions[name]))}</p>" if captions[name]
+                      else "")
                    for name, (cap, _) in figures.items())
     warn_html = ("<h2>Warnings (assumptions that change the result)</h2><ul>"
                  + "".join(f"<li>{html.escape(w)}</li>" for w in warnings) + "</ul>"

@@ -19,6 +19,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -142,7 +143,8 @@ def second_pass_plan(first_run: str | Path, spec: PlanSpec, profile: BenchProfil
     text = second_pass_text(spec.source_text, placement.pairs, Path(first_run).name)
     spec2 = parse_plan(text, source=f"second pass of {first_run}")
     plan2 = build_plan(replace(spec2, source_text=text), profile)
-    kw = {"det": det, "option": option, "budget": budget, "readout_s": pol.readout_s}
+    kw: dict[str, Any] = {"det": det, "option": option, "budget": budget,
+                          "readout_s": pol.readout_s}
     plan1 = build_plan(spec, profile)
     t1 = plan_seconds(plan1, plan_budget(plan1, forward, fit.params, **kw)[1],
                       pol.readout_s, frames)

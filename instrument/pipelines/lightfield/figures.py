@@ -14,8 +14,10 @@ matplotlib is imported here only, when figures are asked for.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from analysis.lightfield import Detection
 from instrument.pipelines.lightfield.results import ReconstructionResult, median_delta_p
@@ -23,7 +25,7 @@ from instrument.pipelines.lightfield.results import ReconstructionResult, median
 __all__ = ["localisation_figures", "reconstruction_figures"]
 
 
-def _pyplot():
+def _pyplot() -> Any:  # the matplotlib.pyplot module
     try:
         import matplotlib
     except ImportError as err:  # pragma: no cover - depends on the installation
@@ -39,7 +41,8 @@ def _pyplot():
 RADIANCE_UNIT = "DN/µs"
 
 
-def _field_image(ax, values, y, theta, title: str, ylabel: str, clabel: str) -> None:
+def _field_image(ax: Any, values: NDArray[Any], y: NDArray[Any], theta: NDArray[Any], title: str,
+                 ylabel: str, clabel: str) -> None:
     extent = (float(np.degrees(theta[0])), float(np.degrees(theta[-1])), float(y[0]),
               float(y[-1]))
     im = ax.imshow(values, origin="lower", aspect="auto", extent=extent, cmap="magma")

@@ -31,7 +31,7 @@ lab frame of the bench when ``detector_theta = 0``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -62,6 +62,9 @@ from analysis.sh.sphere_image import (
     sphere_geometry,
 )
 from instrument.pipelines.spheres.capture import SphereCapture, locate_sphere
+
+if TYPE_CHECKING:
+    from analysis.sh.transform import ScatteredFitOperator
 
 __all__ = ["CONSISTENCY_LIMIT", "SIM_SPHERES_THRESHOLD_SCALE", "SphereAnalysis", "analyse_capture"]
 
@@ -262,7 +265,8 @@ def _estimate_lighting(capture: SphereCapture, coeffs: np.ndarray, lmax: int
     return None, None
 
 
-def _consistency(capture: SphereCapture, coeffs: np.ndarray, geo: SphereGeometry, op, *,
+def _consistency(capture: SphereCapture, coeffs: np.ndarray, geo: SphereGeometry,
+                 op: ScatteredFitOperator, *,
                  lmax_check: int, n_cases: int, false_alarm: float,
                  threshold_scale: float, seed: int) -> ConsistencyReport:
     """M21 per-order errors of the corner images against a parametric bootstrap.

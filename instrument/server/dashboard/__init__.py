@@ -23,12 +23,16 @@ from __future__ import annotations
 
 import importlib.util
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fastapi import FastAPI, HTTPException
-from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from instrument.protocol import API_PREFIX
+
+if TYPE_CHECKING:
+    from instrument.server.service import BenchService
 
 __all__ = ["STATIC", "SUBPROTOCOL", "BrowserKeys", "bokeh_js_dir", "install_dashboard"]
 
@@ -70,7 +74,7 @@ reinstall scatterlab) and restart <code>scatterlab serve</code>. The API under
 <code>/api/v1</code> and every other client work without it.</p>"""
 
 
-def install_dashboard(app: FastAPI, service, observer) -> None:
+def install_dashboard(app: FastAPI, service: BenchService, observer: Any) -> None:
     """Add the page's routes to ``app`` and wrap it in :class:`BrowserKeys`.
 
     ``service`` is the :class:`~instrument.server.service.BenchService`; ``observer`` the
@@ -90,21 +94,21 @@ def install_dashboard(app: FastAPI, service, observer) -> None:
         return {"bench": service.profile.name, "axes": out}
 
     @app.get("/", include_in_schema=False)
-    def root():
+    def root() -> RedirectResponse:
         return RedirectResponse("/dashboard/")
 
     @app.get("/dashboard/", include_in_schema=False)
-    def page():
+    def page() -> Response:
         if bokeh is None:
             return HTMLResponse(MISSING_BOKEH, 503)
         return _served(STATIC, "index.html")
 
     @app.get("/dashboard/static/{name:path}", include_in_schema=False)
-    def static(name: str):
+    def static(name: str) -> FileResponse:
         return _served(STATIC, name)
 
     @app.get("/dashboard/bokeh/{name}", include_in_schema=False)
-    def bokeh_js(name: str):
+    def bokeh_js(name: str) -> FileResponse:
         if bokeh is None or name not in BOKEH_FILES:
             raise HTTPException(404, f"{name}: not served (bokeh is "
                                 f"{'missing' if bokeh is None else 'installed'})")
@@ -120,10 +124,10 @@ class BrowserKeys:
     whose answer names none of the subprotocols it offered). Every other request passes
     through untouched; the key is checked exactly as in a header."""
 
-    def __init__(self, app) -> None:
+    def __init__(self, app: ASGIApp) -> None:
         self.app = app
 
-    async def __call__(self, scope, receive, send) -> None:
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         offered = (scope.get("subprotocols") or []) if scope["type"] == "websocket" else []
         if SUBPROTOCOL not in offered:
             return await self.app(scope, receive, send)
@@ -134,7 +138,7 @@ class BrowserKeys:
         scope = {**scope, "headers": headers,
                  "subprotocols": [p for p in offered if not p.startswith(_BEARER)]}
 
-        async def answer(message):
+        async def answer(message: Message) -> None:
             if message["type"] == "websocket.accept" and not message.get("subprotocol"):
                 message = {**message, "subprotocol": SUBPROTOCOL}
             await send(message)

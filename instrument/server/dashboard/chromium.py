@@ -52,14 +52,15 @@ def browser() -> Iterator[Any]:
         contexts = []
 
         def new_page(profile_dir: str | Path, *, width: int = 1280, height: int = 900,
-                     args: tuple[str, ...] = ()):
+                     args: tuple[str, ...] = ()) -> Any:
             context = pw.chromium.launch_persistent_context(
                 str(profile_dir), executable_path=CHROMIUM, headless=True,
                 args=[*FLAGS, *args],
                 viewport={"width": width, "height": height}, accept_downloads=True)
             contexts.append(context)
             context.set_default_timeout(WAIT_MS)
-            page = context.pages[0] if context.pages else context.new_page()
+            # Any: the page carries its script errors in an added attribute
+            page: Any = context.pages[0] if context.pages else context.new_page()
             page.errors = []
             page.on("pageerror", lambda err: page.errors.append(str(err)))
             return page
@@ -78,7 +79,7 @@ def open_page(profile_dir: str | Path, *, width: int = 1280, height: int = 900) 
         yield new_page(profile_dir, width=width, height=height)
 
 
-def sign_in(page, url: str, key: str | None) -> None:
+def sign_in(page: Any, url: str, key: str | None) -> None:
     """Open the dashboard at ``url`` and sign in with ``key`` (None: a loopback server
     without keys); returns once the event stream is live."""
     page.goto(url.rstrip("/") + "/")
@@ -90,12 +91,12 @@ def sign_in(page, url: str, key: str | None) -> None:
     wait_live(page)
 
 
-def wait_live(page) -> None:
+def wait_live(page: Any) -> None:
     page.wait_for_function("() => document.getElementById('conn').textContent === 'live'",
                            timeout=WAIT_MS)
 
 
-def wait_run_state(page, state: str) -> None:
+def wait_run_state(page: Any, state: str) -> None:
     """Until the page shows the run in ``state`` (running, paused, finished, ...)."""
     page.wait_for_function(
         "(s) => document.getElementById('run-title').dataset.state === s", arg=state,

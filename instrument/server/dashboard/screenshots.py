@@ -17,7 +17,9 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 __all__ = ["DASHBOARD_VIEWS", "render_dashboard", "serve_sim"]
 
@@ -43,7 +45,7 @@ detectors = ["camera", "power_meter"]
 """
 
 
-def _wait(cond, timeout: float, what: str) -> None:
+def _wait(cond: Callable[[], object], timeout: float, what: str) -> None:
     deadline = time.monotonic() + timeout
     while not cond():
         if time.monotonic() > deadline:
@@ -51,12 +53,13 @@ def _wait(cond, timeout: float, what: str) -> None:
         time.sleep(0.2)
 
 
-def serve_sim(runs: Path) -> tuple[subprocess.Popen[bytes], str]:
+def serve_sim(runs: Path) -> tuple[subprocess.Popen[str], str]:
     """``scatterlab serve --bench sim`` on a free loopback port: the process, its URL."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "instrument.cli", "serve", "--bench", "sim", "--runs",
          str(runs), "--listen", "127.0.0.1:0", "--no-fsync"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert proc.stdout is not None  # stdout=PIPE
     lines = []
     for line in proc.stdout:
         lines.append(line)
@@ -123,6 +126,6 @@ def render_dashboard(out_dir: str | Path) -> dict[str, Path]:
     return shots
 
 
-def _shot(page, path: Path) -> Path:
+def _shot(page: Any, path: Path) -> Path:
     page.screenshot(path=str(path), full_page=True)
     return path
