@@ -17,7 +17,7 @@ import threading
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
-from hw_mocks.clock import Clock, ScaledClock, wire_time_s
+from hw_mocks.clock import Clock, HostPacedClock, ScaledClock, wire_time_s
 from hw_mocks.faults import FaultInjector
 
 __all__ = ["FirmwareEmulator", "clock_from_options"]
@@ -68,12 +68,12 @@ class FirmwareEmulator(ABC):
             self._rx += data
             # On a host-paced clock (hw_mocks.clock.HostPacedClock) the bytes take their
             # wire time, the command's before it runs and the reply's after.
-            paced = getattr(self.clock, "paced_by_host", False)
-            if paced:
-                self.clock.advance(wire_time_s(len(data), self.baudrate))
+            clock = self.clock
+            if isinstance(clock, HostPacedClock):
+                clock.advance(wire_time_s(len(data), self.baudrate))
             frames = self._handle_input(self._rx)
-            if paced and frames:
-                self.clock.advance(wire_time_s(sum(map(len, frames)), self.baudrate))
+            if isinstance(clock, HostPacedClock) and frames:
+                clock.advance(wire_time_s(sum(map(len, frames)), self.baudrate))
             return frames
 
     def poll(self) -> list[bytes]:

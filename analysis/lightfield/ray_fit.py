@@ -69,7 +69,7 @@ def ray_model(
     coef = phi_[sel] * np.exp(-1j * p[sel] * omega * (t_star[..., None] - 0.5 * (a + b)))
     ph = np.conj(_phase(n))[sel]
 
-    def synth(v: NDArray) -> NDArray:
+    def synth(v: NDArray[Any]) -> NDArray[Any]:
         if isinstance(sel, slice):
             return np.fft.ifft(v, axis=-1) * n
         full = np.zeros((*v.shape[:-1], n), dtype=complex)

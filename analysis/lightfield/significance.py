@@ -120,7 +120,7 @@ def amplitude_fit(
     return AmplitudeFit(amp, sigma, signif, mismatch)
 
 
-def with_leak(fit: AmplitudeFit, responses: NDArray, share: float) -> NDArray[np.float64]:
+def with_leak(fit: AmplitudeFit, responses: NDArray[Any], share: float) -> NDArray[np.float64]:
     """Significances of ``fit`` with a systematic share of what every other response leaks
     into each one: ``s_k = a_k / hypot(σ_k, share Σ_{j≠k} |a_j ⟨K_k, K_j⟩| / ⟨K_k, K_k⟩)``
     (the localiser's model-mismatch term, :data:`.localize.MODEL_MISMATCH`).

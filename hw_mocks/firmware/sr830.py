@@ -108,7 +108,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
-from hw_mocks.clock import Clock
+from hw_mocks.clock import Clock, HostPacedClock
 from hw_mocks.emulator import FirmwareEmulator
 from hw_mocks.firmware.sr830_storage import (
     BUFFER_POINTS,
@@ -411,10 +411,11 @@ class Sr830Emulator(FirmwareEmulator):
 
     def poll(self) -> list[bytes]:
         with self.lock:
-            if self._rx_lines and getattr(self.clock, "paced_by_host", False):
+            clock = self.clock
+            if self._rx_lines and isinstance(clock, HostPacedClock):
                 # The host waits for an answer held back by AGAN: on a host-paced clock
                 # its waiting is what lets the auto gain finish.
-                self.clock.run_to(self._busy_until)
+                clock.run_to(self._busy_until)
             return self._run_queue()
 
     def unsolicited_frame(self) -> bytes:

@@ -54,7 +54,8 @@ SIM_WORLD_ENTRY = "hw_mocks.sim.world:configure_world"
 
 def _entry(spec: str) -> Callable[..., Any]:
     module, _, func = spec.partition(":")
-    return getattr(importlib.import_module(module), func)
+    opener: Callable[..., Any] = getattr(importlib.import_module(module), func)
+    return opener
 
 
 def sim_entry_point(scheme: str) -> Callable[..., Any]:
@@ -95,6 +96,7 @@ def open_device(spec: DeviceSpec) -> Device:
         raise ConnectionFailed(f"driver {spec.driver!r} is not available: {err}",
                                device=spec.role, command="open") from err
     kind = registry.kind_of(spec.driver)
+    assert kind is not None  # the device was opened through its registered entry
     if not isinstance(device, Device) or not isinstance(device, kind_abc(kind)):
         with contextlib.suppress(Exception):
             device.close()
@@ -133,11 +135,13 @@ class Bench:
 
     @property
     def camera(self) -> Camera | None:
-        return self._one(Camera)
+        found: Camera | None = self._one(Camera)
+        return found
 
     @property
     def power_meter(self) -> PowerMeter | None:
-        return self._one(PowerMeter)
+        found: PowerMeter | None = self._one(PowerMeter)
+        return found
 
     @property
     def source(self) -> LightSource | None:
@@ -149,7 +153,8 @@ class Bench:
 
     @property
     def shutter(self) -> Shutter | None:
-        return self._one(Shutter)
+        found: Shutter | None = self._one(Shutter)
+        return found
 
     @property
     def light_switch(self) -> LightSource | None:
@@ -159,11 +164,13 @@ class Bench:
 
     @property
     def lockin(self) -> LockIn | None:
-        return self._one(LockIn)
+        found: LockIn | None = self._one(LockIn)
+        return found
 
     @property
     def filter_wheel(self) -> FilterWheel | None:
-        return self._one(FilterWheel)
+        found: FilterWheel | None = self._one(FilterWheel)
+        return found
 
     def homed_pose(self) -> dict[str, float]:
         """Positions (axis units) of the homed axes now, read from each axis: the pose the
@@ -199,7 +206,7 @@ class Bench:
     def __enter__(self) -> Bench:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 

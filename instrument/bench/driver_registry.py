@@ -81,7 +81,8 @@ KINDS: dict[str, str] = {
 
 def kind_abc(kind: str) -> type:
     """The ABC of ``kind`` (a key of :data:`KINDS`), from :mod:`drivers.base`."""
-    return getattr(importlib.import_module("drivers.base"), KINDS[kind])
+    abc: type = getattr(importlib.import_module("drivers.base"), KINDS[kind])
+    return abc
 
 
 _TYPE_WORDS = {float: "a number", int: "an integer", bool: "true or false", str: "a string",

@@ -482,7 +482,7 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
                       timing_declared=frozenset(timing))
 
 
-def _serial(v: _Validator, t: dict, path: str, driver: str | None) -> str | None:
+def _serial(v: _Validator, t: dict[str, Any], path: str, driver: str | None) -> str | None:
     """The ``serial`` of a device its driver finds by serial number (it stands in for the
     url)."""
     if "url" in t:

@@ -43,7 +43,7 @@ def list_drivers() -> int:
     return 0
 
 
-def describe(device) -> str:
+def describe(device: object) -> str:
     """One line of live state for a device."""
     from drivers.base import Camera, LightSource, MotionAxis, PowerMeter
 

@@ -688,7 +688,9 @@ class BenchService:
                     if not self._drive(item, engine, path):
                         return
             except LockHeld as err:
-                engine.store.close()
+                # The other holder is writing this file: close our handles without
+                # writing a status or a journal line into its run.
+                engine.store.abandon()
                 self._item_failed(item, f"run {Path(path).name} is being continued by "
                                   f"{err.holder}")
                 return

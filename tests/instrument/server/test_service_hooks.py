@@ -9,6 +9,10 @@ import threading
 import pytest
 
 from instrument.bench.profile import load_profile, parse_profile
+from instrument.run.journal import read_journal
+from instrument.run.locks import hold
+from instrument.run.paths import writer_lock_path
+from instrument.run.storage import journal_path
 from instrument.server.service import STATE_KINDS, BenchService, Caller
 from tests.instrument.server.helpers import fast_profile_text, plan_text
 from tests.waiting import wait_for
@@ -106,4 +110,45 @@ def test_the_devices_message_carries_the_lock_in_wheel_and_meter(tmp_path):
         assert states["power_meter"]["values"]["wavelength_nm"] == 550.0
         json.dumps(states, allow_nan=False)
     finally:
+        svc.close()
+
+
+class LockedByAnother(BenchService):
+    """Another holder takes the writer lock of each new run file the moment the service
+    has opened it, as a ``scatterlab resume`` of the same file in another process would."""
+
+    def __init__(self, *args, **kw) -> None:
+        self.other_holders: list = []
+        super().__init__(*args, **kw)
+
+    def _engine_for(self, item, bench):
+        engine, note = super()._engine_for(item, bench)
+        if engine is not None:
+            held = hold(writer_lock_path(engine.store.path), "scatterlab resume (test)")
+            held.__enter__()  # a second open file: flock refuses the service's own
+            self.other_holders.append(held)
+        return engine, note
+
+
+@pytest.mark.timeout(600)
+def test_a_run_file_locked_by_another_process_fails_the_item_and_is_left_alone(tmp_path):
+    svc = LockedByAnother(parse_profile(fast_profile_text(), source="fast sim"),
+                          tmp_path / "runs", fsync=False)
+    try:
+        item = svc.add_plan(OPERATOR, plan_text("locked", THETA_R))
+        svc.start_queue(OPERATOR)
+        wait_for(lambda: [h.outcome for h in svc.queue.history()] == ["failed"], HOLD_S,
+                 "the item to fail")
+        (entry,) = svc.queue.history()
+        assert entry.item_id == item.id
+        assert "is being continued by" in entry.note and "scatterlab resume (test)" in entry.note
+        assert svc.status()["queue_running"] is False and svc.engine is None
+        # the service closed its handles without writing: the run's status and journal
+        # stay the other holder's to write
+        (run_file,) = (tmp_path / "runs").rglob("*.h5")
+        records, _ = read_journal(journal_path(run_file))
+        assert records and not [r for r in records if r.get("t") == "status"]
+    finally:
+        for held in svc.other_holders:
+            held.__exit__(None, None, None)
         svc.close()
