@@ -87,6 +87,11 @@ nitpick_ignore_regex = [
     # Pieces of an annotation that autodoc could not evaluate (a type-checking-only
     # import inside a generic: 'dict[str, Foo]'): the signature shows it as written.
     (r"py:class", r"'?\w+\[.*"),
+    # Standard-library types named through a module alias or a stub-only module, as the
+    # signature writes them: `from importlib import metadata` (metadata.EntryPoint) and
+    # _typeshed's WriteableBuffer (a type-checking-only name, no run-time object).
+    (r"py:class", r"metadata\.EntryPoint"),
+    (r"py:class", r"WriteableBuffer"),
 ]
 
 # --- HTML -------------------------------------------------------------------------------

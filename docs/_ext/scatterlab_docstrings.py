@@ -13,15 +13,22 @@
   ``Class.attribute`` of a class documented elsewhere) to the one documented object whose
   dotted name ends with it. A name that does not lead to a documented object
   stays a warning (an error in the build).
+* A built-in name in an annotation (``-> type``) stays text, as the Python domain leaves a
+  built-in it cannot find. It is unlinked before resolution because Sphinx marks every
+  annotation reference "specific" (``refspecific`` set, even to False), and a specific
+  search for ``type`` would match every documented attribute called ``type``
+  (``Option.type``, ``Message.type``) and warn that the reference is ambiguous.
 """
 
 from __future__ import annotations
 
+import builtins
 import importlib
 import re
 import sys
 from typing import Any
 
+from sphinx.addnodes import pending_xref
 from sphinx.ext.napoleon import Config
 from sphinx.ext.napoleon.docstring import NumpyDocstring
 
@@ -147,7 +154,17 @@ def resolve_missing(app, env, node, contnode):
     return results[0][1] if results else None
 
 
+def unlink_builtins(app, doctree) -> None:
+    """Replace each Python reference to a built-in class (``type``, ``int``) by its text;
+    a reference written ``.type`` (specific on purpose: the project's first) is kept."""
+    for node in list(doctree.findall(pending_xref)):
+        if (node.get("refdomain") == "py" and not node.get("refspecific")
+                and isinstance(getattr(builtins, node.get("reftarget", ""), None), type)):
+            node.replace_self(node.children)
+
+
 def setup(app):
     app.connect("autodoc-process-docstring", process_docstring)
+    app.connect("doctree-read", unlink_builtins)
     app.connect("missing-reference", resolve_missing)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

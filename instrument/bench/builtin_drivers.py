@@ -4,7 +4,7 @@
 Each entry says the device kind, the driver class (imported only when a device is opened:
 neither OpenCV, the simulation nor NumPy is imported to validate a profile), the profile options
 the constructor takes, the settings applied after opening, and the pyserial scheme of the
-firmware emulator. The simulated camera and source live in :mod:`hw_mocks`: production
+firmware emulator. The simulated camera and source live in ``hw_mocks``: production
 code reaches them only by the strings here and their URL schemes (``simcam://``,
 ``simsource://``), never by an import.
 """

@@ -12,7 +12,7 @@ worker), never on the GUI thread.
 **Adding a kind**: write its ABC in ``drivers/base.py``, then register it here with
 :func:`register_kind` — a name, the ABC, ``read_info`` and ``read_values`` functions and a
 poll interval — and give it a panel in ``gui.qt.panels``
-(:func:`gui.qt.panels.register_panel` with the same name). A driver of an existing kind
+(``gui.qt.panels.register_panel`` with the same name). A driver of an existing kind
 (a Zaber axis, another shutter) needs nothing: it is shown and commanded through its
 kind. A device whose kind is not registered still appears, with its identity and an
 "unknown kind" state.

@@ -3,7 +3,7 @@
 Drivers are found by name in the driver registry (:mod:`instrument.bench.driver_registry`:
 every driver, scatterlab's and plugins', is registered under the ``scatterlab.drivers``
 entry-point group). Devices that exist only in simulation (camera, source) and the emulated
-USB backend live in :mod:`hw_mocks`; they are reached *only* through the URL scheme in the
+USB backend live in ``hw_mocks``; they are reached *only* through the URL scheme in the
 profile (``simcam://``, ``simsource://``, ``simusb://``), by a string import, so no code
 path that real hardware takes imports the mocks. Likewise the pyserial handlers of the
 emulated serial controllers (each driver's registered emulator scheme: ``simapt://``,

@@ -66,7 +66,7 @@ BUILTIN_DISTRIBUTION = "scatterlab"
 #: subclasses. The names are the GUI's device kinds (:mod:`instrument.bench.device_state`), so a
 #: plugin's device is shown through its kind. The GUI may add kinds that refine one of
 #: these for a driver class with more to set (``genicam_camera``: a ``camera`` whose class
-#: is a :class:`drivers.genicam_camera.GenICamCamera`); it shows a device through the most
+#: is a ``drivers.genicam_camera.GenICamCamera``); it shows a device through the most
 #: derived kind its class implements.
 KINDS: dict[str, str] = {
     "motion_axis": "MotionAxis",

@@ -176,8 +176,9 @@ class DeviceSpec:
 
     @property
     def kind(self) -> str | None:
-        """The device kind of the driver (``"motion_axis"``...; :data:`KINDS`), None for a
-        driver that is not registered."""
+        """The device kind of the driver (``"motion_axis"``...;
+        :data:`~instrument.bench.driver_registry.KINDS`), None for a driver that is not
+        registered."""
         return driver_registry().kind_of(self.driver)
 
     @property

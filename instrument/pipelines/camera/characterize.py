@@ -7,8 +7,8 @@ in memory), reduced to pair statistics (:func:`analysis.photon_transfer.pair_sta
 and evaluated by :func:`analysis.emva1288.characterize`; the frames at the exposure nearest
 half the saturation signal are read again and averaged for the non-uniformities.
 
-The JSON written holds every key :meth:`instrument.bench.camera_calibration.
-CameraCalibration.from_json` reads, and the EMVA numbers with their uncertainties under
+The JSON written holds every key
+:meth:`instrument.bench.camera_calibration.CameraCalibration.from_json` reads, and the EMVA numbers with their uncertainties under
 ``"emva1288"`` (which ``from_json`` ignores).
 """
 
