@@ -15,7 +15,8 @@ constant irradiance; H ∝ exposure time) taken as pairs of frames at every expo
 dark pairs at the same exposures:
 
 * mean and temporal variance of every pair
-  (:func:`analysis.photon_transfer.pair_statistics`: the difference of the two frames removes the fixed pattern);
+  (:func:`analysis.photon_transfer.pair_statistics`: the difference of the two frames
+  removes the fixed pattern);
 * saturation: the point of the sweep where the temporal variance σ²_y is largest
   (R4.0 §6, photon-transfer evaluation); μ_e.sat = (μ_y.sat − μ_y.dark)/K is the
   saturation capacity;

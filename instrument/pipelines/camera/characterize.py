@@ -8,8 +8,8 @@ and evaluated by :func:`analysis.emva1288.characterize`; the frames at the expos
 half the saturation signal are read again and averaged for the non-uniformities.
 
 The JSON written holds every key
-:meth:`instrument.bench.camera_calibration.CameraCalibration.from_json` reads, and the EMVA numbers with their uncertainties under
-``"emva1288"`` (which ``from_json`` ignores).
+:meth:`instrument.bench.camera_calibration.CameraCalibration.from_json` reads, and the
+EMVA numbers with their uncertainties under ``"emva1288"`` (which ``from_json`` ignores).
 """
 
 from __future__ import annotations
