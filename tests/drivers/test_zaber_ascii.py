@@ -692,14 +692,19 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, c
 def test_error_state_during_move_raises_fault_and_enable_recovers(faulty):
     axis, faults = faulty
     axis.velocity = 1.0
-    axis.move_to(5.0)
-    faults.schedule(FaultKind.ERROR_STATE, nth=1, code="FS")
-    with pytest.raises(ZaberFault) as info:
-        axis.wait(60)
-    assert info.value.code == "FS" and "stalled and stopped" in str(info.value)
-    assert info.value.device == "beh"
-    with pytest.raises(ZaberFault):
-        axis.move_to(1.0)  # refused until cleared
+    # Emulated time stands while the stall is injected, so the axis stalls where the move
+    # began whatever the host's load (on the running clock that point followed the wall
+    # time between the move and the poll).
+    with emulator_of(axis).clock.held():
+        axis.move_to(5.0)
+        faults.schedule(FaultKind.ERROR_STATE, nth=1, code="FS")
+        with pytest.raises(ZaberFault) as info:
+            axis.wait(60)
+        assert info.value.code == "FS" and "stalled and stopped" in str(info.value)
+        assert info.value.device == "beh"
+        assert emulator_of(axis).position_usteps() == 0
+        with pytest.raises(ZaberFault):
+            axis.move_to(1.0)  # refused until cleared
     axis.enable()
     axis.velocity = 20.0
     axis.move_to(1.0, wait=True, timeout=10)
