@@ -141,13 +141,26 @@ def test_two_objects_on_one_line_of_sight_with_unresolved_depths_are_said_to_be_
 
 
 @pytest.mark.slow
-def test_brushed_metal_pair_one_blur_apart_is_reported_as_two_inseparable_objects(bench):
-    """Two discs one blur apart side by side behind the brushed metal: two objects over
-    them whose depths hold the truth, and a note that says they are not separable."""
+def test_brushed_metal_pair_one_blur_apart_is_one_extended_object_over_both(bench):
+    """Two discs one blur apart side by side behind the brushed metal (±3.2 mm, blur
+    6.5 mm): the resolution limit.  The search leaves two points on their common line of
+    sight (z ≈ −207 and −191 mm); the test across fits the two points at the true places,
+    but a bar 12 mm across explains the data within Δ ≈ 6.4 noise variances of them,
+    under the ln n_eff ≈ 8.7 bound: the data do not separate the pair, so the report is
+    one object flagged "extended" whose width covers both discs — not a place claimed
+    resolved (ADR 0032, "Line of sight and across")."""
     brdf = bench.walls()["brushed_metal"]
     objects = bench.scenes(bench.wall_blur(brdf, None, "brushed_metal"))["pair_1blur"]
     det = _locate(bench, "brushed_metal", objects, 1)
-    assert det.count == 2
-    for obj in objects:
-        assert all(_holds(det, k, obj) for k in range(det.count))
-    assert any("two objects, not separable in depth" in n for n in det.notes)
+    assert det.count == 1 and det.quality == ("extended",), det.positions_mm
+    ((*_, stat, bound),) = det.extended_tests
+    assert stat <= bound
+    y0, width = det.positions_mm[0, 0], det.extent_mm[0, 0]
+    blur = det.resolutions[0].transverse_mm
+    # the segment spans both discs across, and is no wider than the pair and a blur
+    assert all(abs(obj.y_mm - y0) <= 0.5 * width for obj in objects), (y0, width)
+    assert width <= abs(objects[1].y_mm - objects[0].y_mm) + blur
+    far, near = det.depth_interval_mm[0]
+    assert all(far <= obj.z_mm <= near for obj in objects)
+    # nothing is stacked on the line of sight any more: no depth-inseparability note
+    assert not any("not separable in depth" in n for n in det.notes)
