@@ -20,6 +20,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hw_mocks import registry
 from hw_mocks.faults import FaultKind
@@ -71,6 +72,7 @@ def _power_on_again() -> None:
     reset_worlds()
 
 
+@pytest.mark.slow  # two lock-in scans with real settling waits: ~18 s (ADR 0021)
 def test_a_seeded_lock_in_scan_gives_the_same_data_on_a_slow_host(tmp_path):
     profile = _profile(7)
     quiet = _run(tmp_path, "quiet", profile)

@@ -97,6 +97,7 @@ def test_errors_name_the_fix(ptc_run, tmp_path, capsys) -> None:
     assert "photon_transfer" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # a BRDF run fitted twice: ~7 s on top of the shared calibration run
 def test_fit_with_the_recovered_calibration_matches_the_true_one(recovered, tmp_path,
                                                                  capsys) -> None:
     """The same BRDF, within the fit's σ (which now includes u(Kη)), as with the
