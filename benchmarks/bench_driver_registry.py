@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 PROBE = r"""
-import json, sys, time
+import importlib.util, json, sys, time
 t0 = time.perf_counter()
 from instrument.bench.profile import load_profile
 t1 = time.perf_counter(); load_profile("sim"); t2 = time.perf_counter(); load_profile("sim")
@@ -35,11 +35,9 @@ t3 = time.perf_counter()
 out = {"import instrument.bench.profile": t1 - t0, "load_profile('sim'), first": t2 - t1,
        "load_profile('sim'), again": t3 - t2}
 numpy = "numpy" in sys.modules
-try:
+if importlib.util.find_spec("instrument.bench.driver_registry") is not None:
+    # (absent from a checkout from before the registry, --tree)
     from instrument.bench.driver_registry import load_registry
-except ImportError:  # a checkout from before the registry (--tree)
-    pass
-else:
     t4 = time.perf_counter(); load_registry(); t5 = time.perf_counter()
     out["load_registry() again (the scan, entries imported)"] = t5 - t4
 from importlib import metadata

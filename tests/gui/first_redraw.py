@@ -10,11 +10,13 @@ the window showed. Every wait polls a condition under a generous limit.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
-import time
 
 from PySide6.QtWidgets import QApplication
+
+from tests.waiting import wait_for
 
 #: Seconds the window may take to connect and build its run browser on a loaded machine.
 TIMEOUT_S = 120.0
@@ -27,10 +29,14 @@ def main(url: str) -> int:
     window = ClientWindow(url)
     before = set(sys.modules)
     window.show()
-    deadline = time.monotonic() + TIMEOUT_S
-    while window.browser is None and time.monotonic() < deadline:
+
+    def browser_built() -> bool:
         app.processEvents()
-        time.sleep(0.01)
+        return window.browser is not None
+
+    # tests.waiting: poll a condition, the limit only bounds a hang
+    with contextlib.suppress(AssertionError):  # not built: the JSON line says so
+        wait_for(browser_built, TIMEOUT_S, "the run browser")
     print(json.dumps({"browser": window.browser is not None,
                       "stats_before_show": "scipy.stats" in before,
                       "imported": sorted(set(sys.modules) - before)}))
