@@ -5,6 +5,8 @@ Pure numerics on arrays (no I/O, no other project package). Conventions (Stokes
 :mod:`analysis.polarimetry.elements` and in ADR 0098.
 """
 
+from analysis.polarimetry.calibration import DrrCalibration, ReferenceScan, calibrate_drr
+from analysis.polarimetry.decomposition import PolarDecomposition, decompose
 from analysis.polarimetry.drr import (
     MuellerEstimate,
     analyser_row,
@@ -16,6 +18,12 @@ from analysis.polarimetry.drr import (
     pem_instrument_rows,
     reduce,
 )
+from analysis.polarimetry.ecm import (
+    EcmCalibration,
+    ReferenceSample,
+    ecm_calibrate,
+    retarder_diattenuator,
+)
 from analysis.polarimetry.elements import (
     depolariser,
     diattenuator,
@@ -25,23 +33,42 @@ from analysis.polarimetry.elements import (
     rotation,
     stokes_dop,
 )
+from analysis.polarimetry.realizability import (
+    Realizability,
+    coherency_matrix,
+    mueller_from_coherency,
+    realizability,
+)
 from analysis.polarimetry.validation import PolarimetryInputError
 
 __all__ = [
+    "DrrCalibration",
+    "EcmCalibration",
     "MuellerEstimate",
+    "PolarDecomposition",
     "PolarimetryInputError",
+    "Realizability",
+    "ReferenceSample",
+    "ReferenceScan",
     "analyser_row",
+    "calibrate_drr",
+    "coherency_matrix",
     "condition_number",
+    "decompose",
     "depolariser",
     "diattenuator",
     "drr_angles",
+    "ecm_calibrate",
     "generator_stokes",
     "instrument_matrix",
     "linear_polariser",
     "linear_retarder",
+    "mueller_from_coherency",
     "normalise",
     "pem_instrument_rows",
+    "realizability",
     "reduce",
+    "retarder_diattenuator",
     "rotated",
     "rotation",
     "stokes_dop",

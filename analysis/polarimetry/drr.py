@@ -101,10 +101,36 @@ def instrument_matrix(psg_retarder_deg: ArrayLike, psa_retarder_deg: ArrayLike, 
             f"got {a_ang.shape}")
     d_g = _scalar("psg_retardance", psg_retardance)
     d_a = _scalar("psa_retardance", psa_retardance)
-    rows = [np.outer(analyser_row(ta, d_a, psa_polariser_deg),
-                     generator_stokes(tg, d_g, psg_polariser_deg)).ravel()
-            for tg, ta in zip(g_ang, a_ang, strict=True)]
-    return np.array(rows).reshape(len(rows), 16)
+    p_g = math.radians(_scalar("psg_polariser_deg", psg_polariser_deg))
+    p_a = math.radians(_scalar("psa_polariser_deg", psa_polariser_deg))
+    # vectorised over the steps: g_k = Ret(θ_k) · Pol(p_g) · (1,0,0,0),
+    # a_k = [Pol(p_a) · Ret(θ'_k)] row 0; the same matrices as elements.py (tested equal)
+    pol_g = 0.5 * np.array([1.0, math.cos(2 * p_g), math.sin(2 * p_g), 0.0])
+    pol_a = 0.5 * np.array([1.0, math.cos(2 * p_a), math.sin(2 * p_a), 0.0])
+    gen = np.einsum("kij,j->ki", _retarders(np.radians(g_ang), d_g), pol_g)
+    ana = np.einsum("i,kij->kj", pol_a, _retarders(np.radians(a_ang), d_a))
+    return (ana[:, :, None] * gen[:, None, :]).reshape(g_ang.size, 16)
+
+
+def _retarders(theta_rad: NDArray[np.float64], delta: float) -> NDArray[np.float64]:
+    """Linear-retarder Mueller matrices, shape (K, 4, 4), fast axes θ_k, retardance δ.
+
+    The closed form of ``R(−θ) M(0) R(θ)`` (Goldstein 2011, §5.5) for the matrix of
+    :func:`analysis.polarimetry.elements.linear_retarder`.
+    """
+    c, s = np.cos(2 * theta_rad), np.sin(2 * theta_rad)
+    cd, sd = math.cos(delta), math.sin(delta)
+    out = np.zeros((theta_rad.size, 4, 4))
+    out[:, 0, 0] = 1.0
+    out[:, 1, 1] = c * c + s * s * cd
+    out[:, 1, 2] = out[:, 2, 1] = c * s * (1.0 - cd)
+    out[:, 1, 3] = -s * sd
+    out[:, 2, 2] = s * s + c * c * cd
+    out[:, 2, 3] = c * sd
+    out[:, 3, 1] = s * sd
+    out[:, 3, 2] = -c * sd
+    out[:, 3, 3] = cd
+    return out
 
 
 def drr_angles(steps: int, ratio: float = 5.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -209,3 +209,15 @@ def test_single_pem_setting_cannot_see_u_columns():
     w = pem_instrument_rows(analysers, amplitude_rad=2.405)
     with pytest.raises(PolarimetryInputError, match="rank"):
         reduce(np.zeros(len(w)), 1.0, w)
+
+
+def test_vectorised_instrument_matrix_equals_element_products():
+    rng = np.random.default_rng(2)
+    g, a = rng.uniform(-180, 180, 20), rng.uniform(-180, 180, 20)
+    w = instrument_matrix(g, a, psg_retardance=1.9, psa_retardance=2.3,
+                          psg_polariser_deg=7.0, psa_polariser_deg=-4.0)
+    for k in range(20):
+        gen = (linear_retarder(math.radians(g[k]), 1.9) @ linear_polariser(math.radians(7.0))
+               @ np.array([1.0, 0, 0, 0]))
+        ana = (linear_polariser(math.radians(-4.0)) @ linear_retarder(math.radians(a[k]), 2.3))[0]
+        np.testing.assert_allclose(w[k], np.outer(ana, gen).ravel(), atol=1e-15)
