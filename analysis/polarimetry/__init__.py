@@ -33,6 +33,7 @@ from analysis.polarimetry.elements import (
     rotation,
     stokes_dop,
 )
+from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf, fresnel_mueller, pbrdf
 from analysis.polarimetry.realizability import (
     Realizability,
     coherency_matrix,
@@ -42,9 +43,11 @@ from analysis.polarimetry.realizability import (
 from analysis.polarimetry.validation import PolarimetryInputError
 
 __all__ = [
+    "PBRDF_PARAMS",
     "DrrCalibration",
     "EcmCalibration",
     "MuellerEstimate",
+    "PbrdfFit",
     "PolarDecomposition",
     "PolarimetryInputError",
     "Realizability",
@@ -59,12 +62,15 @@ __all__ = [
     "diattenuator",
     "drr_angles",
     "ecm_calibrate",
+    "fit_pbrdf",
+    "fresnel_mueller",
     "generator_stokes",
     "instrument_matrix",
     "linear_polariser",
     "linear_retarder",
     "mueller_from_coherency",
     "normalise",
+    "pbrdf",
     "pem_instrument_rows",
     "realizability",
     "reduce",

@@ -1,0 +1,270 @@
+"""Polarimetric BRDF model (microfacet Fresnel + depolarising diffuse) and its fit.
+
+Model (Priest & Germer, "Polarimetric BRDF in the microfacet model: theory and
+measurements", Proc. 2000 Meeting of the Military Sensing Symposia Specialty Group on
+Passive Sensors 1, 169 (2002)): the Mueller-matrix BRDF (unit 1/sr) of a rough surface is
+
+    F(ωi, ωr) = D(θh) · V(μi, μr) · R(−η_r) · F_facet(β) · R(η_i)  +  (ρ/π) · diag(1,0,0,0)
+
+* ``D`` the facet-slope distribution (Beckmann with rms slope α, or GGX of width α;
+  :mod:`analysis.brdf.microfacet`), ``V = G₂/(4μiμr)`` the height-correlated Smith
+  visibility (Heitz 2014, eq. 99) in place of Priest & Germer's shadowing function;
+  ``m00`` is then exactly the scalar microfacet BRDF with unpolarised Fresnel
+  reflectance.
+* ``F_facet`` the Fresnel Mueller matrix of the facet at its local incidence angle β
+  (``cos β = ωi·h``), in the facet's s/p frames (``e₁ = s``, perpendicular to the plane
+  of ωi and ωr; ``e₂ = k × s``, k the propagation direction, for each beam):
+  ``½[[Rs+Rp, Rs−Rp, 0, 0], [Rs−Rp, Rs+Rp, 0, 0], [0, 0, 2Re c, −2Im c],
+  [0, 0, 2Im c, 2Re c]]`` with ``c = r_s r_p*``, from the Jones matrix diag(r_s, r_p)
+  and ``V = 2 Im(E₁E₂*)`` for fields written with exp(−iωt) — the Stokes convention of
+  :mod:`analysis.polarimetry.elements` (checked in the tests against the retarder matrix).
+  ``r_s, r_p`` and the index convention ``n̂ = n + ik``, k ≥ 0, are those of
+  :mod:`analysis.brdf.fresnel` (Born & Wolf).
+* The global frames (the frames the polarimeter's azimuths refer to): for each beam,
+  ``e₁`` lies in the plane containing the surface normal and the beam (for in-plane
+  scans the scattering plane: +x of the beam frame is "p"), ``e₂ = −s_g`` with
+  ``s_g = (−sin φ, cos φ, 0)``, so that ``e₁ × e₂ = k``. ``η`` is the angle from the
+  global ``e₁`` to the facet's ``s`` about k (Priest & Germer's rotation of the facet
+  Mueller matrix into the global frames). In this frame a smooth dielectric at Brewster's
+  angle has ``m01 = −m00`` (only s light, which is −Q, is reflected).
+* ``ρ`` the albedo of an ideal depolarising Lambertian layer.
+
+Parameters of the fit, in this order: ``n``, ``k`` (the complex index), ``alpha``
+(roughness), ``albedo``; any of them can be held fixed. The fit minimises
+``χ² = Σ_g rᵀ C_g⁻¹ r`` over the geometries g (r the 16 residuals of the Mueller matrix,
+``C_g`` its 16×16 covariance from :func:`analysis.polarimetry.drr.reduce`), by whitening
+with ``C_g^(−½)`` (pseudo-inverse: a normalised matrix's ``m00`` has zero variance), and
+judges it with the project's goodness-of-fit gate
+(:func:`analysis.brdf.goodness.goodness_of_fit`, ADR 0051).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import optimize
+
+from analysis.brdf.fresnel import fresnel
+from analysis.brdf.goodness import GoodnessOfFit, goodness_of_fit
+from analysis.brdf.microfacet import beckmann_d, ggx_d, smith_visibility
+from analysis.polarimetry.validation import PolarimetryInputError, check_array
+
+__all__ = ["PBRDF_PARAMS", "PbrdfFit", "fit_pbrdf", "fresnel_mueller", "pbrdf"]
+
+#: Parameter names, in the order of the parameter vector.
+PBRDF_PARAMS = ("n", "k", "alpha", "albedo")
+_LOWER = np.array([1.0 + 1e-6, 0.0, 1e-3, 0.0])
+_UPPER = np.array([10.0, 20.0, 1.5, 1.0])
+_DISTRIBUTIONS = ("beckmann", "ggx")
+
+
+def fresnel_mueller(cos_beta: ArrayLike, n: complex) -> NDArray[np.float64]:
+    """Fresnel Mueller matrices (shape (..., 4, 4)) in the facet's s/p frames (module doc)."""
+    res = fresnel(cos_beta, n)
+    c = res.rs * np.conj(res.rp)
+    out = np.zeros((*np.shape(res.Rs), 4, 4))
+    out[..., 0, 0] = out[..., 1, 1] = 0.5 * (res.Rs + res.Rp)
+    out[..., 0, 1] = out[..., 1, 0] = 0.5 * (res.Rs - res.Rp)
+    out[..., 2, 2] = out[..., 3, 3] = c.real
+    out[..., 2, 3] = -c.imag
+    out[..., 3, 2] = c.imag
+    return out
+
+
+def _rot(eta: NDArray[np.float64]) -> NDArray[np.float64]:
+    c, s = np.cos(2 * eta), np.sin(2 * eta)
+    out = np.zeros((*eta.shape, 4, 4))
+    out[..., 0, 0] = out[..., 3, 3] = 1.0
+    out[..., 1, 1] = out[..., 2, 2] = c
+    out[..., 1, 2] = s
+    out[..., 2, 1] = -s
+    return out
+
+
+def _frames(theta: NDArray[np.float64], phi: NDArray[np.float64],
+            k: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Global (e₁, e₂) of beams with propagation k (module docstring)."""
+    s_g = np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], axis=-1)
+    return np.cross(k, s_g), -s_g
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    cos_theta_h: NDArray[np.float64]
+    cos_beta: NDArray[np.float64]
+    mu_i: NDArray[np.float64]
+    mu_r: NDArray[np.float64]
+    rot_in: NDArray[np.float64]   # R(η_i), shape (N, 4, 4)
+    rot_out: NDArray[np.float64]  # R(−η_r)
+
+
+def _geometry(theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
+              phi_r: ArrayLike) -> _Geometry:
+    arrs = [check_array(name, v) for name, v in (("theta_i", theta_i), ("phi_i", phi_i),
+                                                  ("theta_r", theta_r), ("phi_r", phi_r))]
+    ti, pi_, tr, pr = (a.ravel() for a in np.broadcast_arrays(*arrs))
+    for name, t in (("theta_i", ti), ("theta_r", tr)):
+        if np.any((t < 0) | (t > math.pi / 2)):
+            raise PolarimetryInputError(name, "must lie in [0, π/2] rad (from the normal)")
+    wi = np.stack([np.sin(ti) * np.cos(pi_), np.sin(ti) * np.sin(pi_), np.cos(ti)], axis=-1)
+    wr = np.stack([np.sin(tr) * np.cos(pr), np.sin(tr) * np.sin(pr), np.cos(tr)], axis=-1)
+    v = wi + wr
+    vn = np.linalg.norm(v, axis=-1)
+    h = np.where(vn[:, None] > 0, v / np.where(vn > 0, vn, 1.0)[:, None], [0.0, 0.0, 1.0])
+    cross = np.cross(wi, wr)
+    cn = np.linalg.norm(cross, axis=-1)
+    k_in, k_out = -wi, wr
+    e1_in, e2_in = _frames(ti, pi_, k_in)
+    e1_out, e2_out = _frames(tr, pr, k_out)
+    # facet s: ⊥ to the plane of ωi and ωr; when they are parallel (retro-reflection)
+    # every s is equivalent and the global s of the incident beam is used
+    s_loc = np.where(cn[:, None] > 1e-12, cross / np.where(cn > 1e-12, cn, 1.0)[:, None],
+                     -e2_in)
+    eta_i = np.arctan2(np.sum(s_loc * e2_in, -1), np.sum(s_loc * e1_in, -1))
+    eta_r = np.arctan2(np.sum(s_loc * e2_out, -1), np.sum(s_loc * e1_out, -1))
+    return _Geometry(cos_theta_h=h[:, 2], cos_beta=np.clip(np.sum(wi * h, -1), 0.0, 1.0),
+                     mu_i=np.cos(ti), mu_r=np.cos(tr), rot_in=_rot(eta_i),
+                     rot_out=_rot(-eta_r))
+
+
+def _evaluate(p: NDArray[np.float64], g: _Geometry, distribution: str) -> NDArray[np.float64]:
+    n, k, alpha, albedo = (float(v) for v in p)
+    d = (beckmann_d(g.cos_theta_h, alpha) if distribution == "beckmann"
+         else ggx_d(g.cos_theta_h, alpha))
+    vis = smith_visibility(g.mu_i, g.mu_r, alpha, distribution=distribution)
+    f = fresnel_mueller(g.cos_beta, complex(n, k))
+    spec = (d * vis)[:, None, None] * (g.rot_out @ f @ g.rot_in)
+    spec[:, 0, 0] += albedo / math.pi
+    return spec
+
+
+def _check_params(params: ArrayLike, distribution: str) -> NDArray[np.float64]:
+    p = check_array("params", params, shape=(4,))
+    if distribution not in _DISTRIBUTIONS:
+        raise PolarimetryInputError("distribution", f"must be one of {_DISTRIBUTIONS}, "
+                                    f"got {distribution!r}")
+    for i, name in enumerate(PBRDF_PARAMS):
+        if not _LOWER[i] <= p[i] <= _UPPER[i]:
+            raise PolarimetryInputError(
+                "params", f"{name} = {p[i]} outside [{_LOWER[i]}, {_UPPER[i]}]")
+    return p
+
+
+def pbrdf(params: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
+          phi_r: ArrayLike, *, distribution: str = "beckmann") -> NDArray[np.float64]:
+    """The Mueller-matrix BRDF (1/sr) at the given geometries (module docstring).
+
+    Parameters
+    ----------
+    params : array_like of shape (4,)
+        ``(n, k, alpha, albedo)``: index n + ik (k ≥ 0), roughness (Beckmann rms slope or
+        GGX width), Lambertian albedo of the depolarising layer.
+    theta_i, phi_i, theta_r, phi_r : array_like, broadcast together to N geometries
+        Polar angles from the normal and azimuths, radians (conventions of
+        :mod:`analysis.brdf.geometry`; the specular direction is φr = φi + π).
+
+    Returns
+    -------
+    ndarray of shape (N, 4, 4)
+    """
+    p = _check_params(params, distribution)
+    return _evaluate(p, _geometry(theta_i, phi_i, theta_r, phi_r), distribution)
+
+
+@dataclass(frozen=True)
+class PbrdfFit:
+    """The result of :func:`fit_pbrdf`.
+
+    Attributes
+    ----------
+    params : ndarray of shape (4,)
+        ``(n, k, alpha, albedo)`` at the minimum (fixed ones at their given values).
+    sigma : ndarray of shape (4,)
+        Standard errors (0 for fixed parameters).
+    cov : ndarray of shape (4, 4)
+        Covariance of the parameters (zero rows/columns for fixed ones).
+    goodness : GoodnessOfFit
+        χ², degrees of freedom, p-value and verdict (the project's gate).
+    """
+
+    params: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    goodness: GoodnessOfFit
+
+
+def _whiteners(cov: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """Per geometry, C^(−½) on the covariance's range (pseudo-inverse square root)."""
+    out = []
+    for c in cov:
+        vals, vecs = np.linalg.eigh(0.5 * (c + c.T))
+        keep = vals > 1e-12 * max(float(vals[-1]), 1e-300)
+        out.append((vecs[:, keep] / np.sqrt(vals[keep])).T)
+    return out
+
+
+def fit_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike,
+              theta_r: ArrayLike, phi_r: ArrayLike, *, start: ArrayLike,
+              fixed: Sequence[str] = (), distribution: str = "beckmann") -> PbrdfFit:
+    """Fit the pBRDF to measured Mueller matrices with their full covariances.
+
+    Parameters
+    ----------
+    m : array_like of shape (N, 4, 4)
+        Measured Mueller-matrix BRDF, 1/sr.
+    cov : array_like of shape (N, 16, 16)
+        Covariance of each row-major ``vec(m[g])``.
+    theta_i, phi_i, theta_r, phi_r : array_like of shape (N,)
+        The geometries, radians.
+    start : array_like of shape (4,)
+        Start values ``(n, k, alpha, albedo)`` (and the values of fixed parameters).
+    fixed : sequence of str
+        Names from :data:`PBRDF_PARAMS` held at their start value (e.g. ``("k",)`` for a
+        dielectric).
+
+    Raises
+    ------
+    PolarimetryInputError
+        Mis-shaped or non-finite input, unknown names in ``fixed``, start outside bounds.
+    """
+    mm = check_array("m", m)
+    if mm.ndim != 3 or mm.shape[1:] != (4, 4):
+        raise PolarimetryInputError("m", f"must have shape (N, 4, 4), got {mm.shape}")
+    n_geo = mm.shape[0]
+    cc = check_array("cov", cov, shape=(n_geo, 16, 16))
+    p0 = _check_params(start, distribution)
+    unknown = [f for f in fixed if f not in PBRDF_PARAMS]
+    if unknown:
+        raise PolarimetryInputError("fixed", f"names unknown parameters {unknown}; "
+                                    f"use {PBRDF_PARAMS}")
+    geo = _geometry(theta_i, phi_i, theta_r, phi_r)
+    if geo.mu_i.size != n_geo:
+        raise PolarimetryInputError("theta_i", f"must give {n_geo} geometries, "
+                                    f"got {geo.mu_i.size}")
+    free = np.array([name not in fixed for name in PBRDF_PARAMS])
+    whit = _whiteners(cc)
+    data = mm.reshape(n_geo, 16)
+
+    def full(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        p = p0.copy()
+        p[free] = x
+        return p
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        model = _evaluate(full(x), geo, distribution).reshape(n_geo, 16)
+        return np.concatenate([wg @ (model[g] - data[g]) for g, wg in enumerate(whit)])
+
+    x0 = np.clip(p0[free], _LOWER[free] + 1e-9, _UPPER[free] - 1e-9)
+    res = optimize.least_squares(residuals, x0, bounds=(_LOWER[free], _UPPER[free]),
+                                 method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                                 gtol=1e-12)
+    cov_free = np.linalg.pinv(res.jac.T @ res.jac)
+    cov_full = np.zeros((4, 4))
+    cov_full[np.ix_(free, free)] = cov_free
+    gof = goodness_of_fit(res.fun, int(free.sum()))
+    return PbrdfFit(params=full(res.x), sigma=np.sqrt(np.clip(np.diag(cov_full), 0, None)),
+                    cov=cov_full, goodness=gof)
