@@ -100,7 +100,9 @@ class DrrCalibration:
         Their covariance.
     sample_params : tuple of tuple of float
         Per scan: ``(scale,)`` for air, ``(scale, angle_deg)`` for a polariser,
-        ``(scale, angle_deg, retardance)`` for a retarder.
+        ``(scale, angle_deg, retardance)`` for a retarder. The instrument matrix is for
+        a unit source; the air scan's scale is the source intensity in the readings'
+        units, by which a reduced matrix is divided to give transmittances.
     chi2 : float
         Weighted residual sum of squares.
     dof : int

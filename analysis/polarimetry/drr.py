@@ -329,6 +329,8 @@ def pem_instrument_rows(analysers: ArrayLike, *, amplitude_rad: float,
     if an.shape[1] != 4:
         raise PolarimetryInputError("analysers", f"must have shape (N, 4), got {an.shape}")
     amp = _scalar("amplitude_rad", amplitude_rad)
+    pem_axis_deg = _scalar("pem_axis_deg", pem_axis_deg)
+    polariser_deg = _scalar("polariser_deg", polariser_deg)
     g_plus = generator_stokes(pem_axis_deg, 0.0, polariser_deg)       # g0 + gc
     g_minus = generator_stokes(pem_axis_deg, math.pi, polariser_deg)  # g0 − gc
     g_quarter = generator_stokes(pem_axis_deg, math.pi / 2, polariser_deg)  # g0 + gs

@@ -10,7 +10,9 @@ Passive Sensors 1, 169 (2002)): the Mueller-matrix BRDF (unit 1/sr) of a rough s
   :mod:`analysis.brdf.microfacet`), ``V = G₂/(4μiμr)`` the height-correlated Smith
   visibility (Heitz 2014, eq. 99) in place of Priest & Germer's shadowing function;
   ``m00`` is then exactly the scalar microfacet BRDF with unpolarised Fresnel
-  reflectance.
+  reflectance: with GGX it equals the registry model ``ggx_conductor+lambert``
+  (:mod:`analysis.brdf.registry`, tested), so the scalar fits and model selection
+  already cover ``m00``; this module fits the whole matrix.
 * ``F_facet`` the Fresnel Mueller matrix of the facet at its local incidence angle β
   (``cos β = ωi·h``), in the facet's s/p frames (``e₁ = s``, perpendicular to the plane
   of ωi and ωr; ``e₂ = k × s``, k the propagation direction, for each beam):

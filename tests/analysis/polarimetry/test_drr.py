@@ -221,3 +221,25 @@ def test_vectorised_instrument_matrix_equals_element_products():
                @ np.array([1.0, 0, 0, 0]))
         ana = (linear_polariser(math.radians(-4.0)) @ linear_retarder(math.radians(a[k]), 2.3))[0]
         np.testing.assert_allclose(w[k], np.outer(ana, gen).ravel(), atol=1e-15)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40))
+def test_mismatched_retarder_angle_arrays_named(n_g, n_a):
+    if n_g == n_a:
+        return
+    with pytest.raises(PolarimetryInputError) as err:
+        instrument_matrix(np.zeros(n_g), np.zeros(n_a), psg_retardance=QWP,
+                          psa_retardance=QWP)
+    assert err.value.argument == "psa_retarder_deg"
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(["amplitude_rad", "pem_axis_deg", "polariser_deg"]),
+       st.sampled_from([math.nan, math.inf, -math.inf]))
+def test_pem_non_finite_settings_named(name, bad):
+    kwargs = {"amplitude_rad": 2.405, "pem_axis_deg": 45.0, "polariser_deg": 0.0}
+    kwargs[name] = bad
+    with pytest.raises(PolarimetryInputError) as err:
+        pem_instrument_rows(np.array([[0.5, 0.5, 0.0, 0.0]]), **kwargs)
+    assert err.value.argument == name

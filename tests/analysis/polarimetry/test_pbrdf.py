@@ -174,3 +174,15 @@ def test_fit_input_checks():
     with pytest.raises(PolarimetryInputError) as err:
         pbrdf((1.5, 0.0, 0.2, 0.1), 2.0, 0.0, 0.1, math.pi)
     assert err.value.argument == "theta_i"
+
+
+def test_ggx_m00_is_the_registry_model_ggx_conductor_plus_lambert():
+    # the scalar route (fit_brdf, select_model) already fits m00 with this registry name
+    from analysis.brdf import get_model, make_geometry
+    rng = np.random.default_rng(4)
+    ti, tr = rng.uniform(0.05, 1.4, 20), rng.uniform(0.05, 1.4, 20)
+    pi_, pr = rng.uniform(-math.pi, math.pi, 20), rng.uniform(-math.pi, math.pi, 20)
+    p = np.array([1.4, 7.6, 0.2, 0.3])
+    m = pbrdf(p, ti, pi_, tr, pr, distribution="ggx")
+    scalar = get_model("ggx_conductor+lambert").value_fn(p, make_geometry(ti, pi_, tr, pr))
+    np.testing.assert_allclose(m[:, 0, 0], scalar, rtol=1e-10)
