@@ -96,6 +96,15 @@ class Realizability:
     alpha: float
     flagged: bool
 
+    def negative_beyond(self, k: float = 3.0) -> bool:
+        """Whether some eigenvalue is below ``−k σ`` (first-order σ).
+
+        The plain "all eigenvalues ≥ 0 within kσ" rule: it holds its one-sided level only
+        for well-separated eigenvalues (a depolarising matrix); for a nearly pure matrix
+        use :attr:`flagged` (module docstring).
+        """
+        return bool(np.any(self.eigenvalues < -float(k) * self.sigma))
+
 
 def _sqrt_psd(cov: NDArray[np.float64]) -> NDArray[np.float64]:
     """A matrix L with L Lᵀ = cov, for a possibly singular covariance (eigen square root)."""

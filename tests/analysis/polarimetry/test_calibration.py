@@ -54,6 +54,10 @@ def test_ecm_recovers_misaligned_separable_polarimeter():
     assert cal.samples[2].retardance == pytest.approx(1.4, abs=5e-3)
     assert cal.samples[1].theta_deg == pytest.approx(90.0, abs=0.1)
     assert cal.samples[2].theta_deg == pytest.approx(30.0, abs=0.1)
+    # W and A themselves, up to the common scale ECM cannot see (A W is measured)
+    scale = np.sum(cal.w * w_true) / np.sum(w_true * w_true)
+    np.testing.assert_allclose(cal.w / scale, w_true, atol=2e-3)
+    np.testing.assert_allclose(cal.a * scale, a_true, atol=2e-3)
     for name, m in TEST_SAMPLES.items():
         b = meas(m)
         est = reduce(b.ravel(), noise, cal.instrument_matrix())

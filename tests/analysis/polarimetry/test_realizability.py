@@ -47,6 +47,9 @@ def test_non_physical_matrix_is_flagged():
     res = realizability(m, np.eye(16) * 1e-6)
     assert res.eigenvalues[0] == pytest.approx(-0.5)
     assert res.flagged and res.p_value < 1e-3
+    assert res.negative_beyond(3.0)
+    ok = realizability(depolariser(1.0, 0.5), np.eye(16) * 1e-6)
+    assert not ok.flagged and not ok.negative_beyond(3.0) and ok.p_value == 1.0
 
 
 def test_slightly_non_physical_measurement_flagged_with_its_noise():
