@@ -5,13 +5,19 @@ Pure numerics on arrays (no I/O, no other project package). Conventions (Stokes
 :mod:`analysis.polarimetry.elements` and in ADR 0110.
 """
 
-from analysis.polarimetry.calibration import DrrCalibration, ReferenceScan, calibrate_drr
+from analysis.polarimetry.calibration import (
+    DrrCalibration,
+    ReferenceScan,
+    calibrate_drr,
+    reduce_calibrated,
+)
 from analysis.polarimetry.decomposition import PolarDecomposition, decompose
 from analysis.polarimetry.drr import (
     MuellerEstimate,
     analyser_row,
     condition_number,
     drr_angles,
+    estimate,
     generator_stokes,
     instrument_matrix,
     normalise,
@@ -62,6 +68,7 @@ __all__ = [
     "diattenuator",
     "drr_angles",
     "ecm_calibrate",
+    "estimate",
     "fit_pbrdf",
     "fresnel_mueller",
     "generator_stokes",
@@ -74,6 +81,7 @@ __all__ = [
     "pem_instrument_rows",
     "realizability",
     "reduce",
+    "reduce_calibrated",
     "retarder_diattenuator",
     "rotated",
     "rotation",

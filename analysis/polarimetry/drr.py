@@ -37,6 +37,7 @@ __all__ = [
     "analyser_row",
     "condition_number",
     "drr_angles",
+    "estimate",
     "generator_stokes",
     "instrument_matrix",
     "normalise",
@@ -194,7 +195,9 @@ class MuellerEstimate:
         Degrees of freedom, K − 16 (0 for an exactly determined set).
     m_normalised, cov_normalised, sigma_normalised : ndarray
         ``m / m00`` with its covariance propagated to first order (:func:`normalise`);
-        ``m_normalised[0, 0] = 1`` with zero variance.
+        ``m_normalised[0, 0] = 1`` with zero variance. All zero when ``m00 ≤ 0``.
+    normalised_valid : bool
+        Whether ``m00 > 0``, i.e. whether the normalised matrix exists.
     """
 
     m: NDArray[np.float64]
@@ -205,6 +208,7 @@ class MuellerEstimate:
     m_normalised: NDArray[np.float64]
     cov_normalised: NDArray[np.float64]
     sigma_normalised: NDArray[np.float64]
+    normalised_valid: bool = True
 
 
 def normalise(m: ArrayLike, cov: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -279,14 +283,27 @@ def reduce(intensities: ArrayLike, sigmas: ArrayLike, w: ArrayLike) -> MuellerEs
     cov = 0.5 * (cov + cov.T)
     resid = a @ vec - b
     m = vec.reshape(4, 4)
-    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None)).reshape(4, 4)
-    if m[0, 0] > 0:
-        mn, cn = normalise(m, cov)
-    else:  # nothing transmitted: the normalised matrix is undefined, not an error here
-        mn, cn = np.full((4, 4), np.nan), np.full((16, 16), np.nan)
+    return estimate(m, cov, chi2=float(resid @ resid), dof=k - 16)
+
+
+def estimate(m: ArrayLike, cov: ArrayLike, *, chi2: float, dof: int) -> MuellerEstimate:
+    """A :class:`MuellerEstimate` from a matrix and its covariance (σ, normalised parts).
+
+    Used by :func:`reduce` and by reductions that add terms to the covariance (e.g. the
+    calibration's, :func:`analysis.polarimetry.calibration.reduce_calibrated`).
+    """
+    mat = check_array("m", m, shape=(4, 4))
+    c = check_array("cov", cov, shape=(16, 16))
+    sigma = np.sqrt(np.clip(np.diag(c), 0.0, None)).reshape(4, 4)
+    valid = bool(mat[0, 0] > 0)
+    if valid:
+        mn, cn = normalise(mat, c)
+    else:  # nothing transmitted: M/m00 is not observable; zeros and the flag, not NaN
+        mn, cn = np.zeros((4, 4)), np.zeros((16, 16))
     sn = np.sqrt(np.clip(np.diag(cn), 0.0, None)).reshape(4, 4)
-    return MuellerEstimate(m=m, cov=cov, sigma=sigma, chi2=float(resid @ resid), dof=k - 16,
-                           m_normalised=mn, cov_normalised=cn, sigma_normalised=sn)
+    return MuellerEstimate(m=mat, cov=c, sigma=sigma, chi2=float(chi2), dof=int(dof),
+                           m_normalised=mn, cov_normalised=cn, sigma_normalised=sn,
+                           normalised_valid=valid)
 
 
 def pem_instrument_rows(analysers: ArrayLike, *, amplitude_rad: float,

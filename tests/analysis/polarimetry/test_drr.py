@@ -243,3 +243,11 @@ def test_pem_non_finite_settings_named(name, bad):
     with pytest.raises(PolarimetryInputError) as err:
         pem_instrument_rows(np.array([[0.5, 0.5, 0.0, 0.0]]), **kwargs)
     assert err.value.argument == name
+
+
+def test_dark_matrix_has_no_normalised_form_and_says_so():
+    w = drr_w(36)
+    est = reduce(np.zeros(36) - 1e-6, 1e-3, w)  # m00 slightly negative: noise in the dark
+    assert not est.normalised_valid
+    assert np.all(est.m_normalised == 0) and np.all(np.isfinite(est.cov_normalised))
+    assert reduce(w @ np.eye(4).ravel(), 1e-3, w).normalised_valid
