@@ -165,6 +165,17 @@ class SerialChannel:
             self._pending += self._read(1, remaining, command)
             self._pending += self._read_waiting(command)
 
+    def read_lines_available(self, terminator: bytes, *, command: str = "read") -> list[bytes]:
+        """Every complete line received by now, without waiting; a partial line stays
+        buffered for the next read (a shared bus sorts what arrived before it writes)."""
+        self._pending += self._read_waiting(command)
+        lines: list[bytes] = []
+        while (end := self._pending.find(terminator)) >= 0:
+            end += len(terminator)
+            lines.append(bytes(self._pending[:end]))
+            del self._pending[:end]
+        return lines
+
     def read_available(self, *, command: str = "read") -> bytes:
         """Whatever is buffered now, without waiting."""
         data = bytes(self._pending) + self._read_waiting(command)

@@ -106,7 +106,8 @@ from drivers.errors import (
     ProtocolError,
     StateError,
 )
-from drivers.transport import SerialChannel, open_serial
+from drivers.shared_port import PortRegistry, SharedPort
+from drivers.transport import SerialChannel
 from drivers.zaber_protocol import (
     MESSAGE_ID_RANGE,
     REJECTION_REASONS,
@@ -198,56 +199,26 @@ def accel_from_data(data: int, microstep_size: float) -> float:
 # --------------------------------------------------------------------------- shared link
 
 
-class _Link:
+class _Link(SharedPort):
     """One serial port shared by every axis of a daisy chain opened through it."""
 
     def __init__(self, key: str, channel: SerialChannel, owned: bool) -> None:
-        self.key = key
-        self.channel = channel
-        self.owned = owned  # opened here from a path or URL (else the caller's port object)
-        # One exchange at a time on the wire: a stop() from another thread, or another
-        # axis of the chain, must not read the reply a poll is waiting for.
-        self.lock = threading.RLock()
-        self.users = 0
+        super().__init__(key, channel, owned)
         self.next_id = MESSAGE_ID_RANGE[0]
         self.alerts: collections.deque[Alert] = collections.deque(maxlen=200)
 
 
-_links: dict[str, _Link] = {}
-_links_lock = threading.Lock()
+_links: PortRegistry[_Link] = PortRegistry(_Link)
 
 
 def _acquire_link(port: str | serial.SerialBase, name: str) -> tuple[_Link, bool]:
     """The link for ``port`` (shared if already open); True if it was opened just now."""
-    key = f"object:{id(port)}" if isinstance(port, serial.SerialBase) else str(port)
-    with _links_lock:
-        link = _links.get(key)
-        if link is not None:
-            link.users += 1
-            return link, False
-        raw = open_serial(port, device=name, baudrate=ZaberAxis.BAUDRATE)
-        try:
-            channel = SerialChannel(raw, device=name)
-        except BaseException:
-            if not isinstance(port, serial.SerialBase):
-                raw.close()
-            raise
-        link = _Link(key, channel, owned=not isinstance(port, serial.SerialBase))
-        link.users = 1
-        _links[key] = link
-        return link, True
+    return _links.acquire(port, name, baudrate=ZaberAxis.BAUDRATE)
 
 
 def _release_link(link: _Link, *, close_port: bool = True) -> None:
     """Drop one user; the last one closes the port (unless ``close_port`` is False)."""
-    with _links_lock:
-        link.users -= 1
-        if link.users > 0:
-            return
-        if _links.get(link.key) is link:
-            del _links[link.key]
-    if close_port:
-        link.channel.close()
+    _links.release(link, close_port=close_port)
 
 
 # --------------------------------------------------------------------------- driver
