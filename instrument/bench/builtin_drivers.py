@@ -17,8 +17,8 @@ from drivers.errors import ConnectionFailed
 from instrument.bench.driver_registry import Device, DriverEntry, Emulator, Option
 from instrument.bench.profile import DeviceSpec
 
-__all__ = ["APT", "BASLER", "FW102C", "NEWPORT_SMC100", "OPENCV_CAMERA", "PM100USB", "SC10",
-           "SIM_CAMERA", "SIM_SOURCE", "SR830", "ZABER"]
+__all__ = ["APT", "BASLER", "ELL14", "FW102C", "NEWPORT_SMC100", "OPENCV_CAMERA", "PM100USB",
+           "SC10", "SIM_CAMERA", "SIM_SOURCE", "SR830", "ZABER"]
 
 #: The package of the firmware emulators' pyserial URL handlers.
 SIM_URL_HANDLERS = "hw_mocks.urlhandler"
@@ -55,6 +55,11 @@ def _kind_kwargs(spec: DeviceSpec) -> dict[str, Any]:
 
 def _open_apt(cls: type, spec: DeviceSpec) -> Device:
     return cls(spec.url, stage=spec.stage or "K10CR1", **_axis_kwargs(spec))
+
+
+def _open_axis(cls: type, spec: DeviceSpec) -> Device:
+    """An axis whose kind the driver knows (a rotation mount): limits, tolerance, options."""
+    return cls(spec.url, **_axis_kwargs(spec))
 
 
 def _open_axis_with_kind(cls: type, spec: DeviceSpec) -> Device:
@@ -143,6 +148,17 @@ ZABER = DriverEntry(
              "checksum": Option(bool), "alerts": Option(bool), "message_ids": Option(bool),
              "flush_s": _SECONDS},
     emulator=Emulator("simzaber", SIM_URL_HANDLERS), open=_open_zaber)
+
+ELL14 = DriverEntry(
+    "motion_axis", "drivers.thorlabs_elliptec:ElliptecMount",
+    summary="Thorlabs Elliptec ELL14 rotation mounts, several on one bus (address 0-F)",
+    options={"address": Option(str, choices=tuple("0123456789ABCDEF"),
+                               doc="the module's bus address"),
+             "max_velocity": Option(float, 1.0, 1e4, doc="deg/s at 100 % velocity"),
+             "nominal_acceleration": Option(float, 1.0, 1e6, doc="deg/s², for estimates"),
+             "home_direction": Option(str, choices=("cw", "ccw")),
+             "assume_homed": Option(bool), **_POLL, **_LINK, "flush_s": _SECONDS},
+    emulator=Emulator("simell", SIM_URL_HANDLERS), open=_open_axis)
 
 SR830 = DriverEntry(
     "lockin", "drivers.stanford_sr830:Sr830LockIn",

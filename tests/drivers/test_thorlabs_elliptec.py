@@ -420,3 +420,31 @@ def test_a_missed_target_is_a_motion_error(homed):
         emulator.modules["0"].stage.stop(immediate=True)
     with pytest.raises(MotionError):
         homed.wait(30)
+
+
+# --------------------------------------------------------------------------- profile
+
+
+def test_profile_names_two_mounts_on_one_bus():
+    """``driver = "ell14"`` in a bench profile: two roles, one bus, one address each."""
+    from instrument.bench.devices import open_device
+    from instrument.bench.profile import ProfileError, parse_profile
+
+    text = ('[bench]\nname = "b"\n'
+            '[devices.sample_phi]\ndriver = "ell14"\n'
+            'url = "simell://profbus?addresses=01&speed=50"\nlimits = [-360.0, 360.0]\n'
+            'options = { address = "0" }\n'
+            '[devices.sample_tilt]\ndriver = "ell14"\n'
+            'url = "simell://profbus?addresses=01&speed=50"\nvelocity = 215.0\n'
+            'options = { address = "1", home_direction = "ccw" }\n')
+    profile = parse_profile(text)
+    with open_device(profile.device("sample_phi")) as polariser, \
+            open_device(profile.device("sample_tilt")) as analyser:
+        assert isinstance(polariser, ElliptecMount) and polariser.soft_limits == (-360, 360)
+        assert analyser.address == "1" and analyser.velocity == pytest.approx(215.0)
+        assert polariser._bus is analyser._bus
+        polariser.home()
+        polariser.move_to(22.5, wait=True, timeout=30)
+        assert polariser.position == pytest.approx(22.5, abs=DEG)
+    with pytest.raises(ProfileError, match="address"):
+        parse_profile(text.replace('address = "1"', 'address = "G"'))
