@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -109,7 +111,5 @@ def test_arbitrary_bytes_raise_only_protocol_errors(data):
             continue
         assert reply.address in ADDRESSES
     for decode in (parse_position, parse_status, parse_velocity, parse_info):
-        try:
+        with contextlib.suppress(ProtocolError):
             decode(data.decode("latin-1"))
-        except ProtocolError:
-            pass
