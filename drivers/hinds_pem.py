@@ -59,8 +59,14 @@ from drivers.errors import (
 )
 from drivers.transport import SerialChannel, open_serial
 
-__all__ = ["PemAnswer", "PemCommandError", "PemFault", "PemOutOfRange", "Pem200",
-           "parse_answer"]
+__all__ = [
+    "Pem200",
+    "PemAnswer",
+    "PemCommandError",
+    "PemFault",
+    "PemOutOfRange",
+    "parse_answer",
+]
 
 T = TypeVar("T")
 _TERMINATOR = b"\n"

@@ -76,7 +76,7 @@ def test_errors_are_typed_and_unsolicited_ones_kept():
 
 def test_values_outside_the_drive_are_refused_before_sending():
     pem, port = transcript_pem([IDN])
-    with pytest.raises(ValueError, match="above the controller's 1.0"):
+    with pytest.raises(ValueError, match=r"above the controller's 1\.0"):
         pem.retardation_waves = 2.0  # 1265.6 nm > 1000 nm
     for bad in (-0.1, math.nan, math.inf):
         with pytest.raises(ValueError):
