@@ -213,3 +213,33 @@ def test_disconnect_is_typed_and_reopen_finds_same_drive(transport, cleanup):
                               lambda: open_pem(transport, pem.name, cleanup),
                               command=":MOD:DRV?")
     assert again.retardation_waves == pytest.approx(0.3, abs=1e-5)
+
+
+# --------------------------------------------------------------------------- profile
+
+
+def test_profile_opens_a_pem200_and_the_gui_reads_it_as_a_modulator():
+    """``driver = "pem200"``: options, settings in order (wavelength, then amplitude) and the
+    device kind the bench panel shows it through."""
+    from instrument.bench.device_state import kind_of, read_state
+    from instrument.bench.devices import open_device
+    from instrument.bench.profile import parse_profile
+
+    registry.remove("simpem", "pem")
+    text = ('[bench]\nname = "b"\n[devices.pem]\ndriver = "pem200"\n'
+            'url = "simpem://pem?frequency=47000"\n'
+            'options = { nm_per_drive = 1200.0 }\n'
+            'settings = { wavelength_nm = 600.0, retardation_waves = 0.383 }\n')
+    spec = parse_profile(text).device("pem")
+    with open_device(spec) as pem:
+        assert isinstance(pem, Pem200)
+        assert pem.drive == pytest.approx(0.383 * 600.0 / 1200.0, abs=1e-6)
+        assert kind_of(pem).name == "modulator"
+        state = read_state("pem", pem, with_info=True)
+        assert state.kind == "modulator" and state.connected
+        assert state.info["wavelength_nm"] == 600.0
+        assert state.values["frequency_hz"] == pytest.approx(47000.0, abs=5.0)
+        assert state.values["retardation_waves"] == pytest.approx(0.383, abs=1e-5)
+    with pytest.raises(ConnectionFailed, match="nm_per_drive"):
+        open_device(parse_profile(text.replace("nm_per_drive = 1200.0", "baudrate = 9600"))
+                    .device("pem"))
