@@ -56,6 +56,7 @@ from drivers.errors import (
     LimitError,
     ProtocolError,
     StateError,
+    attempts_exhausted,
 )
 from drivers.transport import SerialChannel, open_serial
 
@@ -224,9 +225,7 @@ class Pem200(Modulator):
                 raise self._error(answer, command)
             return answer
         assert last is not None
-        suffix = f" (after {attempts} attempts)" if attempts > 1 else ""
-        raise type(last)(last.message + suffix, device=self.name, command=command,
-                         hint=last.hint or "check the connection and the controller") from last
+        raise attempts_exhausted(last, attempts, device=self.name, command=command) from last
 
     def _error(self, answer: PemAnswer, command: str) -> PemCommandError:
         message = f"controller refused the command: <{answer.identifier}>({answer.text})"

@@ -16,9 +16,10 @@ from typing import Generic, TypeVar
 
 import serial
 
+from drivers.errors import StateError
 from drivers.transport import SerialChannel, open_serial
 
-__all__ = ["PortRegistry", "SharedPort"]
+__all__ = ["PortRegistry", "SharedPort", "port_channel", "port_lock"]
 
 
 class SharedPort:
@@ -32,6 +33,20 @@ class SharedPort:
         # device of the bus, must not read the reply a poll is waiting for.
         self.lock = threading.RLock()
         self.users = 0
+
+
+def port_channel(link: SharedPort | None, device: str, command: str) -> SerialChannel:
+    """The channel of a device's shared port; :class:`StateError` once it is closed."""
+    if link is None:
+        raise StateError("device is closed", device=device, command=command)
+    return link.channel
+
+
+def port_lock(link: SharedPort | None, device: str) -> threading.RLock:
+    """The lock of a device's shared port; :class:`StateError` once it is closed."""
+    if link is None:
+        raise StateError("device is closed", device=device)
+    return link.lock
 
 
 P = TypeVar("P", bound=SharedPort)

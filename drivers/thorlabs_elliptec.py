@@ -87,8 +87,9 @@ from drivers.errors import (
     ProtocolError,
     StateError,
     UnsupportedFeature,
+    attempts_exhausted,
 )
-from drivers.shared_port import PortRegistry, SharedPort
+from drivers.shared_port import PortRegistry, SharedPort, port_channel, port_lock
 from drivers.transport import SerialChannel
 
 __all__ = ["ElliptecBusy", "ElliptecError", "ElliptecMount", "ElliptecOutOfRange"]
@@ -283,14 +284,10 @@ class ElliptecMount(MotionAxis):
         return f"{self.address}{command}{data}"
 
     def _chan(self, command: str) -> SerialChannel:
-        if self._bus is None:
-            raise StateError("device is closed", device=self.name, command=command)
-        return self._bus.channel
+        return port_channel(self._bus, self.name, command)
 
     def _lock(self) -> threading.RLock:
-        if self._bus is None:
-            raise StateError("device is closed", device=self.name)
-        return self._bus.lock
+        return port_lock(self._bus, self.name)
 
     def _drain(self, text: str) -> None:
         """Before a command: sort what has arrived by now. Other addresses' replies go to
@@ -398,9 +395,7 @@ class ElliptecMount(MotionAxis):
                                    command=text)
             return reply
         assert last is not None
-        suffix = f" (after {attempts} attempts)" if attempts > 1 else ""
-        raise type(last)(last.message + suffix, device=self.name, command=text,
-                         hint=last.hint or "check the connection and the module") from last
+        raise attempts_exhausted(last, attempts, device=self.name, command=text) from last
 
     def _query(self, command: str, expect: str, parse: Callable[[str], T],
                data: str = "") -> T:

@@ -105,8 +105,9 @@ from drivers.errors import (
     LimitError,
     ProtocolError,
     StateError,
+    attempts_exhausted,
 )
-from drivers.shared_port import PortRegistry, SharedPort
+from drivers.shared_port import PortRegistry, SharedPort, port_channel, port_lock
 from drivers.transport import SerialChannel
 from drivers.zaber_protocol import (
     MESSAGE_ID_RANGE,
@@ -382,14 +383,10 @@ class ZaberAxis(MotionAxis):
         return f"/{self.device} {axis} {command}".strip()
 
     def _chan(self, command: str) -> SerialChannel:
-        if self._link is None:
-            raise StateError("device is closed", device=self.name, command=command)
-        return self._link.channel
+        return port_channel(self._link, self.name, command)
 
     def _lock(self) -> threading.RLock:
-        if self._link is None:
-            raise StateError("device is closed", device=self.name)
-        return self._link.lock
+        return port_lock(self._link, self.name)
 
     def _take_id(self) -> int | None:
         if not self.message_ids or self._link is None:
@@ -481,13 +478,10 @@ class ZaberAxis(MotionAxis):
             except DeviceTimeout as err:
                 last = err
         assert last is not None
-        suffix = f" (after {attempts} attempts)" if attempts > 1 else ""
-        if retry:
-            hint = last.hint or "check the connection and the device"
-        else:
-            hint = "the command's outcome is unknown; check status()"
-        raise type(last)(last.message + suffix, device=self.name, command=text,
-                         hint=hint) from last
+        raise attempts_exhausted(
+            last, attempts, device=self.name, command=text,
+            hint=None if retry else "the command's outcome is unknown; check status()",
+        ) from last
 
     def _query(self, command: str, parse: Callable[[str], T], *, axis: int | None = None) -> T:
         """An idempotent ``get``: the reply's data parsed by ``parse``."""

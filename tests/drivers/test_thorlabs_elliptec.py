@@ -417,6 +417,7 @@ def test_a_missed_target_is_a_motion_error(homed):
     emulator = emulator_of(homed)
     with emulator.clock.held():
         homed.move_to(5.0)
+        assert homed.is_moving  # a round trip: the module has taken the move (pty too)
         emulator.modules["0"].stage.stop(immediate=True)
     with pytest.raises(MotionError):
         homed.wait(30)
