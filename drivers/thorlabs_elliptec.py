@@ -432,6 +432,34 @@ class ElliptecMount(MotionAxis):
         return self._query("gp", "PO", parse_position)
 
     @property
+    def jog_step(self) -> float:
+        """The jog step in degrees (``gj``): what :meth:`jog` moves by."""
+        self._check_open("jog_step")
+        return self._query("gj", "GJ", parse_position) * self.degrees_per_pulse
+
+    @jog_step.setter
+    def jog_step(self, degrees: float) -> None:
+        self._check_open("set jog_step")
+        degrees = float(degrees)
+        if not (math.isfinite(degrees) and degrees > 0):
+            raise ValueError(f"{self.name}: a jog step must be a finite number > 0 degrees, "
+                             f"got {degrees}")
+        data = pulses_to_hex(self._pulses(degrees))
+        self._check(self._status_code("sj", data), self._text("sj", data))
+
+    def jog(self, forward: bool = True, *, wait: bool = False, timeout: float = 60.0) -> None:
+        """Move one jog step forward (``fw``) or backward (``bw``): a relative move whose
+        size the module holds, e.g. to step a waveplate by a fixed angle with one byte
+        triple per step. The target is forgotten (a later :meth:`wait` checks no arrival)."""
+        self._check_open("jog")
+        self._require_ready("jog")
+        self._refuse_if_faulted("jog")
+        self._target = None
+        self._start_motion("fw" if forward else "bw", "")
+        if wait:
+            self.wait(timeout)
+
+    @property
     def fault(self) -> int | None:
         """The status code of the last fault met (``None``: no fault); cleared by enable()."""
         return self._fault

@@ -34,6 +34,7 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.elliptec import ElliptecEmulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
+from tests.drivers.fault_checks import corrupted_reads
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
@@ -370,6 +371,18 @@ def test_query_faults_recover(faulty, kind, params):
     query_survives(faults, kind, params, lambda: mount.position_pulses, round(4.0 / DEG))
 
 
+def test_corrupted_replies_are_retried_or_decoded_the_protocol_has_no_checksum(faulty):
+    """A flip in the address, the mnemonic or the line end makes the reply not ours and
+    the query is retried; a flip that turns one hex digit into another decodes as a wrong
+    position, which the Elliptec protocol (no checksum) cannot catch: counted here."""
+    mount, faults = faulty
+    mount.move_to(4.0, wait=True, timeout=30)
+    expected = round(4.0 / DEG)
+    got = corrupted_reads(lambda: mount.position_pulses, lambda v: v == expected, faults,
+                          n=30, device=mount.name, command="0gp")
+    assert got.right + got.wrong + got.failed == 30 and got.right >= 10
+
+
 def test_random_faults_on_a_long_session_never_hang(faulty):
     mount, faults = faulty
     motion_fault_session(mount, faults)
@@ -449,3 +462,25 @@ def test_profile_names_two_mounts_on_one_bus():
         assert polariser.position == pytest.approx(22.5, abs=DEG)
     with pytest.raises(ProfileError, match="address"):
         parse_profile(text.replace('address = "1"', 'address = "G"'))
+
+
+def test_jog_steps_by_the_modules_step(homed):
+    homed.move_to(10.0, wait=True, timeout=30)
+    homed.jog_step = 22.5
+    assert homed.jog_step == pytest.approx(22.5, abs=DEG)
+    homed.jog(wait=True, timeout=30)
+    homed.jog(wait=True, timeout=30)
+    homed.jog(forward=False, wait=True, timeout=30)
+    assert homed.position == pytest.approx(32.5, abs=2 * DEG)
+    with pytest.raises(ValueError):
+        homed.jog_step = 0.0
+
+
+def test_jog_transcript():
+    steps = [*CONNECT, (b"0sj00000FA0", b"0GS00\r\n"), *status(), (b"0bw", b""),
+             (b"0gs", b"0POFFFFF060\r\n0GS00\r\n"), (b"0gp", b"0POFFFFF060\r\n")]
+    mount, port = transcript_mount(steps, assume_homed=True)
+    mount.jog_step = 4000 * DEG
+    mount.jog(forward=False, wait=True)
+    assert mount.target is None and mount.skipped_lines == 1
+    port.assert_complete()
