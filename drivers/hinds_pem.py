@@ -185,15 +185,8 @@ class Pem200(Modulator):
         deadline = time.monotonic() + self.reply_timeout
         noise: list[str] = []
         while True:
-            try:
-                line = self._chan(command).read_line(
-                    _TERMINATOR, timeout=max(deadline - time.monotonic(), 0.0),
-                    command=command, max_bytes=_MAX_LINE)
-            except DeviceTimeout as err:
-                if noise:
-                    raise ProtocolError(f"no valid answer; received {'; '.join(noise[:3])}",
-                                        device=self.name, command=command) from err
-                raise
+            line = self._chan(command).read_line_by(_TERMINATOR, deadline, command=command,
+                                                    noise=noise, max_bytes=_MAX_LINE)
             try:
                 answer = parse_answer(line)
             except ProtocolError as err:

@@ -319,15 +319,8 @@ class ElliptecMount(MotionAxis):
         assert self._bus is not None
         box = self._bus.mailbox[self.address]
         while not box:
-            try:
-                line = self._chan(text).read_line(
-                    TERMINATOR, timeout=max(deadline - time.monotonic(), 0.0), command=text,
-                    max_bytes=_MAX_LINE)
-            except DeviceTimeout as err:
-                if noise:  # silence after noise: name the noise as the cause
-                    raise ProtocolError(f"no valid reply; received {'; '.join(noise[:3])}",
-                                        device=self.name, command=text) from err
-                raise
+            line = self._chan(text).read_line_by(TERMINATOR, deadline, command=text,
+                                                 noise=noise, max_bytes=_MAX_LINE)
             try:
                 reply = scan_reply(line)
             except ProtocolError as err:

@@ -422,14 +422,8 @@ class ZaberAxis(MotionAxis):
         noise: list[str] = []
         while True:
             try:
-                line = self._chan(text).read_line(
-                    TERMINATOR, timeout=max(deadline - time.monotonic(), 0.0), command=text,
-                    max_bytes=_MAX_LINE)
-            except DeviceTimeout as err:
-                if noise:  # silence after noise: name the noise as the cause
-                    raise ProtocolError(f"no valid reply; received {'; '.join(noise[:3])}",
-                                        device=self.name, command=text) from err
-                raise
+                line = self._chan(text).read_line_by(TERMINATOR, deadline, command=text,
+                                                     noise=noise, max_bytes=_MAX_LINE)
             except ProtocolError as err:
                 raise ProtocolError(err.message, device=self.name, command=text) from err
             try:

@@ -116,14 +116,6 @@ def test_answers_round_trip(identifier, text, error):
 # --------------------------------------------------------------------------- emulator
 
 
-@pytest.fixture
-def cleanup():
-    items: list = []
-    yield items
-    for item in reversed(items):
-        item.close()
-
-
 def open_pem(transport: str, name: str, cleanup: list, **kw) -> Pem200:
     if transport == "url":
         pem = Pem200(f"simpem://{name}", name=name, nm_per_drive=NM, **kw)

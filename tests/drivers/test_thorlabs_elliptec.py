@@ -224,14 +224,6 @@ def test_arguments_are_validated_before_opening(kw):
 # --------------------------------------------------------------------------- emulator
 
 
-@pytest.fixture
-def cleanup():
-    items: list = []
-    yield items
-    for item in reversed(items):
-        item.close()
-
-
 def open_mount(transport: str, name: str, *, cleanup: list, address: str = "0",
                addresses: str = "0", **kw) -> ElliptecMount:
     kw.setdefault("flush_s", 0.0)
