@@ -7,10 +7,13 @@ against an independent reading.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hw_mocks import registry
 from hw_mocks.clock import ManualClock
@@ -117,3 +120,27 @@ def test_firmware_emulator_imports_nothing_from_drivers():
     root = Path(__file__).resolve().parents[2] / "hw_mocks"
     assert_imports_nothing_forbidden(root / "firmware" / "elliptec.py",
                                      root / "urlhandler" / "protocol_simell.py")
+
+
+# --------------------------------------------------------------------------- fuzzing
+
+_REPLY = re.compile(rb"[02](IN[0-9A-F]{30}|GS[0-9A-F]{2}|PO[0-9A-F]{8}|GV[0-9A-F]{2}"
+                    rb"|GJ[0-9A-F]{8})\r\n")
+_packets = st.one_of(
+    st.tuples(st.sampled_from("0257"), st.sampled_from(
+        ["in", "gs", "gp", "gv", "gj", "st", "fw", "bw", "ho", "ma", "mr", "sj", "sv", "zz"]),
+        st.text("0123456789ABCDEFX", max_size=8)).map(lambda t: "".join(t).encode()),
+    st.binary(max_size=6))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(_packets, st.floats(0.0, 0.5)), max_size=25))
+def test_any_byte_stream_gets_only_well_formed_replies(script):
+    """Whatever arrives (packets with any data, line noise), the bus answers only
+    well-formed replies from modules that exist, and never raises."""
+    clock = ManualClock()
+    bus = ElliptecEmulator("fuzz", addresses="02", clock=clock)
+    for data, dt in script:
+        for frame in bus.receive(data) + bus.poll():
+            assert _REPLY.fullmatch(frame), frame
+        clock.advance(dt)
