@@ -33,6 +33,10 @@ How this driver deals with the protocol
   (``max_velocity``, 430°/s for the ELL14 per its specification sheet).
 * **Stop**: ``st`` ends any motion at once **[the manual documents it for continuous
   jogging; that it also ends a move is assumed]**.
+* **Bus time.** At 9600 baud (10 bits a byte) one status poll (``gs`` 3 bytes, ``GS``
+  reply 7, ``gp`` 3, ``PO`` reply 13) is 26 bytes, 27 ms on the wire: a bus of four mounts
+  polled in turn cannot report faster than about 9 rounds a second, whatever
+  ``poll_interval`` says.
 * Only idempotent commands are retried after a timeout or a garbled reply (queries,
   ``sv``, ``st``); ``ma``, ``mr`` and ``ho`` are written once and never read back
   synchronously. Every read has a deadline.

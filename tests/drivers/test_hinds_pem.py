@@ -235,3 +235,18 @@ def test_profile_opens_a_pem200_and_the_gui_reads_it_as_a_modulator():
     with pytest.raises(ConnectionFailed, match="nm_per_drive"):
         open_device(parse_profile(text.replace("nm_per_drive = 1200.0", "baudrate = 9600"))
                     .device("pem"))
+
+
+@pytest.mark.hardware
+def test_real_controller_identity_and_frequency():
+    """Opt-in: ``SCATTERLAB_HW_PEM200=/dev/ttyACM0``. Reads only (the drive is unchanged):
+    confirms the answer format and the assumed ``:MOD:FREQ?``."""
+    import os
+
+    port = os.environ.get("SCATTERLAB_HW_PEM200")
+    if not port:
+        pytest.skip("set SCATTERLAB_HW_PEM200 to the controller's serial port")
+    with Pem200(port, name="hw_pem", nm_per_drive=1000.0) as pem:
+        assert pem.identity.model
+        assert 0.0 <= pem.drive <= 1.0
+        assert 1e3 < pem.frequency_hz < 1e6

@@ -476,3 +476,20 @@ def test_jog_transcript():
     mount.jog(forward=False, wait=True)
     assert mount.target is None and mount.skipped_lines == 1
     port.assert_complete()
+
+
+@pytest.mark.hardware
+def test_real_mount_identity_and_status():
+    """Opt-in: ``SCATTERLAB_HW_ELL14=/dev/ttyUSB0`` (``SCATTERLAB_HW_ELL14_ADDRESS``, default
+    0). Moves nothing; confirms the ``in`` layout, ``gs``/``gp`` and the ``gv`` percentage."""
+    import os
+
+    port = os.environ.get("SCATTERLAB_HW_ELL14")
+    if not port:
+        pytest.skip("set SCATTERLAB_HW_ELL14 to the interface board's serial port")
+    with ElliptecMount(port, name="hw_ell14", reply_timeout=1.0,
+                       address=os.environ.get("SCATTERLAB_HW_ELL14_ADDRESS", "0")) as mount:
+        assert mount.identity.vendor == "Thorlabs" and mount.identity.serial
+        assert mount.degrees_per_pulse == pytest.approx(360 / 143360)
+        assert mount.status().error is None
+        assert 0 < mount.velocity <= mount.max_velocity
