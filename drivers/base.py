@@ -1711,3 +1711,82 @@ def _finite_positive(value: float, what: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{what} must be a finite number > 0, got {value}")
     return value
+
+
+# --------------------------------------------------------------------------- modulator
+# Kept in one self-contained section, like the lock-in's.
+
+__all__ += ["Modulator"]
+
+
+class Modulator(Device):
+    """A photoelastic modulator (PEM): a retarder whose retardation oscillates at the
+    resonance of its optical head, δ(t) = 2π·A·sin(2π f t).
+
+    ``A`` is the peak retardation in waves at :attr:`wavelength_nm` (a half-wave modulator
+    at 633 nm: ``A = 0.5``), :attr:`retardation_rad` the same in radians (2πA, the
+    argument of the Bessel functions J₁, J₂ that weight the detector's 1f and 2f terms);
+    :attr:`frequency_hz` is the modulation frequency f the lock-in takes as its reference
+    (its harmonics 1 and 2 carry the polarisation signals). A modulator's retardation in
+    nanometres is fixed by its drive, so the same drive is fewer waves at a longer
+    wavelength: setting :attr:`wavelength_nm` keeps the drive and changes ``A``.
+
+    Parameters
+    ----------
+    name
+        Role name (e.g. ``"pem"``).
+    """
+
+    @property
+    def wavelength_nm(self) -> float:
+        """The wavelength the retardation amplitude is expressed at, nm."""
+        self._check_open("wavelength_nm")
+        return self._do_get_wavelength_nm()
+
+    @wavelength_nm.setter
+    def wavelength_nm(self, value: float) -> None:
+        self._check_open("set wavelength_nm")
+        self._do_set_wavelength_nm(_finite_positive(value, f"{self.name}: wavelength"))
+
+    @property
+    def retardation_waves(self) -> float:
+        """Peak retardation amplitude in waves at :attr:`wavelength_nm`."""
+        self._check_open("retardation_waves")
+        return self._do_get_retardation_waves()
+
+    @retardation_waves.setter
+    def retardation_waves(self, value: float) -> None:
+        self._check_open("set retardation_waves")
+        if isinstance(value, bool):
+            raise TypeError(f"{self.name}: retardation must be a number, got {value!r}")
+        value = float(value)
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{self.name}: retardation must be a finite number >= 0 waves, "
+                             f"got {value}")
+        self._do_set_retardation_waves(value)
+
+    @property
+    def retardation_rad(self) -> float:
+        """Peak retardation amplitude in radians (2π × waves)."""
+        return 2.0 * math.pi * self.retardation_waves
+
+    @property
+    def frequency_hz(self) -> float:
+        """The modulation frequency (the head's resonance), Hz: the lock-in's reference."""
+        self._check_open("frequency_hz")
+        return self._do_get_frequency_hz()
+
+    @abstractmethod
+    def _do_get_wavelength_nm(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_wavelength_nm(self, value: float) -> None: ...
+
+    @abstractmethod
+    def _do_get_retardation_waves(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_retardation_waves(self, value: float) -> None: ...
+
+    @abstractmethod
+    def _do_get_frequency_hz(self) -> float: ...

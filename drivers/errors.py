@@ -54,6 +54,7 @@ __all__ = [
     "ProtocolError",
     "StateError",
     "UnsupportedFeature",
+    "attempts_exhausted",
 ]
 
 
@@ -155,3 +156,13 @@ class OverloadError(DeviceError):
 
 class UnsupportedFeature(DeviceError):
     """The device or its backend does not support the requested feature."""
+
+
+def attempts_exhausted(last: DeviceError, attempts: int, *, device: str, command: str,
+                       hint: str | None = None) -> DeviceError:
+    """The error to raise when every attempt of a command failed: the last failure's type
+    and message, saying how many attempts were made (raise it ``from last``)."""
+    suffix = f" (after {attempts} attempts)" if attempts > 1 else ""
+    return type(last)(last.message + suffix, device=device, command=command,
+                      hint=hint or last.hint or "check the connection and the device")
+

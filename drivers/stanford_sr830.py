@@ -42,7 +42,9 @@ Rules this driver follows
   driver refuses it there.
 
 Beyond the LockIn interface (the bench's needs): :attr:`Sr830LockIn.harmonic` (``HARM``,
-1f/2f detection for polarimetry), :attr:`Sr830LockIn.reference_slope` (``RSLP``),
+1f/2f detection for polarimetry) and :meth:`Sr830LockIn.read_harmonics` (one settled
+snapshot per harmonic, e.g. 1f and 2f of a photoelastic modulator on REF IN),
+:attr:`Sr830LockIn.reference_slope` (``RSLP``),
 :meth:`Sr830LockIn.configure_input` (``ISRC``, ``IGND``, ``ICPL``, ``ILIN``) and the data
 buffer for fast scans (:meth:`Sr830LockIn.start_buffer`, ``trigger``, ``pause_buffer``,
 ``buffer_points``, :meth:`Sr830LockIn.read_buffer`: ``SRAT``/``SEND``/``STRT``, then binary
@@ -445,6 +447,33 @@ class Sr830LockIn(LockIn):
             raise ValueError(f"harmonic must be an integer 1 to {MAX_HARMONIC}, got {value!r}")
         # i·f > 102 kHz is refused by the SR830 itself (CommandRejected naming HARM).
         self._command("HARM", value)
+
+    def read_harmonics(self, harmonics: tuple[int, ...] = (1, 2), *,
+                       timeout: float = 60.0) -> dict[int, LockInReading]:
+        """One settled snapshot per detection harmonic, the harmonic restored afterwards.
+
+        With a photoelastic modulator on REF IN (``reference_source`` external), harmonics
+        1 and 2 are its 1f and 2f terms (the Bessel-weighted circular and linear
+        polarisation signals). The SR830 detects up to 102 kHz (``HARM`` i·f ≤ 102 kHz,
+        manual p. 5-4): a 50 kHz head's 2f (100 kHz) fits; a higher harmonic or a faster
+        head is refused by the instrument with :class:`CommandRejected` naming ``HARM``.
+        Each harmonic change waits the present filter's 99 % settling time (:meth:`settle`,
+        ``timeout`` each).
+        """
+        self._check_open("read_harmonics")
+        if not harmonics:
+            raise ValueError(f"{self.name}: give at least one harmonic")
+        before = self.harmonic
+        readings: dict[int, LockInReading] = {}
+        try:
+            for n in harmonics:
+                self.harmonic = n
+                self.settle(timeout=timeout)
+                readings[n] = self.snapshot()
+        finally:
+            if self.harmonic != before:
+                self.harmonic = before
+        return readings
 
     @property
     def reference_slope(self) -> str:

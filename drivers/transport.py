@@ -165,6 +165,31 @@ class SerialChannel:
             self._pending += self._read(1, remaining, command)
             self._pending += self._read_waiting(command)
 
+    def read_line_by(self, terminator: bytes, deadline: float, *, command: str,
+                     noise: list[str], max_bytes: int = 4096) -> bytes:
+        """:meth:`read_line` until the ``time.monotonic()`` ``deadline``; a timeout after
+        lines that were noise (``noise``: why each was refused) is a
+        :class:`ProtocolError` naming them, since the noise is then the likely cause."""
+        try:
+            return self.read_line(terminator, timeout=max(deadline - time.monotonic(), 0.0),
+                                  command=command, max_bytes=max_bytes)
+        except DeviceTimeout as err:
+            if noise:
+                raise ProtocolError(f"no valid reply; received {'; '.join(noise[:3])}",
+                                    device=self.device, command=command) from err
+            raise
+
+    def read_lines_available(self, terminator: bytes, *, command: str = "read") -> list[bytes]:
+        """Every complete line received by now, without waiting; a partial line stays
+        buffered for the next read (a shared bus sorts what arrived before it writes)."""
+        self._pending += self._read_waiting(command)
+        lines: list[bytes] = []
+        while (end := self._pending.find(terminator)) >= 0:
+            end += len(terminator)
+            lines.append(bytes(self._pending[:end]))
+            del self._pending[:end]
+        return lines
+
     def read_available(self, *, command: str = "read") -> bytes:
         """Whatever is buffered now, without waiting."""
         data = bytes(self._pending) + self._read_waiting(command)

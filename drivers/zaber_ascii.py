@@ -105,8 +105,10 @@ from drivers.errors import (
     LimitError,
     ProtocolError,
     StateError,
+    attempts_exhausted,
 )
-from drivers.transport import SerialChannel, open_serial
+from drivers.shared_port import PortRegistry, SharedPort, port_channel, port_lock
+from drivers.transport import SerialChannel
 from drivers.zaber_protocol import (
     MESSAGE_ID_RANGE,
     REJECTION_REASONS,
@@ -198,56 +200,26 @@ def accel_from_data(data: int, microstep_size: float) -> float:
 # --------------------------------------------------------------------------- shared link
 
 
-class _Link:
+class _Link(SharedPort):
     """One serial port shared by every axis of a daisy chain opened through it."""
 
     def __init__(self, key: str, channel: SerialChannel, owned: bool) -> None:
-        self.key = key
-        self.channel = channel
-        self.owned = owned  # opened here from a path or URL (else the caller's port object)
-        # One exchange at a time on the wire: a stop() from another thread, or another
-        # axis of the chain, must not read the reply a poll is waiting for.
-        self.lock = threading.RLock()
-        self.users = 0
+        super().__init__(key, channel, owned)
         self.next_id = MESSAGE_ID_RANGE[0]
         self.alerts: collections.deque[Alert] = collections.deque(maxlen=200)
 
 
-_links: dict[str, _Link] = {}
-_links_lock = threading.Lock()
+_links: PortRegistry[_Link] = PortRegistry(_Link)
 
 
 def _acquire_link(port: str | serial.SerialBase, name: str) -> tuple[_Link, bool]:
     """The link for ``port`` (shared if already open); True if it was opened just now."""
-    key = f"object:{id(port)}" if isinstance(port, serial.SerialBase) else str(port)
-    with _links_lock:
-        link = _links.get(key)
-        if link is not None:
-            link.users += 1
-            return link, False
-        raw = open_serial(port, device=name, baudrate=ZaberAxis.BAUDRATE)
-        try:
-            channel = SerialChannel(raw, device=name)
-        except BaseException:
-            if not isinstance(port, serial.SerialBase):
-                raw.close()
-            raise
-        link = _Link(key, channel, owned=not isinstance(port, serial.SerialBase))
-        link.users = 1
-        _links[key] = link
-        return link, True
+    return _links.acquire(port, name, baudrate=ZaberAxis.BAUDRATE)
 
 
 def _release_link(link: _Link, *, close_port: bool = True) -> None:
     """Drop one user; the last one closes the port (unless ``close_port`` is False)."""
-    with _links_lock:
-        link.users -= 1
-        if link.users > 0:
-            return
-        if _links.get(link.key) is link:
-            del _links[link.key]
-    if close_port:
-        link.channel.close()
+    _links.release(link, close_port=close_port)
 
 
 # --------------------------------------------------------------------------- driver
@@ -411,14 +383,10 @@ class ZaberAxis(MotionAxis):
         return f"/{self.device} {axis} {command}".strip()
 
     def _chan(self, command: str) -> SerialChannel:
-        if self._link is None:
-            raise StateError("device is closed", device=self.name, command=command)
-        return self._link.channel
+        return port_channel(self._link, self.name, command)
 
     def _lock(self) -> threading.RLock:
-        if self._link is None:
-            raise StateError("device is closed", device=self.name)
-        return self._link.lock
+        return port_lock(self._link, self.name)
 
     def _take_id(self) -> int | None:
         if not self.message_ids or self._link is None:
@@ -454,14 +422,8 @@ class ZaberAxis(MotionAxis):
         noise: list[str] = []
         while True:
             try:
-                line = self._chan(text).read_line(
-                    TERMINATOR, timeout=max(deadline - time.monotonic(), 0.0), command=text,
-                    max_bytes=_MAX_LINE)
-            except DeviceTimeout as err:
-                if noise:  # silence after noise: name the noise as the cause
-                    raise ProtocolError(f"no valid reply; received {'; '.join(noise[:3])}",
-                                        device=self.name, command=text) from err
-                raise
+                line = self._chan(text).read_line_by(TERMINATOR, deadline, command=text,
+                                                     noise=noise, max_bytes=_MAX_LINE)
             except ProtocolError as err:
                 raise ProtocolError(err.message, device=self.name, command=text) from err
             try:
@@ -510,13 +472,10 @@ class ZaberAxis(MotionAxis):
             except DeviceTimeout as err:
                 last = err
         assert last is not None
-        suffix = f" (after {attempts} attempts)" if attempts > 1 else ""
-        if retry:
-            hint = last.hint or "check the connection and the device"
-        else:
-            hint = "the command's outcome is unknown; check status()"
-        raise type(last)(last.message + suffix, device=self.name, command=text,
-                         hint=hint) from last
+        raise attempts_exhausted(
+            last, attempts, device=self.name, command=text,
+            hint=None if retry else "the command's outcome is unknown; check status()",
+        ) from last
 
     def _query(self, command: str, parse: Callable[[str], T], *, axis: int | None = None) -> T:
         """An idempotent ``get``: the reply's data parsed by ``parse``."""

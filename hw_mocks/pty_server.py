@@ -79,9 +79,9 @@ class PtyServer:
 
 def serve_url(url: str, *, handlers: str = "hw_mocks.urlhandler") -> PtyServer:
     """Serve the emulator named by a ``simapt://``, ``simsmc://``, ``simzaber://``,
-    ``simsr830://``, ``simsc10://`` or ``simfw102c://`` URL (any scheme with a handler in
-    the package ``handlers``: :mod:`hw_mocks.urlhandler`, or a driver plugin's) on a new
-    pty."""
+    ``simsr830://``, ``simsc10://``, ``simfw102c://``, ``simell://`` or ``simpem://`` URL
+    (any scheme with a handler in the package ``handlers``: :mod:`hw_mocks.urlhandler`, or
+    a driver plugin's) on a new pty."""
     import importlib
 
     from hw_mocks import registry

@@ -17,8 +17,8 @@ from drivers.errors import ConnectionFailed
 from instrument.bench.driver_registry import Device, DriverEntry, Emulator, Option
 from instrument.bench.profile import DeviceSpec
 
-__all__ = ["APT", "BASLER", "FW102C", "NEWPORT_SMC100", "OPENCV_CAMERA", "PM100USB", "SC10",
-           "SIM_CAMERA", "SIM_SOURCE", "SR830", "ZABER"]
+__all__ = ["APT", "BASLER", "ELL14", "FW102C", "NEWPORT_SMC100", "OPENCV_CAMERA", "PEM200",
+           "PM100USB", "SC10", "SIM_CAMERA", "SIM_SOURCE", "SR830", "ZABER"]
 
 #: The package of the firmware emulators' pyserial URL handlers.
 SIM_URL_HANDLERS = "hw_mocks.urlhandler"
@@ -67,6 +67,14 @@ def _open_zaber(cls: type, spec: DeviceSpec) -> Device:
                                "microstep, from the product's specification)",
                                device=spec.role, command="open")
     return _open_axis_with_kind(cls, spec)
+
+
+def _open_pem(cls: type, spec: DeviceSpec) -> Device:
+    if "nm_per_drive" not in spec.options:
+        raise ConnectionFailed("a PEM200 needs options.nm_per_drive (nm of peak retardation "
+                               "at drive 1.0, the head's calibration)",
+                               device=spec.role, command="open")
+    return cls(spec.url, name=spec.role, **spec.options)
 
 
 def _open_pm100(cls: type, spec: DeviceSpec) -> Device:
@@ -144,6 +152,17 @@ ZABER = DriverEntry(
              "flush_s": _SECONDS},
     emulator=Emulator("simzaber", SIM_URL_HANDLERS), open=_open_zaber)
 
+ELL14 = DriverEntry(
+    "motion_axis", "drivers.thorlabs_elliptec:ElliptecMount",
+    summary="Thorlabs Elliptec ELL14 rotation mounts, several on one bus (address 0-F)",
+    options={"address": Option(str, choices=tuple("0123456789ABCDEF"),
+                               doc="the module's bus address"),
+             "max_velocity": Option(float, 1.0, 1e4, doc="deg/s at 100 % velocity"),
+             "nominal_acceleration": Option(float, 1.0, 1e6, doc="deg/s², for estimates"),
+             "home_direction": Option(str, choices=("cw", "ccw")),
+             "assume_homed": Option(bool), **_POLL, **_LINK, "flush_s": _SECONDS},
+    emulator=Emulator("simell", SIM_URL_HANDLERS))
+
 SR830 = DriverEntry(
     "lockin", "drivers.stanford_sr830:Sr830LockIn",
     summary="Stanford Research SR830 lock-in amplifier over RS-232",
@@ -153,6 +172,17 @@ SR830 = DriverEntry(
               "sensitivity_v": Option(float, 2e-9, 1.0),
               "reference_source": Option(str, choices=("internal", "external"))},
     emulator=Emulator("simsr830", SIM_URL_HANDLERS), open=_open_sr830)
+
+PEM200 = DriverEntry(
+    "modulator", "drivers.hinds_pem:Pem200",
+    summary="Hinds Instruments PEM200 photoelastic modulator controller",
+    options={"nm_per_drive": Option(float, 1.0, 1e5, doc="nm of peak retardation at drive "
+                                    "1.0, the head's calibration (required)"),
+             "wavelength_nm": Option(float, 100.0, 25000.0), **_BAUD, **_LINK},
+    # applied in this order: the wavelength first, then the amplitude in waves at it
+    settings={"wavelength_nm": Option(float, 100.0, 25000.0),
+              "retardation_waves": Option(float, 0.0, 10.0, doc="peak, in waves")},
+    emulator=Emulator("simpem", SIM_URL_HANDLERS), open=_open_pem)
 
 SC10 = DriverEntry(
     "shutter", "drivers.thorlabs_sc10:Sc10Shutter",

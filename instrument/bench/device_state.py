@@ -2,7 +2,7 @@
 the bench server's sampler both read devices through here.
 
 A kind is one abstract class of :mod:`drivers.base` (motion axis, camera, light source,
-shutter, power meter, lock-in amplifier, filter wheel); a device takes the most derived
+shutter, power meter, lock-in amplifier, filter wheel, modulator); a device takes the most derived
 kind it implements (a shutter is also a light source). For each, a :class:`DeviceKind`
 says how to read the device's static information (once, after connecting or after a
 setting changed) and its live values (on every poll), and how often to poll it. Every
@@ -33,6 +33,7 @@ from drivers.base import (
     FilterWheel,
     LightSource,
     LockIn,
+    Modulator,
     MotionAxis,
     PixelFormat,
     PowerMeter,
@@ -373,3 +374,18 @@ register_kind(DeviceKind("power_meter", "Power meter", PowerMeter, _meter_info,
                          _meter_values, poll_s=0.5,
                          settings=("wavelength_nm", "averaging", "auto_range"),
                          actions={"zero": _zero}))
+
+
+def _modulator_info(pem: Modulator) -> dict[str, Any]:
+    return {"wavelength_nm": pem.wavelength_nm}
+
+
+def _modulator_values(pem: Modulator) -> dict[str, Any]:
+    return {"retardation_waves": pem.retardation_waves, "frequency_hz": pem.frequency_hz}
+
+
+# A photoelastic modulator: its amplitude (waves at the wavelength) and the frequency the
+# lock-in takes as its reference.
+register_kind(DeviceKind("modulator", "Photoelastic modulator", Modulator, _modulator_info,
+                         _modulator_values, poll_s=1.0,
+                         settings=("wavelength_nm", "retardation_waves")))

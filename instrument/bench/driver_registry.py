@@ -76,6 +76,7 @@ KINDS: dict[str, str] = {
     "power_meter": "PowerMeter",
     "lockin": "LockIn",
     "filter_wheel": "FilterWheel",
+    "modulator": "Modulator",
 }
 
 

@@ -23,3 +23,13 @@ def servers():
     yield started
     for server in started:
         server.close()
+
+
+@pytest.fixture
+def cleanup():
+    """Devices and servers to close after the test, whatever happened (last first)."""
+    items: list = []
+    yield items
+    for item in reversed(items):
+        item.close()
+

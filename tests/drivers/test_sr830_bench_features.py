@@ -138,3 +138,36 @@ def test_buffer_per_trigger_and_long_reads_in_chunks(held):
     x = lockin.read_buffer(1)
     assert x.shape == (2049,)
     np.testing.assert_allclose(x, 1e-3, rtol=1e-6)
+
+
+def test_read_harmonics_at_1f_and_2f_of_a_pem_on_ref_in(lockin):
+    """A photoelastic modulator's frequency on REF IN: one settled reading per harmonic,
+    the harmonic restored; the 3f of a 50 kHz head is beyond the SR830's 102 kHz."""
+    from drivers.hinds_pem import Pem200
+    from hw_mocks import registry
+
+    registry.remove("simpem", f"ref-{lockin.name}")
+    pem = Pem200(f"simpem://ref-{lockin.name}", name="pem", nm_per_drive=1000.0)
+    try:
+        pem.retardation_waves = 0.383  # 2.405 rad, the J0 zero
+        emulator = emulator_of(lockin)
+        emulator.reference_input_hz = pem.frequency_hz  # the PEM's reference output
+        lockin.reference_source = "external"
+        assert lockin.reference_frequency_hz == pytest.approx(pem.frequency_hz, rel=1e-4)
+        emulator.input_signal = lambda: InputSignal(
+            ac_rms_v=3e-3, phase_deg=0.0, harmonics=((2, 1.2e-3, 90.0), (3, 5e-3, 0.0)))
+        lockin.sensitivity_v = 0.01
+        lockin.time_constant_s = 1e-3
+        readings = lockin.read_harmonics((1, 2))
+        # noise: 10 nV/√Hz × √(125 Hz) ≈ 0.1 µV, far inside 1 %
+        assert readings[1].r_v == pytest.approx(3e-3, rel=0.01)
+        assert readings[2].r_v == pytest.approx(1.2e-3, rel=0.01)
+        assert readings[2].theta_deg == pytest.approx(90.0, abs=0.5)
+        assert lockin.harmonic == 1
+        with pytest.raises(CommandRejected) as info:
+            lockin.read_harmonics((2, 3))
+        assert info.value.command == "HARM 3" and lockin.harmonic == 1
+        with pytest.raises(ValueError):
+            lockin.read_harmonics(())
+    finally:
+        pem.close()

@@ -224,7 +224,7 @@ def test_the_kinds_are_the_abcs_of_drivers_base():
 
     assert all(kind_abc(kind) is getattr(base, name) for kind, name in KINDS.items())
     assert set(KINDS) == {"motion_axis", "camera", "light_source", "shutter", "power_meter",
-                          "lockin", "filter_wheel"}
+                          "lockin", "filter_wheel", "modulator"}
 
 
 numbers = st.one_of(st.integers(-10**9, 10**9), st.floats(allow_nan=True,
