@@ -25,7 +25,9 @@ the heads move by at most ε between samples (the sum of the axes' top speeds ×
 step), and asks for δ ≥ α_s + α_d + ε/2 at every sample: in between, every pose is within
 ε/2 of a sample, so the heads cannot touch there. :func:`safe_route` finds a sequence of
 such moves when the direct one is not clear: the arms one after the other (either
-first), then detours that turn one arm's azimuth aside, move its arc, and turn it back.
+first), then detours that turn one arm's azimuth aside, move its arc, and turn it back,
+or move its arc aside (over or under the other head), turn its azimuth, and move the arc
+back.
 """
 
 from __future__ import annotations
@@ -191,6 +193,18 @@ def _candidates(here: dict[str, float], there: dict[str, float]
                                f"{base_name}), arc, azimuth back"
                                + ("; other arm first" if other_first else "; other arm last"))
                         out.append((how, [w1, w2, w3, there]))
+        for aside in DETOURS_DEG:
+            for sign in (1.0, -1.0):
+                # over or under the other head: the arc aside, the azimuth, the arc back
+                lifted = here[arc] + sign * aside
+                for other_first in (True, False):
+                    start = arm_at(here, other, there) if other_first else dict(here)
+                    w1 = with_(start, **{arc: lifted})
+                    w2 = with_(w1, **{az: there[az]})
+                    w3 = with_(w2, **{arc: there[arc]})
+                    how = (f"{mover} arm over the other: arc {lifted:+.4g}, azimuth, arc back"
+                           + ("; other arm first" if other_first else "; other arm last"))
+                    out.append((how, [w1, w2, w3, there]))
     return out
 
 
