@@ -75,7 +75,8 @@ def separation_deg(kin: TypeIKinematics, poses: Mapping[str, np.ndarray]) -> np.
 
     s, d = dirs("source"), dirs("detector")
     cross = np.linalg.norm(np.cross(s, d), axis=-1)
-    return np.degrees(np.arctan2(cross, np.sum(s * d, axis=-1)))
+    delta: np.ndarray = np.degrees(np.arctan2(cross, np.sum(s * d, axis=-1)))
+    return delta
 
 
 def arm_violations(geometry: GeometrySpec, pose: Mapping[str, float], *, light: bool

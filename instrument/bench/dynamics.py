@@ -74,7 +74,8 @@ def move_progress(distance: float, dyn: AxisDynamics, t: np.ndarray) -> np.ndarr
     cruise = v * np.clip(t - ta, 0.0, max(total - 2.0 * ta, 0.0))
     fall_t = np.clip(t - (total - ta), 0.0, ta)
     fall = v * fall_t - 0.5 * a * fall_t ** 2
-    return math.copysign(1.0, float(distance)) * np.minimum(rise + cruise + fall, d)
+    covered: np.ndarray = np.minimum(rise + cruise + fall, d)
+    return math.copysign(1.0, float(distance)) * covered
 
 
 def move_time(distance: float, dyn: AxisDynamics) -> float:
