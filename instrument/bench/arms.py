@@ -178,34 +178,25 @@ def _candidates(here: dict[str, float], there: dict[str, float]
     out: list[tuple[str, list[dict[str, float]]]] = [("both arms together", [there])]
     for first, axes in (("source", _SOURCE), ("detector", _DETECTOR)):
         out.append((f"{first} arm first", [arm_at(here, axes, there), there]))
-    for mover, axes, other in (("detector", _DETECTOR, _SOURCE),
-                               ("source", _SOURCE, _DETECTOR)):
-        arc, az = axes
-        for base_name, base in (("here", here[az]), ("there", there[az])):
-            for aside in DETOURS_DEG:
-                for sign in (1.0, -1.0):
-                    turned = base + sign * aside
-                    for other_first in (True, False):
-                        start = arm_at(here, other, there) if other_first else dict(here)
-                        w1 = with_(start, **{az: turned})
-                        w2 = with_(w1, **{arc: there[arc]})
-                        w3 = with_(w2, **{az: there[az]})
-                        how = (f"{mover} arm around: azimuth {turned:+.4g} (aside of "
-                               f"{base_name}), arc, azimuth back"
-                               + ("; other arm first" if other_first else "; other arm last"))
-                        out.append((how, [w1, w2, w3, there]))
-        for aside in DETOURS_DEG:
-            for sign in (1.0, -1.0):
-                # over or under the other head: the arc aside, the azimuth, the arc back
-                lifted = here[arc] + sign * aside
-                for other_first in (True, False):
-                    start = arm_at(here, other, there) if other_first else dict(here)
-                    w1 = with_(start, **{arc: lifted})
-                    w2 = with_(w1, **{az: there[az]})
-                    w3 = with_(w2, **{arc: there[arc]})
-                    how = (f"{mover} arm over the other: arc {lifted:+.4g}, azimuth, arc back"
-                           + ("; other arm first" if other_first else "; other arm last"))
-                    out.append((how, [w1, w2, w3, there]))
+    for mover, (arc, az), other in (("detector", _DETECTOR, _SOURCE),
+                                    ("source", _SOURCE, _DETECTOR)):
+        # (the axis set aside, where to, the other axis of the arm, in words)
+        asides = [(az, base + sign * d, arc, f"{mover} arm around: azimuth {{:+.4g}} (aside "
+                   f"of {name}), arc, azimuth back")
+                  for name, base in (("here", here[az]), ("there", there[az]))
+                  for d in DETOURS_DEG for sign in (1.0, -1.0)]
+        asides += [(arc, here[arc] + sign * d, az, f"{mover} arm over the other: arc "
+                    "{:+.4g}, azimuth, arc back")
+                   for d in DETOURS_DEG for sign in (1.0, -1.0)]
+        for aside_axis, value, then_axis, words in asides:
+            for other_first in (True, False):
+                start = arm_at(here, other, there) if other_first else dict(here)
+                w1 = with_(start, **{aside_axis: value})
+                w2 = with_(w1, **{then_axis: there[then_axis]})
+                w3 = with_(w2, **{aside_axis: there[aside_axis]})
+                how = words.format(value) + ("; other arm first" if other_first
+                                             else "; other arm last")
+                out.append((how, [w1, w2, w3, there]))
     return out
 
 

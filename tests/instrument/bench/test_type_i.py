@@ -33,25 +33,12 @@ DYN = dynamics_of(PROFILE, TYPE_I_AXES)
 KIN = kinematics_of(GEO)
 
 #: A type (i) bench written by hand: arms of declared widths, one table per rule's test.
-HAND = """
-[bench]
-name = "hand-type-i"
-[devices.source_arc]
-driver = "thorlabs_apt"
-url = "simapt://source_arc?model=K10CR1"
-limits = [-90.0, 90.0]
-[devices.source_azimuth]
-driver = "thorlabs_apt"
-url = "simapt://source_azimuth?model=K10CR1"
-limits = [-180.0, 180.0]
-[devices.detector_arc]
-driver = "thorlabs_apt"
-url = "simapt://detector_arc?model=K10CR1"
-limits = [-90.0, 90.0]
-[devices.detector_azimuth]
-driver = "thorlabs_apt"
-url = "simapt://detector_azimuth?model=K10CR1"
-limits = [-180.0, 180.0]
+HAND = '[bench]\nname = "hand-type-i"\n' + "".join(
+    f'[devices.{role}]\ndriver = "thorlabs_apt"\nurl = "simapt://{role}?model=K10CR1"\n'
+    f"limits = {lim}\n"
+    for role, lim in (("source_arc", "[-90.0, 90.0]"), ("source_azimuth", "[-180.0, 180.0]"),
+                      ("detector_arc", "[-90.0, 90.0]"),
+                      ("detector_azimuth", "[-180.0, 180.0]"))) + """
 [geometry]
 goniometer = "type_i"
 detector_distance_mm = {r_d}
