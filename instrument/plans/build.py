@@ -8,6 +8,7 @@ typed commands the engine runs; it skips points already done (resume).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Container, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -16,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from instrument.bench import guard
-from instrument.bench.dynamics import AxisDynamics, dynamics_of, route_time
-from instrument.bench.kinematics import Angles, UnreachableError, kinematics_of
+from instrument.bench.arms import safe_route
+from instrument.bench.dynamics import AxisDynamics, dynamics_of, route_time, step_time
+from instrument.bench.kinematics import TYPE_I_AXES, Angles, UnreachableError, kinematics_of
 from instrument.bench.profile import BenchProfile, FieldError
 from instrument.bench.timing import BenchTiming, bench_timing
 from instrument.plans.commands import (
@@ -133,11 +135,13 @@ class Plan:
         dyn = dynamics_of(self.profile, self.axes)
         travel = {r: float(np.abs(np.diff(t[:, k])).sum()) for k, r in enumerate(self.axes)}
         motion, _ = route_time(t, self.axes, dyn)
+        motion += self._routes_extra_s(t, dyn)
         pol = self.spec.acquisition
         acq = sum(pol.estimated_seconds(p.exposure_us) for p in self.points)
         timing = bench_timing(self.profile, self.axes)
         fast = {r: _faster(d, timing.axis_speed.get(r, 1.0)) for r, d in dyn.items()}
         bench_motion, _ = route_time(t, self.axes, fast)
+        bench_motion += self._routes_extra_s(t, fast)
         speedup = motion / bench_motion if bench_motion > 0 else 1.0
         nd_s, nd_note = self._nd_turns(timing)
         events = dict.fromkeys(EVENTS, 0.0)
@@ -145,6 +149,29 @@ class Plan:
         return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
                             acquisition + nd_s, speedup, dict(timing.home_s),
                             timing.assumed, nd_note + self._events_note(events), events)
+
+    def _routes_extra_s(self, t: np.ndarray, dyn: dict[str, AxisDynamics]) -> float:
+        """Seconds a type (i) bench's routes add to the moves between the rows of ``t``
+        (targets, axes :attr:`axes`): the legs of a split move one after the other, less
+        the one concurrent move :func:`route_time` counted (ADR 0104). 0 on type (ii)."""
+        geo = self.profile.geometry
+        if not geo.is_type_i or not all(r in self.axes for r in TYPE_I_AXES):
+            return 0.0
+        col = [self.axes.index(r) for r in TYPE_I_AXES]
+        limits = {r: d.limits for r, d in self.profile.axes.items()}
+        extra = 0.0
+        for a, b in itertools.pairwise(t[:, col]):
+            here, there = dict(zip(TYPE_I_AXES, a, strict=True)), dict(
+                zip(TYPE_I_AXES, b, strict=True))
+            route = safe_route(geo, dyn, here, there, limits=limits)
+            if route is None or not route.split:
+                continue
+            legs, at = 0.0, here
+            for leg in route.moves:
+                legs += step_time(at, leg, dyn)
+                at = leg
+            extra += legs - step_time(here, there, dyn)
+        return extra
 
     @staticmethod
     def _events_note(events: dict[str, float]) -> tuple[str, ...]:

@@ -144,3 +144,24 @@ def test_an_order_the_arms_cannot_run_is_refused_as_path():
         build_plan(parse_plan(SPECULAR_30), profile, start=SWAPPED)
     assert [v.reason for v in err.value.violations] == ["path"]
     assert "no collision-free route" in str(err.value)
+
+
+def test_the_estimate_counts_the_legs_of_split_moves():
+    """A move the arms cannot make together runs as legs one after the other: the
+    estimate adds what they take beyond the one concurrent move."""
+    from instrument.bench.arms import safe_route
+    from instrument.bench.dynamics import route_time, step_time
+
+    plan = build_plan(load_plan(ROOT / "examples" / "brdf_inplane.toml"), TYPE_I)
+    dyn = dynamics_of(TYPE_I, plan.axes)
+    concurrent, _ = route_time(plan.targets_array(), plan.axes, dyn)
+    lim = {r: d.limits for r, d in TYPE_I.axes.items()}
+    pts = [p.target_dict() for p in plan.points]
+    routed = 0.0
+    for here, there in zip(pts, pts[1:], strict=False):
+        at = here
+        for leg in safe_route(TYPE_I.geometry, dyn, here, there, limits=lim).moves:
+            routed += step_time(at, leg, dyn)
+            at = leg
+    assert plan.estimate().motion_s == pytest.approx(routed, rel=1e-9)
+    assert routed > concurrent  # the README's plan has moves past the source arm
