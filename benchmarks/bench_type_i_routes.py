@@ -17,6 +17,7 @@ For each example plan on ``sim-type-i`` (and on its type (ii) twin for compariso
 
 from __future__ import annotations
 
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -25,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from instrument.bench.arms import safe_route  # noqa: E402
-from instrument.bench.dynamics import dynamics_of, step_time  # noqa: E402
+from instrument.bench.dynamics import dynamics_of  # noqa: E402
 from instrument.bench.kinematics import TYPE_I_AXES  # noqa: E402
 from instrument.bench.profile import load_profile  # noqa: E402
 from instrument.plans.build import build_plan  # noqa: E402
@@ -43,15 +44,12 @@ def routed_motion_s(plan) -> tuple[int, int, float]:
     pts = [p.target_dict() for p in plan.points if p.targets]
     moves = split = 0
     total = 0.0
-    for here, there in zip(pts, pts[1:], strict=False):
+    for here, there in itertools.pairwise(pts):
         route = safe_route(profile.geometry, dyn, here, there, limits=limits)
         assert route is not None, "build_plan checked every move"
         moves += 1
         split += route.split
-        at = here
-        for leg in route.moves:
-            total += step_time(at, leg, dyn)
-            at = leg
+        total += route.seconds(here, dyn)
     return moves, split, total
 
 

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from instrument.bench.dynamics import AxisDynamics, move_progress, move_time
+from instrument.bench.dynamics import AxisDynamics, move_progress, move_time, step_time
 from instrument.bench.kinematics import TYPE_I_AXES, TypeIKinematics, kinematics_of
 from instrument.bench.profile import ArmSpec, GeometrySpec
 
@@ -154,6 +154,16 @@ class Route:
     @property
     def split(self) -> bool:
         return len(self.moves) > 1
+
+    def seconds(self, here: Mapping[str, float],
+                dynamics: Mapping[str, AxisDynamics]) -> float:
+        """Motion time from ``here``: each leg's slowest axis, the legs one after the
+        other (:func:`instrument.bench.dynamics.step_time`)."""
+        total, at = 0.0, dict(here)
+        for leg in self.moves:
+            total += step_time(at, leg, dynamics)
+            at = leg
+        return total
 
 
 def _within(pose: Mapping[str, float],

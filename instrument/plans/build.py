@@ -164,13 +164,8 @@ class Plan:
             here, there = dict(zip(TYPE_I_AXES, a, strict=True)), dict(
                 zip(TYPE_I_AXES, b, strict=True))
             route = safe_route(geo, dyn, here, there, limits=limits)
-            if route is None or not route.split:
-                continue
-            legs, at = 0.0, here
-            for leg in route.moves:
-                legs += step_time(at, leg, dyn)
-                at = leg
-            extra += legs - step_time(here, there, dyn)
+            if route is not None and route.split:
+                extra += route.seconds(here, dyn) - step_time(here, there, dyn)
         return extra
 
     @staticmethod

@@ -4,6 +4,7 @@ motion."""
 
 from __future__ import annotations
 
+import itertools
 import tomllib
 from pathlib import Path
 
@@ -150,7 +151,7 @@ def test_the_estimate_counts_the_legs_of_split_moves():
     """A move the arms cannot make together runs as legs one after the other: the
     estimate adds what they take beyond the one concurrent move."""
     from instrument.bench.arms import safe_route
-    from instrument.bench.dynamics import route_time, step_time
+    from instrument.bench.dynamics import move_time, route_time
 
     plan = build_plan(load_plan(ROOT / "examples" / "brdf_inplane.toml"), TYPE_I)
     dyn = dynamics_of(TYPE_I, plan.axes)
@@ -158,10 +159,12 @@ def test_the_estimate_counts_the_legs_of_split_moves():
     lim = {r: d.limits for r, d in TYPE_I.axes.items()}
     pts = [p.target_dict() for p in plan.points]
     routed = 0.0
-    for here, there in zip(pts, pts[1:], strict=False):
+    for here, there in itertools.pairwise(pts):
+        route = safe_route(TYPE_I.geometry, dyn, here, there, limits=lim)
+        # each leg's slowest axis, one leg after the other
         at = here
-        for leg in safe_route(TYPE_I.geometry, dyn, here, there, limits=lim).moves:
-            routed += step_time(at, leg, dyn)
+        for leg in route.moves:
+            routed += max(move_time(leg[r] - at[r], dyn[r]) for r in leg)
             at = leg
     assert plan.estimate().motion_s == pytest.approx(routed, rel=1e-9)
     assert routed > concurrent  # the README's plan has moves past the source arm
