@@ -215,8 +215,8 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
 
     What the profile already says is not repeated in ``[simulation]``: each motion role is
     bound to its device URL (a type (i) arm's with its stage offset), the power-meter head
-    to the ``simusb://`` power meter, and the
-    arm length to the geometry's detector distance, unless the table overrides them.
+    to the ``simusb://`` power meter, and the arm length to the geometry's detector
+    distance, unless the table overrides them.
     """
     config = dict(profile.simulation or {})
     world = str(config.pop("world", "sim"))
