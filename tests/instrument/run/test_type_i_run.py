@@ -102,3 +102,48 @@ def test_the_example_plans_run_end_to_end_on_the_type_i_bench(example, tmp_path)
         power = f["entry/points/power_w"][:]
     assert len(status) == len(plan.points) and set(status) == {0}
     assert np.all(power > 0)
+
+
+def test_a_move_with_no_route_from_where_the_arms_stand_pauses_before_moving(tmp_path):
+    """The engine decides each move's route from the read-back positions. With the
+    azimuth stages held at 0 (soft limits hugging it) the detector cannot go around the
+    source arm: the run pauses at that point, naming why, and no stage has moved."""
+    import dataclasses
+    import threading
+
+    from hw_mocks import registry
+    from instrument.bench.profile import parse_profile
+    from instrument.run.events import Fault, Paused, PointCompleted
+
+    profile = load_profile("sim-type-i")
+    held = parse_profile(profile.source_text.replace("limits = [-180.0, 180.0]",
+                                                     "limits = [-0.01, 0.01]"))
+    bench = open_bench(profile)
+    try:
+        plan = build_plan(parse_plan(CROSSING), profile)
+        engine = start_run(dataclasses.replace(plan, profile=held), bench,
+                           runs_dir=tmp_path, fsync=False)
+        paused, seen = threading.Event(), []
+
+        def on(ev):
+            seen.append(ev)
+            if isinstance(ev, Paused):
+                paused.set()
+
+        engine.subscribe(on)
+        engine.start()
+        assert paused.wait(120)
+        fault = [e for e in seen if isinstance(e, Fault)][-1]
+        assert "no collision-free route" in fault.cause and fault.action == "pause"
+        # the first move already: from the homed arms (the source head at θ 60°, φ 0°,
+        # the detector's on the far side) the detector must pass over the source head to
+        # reach (30, -70) on the source's side; with both azimuths held, no route
+        assert not [e for e in seen if isinstance(e, PointCompleted)]
+        for role, scheme in (("source_arc", "simapt"), ("source_azimuth", "simzaber"),
+                             ("detector_arc", "simsmc"), ("detector_azimuth", "simapt")):
+            stage = registry.get(scheme, role).stage
+            assert stage.physical_position() == pytest.approx(0.0, abs=1e-6), role
+        engine.abort()
+        engine.wait(60)
+    finally:
+        bench.close()
