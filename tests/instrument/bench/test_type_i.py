@@ -311,21 +311,22 @@ def test_every_route_found_keeps_the_arms_apart_on_a_dense_check(s1, d1, s2, d2)
         at = leg
 
 
-def test_swapping_the_arms_in_a_ring_has_no_route_and_the_plan_is_refused():
-    """Both heads on one ring, each where the other must go: whichever turns first meets
-    the other (no tried detour leaves the ring, since both arcs stay put)."""
-    prof = hand()
-    kin = kinematics_of(prof.geometry)
-    here = kin.positions(Angles(30.0, 0.0, 30.0, 90.0))
-    there = kin.positions(Angles(30.0, 90.0, 30.0, 0.0))
-    lim = {r: d.limits for r, d in prof.axes.items()}
-    dyn = dynamics_of(prof, TYPE_I_AXES)
-    route = arms.safe_route(prof.geometry, dyn, here, there, limits=lim)
-    if route is not None:  # a detour exists: it must be clear
-        assert route.split
-        return
-    bad = guard.check_route([point(there, index=1)], prof, dyn, start=here)
-    assert [v.reason for v in bad] == ["path"]
+def test_arms_swapped_on_a_ring_go_over_each_other_and_without_room_are_refused():
+    """Both heads on one ring (θ 30°), each where the other must go: no azimuth turn gets
+    one past the other, so the route lifts one arm's arc over the other head. With the
+    arcs held on that ring by their soft limits there is no route: ``path``."""
+    here = KIN.positions(Angles(30.0, 0.0, 30.0, 180.0))
+    there = KIN.positions(Angles(30.0, 180.0, 30.0, 0.0))
+    there = {**there, "source_arc": here["source_arc"], "detector_arc": here["detector_arc"]}
+    route = arms.safe_route(GEO, DYN, here, there, limits=LIMITS)
+    assert route is not None and "over the other" in route.how
+    at = here
+    for leg in route.moves:
+        assert dense_min_separation(at, leg) > touch_deg()
+        at = leg
+    held = {**LIMITS, "source_arc": (here["source_arc"] - 0.01, here["source_arc"] + 0.01),
+            "detector_arc": (here["detector_arc"] - 0.01, here["detector_arc"] + 0.01)}
+    assert arms.safe_route(GEO, DYN, here, there, limits=held) is None
 
 
 # ------------------------------------------------------------------ manual moves
