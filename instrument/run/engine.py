@@ -42,7 +42,6 @@ from drivers.base import AxisStatus, Camera, Frame, MotionAxis, PowerMeter
 from drivers.errors import ControllerError, DeviceError, LimitError, MotionError
 from instrument.bench.arms import safe_route
 from instrument.bench.devices import Bench
-from instrument.bench.dynamics import dynamics_of as bench_dynamics
 from instrument.bench.dynamics import move_time
 from instrument.bench.kinematics import TYPE_I_AXES, kinematics_of
 from instrument.bench.profile import RetryPolicy
@@ -768,10 +767,11 @@ class RunEngine:
             cached = self._position_cache.get(role)
             here[role] = (cached if cached is not None else
                           self._read_back(role, self._axis(role).status()).position)
-        route = safe_route(profile.geometry, bench_dynamics(profile, TYPE_I_AXES), here,
-                           targets, limits={r: d.limits for r, d in profile.axes.items()})
+        route = safe_route(profile.geometry, self._dyn, here, targets,
+                           limits={r: d.limits for r, d in profile.axes.items()})
         if route is None:
-            raise _PointFailed("pause", "source_arc", "no collision-free route for the arms "
+            # no device failed: the fault names the two arms together
+            raise _PointFailed("pause", "arms", "no collision-free route for the arms "
                                "from where they stand to this point; move them apart by "
                                "hand and resume")
         if route.split:
