@@ -1,7 +1,8 @@
 """The goniometer view: a live drawing of the bench from the read-back positions.
 
 It draws the :class:`gui.model.goniometer.Scene` the model computes — from above for
-every bench, plus the hemisphere projection on out-of-plane benches — and redraws at most
+every bench (a type (i) bench's arms over its stationary sample), plus the hemisphere
+projection on out-of-plane type (ii) benches — and redraws at most
 10 times a second, whatever the rate of position updates.
 """
 
@@ -46,6 +47,9 @@ STYLES = {
     "incident": ("#d32f2f", 1, "#d32f2f", "star", 16),
     "horizon": ("#424242", 2, None, None, 0),
     "grid": ("#bdbdbd", 1, None, None, 0),
+    "source_rail": ("#e57373", 3, None, None, 0),
+    "detector_rail": ("#64b5f6", 3, None, None, 0),
+    "stationary_sample": ("#212121", 1, "#9e9e9e", "o", 18),
 }
 
 
@@ -95,7 +99,9 @@ class GoniometerView(QWidget):
     def set_profile(self, profile: BenchProfile | None) -> None:
         self.profile = profile
         self.positions = {}
-        oop = profile is not None and profile.geometry.kind == "out_of_plane"
+        # a type (i) bench's view from above is already its hemisphere (gui.model)
+        oop = (profile is not None and profile.geometry.kind == "out_of_plane"
+               and not profile.geometry.is_type_i)
         self.which.model().item(1).setEnabled(oop)
         if not oop:
             self.which.setCurrentIndex(0)
@@ -143,7 +149,7 @@ class GoniometerView(QWidget):
             self.scene = None
             return
         hemi = self.which.currentData() == "hemisphere" and \
-            self.profile.geometry.kind == "out_of_plane"
+            self.profile.geometry.kind == "out_of_plane" and not self.profile.geometry.is_type_i
         if hemi:
             scene = hemisphere_view(self.profile, self.positions,
                                     planned_angles=self.planned_angles, done=self.done)

@@ -196,6 +196,9 @@ class SimulatedCamera(Camera):
             center = np.asarray(place(state), dtype=float)
         forward = -pose.detector_dir
         right = np.cross(forward, [0.0, 1.0, 0.0])
+        if np.linalg.norm(right) < 1e-9:
+            # looking straight down (a type (i) detector at the pole): image up = +z
+            right = np.cross(forward, [0.0, 0.0, 1.0])
         right /= np.linalg.norm(right)
         down = np.cross(forward, right)
         return center, forward, right, down

@@ -18,12 +18,14 @@ from numpy.typing import NDArray
 from hw_mocks import registry
 from hw_mocks.sim.filters import FilterBand, NeutralDensity, parse_bands
 
-__all__ = ["ROLES", "BenchPose", "LightPath", "PowerMeterHead", "Scene", "SourceState",
+__all__ = ["ARM_ROLES", "ROLES", "BenchPose", "LightPath", "PowerMeterHead", "Scene", "SourceState",
            "WorldState", "rotation"]
 
 
 ROLES = ("sample_theta", "sample_phi", "sample_tilt", "detector_theta", "source_theta",
-         "camera_z")
+         "camera_z", "source_arc", "source_azimuth", "detector_arc", "detector_azimuth")
+#: The arms of a type (i) goniometer: a world with any of them has a stationary sample.
+ARM_ROLES = ("source_arc", "source_azimuth", "detector_arc", "detector_azimuth")
 
 
 def rotation(axis: str, angle_rad: float) -> NDArray[np.float64]:

@@ -41,6 +41,12 @@ rotation by θ about axis a.
   zeros.
 * Detector arm direction: ``ω_d = R_y(detector_theta) ẑ``; the camera (or the power-meter
   head) sits at ``(arm_length_mm + camera_z) · ω_d`` looking at the origin, image "up" = ŷ.
+* Type (i) goniometer (any of the roles ``source_arc``, ``source_azimuth``,
+  ``detector_arc``, ``detector_azimuth``): the sample lies still with its normal up,
+  (x_s, y_s, n) = (ẑ, x̂, ŷ), and the source and detector directions are the arms'
+  ``(sin a cos ϕ, sin a sin ϕ, cos a)`` in that frame (a the arc, ϕ the azimuth: the
+  convention of :class:`instrument.bench.kinematics.TypeIKinematics`, whose lab X, Y, Z
+  are this ẑ, x̂, ŷ). The other rotation roles are ignored there.
 * The scattering angles follow :mod:`analysis.brdf.geometry`: θ from the normal,
   φ = atan2(ω·y_s, ω·x_s). With ``sample_theta = θ > 0`` and ``detector_theta = 2θ`` the
   detector sits in the specular direction (θi = θr = θ, φi = 0, φr = π): the classic θ–2θ
@@ -61,6 +67,7 @@ import numpy as np
 from hw_mocks import registry
 from hw_mocks.sim.filters import parse_bands, transmit
 from hw_mocks.sim.state import (
+    ARM_ROLES,
     ROLES,
     BenchPose,
     LightPath,
@@ -316,6 +323,8 @@ class VirtualBench:
 
     def pose(self, positions: Mapping[str, float] | None = None) -> BenchPose:
         p = dict(positions) if positions is not None else self.positions()
+        if any(r in self._roles for r in ARM_ROLES):
+            return self._arms_pose(p)
         rad = {k: math.radians(p.get(k, 0.0)) for k in ROLES if k != "camera_z"}
         z = np.array([0.0, 0.0, 1.0])
         source_dir = rotation("y", rad["source_theta"]) @ z
@@ -326,6 +335,19 @@ class VirtualBench:
             source_dir=source_dir, sample_axes=r.T.copy(), detector_dir=detector_dir,
             detector_distance_mm=self.arm_length_mm + p.get("camera_z", 0.0),
         )
+
+    def _arms_pose(self, p: Mapping[str, float]) -> BenchPose:
+        """The pose of a type (i) goniometer (module docstring)."""
+        def arm(name: str) -> np.ndarray:
+            a = math.radians(p.get(f"{name}_arc", 0.0))
+            az = math.radians(p.get(f"{name}_azimuth", 0.0))
+            sx, sy, sz = math.sin(a) * math.cos(az), math.sin(a) * math.sin(az), math.cos(a)
+            return np.array([sy, sz, sx])  # sample (x_s, y_s, n) = world (ẑ, x̂, ŷ)
+
+        axes = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        return BenchPose(source_dir=arm("source"), sample_axes=axes,
+                         detector_dir=arm("detector"),
+                         detector_distance_mm=self.arm_length_mm + p.get("camera_z", 0.0))
 
     def snapshot(self) -> WorldState:
         """Everything a device needs to render the world now, with a cache key."""

@@ -21,7 +21,9 @@ as unknown (taken as 0, with a warning naming the key to set).
 
 In plane (ADR 0012) θi is the source's angle less the sample stage's and θr the
 detector arm's less the sample stage's: σθi = σ_sample, σθr = σ_sample ⊕ σ_arm (the
-sample stage's error shifts both; their correlation is left out).
+sample stage's error shifts both; their correlation is left out). On a type (i)
+goniometer (ADR 0104) the sample stands still and θi, θr are the arcs' own angles:
+σθi = σ_source_arc, σθr = σ_detector_arc (the azimuth stages move φ, not θ).
 """
 
 from __future__ import annotations
@@ -98,14 +100,18 @@ def angular_model(profile: dict[str, Any]) -> AngularModel:
     """σθi, σθr of the recorded angles of a run with the bench profile ``profile`` (the
     parsed TOML stored in the run; module docstring)."""
     devices = profile.get("devices", {})
-    stages = tuple(stage_angle(r, devices[r]) for r in ("sample_theta", "detector_theta")
-                   if r in devices)
+    type_i = profile.get("geometry", {}).get("goniometer") == "type_i"
+    roles = ("source_arc", "detector_arc") if type_i else ("sample_theta", "detector_theta")
+    stages = tuple(stage_angle(r, devices[r]) for r in roles if r in devices)
     sig = {s.role: math.radians(s.sigma) for s in stages}
-    s_sample = sig.get("sample_theta", 0.0)
     warnings = tuple(
         f"{s.role}: the stage's repeatability is not declared, so the angles' uncertainty "
         "holds the read-back resolution only; set devices."
         f"{s.role}.repeatability (± in axis units, from the spec sheet or measured)"
         for s in stages if s.repeatability is None)
+    if type_i:
+        return AngularModel(sig.get("source_arc", 0.0), sig.get("detector_arc", 0.0), stages,
+                            warnings)
+    s_sample = sig.get("sample_theta", 0.0)
     return AngularModel(s_sample, math.hypot(s_sample, sig.get("detector_theta", 0.0)),
                         stages, warnings)

@@ -214,12 +214,22 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
     """The world name and the virtual-bench configuration for an emulated profile.
 
     What the profile already says is not repeated in ``[simulation]``: each motion role is
-    bound to its device URL, the power-meter head to the ``simusb://`` power meter, and the
-    arm length to the geometry's detector distance, unless the table overrides them.
+    bound to its device URL (a type (i) arm's with its stage offset), the power-meter head
+    to the ``simusb://`` power meter, and the arm length to the geometry's detector
+    distance, unless the table overrides them.
     """
     config = dict(profile.simulation or {})
     world = str(config.pop("world", "sim"))
-    roles = {role: spec.url for role, spec in profile.axes.items() if spec.is_simulated}
+    roles: dict[str, Any] = {role: spec.url for role, spec in profile.axes.items()
+                             if spec.is_simulated}
+    geo = profile.geometry
+    for arm, spec in (("source", geo.source_arm), ("detector", geo.detector_arm)):
+        # a type (i) arm's stage reads its angle plus the profile's offset (ADR 0104)
+        for axis, offset in ((f"{arm}_arc", 0.0 if spec is None else spec.arc_offset_deg),
+                             (f"{arm}_azimuth",
+                              0.0 if spec is None else spec.azimuth_offset_deg)):
+            if offset and isinstance(roles.get(axis), str):
+                roles[axis] = {"url": roles[axis], "offset": -offset}
     roles.update(config.get("roles", {}))
     config["roles"] = roles
     config.setdefault("arm_length_mm", profile.geometry.detector_distance_mm)

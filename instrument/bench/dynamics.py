@@ -14,12 +14,15 @@ planner's own model and deliberately independent of the emulators in ``hw_mocks`
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["AxisDynamics", "move_time", "move_times", "route_time", "step_time"]
+from instrument.bench.profile import BenchProfile
+
+__all__ = ["DEFAULT_DYNAMICS", "AxisDynamics", "dynamics_of", "move_progress", "move_time",
+           "move_times", "route_time", "step_time"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +36,46 @@ class AxisDynamics:
     def __post_init__(self) -> None:
         if not (self.velocity > 0 and self.acceleration > 0 and self.settle_s >= 0):
             raise ValueError(f"need velocity, acceleration > 0 and settle_s >= 0: {self}")
+
+
+#: Used for planning when a profile gives no velocity/acceleration for an axis.
+DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
+
+
+def dynamics_of(profile: BenchProfile, axes: Iterable[str]) -> dict[str, AxisDynamics]:
+    """Each axis's dynamics from its profile entry (:data:`DEFAULT_DYNAMICS` where the
+    profile gives no velocity or acceleration)."""
+    out = {}
+    for r in axes:
+        spec = profile.devices.get(r)
+        if spec is None or spec.velocity is None or spec.acceleration is None:
+            out[r] = DEFAULT_DYNAMICS
+        else:
+            out[r] = AxisDynamics(spec.velocity, spec.acceleration, spec.settle_s)
+    return out
+
+
+def move_progress(distance: float, dyn: AxisDynamics, t: np.ndarray) -> np.ndarray:
+    """Signed distance covered ``t`` seconds (array) after the start of one trapezoidal
+    move of ``distance`` (the profile of the module docstring; the settle time comes after
+    arrival and moves nothing)."""
+    d = abs(float(distance))
+    t = np.asarray(t, dtype=float)
+    if d == 0.0:
+        return np.zeros_like(t)
+    v, a = dyn.velocity, dyn.acceleration
+    if d >= v * v / a:
+        ta, total = v / a, d / v + v / a
+    else:
+        ta = math.sqrt(d / a)
+        total = 2.0 * ta
+        v = a * ta
+    rise = 0.5 * a * np.minimum(t, ta) ** 2
+    cruise = v * np.clip(t - ta, 0.0, max(total - 2.0 * ta, 0.0))
+    fall_t = np.clip(t - (total - ta), 0.0, ta)
+    fall = v * fall_t - 0.5 * a * fall_t ** 2
+    covered: np.ndarray = np.minimum(rise + cruise + fall, d)
+    return math.copysign(1.0, float(distance)) * covered
 
 
 def move_time(distance: float, dyn: AxisDynamics) -> float:

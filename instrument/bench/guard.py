@@ -9,7 +9,12 @@ A point is rejected when
   (a detector cannot sit in the incident beam: no exact backscatter);
 * a direction leaves the upper hemisphere (θi or θr ≥ 90°: the beam or the detector would
   look at the sample from behind);
-* an axis (or a difference of two axes) lies in one of the profile's arm-collision zones.
+* an axis (or a difference of two axes) lies in one of the profile's arm-collision zones;
+* on a type (i) goniometer (``geometry.goniometer = "type_i"``), the rules of
+  :mod:`instrument.bench.arms`: the arms' heads touch (``arms``), the detector arm shadows
+  the incident beam (``beam``) or the source arm stands in the detector's field of view
+  (``view``); the last two only with the light on. A move between two allowed poses that
+  would make the arms touch on the way is refused as ``path`` (:func:`check_route`).
 
 :func:`check` returns every violation; :func:`enforce` raises :class:`GuardError` whose
 message lists each offending point and why.
@@ -22,10 +27,17 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from instrument.bench.kinematics import Angles, wrap180
+from instrument.bench import arms
+from instrument.bench.dynamics import AxisDynamics
+from instrument.bench.kinematics import TYPE_I_AXES, Angles, wrap180
 from instrument.bench.profile import BenchProfile
 
-__all__ = ["GuardError", "GuardedPoint", "Violation", "check", "enforce"]
+__all__ = ["NEAR_SOURCE", "GuardError", "GuardedPoint", "Violation", "check", "check_route",
+           "enforce"]
+
+#: Reasons that mean "the detector is too near the source direction": what a plan's
+#: ``skip_beam_points`` drops (type ii: ``beam``; type i: also the arms' rules).
+NEAR_SOURCE = ("beam", *arms.ARM_RULES)
 
 
 class GuardedPoint(Protocol):
@@ -53,7 +65,9 @@ MAX_LISTED = 40
 @dataclass(frozen=True)
 class Violation:
     index: int
-    reason: str  # "limits" | "missing_axis" | "beam" | "hemisphere" | "collision"
+    # "limits" | "missing_axis" | "beam" | "hemisphere" | "collision"; type (i) also
+    # "arms" | "view" | "path"
+    reason: str
     detail: str
     point: str = ""  # the point's own description (angles, targets)
 
@@ -111,6 +125,9 @@ def check(points: Iterable[GuardedPoint], profile: BenchProfile) -> list[Violati
                     out.append(Violation(
                         p.index, "hemisphere",
                         f"{name} = {theta:.4g} deg is not above the sample surface (< 90)"))
+        if geometry.is_type_i and all(r in targets for r in TYPE_I_AXES):
+            for reason, detail in arms.arm_violations(geometry, targets, light=p.light):
+                out.append(Violation(p.index, reason, detail))
         for zone in geometry.collisions:
             if zone.hit(targets):
                 out.append(Violation(p.index, "collision",
@@ -118,6 +135,32 @@ def check(points: Iterable[GuardedPoint], profile: BenchProfile) -> list[Violati
         if len(out) > first:
             desc = p.describe()
             out[first:] = [Violation(v.index, v.reason, v.detail, desc) for v in out[first:]]
+    return out
+
+
+def check_route(points: Sequence[GuardedPoint], profile: BenchProfile,
+                dynamics: dict[str, AxisDynamics], *,
+                start: dict[str, float] | None = None) -> list[Violation]:
+    """``path`` violations of running ``points`` in this order on a type (i) bench: a move
+    into a point (from ``start``, or from the previous point) for which
+    :func:`instrument.bench.arms.safe_route` finds no collision-free route. Empty for a
+    type (ii) bench."""
+    if not profile.geometry.is_type_i:
+        return []
+    limits = {r: d.limits for r, d in profile.axes.items()}
+    out = []
+    here = dict(start) if start and all(r in start for r in TYPE_I_AXES) else None
+    for p in points:
+        there = p.target_dict()
+        if not all(r in there for r in TYPE_I_AXES):
+            continue
+        if here is not None and arms.safe_route(profile.geometry, dynamics, here, there,
+                                                limits=limits) is None:
+            out.append(Violation(p.index, "path", "no collision-free route for the arms from "
+                                 + ", ".join(f"{r}={here[r]:.4g}" for r in TYPE_I_AXES)
+                                 + ": every tried order and detour makes them touch",
+                                 p.describe()))
+        here = there
     return out
 
 

@@ -38,6 +38,24 @@ detector), ω = (sinθ cosφ, sinθ sinφ, cosθ). This is the convention of
 φr = φi + 180°. In-plane points have φ ∈ {0°, 180°}; for sample_theta > 0 the source is
 at φi = 0 and the specular detector at detector_theta = 2·sample_theta. When θ = 0 the
 azimuth is undefined and reported as 0.
+
+Type (i) goniometer (:class:`TypeIKinematics`, ADR 0104)
+----------------------------------------------------------
+The sample lies still, normal up: the sample frame *is* the lab frame (x_s = +X,
+y_s = +Y, z_s = +Z). The source and the detector each ride an arc rail whose plane turns
+about +Z on an azimuth stage:
+
+``source_arc`` / ``detector_arc``
+    Signed angle of the head along its arc from the pole (+Z), less the profile's
+    ``arc_offset_deg``: a reading a at azimuth reading ϕ points the head along
+    (sin a cos ϕ, sin a sin ϕ, cos a), so a negative arc reaches the far side of the rail.
+``source_azimuth`` / ``detector_azimuth``
+    Azimuth of the arc's plane from +X, counter-clockwise seen from above, less
+    ``azimuth_offset_deg``.
+
+So θi = |source_arc|, φi = source_azimuth (+180° for a negative arc), and the same for
+the detector: the same (θi, φi, θr, φr) are the same two directions in the sample frame on
+both types, which is all the BRDF sees.
 """
 
 from __future__ import annotations
@@ -46,25 +64,32 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from instrument.bench.profile import GeometrySpec
 
 __all__ = [
     "IN_PLANE_AXES",
     "OUT_OF_PLANE_AXES",
+    "TYPE_I_AXES",
     "Angles",
     "InPlaneKinematics",
     "Kinematics",
     "OutOfPlaneKinematics",
+    "TypeIKinematics",
     "UnreachableError",
     "direction",
     "kinematics_for",
+    "kinematics_of",
     "wrap180",
 ]
 
 IN_PLANE_AXES = ("sample_theta", "detector_theta")
 OUT_OF_PLANE_AXES = ("sample_theta", "sample_tilt", "sample_phi", "detector_theta")
+TYPE_I_AXES = ("source_arc", "source_azimuth", "detector_arc", "detector_azimuth")
 
 _EPS = 1e-9
 
@@ -290,6 +315,66 @@ def _triad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     b_perp = b - np.dot(b, e1) * e1
     e2 = b_perp / np.linalg.norm(b_perp)
     return np.column_stack([e1, e2, np.cross(e1, e2)])
+
+
+class TypeIKinematics(Kinematics):
+    """Source and detector arms over a stationary, horizontal sample (module docstring).
+
+    ``offsets`` maps an axis role to its reading at the arm's zero (``arc_offset_deg``,
+    ``azimuth_offset_deg`` of the profile's arms). Each arm reaches a direction two ways,
+    (a, ϕ) and (−a, ϕ + 180°); :meth:`solutions` lists the four combinations, the
+    positive arcs first. At the pole the azimuth is free and is kept at its zero.
+    """
+
+    axes = TYPE_I_AXES
+
+    def __init__(self, *, offsets: Mapping[str, float] | None = None) -> None:
+        super().__init__(source_theta_deg=0.0)
+        self.offsets = {r: float((offsets or {}).get(r, 0.0)) for r in TYPE_I_AXES}
+
+    def sample_to_lab(self, positions: Mapping[str, float]) -> np.ndarray:
+        return np.eye(3)
+
+    def arm_direction(self, positions: Mapping[str, float], arm: str) -> np.ndarray:
+        """Unit vector from the sample centre to the ``arm`` ("source" or "detector")
+        head, lab (= sample) frame."""
+        a = float(positions[f"{arm}_arc"]) - self.offsets[f"{arm}_arc"]
+        p = float(positions[f"{arm}_azimuth"]) - self.offsets[f"{arm}_azimuth"]
+        return direction(a, p)
+
+    def angles(self, positions: Mapping[str, float]) -> Angles:
+        ti, pi = _polar(self.arm_direction(positions, "source"))
+        tr, pr = _polar(self.arm_direction(positions, "detector"))
+        return Angles(ti, pi, tr, pr)
+
+    def solutions(self, angles: Angles) -> list[dict[str, float]]:
+        if not (0.0 <= angles.theta_i <= 180.0 and 0.0 <= angles.theta_r <= 180.0):
+            return []
+        src = self._arm("source", angles.theta_i, angles.phi_i)
+        det = self._arm("detector", angles.theta_r, angles.phi_r)
+        return [{**s, **d} for s in src for d in det]
+
+    def _arm(self, arm: str, theta: float, phi: float) -> list[dict[str, float]]:
+        arc, az = f"{arm}_arc", f"{arm}_azimuth"
+        if abs(theta) < _EPS:
+            return [{arc: self.offsets[arc], az: self.offsets[az]}]
+        return [{arc: theta + self.offsets[arc], az: wrap180(phi) + self.offsets[az]},
+                {arc: -theta + self.offsets[arc],
+                 az: wrap180(phi + 180.0) + self.offsets[az]}]
+
+
+def kinematics_of(geometry: GeometrySpec) -> Kinematics:
+    """The kinematics of a profile's ``[geometry]``: its goniometer type, its kind and its
+    source direction (type ii) or its arms' stage offsets (type i)."""
+    if geometry.is_type_i:
+        offsets: dict[str, float] = {}
+        for arm, spec in (("source", geometry.source_arm),
+                          ("detector", geometry.detector_arm)):
+            if spec is not None:
+                offsets[f"{arm}_arc"] = spec.arc_offset_deg
+                offsets[f"{arm}_azimuth"] = spec.azimuth_offset_deg
+        return TypeIKinematics(offsets=offsets)
+    return kinematics_for(geometry.kind, source_theta_deg=geometry.source_theta_deg)
 
 
 def kinematics_for(kind: str, *, source_theta_deg: float = 0.0) -> Kinematics:

@@ -12,7 +12,11 @@ it into the beam, so with the light on it is refused like any move there. Turnin
 light on is judged as a point at the present pose with the light on (the detector
 parked in the beam is refused before the beam reaches it).
 
-Only end poses are judged, as for a plan: the path between two allowed poses is not.
+Only end poses are judged, as for a plan, except on a type (i) goniometer, where the arms
+can meet on the way: there the move's own path (its axes started together, as the bench
+runs them) must keep the arms apart too (:func:`instrument.bench.arms.path_clear`), else
+the move is refused as ``path`` before anything moves; the remedy is to move one arm
+first, or around the other.
 
 :func:`plan_manual_move` returns the :class:`ManualMove` or raises :class:`MoveRefused`,
 whose message lists every reason, in the guard's words. Nothing here talks to a device:
@@ -26,7 +30,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from instrument.bench import guard
-from instrument.bench.kinematics import Angles, kinematics_for
+from instrument.bench.arms import path_clear
+from instrument.bench.dynamics import dynamics_of
+from instrument.bench.kinematics import TYPE_I_AXES, Angles, kinematics_of
 from instrument.bench.profile import BenchProfile
 
 __all__ = [
@@ -111,7 +117,7 @@ def manual_move(profile: BenchProfile, current: Mapping[str, float],
             raise ValueError(f"{role}: target must be finite, got {value}")
         pose[role] = value
     geo = profile.geometry
-    kin = kinematics_for(geo.kind, source_theta_deg=geo.source_theta_deg)
+    kin = kinematics_of(geo)
     angles = kin.angles(pose) if all(a in pose for a in kin.axes) else None
     return ManualMove(tuple(pose.items()), tuple(targets), angles, bool(light), what=what)
 
@@ -120,7 +126,7 @@ def plan_manual_move(profile: BenchProfile, current: Mapping[str, float],
                      targets: Mapping[str, float], *, light: bool) -> ManualMove:
     """:func:`manual_move`, guarded: returns it, or raises :class:`MoveRefused`."""
     move = manual_move(profile, current, targets, light=light)
-    violations = guard.check([move], profile)
+    violations = guard.check([move], profile) + _path(profile, current, move)
     if violations:
         raise MoveRefused(move, violations)
     return move
@@ -131,13 +137,28 @@ def plan_home(profile: BenchProfile, current: Mapping[str, float], role: str, *,
     """A home of ``role``, judged as a move to :data:`HOME_POSITION`; raises
     :class:`MoveRefused` when the bench may not stand there."""
     move = manual_move(profile, current, {role: HOME_POSITION}, light=light, what="home")
-    violations = [v for v in guard.check([move], profile)
+    violations = [v for v in guard.check([move], profile) + _path(profile, current, move)
                   if not (v.reason == "limits" and v.detail.startswith(f"{role} "))]
     # A reference outside the soft limits is the stage's business, not a reason to refuse
     # finding it: the limits apply to moves after homing.
     if violations:
         raise MoveRefused(move, violations)
     return move
+
+
+def _path(profile: BenchProfile, current: Mapping[str, float], move: ManualMove
+          ) -> list[guard.Violation]:
+    """A type (i) move whose own path brings the arms together (module docstring)."""
+    pose = move.target_dict()
+    if not (profile.geometry.is_type_i and all(r in current for r in TYPE_I_AXES)
+            and all(r in pose for r in TYPE_I_AXES)):
+        return []
+    check = path_clear(profile.geometry, dynamics_of(profile, TYPE_I_AXES), current, pose)
+    if check.clear:
+        return []
+    return [guard.Violation(move.index, "path", "the arms would touch on the way (closest "
+                            f"{check.closest_deg:.3g} deg apart): move one arm first, or "
+                            "around the other", move.describe())]
 
 
 def check_light_on(profile: BenchProfile, current: Mapping[str, float]) -> list[guard.Violation]:
@@ -149,7 +170,7 @@ def check_light_on(profile: BenchProfile, current: Mapping[str, float]) -> list[
     if not current:
         return []
     geo = profile.geometry
-    kin = kinematics_for(geo.kind, source_theta_deg=geo.source_theta_deg)
+    kin = kinematics_of(geo)
     angles = kin.angles(current) if all(a in current for a in kin.axes) else None
     point = ManualMove(tuple((r, float(v)) for r, v in current.items()), (), angles, True,
                        what="light on at")

@@ -47,11 +47,27 @@ Schema (all lengths in mm, angles in degrees)::
     on_failure = "pause"               # "pause" | "skip" | "rehome" | "abort"
 
     [geometry]                         # goniometer geometry
-    kind = "in_plane"                  # "in_plane" | "out_of_plane"
+    goniometer = "type_ii"             # "type_ii": fixed source, the sample rotates, the
+                                       # detector orbits (default); "type_i": source and
+                                       # detector arms over a stationary sample (ADR 0104)
+    kind = "in_plane"                  # "in_plane" | "out_of_plane" (type_i: out_of_plane)
     detector_distance_mm = 300.0       # sample centre to detector aperture
     detector_aperture_mm = 5.0         # diameter of the detector's limiting aperture
     min_bistatic_deg = 6.0             # detector must stay this far from the beam
     source_theta_deg = 0.0             # fixed source direction in the lab frame
+
+    [geometry.source_arm]              # type_i only: the source's arc and azimuth stages
+    radius_mm = 400.0                  # sample centre to the source head (arc radius)
+    width_mm = 40.0                    # width of the arm's head across the arc
+    arc_offset_deg = 0.0               # source_arc reading with the source at the pole
+    azimuth_offset_deg = 0.0           # source_azimuth reading at sample azimuth 0
+
+    [geometry.detector_arm]            # type_i only; its radius is detector_distance_mm
+    width_mm = 14.0
+    arc_offset_deg = 0.0
+    azimuth_offset_deg = 0.0
+    field_of_view_deg = 0.0            # full angle of the detector's view cone beyond
+                                       # its aperture (0: it sees the sample centre only)
 
     [[geometry.collision]]             # arm-collision zones (any number; optional)
     axis = "detector_theta"            # an axis role
@@ -79,6 +95,8 @@ from instrument.bench.driver_registry import DriverEntry, driver_registry
 
 __all__ = [
     "AXIS_ROLES",
+    "GONIOMETER_TYPES",
+    "ArmSpec",
     "BenchProfile",
     "CollisionZone",
     "DeviceSpec",
@@ -99,7 +117,14 @@ AXIS_ROLES = (
     "detector_phi",
     "source_theta",
     "camera_z",
+    # the arms of a type (i) goniometer (instrument.bench.kinematics.TypeIKinematics)
+    "source_arc",
+    "source_azimuth",
+    "detector_arc",
+    "detector_azimuth",
 )
+#: ``geometry.goniometer``: the two designs (ADR 0104).
+GONIOMETER_TYPES = ("type_ii", "type_i")
 #: ``[photodiode]``: the chopped photodiode a lock-in reads (its transimpedance amplifier
 #: and chopper), key → (low, high); ``responsivity_a_per_w`` may be a table over
 #: ``responsivity_nm``.
@@ -216,6 +241,25 @@ class CollisionZone:
 
 
 @dataclass(frozen=True)
+class ArmSpec:
+    """One arm of a type (i) goniometer (ADR 0104): its head (the source or the detector
+    on its carriage) at ``radius_mm`` from the sample centre, ``width_mm`` wide across the
+    arc; the stage readings at the pole (arc) and at sample azimuth 0 (azimuth); for the
+    detector, the full angle of its view cone beyond the aperture."""
+
+    radius_mm: float
+    width_mm: float
+    arc_offset_deg: float = 0.0
+    azimuth_offset_deg: float = 0.0
+    field_of_view_deg: float = 0.0
+
+    @property
+    def half_width_deg(self) -> float:
+        """Angular half-width of the head seen from the sample centre, degrees."""
+        return math.degrees(math.atan2(self.width_mm / 2.0, self.radius_mm))
+
+
+@dataclass(frozen=True)
 class GeometrySpec:
     """The goniometer's geometry. The optional beam and sample entries describe what each
     reading integrates (the instrument function of the BRDF fit,
@@ -233,6 +277,18 @@ class GeometrySpec:
     beam_radius_mm: float | None = None
     beam_divergence_mrad: float | None = None
     sample_radius_mm: float | None = None
+    goniometer: str = "type_ii"
+    source_arm: ArmSpec | None = None
+    detector_arm: ArmSpec | None = None
+
+    @property
+    def is_type_i(self) -> bool:
+        return self.goniometer == "type_i"
+
+    @property
+    def reaches_hemisphere(self) -> bool:
+        """Whether the bench reaches directions off the plane of incidence."""
+        return self.is_type_i or self.kind == "out_of_plane"
 
     @property
     def detector_solid_angle_sr(self) -> float:
@@ -546,12 +602,23 @@ def _retry(v: _Validator, t: Any, path: str) -> RetryPolicy:
 def _geometry(v: _Validator, t: dict[str, Any], path: str) -> GeometrySpec:
     v.unknown(t, path, {"kind", "detector_distance_mm", "detector_aperture_mm",
                         "min_bistatic_deg", "source_theta_deg", "collision",
-                        "beam_radius_mm", "beam_divergence_mrad", "sample_radius_mm"})
+                        "beam_radius_mm", "beam_divergence_mrad", "sample_radius_mm",
+                        "goniometer", "source_arm", "detector_arm"})
     default = GeometrySpec()
-    kind = v.string(t, "kind", path) or default.kind
+    goniometer = v.string(t, "goniometer", path) or default.goniometer
+    if goniometer not in GONIOMETER_TYPES:
+        v.error(f"{path}.goniometer", "must be 'type_ii' (fixed source, rotating sample) or "
+                "'type_i' (source and detector arms over a stationary sample)")
+        goniometer = default.goniometer
+    kind = v.string(t, "kind", path) or (
+        "out_of_plane" if goniometer == "type_i" else default.kind)
     if kind not in ("in_plane", "out_of_plane"):
         v.error(f"{path}.kind", "must be 'in_plane' or 'out_of_plane'")
         kind = default.kind
+    if goniometer == "type_i" and kind != "out_of_plane":
+        v.error(f"{path}.kind", "a type_i goniometer's arms reach the hemisphere: leave "
+                "kind out or set it to 'out_of_plane'")
+        kind = "out_of_plane"
     distance = v.positive(t, "detector_distance_mm", path) or default.detector_distance_mm
     aperture = v.positive(t, "detector_aperture_mm", path) or default.detector_aperture_mm
     if aperture >= 2 * distance:
@@ -569,11 +636,69 @@ def _geometry(v: _Validator, t: dict[str, Any], path: str) -> GeometrySpec:
     if divergence is not None and (not _is_number(divergence) or divergence < 0):
         v.error(f"{path}.beam_divergence_mrad", f"must be a number >= 0, got {divergence!r}")
         divergence = None
+    arms = _arms(v, t, path, goniometer, float(distance))
     return GeometrySpec(kind, float(distance), float(aperture), float(bistatic), float(source),
                         collisions, beam_radius_mm=v.positive(t, "beam_radius_mm", path),
                         beam_divergence_mrad=(None if divergence is None
                                               else float(divergence)),
-                        sample_radius_mm=v.positive(t, "sample_radius_mm", path))
+                        sample_radius_mm=v.positive(t, "sample_radius_mm", path),
+                        goniometer=goniometer, source_arm=arms[0], detector_arm=arms[1])
+
+
+#: Keys of ``[geometry.source_arm]`` / ``[geometry.detector_arm]`` → (low, high); the
+#: detector arm's radius is ``detector_distance_mm`` and only it has a field of view.
+ARM_KEYS = {"radius_mm": (1.0, 1e5), "width_mm": (0.0, 1e4),
+            "arc_offset_deg": (-360.0, 360.0), "azimuth_offset_deg": (-360.0, 360.0),
+            "field_of_view_deg": (0.0, 90.0)}
+
+
+def _arms(v: _Validator, t: dict[str, Any], path: str, goniometer: str, distance: float
+          ) -> tuple[ArmSpec | None, ArmSpec | None]:
+    """``source_arm`` and ``detector_arm`` of a type (i) goniometer (both required there,
+    refused on a type (ii)); every number finite and in :data:`ARM_KEYS`' range."""
+    out: list[ArmSpec | None] = []
+    for name in ("source_arm", "detector_arm"):
+        where = f"{path}.{name}"
+        raw = t.get(name)
+        if goniometer != "type_i":
+            if raw is not None:
+                v.error(where, "only a type_i goniometer has arms (set "
+                        f"{path}.goniometer = 'type_i', or remove this table)")
+            out.append(None)
+            continue
+        if not isinstance(raw, dict):
+            v.error(where, "is required for a type_i goniometer: a table with width_mm"
+                    + (" and radius_mm" if name == "source_arm" else ""))
+            out.append(None)
+            continue
+        known = {k for k in ARM_KEYS
+                 if (k != "radius_mm" or name == "source_arm")
+                 and (k != "field_of_view_deg" or name == "detector_arm")}
+        v.unknown(raw, where, known)
+        values: dict[str, float] = {}
+        for key in sorted(known):
+            low, high = ARM_KEYS[key]
+            if key not in raw:
+                if key in ("radius_mm", "width_mm"):
+                    v.error(f"{where}.{key}", "is required")
+                continue
+            x = raw[key]
+            if not _is_number(x) or not low <= x <= high or (key == "width_mm" and x <= 0):
+                v.error(f"{where}.{key}", f"must be a number from {low:g} to {high:g}"
+                        + (" (> 0)" if key == "width_mm" else "") + f", got {x!r}")
+                continue
+            values[key] = float(x)
+        if name == "detector_arm":
+            values["radius_mm"] = distance
+        if "radius_mm" in values and "width_mm" in values:
+            if values["width_mm"] >= 2 * values["radius_mm"]:
+                v.error(f"{where}.width_mm", "must be smaller than twice the arm's radius")
+                out.append(None)
+                continue
+            out.append(ArmSpec(**values))
+        else:
+            out.append(None)
+    return out[0], out[1]
 
 
 def _collisions(v: _Validator, raw: Any, path: str) -> tuple[CollisionZone, ...]:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, runtime_checkable
 
 from instrument.bench import guard
-from instrument.bench.kinematics import Angles, UnreachableError, kinematics_for
+from instrument.bench.kinematics import Angles, UnreachableError, kinematics_of
 from instrument.plans.build import Plan, in_plane_angles
 from instrument.plans.commands import ScanPoint
 from instrument.plans.planfile import PlanSpec
@@ -249,8 +249,7 @@ class AdaptiveDriver:
     def _guard(self, plan: Plan, props: list[Proposal]
                ) -> tuple[list[ScanPoint], list[dict[str, Any]], list[Refused]]:
         profile = plan.profile
-        kin = kinematics_for(profile.geometry.kind,
-                             source_theta_deg=profile.geometry.source_theta_deg)
+        kin = kinematics_of(profile.geometry)
         limits = {r: d.limits for r, d in profile.axes.items() if d.limits is not None}
         first = len(plan.points)
         points: list[ScanPoint] = []

@@ -8,16 +8,18 @@ typed commands the engine runs; it skips points already done (resume).
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Container, Iterable, Iterator, Sequence
+from collections.abc import Container, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from instrument.bench import guard
-from instrument.bench.dynamics import AxisDynamics, route_time
-from instrument.bench.kinematics import Angles, UnreachableError, kinematics_for
+from instrument.bench.arms import safe_route
+from instrument.bench.dynamics import AxisDynamics, dynamics_of, route_time, step_time
+from instrument.bench.kinematics import TYPE_I_AXES, Angles, UnreachableError, kinematics_of
 from instrument.bench.profile import BenchProfile, FieldError
 from instrument.bench.timing import BenchTiming, bench_timing
 from instrument.plans.commands import (
@@ -43,9 +45,6 @@ __all__ = ["EVENTS", "Plan", "PlanEstimate", "build_plan", "dynamics_of", "guard
 #: and the auto-exposure's frames at exposures it did not keep (:meth:`Plan._climb_frames`).
 EVENTS = ("power_meter_integrals_lit", "power_meter_integrals_dark", "lockin_integrals_lit",
           "lockin_integrals_dark", "auto_exposure_climb_frames")
-
-#: Used for planning when a profile gives no velocity/acceleration for an axis.
-DEFAULT_DYNAMICS = AxisDynamics(velocity=10.0, acceleration=10.0)
 
 
 @dataclass(frozen=True)
@@ -136,11 +135,13 @@ class Plan:
         dyn = dynamics_of(self.profile, self.axes)
         travel = {r: float(np.abs(np.diff(t[:, k])).sum()) for k, r in enumerate(self.axes)}
         motion, _ = route_time(t, self.axes, dyn)
+        motion += self._routes_extra_s(t, dyn)
         pol = self.spec.acquisition
         acq = sum(pol.estimated_seconds(p.exposure_us) for p in self.points)
         timing = bench_timing(self.profile, self.axes)
         fast = {r: _faster(d, timing.axis_speed.get(r, 1.0)) for r, d in dyn.items()}
         bench_motion, _ = route_time(t, self.axes, fast)
+        bench_motion += self._routes_extra_s(t, fast)
         speedup = motion / bench_motion if bench_motion > 0 else 1.0
         nd_s, nd_note = self._nd_turns(timing)
         events = dict.fromkeys(EVENTS, 0.0)
@@ -148,6 +149,24 @@ class Plan:
         return PlanEstimate(len(self.points), travel, motion, acq, bench_motion,
                             acquisition + nd_s, speedup, dict(timing.home_s),
                             timing.assumed, nd_note + self._events_note(events), events)
+
+    def _routes_extra_s(self, t: np.ndarray, dyn: dict[str, AxisDynamics]) -> float:
+        """Seconds a type (i) bench's routes add to the moves between the rows of ``t``
+        (targets, axes :attr:`axes`): the legs of a split move one after the other, less
+        the one concurrent move :func:`route_time` counted (ADR 0104). 0 on type (ii)."""
+        geo = self.profile.geometry
+        if not geo.is_type_i or not all(r in self.axes for r in TYPE_I_AXES):
+            return 0.0
+        col = [self.axes.index(r) for r in TYPE_I_AXES]
+        limits = {r: d.limits for r, d in self.profile.axes.items()}
+        extra = 0.0
+        for a, b in itertools.pairwise(t[:, col]):
+            here, there = dict(zip(TYPE_I_AXES, a, strict=True)), dict(
+                zip(TYPE_I_AXES, b, strict=True))
+            route = safe_route(geo, dyn, here, there, limits=limits)
+            if route is not None and route.split:
+                extra += route.seconds(here, dyn) - step_time(here, there, dyn)
+        return extra
 
     @staticmethod
     def _events_note(events: dict[str, float]) -> tuple[str, ...]:
@@ -368,17 +387,6 @@ def _faster(d: AxisDynamics, speed: float) -> AxisDynamics:
                         d.settle_s / speed)
 
 
-def dynamics_of(profile: BenchProfile, axes: Iterable[str]) -> dict[str, AxisDynamics]:
-    out = {}
-    for r in axes:
-        spec = profile.devices.get(r)
-        if spec is None or spec.velocity is None or spec.acceleration is None:
-            out[r] = DEFAULT_DYNAMICS
-        else:
-            out[r] = AxisDynamics(spec.velocity, spec.acceleration, spec.settle_s)
-    return out
-
-
 # --------------------------------------------------------------------------- generation
 
 
@@ -386,11 +394,10 @@ def _raw_points(spec: PlanSpec, profile: BenchProfile) -> list[ScanPoint]:
     check_point_count(spec)  # from the axes, before a single point is made
     s = spec.scan
     kind = spec.kind
-    kin = kinematics_for(profile.geometry.kind,
-                         source_theta_deg=profile.geometry.source_theta_deg)
+    kin = kinematics_of(profile.geometry)
     limits = {r: d.limits for r, d in profile.axes.items() if d.limits is not None}
     label = {"reference": "reference", "signature": "signature"}.get(kind, "sample")
-    if kind == "brdf_hemisphere" and profile.geometry.kind != "out_of_plane":
+    if kind == "brdf_hemisphere" and not profile.geometry.reaches_hemisphere:
         # One cause, one message: an in-plane goniometer has no sample azimuth or tilt, so
         # every off-plane direction would otherwise be listed as its own error.
         raise PlanError(f"plan {spec.name!r}", [FieldError(
@@ -545,7 +552,7 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
     raw = [replace(p, index=i) for i, p in enumerate(raw)]
     dropped = 0
     if spec.scan.get("skip_beam_points", False):
-        beam = {v.index for v in guard.check(raw, profile) if v.reason == "beam"}
+        beam = {v.index for v in guard.check(raw, profile) if v.reason in guard.NEAR_SOURCE}
         dropped = len(beam)
         raw = [replace(p, index=i)
                for i, p in enumerate(p for p in raw if p.index not in beam)]
@@ -559,7 +566,9 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
         t = np.array([[dict(p.targets)[r] for r in axes] for p in body])
         st = None if start is None else np.array([start.get(r, 0.0) for r in axes])
         order = optimise_order(t, axes, dynamics_of(profile, axes), start=st)
-        body = [body[int(j)] for j in order]
+        body = _routable(profile, body, [body[int(j)] for j in order], start)
+    elif profile.geometry.is_type_i:
+        _routable(profile, body, body, start)
     _check_power_meter_wavelength(spec, profile)
     if spec.spectral is not None:
         body = _wavelength_axis(spec, profile, body)
@@ -571,6 +580,23 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
         body = _dark_per_row(body)
     points = tuple(replace(p, index=k) for k, p in enumerate(head + body))
     return Plan(spec, profile, axes, points, dropped)
+
+
+def _routable(profile: BenchProfile, generated: list[ScanPoint], ordered: list[ScanPoint],
+              start: dict[str, float] | None) -> list[ScanPoint]:
+    """``ordered``, if the arms of a type (i) bench can run it without touching between
+    points (:func:`instrument.bench.guard.check_route`); else the generated order if they
+    can run that; else :class:`~instrument.bench.guard.GuardError` (nothing has moved)."""
+    if not profile.geometry.is_type_i:
+        return ordered
+    dyn = dynamics_of(profile, profile.axes)
+    bad = guard.check_route(ordered, profile, dyn, start=start)
+    if bad and ordered is not generated and not guard.check_route(generated, profile, dyn,
+                                                                   start=start):
+        return generated
+    if bad:
+        raise guard.GuardError(bad, len(ordered))
+    return ordered
 
 
 def _dark_per_row(body: list[ScanPoint]) -> list[ScanPoint]:

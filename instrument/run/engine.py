@@ -40,9 +40,10 @@ from numpy.typing import NDArray
 
 from drivers.base import AxisStatus, Camera, Frame, MotionAxis, PowerMeter
 from drivers.errors import ControllerError, DeviceError, LimitError, MotionError
+from instrument.bench.arms import safe_route
 from instrument.bench.devices import Bench
 from instrument.bench.dynamics import move_time
-from instrument.bench.kinematics import kinematics_for
+from instrument.bench.kinematics import TYPE_I_AXES, kinematics_of
 from instrument.bench.profile import RetryPolicy
 from instrument.plans.adaptive import AdaptiveDriver
 from instrument.plans.build import Plan, dynamics_of
@@ -177,8 +178,7 @@ class RunEngine:
             store.path, fsync=store.fsync, sync_interval_s=store.sync_interval_s,
             min_free_bytes=store.min_free_bytes))
         self._dyn = dynamics_of(plan.profile, plan.axes)
-        self._kin = kinematics_for(plan.profile.geometry.kind,
-                                   source_theta_deg=plan.profile.geometry.source_theta_deg)
+        self._kin = kinematics_of(plan.profile.geometry)
         # The bench's devices do not change during a run: look them up once.
         self._camera = bench.camera
         self._pm = bench.power_meter
@@ -750,6 +750,36 @@ class RunEngine:
 
     def _move(self, move: Move, st: _PointState) -> None:
         targets = dict(move.targets)
+        for leg in self._route(targets):
+            self._move_together(leg, st)
+        self._move_together(targets, st)
+
+    def _route(self, targets: dict[str, float]) -> list[dict[str, float]]:
+        """The intermediate moves before ``targets`` on a type (i) bench (ADR 0104): none
+        when the arms can move together from where they stand, else the legs of
+        :func:`instrument.bench.arms.safe_route`. Decided before anything moves: a move
+        with no collision-free route pauses the run instead."""
+        profile = self.plan.profile
+        if not (profile.geometry.is_type_i and all(r in targets for r in TYPE_I_AXES)):
+            return []
+        here = {}
+        for role in TYPE_I_AXES:
+            cached = self._position_cache.get(role)
+            here[role] = (cached if cached is not None else
+                          self._read_back(role, self._axis(role).status()).position)
+        route = safe_route(profile.geometry, self._dyn, here, targets,
+                           limits={r: d.limits for r, d in profile.axes.items()})
+        if route is None:
+            # no device failed: the fault names the two arms together
+            raise _PointFailed("pause", "arms", "no collision-free route for the arms "
+                               "from where they stand to this point; move them apart by "
+                               "hand and resume")
+        if route.split:
+            self.store_event("route", how=route.how, legs=len(route.moves))
+        return [dict(leg) for leg in route.moves[:-1]]
+
+    def _move_together(self, targets: dict[str, float], st: _PointState) -> None:
+        """Start every axis of ``targets``, then wait for them all."""
         moving: dict[str, MotionAxis] = {}
         plan_time = 0.0
         for role, target in targets.items():

@@ -137,3 +137,29 @@ def test_the_cli_starts_no_qt_for_other_commands():
     out = subprocess.run([sys.executable, "-m", "instrument.cli", "gui", "--help"],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and "--bench" in out.stdout and "--out" in out.stdout
+
+
+def test_the_type_i_bench_shows_its_arms_and_refuses_a_jog_into_the_other_arm(
+        qtbot, make_window, fast_bench_file):
+    w = make_window(fast_bench_file("sim-type-i"))
+    connect(qtbot, w)
+    panels = w.bench_panel.panels
+    arms = ("source_arc", "source_azimuth", "detector_arc", "detector_azimuth")
+    assert set(arms) <= set(panels)
+    _home(qtbot, w, *arms)
+    # homed, the arcs stand 60° either side of the pole: the source head at θ 60°, φ 0°;
+    # the detector arc at 120° (its offset 60°) would put its head on the source's
+    det = panels["detector_arc"]
+    det.target.setValue(120.0)
+    det.go.click()
+    qtbot.waitUntil(lambda: "refused" in w.bench_panel.message.text(), timeout=60000)
+    assert "arms collide" in w.bench_panel.message.text()
+    assert w.session.wait_idle(60)
+    assert _stage("simsmc", "detector_arc") == pytest.approx(0.0, abs=0.005)
+    # turned aside first, the same arc is allowed
+    panels["detector_azimuth"].target.setValue(40.0)
+    panels["detector_azimuth"].go.click()
+    qtbot.waitUntil(lambda: panels["detector_azimuth"].position.text() == "40.000 deg",
+                    timeout=60000)
+    det.go.click()
+    qtbot.waitUntil(lambda: det.position.text() == "120.000 deg", timeout=60000)

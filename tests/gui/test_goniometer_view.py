@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,3 +44,33 @@ def test_the_drawing_follows_the_stages(qtbot, make_window, fast_bench_file):
                                                       [::-1])) - 15.0) < 0.02, timeout=60000)
     assert "min_bistatic" not in view.caption.text()
     assert view.scene.by_role("bistatic_cone")
+
+
+def test_a_type_i_bench_draws_both_arms_the_sample_and_the_zones(qtbot, tmp_path):
+    """The view alone, given the sim-type-i profile, a pose and a plan (no bench open)."""
+    from gui.qt.goniometer_view import GoniometerView
+    from instrument.bench.kinematics import Angles, kinematics_of
+    from instrument.bench.profile import load_profile
+    from instrument.plans.build import build_plan
+    from instrument.plans.planfile import load_plan
+
+    root = Path(__file__).resolve().parents[2]
+    profile = load_profile("sim-type-i")
+    view = GoniometerView()
+    qtbot.addWidget(view)
+    view.resize(640, 640)
+    view.set_profile(profile)
+    assert not view.which.model().item(1).isEnabled()  # its top view is the hemisphere
+    pose = kinematics_of(profile.geometry).positions(Angles(30.0, 0.0, 50.0, 180.0))
+    view.set_positions(pose)
+    view.set_plan(build_plan(load_plan(root / "examples" / "brdf_hemisphere.toml"), profile))
+    view.set_done([True] * 20)
+    view.show()
+    view.redraw()
+    roles = {s.role for s in view.scene.shapes}
+    assert {"source_rail", "detector_rail", "incident", "detector", "stationary_sample",
+            "collision", "points_done", "points_todo"} <= roles
+    assert "type (i)" in view.caption.text()
+    # pytest-qt's own grab: a picture of what was drawn, kept for a look by eye
+    view.grab().save(str(tmp_path / "goniometer_type_i.png"))
+    assert (tmp_path / "goniometer_type_i.png").stat().st_size > 0

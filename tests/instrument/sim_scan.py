@@ -36,6 +36,7 @@ from hw_mocks.sim.camera import OpticsParams, SimulatedCamera
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import Sensor, SensorParams
 from hw_mocks.sim.world import SourceState, VirtualBench
+from instrument.bench.kinematics import kinematics_of
 from instrument.bench.profile import load_profile
 from instrument.plans.build import Plan, build_plan
 from instrument.plans.planfile import parse_plan
@@ -196,6 +197,7 @@ def _render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None =
         "camera", world=world, sensor=fine,
         optics=OpticsParams(setup.focal_length_mm, setup.aperture_mm),
     )
+    offsets = getattr(kinematics_of(plan.profile.geometry), "offsets", {})
     rates, angles = [], []
     for p in plan.points:
         key = (sample, setup, tuple((r, round(v, 9)) for r, v in p.targets))
@@ -203,7 +205,8 @@ def _render(setup: ScanSetup, sample: Sample, *, scene: GoniometerScene | None =
             rates.append(cache[key])
         else:
             for role, value in p.targets:
-                world.set_role(role, value)
+                # a type (i) arm's stage reads its angle plus the profile's offset
+                world.set_role(role, value - offsets.get(role, 0.0))
             state = world.snapshot()
             rate = np.array(cam.photon_rate(state), dtype=np.float64)
             # each pixel sums its ss × ss sub-pixels (area integration)

@@ -73,3 +73,16 @@ def test_the_theta_i_slope_is_not_differenced_across_a_coarse_grid():
     f2 = 1 + 0.1 * np.degrees(ti2)
     u2 = angular_uncertainty(f2, ti2, tr, sigma_theta_i=0.01)
     assert u2 == pytest.approx(np.full(9, 0.1 * np.degrees(1) * 0.01), rel=1e-6)
+
+
+def test_on_a_type_i_bench_each_arc_alone_sets_its_angle():
+    """The sample stands still: σθi is the source arc's read-back, σθr the detector
+    arc's, nothing shared (ADR 0104)."""
+    data = _profile("sim-type-i")
+    data["devices"]["source_arc"]["repeatability"] = 0.002
+    data["devices"]["detector_arc"]["readback_resolution"] = 0.001
+    m = angular_model(data)
+    assert [s.role for s in m.stages] == ["source_arc", "detector_arc"]
+    assert math.degrees(m.sigma_theta_i_rad) == pytest.approx(
+        math.hypot(3 / 409600 / math.sqrt(12), 0.002 / math.sqrt(3)))
+    assert math.degrees(m.sigma_theta_r_rad) == pytest.approx(0.001 / math.sqrt(12))
