@@ -34,6 +34,7 @@ from analysis.brdf.reduction import (
     pixel_response_covariance,
     relative_brdf,
     solid_angle_sr,
+    speckle_rel,
     subtract_signature,
 )
 from analysis.radiometry import FlatField, flat_field
@@ -412,6 +413,28 @@ def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, st
     return None, "unknown (points treated as point samples: give --beam-radius-mm)"
 
 
+def _speckle_rel(run: RunData, opts: ReductionOptions, theta_i: np.ndarray,
+                 theta_r: np.ndarray, solid_angle_sr: float) -> np.ndarray | None:
+    """The relative error laser speckle leaves in each reading (a static sample,
+    :mod:`analysis.brdf.reduction.speckle`), or None under an incoherent source (the
+    stored profile's ``[source] coherence``)."""
+    profile = run.profile()
+    light = profile.get("source", {})
+    if light.get("coherence", "incoherent") != "laser":
+        return None
+    wavelength = light.get("wavelength_nm",
+                           profile.get("simulation", {}).get("source", {}).get("wavelength_nm"))
+    if wavelength is None:
+        raise ValueError("the bench's source is a laser, whose speckle grain depends on its "
+                         "wavelength: set [source] wavelength_nm in the bench profile")
+    beam, _ = _beam_radius(run, opts)
+    if beam is None:
+        raise ValueError("the bench's source is a laser, whose speckle depends on the beam's "
+                         "size on the sample: give --beam-radius-mm")
+    return speckle_rel(theta_i, theta_r, wavelength_nm=float(wavelength),
+                       beam_radius_mm=beam, solid_angle_sr=solid_angle_sr)
+
+
 def _beam_divergence_rad(run: RunData, opts: ReductionOptions) -> tuple[float, str]:
     if opts.beam_divergence_mrad is not None:
         return 1e-3 * float(opts.beam_divergence_mrad), "option"
@@ -586,6 +609,12 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         warnings.extend(_dark_warnings(sig.dark, noise))
         if noise.warning:
             warnings.append(noise.warning)
+    speckle = _speckle_rel(run, opts, ti, tr, float(rinfo["solid_angle_sr"]))
+    if speckle is not None:
+        # a frozen pattern per geometry: an error of each value, independent between points
+        u_s = np.hypot(u_s, p_s * speckle)
+        prov["speckle"] = (f"laser source, static sample: {speckle.min():.2%} to "
+                           f"{speckle.max():.2%} of each value")
     scale_unknown: list[str] = []
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
@@ -619,6 +648,8 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             np.concatenate([nd_slots(ref_run, rr) for rr in ref_rows]), ref_table)
         if ref_nd is not None:  # the standard's readings: the filter's error on each
             ref_u = np.hypot(ref_u, ref_p * np.sqrt(np.diag(ref_nd)))
+        if speckle is not None:  # the standard speckles under the same laser
+            ref_u = np.hypot(ref_u, ref_p * speckle)
         ref = replace(ref, power_w=ref_p, u_power_w=ref_u)
         std = _reference_standard(ref_run, opts)
         pts = relative_brdf(p_s, u_s, ref.power_w, ref.u_power_w, ti, pi_, tr, pr,
