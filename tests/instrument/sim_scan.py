@@ -373,11 +373,12 @@ def profile_text(setup: ScanSetup, sample: Sample) -> str:
 
 
 def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_plane",
-                   run_id: str = "closed-loop", plan_text: str | None = None) -> Path:
+                   run_id: str = "closed-loop", plan_text: str | None = None,
+                   coherence: str | None = None) -> Path:
     """Acquire every point of ``r`` with sensor ``seed`` and store it as a run file with
     :class:`instrument.run.storage.RunStore` (the engine's writer), frames per point: the light
     frame then its dark frame. ``plan_text`` is stored as the run's plan (default the
-    setup's)."""
+    setup's); ``coherence`` adds the profile's ``[source] coherence``."""
     import time as _time
 
     from instrument.run.storage import FrameData, PointRecord, RunHeader, RunStore
@@ -392,7 +393,9 @@ def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_p
     header = RunHeader(
         run_id=run_id, plan_kind=kind, plan_name=plan.spec.name,
         plan_text=plan_text if plan_text is not None else s.plan_text(),
-        profile_text=profile_text(s, r.sample), bench_name="sim", sample_name=r.sample.name,
+        profile_text=profile_text(s, r.sample) + (
+            "" if coherence is None else f'\n[source]\ncoherence = "{coherence}"\n'),
+        bench_name="sim", sample_name=r.sample.name,
         sample_description="closed-loop sample", axes=plan.axes,
         planned_targets=plan.targets_array().tolist(),
         planned_angles=[list(q.angles.as_tuple()) for q in plan.points],

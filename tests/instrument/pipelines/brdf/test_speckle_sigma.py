@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,7 +28,16 @@ from analysis.brdf.goodness import DEFAULT_ALPHA, goodness_of_fit
 from analysis.brdf.reduction import BRDFPoints, receiver_model, speckle_rel
 from hw_mocks.sim.sensor import SensorParams
 from hw_mocks.sim.speckle import SpeckleOptics, speckle_image, speckle_seed
-from tests.instrument.sim_scan import Rendered, Sample, ScanSetup, receiver, reduce_seed, render
+from instrument.pipelines.brdf.reduce import reduce_run
+from tests.instrument.sim_scan import (
+    Rendered,
+    Sample,
+    ScanSetup,
+    receiver,
+    reduce_seed,
+    render,
+    write_run_file,
+)
 
 SETUP = ScanSetup(theta_i_deg=(30.0, 50.0), theta_r_step=20.0, beam_radius_mm=0.3,
                   power_w=2e-5, sensor_px=96,
@@ -91,3 +101,21 @@ def test_without_the_speckle_term_the_gate_fires() -> None:
     fired = [fit_seed(r, seed, speckle_sigma=False)[1].p_value < DEFAULT_ALPHA
              for seed in (1, 2)]
     assert all(fired)
+
+
+#: A few points, for the run-file path (fast).
+SMALL = replace(SETUP, theta_i_deg=(40.0,), theta_r_step=40.0, specular_half_width_deg=0.0,
+                supersample=1)
+
+
+def test_reduce_run_adds_speckle_under_a_laser(tmp_path: Path) -> None:
+    r = speckled(render(SMALL, SAMPLE), 4)
+    lamp = reduce_run(write_run_file(r, 4, tmp_path / "lamp.h5", coherence="incoherent"))
+    laser = reduce_run(write_run_file(r, 4, tmp_path / "laser.h5", coherence="laser"))
+    np.testing.assert_allclose(laser.points.brdf, lamp.points.brdf, rtol=1e-12)
+    rel = speckle_rel(laser.points.theta_i, laser.points.theta_r,
+                      wavelength_nm=WAVELENGTH_NM, beam_radius_mm=SMALL.beam_radius_mm,
+                      solid_angle_sr=laser.provenance["solid_angle_sr"])
+    expected = np.hypot(lamp.points.u_stat, lamp.points.brdf * rel)
+    np.testing.assert_allclose(laser.points.u_stat, expected, rtol=1e-9)
+    assert "speckle" in laser.provenance and "speckle" not in lamp.provenance
