@@ -93,6 +93,7 @@ __all__ = [
     "GeometrySpec",
     "ProfileError",
     "RetryPolicy",
+    "SPIN_ROLE",
     "load_profile",
     "parse_profile",
 ]
@@ -107,6 +108,10 @@ AXIS_ROLES = (
     "source_theta",
     "camera_z",
 )
+#: The role of a sample spinner: a continuous-rotation stage turning the sample about its
+#: normal while the camera exposes, to average a laser's speckle (ADR 0098). Not an axis
+#: of the kinematics: plans never position it, the engine spins it (``spin_deg_s``).
+SPIN_ROLE = "sample_spin"
 #: ``[photodiode]``: the chopped photodiode a lock-in reads (its transimpedance amplifier
 #: and chopper), key → (low, high); ``responsivity_a_per_w`` may be a table over
 #: ``responsivity_nm``.
@@ -466,9 +471,9 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
                     f"drivers that find theirs by serial number "
                     f"({', '.join(registry.serial_drivers()) or 'none'}) take 'serial'")
     is_axis = kind == "motion_axis"
-    if is_axis and role not in AXIS_ROLES:
+    if is_axis and role not in (*AXIS_ROLES, SPIN_ROLE):
         v.error(path, f"motion driver on unknown role {role!r}; axis roles are "
-                f"{', '.join(AXIS_ROLES)}")
+                f"{', '.join(AXIS_ROLES)} (and {SPIN_ROLE}, a sample spinner)")
     stage = v.string(t, "stage", path)
     limits = None
     if "limits" in t:

@@ -527,6 +527,8 @@ def _acquisition(v: _Validator, t: dict[str, Any], path: str) -> AcquisitionPoli
     brackets = number(v, t, "max_brackets", path, lo=1, hi=16, integer=True)
     frames = number(v, t, "frames", path, lo=1, hi=10000, integer=True)
     readout = number(v, t, "readout_s", path, lo=0.0, hi=60.0)
+    # a sample spinner's rate: up to 10 turns a second (a stage's limit is its own)
+    spin = number(v, t, "spin_deg_s", path, lo=0.0, hi=3600.0)
     _boolean(v, t, "hdr", path)
     detectors = d.detectors
     if "detectors" in t:
@@ -555,4 +557,5 @@ def _acquisition(v: _Validator, t: dict[str, Any], path: str) -> AcquisitionPoli
         frames=int(frames if frames is not None else d.frames),
         dark=dark, detectors=detectors, dark_detectors=dark_detectors,
         readout_s=float(readout if readout is not None else d.readout_s),
+        spin_deg_s=float(spin if spin is not None else d.spin_deg_s),
     )
