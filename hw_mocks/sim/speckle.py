@@ -97,7 +97,7 @@ def speckle_seed(seed: int, geometry: Sequence[float], step: int) -> list[int]:
     """The entropy of one pattern: the camera's seed, the geometry (positions to 10⁻⁶)
     and the decorrelation step of the spin angle."""
     words = [int(seed) % 2**63, 0x5BEC]
-    words += [int(round(x * 1e6)) % 2**63 for x in geometry]
+    words += [round(x * 1e6) % 2**63 for x in geometry]
     words.append(int(step) % 2**63)
     return words
 

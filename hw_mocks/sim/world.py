@@ -72,10 +72,10 @@ from hw_mocks.sim.state import (
 )
 
 __all__ = [
+    "SPIN_ROLE",
     "BenchPose",
     "LightPath",
     "PowerMeterHead",
-    "SPIN_ROLE",
     "RoleSpec",
     "Scene",
     "SourceState",

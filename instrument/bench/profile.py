@@ -86,6 +86,7 @@ from instrument.bench.driver_registry import DriverEntry, driver_registry
 
 __all__ = [
     "AXIS_ROLES",
+    "SPIN_ROLE",
     "BenchProfile",
     "CollisionZone",
     "DeviceSpec",
@@ -93,7 +94,6 @@ __all__ = [
     "GeometrySpec",
     "ProfileError",
     "RetryPolicy",
-    "SPIN_ROLE",
     "load_profile",
     "parse_profile",
 ]

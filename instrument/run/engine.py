@@ -47,7 +47,6 @@ from instrument.bench.profile import SPIN_ROLE, RetryPolicy
 from instrument.plans.adaptive import AdaptiveDriver
 from instrument.plans.build import Plan, dynamics_of
 from instrument.plans.commands import Acquire, AcquisitionPolicy, Move, PointDone, SetLight
-from instrument.run.spinner import start_spinner
 from instrument.run.events import (
     AxisHomed,
     Event,
@@ -59,6 +58,7 @@ from instrument.run.events import (
     RunFinished,
     RunStarted,
 )
+from instrument.run.spinner import start_spinner
 from instrument.run.storage import (
     STATUS_OK,
     STATUS_SKIPPED,

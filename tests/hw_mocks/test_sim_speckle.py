@@ -163,7 +163,7 @@ def test_static_sample_shows_a_frozen_pattern() -> None:
 
 
 def test_incoherent_frames_are_unchanged() -> None:
-    world, camera = bench("incoherent")
+    _world, camera = bench("incoherent")
     frame = camera.acquire(1)[0]
     expected = camera.expected_dn()
     # no speckle: the frame scatters about the smooth image by the sensor's noise alone

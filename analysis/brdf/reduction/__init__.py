@@ -101,6 +101,7 @@ from analysis.brdf.reduction.reciprocity import (
 from analysis.brdf.reduction.speckle import (
     speckle_cells,
     speckle_rel,
+    spin_patterns,
 )
 from analysis.brdf.reduction.uncertainty import (
     scale_sensitivity,
@@ -144,6 +145,7 @@ __all__ = [
     "solid_angle_sr",
     "speckle_cells",
     "speckle_rel",
+    "spin_patterns",
     "subtract_signature",
     "with_correlated_uncertainty",
     "with_scale_uncertainty",

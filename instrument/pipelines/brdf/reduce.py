@@ -35,6 +35,7 @@ from analysis.brdf.reduction import (
     relative_brdf,
     solid_angle_sr,
     speckle_rel,
+    spin_patterns,
     subtract_signature,
 )
 from analysis.radiometry import FlatField, flat_field
@@ -413,11 +414,14 @@ def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, st
     return None, "unknown (points treated as point samples: give --beam-radius-mm)"
 
 
-def _speckle_rel(run: RunData, opts: ReductionOptions, theta_i: np.ndarray,
-                 theta_r: np.ndarray, solid_angle_sr: float) -> np.ndarray | None:
-    """The relative error laser speckle leaves in each reading (a static sample,
-    :mod:`analysis.brdf.reduction.speckle`), or None under an incoherent source (the
-    stored profile's ``[source] coherence``)."""
+def _speckle_rel(run: RunData, opts: ReductionOptions,
+                 angles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                 exposure_s: np.ndarray, solid_angle_sr: float, spin_deg_s: float
+                 ) -> np.ndarray | None:
+    """The relative error laser speckle leaves in each reading
+    (:mod:`analysis.brdf.reduction.speckle`): a static sample's frozen pattern, or the
+    average of the patterns a spinning sample sweeps in the point's exposure; None under
+    an incoherent source (the stored profile's ``[source] coherence``)."""
     profile = run.profile()
     light = profile.get("source", {})
     if light.get("coherence", "incoherent") != "laser":
@@ -431,8 +435,13 @@ def _speckle_rel(run: RunData, opts: ReductionOptions, theta_i: np.ndarray,
     if beam is None:
         raise ValueError("the bench's source is a laser, whose speckle depends on the beam's "
                          "size on the sample: give --beam-radius-mm")
-    return speckle_rel(theta_i, theta_r, wavelength_nm=float(wavelength),
-                       beam_radius_mm=beam, solid_angle_sr=solid_angle_sr)
+    ti, pi_, tr, pr = angles
+    patterns = (spin_patterns(ti, pi_, tr, pr, spin_deg_s=spin_deg_s, exposure_s=exposure_s,
+                              wavelength_nm=float(wavelength), beam_radius_mm=beam,
+                              solid_angle_sr=solid_angle_sr)
+                if spin_deg_s > 0 else 1.0)
+    return speckle_rel(ti, tr, wavelength_nm=float(wavelength), beam_radius_mm=beam,
+                       solid_angle_sr=solid_angle_sr, patterns=patterns)
 
 
 def _beam_divergence_rad(run: RunData, opts: ReductionOptions) -> tuple[float, str]:
@@ -609,11 +618,15 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         warnings.extend(_dark_warnings(sig.dark, noise))
         if noise.warning:
             warnings.append(noise.warning)
-    speckle = _speckle_rel(run, opts, ti, tr, float(rinfo["solid_angle_sr"]))
+    spin = float(run.acquisition.get("spin_deg_s", 0.0))
+    exposure_s = np.nan_to_num(joined("exposure_us") * 1e-6, nan=0.0)  # unknown: static
+    speckle = _speckle_rel(run, opts, (ti, pi_, tr, pr), exposure_s,
+                           float(rinfo["solid_angle_sr"]), spin)
     if speckle is not None:
         # a frozen pattern per geometry: an error of each value, independent between points
         u_s = np.hypot(u_s, p_s * speckle)
-        prov["speckle"] = (f"laser source, static sample: {speckle.min():.2%} to "
+        sample = (f"sample spun at {spin:g} °/s" if spin > 0 else "static sample")
+        prov["speckle"] = (f"laser source, {sample}: {speckle.min():.2%} to "
                            f"{speckle.max():.2%} of each value")
     scale_unknown: list[str] = []
     if opts.method == "absolute":

@@ -1,0 +1,119 @@
+"""Laser speckle and the sample spinner: what spinning buys (ADR 0098).
+
+1. ``--contrast``: the speckle contrast C = σ_I/⟨I⟩ of the simulated camera's generator
+   (:mod:`hw_mocks.sim.speckle`) against N, the independent patterns an exposure
+   averages, on pixels finer than the grain (1 µm, grain λ·F# = 3.2 µm) and on the sim
+   camera's 5.5 µm pixels; 4 seeds per N. The log-log slope is fitted by least squares
+   with its standard error from the scatter about the line (expected −1/2).
+2. ``--brdf``: the σ of the fitted BRDF parameters with a static and with a spun sample
+   (the K10CR1 at its 10 °/s) at equal total time (the same exposures: the spinner costs
+   one acceleration ramp per run), on the scan of
+   tests/instrument/pipelines/brdf/test_speckle_sigma.py (lambert+ggx, a 0.3 mm beam):
+   per parameter the mean reported σ, the scatter of the estimates over seeds, and the
+   mean pull spread.
+
+Run: ``python benchmarks/bench_speckle.py [--contrast] [--brdf] [--seeds N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from hw_mocks.sim.speckle import SpeckleOptics, speckle_image, speckle_seed  # noqa: E402
+
+
+def contrast_table(seeds: int) -> None:
+    y, x = np.mgrid[0:96, 0:128]
+    rate = 1e6 * np.exp(-2.0 * (((x - 64) / 77.0) ** 2 + ((y - 48) / 58.0) ** 2))
+    core = rate > 0.8 * rate.max()
+    for pitch in (1.0, 5.5):
+        optics = SpeckleOptics(633.0, 5.0, pitch)
+        ns = np.array([1, 2, 4, 8, 16, 32, 64, 128, 256])
+        rows = []
+        t0 = time.perf_counter()
+        for n in ns:
+            c = [float((speckle_image(rate, optics,
+                                      [speckle_seed(s, [pitch], k) for k in range(min(n, 8))],
+                                      patterns=float(n))[core] / rate[core]).std())
+                 for s in range(seeds)]
+            rows.append((n, np.mean(c), np.std(c, ddof=1) / math.sqrt(seeds)))
+        elapsed = time.perf_counter() - t0
+        logn = np.log(ns)
+        logc = np.log([r[1] for r in rows])
+        a = np.vstack([logn, np.ones_like(logn)]).T
+        coef, res, *_ = np.linalg.lstsq(a, logc, rcond=None)
+        dof = ns.size - 2
+        s2 = float(res[0]) / dof if res.size else 0.0
+        se = math.sqrt(s2 * np.linalg.inv(a.T @ a)[0, 0])
+        print(f"\npixel {pitch:g} µm (grain {optics.grain_um:.2f} µm), {seeds} seeds, "
+              f"{elapsed:.1f} s")
+        print("   N   contrast   ± (se)   C·√N")
+        for n, c, e in rows:
+            print(f"{n:4d}   {c:.4f}   {e:.4f}   {c * math.sqrt(n):.3f}")
+        print(f"log-log slope {coef[0]:+.4f} ± {se:.4f} (expected −0.5)")
+
+
+def brdf_table(seeds: int) -> None:
+    from tests.instrument.pipelines.brdf.test_speckle_sigma import (
+        SAMPLE,
+        SETUP,
+        SPIN,
+        fit_seed,
+    )
+    from tests.instrument.sim_scan import acquisition_seconds, render, spun_patterns
+
+    r = render(SETUP, SAMPLE)
+    truth = np.array(SAMPLE.params)
+    n = spun_patterns(r, SPIN)
+    print(f"\n{len(r.angles_rad)} points, exposure time {acquisition_seconds(r):.2f} s "
+          f"(light + dark), N per point {n.min():.1f} to {n.max():.1f} "
+          f"(median {np.median(n):.1f}); {seeds} seeds")
+    print("sample     param    reported σ   scatter   pull std   max χ²/ν")
+    out = {}
+    for label, spin in (("static", 0.0), (f"spun {SPIN:g}°/s", SPIN)):
+        est, sig, chi = [], [], []
+        t0 = time.perf_counter()
+        for seed in range(1, seeds + 1):
+            fit, gof = fit_seed(r, seed, speckle_sigma=True, spin_deg_s=spin)
+            est.append(fit.params)
+            sig.append(fit.stderr)
+            chi.append(gof.chi2 / gof.dof)
+        est_a, sig_a = np.array(est), np.array(sig)
+        out[label] = sig_a.mean(axis=0)
+        for j, name in enumerate(("rho", "ks", "alpha")):
+            pull = (est_a[:, j] - truth[j]) / sig_a[:, j]
+            print(f"{label:12s} {name:6s} {sig_a[:, j].mean():.5f}     "
+                  f"{est_a[:, j].std(ddof=1):.5f}    {pull.std(ddof=1):.2f}     "
+                  f"{max(chi):.2f}")
+        print(f"   ({time.perf_counter() - t0:.0f} s)")
+    ratio = out["static"] / out[f"spun {SPIN:g}°/s"]
+    print("σ static / σ spun: " + ", ".join(f"{v:.2f}" for v in ratio))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--contrast", action="store_true")
+    ap.add_argument("--brdf", action="store_true")
+    ap.add_argument("--seeds", type=int, default=4)
+    args = ap.parse_args()
+    if not (args.contrast or args.brdf):
+        args.contrast = args.brdf = True
+    if args.contrast:
+        contrast_table(args.seeds)
+    if args.brdf:
+        brdf_table(args.seeds)
+
+
+if __name__ == "__main__":
+    main()
