@@ -238,14 +238,17 @@ class SimulatedCamera(Camera):
 
     # -- laser speckle ------------------------------------------------------------------
     def speckle_optics(self, state: WorldState) -> speckle.SpeckleOptics:
-        """Wavelength, working f-number (image distance z_i = 1/(1/f − 1/F) over the
-        pupil's diameter, F the focus distance) and pixel pitch of the speckle grain."""
-        center = self.camera_frame(state)[0]
-        f, focus = self.optics.focal_length_mm, self._focus_mm(center)
-        image_mm = 1.0 / (1.0 / f - 1.0 / focus) if focus > f else f
-        return speckle.SpeckleOptics(state.source.wavelength_nm,
-                                     image_mm / self.optics.aperture_diameter_mm,
-                                     self.sensor.params.pixel_pitch_um)
+        """Wavelength, f-number and pixel pitch of the speckle grain.
+
+        The f-number is f/D, not the working z_i/D of a lens focused closer: this camera
+        maps a pixel to the angle p/f (its étendue A (p/f)², module docstring), so the
+        grain λ·f/D on its sensor is the one whose count over the image of the spot is
+        the spot's étendue into the pupil over λ² (what a real camera's λ·z_i/D gives
+        with its own magnification z_i/z_o)."""
+        return speckle.SpeckleOptics(
+            state.source.wavelength_nm,
+            self.optics.focal_length_mm / self.optics.aperture_diameter_mm,
+            self.sensor.params.pixel_pitch_um)
 
     def speckle_decorrelation_deg(self, state: WorldState) -> float:
         """The spin angle Δφ_c (degrees) after which the sample's speckle is a new,

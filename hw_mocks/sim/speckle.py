@@ -7,7 +7,8 @@ speckle* (Goodman, *Speckle Phenomena in Optics*, 2007, ch. 3: the intensity at 
 exponentially distributed, contrast C = σ_I/⟨I⟩ = 1; ch. 4: integrated over a detector
 much larger than a grain, the contrast falls as 1/√M with M the number of grains in it;
 ch. 5: in an imaging system the grain size on the sensor is ≈ λ·F#, F# the working
-f-number z_i/D of the lens).
+f-number z_i/D of the lens; the simulated camera, whose pixels subtend p/f, uses f/D:
+:meth:`hw_mocks.sim.camera.SimulatedCamera.speckle_optics`).
 
 How it is generated here (cheaply, and physically):
 

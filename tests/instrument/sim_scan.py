@@ -470,9 +470,9 @@ LASER_NM = 633.0
 
 
 def speckle_optics(setup: ScanSetup) -> SpeckleOptics:
-    """The simulated camera's speckle grain for this setup (working f-number z_i/D)."""
-    image_mm = 1.0 / (1.0 / setup.focal_length_mm - 1.0 / setup.distance_mm)
-    return SpeckleOptics(LASER_NM, image_mm / setup.aperture_mm,
+    """The simulated camera's speckle grain for this setup (f/D: its pixels subtend p/f,
+    :meth:`hw_mocks.sim.camera.SimulatedCamera.speckle_optics`)."""
+    return SpeckleOptics(LASER_NM, setup.focal_length_mm / setup.aperture_mm,
                          setup.sensor_params().pixel_pitch_um)
 
 
