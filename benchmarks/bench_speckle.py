@@ -11,8 +11,10 @@
    tests/instrument/pipelines/brdf/test_speckle_sigma.py (lambert+ggx, a 0.3 mm beam):
    per parameter the mean reported σ, the scatter of the estimates over seeds, and the
    mean pull spread.
+3. ``--cost``: CPU seconds of a frame of the simulated camera, incoherent and under a
+   laser (static, spun).
 
-Run: ``python benchmarks/bench_speckle.py [--contrast] [--brdf] [--seeds N]``.
+Run: ``python benchmarks/bench_speckle.py [--contrast] [--brdf] [--cost] [--seeds N]``.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hw_mocks.sim.speckle import SpeckleOptics, speckle_image, speckle_seed  # noqa: E402
+from hw_mocks.sim.speckle import SpeckleOptics, speckle_image, speckle_seed
 
 
 def contrast_table(seeds: int) -> None:
@@ -97,18 +99,54 @@ def brdf_table(seeds: int) -> None:
     print("σ static / σ spun: " + ", ".join(f"{v:.2f}" for v in ratio))
 
 
+def cost_table() -> None:
+    """CPU seconds of one frame of the simulated camera at θi = 30°, θr = 40°: the
+    incoherent frame (render cached: the sensor's noise alone), and under a laser the
+    speckle of a static sample and of an exposure of 0.2 s spun at 10 °/s."""
+    from hw_mocks.sim.camera import SimulatedCamera
+    from hw_mocks.sim.sensor import SensorParams
+    from hw_mocks.sim.state import SourceState
+    from hw_mocks.sim.world import VirtualBench
+
+    print("\npixels   beam    frame                        N      CPU s")
+    for width, beam in ((256, 0.5), (1024, 2.0)):
+        world = VirtualBench(f"cost{width}", source=SourceState(
+            on=True, beam_radius_mm=beam, coherence="laser"),
+            roles={"sample_theta": 30.0, "detector_theta": 70.0})
+        cam = SimulatedCamera("c", world=world, seed=1,
+                              sensor=SensorParams(width=width, height=width))
+        state = world.snapshot()
+        rate = cam.photon_rate(state)
+        t = time.process_time()
+        for _ in range(5):
+            cam.sensor.expose(rate, 2e5, gain_db=0.0, bits=12, roi=(0, 0, width, width))
+        print(f"{width:5d}   {beam:.1f} mm  incoherent (noise only)        -   "
+              f"{(time.process_time() - t) / 5:.3f}")
+        for label, spin in (("laser, static", (0.0, 0.0)),
+                            ("laser, 0.2 s spun at 10 °/s", (0.0, 10.0))):
+            cam._speckle_rate = None  # recompute: the first frame at a geometry
+            t = time.process_time()
+            n = cam.speckle_patterns(state, spin, 2e5)[1]
+            cam._speckled(state, cam.roi, rate, spin, 2e5)
+            print(f"{width:5d}   {beam:.1f} mm  {label:28s} {n:5.1f}   "
+                  f"{time.process_time() - t:.3f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--contrast", action="store_true")
     ap.add_argument("--brdf", action="store_true")
+    ap.add_argument("--cost", action="store_true")
     ap.add_argument("--seeds", type=int, default=4)
     args = ap.parse_args()
-    if not (args.contrast or args.brdf):
-        args.contrast = args.brdf = True
+    if not (args.contrast or args.brdf or args.cost):
+        args.contrast = args.brdf = args.cost = True
     if args.contrast:
         contrast_table(args.seeds)
     if args.brdf:
         brdf_table(args.seeds)
+    if args.cost:
+        cost_table()
 
 
 if __name__ == "__main__":
