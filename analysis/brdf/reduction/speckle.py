@@ -33,7 +33,9 @@ vectors towards source and receiver), spread by the receiver's half-angle a = �
 the spectrum is correlated over 2π/L, L = 2w/√cos θi the footprint's 1/e² diameter
 (geometric mean of its axes), and a rotation by Δφ moves the sample by |q_t| Δφ, so
 patterns decorrelate every Δφ_c = λ / (L · max(|ω_i,t + ω_r,t|, a)) and an exposure of
-t at the spin rate ω averages N = max(1, ω t / Δφ_c). The simulated bench draws its
+t at the spin rate ω averages N = max(1, ω t / Δφ_c). Frames taken at other spin angles
+(HDR brackets, repeats) see other patterns; a merge weighing them by exposure averages
+N = ω Σt / Δφ_c (the caller passes Σt). The simulated bench draws its
 patterns by the same model (:mod:`hw_mocks.sim.speckle`, ADR 0098).
 """
 

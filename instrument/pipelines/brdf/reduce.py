@@ -414,6 +414,23 @@ def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, st
     return None, "unknown (points treated as point samples: give --beam-radius-mm)"
 
 
+def _light_seconds(run: RunData, rows: np.ndarray) -> np.ndarray:
+    """Seconds of light each point's stored frames collected, brackets and repeats alike.
+
+    A spinning sample shows each frame other patterns (it turns on between frames), and
+    a merge that weighs the frames by their exposure (shot-noise-limited HDR) averages
+    as many independent patterns as all its frames swept together: N = ω Σt / Δφ_c.
+    A point without frames (a meter's reading) counts 0 s: N = 1, a static sample's
+    error (the larger, so an upper bound)."""
+    out = np.zeros(rows.size)
+    for k, r in enumerate(rows):
+        n0, n = int(run.frame_start[r]), int(run.n_frames[r])
+        light = run.frame_light[n0:n0 + n].astype(bool)
+        exposures = run.frame_exposure_us[n0:n0 + n][light]
+        out[k] = float(np.sum(exposures[np.isfinite(exposures)])) * 1e-6
+    return out
+
+
 def _speckle_rel(run: RunData, opts: ReductionOptions,
                  angles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                  exposure_s: np.ndarray, solid_angle_sr: float, spin_deg_s: float
@@ -619,7 +636,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         if noise.warning:
             warnings.append(noise.warning)
     spin = float(run.acquisition.get("spin_deg_s", 0.0))
-    exposure_s = np.nan_to_num(joined("exposure_us") * 1e-6, nan=0.0)  # unknown: static
+    exposure_s = np.concatenate([_light_seconds(r, rw) for r, rw in parts])
     speckle = _speckle_rel(run, opts, (ti, pi_, tr, pr), exposure_s,
                            float(rinfo["solid_angle_sr"]), spin)
     if speckle is not None:

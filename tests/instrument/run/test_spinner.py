@@ -126,3 +126,11 @@ def test_spin_rate_is_validated_and_stored() -> None:
 def test_spinner_role_accepted_by_the_profile(tmp_path: Path) -> None:
     profile = parse_profile(spinning_bench(tmp_path).read_text("utf-8"))
     assert "sample_spin" in profile.axes and profile.coherence == "laser"
+
+
+def test_spinning_with_hdr_brackets_is_refused() -> None:
+    # each bracket would see other patterns: the per-pixel merge would bias the value low
+    with pytest.raises(PlanError) as err:
+        parse_plan(PLAN.replace('mode = "fixed"', 'mode = "auto"\nhdr = true'))
+    assert any(e.path == "acquisition.spin_deg_s" and "hdr = false" in e.message
+               for e in err.value.errors)
