@@ -67,6 +67,8 @@ from drivers.errors import (
     DeviceTimeout,
     LimitError,
     ProtocolError,
+    StateError,
+    UnsupportedFeature,
 )
 from drivers.transport import SerialChannel, open_serial
 
@@ -596,6 +598,25 @@ class AptMotor(MotionAxis):
         # The old target is void: a wait() afterwards reports where the axis came to
         # rest (no MotionError), and move_by() counts from there.
         self._target = None
+
+    def move_continuous(self, *, forward: bool = True) -> None:
+        """Turn without end at the set :attr:`velocity` (MOT_MOVE_VELOCITY, p2 = 1
+        forward, 2 reverse) until :meth:`stop`: a sample spinner. Only a
+        continuous-rotation stage (no travel limits) may; the position counter wraps
+        after some turns (a 32-bit register), so home again before positioning moves."""
+        self._check_open("move_continuous")
+        if self.spec.travel is not None:
+            raise UnsupportedFeature(
+                f"{self.spec.name} has a limited travel: only a continuous-rotation stage "
+                "(K10CR1, PRM1-Z8) turns continuously", device=self.name,
+                command="move_continuous")
+        if not self.status().is_enabled:
+            # a disabled channel ignores the command without a word
+            raise StateError("channel disabled: enable it before a continuous move",
+                             device=self.name, command="move_continuous")
+        self._target = None  # no arrival to check: it turns until stopped
+        self._send(apt.pack_short(MessageId.MOT_MOVE_VELOCITY, self.channel,
+                                  1 if forward else 2), "MOT_MOVE_VELOCITY")
 
     def _read_info(self) -> apt.HwInfo:
         return self._query(apt.pack_short(MessageId.HW_REQ_INFO), MessageId.HW_GET_INFO,

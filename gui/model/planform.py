@@ -126,6 +126,9 @@ ACQUISITION = [
     _f("acquisition.detectors", "detectors", "detectors", ", ".join(DETECTORS),
        default="camera, power_meter"),
     _f("acquisition.readout_s", "readout (s)", "number", "per-frame overhead (estimates)"),
+    _f("acquisition.spin_deg_s", "spin (°/s)", "number",
+       "spin the sample about its normal to average a laser's speckle (a bench with a "
+       "sample_spin stage; no HDR); empty: still"),
 ]
 CALIBRATION = [
     _f(f"calibration.{k}", f"{k} run", "text",

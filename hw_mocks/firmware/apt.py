@@ -50,6 +50,11 @@ Default behaviour, declared once in :data:`PROFILES` and :class:`AptDefaults`:
 - Home offset: after the home switch (physical 0) the stage moves by the offset from the
   home parameters and zeroes its counter there; MOVE_HOMED follows.
 - Motion commands on a disabled channel are ignored (no motion, no reply).
+- MOT_MOVE_VELOCITY (p2 = 1 forward, 2 reverse) turns the stage continuously at the
+  velocity parameters' maximum velocity, accelerating at their acceleration, until
+  MOT_MOVE_STOP (then MOVE_STOPPED) or a limit switch; a continuous-rotation stage never
+  meets one. The position counter is a 32-bit register and wraps (the K10CR1's "overflows
+  after 43 full turns", QMI's k10crx documentation).
 """
 
 from __future__ import annotations
@@ -97,6 +102,7 @@ _MOT_MOVE_HOME = 0x0443
 _MOT_MOVE_HOMED = 0x0444
 _MOT_MOVE_RELATIVE = 0x0448
 _MOT_MOVE_ABSOLUTE = 0x0453
+_MOT_MOVE_VELOCITY = 0x0457
 _MOT_MOVE_COMPLETED = 0x0464
 _MOT_MOVE_STOP = 0x0465
 _MOT_MOVE_STOPPED = 0x0466
@@ -307,13 +313,17 @@ class AptEmulator(FirmwareEmulator):
         self._unsolicited_turn = 0
 
     # ------------------------------------------------------------------ units
+    #: How far (stage units) a continuous move aims: beyond any travel, yet short enough
+    #: that its profile keeps 10⁻⁷-unit resolution in double precision.
+    CONTINUOUS_UNITS: ClassVar[float] = 1e9
+
     def _counts(self, units: float) -> int:
         return round(units * self.profile.counts_per_unit)
 
     def position_counts(self) -> int:
-        """The controller's position counter now."""
+        """The controller's position counter now (a 32-bit register: it wraps)."""
         with self.lock:
-            return self._counts(self.stage.position())
+            return (self._counts(self.stage.position()) + 2**31) % 2**32 - 2**31
 
     # ------------------------------------------------------------------ status
     def status_bits(self) -> int:
@@ -389,8 +399,9 @@ class AptEmulator(FirmwareEmulator):
             st.homed = True
             self._motion = None
             out.append(_short(_MOT_MOVE_HOMED, 1, 0))
-        elif (self._motion in ("move", "stop") and not st.is_moving()
+        elif (self._motion in ("move", "stop", "velocity") and not st.is_moving()
               and not self._settling()):
+            # a continuous move ends only at a limit switch: it stopped
             kind = _MOT_MOVE_COMPLETED if self._motion == "move" else _MOT_MOVE_STOPPED
             self._motion = None
             out.append(_long(kind, self._status_packet()))
@@ -622,6 +633,16 @@ class AptEmulator(FirmwareEmulator):
         self._motion = "home"
         return []
 
+    def _move_velocity(self, p1, p2, data):
+        refused = self._refuse(_MOT_MOVE_VELOCITY)
+        if refused is not None:
+            return refused
+        direction = -1 if p2 == 2 else 1
+        self._direction = direction
+        self.stage.move_to(self.stage.position() + direction * self.CONTINUOUS_UNITS)
+        self._motion = "velocity"
+        return []
+
     def _move_stop(self, p1, p2, data):
         self.stage.stop(immediate=(p2 == 1))
         self._motion = "stop"
@@ -648,4 +669,5 @@ class AptEmulator(FirmwareEmulator):
         _MOT_MOVE_RELATIVE: _move_relative,
         _MOT_MOVE_ABSOLUTE: _move_absolute,
         _MOT_MOVE_STOP: _move_stop,
+        _MOT_MOVE_VELOCITY: _move_velocity,
     }

@@ -34,7 +34,11 @@ it may use besides :mod:`hw_mocks`). On every frame it
    of a frame moves by < 10⁻⁸. ``pupil="chief"`` keeps the pinhole (chief ray, ``Φ = L A
    (p/f)² cos⁴α``), which flatland scenes (the light-field bench) ask for;
 4. converts radiance to photons per second, ``n = Φ λ / (h c)``;
-5. exposes the sensor (:mod:`hw_mocks.sim.sensor`) for the set exposure time and gain.
+5. under a laser (the source's ``coherence``), speckles the sample's light
+   (:mod:`hw_mocks.sim.speckle`): a frozen pattern per geometry, or the average of the
+   independent patterns a spinning sample (:meth:`VirtualBench.spin`) sweeps through
+   during the exposure;
+6. exposes the sensor (:mod:`hw_mocks.sim.sensor`) for the set exposure time and gain.
 
 The noise-free rendering is cached per world state, ROI and binning: a still scene streams
 at the speed of the noise generator.
@@ -82,7 +86,7 @@ from scipy import ndimage
 from drivers.base import Camera, DeviceIdentity, Frame, PixelFormat, Roi
 from drivers.errors import DeviceTimeout
 from hw_mocks import registry
-from hw_mocks.sim import lens, workers
+from hw_mocks.sim import lens, speckle, workers
 from hw_mocks.sim import pupil as pupil_rules
 from hw_mocks.sim.sensor import Sensor, SensorParams
 from hw_mocks.sim.world import VirtualBench, WorldState, get_world
@@ -184,6 +188,8 @@ class SimulatedCamera(Camera):
         self._backlog: deque[Frame] = deque()  # simulated driver queue (stale frames)
         self._cache_key: tuple | None = None
         self._cache_rate: NDArray[np.float32] | None = None
+        self._speckle_key: tuple | None = None
+        self._speckle_rate: NDArray[np.float32] | None = None
 
     # ------------------------------------------------------------------ rendering
     def camera_frame(self, state: WorldState) -> tuple[NDArray, NDArray, NDArray, NDArray]:
@@ -217,16 +223,92 @@ class SimulatedCamera(Camera):
         with self._lock:
             if key == self._cache_key and self._cache_rate is not None:
                 return self._cache_rate
-        p = self.sensor.params
         render = self._render_reference if self.renderer == "reference" else self._render
         collected = render(state, roi)
-        aperture_m2 = math.pi * (0.5e-3 * self.optics.aperture_diameter_mm) ** 2
-        etendue = aperture_m2 * (p.pixel_pitch_um * 1e-3 / self.optics.focal_length_mm) ** 2
-        photon_j = PLANCK_J_S * SPEED_OF_LIGHT_M_S / (state.source.wavelength_nm * 1e-9)
-        rate = (collected * (etendue / photon_j)).astype(np.float32)
+        rate = (collected * self._photons_per_radiance(state)).astype(np.float32)
         with self._lock:
             self._cache_key, self._cache_rate = key, rate
         return rate
+
+    def _photons_per_radiance(self, state: WorldState) -> float:
+        """Photons/s on a pixel per W m⁻² sr⁻¹ of collected radiance: the pixel's étendue
+        A (p/f)² over the photon energy hc/λ (module docstring, steps 3–4)."""
+        p = self.sensor.params
+        aperture_m2 = math.pi * (0.5e-3 * self.optics.aperture_diameter_mm) ** 2
+        etendue = aperture_m2 * (p.pixel_pitch_um * 1e-3 / self.optics.focal_length_mm) ** 2
+        photon_j = PLANCK_J_S * SPEED_OF_LIGHT_M_S / (state.source.wavelength_nm * 1e-9)
+        return etendue / photon_j
+
+    # -- laser speckle ------------------------------------------------------------------
+    def speckle_optics(self, state: WorldState) -> speckle.SpeckleOptics:
+        """Wavelength, f-number and pixel pitch of the speckle grain.
+
+        The f-number is f/D, not the working z_i/D of a lens focused closer: this camera
+        maps a pixel to the angle p/f (its étendue A (p/f)², module docstring), so the
+        grain λ·f/D on its sensor is the one whose count over the image of the spot is
+        the spot's étendue into the pupil over λ² (what a real camera's λ·z_i/D gives
+        with its own magnification z_i/z_o)."""
+        return speckle.SpeckleOptics(
+            state.source.wavelength_nm,
+            self.optics.focal_length_mm / self.optics.aperture_diameter_mm,
+            self.sensor.params.pixel_pitch_um)
+
+    def speckle_decorrelation_deg(self, state: WorldState) -> float:
+        """The spin angle Δφ_c (degrees) after which the sample's speckle is a new,
+        independent pattern at this geometry (:mod:`hw_mocks.sim.speckle`)."""
+        pose = state.pose
+        s_loc = pose.to_sample(pose.source_dir)
+        d_loc = pose.to_sample(pose.detector_dir)
+        half_angle = 0.5 * self.optics.aperture_diameter_mm / pose.detector_distance_mm
+        return speckle.decorrelation_angle_deg(
+            state.source.wavelength_nm, state.source.beam_radius_mm, float(s_loc[2]),
+            math.hypot(s_loc[0] + d_loc[0], s_loc[1] + d_loc[1]), half_angle)
+
+    def speckle_patterns(self, state: WorldState, spin: tuple[float, float],
+                         exposure_us: float) -> tuple[int, float]:
+        """(first decorrelation step, N): the steps of the spin angle an exposure starting
+        at ``spin = (angle°, rate °/s)`` sweeps, N ≥ 1 independent patterns."""
+        angle, rate = spin
+        step = self.speckle_decorrelation_deg(state)
+        swept = abs(rate) * exposure_us * 1e-6
+        start = angle if rate >= 0 else angle - swept
+        return math.floor(start / step), max(1.0, swept / step)
+
+    def _speckled(self, state: WorldState, roi: Roi, rate: NDArray[np.float32],
+                  spin: tuple[float, float], exposure_us: float) -> NDArray[np.float32]:
+        """``rate`` under a laser: the sample's light speckled, the veil (ambient, stray
+        light) left as it is; cached per geometry and decorrelation steps, so a static
+        sample shows one frozen pattern."""
+        first, n = self.speckle_patterns(state, spin, exposure_us)
+        drawn = min(math.floor(n), speckle.EXACT_PATTERNS)
+        key = (state.key, roi, self.optics, first, drawn, round(n, 6))
+        with self._lock:
+            if key == self._speckle_key and self._speckle_rate is not None:
+                return self._speckle_rate
+        veil = self._veil_rate(state, roi)
+        geometry = [state.positions[k] for k in sorted(state.positions)]
+        seeds = [speckle.speckle_seed(self.seed, geometry, first + k) for k in range(drawn)]
+        coherent = np.maximum(rate.astype(np.float64) - veil, 0.0)
+        out = (speckle.speckle_image(coherent, self.speckle_optics(state), seeds, patterns=n)
+               + veil).astype(np.float32)
+        with self._lock:
+            self._speckle_key, self._speckle_rate = key, out
+        return out
+
+    def _veil_rate(self, state: WorldState, roi: Roi) -> NDArray[np.float64]:
+        """Photons/s per pixel of the scene's uniform veil (``veil_radiance``, 0 for a
+        scene without one) through the chief ray's obliquity cos⁴α (the pupil's varies
+        from it by (ρ/F)², 10⁻⁴ of a veil)."""
+        veil_of = getattr(state.scene, "veil_radiance", None)
+        veil = 0.0 if veil_of is None else float(veil_of(self.camera_frame(state)[0], state))
+        if veil == 0.0:
+            return np.zeros((roi.height, roi.width))
+        p = self.sensor.params
+        scale = p.pixel_pitch_um * 1e-3 / self.optics.focal_length_mm
+        u = (np.arange(roi.x, roi.x + roi.width) - (p.width - 1) / 2.0) * scale
+        v = (np.arange(roi.y, roi.y + roi.height) - (p.height - 1) / 2.0) * scale
+        cos2 = 1.0 / (1.0 + u[None, :] ** 2 + v[:, None] ** 2)
+        return veil * cos2 * cos2 * self._photons_per_radiance(state)
 
     def _samples_pupil(self, state: WorldState) -> bool:
         # a flatland scene (rays (y, θ) in one plane) has no pupil to sample
@@ -527,7 +609,10 @@ class SimulatedCamera(Camera):
             exposure, gain = self._exposure_us, self._gain_db
             index = self._index
             self._index += 1
+        spin = self.world.spin()
         rate = self.photon_rate(state, roi=roi)
+        if state.source.coherence == "laser" and state.source.on:
+            rate = self._speckled(state, roi, rate, spin, exposure)
         bits = fmt.bit_depth
         data = self.sensor.expose(
             rate, exposure, gain_db=gain, bits=bits,
@@ -637,6 +722,7 @@ class SimulatedCamera(Camera):
             self._pending.clear()
             self._backlog.clear()
             self._cache_rate = None
+            self._speckle_rate = None
 
 
 def _disk_structure(radius_px: int) -> NDArray[np.bool_]:

@@ -325,6 +325,17 @@ class GoniometerScene:
         psi = math.degrees(math.acos(cos_psi))
         return self.signature_sr / (1.0 + (psi / self.signature_width_deg) ** 2)
 
+    def veil_radiance(self, origin_mm: NDArray[np.float64], state: WorldState) -> float:
+        """The uniform veil (W m⁻² sr⁻¹) an observer at ``origin_mm`` sees along every ray:
+        ambient light and the instrument signature. Both are incoherent (room light, and
+        stray light from many paths), so a laser speckles only what the sample scatters
+        (:mod:`hw_mocks.sim.speckle`)."""
+        o = np.asarray(origin_mm, dtype=float)
+        dist = math.sqrt(float(o @ o))  # (np.linalg.norm costs more than the rest here)
+        observer_dir = o / dist if dist > 0 else state.pose.detector_dir
+        peak = state.source.peak_intensity_w_m2()
+        return self.ambient_radiance + self._signature(observer_dir, state) * peak
+
     @staticmethod
     def _beam_intensity(points: NDArray[np.float64], state: WorldState) -> NDArray[np.float64]:
         """Beam intensity (W/m², perpendicular to the beam) at lab points (mm), shape (...)."""
@@ -358,10 +369,8 @@ class GoniometerScene:
         pose = state.pose
         o = np.asarray(origin_mm, dtype=float)
         n = pose.normal
-        dist = math.sqrt(float(o @ o))  # (np.linalg.norm costs more than the rest here)
-        observer_dir = o / dist if dist > 0 else pose.detector_dir
         peak = state.source.peak_intensity_w_m2()
-        veil = self.ambient_radiance + self._signature(observer_dir, state) * peak
+        veil = self.veil_radiance(o, state)
         brdf = self._active_brdf(state)
         cos_i = float(n @ pose.source_dir)
         height = float(o @ n)

@@ -18,9 +18,13 @@ from numpy.typing import NDArray
 from hw_mocks import registry
 from hw_mocks.sim.filters import FilterBand, NeutralDensity, parse_bands
 
-__all__ = ["ARM_ROLES", "ROLES", "BenchPose", "LightPath", "PowerMeterHead", "Scene", "SourceState",
-           "WorldState", "rotation"]
+__all__ = ["ARM_ROLES", "COHERENCE", "ROLES", "BenchPose", "LightPath", "PowerMeterHead", "Scene",
+           "SourceState", "WorldState", "rotation"]
 
+
+#: What a source's light can be: ``"laser"`` (spatially coherent: speckle) or
+#: ``"incoherent"`` (a lamp).
+COHERENCE = ("incoherent", "laser")
 
 ROLES = ("sample_theta", "sample_phi", "sample_tilt", "detector_theta", "source_theta",
          "camera_z", "source_arc", "source_azimuth", "detector_arc", "detector_azimuth")
@@ -46,6 +50,9 @@ class SourceState:
 
     Its spectrum is a line at ``wavelength_nm`` (``bandwidth_nm`` 0, a laser) or a flat band
     of full width ``bandwidth_nm`` around it (see :mod:`hw_mocks.sim.filters`).
+    ``coherence`` is ``"incoherent"`` (a lamp: no interference, the default) or
+    ``"laser"``: light scattered by a rough sample then shows speckle on the camera
+    (:mod:`hw_mocks.sim.speckle`).
     """
 
     on: bool = False
@@ -54,6 +61,12 @@ class SourceState:
     beam_radius_mm: float = 2.0
     max_power_w: float = 5e-3
     bandwidth_nm: float = 0.0
+    coherence: str = "incoherent"
+
+    def __post_init__(self) -> None:
+        if self.coherence not in COHERENCE:
+            raise ValueError(f"source coherence must be one of {', '.join(COHERENCE)}, got "
+                             f"{self.coherence!r}")
 
     def peak_intensity_w_m2(self) -> float:
         """On-axis intensity 2P/(π w²) of the Gaussian beam, perpendicular to it (W/m²)."""

@@ -79,6 +79,7 @@ from hw_mocks.sim.state import (
 )
 
 __all__ = [
+    "SPIN_ROLE",
     "BenchPose",
     "LightPath",
     "PowerMeterHead",
@@ -318,6 +319,22 @@ class VirtualBench:
             physical = float(emulator.stage.physical_position())
         return spec.scale * physical + spec.offset
 
+    def spin(self) -> tuple[float, float]:
+        """(angle in degrees, rate in degrees/s) of the sample spinner: the stage bound to
+        the role :data:`SPIN_ROLE`, which turns the sample about its own normal; (0, 0)
+        without one. Not part of the pose: it matters to coherent light alone (speckle,
+        :mod:`hw_mocks.sim.speckle`), the samples being isotropic about their normal."""
+        spec = self._roles.get(SPIN_ROLE)
+        if spec is None:
+            return 0.0, 0.0
+        if spec.url is None:
+            return spec.value, 0.0
+        emulator = _emulator_for(spec.url)
+        with emulator.lock:
+            angle = float(emulator.stage.physical_position())
+            rate = float(emulator.stage.velocity_now())
+        return spec.scale * angle + spec.offset, spec.scale * rate
+
     def positions(self) -> dict[str, float]:
         return {role: self.position(role) for role in ROLES}
 
@@ -479,6 +496,9 @@ def _url_of(target: Any) -> str:
         raise TypeError(f"expected an emulator or a URL, got {target!r}")
     return f"{scheme}://{name}"
 
+
+#: The role of a sample spinner (:meth:`VirtualBench.spin`).
+SPIN_ROLE = "sample_spin"
 
 _worlds: dict[str, VirtualBench] = {}
 

@@ -233,6 +233,8 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
     roles.update(config.get("roles", {}))
     config["roles"] = roles
     config.setdefault("arm_length_mm", profile.geometry.detector_distance_mm)
+    # the simulated source has the coherence of the profile's [source]
+    config["source"] = {**dict(config.get("source", {})), "coherence": profile.coherence}
     meters = [s.url for s in profile.devices.values()
               if s.kind == "power_meter" and s.is_simulated]
     if meters:

@@ -75,6 +75,13 @@ Schema (all lengths in mm, angles in degrees)::
     relative_to = "sample_theta"       # optional: the zone applies to axis − relative_to
     reason = "arm hits the sample holder"
 
+    [source]                           # the light source (optional)
+    coherence = "incoherent"           # "laser" | "incoherent" (default): a laser on a
+                                       # rough sample makes speckle, which the reduction
+                                       # counts in each value's σ (docs/guide, speckle)
+    wavelength_nm = 633.0              # a laser's wavelength (the speckle grain); on an
+                                       # emulated bench [simulation.source]'s by default
+
     [simulation]                       # only for emulated benches; passed to hw_mocks
     world = "sim"
     ...
@@ -96,6 +103,7 @@ from instrument.bench.driver_registry import DriverEntry, driver_registry
 __all__ = [
     "AXIS_ROLES",
     "GONIOMETER_TYPES",
+    "SPIN_ROLE",
     "ArmSpec",
     "BenchProfile",
     "CollisionZone",
@@ -125,6 +133,11 @@ AXIS_ROLES = (
 )
 #: ``geometry.goniometer``: the two designs (ADR 0104).
 GONIOMETER_TYPES = ("type_ii", "type_i")
+
+#: The role of a sample spinner: a continuous-rotation stage turning the sample about its
+#: normal while the camera exposes, to average a laser's speckle (ADR 0098). Not an axis
+#: of the kinematics: plans never position it, the engine spins it (``spin_deg_s``).
+SPIN_ROLE = "sample_spin"
 #: ``[photodiode]``: the chopped photodiode a lock-in reads (its transimpedance amplifier
 #: and chopper), key → (low, high); ``responsivity_a_per_w`` may be a table over
 #: ``responsivity_nm``.
@@ -311,6 +324,14 @@ class BenchProfile:
     #: ``[photodiode]`` as validated (plain data; the lock-in reduction reads it from the
     #: profile stored with each run), or None.
     photodiode: dict[str, Any] | None = None
+    #: ``[source]`` as validated: ``coherence`` ("laser" or "incoherent") and, where
+    #: given, ``wavelength_nm`` (:func:`_source`).
+    source: dict[str, Any] = field(default_factory=lambda: {"coherence": "incoherent"})
+
+    @property
+    def coherence(self) -> str:
+        """``"laser"`` or ``"incoherent"``: the source's coherence."""
+        return str(self.source["coherence"])
 
     @property
     def axes(self) -> dict[str, DeviceSpec]:
@@ -400,10 +421,45 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
     if photodiode is not None and not any(d.kind == "lockin" for d in devices.values()):
         v.error("photodiode", "describes the lock-in's detector: the bench needs a device "
                 "with driver 'sr830' (or another driver of kind 'lockin')")
-    v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode"})
+    light = _source(v, data.get("source"), simulation)
+    v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode",
+                         "source"})
     if v.errors:
         raise ProfileError(source, v.errors)
-    return BenchProfile(name, description, devices, geometry, simulation, text, photodiode)
+    return BenchProfile(name, description, devices, geometry, simulation, text, photodiode,
+                        light)
+
+
+#: What ``[source] coherence`` may say.
+COHERENCE = ("incoherent", "laser")
+
+
+def _source(v: _Validator, t: Any, simulation: dict[str, Any] | None) -> dict[str, Any]:
+    """``[source]``: the coherence of the light and a laser's wavelength. On an emulated
+    bench the simulated source follows it; a ``[simulation.source] coherence`` that says
+    otherwise is refused (one bench, one source)."""
+    out: dict[str, Any] = {"coherence": "incoherent"}
+    if t is None:
+        t = {}
+    if not isinstance(t, dict):
+        v.error("source", "must be a table")
+        return out
+    coherence = t.get("coherence", "incoherent")
+    if coherence not in COHERENCE:
+        v.error("source.coherence", f"must be one of {', '.join(repr(c) for c in COHERENCE)} "
+                f"(a laser speckles on a rough sample; a lamp does not), got {coherence!r}")
+    else:
+        out["coherence"] = coherence
+    wavelength = v.positive(t, "wavelength_nm", "source")
+    if wavelength is not None:
+        out["wavelength_nm"] = wavelength
+    v.unknown(t, "source", {"coherence", "wavelength_nm"})
+    sim_source = (simulation or {}).get("source")
+    if isinstance(sim_source, dict) and "coherence" in sim_source \
+            and sim_source["coherence"] != out["coherence"]:
+        v.error("simulation.source.coherence", f"says {sim_source['coherence']!r} but "
+                f"[source] coherence is {out['coherence']!r}: set it once, in [source]")
+    return out
 
 
 def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
@@ -472,9 +528,9 @@ def _device(v: _Validator, role: str, t: dict[str, Any], path: str) -> DeviceSpe
                     f"drivers that find theirs by serial number "
                     f"({', '.join(registry.serial_drivers()) or 'none'}) take 'serial'")
     is_axis = kind == "motion_axis"
-    if is_axis and role not in AXIS_ROLES:
+    if is_axis and role not in (*AXIS_ROLES, SPIN_ROLE):
         v.error(path, f"motion driver on unknown role {role!r}; axis roles are "
-                f"{', '.join(AXIS_ROLES)}")
+                f"{', '.join(AXIS_ROLES)} (and {SPIN_ROLE}, a sample spinner)")
     stage = v.string(t, "stage", path)
     limits = None
     if "limits" in t:

@@ -36,6 +36,7 @@ from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, spe
 from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
 from instrument.plans.ranges import float_range
+from instrument.plans.spin import check_spinner
 
 __all__ = ["EVENTS", "Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points",
            "in_plane_angles"]
@@ -570,6 +571,7 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
     elif profile.geometry.is_type_i:
         _routable(profile, body, body, start)
     _check_power_meter_wavelength(spec, profile)
+    check_spinner(spec, profile)
     if spec.spectral is not None:
         body = _wavelength_axis(spec, profile, body)
         if len(head) + len(body) > MAX_POINTS:

@@ -46,6 +46,9 @@ class AcquisitionPolicy:
     names the detectors whose per-point dark is read (``None``: every detector listed);
     a plan that leaves ``detectors`` at its default measures with the camera and reads
     the power meter beside it without a dark of its own (:meth:`reads_dark`).
+    ``spin_deg_s`` > 0 spins the sample about its normal at that rate through the run
+    (the bench's ``sample_spin`` stage), so that an exposure averages a laser's speckle
+    over the patterns it sweeps (ADR 0098); 0 keeps the sample still.
     """
 
     mode: str = "fixed"
@@ -61,6 +64,7 @@ class AcquisitionPolicy:
     detectors: tuple[str, ...] = ("camera", "power_meter")
     readout_s: float = 0.0  # per-frame readout/transfer overhead, for estimates only
     dark_detectors: tuple[str, ...] | None = None
+    spin_deg_s: float = 0.0
 
     def as_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)

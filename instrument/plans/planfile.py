@@ -527,6 +527,8 @@ def _acquisition(v: _Validator, t: dict[str, Any], path: str) -> AcquisitionPoli
     brackets = number(v, t, "max_brackets", path, lo=1, hi=16, integer=True)
     frames = number(v, t, "frames", path, lo=1, hi=10000, integer=True)
     readout = number(v, t, "readout_s", path, lo=0.0, hi=60.0)
+    # a sample spinner's rate: up to 10 turns a second (a stage's limit is its own)
+    spin = number(v, t, "spin_deg_s", path, lo=0.0, hi=3600.0)
     _boolean(v, t, "hdr", path)
     detectors = d.detectors
     if "detectors" in t:
@@ -542,6 +544,13 @@ def _acquisition(v: _Validator, t: dict[str, Any], path: str) -> AcquisitionPoli
     emax_v = emax if emax is not None else d.max_exposure_us
     if emin_v > emax_v:
         v.error(f"{path}.min_exposure_us", "must not exceed max_exposure_us")
+    if spin and t.get("hdr", d.hdr) is True:
+        # each bracket sees other speckle patterns (the sample turns between frames);
+        # merging them pixel by pixel keeps the long bracket where its pattern happens to
+        # be dim (not saturated): a selection that biases the value low (ADR 0098)
+        v.error(f"{path}.spin_deg_s", "a spinning sample cannot be bracketed: each HDR "
+                "bracket sees other speckle patterns, and the per-pixel merge biases the "
+                "value low; set hdr = false (frames = N averages without bias)")
     exp_v = exp if exp is not None else d.exposure_us
     if exp is not None and not emin_v <= exp_v <= emax_v:
         v.error(f"{path}.exposure_us", "must lie within [min_exposure_us, max_exposure_us]")
@@ -555,4 +564,5 @@ def _acquisition(v: _Validator, t: dict[str, Any], path: str) -> AcquisitionPoli
         frames=int(frames if frames is not None else d.frames),
         dark=dark, detectors=detectors, dark_detectors=dark_detectors,
         readout_s=float(readout if readout is not None else d.readout_s),
+        spin_deg_s=float(spin if spin is not None else d.spin_deg_s),
     )

@@ -44,7 +44,7 @@ from instrument.bench.arms import safe_route
 from instrument.bench.devices import Bench
 from instrument.bench.dynamics import move_time
 from instrument.bench.kinematics import TYPE_I_AXES, kinematics_of
-from instrument.bench.profile import RetryPolicy
+from instrument.bench.profile import SPIN_ROLE, RetryPolicy
 from instrument.plans.adaptive import AdaptiveDriver
 from instrument.plans.build import Plan, dynamics_of
 from instrument.plans.commands import Acquire, AcquisitionPolicy, Move, PointDone, SetLight
@@ -59,6 +59,7 @@ from instrument.run.events import (
     RunFinished,
     RunStarted,
 )
+from instrument.run.spinner import start_spinner
 from instrument.run.storage import (
     STATUS_OK,
     STATUS_SKIPPED,
@@ -418,7 +419,8 @@ class RunEngine:
         return total
 
     def _prepare(self) -> None:
-        """Enable and home every axis the plan moves (homing is skipped when homed)."""
+        """Enable and home every axis the plan moves (homing is skipped when homed); spin
+        the sample when the plan asks (:mod:`instrument.run.spinner`)."""
         for role in self.plan.axes:
             axis = self._axis(role)
             policy = self._policy(role)
@@ -434,6 +436,11 @@ class RunEngine:
                                                           axis.status))
                 self.store_event("homed", device=role, position=after.position)
                 self._emit(AxisHomed(role, after.position, time.monotonic() - t0))
+        spin = self.plan.spec.acquisition.spin_deg_s
+        if spin > 0.0:
+            # spun through the run and stopped by make_safe with the other axes (ADR 0098)
+            start_spinner(self.bench.devices, spin)
+            self.store_event("spinning", device=SPIN_ROLE, deg_per_s=spin)
 
     def _loop(self) -> str:
         while True:

@@ -27,6 +27,7 @@ from drivers.errors import (
     MotionError,
     ProtocolError,
     StateError,
+    UnsupportedFeature,
 )
 from drivers.thorlabs_apt import STAGES, AptMotor
 from hw_mocks import registry
@@ -765,3 +766,50 @@ def test_after_a_stop_wait_reports_the_rest_position_and_move_by_counts_from_it(
     assert motor.velocity == pytest.approx(STAGES[stage].velocity, rel=1e-4)
     motor.move_by(1.0, wait=True, timeout=5.0)
     assert motor.position == pytest.approx(rest + 1.0, abs=motor.position_tolerance)
+
+
+# --------------------------------------------------------------------------- continuous
+
+
+def test_continuous_move_turns_at_the_set_velocity_until_stopped():
+    motor = open_url(extra="&stop_short=0")
+    emu = registry.get("simapt", "ax")
+    motor.home(timeout=5.0)
+    motor.velocity = 6.0
+    with emu.clock.held() as clock:
+        start = emu.stage.physical_position()
+        motor.move_continuous(forward=False)
+        clock.advance(10.0)  # 0.6 s of ramp at 10 °/s², then 6 °/s
+        assert emu.stage.velocity_now() == pytest.approx(-6.0, rel=1e-12)
+        assert emu.stage.physical_position() == pytest.approx(start - (60.0 - 1.8), abs=1e-6)
+        bits = emu.status_bits()
+        assert bits & 0x20000000 and bits & 0x20  # active, moving reverse
+        motor.stop()
+        clock.advance(1.0)  # braking takes 0.6 s
+        assert not emu.stage.is_moving()
+    assert not motor.is_moving
+
+
+def test_continuous_move_wraps_the_32_bit_counter():
+    motor = open_url()
+    emu = registry.get("simapt", "ax")
+    motor.home(timeout=5.0)
+    with emu.clock.held() as clock:
+        motor.move_continuous()
+        clock.advance(2000.0)  # ≈ 20 000°: past the counter's 15 729°
+        counts = emu.position_counts()
+        assert -2**31 <= counts < 2**31
+        true = round(emu.stage.position() * 409600 / 3)
+        assert (true - counts) % 2**32 == 0 and true != counts
+        motor.stop()
+        clock.advance(2.0)
+
+
+def test_continuous_move_refused_on_a_linear_stage_or_a_disabled_channel():
+    with open_url(stage="MTS25-Z8") as linear, pytest.raises(UnsupportedFeature) as info:
+        linear.move_continuous()
+    assert info.value.device == "ax" and "continuous-rotation" in str(info.value)
+    motor = open_url(name="rot")
+    motor.disable()
+    with pytest.raises(StateError, match="enable"):
+        motor.move_continuous()

@@ -35,6 +35,13 @@ from analysis.radiometry import FlatField
 from hw_mocks.sim.camera import OpticsParams, SimulatedCamera
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import Sensor, SensorParams
+from hw_mocks.sim.speckle import (
+    EXACT_PATTERNS,
+    SpeckleOptics,
+    decorrelation_angle_deg,
+    speckle_image,
+    speckle_seed,
+)
 from hw_mocks.sim.world import SourceState, VirtualBench
 from instrument.bench.kinematics import kinematics_of
 from instrument.bench.profile import load_profile
@@ -376,11 +383,12 @@ def profile_text(setup: ScanSetup, sample: Sample) -> str:
 
 
 def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_plane",
-                   run_id: str = "closed-loop", plan_text: str | None = None) -> Path:
+                   run_id: str = "closed-loop", plan_text: str | None = None,
+                   coherence: str | None = None) -> Path:
     """Acquire every point of ``r`` with sensor ``seed`` and store it as a run file with
     :class:`instrument.run.storage.RunStore` (the engine's writer), frames per point: the light
     frame then its dark frame. ``plan_text`` is stored as the run's plan (default the
-    setup's)."""
+    setup's); ``coherence`` adds the profile's ``[source] coherence``."""
     import time as _time
 
     from instrument.run.storage import FrameData, PointRecord, RunHeader, RunStore
@@ -395,7 +403,9 @@ def write_run_file(r: Rendered, seed: int, path: Path, *, kind: str = "brdf_in_p
     header = RunHeader(
         run_id=run_id, plan_kind=kind, plan_name=plan.spec.name,
         plan_text=plan_text if plan_text is not None else s.plan_text(),
-        profile_text=profile_text(s, r.sample), bench_name="sim", sample_name=r.sample.name,
+        profile_text=profile_text(s, r.sample) + (
+            "" if coherence is None else f'\n[source]\ncoherence = "{coherence}"\n'),
+        bench_name="sim", sample_name=r.sample.name,
         sample_description="closed-loop sample", axes=plan.axes,
         planned_targets=plan.targets_array().tolist(),
         planned_angles=[list(q.angles.as_tuple()) for q in plan.points],
@@ -456,3 +466,44 @@ def write_flat_run(setup: ScanSetup, seed: int, path: Path, *, n_frames: int = 8
                                  frames=frames))
     store.close("finished")
     return path
+
+
+#: The laser's wavelength on the simulated bench (nm).
+LASER_NM = 633.0
+
+
+def speckle_optics(setup: ScanSetup) -> SpeckleOptics:
+    """The simulated camera's speckle grain for this setup (f/D: its pixels subtend p/f,
+    :meth:`hw_mocks.sim.camera.SimulatedCamera.speckle_optics`)."""
+    return SpeckleOptics(LASER_NM, setup.focal_length_mm / setup.aperture_mm,
+                         setup.sensor_params().pixel_pitch_um)
+
+
+def spun_patterns(r: Rendered, spin_deg_s: float) -> np.ndarray:
+    """N per point: the independent speckle patterns each point's exposure
+    (:func:`exposures_us`) averages while the sample spins at ``spin_deg_s``, by the
+    simulated camera's model (:func:`hw_mocks.sim.speckle.decorrelation_angle_deg`)."""
+    s = r.setup
+    out = np.ones(len(r.angles_rad))
+    for k, ((ti, pi_, tr, pr), t_us) in enumerate(zip(r.angles_rad, exposures_us(r),
+                                                       strict=True)):
+        q = math.hypot(math.sin(ti) * math.cos(pi_) + math.sin(tr) * math.cos(pr),
+                       math.sin(ti) * math.sin(pi_) + math.sin(tr) * math.sin(pr))
+        step = decorrelation_angle_deg(LASER_NM, s.beam_radius_mm, math.cos(ti), q,
+                                       0.5 * s.aperture_mm / s.distance_mm)
+        out[k] = max(1.0, spin_deg_s * t_us * 1e-6 / step)
+    return out
+
+
+def speckled(r: Rendered, seed: int, *, spin_deg_s: float = 0.0) -> Rendered:
+    """Every point's image under a laser: one frozen pattern per geometry for this seed
+    (a static sample), or the average of the N patterns a spinning sample sweeps in the
+    point's exposure (:func:`spun_patterns`), as the simulated camera draws them."""
+    optics = speckle_optics(r.setup)
+    n = spun_patterns(r, spin_deg_s)
+    rates = []
+    for rate, angles, n_k in zip(r.photon_rate, r.angles_rad, n, strict=True):
+        seeds = [speckle_seed(seed, angles, j)
+                 for j in range(min(math.floor(n_k), EXACT_PATTERNS))]
+        rates.append(speckle_image(rate, optics, seeds, patterns=n_k))
+    return replace(r, photon_rate=np.array(rates))

@@ -4,7 +4,8 @@ Pure functions on arrays (no I/O), one module per job: :mod:`.detector` (signals
 solid angles), :mod:`.receiver` (the instrument function: beam footprint and divergence,
 receiver aperture, set-point spread), :mod:`.values` (absolute and relative BRDF,
 signature), :mod:`.angular` (positioning uncertainty), :mod:`.reciprocity` (a check of the
-data), :mod:`.uncertainty` (shared and correlated errors in fits), :mod:`.forward` (the
+data), :mod:`.uncertainty` (shared and correlated errors in fits), :mod:`.speckle` (a laser's
+speckle in each value), :mod:`.forward` (the
 forward model a fit compares the data with, its quadrature refined against the noise) and
 :mod:`.candidates` (model selection among forward fits).
 The chain, per measured point:
@@ -47,7 +48,9 @@ Uncertainty budget (sources as in ASTM E2387 and the EURAMET BRDF comparison, Ba
 al., Applied Optics 62(13), 2023), kept in separate columns of :class:`BRDFPoints`:
 
 * ``u_stat``: signal noise — shot, read and dark noise of the light and dark frames
-  (camera), or the reading noise of a power meter; independent between points.
+  (camera), or the reading noise of a power meter; independent between points. Under a
+  laser (the profile's ``[source] coherence``) it includes the static sample's frozen
+  speckle, σ_rel = 1/√M (:mod:`.speckle`), independent between geometries.
 * ``u_angle``: positioning — |∂f/∂θi| σθi ⊕ |∂f/∂θr| σθr with the local slope of the
   measured BRDF (:func:`angular_uncertainty`); independent between points.
 * ``u_ref``: the reference table's uncertainty (relative method).
@@ -95,6 +98,11 @@ from analysis.brdf.reduction.reciprocity import (
     ReciprocityCheck,
     reciprocity_check,
 )
+from analysis.brdf.reduction.speckle import (
+    speckle_cells,
+    speckle_rel,
+    spin_patterns,
+)
 from analysis.brdf.reduction.uncertainty import (
     scale_sensitivity,
     with_correlated_uncertainty,
@@ -135,6 +143,9 @@ __all__ = [
     "relative_brdf",
     "scale_sensitivity",
     "solid_angle_sr",
+    "speckle_cells",
+    "speckle_rel",
+    "spin_patterns",
     "subtract_signature",
     "with_correlated_uncertainty",
     "with_scale_uncertainty",

@@ -34,6 +34,8 @@ from analysis.brdf.reduction import (
     pixel_response_covariance,
     relative_brdf,
     solid_angle_sr,
+    speckle_rel,
+    spin_patterns,
     subtract_signature,
 )
 from analysis.radiometry import FlatField, flat_field
@@ -412,6 +414,53 @@ def _beam_radius(run: RunData, opts: ReductionOptions) -> tuple[float | None, st
     return None, "unknown (points treated as point samples: give --beam-radius-mm)"
 
 
+def _light_seconds(run: RunData, rows: np.ndarray) -> np.ndarray:
+    """Seconds of light each point's stored frames collected, brackets and repeats alike.
+
+    A spinning sample shows each frame other patterns (it turns on between frames), and
+    a merge that weighs the frames by their exposure (shot-noise-limited HDR) averages
+    as many independent patterns as all its frames swept together: N = ω Σt / Δφ_c.
+    A point without frames (a meter's reading) counts 0 s: N = 1, a static sample's
+    error (the larger, so an upper bound)."""
+    out = np.zeros(rows.size)
+    for k, r in enumerate(rows):
+        n0, n = int(run.frame_start[r]), int(run.n_frames[r])
+        light = run.frame_light[n0:n0 + n].astype(bool)
+        exposures = run.frame_exposure_us[n0:n0 + n][light]
+        out[k] = float(np.sum(exposures[np.isfinite(exposures)])) * 1e-6
+    return out
+
+
+def _speckle_rel(run: RunData, opts: ReductionOptions,
+                 angles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                 exposure_s: np.ndarray, solid_angle_sr: float, spin_deg_s: float
+                 ) -> np.ndarray | None:
+    """The relative error laser speckle leaves in each reading
+    (:mod:`analysis.brdf.reduction.speckle`): a static sample's frozen pattern, or the
+    average of the patterns a spinning sample sweeps in the point's exposure; None under
+    an incoherent source (the stored profile's ``[source] coherence``)."""
+    profile = run.profile()
+    light = profile.get("source", {})
+    if light.get("coherence", "incoherent") != "laser":
+        return None
+    wavelength = light.get("wavelength_nm",
+                           profile.get("simulation", {}).get("source", {}).get("wavelength_nm"))
+    if wavelength is None:
+        raise ValueError("the bench's source is a laser, whose speckle grain depends on its "
+                         "wavelength: set [source] wavelength_nm in the bench profile")
+    beam, _ = _beam_radius(run, opts)
+    if beam is None:
+        raise ValueError("the bench's source is a laser, whose speckle depends on the beam's "
+                         "size on the sample: give --beam-radius-mm")
+    ti, pi_, tr, pr = angles
+    patterns = (spin_patterns(ti, pi_, tr, pr, spin_deg_s=spin_deg_s, exposure_s=exposure_s,
+                              wavelength_nm=float(wavelength), beam_radius_mm=beam,
+                              solid_angle_sr=solid_angle_sr)
+                if spin_deg_s > 0 else 1.0)
+    return speckle_rel(ti, tr, wavelength_nm=float(wavelength), beam_radius_mm=beam,
+                       solid_angle_sr=solid_angle_sr, patterns=patterns)
+
+
 def _beam_divergence_rad(run: RunData, opts: ReductionOptions) -> tuple[float, str]:
     if opts.beam_divergence_mrad is not None:
         return 1e-3 * float(opts.beam_divergence_mrad), "option"
@@ -586,6 +635,16 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         warnings.extend(_dark_warnings(sig.dark, noise))
         if noise.warning:
             warnings.append(noise.warning)
+    spin = float(run.acquisition.get("spin_deg_s", 0.0))
+    exposure_s = np.concatenate([_light_seconds(r, rw) for r, rw in parts])
+    speckle = _speckle_rel(run, opts, (ti, pi_, tr, pr), exposure_s,
+                           float(rinfo["solid_angle_sr"]), spin)
+    if speckle is not None:
+        # a frozen pattern per geometry: an error of each value, independent between points
+        u_s = np.hypot(u_s, p_s * speckle)
+        sample = (f"sample spun at {spin:g} °/s" if spin > 0 else "static sample")
+        prov["speckle"] = (f"laser source, {sample}: {speckle.min():.2%} to "
+                           f"{speckle.max():.2%} of each value")
     scale_unknown: list[str] = []
     if opts.method == "absolute":
         p_i, u_pi_rel, src = _incident_power(run, opts)
@@ -619,6 +678,8 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
             np.concatenate([nd_slots(ref_run, rr) for rr in ref_rows]), ref_table)
         if ref_nd is not None:  # the standard's readings: the filter's error on each
             ref_u = np.hypot(ref_u, ref_p * np.sqrt(np.diag(ref_nd)))
+        if speckle is not None:  # the standard speckles under the same laser
+            ref_u = np.hypot(ref_u, ref_p * speckle)
         ref = replace(ref, power_w=ref_p, u_power_w=ref_u)
         std = _reference_standard(ref_run, opts)
         pts = relative_brdf(p_s, u_s, ref.power_w, ref.u_power_w, ti, pi_, tr, pr,

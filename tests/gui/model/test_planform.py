@@ -23,7 +23,9 @@ EXPLICIT_POINTS = {"calibration_nd"}
 EXAMPLES = [p for p in EXAMPLES if p.stem not in EXPLICIT_POINTS]
 #: The bench each example plan is written for (its comment says so).
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
-         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
+         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
+         "brdf_inplane_spin": str(Path(__file__).resolve().parents[3] / "examples"
+                                  / "bench_sim_laser.toml")}
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
