@@ -59,6 +59,11 @@ Schema (all lengths in mm, angles in degrees)::
     relative_to = "sample_theta"       # optional: the zone applies to axis − relative_to
     reason = "arm hits the sample holder"
 
+    [[optics.source]]                  # a polarimeter's optical train (optional):
+    kind = "retarder"                  # polarisers, retarders and PEMs in each arm, with
+    mount = "psg_retarder"             # their mounts and nominal values; see
+    retardance_deg = 90.0              # instrument.bench.optics
+
     [simulation]                       # only for emulated benches; passed to hw_mocks
     world = "sim"
     ...
@@ -76,6 +81,7 @@ from pathlib import Path
 from typing import Any
 
 from instrument.bench.driver_registry import DriverEntry, driver_registry
+from instrument.bench.optics import OpticalTrain, parse_optics
 
 __all__ = [
     "AXIS_ROLES",
@@ -99,6 +105,11 @@ AXIS_ROLES = (
     "detector_phi",
     "source_theta",
     "camera_z",
+    # rotation mounts of a polarimeter's elements ([optics], instrument.bench.optics)
+    "psg_polariser",
+    "psg_retarder",
+    "psa_retarder",
+    "psa_polariser",
 )
 #: ``[photodiode]``: the chopped photodiode a lock-in reads (its transimpedance amplifier
 #: and chopper), key → (low, high); ``responsivity_a_per_w`` may be a table over
@@ -255,6 +266,8 @@ class BenchProfile:
     #: ``[photodiode]`` as validated (plain data; the lock-in reduction reads it from the
     #: profile stored with each run), or None.
     photodiode: dict[str, Any] | None = None
+    #: ``[optics]``: a polarimeter's elements and their nominal values, or None.
+    optics: OpticalTrain | None = None
 
     @property
     def axes(self) -> dict[str, DeviceSpec]:
@@ -344,10 +357,15 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
     if photodiode is not None and not any(d.kind == "lockin" for d in devices.values()):
         v.error("photodiode", "describes the lock-in's detector: the bench needs a device "
                 "with driver 'sr830' (or another driver of kind 'lockin')")
-    v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode"})
+    optics = None
+    if "optics" in data:
+        axes = {role for role, d in devices.items() if d.is_axis}
+        optics = parse_optics(data["optics"], axes, v.error)
+    v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode", "optics"})
     if v.errors:
         raise ProfileError(source, v.errors)
-    return BenchProfile(name, description, devices, geometry, simulation, text, photodiode)
+    return BenchProfile(name, description, devices, geometry, simulation, text, photodiode,
+                        optics)
 
 
 def _photodiode(v: _Validator, t: Any) -> dict[str, Any] | None:
