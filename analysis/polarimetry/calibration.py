@@ -1,0 +1,206 @@
+"""Calibration of a dual rotating retarder's hidden parameters on reference samples.
+
+A DRR (:mod:`analysis.polarimetry.drr`) is not a separable ``A · M · W`` polarimeter —
+each step moves the generator and the analyser together — so the eigenvalue calibration
+method (:mod:`analysis.polarimetry.ecm`) does not apply to its K×16 instrument matrix.
+Its instrument matrix is, however, fixed by five numbers: the zero offsets of the two
+retarders' fast axes, their two retardances and the analyser polariser's axis relative to
+the generator polariser (which defines the azimuth 0 of the measured matrices). Those
+are fitted here by weighted non-linear least squares (Levenberg–Marquardt with bounds,
+``scipy.optimize.least_squares``) to the DRR scans of the same reference samples ECM
+uses — air, a polariser at one or two angles, a retarder — with the samples' own
+parameters (polariser azimuth, retarder azimuth and retardance) and a source scale per
+scan as nuisance parameters. Goldstein & Chipman 1990 (J. Opt. Soc. Am. A 7, 693) derive
+the same retarder-offset and retardance errors of a DRR from the air measurement in closed
+form to first order; the joint fit here needs no small-error assumption and also uses the
+polariser and retarder scans. The covariance of the fitted parameters is
+``(JᵀJ)⁻¹`` of the whitened residuals at the solution.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import optimize
+
+from analysis.polarimetry.drr import instrument_matrix
+from analysis.polarimetry.elements import linear_polariser, linear_retarder
+from analysis.polarimetry.validation import PolarimetryInputError, check_array
+
+__all__ = ["DrrCalibration", "ReferenceScan", "calibrate_drr"]
+
+_KINDS = ("air", "polariser", "retarder")
+
+#: Names of :attr:`DrrCalibration.params`, in order.
+INSTRUMENT_PARAMS = ("psg_retarder_offset_deg", "psa_retarder_offset_deg", "psg_retardance",
+                     "psa_retardance", "psa_polariser_deg")
+
+
+@dataclass(frozen=True)
+class ReferenceScan:
+    """One DRR scan of a reference sample.
+
+    Attributes
+    ----------
+    kind : str
+        ``"air"``, ``"polariser"`` or ``"retarder"``.
+    intensities, sigmas : ndarray of shape (K,)
+        The readings at the scan's steps and their standard deviations.
+    psg_retarder_deg, psa_retarder_deg : ndarray of shape (K,)
+        The nominal retarder angles the stages were sent to (e.g. :func:`drr_angles`).
+    angle_deg : float
+        Nominal azimuth of the polariser's axis or the retarder's fast axis (start value).
+    retardance : float
+        Nominal retardance of a retarder sample, radians (start value).
+    """
+
+    kind: str
+    intensities: NDArray[np.float64]
+    sigmas: NDArray[np.float64]
+    psg_retarder_deg: NDArray[np.float64]
+    psa_retarder_deg: NDArray[np.float64]
+    angle_deg: float = 0.0
+    retardance: float = math.pi / 2
+
+    def __post_init__(self) -> None:
+        if self.kind not in _KINDS:
+            raise PolarimetryInputError("kind", f"must be one of {_KINDS}, got {self.kind!r}")
+        y = check_array("intensities", self.intensities, ndim=1)
+        shape = y.shape
+        s = check_array("sigmas", self.sigmas)
+        if s.ndim == 0:
+            s = np.full(shape, float(s))
+        if s.shape != shape or np.any(s <= 0):
+            raise PolarimetryInputError("sigmas", f"must be > 0 with shape {shape}")
+        g = check_array("psg_retarder_deg", self.psg_retarder_deg, shape=shape)
+        a = check_array("psa_retarder_deg", self.psa_retarder_deg, shape=shape)
+        for name, val in (("angle_deg", self.angle_deg), ("retardance", self.retardance)):
+            if not math.isfinite(float(val)):
+                raise PolarimetryInputError(name, f"must be finite, got {val!r}")
+        object.__setattr__(self, "intensities", y)
+        object.__setattr__(self, "sigmas", s)
+        object.__setattr__(self, "psg_retarder_deg", g)
+        object.__setattr__(self, "psa_retarder_deg", a)
+
+
+@dataclass(frozen=True)
+class DrrCalibration:
+    """Fitted DRR parameters; :meth:`instrument_matrix` is what a calibrated reduction uses.
+
+    Attributes
+    ----------
+    params : ndarray of shape (5,)
+        :data:`INSTRUMENT_PARAMS`: retarder offsets (deg, added to the commanded angles),
+        retardances (rad), analyser polariser axis (deg; the generator polariser is 0).
+    cov : ndarray of shape (5, 5)
+        Their covariance.
+    sample_params : tuple of tuple of float
+        Per scan: ``(scale,)`` for air, ``(scale, angle_deg)`` for a polariser,
+        ``(scale, angle_deg, retardance)`` for a retarder.
+    chi2 : float
+        Weighted residual sum of squares.
+    dof : int
+        Number of readings minus fitted parameters.
+    """
+
+    params: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    sample_params: tuple[tuple[float, ...], ...] = field(default=())
+    chi2: float = 0.0
+    dof: int = 0
+
+    @property
+    def sigma(self) -> NDArray[np.float64]:
+        """Standard deviations of :attr:`params`."""
+        return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+
+    def instrument_matrix(self, psg_retarder_deg: ArrayLike,
+                          psa_retarder_deg: ArrayLike) -> NDArray[np.float64]:
+        """The calibrated instrument matrix (shape (K, 16)) for commanded retarder angles."""
+        g_off, a_off, d_g, d_a, p_a = (float(v) for v in self.params)
+        return instrument_matrix(check_array("psg_retarder_deg", psg_retarder_deg) + g_off,
+                                 check_array("psa_retarder_deg", psa_retarder_deg) + a_off,
+                                 psg_retardance=d_g, psa_retardance=d_a,
+                                 psa_polariser_deg=p_a)
+
+
+def _sample_matrix(kind: str, p: NDArray[np.float64]) -> NDArray[np.float64]:
+    if kind == "air":
+        return np.eye(4)
+    if kind == "polariser":
+        return linear_polariser(math.radians(float(p[0])))
+    return linear_retarder(math.radians(float(p[0])), float(p[1]))
+
+
+def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
+                  psa_retardance: float) -> DrrCalibration:
+    """Fit the DRR's hidden parameters to reference scans (see the module docstring).
+
+    Parameters
+    ----------
+    scans : sequence of ReferenceScan
+        At least an air scan and one other reference; air + polariser + retarder
+        determines all five instrument parameters.
+    psg_retardance, psa_retardance : float
+        Nominal retardances, radians (start values).
+
+    Raises
+    ------
+    PolarimetryInputError
+        No scans, no air scan, or too few readings for the parameters.
+    """
+    if not scans:
+        raise PolarimetryInputError("scans", "must hold at least an air scan")
+    if not any(s.kind == "air" for s in scans):
+        raise PolarimetryInputError("scans", "must include an air scan (no sample)")
+    for name, val in (("psg_retardance", psg_retardance), ("psa_retardance", psa_retardance)):
+        if not math.isfinite(float(val)):
+            raise PolarimetryInputError(name, f"must be finite, got {val!r}")
+    n_extra = {"air": 0, "polariser": 1, "retarder": 2}
+    x0 = [0.0, 0.0, float(psg_retardance), float(psa_retardance), 0.0]
+    lo = [-30.0, -30.0, 0.0, 0.0, -30.0]
+    hi = [30.0, 30.0, math.pi, math.pi, 30.0]
+    slices = []
+    for s in scans:
+        start = len(x0)
+        scale0 = float(np.max(np.abs(s.intensities))) or 1.0
+        x0.append(scale0 * 2.0)
+        lo.append(0.0)
+        hi.append(np.inf)
+        if s.kind in ("polariser", "retarder"):
+            x0.append(float(s.angle_deg))
+            lo.append(float(s.angle_deg) - 45.0)
+            hi.append(float(s.angle_deg) + 45.0)
+        if s.kind == "retarder":
+            x0.append(float(s.retardance))
+            lo.append(0.0)
+            hi.append(math.pi)
+        slices.append(slice(start, start + 1 + n_extra[s.kind]))
+    n_data = sum(s.intensities.size for s in scans)
+    if n_data <= len(x0):
+        raise PolarimetryInputError(
+            "scans", f"hold {n_data} readings for {len(x0)} parameters; add steps or scans")
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        cal = DrrCalibration(params=x[:5], cov=np.zeros((5, 5)))
+        out = []
+        for s, sl in zip(scans, slices, strict=True):
+            w = cal.instrument_matrix(s.psg_retarder_deg, s.psa_retarder_deg)
+            p = x[sl]
+            model = p[0] * (w @ _sample_matrix(s.kind, p[1:]).ravel())
+            out.append((model - s.intensities) / s.sigmas)
+        return np.concatenate(out)
+
+    x0a = np.clip(np.array(x0), np.array(lo) + 1e-9, np.array(hi) - 1e-9)
+    res = optimize.least_squares(residuals, x0a, bounds=(lo, hi), method="trf",
+                                 x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    jac = res.jac
+    cov_full = np.linalg.pinv(jac.T @ jac)
+    sample_params = tuple(tuple(float(v) for v in res.x[sl]) for sl in slices)
+    return DrrCalibration(params=np.asarray(res.x[:5], dtype=float), cov=cov_full[:5, :5],
+                          sample_params=sample_params, chi2=float(2.0 * res.cost),
+                          dof=n_data - len(x0))

@@ -1,0 +1,134 @@
+"""ECM (separable polarimeter) and DRR hidden-parameter calibration on synthetic benches."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from analysis.polarimetry import (
+    PolarimetryInputError,
+    analyser_row,
+    diattenuator,
+    drr_angles,
+    generator_stokes,
+    instrument_matrix,
+    linear_polariser,
+    linear_retarder,
+    reduce,
+)
+from analysis.polarimetry.calibration import ReferenceScan, calibrate_drr
+from analysis.polarimetry.ecm import ecm_calibrate
+
+OPT = math.radians(127)
+STATES = (-45.0, 0.0, 30.0, 60.0)
+TEST_SAMPLES = {
+    "polariser_30": linear_polariser(math.radians(30)),
+    "qwp_20": linear_retarder(math.radians(20), math.pi / 2),
+    "diattenuating_retarder": linear_retarder(math.radians(10), 0.7)
+    @ diattenuator(0.4, 0.8, 0.3),
+}
+
+
+def _separable(offset_deg: float, retardance: float, pol_deg: float = 0.0):
+    w = np.array([generator_stokes(t + offset_deg, retardance) for t in STATES]).T
+    a = np.array([analyser_row(t - offset_deg, retardance, pol_deg) for t in STATES])
+    return w, a
+
+
+def test_ecm_recovers_misaligned_separable_polarimeter():
+    # true: retarders 2° off, retardance 5 % off; nominal: perfect
+    w_true, a_true = _separable(2.0, OPT * 1.05, 0.5)
+    w_nom, a_nom = _separable(0.0, OPT)
+    refs = [linear_polariser(0.0), linear_polariser(math.pi / 2),
+            linear_retarder(math.radians(30), 1.4)]
+    noise = 1e-4
+    rng = np.random.default_rng(7)
+
+    def meas(m):
+        return a_true @ m @ w_true + noise * rng.standard_normal((4, 4))
+
+    cal = ecm_calibrate(meas(np.eye(4)), [meas(m) for m in refs], [0.0, 90.0, 30.0])
+    assert cal.eigenvalue_ratio < 1e-4 and cal.separation > 1e-3
+    assert cal.samples[2].retardance == pytest.approx(1.4, abs=5e-3)
+    assert cal.samples[1].theta_deg == pytest.approx(90.0, abs=0.1)
+    assert cal.samples[2].theta_deg == pytest.approx(30.0, abs=0.1)
+    for name, m in TEST_SAMPLES.items():
+        b = meas(m)
+        est = reduce(b.ravel(), noise, cal.instrument_matrix())
+        pull = np.abs(est.m - m) / est.sigma
+        # calibrated: within noise (the calibration's own error is ~noise too: 5σ bound)
+        assert np.all(pull < 5.0), name
+        uncal = reduce(b.ravel(), noise, np.kron(a_nom, w_nom.T))
+        assert np.max(np.abs(uncal.m - m)) > 0.02, name  # visibly off
+
+
+def test_ecm_needs_two_samples_and_an_invertible_air_matrix():
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(np.eye(4), [np.eye(4)], [0.0])
+    assert err.value.argument == "b_samples"
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(np.zeros((4, 4)), [np.eye(4), np.eye(4)], [0.0, 90.0])
+    assert err.value.argument == "b_air"
+
+
+def _drr_scans(rng, noise, truth):
+    g, a = drr_angles(36)
+    w_true = instrument_matrix(g + truth["g_off"], a + truth["a_off"],
+                               psg_retardance=truth["d_g"], psa_retardance=truth["d_a"],
+                               psa_polariser_deg=truth["p_a"])
+    refs = (("air", np.eye(4), 0.0, 0.0),
+            ("polariser", linear_polariser(math.radians(3.0)), 0.0, 0.0),
+            ("retarder", linear_retarder(math.radians(32.0), 1.5), 30.0, math.pi / 2))
+    scans = [ReferenceScan(kind=k, intensities=0.9 * w_true @ m.ravel()
+                           + noise * rng.standard_normal(36),
+                           sigmas=np.full(36, noise), psg_retarder_deg=g, psa_retarder_deg=a,
+                           angle_deg=ang, retardance=ret) for k, m, ang, ret in refs]
+    return g, a, w_true, scans
+
+
+def test_drr_calibration_recovers_hidden_parameters_within_2_sigma():
+    truth = {"g_off": 2.0, "a_off": -1.0, "d_g": OPT * 1.05, "d_a": OPT * 0.95, "p_a": 0.5}
+    expected = np.array([2.0, -1.0, OPT * 1.05, OPT * 0.95, 0.5])
+    pulls = []
+    for seed in range(10):
+        _, _, _, scans = _drr_scans(np.random.default_rng(seed), 1e-3, truth)
+        cal = calibrate_drr(scans, psg_retardance=OPT, psa_retardance=OPT)
+        pulls.append((cal.params - expected) / cal.sigma)
+        assert cal.chi2 / cal.dof < 1.5
+    p = np.abs(np.array(pulls))
+    # 10 seeds × 5 parameters: at 2σ about 2 of 50 exceed by chance; allow 6
+    assert np.sum(p > 2.0) <= 6 and np.all(p < 4.0)
+
+
+def test_calibrated_drr_reduces_test_samples_within_noise_uncalibrated_visibly_off():
+    truth = {"g_off": 2.0, "a_off": 2.0, "d_g": OPT * 1.05, "d_a": OPT * 1.05, "p_a": 0.0}
+    rng = np.random.default_rng(11)
+    noise = 1e-3
+    g, a, w_true, scans = _drr_scans(rng, noise, truth)
+    cal = calibrate_drr(scans, psg_retardance=OPT, psa_retardance=OPT)
+    w_cal = cal.instrument_matrix(g, a)
+    w_nom = instrument_matrix(g, a, psg_retardance=OPT, psa_retardance=OPT)
+    for name, m in TEST_SAMPLES.items():
+        y = w_true @ m.ravel() + noise * rng.standard_normal(36)
+        est = reduce(y, noise, w_cal)
+        assert np.all(np.abs(est.m - m) < 4.0 * est.sigma + 1e-3), name
+        uncal = reduce(y, noise, w_nom)
+        assert np.max(np.abs(uncal.m - m) / uncal.sigma) > 10.0, name
+
+
+def test_drr_calibration_input_checks():
+    g, a = drr_angles(36)
+    pol = ReferenceScan(kind="polariser", intensities=np.ones(36), sigmas=1.0,
+                        psg_retarder_deg=g, psa_retarder_deg=a)
+    with pytest.raises(PolarimetryInputError, match="air"):
+        calibrate_drr([pol], psg_retardance=OPT, psa_retardance=OPT)
+    with pytest.raises(PolarimetryInputError) as err:
+        ReferenceScan(kind="mirror", intensities=np.ones(36), sigmas=1.0,
+                      psg_retarder_deg=g, psa_retarder_deg=a)
+    assert err.value.argument == "kind"
+    with pytest.raises(PolarimetryInputError) as err:
+        ReferenceScan(kind="air", intensities=np.ones(36), sigmas=-1.0,
+                      psg_retarder_deg=g, psa_retarder_deg=a)
+    assert err.value.argument == "sigmas"
