@@ -106,8 +106,8 @@ class PolarimetricScene:
         cfg = dict(config)
         cfg.pop("kind", None)
         kind = str(cfg.pop("sample", "pbrdf"))
-        tables = {key: cfg.pop(key) for key in ("pbrdf", "air", "polariser", "retarder")
-                  if key in cfg}
+        tables: dict[str, Any] = {key: cfg.pop(key) for key in
+                                  ("pbrdf", "air", "polariser", "retarder") if key in cfg}
         extra = set(tables) - {kind}
         if extra:
             raise ValueError(f"[simulation.scene] sample = {kind!r} but tables "

@@ -115,13 +115,13 @@ def _rot(theta: float) -> NDArray[np.float64]:
 def polariser_jones(theta_rad: float, extinction: float = 0.0) -> NDArray[np.complex128]:
     """Linear polariser with its transmission axis at θ (power extinction ratio ε)."""
     d = np.diag([1.0, math.sqrt(extinction)]).astype(complex)
-    return _rot(-theta_rad) @ d @ _rot(theta_rad)
+    return np.asarray(_rot(-theta_rad) @ d @ _rot(theta_rad), dtype=np.complex128)
 
 
 def retarder_jones(theta_rad: float, delta_rad: float) -> NDArray[np.complex128]:
     """Linear retarder, fast axis at θ, retardance δ (the slow axis lags by δ)."""
     d = np.diag([1.0, np.exp(1j * delta_rad)])
-    return _rot(-theta_rad) @ d @ _rot(theta_rad)
+    return np.asarray(_rot(-theta_rad) @ d @ _rot(theta_rad), dtype=np.complex128)
 
 
 def polariser_mueller(theta_rad: float, extinction: float = 0.0) -> NDArray[np.float64]:

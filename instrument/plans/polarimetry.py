@@ -166,7 +166,8 @@ def conditioning(pol: dict[str, Any], profile: BenchProfile,
     kappas = [(_kappa(steps, ratio, d, d), d) for d in _SEARCH_DEG]
     best_kappa, best_deg = min(kappas)
     out = []
-    for lam in (list(wavelengths) or [None]):
+    at_wavelengths: list[float | None] = [*wavelengths] or [None]
+    for lam in at_wavelengths:
         at = 550.0 if lam is None else lam
         dg, da = psg.retardance_at(at), psa.retardance_at(at)
         out.append(Conditioning(lam, dg, da, _kappa(steps, ratio, dg, da), best_kappa,
