@@ -20,9 +20,9 @@ from analysis.polarimetry.drr import instrument_matrix, reduce
 from hw_mocks.sim.world import find_world
 from instrument.bench.profile import load_profile
 from instrument.cli import main
+from instrument.pipelines.brdf.pipeline import fit_run
 from instrument.plans import build_plan
 from instrument.plans.planfile import PlanError, parse_plan
-from instrument.pipelines.brdf.pipeline import fit_run
 from instrument.run.runfile import RunFileError, read_run
 
 PLAN = """
@@ -158,6 +158,7 @@ def test_the_planner_shows_the_condition_number(capsys, tmp_path):
     assert "warning: κ is more than 2× the optimum's" in out
 
 
+@pytest.mark.slow  # 25 emulated mount moves and aperture integrals: 40-65 s on a loaded box
 def test_the_engine_records_the_mounts_and_recovers_the_hidden_mueller_matrix(tmp_path):
     bench = tmp_path / "bench.toml"
     bench.write_text(fast_profile(), encoding="utf-8")
@@ -213,5 +214,5 @@ def test_the_engine_records_the_mounts_and_recovers_the_hidden_mueller_matrix(tm
     # Brewster's neighbourhood: strongly p-suppressing at 50° on glass
     assert truth[0, 1] / truth[0, 0] < -0.5
     # the scalar fit would mix the analyser's states: refused, naming the way to reduce it
-    with pytest.raises(RunFileError, match="polarimetric run.*analysis.polarimetry.drr"):
+    with pytest.raises(RunFileError, match=r"polarimetric run.*analysis\.polarimetry\.drr"):
         fit_run(path, report=False, write=False)
