@@ -224,3 +224,23 @@ def test_the_hidden_train_from_its_table():
         HiddenTrain.from_config({"detector": [{"kind": "retarder", "mount": "x"}]})
     with pytest.raises(ValueError, match="source_stokes"):
         HiddenTrain.from_config({"source_stokes": [1.0, 1.0, 1.0, 0.0]})
+
+
+def test_the_scene_from_its_table():
+    scene = PolarimetricScene.from_config({"kind": "polarimetric", "sample": "polariser",
+                                           "polariser": {"orientation_deg": 30.0}})
+    assert scene.sample is None
+    np.testing.assert_allclose(scene.reference, polariser_mueller(math.radians(30.0)))
+    glass = PolarimetricScene.from_config({"kind": "polarimetric",
+                                           "pbrdf": {"n": 1.5, "albedo": 0.2},
+                                           "aperture_samples": 6})
+    assert glass.sample == MicrofacetPolarisedSample(n=1.5, albedo=0.2)
+    assert glass.base.aperture_samples == 6
+    with pytest.raises(ValueError, match="tables \\['pbrdf'\\]"):
+        PolarimetricScene.from_config({"sample": "air", "pbrdf": {"n": 1.5}})
+    with pytest.raises(ValueError, match="ambient light"):
+        PolarimetricScene.from_config({"ambient_radiance": 1.0})
+    with pytest.raises(ValueError, match="reference sample must be one of"):
+        PolarimetricScene.from_config({"sample": "mirror"})
+    with pytest.raises(ValueError, match="unknown keys"):
+        PolarimetricScene.from_config({"pbrdf": {"roughness": 0.1}})
