@@ -39,7 +39,7 @@ from instrument.bench.optics import OpticalTrain
 from instrument.bench.profile import BenchProfile, FieldError, _Validator
 from instrument.plans.commands import ScanPoint
 
-__all__ = ["DEFAULT_STEPS", "FAR_FROM_OPTIMUM", "POLARIMETRY_KINDS", "Conditioning",
+__all__ = ["DEFAULT_STEPS", "FAR_FROM_OPTIMUM", "MIN_STEPS", "POLARIMETRY_KINDS", "Conditioning",
            "conditioning", "parse_polarimetry", "plan_wavelengths", "polarimetry_axis"]
 
 DEFAULT_STEPS = 36

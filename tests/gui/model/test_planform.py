@@ -23,7 +23,8 @@ EXPLICIT_POINTS = {"calibration_nd"}
 EXAMPLES = [p for p in EXAMPLES if p.stem not in EXPLICIT_POINTS]
 #: The bench each example plan is written for (its comment says so).
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
-         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
+         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
+         "brdf_polarimetric": "sim-polarimetric"}
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
@@ -32,7 +33,7 @@ def test_every_example_round_trips_and_validates(path):
     form = PlanForm.from_toml(path.read_text())
     again = parse_plan(form.to_toml())
     for attr in ("kind", "name", "order", "sample_name", "sample_description",
-                 "acquisition", "calibration", "spectral"):
+                 "acquisition", "calibration", "spectral", "polarimetry"):
         assert getattr(again, attr) == getattr(original, attr), attr
     # the same scan; switches equal to their default (reciprocity = false) may be left
     # out, so they are compared through the points they give (below)
