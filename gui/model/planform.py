@@ -248,7 +248,7 @@ SPECTRAL = [
 POLARIMETRY = [
     _f("polarimetry.mode", "polarimetry", "choice",
        "drr: a dual rotating retarder scan at every geometry (the bench's [optics] names "
-       "the retarders); empty: none", ("drr",)),
+       "the retarders); none: no polarimetry", ("", "drr")),
     _f("polarimetry.steps", "retarder steps", "integer",
        f"steps per geometry, at least {MIN_STEPS} (default {DEFAULT_STEPS})"),
     _f("polarimetry.ratio", "retarder ratio", "number",

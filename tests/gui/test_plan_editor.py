@@ -17,7 +17,8 @@ EXAMPLES = sorted(p for p in _EXAMPLE_DIR.glob("*.toml")
 EXPLICIT_POINTS = {"calibration_nd"}
 EXAMPLES = [p for p in EXAMPLES if p.stem not in EXPLICIT_POINTS]
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
-         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral"}
+         "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
+         "brdf_polarimetric": "sim-polarimetric"}
 
 
 def _validated(qtbot, editor):

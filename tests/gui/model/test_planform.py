@@ -107,3 +107,24 @@ def test_values_text_round_trips(values):
 def test_range_syntax():
     assert parse_values("-70 to 80 step 10") == {"start": -70, "stop": 80, "step": 10}
     assert parse_values("0:1.5:0.5") == {"start": 0, "stop": 1.5, "step": 0.5}
+
+
+def test_the_polarimetry_settings_make_a_polarimetric_plan():
+    form = PlanForm("brdf_in_plane")
+    form.set("sample.name", "glass")
+    assert "[polarimetry]" not in form.to_toml()  # none by default
+    form.set("polarimetry.mode", "drr")
+    form.set("polarimetry.steps", "25")
+    text = form.to_toml()
+    assert "[polarimetry]" in text and "steps = 25" in text
+    assert parse_plan(text).polarimetry == {"mode": "drr", "steps": 25, "ratio": 5.0}
+    result = form.validate(load_profile("sim-polarimetric"))
+    assert result.ok, (result.errors, result.general)
+    lit = [p for p in result.plan.points if p.light]
+    assert {dict(p.targets)["psa_retarder"] for p in lit} >= {0.0, 36.0}
+    # on a bench without the train, the error sits next to the polarimetry field
+    result = form.validate(load_profile("sim"))
+    assert "names no optical train" in " ".join(result.errors["polarimetry.mode"])
+    form.set("polarimetry.steps", "20")
+    result = form.validate(load_profile("sim-polarimetric"))
+    assert "singular" in " ".join(result.errors.get("polarimetry.steps", result.general))
