@@ -66,6 +66,7 @@ def _effective_brdf(sample: MicrofacetPolarisedSample, state: WorldState) -> Any
         st = np.sin(theta_r)
         return from_components(wi, st * np.cos(phi_r), st * np.sin(phi_r), np.cos(theta_r))
 
+    # the call form the goniometer scene prefers, set on the function object
     brdf.from_components = from_components  # type: ignore[attr-defined]
     return brdf
 
