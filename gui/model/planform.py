@@ -43,6 +43,7 @@ from instrument.plans.planfile import (
     PlanSpec,
     parse_plan,
 )
+from instrument.plans.polarimetry import DEFAULT_STEPS, MIN_STEPS, POLARIMETRY_KINDS
 
 __all__ = ["LOBE_MODELS", "FieldSpec", "PlanForm", "Validation", "field_for", "fields_for",
            "parse_values"]
@@ -245,13 +246,27 @@ SPECTRAL = [
 ]
 
 
+#: The polarimetry axis of BRDF plans (``[polarimetry]``, instrument.plans.polarimetry);
+#: every field empty: no polarimetry.
+POLARIMETRY = [
+    _f("polarimetry.mode", "polarimetry", "choice",
+       "drr: a dual rotating retarder scan at every geometry (the bench's [optics] names "
+       "the retarders); none: no polarimetry", ("", "drr")),
+    _f("polarimetry.steps", "retarder steps", "integer",
+       f"steps per geometry, at least {MIN_STEPS} (default {DEFAULT_STEPS})"),
+    _f("polarimetry.ratio", "retarder ratio", "number",
+       "the analyser retarder turns this many times as far (default 5)"),
+]
+
+
 def fields_for(kind: str) -> list[FieldSpec]:
     """Every field of a plan of ``kind``: common, scan, acquisition, calibration (and the
-    wavelength axis where the kind takes one)."""
+    wavelength and polarimetry axes where the kind takes them)."""
     spectral = SPECTRAL if kind in SPECTRAL_KINDS else []
+    polarimetry = POLARIMETRY if kind in POLARIMETRY_KINDS else []
     return [_f("plan.kind", "kind", "choice", "what the plan measures", choices=KINDS,
                default=kind), *COMMON,
-            *SCAN_FIELDS[kind], *ACQUISITION, *CALIBRATION, *spectral]
+            *SCAN_FIELDS[kind], *ACQUISITION, *CALIBRATION, *spectral, *polarimetry]
 
 
 # --------------------------------------------------------------------------- text → values
@@ -603,6 +618,8 @@ class PlanForm:
             del data["sample"]
         if "filters" not in data.get("spectral", {}):
             data.pop("spectral", None)  # an order alone is no wavelength axis
+        if not data.get("polarimetry"):
+            data.pop("polarimetry", None)
         return data, errors
 
     def to_toml(self) -> str:
@@ -610,7 +627,8 @@ class PlanForm:
         data, _ = self.to_data()
         lines = [f"# {KIND_TITLES.get(self.kind, self.kind)} plan, written by the "
                  "scatterlab plan editor"]
-        for section in ("plan", "sample", "scan", "acquisition", "calibration", "spectral"):
+        for section in ("plan", "sample", "scan", "acquisition", "calibration", "spectral",
+                        "polarimetry"):
             table = data.get(section)
             if not table and section not in ("plan", "scan"):
                 continue

@@ -50,7 +50,7 @@ __all__ = ["PlanEditor"]
 
 SECTIONS = (("plan", "Plan"), ("sample", "Sample"), ("scan", "Scan"),
             ("acquisition", "Acquisition"), ("calibration", "Calibration runs"),
-            ("spectral", "Wavelength axis"))
+            ("spectral", "Wavelength axis"), ("polarimetry", "Polarimetry"))
 
 
 def field_tip(spec: FieldSpec) -> str:
@@ -256,7 +256,7 @@ class PlanEditor(QWidget):
             w = QComboBox()
             for c in spec.choices:
                 w.addItem(KIND_TITLES.get(c, c) if spec.path == "plan.kind" else
-                          c or "automatic", c)
+                          c or ("none" if spec.path == "polarimetry.mode" else "automatic"), c)
             if value and w.findData(value) < 0:  # a plan file's value not in the list
                 w.addItem(str(value), value)
             w.setCurrentIndex(max(0, w.findData(value or "")))

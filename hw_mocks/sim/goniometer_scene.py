@@ -224,6 +224,10 @@ class GoniometerScene:
     ambient_radiance: float = 0.0
     spot_samples: int = 48
     aperture_samples: int = 9
+    #: Fraction of the direct beam's power the detector reads (a polarisation analyser
+    #: after a transmissive reference sample, :mod:`hw_mocks.sim.polarimetric_scene`);
+    #: not a configuration key.
+    direct_transmission: float = 1.0
 
     def __post_init__(self) -> None:
         if self.target not in ("sample", "reference", "none"):
@@ -515,7 +519,9 @@ class GoniometerScene:
                                          <= self.sample_radius_mm**2)
             downstream = b_pts @ pose.source_dir < 0.0
             beam = self._beam_intensity(b_pts, state) * float(f @ pose.source_dir)
-            power += float(np.sum(np.where(~blocked & downstream, beam, 0.0)) * db)
+            direct = float(np.sum(np.where(~blocked & downstream, beam, 0.0)) * db)
+            power += direct if self.direct_transmission == 1.0 \
+                else direct * self.direct_transmission
         if brdf is None or cos_i <= 0.0 or float(c @ n) <= 0.0:
             return power
         # Scattered light: footprint grid in sample coordinates aligned with the beam.

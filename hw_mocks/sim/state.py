@@ -136,6 +136,9 @@ class WorldState:
     source: SourceState
     scene: Scene
     key: tuple
+    #: The polarisation optics as they stand (a
+    #: :class:`~hw_mocks.sim.polarisation.PolarisationState`), None on a bench without.
+    optics: Any = None
 
 
 @dataclass(frozen=True)

@@ -66,6 +66,7 @@ import numpy as np
 
 from hw_mocks import registry
 from hw_mocks.sim.filters import parse_bands, transmit
+from hw_mocks.sim.polarisation import HiddenTrain
 from hw_mocks.sim.state import (
     ARM_ROLES,
     ROLES,
@@ -181,6 +182,7 @@ class VirtualBench:
         arm_length_mm: float = 300.0,
         power_meter: PowerMeterHead | None = None,
         light_path: LightPath | None = None,
+        optics: HiddenTrain | None = None,
     ) -> None:
         self.name = name
         self._lock = threading.RLock()
@@ -198,6 +200,7 @@ class VirtualBench:
         self.arm_length_mm = float(arm_length_mm)
         self.power_meter = power_meter or PowerMeterHead()
         self._light_path = light_path or LightPath()
+        self._optics = optics
         self._version = 0
         self._power_cache: dict[tuple, float] = {}
         self._bound_meter: Any = None  # the PM100USB firmware reading this world
@@ -217,11 +220,15 @@ class VirtualBench:
         ``source`` ({power_w, wavelength_nm, beam_radius_mm, max_power_w, on}),
         ``arm_length_mm``, ``power_meter`` ({distance_mm, aperture_diameter_mm, url}),
         ``shutter`` (a ``simsc10://`` URL) and ``filter_wheel`` ({url, filters}; see
-        :class:`~hw_mocks.sim.state.LightPath`). With a power-meter ``url`` the PM100USB
-        emulator is created and bound (:meth:`bind_power_meter`).
+        :class:`~hw_mocks.sim.state.LightPath`); ``optics``, a polarimeter's hidden
+        elements (:class:`~hw_mocks.sim.polarisation.HiddenTrain`), which with
+        ``scene.kind = "polarimetric"``
+        (:class:`~hw_mocks.sim.polarimetric_scene.PolarimetricScene`) make the world carry
+        Stokes vectors. With a power-meter ``url`` the PM100USB emulator is created and
+        bound (:meth:`bind_power_meter`).
         """
         known = {"roles", "scene", "source", "arm_length_mm", "power_meter", "shutter",
-                 "filter_wheel"}
+                 "filter_wheel", "optics"}
         unknown = set(config) - known
         if unknown:
             raise ValueError(f"unknown [simulation] keys {sorted(unknown)}; known {sorted(known)}")
@@ -238,6 +245,10 @@ class VirtualBench:
             from hw_mocks.sim.uniform_target import IntegratingSphereTarget
 
             scene = IntegratingSphereTarget.from_config(scene_cfg)
+        elif scene_cfg.get("kind") == "polarimetric":
+            from hw_mocks.sim.polarimetric_scene import PolarimetricScene
+
+            scene = PolarimetricScene.from_config(scene_cfg)
         else:
             from hw_mocks.sim.goniometer_scene import GoniometerScene
 
@@ -245,10 +256,13 @@ class VirtualBench:
         source = SourceState(**dict(config.get("source", {})))
         pm = PowerMeterHead(**dict(config.get("power_meter", {})))
         light_path = LightPath.from_config(config.get("shutter"), config.get("filter_wheel"))
+        optics = None
+        if config.get("optics") is not None:
+            optics = HiddenTrain.from_config(config["optics"])
         world = cls(
             name, roles=config.get("roles"), scene=scene, source=source,
             arm_length_mm=float(config.get("arm_length_mm", 300.0)), power_meter=pm,
-            light_path=light_path,
+            light_path=light_path, optics=optics,
         )
         if pm.url is not None:
             world.bind_power_meter()
@@ -264,6 +278,7 @@ class VirtualBench:
             self.arm_length_mm = other.arm_length_mm
             self.power_meter = other.power_meter
             self._light_path = other._light_path
+            self._optics = other._optics
             self._version += 1
             self._power_cache.clear()
         if self.power_meter.url is not None:
@@ -371,13 +386,26 @@ class VirtualBench:
         with self._lock:
             positions = self.positions()
             source, scene, version = self.light_at_sample(), self._scene, self._version
-        key = (
+            optics = self._optics
+        key: tuple = (
             self.name, version, id(scene),
             tuple(round(positions[k], 9) for k in ROLES),
             source,
         )
+        if optics is None:
+            return WorldState(positions=positions, pose=self.pose(positions), source=source,
+                              scene=scene, key=key)
+        # a polarimetric bench: the elements' mounts are part of the state (and its key)
+        mounts = {role: self.position(role) for role in optics.mounts}
+        key += (tuple(round(mounts[r], 9) for r in optics.mounts),)
+        state = optics.state(mounts.__getitem__, source.wavelength_nm)
         return WorldState(positions=positions, pose=self.pose(positions), source=source,
-                          scene=scene, key=key)
+                          scene=scene, key=key, optics=state)
+
+    @property
+    def optics(self) -> HiddenTrain | None:
+        """The hidden polarisation optics (``[simulation.optics]``), None without."""
+        return self._optics
 
     # light path ---------------------------------------------------------------------
     @property

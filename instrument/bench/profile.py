@@ -81,6 +81,10 @@ Schema (all lengths in mm, angles in degrees)::
                                        # counts in each value's σ (docs/guide, speckle)
     wavelength_nm = 633.0              # a laser's wavelength (the speckle grain); on an
                                        # emulated bench [simulation.source]'s by default
+    [[optics.source]]                  # a polarimeter's optical train (optional):
+    kind = "retarder"                  # polarisers, retarders and PEMs in each arm, with
+    mount = "psg_retarder"             # their mounts and nominal values; see
+    retardance_deg = 90.0              # instrument.bench.optics
 
     [simulation]                       # only for emulated benches; passed to hw_mocks
     world = "sim"
@@ -99,6 +103,7 @@ from pathlib import Path
 from typing import Any
 
 from instrument.bench.driver_registry import DriverEntry, driver_registry
+from instrument.bench.optics import OpticalTrain, parse_optics
 
 __all__ = [
     "AXIS_ROLES",
@@ -130,6 +135,11 @@ AXIS_ROLES = (
     "source_azimuth",
     "detector_arc",
     "detector_azimuth",
+    # rotation mounts of a polarimeter's elements ([optics], instrument.bench.optics)
+    "psg_polariser",
+    "psg_retarder",
+    "psa_retarder",
+    "psa_polariser",
 )
 #: ``geometry.goniometer``: the two designs (ADR 0104).
 GONIOMETER_TYPES = ("type_ii", "type_i")
@@ -333,6 +343,9 @@ class BenchProfile:
         """``"laser"`` or ``"incoherent"``: the source's coherence."""
         return str(self.source["coherence"])
 
+    #: ``[optics]``: a polarimeter's elements and their nominal values, or None.
+    optics: OpticalTrain | None = None
+
     @property
     def axes(self) -> dict[str, DeviceSpec]:
         return {role: d for role, d in self.devices.items() if d.is_axis}
@@ -422,12 +435,17 @@ def parse_profile(text: str, *, source: str = "profile") -> BenchProfile:
         v.error("photodiode", "describes the lock-in's detector: the bench needs a device "
                 "with driver 'sr830' (or another driver of kind 'lockin')")
     light = _source(v, data.get("source"), simulation)
+    optics = None
+    if "optics" in data:
+        axes = {role for role, d in devices.items() if d.is_axis}
+        optics = parse_optics(data["optics"], axes, v.error)
     v.unknown(data, "", {"bench", "devices", "geometry", "simulation", "photodiode",
-                         "source"})
+                         "source", "optics"})
     if v.errors:
         raise ProfileError(source, v.errors)
     return BenchProfile(name, description, devices, geometry, simulation, text, photodiode,
-                        light)
+                        light, optics)
+
 
 
 #: What ``[source] coherence`` may say.

@@ -7,10 +7,15 @@ import json
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from instrument.cli import _planner
 from instrument.cli._format import fmt_s
 from instrument.run.paths import DEFAULT_RUNS_DIR
+
+if TYPE_CHECKING:
+    from instrument.bench.profile import BenchProfile
+    from instrument.plans.planfile import PlanSpec
 
 HELP = "dry run of a plan: points, travel, duration, coverage PNG"
 
@@ -98,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
                   f"({est.motion_s / raster.motion_s:.0%} of it used here)")
     acq = json.loads(spec.acquisition.as_json())
     print("  acquisition: " + ", ".join(f"{k} {_value(v)}" for k, v in acq.items()))
+    if spec.polarimetry is not None:
+        _print_polarimetry(spec, profile)
     if any(p.angles is not None for p in plan.points):
         from instrument.plans.coverage import write_coverage_png
 
@@ -114,3 +121,23 @@ def run(args: argparse.Namespace) -> int:
     else:  # light-field, sphere and calibration plans sample no scattering directions
         print("  coverage picture: none (this plan samples no scattering directions)")
     return 0
+
+
+def _print_polarimetry(spec: PlanSpec, profile: BenchProfile) -> None:
+    """The dual-rotating-retarder scan: its steps, and how well its instrument matrix is
+    conditioned with the profile's nominal retardances (a warning far from the optimum)."""
+    from instrument.plans.build import plan_filter_wavelengths
+    from instrument.plans.polarimetry import FAR_FROM_OPTIMUM, conditioning, plan_wavelengths
+
+    pol = spec.polarimetry
+    assert pol is not None
+    print(f"  polarimetry: dual rotating retarder, {pol['steps']} steps per geometry, "
+          f"ratio {pol['ratio']:g}")
+    wavelengths = plan_wavelengths(profile, plan_filter_wavelengths(spec, profile))
+    for c in conditioning(pol, profile, wavelengths):
+        print(f"    {c.describe()}")
+        if c.far_from_optimum:
+            print(f"  warning: κ is more than {FAR_FROM_OPTIMUM:g}× the optimum's: the "
+                  f"Mueller elements' σ grows with it; retarders of about "
+                  f"{c.optimum_retardance_deg:g}° would do better")
+

@@ -35,6 +35,7 @@ from instrument.plans.count import check_point_count
 from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, specular_cone
 from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
+from instrument.plans.polarimetry import plan_wavelengths, polarimetry_axis
 from instrument.plans.ranges import float_range
 from instrument.plans.spin import check_spinner
 
@@ -578,6 +579,9 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
             raise PlanError(f"plan {spec.name!r}", [FieldError(
                 "spectral.filters", f"expands to {len(head) + len(body)} points; at most "
                 f"{MAX_POINTS}")])
+    if spec.polarimetry is not None:
+        body = _polarimetry(spec, profile, body)
+        axes = tuple(dict.fromkeys(r for p in head + body for r, _ in p.targets))
     if spec.acquisition.dark == "per_row":
         body = _dark_per_row(body)
     points = tuple(replace(p, index=k) for k, p in enumerate(head + body))
@@ -599,6 +603,26 @@ def _routable(profile: BenchProfile, generated: list[ScanPoint], ordered: list[S
     if bad:
         raise guard.GuardError(bad, len(ordered))
     return ordered
+
+
+def plan_filter_wavelengths(spec: PlanSpec, profile: BenchProfile) -> list[float]:
+    """The centre wavelengths (nm) of the plan's ``[spectral]`` filters that the profile
+    gives a band for; empty without a wavelength axis."""
+    bands = filter_bands(profile) or {}
+    return [bands[f][0] for f in (spec.spectral or {}).get("filters", ()) if f in bands]
+
+
+def _polarimetry(spec: PlanSpec, profile: BenchProfile, body: list[ScanPoint]
+                 ) -> list[ScanPoint]:
+    """``body`` with the dual-rotating-retarder steps at every lit point
+    (:mod:`instrument.plans.polarimetry`), within the point limit."""
+    assert spec.polarimetry is not None
+    wavelengths = plan_wavelengths(profile, plan_filter_wavelengths(spec, profile))
+    out = polarimetry_axis(spec.polarimetry, profile, body, wavelengths)
+    if len(out) > MAX_POINTS:
+        raise PlanError(f"plan {spec.name!r}", [FieldError(
+            "polarimetry.steps", f"expands to {len(out)} points; at most {MAX_POINTS}")])
+    return out
 
 
 def _dark_per_row(body: list[ScanPoint]) -> list[ScanPoint]:

@@ -29,6 +29,11 @@ as a :class:`~instrument.bench.profile.FieldError` (``scan.theta_i[2]: ...``) in
     [calibration]                 # run ids or file paths of calibration runs (optional)
     dark = "..."; reference = "..."; signature = "..."; flat = "..."; nd = "..."
 
+    [polarimetry]                 # a Mueller-matrix scan at every geometry (optional;
+    mode = "drr"                  # brdf_in_plane and brdf_hemisphere plans):
+    steps = 36                    # instrument.plans.polarimetry
+    ratio = 5
+
 [scan] by kind (angles in degrees; a *range* is ``{start, stop, step}`` inclusive, or an
 explicit list):
 
@@ -77,6 +82,7 @@ from typing import Any, cast
 
 from instrument.bench.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
 from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
+from instrument.plans.polarimetry import parse_polarimetry
 from instrument.plans.ranges import FloatRange
 
 __all__ = ["KINDS", "PlanError", "PlanSpec", "load_plan", "parse_plan"]
@@ -111,6 +117,9 @@ class PlanSpec:
     #: ``[spectral]``: the wavelength axis, ``{"filters": (slots…), "order": …}`` (see
     #: :data:`SPECTRAL_ORDERS`), or None.
     spectral: dict[str, Any] | None = None
+    #: ``[polarimetry]``: ``{"mode": "drr", "steps": K, "ratio": r}``
+    #: (:mod:`instrument.plans.polarimetry`), or None.
+    polarimetry: dict[str, Any] | None = None
 
 
 def load_plan(path: str | Path) -> PlanSpec:
@@ -130,7 +139,8 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
     except tomllib.TOMLDecodeError as err:
         raise PlanError(source, [FieldError("toml", f"not valid TOML: {err}")]) from err
     v = _Validator()
-    v.unknown(data, "", {"plan", "sample", "scan", "acquisition", "calibration", "spectral"})
+    v.unknown(data, "", {"plan", "sample", "scan", "acquisition", "calibration", "spectral",
+                         "polarimetry"})
     plan = v.table(data, "plan", required=True)
     v.unknown(plan, "plan", {"kind", "name", "order"})
     kind = v.string(plan, "kind", "plan", required=True)
@@ -160,10 +170,11 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
         if val is not None:
             calibration[key] = val
     spectral = _spectral(v, data.get("spectral"), kind)
+    polarimetry = parse_polarimetry(v, data.get("polarimetry"), kind)
     if v.errors or kind is None:
         raise PlanError(source, v.errors or [FieldError("plan.kind", "is required")])
     return PlanSpec(kind, name, order, sample_name, sample_desc, dict(scan), acq,
-                    calibration, text, spectral)
+                    calibration, text, spectral, polarimetry)
 
 
 #: Point orders of a wavelength axis: every angle with one filter, then the next filter

@@ -7,7 +7,10 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
       sample/      NXsample     name, description
       instrument/  NXinstrument bench_profile (TOML text), geometry attrs,
                                 <role>/ (NXpositioner | NXdetector | NXsource | NXmonitor)
-                                with the device identity and retry policy as attributes
+                                with the device identity and retry policy as attributes;
+                                optical_train (JSON, a polarimetric run only: the
+                                profile's nominal [optics] and the plan's [polarimetry];
+                                the mounts' read-back angles are columns of positions)
       plan/        NXcollection plan_text, acquisition_policy, retry_policies (JSON),
                                 axes, planned_targets (N, A), planned_angles (N, 4),
                                 planned_label, planned_light, planned_exposure_us;
@@ -152,6 +155,9 @@ class RunHeader:
     #: parameters and seed, from which a resumed run rebuilds it; empty for a fixed plan.
     #: Its planned tables grow during the run (:func:`grow_plan_tables`, ADR 0091).
     adaptive: str = ""
+    #: A polarimetric run's optical train and scan: JSON ``{"optics": the profile's
+    #: nominal [optics], "polarimetry": the plan's [polarimetry]}``; empty otherwise.
+    optical_train: str = ""
 
     def with_planned(self, rows: list[dict[str, Any]]) -> RunHeader:
         """This header with ``rows`` (a journal ``planned`` record's points) appended to
@@ -246,6 +252,8 @@ def new_run_file(path: Path, h: RunHeader) -> h5py.File:
         inst = _group(entry, "instrument", "NXinstrument")
         inst.create_dataset("name", data=h.bench_name)
         inst.create_dataset("bench_profile", data=h.profile_text)
+        if h.optical_train:
+            inst.create_dataset("optical_train", data=h.optical_train)
         for k, v in h.geometry.items():
             if isinstance(v, str | int | float | bool):
                 inst.attrs[f"geometry.{k}"] = v
@@ -415,6 +423,7 @@ def header_from_file(f: h5py.File) -> RunHeader:
         planned_meta=([_text(x) for x in plan["planned_meta"][()]]
                       if "planned_meta" in plan else []),
         adaptive=_text(plan.attrs.get("adaptive", "")),
+        optical_train=(_text(inst["optical_train"][()]) if "optical_train" in inst else ""),
         acquisition_policy=_text(plan["acquisition_policy"][()]),
         retry_policies=json.dumps(retry), identities=identities, device_kinds=kinds,
         geometry=geometry,

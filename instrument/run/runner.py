@@ -115,7 +115,18 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
                                    for r, d in bench.profile.devices.items()}),
         identities=identities, device_kinds={r: _nx_class(d) for r, d in bench.devices.items()},
         geometry=geometry, calibration=dict(plan.spec.calibration),
-        software_version=software_version(), created=time.time())
+        software_version=software_version(), created=time.time(),
+        optical_train=optical_train_json(plan))
+
+
+def optical_train_json(plan: Plan) -> str:
+    """The optical train's provenance of a polarimetric plan (the profile's nominal
+    ``[optics]`` and the plan's ``[polarimetry]``), JSON; empty for any other plan."""
+    optics = plan.profile.optics
+    if plan.spec.polarimetry is None or optics is None:
+        return ""
+    return json.dumps({"optics": optics.as_dict(), "polarimetry": plan.spec.polarimetry},
+                      sort_keys=True)
 
 
 #: Seconds between catalog updates of a running run's point count (a short SQLite write

@@ -18,7 +18,8 @@ EXPLICIT_POINTS = {"calibration_nd"}
 EXAMPLES = [p for p in EXAMPLES if p.stem not in EXPLICIT_POINTS]
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
          "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
-         "brdf_inplane_spin": str(_EXAMPLE_DIR / "bench_sim_laser.toml")}
+         "brdf_inplane_spin": str(_EXAMPLE_DIR / "bench_sim_laser.toml"),
+         "brdf_polarimetric": "sim-polarimetric"}
 
 
 def _validated(qtbot, editor):

@@ -23,7 +23,7 @@ from instrument.pipelines.brdf.reduce import Reduced, ReductionOptions, reduce_r
 from instrument.pipelines.brdf.report import write_report
 from instrument.pipelines.brdf.results import write_analysis, write_fit_results
 from instrument.run.paths import results_dir
-from instrument.run.runfile import RunData, check_run_file, read_run
+from instrument.run.runfile import RunData, RunFileError, check_run_file, open_run, read_run
 
 __all__ = ["FitRun", "default_report_dir", "fit_options", "fit_run"]
 
@@ -60,6 +60,21 @@ def fit_options(options: ReductionOptions | None = None,
             "criterion": criterion, "cross_validation": run_cv, "bootstrap": n_bootstrap}
 
 
+def refuse_polarimetric(path: str | Path) -> None:
+    """A polarimetric run (its file records an optical train, ADR 0112) holds K retarder
+    steps per geometry: the scalar reduction would treat them as repeated points of one
+    BRDF and mix the analyser's states. Refused until the Mueller-matrix reduction is part
+    of ``fit``."""
+    with open_run(path) as f:
+        polarimetric = "optical_train" in f["entry/instrument"]
+    if polarimetric:
+        raise RunFileError(
+            f"{path} is a polarimetric run (dual-rotating-retarder steps at every "
+            "geometry); `scatterlab fit` does not reduce it to Mueller matrices in this "
+            "version: reduce it with analysis.polarimetry.drr as the guide's polarimetry "
+            "chapter shows (docs/guide/polarimetry.md)")
+
+
 def fit_run(
     path: str | Path,
     options: ReductionOptions | None = None,
@@ -90,6 +105,7 @@ def fit_run(
         Missing calibration, reference or dark data, or no scattering points.
     """
     check_run_file(path, "fit")
+    refuse_polarimetric(path)
     opts = options or ReductionOptions()
     for attr, option, kinds in COMPANIONS:
         if getattr(opts, attr) is not None:

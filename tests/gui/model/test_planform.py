@@ -25,7 +25,8 @@ EXAMPLES = [p for p in EXAMPLES if p.stem not in EXPLICIT_POINTS]
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
          "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
          "brdf_inplane_spin": str(Path(__file__).resolve().parents[3] / "examples"
-                                  / "bench_sim_laser.toml")}
+                                  / "bench_sim_laser.toml"),
+         "brdf_polarimetric": "sim-polarimetric"}
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
@@ -34,7 +35,7 @@ def test_every_example_round_trips_and_validates(path):
     form = PlanForm.from_toml(path.read_text())
     again = parse_plan(form.to_toml())
     for attr in ("kind", "name", "order", "sample_name", "sample_description",
-                 "acquisition", "calibration", "spectral"):
+                 "acquisition", "calibration", "spectral", "polarimetry"):
         assert getattr(again, attr) == getattr(original, attr), attr
     # the same scan; switches equal to their default (reciprocity = false) may be left
     # out, so they are compared through the points they give (below)
@@ -108,3 +109,24 @@ def test_values_text_round_trips(values):
 def test_range_syntax():
     assert parse_values("-70 to 80 step 10") == {"start": -70, "stop": 80, "step": 10}
     assert parse_values("0:1.5:0.5") == {"start": 0, "stop": 1.5, "step": 0.5}
+
+
+def test_the_polarimetry_settings_make_a_polarimetric_plan():
+    form = PlanForm("brdf_in_plane")
+    form.set("sample.name", "glass")
+    assert "[polarimetry]" not in form.to_toml()  # none by default
+    form.set("polarimetry.mode", "drr")
+    form.set("polarimetry.steps", "25")
+    text = form.to_toml()
+    assert "[polarimetry]" in text and "steps = 25" in text
+    assert parse_plan(text).polarimetry == {"mode": "drr", "steps": 25, "ratio": 5.0}
+    result = form.validate(load_profile("sim-polarimetric"))
+    assert result.ok, (result.errors, result.general)
+    lit = [p for p in result.plan.points if p.light]
+    assert {dict(p.targets)["psa_retarder"] for p in lit} >= {0.0, 36.0}
+    # on a bench without the train, the error sits next to the polarimetry field
+    result = form.validate(load_profile("sim"))
+    assert "names no optical train" in " ".join(result.errors["polarimetry.mode"])
+    form.set("polarimetry.steps", "20")
+    result = form.validate(load_profile("sim-polarimetric"))
+    assert "singular" in " ".join(result.errors.get("polarimetry.steps", result.general))
