@@ -572,6 +572,20 @@ def test_alerts_arrive_when_enabled(transport, cleanup):
     assert emulator_of(axis).comm_alert
 
 
+def test_moves_end_at_the_target_when_time_jumps_inside_a_reply(cleanup):
+    """A clock that moves on every reading stands for a loaded host: the emulator's thread
+    descheduled for milliseconds (seconds of a ``speed=200`` clock) while it builds a
+    reply. Each reply still belongs to one moment, so the poll that first reads IDLE reads
+    the target, never a position of mid-move (once ``MotionError``: 3.96 deg short)."""
+    axis = ZaberAxis("simzaber://jumps?step=0.05", name="jumps", microstep_size=MS,
+                     flush_s=0.0, poll_interval=0.0)
+    cleanup.append(axis)
+    axis.home(timeout=60)
+    for target in (4.0, 1.0, 7.3, -2.5):
+        axis.move_to(target, wait=True, timeout=60)
+        assert axis.position == pytest.approx(target, abs=MS)
+
+
 def test_message_ids_cycle_through_0_to_99(cleanup):
     axis = open_axis("url", "ids", cleanup=cleanup)
     for _ in range(100):
