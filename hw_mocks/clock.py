@@ -143,6 +143,10 @@ class _Holdable(abc.ABC):
         return t
 
     @abc.abstractmethod
+    def now(self) -> float:
+        """Seconds on a monotonic time line."""
+
+    @abc.abstractmethod
     def _freeze(self) -> None:
         """Stop emulated time (called under the lock when the first hold starts)."""
 
