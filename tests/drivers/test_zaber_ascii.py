@@ -625,6 +625,28 @@ def test_query_faults_recover(faulty, kind, params):
         assert len(axis.alerts) >= 5
 
 
+@pytest.mark.parametrize("message_ids", [True, False])
+def test_a_late_idle_reply_from_before_the_move_never_ends_the_wait(cleanup, message_ids):
+    """The readiness poll's reply ("IDLE" at the start) arrives after the timeout, while
+    the move it preceded is under way: it is skipped (by its id, or discarded as stale
+    input before the next command), never read as the answer to a later poll.
+
+    In-process link: a late frame is never part of a read whose deadline passed, however
+    loaded the host; emulated time stands while the move must be seen in progress."""
+    axis = open_axis("url", "late", cleanup=cleanup, reply_timeout=0.1,
+                     message_ids=message_ids)
+    axis.home(timeout=60)
+    emulator = emulator_of(axis)
+    with emulator.clock.held():
+        emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)  # get pos: IDLE, 0
+        axis.move_to(4.0)
+        for _ in range(3):
+            status = axis.status()
+            assert status.is_moving and status.position == pytest.approx(0.0, abs=MS)
+    assert axis.wait(60) == pytest.approx(4.0, abs=MS)
+    assert [k for _, k in emulator.faults.log] == [FaultKind.DELAY]
+
+
 def test_corrupted_replies_without_checksums_are_retried_or_decoded(faulty):
     """Bit flips mostly break the framing or the id and are retried; without a checksum a
     flip that turns one digit into another is decoded as a wrong number: counted here."""
