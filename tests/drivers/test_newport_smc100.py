@@ -468,6 +468,27 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
     assert axis.position == pytest.approx(3.0, abs=1e-6)
 
 
+def test_a_late_ready_reply_from_before_the_move_never_ends_the_wait(servers):
+    """The readiness poll's TS (READY) arrives after the timeout while the move it preceded
+    runs: the retry takes it (same query, same answer), the retry's own reply is dropped
+    as stale input before the next request, and no later poll reads READY mid-move.
+
+    In-process link: a late frame is never part of a read whose deadline passed, however
+    loaded the host; emulated time stands while the move must be seen in progress."""
+    axis = open_axis("url", "late", cleanup=servers, reply_timeout=0.1)
+    servers.append(axis)
+    axis.home(timeout=60)
+    emulator = emulator_of(axis)
+    with emulator.clock.held():
+        emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)  # TS: READY
+        axis.move_to(4.0)
+        for _ in range(3):
+            status = axis.status()
+            assert status.is_moving and status.position == pytest.approx(0.0, abs=1e-6)
+    assert axis.wait(60) == pytest.approx(4.0, abs=1e-6)
+    assert [k for _, k in emulator.faults.log] == [FaultKind.DELAY]
+
+
 def test_random_faults_on_a_long_session_never_hang(faulty):
     """Random faults: each operation succeeds or raises a typed error naming its command."""
     motion_fault_session(*faulty)

@@ -500,6 +500,26 @@ def test_fault_delay_past_timeout_retries_and_discards_the_late_reply():
     assert motor.unsolicited_count > count  # the late reply was consumed, not used
 
 
+def test_a_late_settled_status_from_before_the_move_never_ends_the_wait():
+    """The readiness status (settled at 0) arrives after the timeout while the move it
+    preceded runs: it is consumed as stale, never read as a later poll's answer.
+
+    In-process link: a late frame is never part of a read whose deadline passed, however
+    loaded the host; emulated time stands while the move must be seen in progress."""
+    motor = open_url(timeout=0.1, stage="PRM1-Z8")
+    motor.home(timeout=60)
+    emu = registry.get("simapt", "ax")
+    with emu.clock.held():
+        emu.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)
+        motor.move_to(3.0)
+        for _ in range(3):
+            status = motor.status()
+            assert status.is_moving and status.position == pytest.approx(0.0, abs=1e-3)
+    assert motor.wait(60) == pytest.approx(3.0, abs=motor.position_tolerance)
+    assert [k for _, k in emu.faults.log] == [FaultKind.DELAY]
+    motor.close()
+
+
 def test_motion_commands_are_sent_once_although_the_queries_around_them_are_retried():
     motor = open_url(timeout=0.1)
     motor.home(timeout=5.0)
