@@ -527,13 +527,17 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, s
 def test_error_state_during_move_raises_controller_error_and_enable_recovers(faulty):
     axis, faults = faulty
     axis.velocity = 1.0
-    axis.move_to(5.0)
-    faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0020")
-    with pytest.raises(ControllerError) as info:
-        axis.wait(60)
-    assert "following error" in str(info.value) and info.value.code == 0x0020
-    assert info.value.device == "beh"
-    assert not axis.is_enabled
+    # Emulated time stands while the fault is injected, so the move is still on when the
+    # first poll of the wait meets it, whatever the host's load (on the running clock a
+    # loaded host could reach that poll after the 25 ms the move takes at SPEED: READY).
+    with emulator_of(axis).clock.held():
+        axis.move_to(5.0)
+        faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0020")
+        with pytest.raises(ControllerError) as info:
+            axis.wait(60)
+        assert "following error" in str(info.value) and info.value.code == 0x0020
+        assert info.value.device == "beh"
+        assert not axis.is_enabled
     axis.enable()
     axis.velocity = 20.0
     axis.move_to(1.0, wait=True, timeout=10)

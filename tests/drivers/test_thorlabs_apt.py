@@ -676,10 +676,13 @@ def test_fault_error_state_is_a_controller_error_and_reenable_recovers():
     motor.home(timeout=5.0)
     emu = registry.get("simapt", "ax")
     emu.stage.velocity = 0.5  # a slow move, so the fault lands mid-way
-    motor.move_to(10.0)
-    emu.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0x21")
-    with pytest.raises(ControllerError) as info:
-        motor.wait(timeout=60)
+    # Emulated time stands while the fault is injected: the move is still on when the wait
+    # meets it, however long a loaded host takes to get from the move to the first poll.
+    with emu.clock.held():
+        motor.move_to(10.0)
+        emu.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0x21")
+        with pytest.raises(ControllerError) as info:
+            motor.wait(timeout=60)
     err = info.value
     # The HW_RICHRESPONSE arrives during the status poll of the wait.
     assert err.device == "ax" and err.command == "MOT_REQ_DCSTATUSUPDATE"
