@@ -40,6 +40,7 @@ from tests.drivers.fault_checks import corrupted_reads
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    QUERY_RETRIES,
     motion_fault_session,
     query_survives,
     unplug_during_move,
@@ -430,6 +431,7 @@ def faulty(homed):
 def test_query_faults_recover_by_retry(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
+    axis.retries = QUERY_RETRIES
     query_survives(faults, kind, params, lambda: round(axis.position, 6), 4.0)
 
 

@@ -34,7 +34,7 @@ from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.fault_checks import corrupted_reads, random_fault_session
 from tests.drivers.filter_wheel_contract import FilterWheelContract
-from tests.drivers.serial_faults import QUERY_FAULTS, query_survives
+from tests.drivers.serial_faults import QUERY_FAULTS, QUERY_RETRIES, query_survives
 from tests.waiting import wait_for
 
 SPEED = 50.0
@@ -292,6 +292,7 @@ def test_error_state_fault_jams_the_next_move(wheel):
 @pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover_by_retry(wheel, kind, params):
     wheel._link.reply_timeout = 0.1
+    wheel._link.retries = QUERY_RETRIES
     query_survives(emulator_of(wheel).faults, kind, params, lambda: wheel.position, 1)
 
 

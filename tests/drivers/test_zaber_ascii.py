@@ -46,6 +46,7 @@ from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    QUERY_RETRIES,
     motion_fault_session,
     query_survives,
     unplug_during_move,
@@ -620,6 +621,7 @@ def faulty(homed):
 def test_query_faults_recover(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
+    axis.retries = QUERY_RETRIES
     query_survives(faults, kind, params, lambda: axis.position_usteps, round(4.0 / MS))
     if kind is FaultKind.UNSOLICITED:
         assert len(axis.alerts) >= 5
