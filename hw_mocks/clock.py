@@ -21,6 +21,12 @@ except for explicit :meth:`~_Holdable.advance` calls, and on release it runs on 
 it stood, without a jump. A test that must observe a state in the middle of a motion ("the
 axis is still moving", "the stop came before the target") holds the clock around the
 observation instead of hoping that the machine is fast enough to look in time.
+
+An emulator reads the clock once per command (:meth:`~_Holdable.instant`): a reply built
+from several readings (a position, then a BUSY flag) could otherwise mix two moments. On
+a loaded machine the emulator's thread can be descheduled between the readings, and on a
+fast clock (``speed=200``) one millisecond of wall time is long enough for a move to end
+between them, so a reply would say IDLE with the position of mid-move.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from collections.abc import Iterator
 from typing import Protocol
 
 __all__ = ["Clock", "HoldableClock", "HostPacedClock", "ManualClock", "ScaledClock",
-           "SteppingClock", "wire_time_s"]
+           "SteppingClock", "instant", "wire_time_s"]
 
 
 class Clock(Protocol):
@@ -62,6 +68,43 @@ class _Holdable(abc.ABC):
     _lock: threading.Lock
     _t: float
     _holds: int = 0
+
+    @contextlib.contextmanager
+    def instant(self) -> Iterator[float]:
+        """Read the clock once for the ``with`` block, in the calling thread.
+
+        Every :meth:`now` from this thread inside the block returns that one reading (a
+        :class:`SteppingClock` steps once), so what an emulator computes for one command
+        belongs to one moment however long the computation takes. :meth:`advance` (and
+        :meth:`HostPacedClock.run_to`) from the same thread move the reading along; other
+        threads see the clock run as usual. Blocks nest (the outermost reading holds).
+        """
+        pins = self._pins()
+        if getattr(pins, "t", None) is not None:
+            yield pins.t
+            return
+        pins.t = self.now()
+        try:
+            yield pins.t
+        finally:
+            pins.t = None
+
+    def _pins(self) -> threading.local:
+        # Created on first use (the clocks' constructors do not call a common one);
+        # dict.setdefault keeps two threads from creating two.
+        pins: threading.local = self.__dict__.setdefault("_pin", threading.local())
+        return pins
+
+    def _pinned(self) -> float | None:
+        """The reading this thread's :meth:`instant` block holds, else ``None``."""
+        pins = self.__dict__.get("_pin")
+        return None if pins is None else getattr(pins, "t", None)
+
+    def _repin(self, t: float) -> None:
+        """This thread moved the clock to ``t``: an :meth:`instant` block follows it."""
+        pins = self.__dict__.get("_pin")
+        if pins is not None and getattr(pins, "t", None) is not None:
+            pins.t = t
 
     @contextlib.contextmanager
     def held(self) -> Iterator[_Holdable]:
@@ -95,7 +138,13 @@ class _Holdable(abc.ABC):
                 self._thaw()
             else:
                 self._t += dt
-            return self._t
+            t = self._t
+        self._repin(t)
+        return t
+
+    @abc.abstractmethod
+    def now(self) -> float:
+        """Seconds on a monotonic time line."""
 
     @abc.abstractmethod
     def _freeze(self) -> None:
@@ -118,6 +167,9 @@ class ScaledClock(_Holdable):
         self._t = 0.0
 
     def now(self) -> float:
+        pinned = self._pinned()
+        if pinned is not None:
+            return pinned
         with self._lock:
             if self._holds:
                 return self._t
@@ -142,6 +194,9 @@ class ManualClock(_Holdable):
         self._lock = threading.Lock()
 
     def now(self) -> float:
+        pinned = self._pinned()
+        if pinned is not None:
+            return pinned
         with self._lock:
             return self._t
 
@@ -156,6 +211,7 @@ class ManualClock(_Holdable):
             if t < self._t:
                 raise ValueError("time cannot run backwards")
             self._t = float(t)
+        self._repin(float(t))
 
 
 class SteppingClock(_Holdable):
@@ -170,6 +226,9 @@ class SteppingClock(_Holdable):
         self._lock = threading.Lock()
 
     def now(self) -> float:
+        pinned = self._pinned()
+        if pinned is not None:
+            return pinned
         with self._lock:
             if not self._holds:
                 self._t += self.step
@@ -180,6 +239,12 @@ class SteppingClock(_Holdable):
 
     def _thaw(self) -> None:
         pass
+
+
+def instant(clock: Clock) -> contextlib.AbstractContextManager[object]:
+    """``clock.instant()`` where the clock has one (every clock here), else a no-op."""
+    method = getattr(clock, "instant", None)
+    return method() if method is not None else contextlib.nullcontext()
 
 
 def wire_time_s(n_bytes: int, baudrate: float) -> float:
@@ -215,4 +280,6 @@ class HostPacedClock(ManualClock):
         """Move time forward to ``t`` (nothing if it is there already); return the reading."""
         with self._lock:
             self._t = max(self._t, float(t))
-            return self._t
+            t = self._t
+        self._repin(t)
+        return t

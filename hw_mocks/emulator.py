@@ -8,16 +8,20 @@ pseudo-terminal) and what faults befall them is the job of :mod:`hw_mocks.link`.
 
 Emulators keep controller state behind one re-entrant lock, because the link, the pty
 server and the virtual bench (which reads stage positions) may call from different
-threads.
+threads. Each :meth:`FirmwareEmulator.receive` and each look for unprompted frames (the
+links call :meth:`FirmwareEmulator.poll` inside :meth:`FirmwareEmulator.instant`) runs at
+one instant of the emulator's clock, so a reply never mixes a position of one moment with
+a state of a later one (:func:`hw_mocks.clock.instant`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
-from hw_mocks.clock import Clock, HostPacedClock, ScaledClock, wire_time_s
+from hw_mocks.clock import Clock, HostPacedClock, ScaledClock, instant, wire_time_s
 from hw_mocks.faults import FaultInjector
 
 __all__ = ["FirmwareEmulator", "clock_from_options"]
@@ -61,9 +65,16 @@ class FirmwareEmulator(ABC):
         #: Every byte received, for tests that need to see what the host sent.
         self.received_log = bytearray()
 
+    def instant(self) -> contextlib.AbstractContextManager[object]:
+        """Run the ``with`` block at one reading of the emulator's clock (this thread)."""
+        return instant(self.clock)
+
     def receive(self, data: bytes) -> list[bytes]:
-        """Accept bytes from the host; return the frames to send back, in order."""
-        with self.lock:
+        """Accept bytes from the host; return the frames to send back, in order.
+
+        The commands are executed at one instant of the emulator's clock.
+        """
+        with self.lock, self.instant():
             self.received_log += data
             self._rx += data
             # On a host-paced clock (hw_mocks.clock.HostPacedClock) the bytes take their

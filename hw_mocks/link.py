@@ -149,7 +149,8 @@ class EmulatedSerial(SerialBase):
         return len(data)
 
     def _pump(self) -> None:
-        frames = self.emulator.poll()
+        with self.emulator.instant():
+            frames = self.emulator.poll()
         if frames and self._baud_ok():
             self._queue.push(frames, self.emulator)
 

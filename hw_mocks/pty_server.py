@@ -54,7 +54,9 @@ class PtyServer:
                     self._queue.push(self.emulator.receive(data), self.emulator)
             if self.emulator.faults.disconnected:
                 continue  # a dead device neither reads nor answers
-            self._queue.push(self.emulator.poll(), self.emulator)
+            with self.emulator.instant():
+                frames = self.emulator.poll()
+            self._queue.push(frames, self.emulator)
             out = self._queue.take(1 << 16)
             if out:
                 # Nobody has the port open: the bytes are lost, as on a wire.

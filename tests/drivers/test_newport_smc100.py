@@ -40,6 +40,7 @@ from tests.drivers.fault_checks import corrupted_reads
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    QUERY_RETRIES,
     motion_fault_session,
     query_survives,
     unplug_during_move,
@@ -430,6 +431,7 @@ def faulty(homed):
 def test_query_faults_recover_by_retry(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
+    axis.retries = QUERY_RETRIES
     query_survives(faults, kind, params, lambda: round(axis.position, 6), 4.0)
 
 
@@ -466,6 +468,27 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
     time.sleep(0.35)
     axis.wait(60)
     assert axis.position == pytest.approx(3.0, abs=1e-6)
+
+
+def test_a_late_ready_reply_from_before_the_move_never_ends_the_wait(servers):
+    """The readiness poll's TS (READY) arrives after the timeout while the move it preceded
+    runs: the retry takes it (same query, same answer), the retry's own reply is dropped
+    as stale input before the next request, and no later poll reads READY mid-move.
+
+    In-process link: a late frame is never part of a read whose deadline passed, however
+    loaded the host; emulated time stands while the move must be seen in progress."""
+    axis = open_axis("url", "late", cleanup=servers, reply_timeout=0.1)
+    servers.append(axis)
+    axis.home(timeout=60)
+    emulator = emulator_of(axis)
+    with emulator.clock.held():
+        emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)  # TS: READY
+        axis.move_to(4.0)
+        for _ in range(3):
+            status = axis.status()
+            assert status.is_moving and status.position == pytest.approx(0.0, abs=1e-6)
+    assert axis.wait(60) == pytest.approx(4.0, abs=1e-6)
+    assert [k for _, k in emulator.faults.log] == [FaultKind.DELAY]
 
 
 def test_random_faults_on_a_long_session_never_hang(faulty):
@@ -506,13 +529,17 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, s
 def test_error_state_during_move_raises_controller_error_and_enable_recovers(faulty):
     axis, faults = faulty
     axis.velocity = 1.0
-    axis.move_to(5.0)
-    faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0020")
-    with pytest.raises(ControllerError) as info:
-        axis.wait(60)
-    assert "following error" in str(info.value) and info.value.code == 0x0020
-    assert info.value.device == "beh"
-    assert not axis.is_enabled
+    # Emulated time stands while the fault is injected, so the move is still on when the
+    # first poll of the wait meets it, whatever the host's load (on the running clock a
+    # loaded host could reach that poll after the 25 ms the move takes at SPEED: READY).
+    with emulator_of(axis).clock.held():
+        axis.move_to(5.0)
+        faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0020")
+        with pytest.raises(ControllerError) as info:
+            axis.wait(60)
+        assert "following error" in str(info.value) and info.value.code == 0x0020
+        assert info.value.device == "beh"
+        assert not axis.is_enabled
     axis.enable()
     axis.velocity = 20.0
     axis.move_to(1.0, wait=True, timeout=10)

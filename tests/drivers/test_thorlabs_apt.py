@@ -501,6 +501,26 @@ def test_fault_delay_past_timeout_retries_and_discards_the_late_reply():
     assert motor.unsolicited_count > count  # the late reply was consumed, not used
 
 
+def test_a_late_settled_status_from_before_the_move_never_ends_the_wait():
+    """The readiness status (settled at 0) arrives after the timeout while the move it
+    preceded runs: it is consumed as stale, never read as a later poll's answer.
+
+    In-process link: a late frame is never part of a read whose deadline passed, however
+    loaded the host; emulated time stands while the move must be seen in progress."""
+    motor = open_url(timeout=0.1, stage="PRM1-Z8")
+    motor.home(timeout=60)
+    emu = registry.get("simapt", "ax")
+    with emu.clock.held():
+        emu.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)
+        motor.move_to(3.0)
+        for _ in range(3):
+            status = motor.status()
+            assert status.is_moving and status.position == pytest.approx(0.0, abs=1e-3)
+    assert motor.wait(60) == pytest.approx(3.0, abs=motor.position_tolerance)
+    assert [k for _, k in emu.faults.log] == [FaultKind.DELAY]
+    motor.close()
+
+
 def test_motion_commands_are_sent_once_although_the_queries_around_them_are_retried():
     motor = open_url(timeout=0.1)
     motor.home(timeout=5.0)
@@ -640,13 +660,15 @@ def test_unplugged_mid_move_is_typed_and_bounded_then_the_move_is_found_finished
 
 def test_lost_replies_on_both_transports_are_retried(apt_on):
     motor, emu = apt_on("lost", timeout=0.1)
+    count = motor.unsolicited_count
     for kind, params in [(FaultKind.DROP, {}), (FaultKind.DELAY, {"delay_s": 0.15})]:
         emu.faults.schedule(kind, nth=1, **params)
         before = emu.received_log.count(REQ_VEL)
         assert motor.velocity == pytest.approx(10.0, rel=1e-5)
         assert emu.received_log.count(REQ_VEL) - before == 2  # one lost attempt, one retry
-    time.sleep(0.1)  # the late reply arrives and is consumed as stale
-    count = motor.unsolicited_count
+    # The late reply is consumed as stale exactly once: before the retry is sent (a host
+    # that reaches the retry after the reply arrived), or before or while the next query
+    # waits (the wire keeps order, so it comes ahead of that query's reply).
     assert motor.acceleration == pytest.approx(10.0, rel=0.01)
     assert motor.unsolicited_count == count + 1
     assert [k for _, k in emu.faults.log] == [FaultKind.DROP, FaultKind.DELAY]
@@ -657,10 +679,13 @@ def test_fault_error_state_is_a_controller_error_and_reenable_recovers():
     motor.home(timeout=5.0)
     emu = registry.get("simapt", "ax")
     emu.stage.velocity = 0.5  # a slow move, so the fault lands mid-way
-    motor.move_to(10.0)
-    emu.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0x21")
-    with pytest.raises(ControllerError) as info:
-        motor.wait(timeout=60)
+    # Emulated time stands while the fault is injected: the move is still on when the wait
+    # meets it, however long a loaded host takes to get from the move to the first poll.
+    with emu.clock.held():
+        motor.move_to(10.0)
+        emu.faults.schedule(FaultKind.ERROR_STATE, nth=1, code="0x21")
+        with pytest.raises(ControllerError) as info:
+            motor.wait(timeout=60)
     err = info.value
     # The HW_RICHRESPONSE arrives during the status poll of the wait.
     assert err.device == "ax" and err.command == "MOT_REQ_DCSTATUSUPDATE"

@@ -34,7 +34,8 @@ from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.fault_checks import corrupted_reads, random_fault_session
 from tests.drivers.filter_wheel_contract import FilterWheelContract
-from tests.drivers.serial_faults import QUERY_FAULTS, query_survives
+from tests.drivers.serial_faults import QUERY_FAULTS, QUERY_RETRIES, query_survives
+from tests.waiting import wait_for
 
 SPEED = 50.0
 IDN = b"THORLABS FW102C/FW212C Filter Wheel version 1.07"
@@ -263,7 +264,8 @@ def test_cleared_jam_completes_late_and_the_late_prompt_is_skipped(wheel):
     with pytest.raises(WheelMoveTimeout):
         wheel.move_to(3, timeout=0.3)
     emulator.clear_jam()  # the obstruction is gone: the move completes, its prompt comes late
-    time.sleep(0.2)
+    # Waited for on the emulator, not slept: a loaded host may take any time to get there.
+    wait_for(lambda: emulator.slot_at_beam() == 3, what="the freed wheel to reach slot 3")
     assert wheel.position == 3
     assert wheel.move_to(5) == 5
 
@@ -290,6 +292,7 @@ def test_error_state_fault_jams_the_next_move(wheel):
 @pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover_by_retry(wheel, kind, params):
     wheel._link.reply_timeout = 0.1
+    wheel._link.retries = QUERY_RETRIES
     query_survives(emulator_of(wheel).faults, kind, params, lambda: wheel.position, 1)
 
 

@@ -31,7 +31,7 @@ from hw_mocks.firmware.sc10 import Sc10Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.fault_checks import unplug_and_replug
-from tests.drivers.serial_faults import QUERY_FAULTS, query_survives
+from tests.drivers.serial_faults import QUERY_FAULTS, QUERY_RETRIES, query_survives
 from tests.drivers.shutter_contract import ShutterContract
 
 RESYNC = (b"\r", b"\rCommand error CMD_NOT_DEFINED\n\r> ")
@@ -341,6 +341,7 @@ def test_close_on_exit_closes_the_shutter_and_can_be_turned_off(transport, serve
 @pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_answer_faults_on_queries_recover_by_retry(shutter, kind, params):
     shutter._link.reply_timeout = 0.1
+    shutter._link.retries = QUERY_RETRIES
     query_survives(emulator_of(shutter).faults, kind, params, lambda: shutter.shutter_state,
                    ShutterState.CLOSED)
 

@@ -46,6 +46,7 @@ from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    QUERY_RETRIES,
     motion_fault_session,
     query_survives,
     unplug_during_move,
@@ -572,6 +573,20 @@ def test_alerts_arrive_when_enabled(transport, cleanup):
     assert emulator_of(axis).comm_alert
 
 
+def test_moves_end_at_the_target_when_time_jumps_inside_a_reply(cleanup):
+    """A clock that moves on every reading stands for a loaded host: the emulator's thread
+    descheduled for milliseconds (seconds of a ``speed=200`` clock) while it builds a
+    reply. Each reply still belongs to one moment, so the poll that first reads IDLE reads
+    the target, never a position of mid-move (once ``MotionError``: 3.96 deg short)."""
+    axis = ZaberAxis("simzaber://jumps?step=0.05", name="jumps", microstep_size=MS,
+                     flush_s=0.0, poll_interval=0.0)
+    cleanup.append(axis)
+    axis.home(timeout=60)
+    for target in (4.0, 1.0, 7.3, -2.5):
+        axis.move_to(target, wait=True, timeout=60)
+        assert axis.position == pytest.approx(target, abs=MS)
+
+
 def test_message_ids_cycle_through_0_to_99(cleanup):
     axis = open_axis("url", "ids", cleanup=cleanup)
     for _ in range(100):
@@ -606,9 +621,32 @@ def faulty(homed):
 def test_query_faults_recover(faulty, kind, params):
     axis, faults = faulty
     axis.move_to(4.0, wait=True, timeout=10)
+    axis.retries = QUERY_RETRIES
     query_survives(faults, kind, params, lambda: axis.position_usteps, round(4.0 / MS))
     if kind is FaultKind.UNSOLICITED:
         assert len(axis.alerts) >= 5
+
+
+@pytest.mark.parametrize("message_ids", [True, False])
+def test_a_late_idle_reply_from_before_the_move_never_ends_the_wait(cleanup, message_ids):
+    """The readiness poll's reply ("IDLE" at the start) arrives after the timeout, while
+    the move it preceded is under way: it is skipped (by its id, or discarded as stale
+    input before the next command), never read as the answer to a later poll.
+
+    In-process link: a late frame is never part of a read whose deadline passed, however
+    loaded the host; emulated time stands while the move must be seen in progress."""
+    axis = open_axis("url", "late", cleanup=cleanup, reply_timeout=0.1,
+                     message_ids=message_ids)
+    axis.home(timeout=60)
+    emulator = emulator_of(axis)
+    with emulator.clock.held():
+        emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)  # get pos: IDLE, 0
+        axis.move_to(4.0)
+        for _ in range(3):
+            status = axis.status()
+            assert status.is_moving and status.position == pytest.approx(0.0, abs=MS)
+    assert axis.wait(60) == pytest.approx(4.0, abs=MS)
+    assert [k for _, k in emulator.faults.log] == [FaultKind.DELAY]
 
 
 def test_corrupted_replies_without_checksums_are_retried_or_decoded(faulty):

@@ -310,3 +310,28 @@ def test_arbitrary_host_bytes_never_crash_the_emulator(chunks):
     # and it still answers a proper request afterwards
     emu.on_connect()  # a reconnect drops any half-received request
     assert query(emu, short(0x0005, 0, 0), 0x0006)
+
+
+@pytest.mark.parametrize("step", [0.01, 0.03, 0.05])
+@pytest.mark.parametrize("target", [10000, 40000, 150000])
+def test_a_status_frame_belongs_to_one_moment(step, target):
+    """Position and status bits of one DC status frame come from one clock reading.
+
+    A stepping clock moves on every reading, as a running clock does while the emulator's
+    thread is descheduled on a loaded machine; read twice, a move could end between the
+    position and the bits, and the frame would say "settled" short of the target.
+    """
+    from hw_mocks.clock import SteppingClock
+
+    emu = AptEmulator("e", model="KDC101", clock=SteppingClock(step), stop_short_counts=0)
+    emu.receive(short(0x0210, 1, 1))
+    emu.stage.teleport(0.0)
+    emu.receive(long(0x0453, struct.pack("<Hi", 1, target)))
+    polls = 0
+    while True:
+        _chan, pos, _vel, _res, bits = struct.unpack(
+            "<HlhHL", query(emu, short(0x0490), 0x0491))
+        if bits & 0x2000:  # settled
+            break
+        polls += 1
+    assert pos == target and polls >= 1

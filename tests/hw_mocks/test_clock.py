@@ -89,3 +89,38 @@ def test_a_stage_move_is_frozen_mid_way_while_the_clock_is_held():
         assert stage.is_moving() and 0.0 < stage.position() < 10.0
     clock.advance(duration)
     assert not stage.is_moving() and stage.position() == pytest.approx(10.0)
+
+
+def test_an_instant_gives_one_reading_to_its_thread_only(clock):
+    """An emulator's command reads the clock once (:meth:`instant`); other threads, and the
+    same thread after the block, see the clock as usual."""
+    seen: list[float] = []
+    with clock.instant() as t:
+        assert clock.now() == t and clock.now() == t  # not even a stepping clock steps
+        time.sleep(0.01)  # 10 emulated seconds of a running ScaledClock(1000)
+        assert clock.now() == t
+        other = threading.Thread(target=lambda: seen.append(clock.now()))
+        other.start()
+        other.join(10.0)
+        with clock.instant() as inner:  # nested: the outer reading holds
+            assert inner == t
+        moved = clock.advance(2.0)  # by hand: the block follows the clock's new reading
+        assert moved >= t + 2.0 and clock.now() == moved
+    if isinstance(clock, ManualClock):
+        assert seen == [t] and clock.now() == t + 2.0
+    else:
+        assert seen[0] > t  # the other thread saw the clock run
+        assert clock.now() > moved
+
+
+def test_instant_of_a_clock_without_one_is_a_no_op():
+    from hw_mocks.clock import instant
+
+    class Bare:
+        def now(self) -> float:
+            return 1.0
+
+    with instant(Bare()):
+        pass
+    with instant(ManualClock(4.0)) as t:
+        assert t == 4.0

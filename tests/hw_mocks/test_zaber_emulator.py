@@ -372,3 +372,26 @@ def test_arbitrary_commands_never_crash_and_replies_stay_well_formed(steps):
     assert line is not None and line.startswith("@01 1 OK ")
     low, high = emu.axes[1].model.travel
     assert low - 1e-9 <= emu.stage.physical_position() <= high + 1e-9
+
+
+@pytest.mark.parametrize("step", [0.01, 0.03, 0.05])
+@pytest.mark.parametrize("target", [4000, 17067, 30000])
+def test_a_reply_belongs_to_one_moment(step, target):
+    """Position and BUSY/IDLE of one reply come from one reading of the clock.
+
+    A stepping clock moves on every reading, as a running clock does while the emulator's
+    thread is descheduled on a loaded machine. Read twice (the position, then the state), a
+    move could end between them: IDLE with the position of mid-move, which a driver takes
+    as a stop short of the target.
+    """
+    from hw_mocks.clock import SteppingClock
+
+    emu = ZaberEmulator("t", clock=SteppingClock(step))
+    ask(emu, "/1 1 home")
+    while "BUSY" in ask(emu, "/1 1 get pos"):
+        pass
+    assert ask(emu, f"/1 1 move abs {target}") == "@01 1 OK BUSY -- 0"
+    polls = 0
+    while (reply := ask(emu, "/1 1 get pos")).startswith("@01 1 OK BUSY"):
+        polls += 1
+    assert reply == f"@01 1 OK IDLE -- {target}" and polls >= 1
