@@ -159,6 +159,10 @@ function handle(msg) {
              d.n_total + " points" + (d.n_done ? ", " + d.n_done + " already done" : "") + ")");
       loadRuns();
       break;
+    case "backfill":   // a resumed run's points from before its resumption
+      if (d.part === 1) addLog("info", "the run's " + d.n_points + " points stored before " +
+                               "it was resumed");
+      // falls through: drawn as points are
     case "points":
       if (Backfill.holds(d.items)) break;
       if (S.run && !S.run.plan_kind) Plot.guess(d.items);
