@@ -408,3 +408,30 @@ def test_the_device_table_has_the_cameras_settings_and_during_a_run_its_frames_e
         }""")
         assert "exposure 1234.5 µs" in row and "run controls it" in row
         assert page.errors == []
+
+
+def test_an_operator_sets_a_device_from_the_device_table(bench_file, start_server,
+                                                          tmp_path):
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)  # loopback without keys: the local admin
+        page.wait_for_selector("#device-filter_wheel")
+        assert "slot 1" in page.inner_text("#device-filter_wheel")
+        assert " W" in page.inner_text("#device-power_meter")  # the meter has its row
+        page.select_option("#device-role", "filter_wheel")
+        page.select_option("#device-field", "position")
+        page.fill("#device-value", "3")
+        page.wait_for_function("() => !document.getElementById('device-apply').disabled")
+        page.click("#device-apply")
+        page.wait_for_function("() => document.getElementById('device-filter_wheel')"
+                               ".innerText.includes('slot 3')")
+        page.wait_for_function("() => [...document.querySelectorAll('#log li')]"
+                               ".some(li => li.innerText.includes('position=3 done'))")
+        # refused before anything is sent: the field is named
+        page.fill("#device-value", "9")
+        page.wait_for_function("() => !document.getElementById('device-apply').disabled")
+        page.click("#device-apply")
+        page.wait_for_function("() => document.getElementById('command-result')"
+                               ".innerText.includes('filter_wheel.position')")
+        assert "slot 3" in page.inner_text("#device-filter_wheel")
+        assert page.errors == []
