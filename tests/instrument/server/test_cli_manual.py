@@ -73,3 +73,30 @@ def test_manual_move_targets_are_role_equals_value(capsys):
         main(["manual", "move", "sample_theta"])
     assert exc.value.code == 2
     assert "give ROLE=VALUE" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(600)
+def test_manual_set_changes_a_device_and_waits_for_its_outcome(bench_file, start_server,
+                                                               monkeypatch, capsys):
+    server = start_server(bench_file())
+    monkeypatch.setenv("SCATTERLAB_SERVER", server.url)
+    monkeypatch.delenv("SCATTERLAB_KEY", raising=False)
+    assert main(["manual", "set", "filter_wheel", "position=4", "speed=normal"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("filter_wheel: applying position=4, speed=normal (request ")
+    assert out[1] == "filter_wheel: position=4, speed=normal done"
+    with BenchClient(server.url) as c:
+        for msg in c.events():  # the sampler reads the wheel afresh after the change
+            states = msg.data.get("states") or {} if msg.type == "devices" else {}
+            if states.get("filter_wheel", {}).get("values", {}).get("position") == 4:
+                assert states["filter_wheel"]["values"]["speed"] == "normal"
+                break
+    # refused before anything is sent: one line naming the field, exit 2
+    assert main(["manual", "set", "power_meter", "wavelength_nm=5"]) == 2
+    line = refused_line(capsys)
+    assert line.startswith("error: power_meter.wavelength_nm: 5 nm is outside")
+    assert "(HTTP 422)" in line
+    # not FIELD=VALUE: the parser says how
+    with pytest.raises(SystemExit):
+        main(["manual", "set", "filter_wheel", "position"])
+    assert "give FIELD=VALUE" in capsys.readouterr().err
