@@ -343,6 +343,33 @@ def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
     assert got["idx"] == list(range(12))
 
 
+def test_a_resumed_runs_backfill_is_plotted_with_the_points_that_follow(bench_file,
+                                                                        start_server,
+                                                                        tmp_path):
+    """The server's order of events for a resumed run, through the page's own handlers:
+    run_started (5 of 12 done), the backfill of those 5, then new points: the plot has the
+    run whole, each point once, and the log says what came back."""
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)
+        got = page.evaluate("""() => {
+            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
+                                signal: 1 + i, power_w: null});
+            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));
+            handle({type: 'run_started', data: {run_id: 'r', path: '/runs/r.h5',
+                    plan_kind: 'brdf_in_plane', n_total: 12, n_done: 5, estimated_s: 1,
+                    item_id: 1}});
+            handle({type: 'backfill', data: {run_id: 'r', path: '/runs/r.h5', n_points: 5,
+                    part: 1, parts: 1, items: span(0, 5)}});
+            handle({type: 'points', data: {items: span(5, 12)}});
+            return {idx: Plot.kept.map((k) => k.i).sort((a, b) => a - b),
+                    log: S.log.map((e) => e.text)};
+        }""")
+        assert page.errors == []
+    assert got["idx"] == list(range(12))
+    assert any("5 points stored before it was resumed" in t for t in got["log"])
+
+
 def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, start_server,
                                                                   tmp_path):
     """As the GUI's: x = θr cos φr, y = θr sin φr, the colour mapping log10 of the signal
