@@ -720,11 +720,10 @@ async function setDevice() {
   const role = $("device-role").value, field = $("device-field").value;
   if (!role || !field) return;
   const value = settingValue($("device-value").value);
-  const r = await command("set " + role + " " + field, "/bench/devices/" +
-                          encodeURIComponent(role) + "/settings", {changes: {[field]: value}});
-  if (r.ok && !S.settings[role]) {   // its applying event may not have come yet
-    S.settings[role] = {request_id: r.data.request_id, who: S.me ? S.me.name : "you"};
-  }
+  // "applying…" comes with the server's applying event (published before this answer;
+  // its end may even arrive first on a fast device), never from the answer itself
+  await command("set " + role + " " + field, "/bench/devices/" + encodeURIComponent(role) +
+                "/settings", {changes: {[field]: value}});
 }
 
 // The camera's settings come with the idle bench's devices messages; during a run the
