@@ -14,6 +14,7 @@ from fastapi.testclient import TestClient
 from instrument.bench.profile import parse_profile
 from instrument.protocol import API_PREFIX as P
 from instrument.protocol import MESSAGE_TYPES
+from instrument.run import events as ev
 from instrument.server.app import create_app
 from instrument.server.audit import AuditLog
 from instrument.server.device_settings import SettingRefused, check_changes
@@ -28,13 +29,25 @@ HOLD_S = 120.0  # bound on a hang only
 class HeldSettings(BenchService):
     """Holds the settings worker inside its next request, where the device command would
     run (a wheel move of seconds): :attr:`inside` is set there, and it goes on once
-    :attr:`go_on` is set."""
+    :attr:`go_on` is set. With :attr:`hold_run`, holds a run on the engine's thread just
+    after its start (announced), until :attr:`run_go` is set: a run that owns the bench
+    however fast the machine is."""
 
     def __init__(self, *args, **kw) -> None:
         self.hold = False
         self.inside = threading.Event()
         self.go_on = threading.Event()
+        self.hold_run = False
+        self.run_held = threading.Event()
+        self.run_go = threading.Event()
         super().__init__(*args, **kw)
+
+    def _on_engine_event(self, event) -> None:
+        super()._on_engine_event(event)
+        if self.hold_run and isinstance(event, ev.RunStarted):
+            self.run_held.set()
+            if not self.run_go.wait(HOLD_S):
+                raise AssertionError("the test never released the run")
 
     def _apply_one(self, req, device) -> None:
         if self.hold:
@@ -92,6 +105,7 @@ def server(tmp_path):
                  HOLD_S, "the first device states")
         yield s
         service.go_on.set()
+        service.run_go.set()
 
 
 def test_a_wheel_move_is_answered_at_once_and_its_end_arrives_as_an_event(server):
@@ -163,15 +177,22 @@ def test_an_observer_may_not_change_settings(server):
 
 def test_refused_while_the_queue_runs_or_a_run_owns_the_bench(server):
     svc = server.service
+    svc.hold_run = True
     assert server.post("/queue", plan=plan_text("long", [-60.0, -40.0, 10.0, 40.0, 60.0])
                        ).status_code == 200
     assert server.post("/queue/start").status_code == 200
-    wait_for(lambda: any(m.type == "run_started" for m in list(server.messages)), HOLD_S,
-             "the run to start")
+    assert svc.run_held.wait(HOLD_S), "the run never started"
     r = server.settings("filter_wheel", position=2)
     assert r.status_code == 409, r.text
-    assert "run" in r.json()["detail"]  # a run owns the bench, or the queue's next does
+    assert r.json()["detail"].startswith("a run owns the bench")
+    assert server.post("/run/pause").status_code == 200  # paused: it still owns the bench
+    svc.run_go.set()
+    wait_for(lambda: any(m.type == "paused" for m in list(server.messages)), HOLD_S,
+             "the run to pause")
+    r = server.settings("filter_wheel", position=2)
+    assert r.status_code == 409 and r.json()["detail"].startswith("a run owns the bench")
     assert server.events() == []
+    assert server.post("/run/resume").status_code == 200
     wait_for(lambda: any(m.type == "item_finished" for m in list(server.messages)), HOLD_S,
              "the run to end")
     wait_for(lambda: not svc.queue_running, HOLD_S, "the queue to stop")
