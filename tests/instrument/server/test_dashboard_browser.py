@@ -313,6 +313,13 @@ def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_ser
     assert kept["seen"] == kept["seenMax"] == 10_000  # the indices remembered, bounded too
 
 
+#: In-plane points ``span(a, b)`` (indices a … b-1) for the page's own handlers.
+SPAN_JS = """
+            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
+                                signal: 1 + i, power_w: null});
+            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));"""
+
+
 def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
                                                                       start_server, tmp_path):
     """The prefill's order of events, driven through the page's own handlers: stream points
@@ -321,10 +328,7 @@ def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
     server = start_server(bench_file())
     with chromium(tmp_path / "profile") as page:
         sign_in(page, server.url, None)
-        got = page.evaluate("""() => {
-            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
-                                signal: 1 + i, power_w: null});
-            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));
+        got = page.evaluate("""() => {""" + SPAN_JS + """
             S.run = {state: 'running', n_total: 12, n_done: 8, plan_kind: null};
             Plot.clear();
             Backfill.early = [];                                  // connected: reading pages
@@ -352,10 +356,7 @@ def test_a_resumed_runs_backfill_is_plotted_with_the_points_that_follow(bench_fi
     server = start_server(bench_file())
     with chromium(tmp_path / "profile") as page:
         sign_in(page, server.url, None)
-        got = page.evaluate("""() => {
-            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
-                                signal: 1 + i, power_w: null});
-            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));
+        got = page.evaluate("""() => {""" + SPAN_JS + """
             handle({type: 'run_started', data: {run_id: 'r', path: '/runs/r.h5',
                     plan_kind: 'brdf_in_plane', n_total: 12, n_done: 5, estimated_s: 1,
                     item_id: 1}});
