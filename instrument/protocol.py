@@ -78,6 +78,12 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
        "messages a second); each item: index, label, status, positions, angles, "
        "exposure_us, power_w, signal, retries. A client that missed some reads them from "
        "the run file", items="array"),
+    _t("backfill", True, "a resumed run's points stored before it was resumed (after a "
+       "restart of the server, a pause now or an abort), sent right after its run_started "
+       "in parts of at most 5000 items (part of parts; n_points in all); items as in "
+       "points. A client draws them as points: the run is then shown whole",
+       run_id="string", path="string", n_points="integer", part="integer",
+       parts="integer", items="array"),
     _t("progress", False, "points done, elapsed and estimated time left (the newest, at "
        "most 10 a second)",
        n_done="integer", n_total="integer", elapsed_s="number", eta_s="number"),
@@ -107,6 +113,14 @@ MESSAGE_TYPES: dict[str, MessageType] = {t.name: t for t in (
        bench="string", message="string"),
     _t("manual", True, "a manual command (home, jog, move, light, camera settings, stop "
        "all) was carried out", who="string", what="string", message="string"),
+    _t("device_settings", True, "a device-settings request (POST /bench/devices/ROLE/"
+       "settings) by request_id: state applying (accepted, waiting for or on the settings "
+       "worker), done, failed (message and field say which and why; the fields before it "
+       "were applied) or cancelled (Stop all, or the server closing, before it was "
+       "applied); device_state: the device's state when it ended (as in devices' states)",
+       request_id="integer", who="string", device="string", kind="string",
+       changes="object", state="string", message="string", field="string|null",
+       device_state="object|null"),
     _t("devices", False, "device states (at most 10 per second); camera: its exposure_us "
        "and gain between runs (null during a run, or without a camera); states: the "
        "lock-in's, filter wheel's and power meter's state by role (kind, connected, "

@@ -118,6 +118,11 @@ class RemoteState:
         #: replaced only when the server's message for it changed (the panels redraw then)
         self.device_states: dict[str, DeviceState] = {}
         self._device_raw: dict[str, Any] = {}
+        #: Device-settings requests not yet ended, by role: the newest ``device_settings``
+        #: message of each (state applying); an ended one moves to :attr:`settings_ended`
+        self.settings_pending: dict[str, dict[str, Any]] = {}
+        #: Ended requests whose end the window has not shown yet (it empties the list)
+        self.settings_ended: list[dict[str, Any]] = []
         self.frame: tuple[int, np.ndarray, float] | None = None
         self.missed: collections.Counter[str] = collections.Counter()
         self.log: collections.deque[str] = collections.deque(maxlen=LOG_LINES)
@@ -236,6 +241,12 @@ class RemoteState:
         self.add_points([(int(i["index"]), point_event(i)) for i in d.get("items") or []])
         return "points"
 
+    def _on_backfill(self, msg: Message, d: dict[str, Any]) -> str:
+        """A resumed run's points from before its resumption: drawn as points are."""
+        self._say(msg, f"run {d.get('run_id')}: {d.get('n_points')} points stored before "
+                  f"it was resumed (part {d.get('part')} of {d.get('parts')})")
+        return self._on_points(msg, d)
+
     def add_points(self, points: list[tuple[int, PointCompleted]]) -> int:
         """Points of the current run (parsed by :func:`point_event`, on any thread)."""
         return 0 if self.run is None else self.run.add_points(points)
@@ -321,6 +332,25 @@ class RemoteState:
         for role in set(self.device_states) - set(states):
             del self.device_states[role], self._device_raw[role]
         return "devices"
+
+    def _on_device_settings(self, msg: Message, d: dict[str, Any]) -> str:
+        """A device-settings request was accepted or ended (by any client): a pending one
+        by role; an ended one with the device's state as it is now (shown at once, not
+        at the next poll)."""
+        role = str(d.get("device") or "")
+        if d.get("state") == "applying":
+            self.settings_pending[role] = dict(d)
+            return "device_settings"
+        pending = self.settings_pending.get(role)
+        if pending is not None and pending.get("request_id") == d.get("request_id"):
+            del self.settings_pending[role]
+        self.settings_ended.append(dict(d))
+        raw = d.get("device_state")
+        if isinstance(raw, dict):
+            self._device_raw[role] = raw
+            self.device_states[role] = state_from_message(role, raw)
+        self._say(msg, f"{d.get('who')}: {d.get('message')}")
+        return "device_settings"
 
     def _on_frame(self, msg: Message, d: dict[str, Any]) -> str:
         shape = tuple(int(s) for s in d.get("shape") or ())

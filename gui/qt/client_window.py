@@ -7,7 +7,9 @@ skip, abort), home, jog, move, light, Stop all, take and release control. What t
 window shows is what the server's event stream says: the queue, the current run with its
 live plot (from its first point, also when the window opens mid-run), device states and
 the goniometer drawing from their read-back positions, the latest camera frame and its
-exposure and gain (set here between runs), faults and the control lease. Controls the
+exposure and gain (set here between runs), the lock-in's, filter wheel's and power
+meter's panels (set here between runs: each change shows "applying…" until the server's
+``device_settings`` event says it is done or why not), faults and the control lease. Controls the
 server would refuse are greyed, with the reason in their tooltip and in the banner (an
 observer key; another operator's lease).
 
@@ -43,6 +45,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from gui.model.session import Action, CommandResult, SetSetting
 from gui.qt.background import Background
 from gui.qt.goniometer_view import GoniometerView
 from gui.qt.live_plot import LivePlot
@@ -58,15 +61,26 @@ __all__ = ["ClientWindow"]
 #: redrawn every PLOT_EVERY-th tick (10 Hz: each redraw repaints its axes).
 REDRAW_HZ = 20
 PLOT_EVERY = 2
-#: Why the device panels' controls are greyed in this window (they show the server's state).
-PANEL_SETTINGS_WHY = ("the server shows this device's state but does not set it yet: change "
-                      "it in the in-process window (scatterlab gui --in-process)")
+#: A panel's actions as the server's device-settings fields (``instrument.server.
+#: device_settings``): the wheel's move is its ``position``; the others are set to true.
+PANEL_ACTIONS = {"move_to": "position", "auto_range": "auto_range", "zero": "zero"}
+
+
+def panel_changes(command) -> dict | None:
+    """A panel's command (:class:`SetSetting` or :class:`Action`) as the fields of a
+    device-settings request; None for a command the server does not take from a panel."""
+    if isinstance(command, SetSetting):
+        return {command.name: command.value}
+    if isinstance(command, Action) and command.name in PANEL_ACTIONS:
+        value = command.args[0] if command.args else True
+        return {PANEL_ACTIONS[command.name]: value}
+    return None
 
 
 class _PanelSession:
     """What a device panel (:mod:`gui.qt.panels`) asks of its session, in this window: the
-    bench profile (the filter wheel's bands named in it). Its controls are greyed
-    (:data:`PANEL_SETTINGS_WHY`), so it submits nothing."""
+    bench profile (the filter wheel's bands named in it), and its commands, sent to the
+    server as device-settings requests (:meth:`ClientWindow.set_device`)."""
 
     def __init__(self, window: ClientWindow) -> None:
         self._window = window
@@ -76,7 +90,13 @@ class _PanelSession:
         return self._window._validation_profile()
 
     def submit(self, command) -> None:
-        self._window.log_view.appendPlainText(f"{command}: {PANEL_SETTINGS_WHY}")
+        role = getattr(command, "role", None)
+        changes = panel_changes(command)
+        if role is None or changes is None:
+            self._window.log_view.appendPlainText(f"{command}: not available through the "
+                                                  "server")
+            return
+        self._window.set_device(role, changes, command)
 
 
 class ClientWindow(QMainWindow):
@@ -99,6 +119,7 @@ class ClientWindow(QMainWindow):
         self._dirty: set[str] = set()
         self._access: tuple | None = None
         self._profile = None
+        self._sent: dict[str, object] = {}  # role -> the panel command awaiting its end
         self._build()
         self.link.changed.connect(self._on_changed)
         self.link.result.connect(self._on_result)
@@ -300,6 +321,15 @@ class ClientWindow(QMainWindow):
         """Set the camera's ``exposure_us`` or ``gain`` on the server (between runs)."""
         self.link.call(f"camera {name}", lambda c: c.camera_settings(**{name: value}))
 
+    def set_device(self, role: str, changes: dict, command=None) -> None:
+        """Ask the server to set the device ``role``'s ``changes``; its panel shows
+        "applying…" (controls greyed) until the request's end arrives on the stream."""
+        self._sent[role] = command
+        panel = self.panels.get(role)
+        if panel is not None:
+            panel.set_pending("applying…")
+        self.link.call(f"device {role}", lambda c: c.device_settings(role, **changes))
+
     def add_plan_text(self, text: str, name: str | None = None) -> None:
         self.link.call(f"add plan {name or ''}".strip(), lambda c: c.add_plan(text, name))
 
@@ -405,6 +435,12 @@ class ClientWindow(QMainWindow):
     # state to widgets -------------------------------------------------------------------
     def _on_result(self, what: str, ok: bool, message: str, reasons) -> None:
         self.results.append((what, ok, message, list(reasons or [])))
+        role = what.removeprefix("device ")
+        if what.startswith("device ") and not ok and role in self.panels:
+            # refused before anything was sent: the panel says why, at once
+            self.panels[role].set_pending("")
+            self.panels[role].show_result(CommandResult(self._sent.pop(role, None), False,
+                                                        message, refused=True))
         field = self.camera_fields.get(what.removeprefix("camera "))
         if what.startswith("camera ") and field is not None:
             field.settled()  # done or refused: the field shows the camera's value again
@@ -431,8 +467,10 @@ class ClientWindow(QMainWindow):
             self._refresh_access()
         if "bench" in parts:
             self._refresh_goniometer_profile()
-        if "devices" in parts:
+        if "devices" in parts or "device_settings" in parts:
             self._refresh_devices()
+        if "device_settings" in parts:
+            self._refresh_settings()
         if "frame" in parts:
             self._refresh_frame()
 
@@ -545,7 +583,9 @@ class ClientWindow(QMainWindow):
             panel = self.panels.get(role)
             if panel is None:
                 panel = panel_for(state.kind)(role, self._panel_session)
-                panel.set_read_only(PANEL_SETTINGS_WHY)
+                panel.reconnect.setEnabled(False)  # the server's bench, not this window's
+                panel.reconnect.setToolTip("an admin reconnects the server's bench "
+                                           "(scatterlab serve: bench disconnect, connect)")
                 self.panel_layout.insertWidget(self.panel_layout.count() - 1, panel)
                 self.panels[role] = panel
                 self.no_panels.hide()
@@ -553,6 +593,35 @@ class ClientWindow(QMainWindow):
                 panel.set_state(state)
             else:
                 panel.refresh_age()
+        self._refresh_panel_access()
+
+    def _refresh_settings(self) -> None:
+        """Device-settings requests: "applying…" on the panel of each pending one (this
+        window's or another client's); an ended one's outcome under its panel."""
+        s = self.state
+        for d in s.settings_ended:
+            panel = self.panels.get(str(d.get("device")))
+            if panel is None:
+                continue
+            ok = d.get("state") == "done"
+            panel.show_result(CommandResult(self._sent.pop(panel.role, None), ok,
+                                            str(d.get("message") or "")))
+        s.settings_ended.clear()
+        for role, panel in self.panels.items():
+            pending = s.settings_pending.get(role)
+            panel.set_pending("" if pending is None else
+                              f"applying… (request {pending.get('request_id')}, "
+                              f"{pending.get('who')})")
+        self._refresh_panel_access()
+
+    def _refresh_panel_access(self) -> None:
+        """A panel's controls work between runs, for an operator who may act, while no
+        change of that device is pending."""
+        may, why = self.state.may_operate()
+        if may and self.state.owner == "run":
+            may, why = False, "a run owns the bench: change device settings between runs"
+        for role, panel in self.panels.items():
+            panel.set_owned(may and role not in self.state.settings_pending, why)
 
     def _refresh_camera_controls(self) -> None:
         """The camera's settings may change between runs only, by an operator who may
@@ -615,6 +684,7 @@ class ClientWindow(QMainWindow):
             w.setEnabled(may)
             w.setToolTip(why)
         self._refresh_camera_controls()
+        self._refresh_panel_access()
         stop_ok, stop_why = s.may_stop_all()
         self.stop_all_button.setEnabled(stop_ok)
         self.stop_all_button.setToolTip(stop_why or "stop every axis now; a run is aborted "

@@ -101,6 +101,12 @@ class DevicePanel(QGroupBox):
         self.age.setStyleSheet("color: #e65100")
         self.age.setToolTip("when this device was last read: a run reads only the axes it "
                             "moves, so the others show their state from before the run")
+        self.pending = QLabel("")
+        self.pending.setObjectName("pending")
+        self.pending.setStyleSheet("color: #1565c0")
+        self.pending.setToolTip("the bench server applies this change; its outcome shows "
+                                "under the panel")
+        self.pending.hide()
         self.error = note_label("error")
         self.reconnect = QPushButton("Reconnect")
         self.reconnect.setToolTip("close and open this device again (a cable plugged back in)")
@@ -109,6 +115,7 @@ class DevicePanel(QGroupBox):
         self.reconnect.hide()
         head = QHBoxLayout()
         head.addWidget(self.status, 1)
+        head.addWidget(self.pending)
         head.addWidget(self.age)
         head.addWidget(self.reconnect)
         self._outer.addWidget(self.identity)
@@ -160,20 +167,22 @@ class DevicePanel(QGroupBox):
         now = time.monotonic() if now is None else now
         self.age.setText(fmt.age(now - self.state.t))
 
-    def set_owned(self, manual: bool) -> None:
-        """``manual``: the device worker owns the bench (no run) and commands are taken."""
+    def set_owned(self, manual: bool, why: str = "") -> None:
+        """``manual``: the device worker owns the bench (no run) and commands are taken;
+        ``why``: the greyed controls' tooltip (the client window says why not)."""
         usable = manual and (self.state is None or self.state.connected)
         for w in self._controls:
-            w.setEnabled(usable)
+            if w.isEnabled() != usable:
+                w.setEnabled(usable)
+            if why and not usable:
+                w.setToolTip(why)
 
-    def set_read_only(self, why: str) -> None:
-        """Show the state only: every control greyed for good, ``why`` its tooltip (the
-        client window's panels, whose device the server reads but does not set)."""
-        self._controls.append(self.reconnect)
-        for w in self._controls:
-            w.setEnabled(False)
-            w.setToolTip(why)
-        self._controls.clear()  # set_owned no longer enables them
+    def set_pending(self, text: str) -> None:
+        """A change sent to the bench server and not yet applied: ``text`` ("applying…")
+        in the panel's head until its end arrives; "" when it ended."""
+        if self.pending.text() != text:
+            self.pending.setText(text)
+            self.pending.setVisible(bool(text))
 
     def show_state(self, state: DeviceState) -> None:
         """Draw the kind's live values (subclasses)."""

@@ -9,8 +9,9 @@ event loop (docs/decisions/0084):
   in one go (:meth:`ServerLink.drain`) — superseded display messages (device states,
   frames, progress) are skipped, points and lifecycle messages never. After ``hello`` it
   reads the current run's points so far (``GET /runs/current/points``), so a GUI opened
-  mid-run draws the plot from the first point. A stream that ends (the server restarted)
-  is opened again after a second.
+  mid-run draws the plot from the first point; a resumed run's points from before its
+  resumption come as ``backfill`` messages and are drawn as points are. A stream that
+  ends (the server restarted) is opened again after a second.
 * the **command worker** carries out the operator's requests (queue, run control, manual
   moves, control lease) one at a time, Stop all ahead of anything waiting, and reports
   each result as a signal.
@@ -130,7 +131,7 @@ class ServerLink(QObject):
             msg = stream.recv(timeout_s=0.5)
             if msg is None:
                 continue
-            if msg.type == "points":  # parsed here, off the GUI thread
+            if msg.type in ("points", "backfill"):  # parsed here, off the GUI thread
                 self._put("points", _parsed(msg.data.get("items") or []))
                 continue
             self._put("message", msg)

@@ -51,7 +51,15 @@ Measurement model (documented emulator choices, not a calibration):
   illustrative quantum efficiency). The console displays ``(I − I_zero)/R(λ_set)``, so a
   wrong wavelength setting scales the reading by ``R(λ_light)/R(λ_set)``.
 * Each sample carries Gaussian noise ``σ_I = sqrt(noise_floor_a² + (relative_noise·R·P)²)``;
-  an ``AVER:COUN n`` reading is the mean of ``n`` samples (σ/√n). ``I_dark`` stays in the
+  an ``AVER:COUN n`` reading is the mean of ``n`` samples (σ/√n).
+* Which noise: alone, the readings draw from one seeded stream, in order. Bound to a
+  virtual bench (:meth:`hw_mocks.sim.world.VirtualBench.bind_power_meter`), each reading's
+  noise is keyed to the bench state it reads (:attr:`Pm100usbFirmware.noise_state`: stage
+  positions and the light at the sample) — seed, state, which visit of that state (a
+  state is visited anew each time the readings' state changes to it) and which reading of
+  the visit. Readings taken while the bench rests between runs (a server polling the
+  meter) then leave a run's readings unchanged: the run moves the bench to each point,
+  a new visit, and draws the same values however many readings came before. ``I_dark`` stays in the
   reading until a dark zero measures it (:meth:`zero_samples` samples); ``*RST`` forgets
   the zero ("no way of resetting the zero value other than full device reset").
 * Zeroing runs :attr:`zero_duration_s` on the emulator clock; ``ZERO:STAT?`` answers 1
@@ -61,10 +69,11 @@ Measurement model (documented emulator choices, not a calibration):
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
-from collections import deque
-from collections.abc import Callable
+from collections import Counter, deque
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
 import numpy as np
@@ -243,6 +252,12 @@ class Pm100usbFirmware(FirmwareEmulator):
         self.serial = serial
         self.sensor = sensor if sensor is not None else SensorHead()
         self._rng = np.random.default_rng(seed)
+        self._seed = int(seed)
+        #: The bench state a reading reads (set by a virtual bench): each reading's noise is
+        #: keyed to it (the module's docstring); ``None``: one stream, in reading order.
+        self.noise_state: Callable[[], Hashable] | None = None
+        self._visits: Counter[int] = Counter()
+        self._visit: list[int] | None = None  # [state digest, visit number, readings]
         #: The virtual bench's light: ``f(wavelength_nm) -> power in W at the sensor``.
         self.optical_power_w: Callable[[float], float] = lambda _wl: 0.0
         #: Wavelength of the incident light (nm), or a callable giving it at each reading
@@ -298,7 +313,21 @@ class Pm100usbFirmware(FirmwareEmulator):
         light = self._light_wavelength()
         signal = self.responsivity_a_per_w(light) * max(self.true_power_w(), 0.0)
         sigma = math.hypot(self.noise_floor_a, self.relative_noise * signal)
-        return signal + self.dark_current_a + float(self._rng.normal(0.0, sigma / math.sqrt(n)))
+        return signal + self.dark_current_a + float(self._noise().normal(0.0, sigma / math.sqrt(n)))
+
+    def _noise(self) -> np.random.Generator:
+        """The generator of the next reading's noise (see the module's docstring)."""
+        if self.noise_state is None:
+            return self._rng
+        # repr: stable across processes (hash() of a str is salted per process)
+        digest = int.from_bytes(hashlib.blake2b(repr(self.noise_state()).encode(),
+                                                digest_size=8).digest(), "little")
+        if self._visit is None or self._visit[0] != digest:
+            self._visits[digest] += 1
+            self._visit = [digest, self._visits[digest], 0]
+        visit = self._visit
+        visit[2] += 1
+        return np.random.default_rng([self._seed, digest, visit[1], visit[2]])
 
     def _measure_power_w(self) -> float:
         current = self._sample_current_a(self.average_count)

@@ -486,6 +486,13 @@ class VirtualBench:
         self._power_cache[key] = power
         return power
 
+    def reading_state(self) -> tuple[tuple[float, ...], SourceState]:
+        """What a detector's reading depends on now: every role's position (rounded far
+        below any stage's resolution) and the light at the sample. A bound power meter
+        keys its noise to it (:mod:`hw_mocks.firmware.pm100usb`)."""
+        positions = self.positions()
+        return tuple(round(positions[k], 9) for k in ROLES), self.light_at_sample()
+
     def power_callable(self) -> Callable[[float], float]:
         """The ``optical_power_w(wavelength_nm) -> W`` callable for the PM100USB emulator."""
         return self.optical_power_w
@@ -495,8 +502,9 @@ class VirtualBench:
 
         ``target`` is the firmware object, a ``simusb://name`` URL (the device is created
         through :func:`hw_mocks.usb.backend_from_url` if needed), or ``None`` for
-        ``power_meter.url``. Sets its ``optical_power_w`` callable and the light's
-        wavelength (followed at every reading: :meth:`light_wavelength_nm`).
+        ``power_meter.url``. Sets its ``optical_power_w`` callable, the light's
+        wavelength (followed at every reading: :meth:`light_wavelength_nm`) and the state
+        its noise is keyed to (:meth:`reading_state`).
         """
         target = self.power_meter.url if target is None else target
         if target is None:
@@ -509,6 +517,7 @@ class VirtualBench:
             target = usb.get_firmware(name)
         target.optical_power_w = self.optical_power_w
         target.light_wavelength_nm = self.light_wavelength_nm
+        target.noise_state = self.reading_state
         target.bound_world = self.name
         self._bound_meter = target
         return target

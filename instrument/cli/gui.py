@@ -42,9 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "resumable) and exit")
     p.add_argument("--in-process", action="store_true",
                    help="open the full window with the engine in the GUI's process (no "
-                   "server; closing the window ends a run): the goniometer drawing, "
-                   "camera settings and the per-device panels that the client window "
-                   "does not show yet")
+                   "server; closing the window ends a run): the plan's points on the "
+                   "goniometer drawing, the camera's region of interest and the "
+                   "analyses' remedies, which the client window does not have yet")
 
 
 def gui_call(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:

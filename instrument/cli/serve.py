@@ -27,6 +27,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--tls-key", default=None, metavar="KEY.pem")
     p.add_argument("--allow", action="append", default=[], metavar="DIR",
                    help="a folder besides --runs whose files plans may name (repeatable)")
+    p.add_argument("--require-keys", action="store_true",
+                   help="every request needs an API key, also on loopback before the first "
+                   "key exists (without it, a loopback server with no keys treats every "
+                   "local client as admin)")
     p.add_argument("--no-fsync", action="store_true",
                    help="do not force each point to stable storage (still safe against a "
                    "crash of the server, not of the computer)")
@@ -67,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         return serve(args.bench, listen=args.listen, runs=args.runs, cert=args.tls_cert,
-                     key=args.tls_key, allow=args.allow, fsync=not args.no_fsync)
+                     key=args.tls_key, allow=args.allow, fsync=not args.no_fsync,
+                     require_keys=args.require_keys)
     except ServeRefused as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

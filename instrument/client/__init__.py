@@ -187,6 +187,14 @@ class BenchClient:
                 if v is not None}
         return cast(str, self.request("POST", "/bench/camera", body)["message"])
 
+    def device_settings(self, role: str, **changes: bool | int | float | str
+                        ) -> dict[str, Any]:
+        """Ask the server to set the device ``role``'s fields (``sensitivity_v=1e-3``,
+        ``position=3``, ``auto_range=True``…); returns ``{"request_id", "message"}`` at
+        once: the ``device_settings`` event with that id says when it is applied."""
+        r = self.request("POST", f"/bench/devices/{role}/settings", {"changes": changes})
+        return {"request_id": int(r["request_id"]), "message": str(r["message"])}
+
     def stop_all(self) -> str:
         return cast(str, self.request("POST", "/bench/stop-all")["message"])
 

@@ -102,6 +102,18 @@ class CameraBody(_Body):
     gain: Annotated[float, Field(allow_inf_nan=False)] | None = None
 
 
+_SettingValue = bool | int | float | str
+
+
+class DeviceSettingsBody(_Body):
+    """Fields of one device to set, in the order to apply them (``instrument.server.
+    device_settings`` lists them by device kind); an action (``auto_range``, ``zero``)
+    takes ``true``."""
+
+    changes: Annotated[dict[Annotated[str, Field(min_length=1, max_length=40)],
+                            _SettingValue], Field(min_length=1, max_length=8)]
+
+
 class TakeControl(_Body):
     timeout_s: Annotated[float, Field(gt=0, le=86400)] | None = None
     force: bool = False
@@ -438,6 +450,17 @@ def create_app(service: BenchService, *, open_local: bool = True) -> FastAPI:
         ctl(request, caller)
         return done(request, service.camera_settings(caller, exposure_us=body.exposure_us,
                                                      gain=body.gain))
+
+    @app.post(f"{p}/bench/devices/{{role}}/settings", status_code=202)
+    def bench_device_settings(role: str, body: DeviceSettingsBody, request: Request,
+                              caller: Caller = control) -> dict[str, Any]:
+        """Change a lock-in's, filter wheel's or power meter's settings between runs. The
+        answer (202) comes at once with ``request_id``; the ``device_settings`` event with
+        that id says when the change is applied or why it failed (a wheel move or an
+        auto-range takes seconds)."""
+        ctl(request, caller)
+        accepted = service.device_settings(caller, role, body.changes)
+        return done(request, accepted["message"], request_id=accepted["request_id"])
 
     @app.post(f"{p}/bench/stop-all")
     def bench_stop_all(request: Request, caller: Caller = operator) -> dict[str, Any]:

@@ -3,6 +3,11 @@
 Loopback (127.0.0.0/8, ::1, ``localhost``) is the default. Any other address needs TLS
 (a certificate and its key) and at least one valid API key; otherwise the server does not
 start and :class:`ServeRefused` says what is missing (docs/decisions/0082).
+
+On loopback without keys every request acts as the local admin, unauthenticated (a
+one-PC bench, as anyone at its keyboard could before); the server says so at start-up,
+with how to change it. ``--require-keys`` turns that off: every request needs a key, from
+the first one, even on loopback (:func:`access_lines`).
 """
 
 from __future__ import annotations
@@ -18,8 +23,8 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from instrument.server.service import BenchService
 
-__all__ = ["DEFAULT_LISTEN", "WS_OPTIONS", "Listen", "ServeRefused", "check_listen",
-           "parse_listen", "serve"]
+__all__ = ["DEFAULT_LISTEN", "WS_OPTIONS", "Listen", "ServeRefused", "access_lines",
+           "check_listen", "parse_listen", "serve"]
 
 DEFAULT_LISTEN = "127.0.0.1:8765"
 
@@ -78,6 +83,23 @@ def check_listen(listen: Listen, *, cert: str | None, key: str | None,
                            "reach it through an SSH tunnel")
 
 
+def access_lines(listen: Listen, *, has_keys: bool, require_keys: bool) -> list[str]:
+    """What the server says at start-up about who may do what without a key."""
+    if require_keys or not listen.loopback:
+        if has_keys:
+            return ["every request needs an API key (Authorization: Bearer KEY)"]
+        return ["every request needs an API key and none exists yet: add one on this PC "
+                "with `scatterlab serve keys add --role admin --name YOU` (no restart "
+                "needed)"]
+    if has_keys:
+        return ["every request needs an API key (keys exist); start with --require-keys "
+                "to keep it so if every key is revoked"]
+    return ["UNAUTHENTICATED: no API keys yet, so every client on this PC acts as admin "
+            "(anyone logged in here, or through an SSH tunnel, may move the stages)",
+            "to require keys: add one (`scatterlab serve keys add --role admin --name "
+            "YOU`), or start with --require-keys"]
+
+
 def _bind(listen: Listen) -> socket.socket:
     family = socket.AF_INET6 if ":" in listen.host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
@@ -94,12 +116,14 @@ def _bind(listen: Listen) -> socket.socket:
 
 def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
           cert: str | None = None, key: str | None = None, allow: Sequence[str] = (),
-          fsync: bool = True, say: Callable[[str], None] = print,
+          fsync: bool = True, require_keys: bool = False,
+          say: Callable[[str], None] = print,
           make_service: Callable[..., BenchService] | None = None) -> int:
     """Run the server until SIGINT/SIGTERM; return an exit code.
 
     ``make_service(profile, runs_dir, fsync=..., allowed=...)`` builds the service
     (default :class:`~instrument.server.service.BenchService`; tests wrap it).
+    ``require_keys``: every request needs a key, also on loopback before any key exists.
     """
     import uvicorn
 
@@ -116,7 +140,7 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
     profile = load_profile(profile_name)
     sock = _bind(where)
     service = (make_service or BenchService)(profile, runs, fsync=fsync, allowed=allow)
-    app = create_app(service, open_local=where.loopback)
+    app = create_app(service, open_local=where.loopback and not require_keys)
     host, port = sock.getsockname()[:2]
     scheme = "https" if cert else "http"
     shown = f"[{host}]" if ":" in host else host
@@ -126,9 +150,8 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
     say(f"serving bench {profile.name!r} on {scheme}://{shown}:{port} (runs in "
         f"{service.runs_dir}); Ctrl-C stops")
     say(f"web dashboard: {scheme}://{shown}:{port}/ (open it in a browser)")
-    if where.loopback and not has_keys:
-        say("no API keys yet: local clients act as admin until one is added "
-            "(scatterlab serve keys add)")
+    for line in access_lines(where, has_keys=has_keys, require_keys=require_keys):
+        say(line)
     sys.stdout.flush()
     config = uvicorn.Config(app, log_level="warning", ssl_certfile=cert, ssl_keyfile=key,
                             lifespan="on", timeout_graceful_shutdown=5, **WS_OPTIONS)

@@ -11,18 +11,27 @@ published before it attached is already here (the hub calls its listeners before
 hands a message to the clients), and what comes later reaches it on the stream. The two
 may overlap by a batch, so a client keeps points by their index.
 
+A resumed run (after a restart of the server, a pause now or an abort) starts with the
+points already in its file: the service sends them as ``backfill`` messages right after
+its ``run_started`` (:func:`stored_points` reads them), and they are kept here as points
+are, so a client that connects later reads them too.
+
 Memory: one small dict per point of the current run (a 10,000-point scan: a few MB); the
 list is emptied when the next run starts.
 """
 
 from __future__ import annotations
 
+import math
 import threading
+from pathlib import Path
 from typing import Any
 
 from instrument.protocol import Message
+from instrument.run.layout import STATUS_OK
+from instrument.run.runfile import read_run
 
-__all__ = ["MAX_POINTS_PAGE", "RunPoints"]
+__all__ = ["MAX_POINTS_PAGE", "RunPoints", "stored_points"]
 
 #: The most points one answer carries (the client asks again from ``next``).
 MAX_POINTS_PAGE = 5000
@@ -43,7 +52,7 @@ class RunPoints:
                 self._run = {k: message.data.get(k) for k in
                              ("run_id", "path", "plan_kind", "n_total", "item_id")}
                 self._items = []
-        elif message.type == "points":
+        elif message.type in ("points", "backfill"):
             items = message.data.get("items") or []
             with self._lock:
                 self._items.extend(items)
@@ -60,3 +69,31 @@ class RunPoints:
             run = dict(self._run) if self._run is not None else None
         return {"run": run, "since": since, "next": since + len(items), "total": total,
                 "items": items}
+
+
+def _number(value: Any) -> float | None:
+    v = float(value)
+    return v if math.isfinite(v) else None  # JSON has no NaN: not measured is null
+
+
+def stored_points(path: str | Path) -> list[dict[str, Any]]:
+    """The points stored in the run file ``path``, in the order they were stored, as the
+    items of a ``points`` message (index, label, status, positions, angles, exposure_us,
+    power_w, signal, retries, nd_slot); retries are not kept in the file's scalars read
+    here and are 0."""
+    run = read_run(path)
+    nd = run.detectors.get("nd_position")
+    items = []
+    for row in range(run.n_points):
+        angles = [_number(a[row]) for a in (run.theta_i, run.phi_i, run.theta_r, run.phi_r)]
+        items.append({
+            "index": int(run.index[row]), "label": str(run.label[row]),
+            "status": "ok" if int(run.point_status[row]) == STATUS_OK else "skipped",
+            "positions": {axis: _number(run.positions[row, k])
+                          for k, axis in enumerate(run.axes)},
+            "angles": None if angles[0] is None else angles,
+            "exposure_us": _number(run.exposure_us[row]), "power_w": _number(run.power_w[row]),
+            "signal": _number(run.signal[row]), "retries": 0,
+            "nd_slot": -1 if nd is None or not math.isfinite(float(nd[row]))
+            else int(nd[row])})
+    return items

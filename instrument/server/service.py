@@ -18,12 +18,23 @@ Threads:
 Manual commands (home, jog, move, light, stop all) are judged by the same guard as the
 GUI's (:mod:`instrument.bench.manual`); while a run owns the bench only Stop all is
 accepted, and it aborts the run (the engine stops every axis and turns the light off).
+
+Device settings (the lock-in's, filter wheel's and power meter's:
+:mod:`instrument.server.device_settings`) are checked when asked, then applied by the
+**settings worker**, one request at a time, in the order accepted: a wheel move or an
+auto-range holds its device for seconds, never the HTTP loop, the event stream or the
+bench's lock. The request is answered at once with its id; the ``device_settings`` event
+says when it is applied or why it failed. While a request waits or is applied, the queue
+runner starts no run; Stop all never waits for one (it stops the axes at once, the
+device in progress finishes its command, the requests still waiting are cancelled).
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
+import itertools
 import math
 import threading
 import time
@@ -50,9 +61,12 @@ from instrument.run.locks import LockHeld, hold
 from instrument.run.paths import writer_lock_path
 from instrument.run.runner import recover_run, resume_run, start_run
 from instrument.run.storage import FrameData, StorageError
+from instrument.server.audit import AuditLog
 from instrument.server.db import ServerDB
+from instrument.server.device_settings import Change, SettingRefused, check_changes, describe
 from instrument.server.hub import EventHub
 from instrument.server.plans import PlanRefused, check_plan
+from instrument.server.points import MAX_POINTS_PAGE, stored_points
 from instrument.server.queue import RESUMABLE, PlanQueue, QueueError, QueueItem
 
 __all__ = ["LEASE_S", "BenchService", "Caller", "ServiceError"]
@@ -68,6 +82,8 @@ STATE_HZ = 10.0
 #: while no run owns the bench (the axes, the light and the camera have their own fields).
 STATE_KINDS = ("lockin", "filter_wheel", "power_meter")
 FRAME_HZ = 2.0
+#: Device-settings requests that may wait for the settings worker at once.
+MAX_SETTINGS_PENDING = 16
 #: Display frames are decimated to at most this many pixels on their longer side.
 FRAME_MAX_PX = 160
 
@@ -89,6 +105,31 @@ class ServiceError(Exception):
         self.status = status
         self.message = message
         self.reasons = list(reasons)
+
+
+@dataclass(frozen=True)
+class _SettingsRequest:
+    """A checked device-settings request waiting for (or on) the settings worker."""
+
+    id: int
+    caller: Caller
+    role: str
+    kind: str
+    changes: tuple[Change, ...]
+
+    def event(self, state: str, message: str, field: str | None = None,
+              device_state: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The ``device_settings`` message's data."""
+        return {"request_id": self.id, "who": self.caller.name, "device": self.role,
+                "kind": self.kind,
+                "changes": {c.field.name: c.value for c in self.changes},
+                "state": state, "message": message, "field": field,
+                "device_state": device_state}
+
+
+#: The audit log's status for how a device-settings request ended (as the manual commands':
+#: 502 a device's error, 409 cancelled by the bench's state).
+_ENDED_STATUS = {"done": 200, "failed": 502, "cancelled": 409}
 
 
 class _StoppedBetweenPasses(Exception):
@@ -175,6 +216,16 @@ class BenchService:
         self._states: dict[str, tuple[float, dict[str, Any]]] = {}
         self._state_info: dict[str, Mapping[str, Any]] = {}
         self._states_of: Bench | None = None
+        # a run file about to be resumed and its stored points (runner thread; published
+        # after the resumed run's run_started by _publish_backfill)
+        self._backfill: tuple[str, list[dict[str, Any]]] | None = None
+        # device settings: requests waiting for the settings worker, the one it applies,
+        # roles whose state the sampler reads afresh (info included) after a change
+        self._settings: collections.deque[_SettingsRequest] = collections.deque()
+        self._applying: _SettingsRequest | None = None
+        self._settings_ids = itertools.count(1)
+        self._stale: set[str] = set()
+        self._audit = AuditLog(self.db)
         self.interrupted = self.queue.after_restart()
         if connect:
             self.connect(Caller("server", "admin"))
@@ -184,6 +235,9 @@ class BenchService:
         self._sampler = threading.Thread(target=self._sample, name="state-sampler",
                                          daemon=True)
         self._sampler.start()
+        self._settings_worker = threading.Thread(target=self._apply_settings,
+                                                 name="device-settings", daemon=True)
+        self._settings_worker.start()
 
     # lifecycle --------------------------------------------------------------------------
     def close(self) -> None:
@@ -198,6 +252,7 @@ class BenchService:
             engine.wait(60.0)
         self._runner.join(60.0)
         self._sampler.join(5.0)
+        self._settings_worker.join(60.0)  # a wheel move or an auto-range ends first
         with self._bench_lock:
             if self.bench is not None:
                 self.bench.close()
@@ -503,6 +558,8 @@ class BenchService:
         control."""
         was_running = self.queue_running
         with self._lock:
+            cancelled, applying = list(self._settings), self._applying
+            self._settings.clear()
             engine = self.engine
             if engine is not None and engine.alive:
                 self.queue_running = False
@@ -521,11 +578,113 @@ class BenchService:
                             problems.append(f"{role}: {err}")
                 message = "all axes stopped" + (
                     f" (could not stop: {'; '.join(problems)})" if problems else "")
+        if applying is not None:
+            message += (f"; {applying.role} finishes its setting in progress (request "
+                        f"{applying.id})")
         self.hub.publish("manual", {"who": caller.name, "what": "stop all",
                                     "message": message})
+        for req in cancelled:
+            self._settings_ended(req, "cancelled", f"{req.role}: cancelled by Stop all "
+                                 f"({caller.name}) before it was applied")
         if was_running:
             self._publish_queue()
         return message
+
+    # device settings --------------------------------------------------------------------
+    def _settings_busy(self) -> bool:
+        """A device-settings request waits or is being applied (under ``_lock``)."""
+        return self._applying is not None or bool(self._settings)
+
+    def device_settings(self, caller: Caller, role: str, changes: Mapping[str, Any]
+                        ) -> dict[str, Any]:
+        """Accept a settings change for the device ``role`` (checked now, applied by the
+        settings worker); returns ``request_id`` and a message at once. Refused (nothing
+        sent) when no bench is connected, a run owns the bench or the queue runs (409), or
+        a field is unknown or its value refused (422, naming ``role.field``)."""
+        with self._cond:
+            bench = self._idle_bench()
+            if self.queue_running:
+                raise ServiceError(409, "the queue is running: its next run takes the bench "
+                                   "at any moment; stop the queue to change device settings")
+            device = bench.devices.get(role)
+            settable = [r for r, d in bench.devices.items()
+                        if (k := kind_of(d)) is not None and k.name in STATE_KINDS]
+            if device is None:
+                raise ServiceError(422, f"{role}: bench {self.profile.name!r} has no device "
+                                   f"{role!r} (devices with settings: "
+                                   f"{', '.join(settable) or 'none'})", [role])
+            kind = kind_of(device)
+            try:
+                checked = check_changes(role, kind.name if kind else "unknown", changes,
+                                        self._state_info.get(role) or {})
+            except SettingRefused as err:
+                raise ServiceError(422, err.message, [err.field]) from err
+            if len(self._settings) >= MAX_SETTINGS_PENDING:
+                raise ServiceError(409, f"{len(self._settings)} device-settings requests "
+                                   "wait already: wait for their events")
+            req = _SettingsRequest(next(self._settings_ids), caller, role,
+                                   kind.name if kind else "unknown", tuple(checked))
+            self._settings.append(req)
+            message = f"{role}: applying {describe(checked)} (request {req.id})"
+            # published before the worker can end it: a client sees applying, then the end
+            self.hub.publish("device_settings", req.event("applying", message))
+            self._cond.notify_all()
+        return {"request_id": req.id, "message": message}
+
+    def _apply_settings(self) -> None:
+        """The settings worker: each request in turn, its fields in order, off the bench's
+        lock (the sampler leaves the device alone meanwhile); then the device's state as
+        it is now goes with the event, and the sampler reads it afresh."""
+        while True:
+            with self._cond:
+                while not self._settings and not self._closed:
+                    self._cond.wait(0.5)
+                if self._closed:
+                    left, self._settings = list(self._settings), collections.deque()
+                    break
+                req = self._settings.popleft()
+                bench, why = self.bench, ""
+                device = bench.devices.get(req.role) if bench is not None else None
+                if self.engine is not None and self.engine.alive:
+                    why = "a run took the bench before it was applied"
+                elif device is None:
+                    why = "the bench was disconnected before it was applied"
+                else:
+                    with self._bench_lock:  # a poll of this device in progress ends first
+                        self._applying = req
+            if device is None or why:
+                self._settings_ended(req, "failed", f"{req.role}: {why}")
+                continue
+            self._apply_one(req, device)
+        for req in left:
+            self._settings_ended(req, "cancelled", f"{req.role}: the server is closing")
+
+    def _apply_one(self, req: _SettingsRequest, device: Any) -> None:
+        field: str | None = None
+        try:
+            for change in req.changes:
+                field = change.field.name
+                change.field.apply(device, change.value)
+        except (DeviceError, ValueError, TypeError) as err:
+            state, message = "failed", f"{req.role}.{field}: {err}"
+        else:
+            state, message, field = "done", f"{req.role}: {describe(req.changes)} done", None
+        now = read_state(req.role, device, with_info=True)
+        with self._cond:
+            self._applying = None
+            self._stale.add(req.role)
+            self._cond.notify_all()
+        self._settings_ended(req, state, message, field, state_message(now, time.time()))
+
+    def _settings_ended(self, req: _SettingsRequest, state: str, message: str,
+                        field: str | None = None,
+                        device_state: dict[str, Any] | None = None) -> None:
+        """Publish the end of a request and write it to the audit log (the request itself
+        is there already, as accepted or refused)."""
+        self.hub.publish("device_settings", req.event(state, message, field, device_state))
+        with contextlib.suppress(Exception):  # the database closing with the server
+            self._audit.write(req.caller.name, req.caller.role, f"device settings request "
+                              f"{req.id} ({req.role}): {state}", _ENDED_STATUS[state], message)
 
     # bench ------------------------------------------------------------------------------
     def connect(self, caller: Caller) -> str:
@@ -546,6 +705,10 @@ class BenchService:
         with self._cond, self._bench_lock:
             if self.engine is not None and self.engine.alive:
                 raise ServiceError(409, "a run owns the bench: abort it first")
+            if self._settings_busy():
+                raise ServiceError(409, "a device setting is being applied: wait for its "
+                                   "device_settings event (or Stop all cancels the waiting "
+                                   "ones)")
             bench, self.bench = self.bench, None
             self.queue_running = False
         if bench is not None:
@@ -561,7 +724,8 @@ class BenchService:
         has run out stops (as a stop marker would), and says so."""
         with self._cond:
             while not self._closed:
-                if self.queue_running and self.bench is not None:
+                if self.queue_running and self.bench is not None and \
+                        not self._settings_busy():  # a setting first, then the run
                     head = self.queue.head()
                     if head is not None:
                         return head
@@ -604,6 +768,8 @@ class BenchService:
             report = recover_run(item.run_file)
             if report.status == "finished":
                 return self._after(item, bench, item.run_file)
+            # the points already in the file go out after run_started (_on_engine_event)
+            self._backfill = (item.run_file, stored_points(item.run_file))
             with self._bench_lock:
                 return resume_run(item.run_file, bench, fsync=self.fsync), ""
         plan = build_plan(parse_plan(item.plan_text or "", source=f"queue item {item.id}"),
@@ -762,6 +928,26 @@ class BenchService:
             item = self.current
             data["item_id"] = item.id if item is not None else None
         self.hub.publish(kind, data)
+        if isinstance(event, ev.RunStarted):
+            self._publish_backfill(event)
+
+    def _publish_backfill(self, started: ev.RunStarted) -> None:
+        """A resumed run's points stored before it was resumed (after a restart, a pause
+        now or an abort), read from its file before the engine reopened it: sent right
+        after ``run_started`` as ``backfill`` messages (lifecycle: never dropped; pages of
+        at most :data:`~instrument.server.points.MAX_POINTS_PAGE`), so that every client
+        draws the run whole; the current-points query has them too."""
+        backfill, self._backfill = self._backfill, None
+        if backfill is None or started.n_done == 0 or \
+                Path(backfill[0]).resolve() != Path(started.path).resolve():
+            return
+        items = backfill[1]
+        parts = max(1, math.ceil(len(items) / MAX_POINTS_PAGE))
+        for k in range(parts):
+            self.hub.publish("backfill", {
+                "run_id": started.run_id, "path": started.path, "n_points": len(items),
+                "part": k + 1, "parts": parts,
+                "items": items[k * MAX_POINTS_PAGE:(k + 1) * MAX_POINTS_PAGE]})
 
     def _flush_display(self) -> None:
         with self._display_lock:
@@ -840,6 +1026,11 @@ class BenchService:
             self._states_of = bench
             self._states.clear()
             self._state_info.clear()
+        with self._lock:
+            stale, self._stale = self._stale, set()
+        for role in stale:  # a setting changed: its tables and values are read again now
+            self._states.pop(role, None)
+            self._state_info.pop(role, None)
         for role, device in bench.devices.items():
             kind = kind_of(device)
             if kind is None or kind.name not in STATE_KINDS:
@@ -853,6 +1044,8 @@ class BenchService:
                 if self.bench is not bench or (self.engine is not None and
                                                self.engine.alive):
                     break  # disconnected, or a run took the bench meanwhile
+                if self._applying is not None and self._applying.role == role:
+                    continue  # the settings worker talks to it: read it when it is done
                 info = self._state_info.get(role)
                 state = read_state(role, device, with_info=info is None, info=info)
             finally:

@@ -410,9 +410,29 @@ def test_the_lock_in_and_filter_wheel_panels_show_the_servers_state(server, open
         assert wv == {"position": 1, "speed": "high"}
         assert wheel.position.text().startswith("slot 1: 450 nm")
         assert wheel.count.text() == "6" and wheel.speed.currentData() == "high"
-        # shown, not set here: the panels' controls are greyed with the reason
+        # set through the server: "applying…" from the click until the server's event
         for b in (lockin.sensitivity, lockin.auto, wheel.go, wheel.speed):
-            assert not b.isEnabled() and "in-process" in b.toolTip()
+            assert b.isEnabled()
+        wheel.slot.setCurrentIndex(wheel.slot.findData(3))
+        wheel.go.click()
+        assert not wheel.pending.isHidden() and wheel.pending.text().startswith("applying")
+        qtbot.waitUntil(lambda: wheel.state.values["position"] == 3
+                        and wheel.pending.isHidden() and wheel.go.isEnabled(),
+                        timeout=WAIT_MS)
+        assert wheel.position.text().startswith("slot 3")
+        k = lockin.sensitivity.findData(1e-3)
+        assert k >= 0
+        lockin.sensitivity.activated.emit(k)
+        assert not lockin.pending.isHidden()
+        qtbot.waitUntil(lambda: lockin.state.values["sensitivity_v"] == 1e-3
+                        and lockin.pending.isHidden(), timeout=WAIT_MS)
+        assert lockin.sensitivity.currentData() == 1e-3
+        assert lockin.outcome.isHidden()  # done: no refusal shown
+        # refused by the server before anything was sent: the panel says why
+        w.set_device("filter_wheel", {"position": 9})
+        qtbot.waitUntil(lambda: not wheel.outcome.isHidden(), timeout=WAIT_MS)
+        assert "filter_wheel.position" in wheel.outcome.text()
+        assert wheel.pending.isHidden() and wheel.state.values["position"] == 3
     finally:
         observer.close()
 

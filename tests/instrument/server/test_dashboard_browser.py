@@ -313,6 +313,13 @@ def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_ser
     assert kept["seen"] == kept["seenMax"] == 10_000  # the indices remembered, bounded too
 
 
+#: In-plane points ``span(a, b)`` (indices a … b-1) for the page's own handlers.
+SPAN_JS = """
+            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
+                                signal: 1 + i, power_w: null});
+            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));"""
+
+
 def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
                                                                       start_server, tmp_path):
     """The prefill's order of events, driven through the page's own handlers: stream points
@@ -321,10 +328,7 @@ def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
     server = start_server(bench_file())
     with chromium(tmp_path / "profile") as page:
         sign_in(page, server.url, None)
-        got = page.evaluate("""() => {
-            const pt = (i) => ({index: i, status: 'ok', angles: [20, 180, -60 + 10 * i, 0],
-                                signal: 1 + i, power_w: null});
-            const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));
+        got = page.evaluate("""() => {""" + SPAN_JS + """
             S.run = {state: 'running', n_total: 12, n_done: 8, plan_kind: null};
             Plot.clear();
             Backfill.early = [];                                  // connected: reading pages
@@ -341,6 +345,30 @@ def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
     assert got["held"] == 0
     assert (got["kind"], got["planKind"]) == ("in_plane", "brdf_in_plane")
     assert got["idx"] == list(range(12))
+
+
+def test_a_resumed_runs_backfill_is_plotted_with_the_points_that_follow(bench_file,
+                                                                        start_server,
+                                                                        tmp_path):
+    """The server's order of events for a resumed run, through the page's own handlers:
+    run_started (5 of 12 done), the backfill of those 5, then new points: the plot has the
+    run whole, each point once, and the log says what came back."""
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)
+        got = page.evaluate("""() => {""" + SPAN_JS + """
+            handle({type: 'run_started', data: {run_id: 'r', path: '/runs/r.h5',
+                    plan_kind: 'brdf_in_plane', n_total: 12, n_done: 5, estimated_s: 1,
+                    item_id: 1}});
+            handle({type: 'backfill', data: {run_id: 'r', path: '/runs/r.h5', n_points: 5,
+                    part: 1, parts: 1, items: span(0, 5)}});
+            handle({type: 'points', data: {items: span(5, 12)}});
+            return {idx: Plot.kept.map((k) => k.i).sort((a, b) => a - b),
+                    log: S.log.map((e) => e.text)};
+        }""")
+        assert page.errors == []
+    assert got["idx"] == list(range(12))
+    assert any("5 points stored before it was resumed" in t for t in got["log"])
 
 
 def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, start_server,
@@ -407,4 +435,31 @@ def test_the_device_table_has_the_cameras_settings_and_during_a_run_its_frames_e
             return document.getElementById('camera-row').innerText;
         }""")
         assert "exposure 1234.5 µs" in row and "run controls it" in row
+        assert page.errors == []
+
+
+def test_an_operator_sets_a_device_from_the_device_table(bench_file, start_server,
+                                                          tmp_path):
+    server = start_server(bench_file())
+    with chromium(tmp_path / "profile") as page:
+        sign_in(page, server.url, None)  # loopback without keys: the local admin
+        page.wait_for_selector("#device-filter_wheel")
+        assert "slot 1" in page.inner_text("#device-filter_wheel")
+        assert " W" in page.inner_text("#device-power_meter")  # the meter has its row
+        page.select_option("#device-role", "filter_wheel")
+        page.select_option("#device-field", "position")
+        page.fill("#device-value", "3")
+        page.wait_for_function("() => !document.getElementById('device-apply').disabled")
+        page.click("#device-apply")
+        page.wait_for_function("() => document.getElementById('device-filter_wheel')"
+                               ".innerText.includes('slot 3')")
+        page.wait_for_function("() => [...document.querySelectorAll('#log li')]"
+                               ".some(li => li.innerText.includes('position=3 done'))")
+        # refused before anything is sent: the field is named
+        page.fill("#device-value", "9")
+        page.wait_for_function("() => !document.getElementById('device-apply').disabled")
+        page.click("#device-apply")
+        page.wait_for_function("() => document.getElementById('command-result')"
+                               ".innerText.includes('filter_wheel.position')")
+        assert "slot 3" in page.inner_text("#device-filter_wheel")
         assert page.errors == []

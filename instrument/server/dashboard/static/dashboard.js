@@ -21,7 +21,14 @@ const SEEN_MAX = 10000;
 const MARKERS_UP_TO = 600;   // plans up to this many points get a marker per point (as the GUI)
 const PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f",
                  "#4e342e", "#ad1457"];
-const OPERATOR_WORK = "pause, resume, abort, answer faults, press Stop all and change the queue";
+const OPERATOR_WORK = "pause, resume, abort, answer faults, press Stop all, change the queue " +
+  "and set devices";
+// What a client may set on each kind of device (instrument/server/device_settings.py).
+const DEVICE_FIELDS = {
+  lockin: ["sensitivity_v", "time_constant_s", "reference_source", "auto_range"],
+  filter_wheel: ["position", "speed"],
+  power_meter: ["wavelength_nm", "averaging", "auto_range", "zero"],
+};
 
 const $ = (id) => document.getElementById(id);
 
@@ -36,6 +43,7 @@ const S = {
   queue: {running: false, items: []},
   control: {holder: null, until: null},
   devices: null,
+  settings: {},        // device-settings requests not yet ended, by role
   units: {},
   frame: null,
   log: [],
@@ -159,6 +167,10 @@ function handle(msg) {
              d.n_total + " points" + (d.n_done ? ", " + d.n_done + " already done" : "") + ")");
       loadRuns();
       break;
+    case "backfill":   // a resumed run's points from before its resumption
+      if (d.part === 1) addLog("info", "the run's " + d.n_points + " points stored before " +
+                               "it was resumed");
+      // falls through: drawn as points are
     case "points":
       if (Backfill.holds(d.items)) break;
       if (S.run && !S.run.plan_kind) Plot.guess(d.items);
@@ -216,6 +228,15 @@ function handle(msg) {
       break;
     case "devices":
       S.devices = d;
+      break;
+    case "device_settings":   // applying, then done, failed or cancelled
+      if (d.state === "applying") S.settings[d.device] = d;
+      else {
+        if (S.settings[d.device] && S.settings[d.device].request_id === d.request_id) {
+          delete S.settings[d.device];
+        }
+        addLog(d.state === "done" ? "info" : "error", d.who + ": " + d.message);
+      }
       break;
     case "frame":
       S.frame = d;
@@ -566,6 +587,10 @@ function renderButtons() {
        (!alive && head && head.resumable), "nothing to resume");
   gate("abort", alive, "no run is going on");
   gate("stop-all", !!(S.status && S.status.connected), "no bench is connected", false);
+  const idle = !!(S.devices && S.devices.owner === "idle") && !S.queue.running;
+  gate("device-apply", idle && !S.settings[$("device-role").value],
+       S.settings[$("device-role").value] ? "a change of this device is being applied"
+       : "devices are set between runs, with the queue stopped");
   gate("queue-add", true, "");
   gate("plan-file", true, "");
   gate("queue-start", !S.queue.running, "the queue is running");
@@ -632,14 +657,77 @@ function renderDevices() {
     cell(tr, (a.moving ? "moving" : "still") + (a.homed ? "" : ", not homed"));
   }
   cameraRow(body, d);
+  for (const [role, s] of Object.entries(d.states || {})) deviceRow(body, role, s);
+  deviceChoices(d.states || {});
   $("light").textContent = "light: " + (d.light === null ? (d.owner === "run" ? "run controls it" : "—")
                                         : d.light ? "on" : "off") +
     " · bench " + (d.owner === "run" ? "owned by the run" : "idle");
 }
 
+// The lock-in's, filter wheel's and power meter's states (read between runs; during a run
+// the state read before it), and a change of their settings in progress.
+function deviceRow(body, role, s) {
+  const v = s.values || {};
+  const tr = body.insertRow();
+  tr.id = "device-" + role;
+  cell(tr, role);
+  let reading = "—", state = "";
+  if (s.kind === "lockin") {
+    reading = v.r_v === null || v.r_v === undefined ? "R —" : "R " + num(v.r_v) + " V";
+    state = "range " + num(v.sensitivity_v) + " V, τ " + num(v.time_constant_s) + " s, " + v.reference;
+  } else if (s.kind === "filter_wheel") {
+    reading = "slot " + v.position;
+    state = "speed " + v.speed;
+  } else if (s.kind === "power_meter") {
+    reading = v.power_w === null || v.power_w === undefined ? "—" : num(v.power_w) + " W";
+    state = "at " + num(v.wavelength_nm) + " nm";
+  }
+  if (s.error) state += " · " + s.error;
+  const pending = S.settings[role];
+  if (pending) state += " · applying… (request " + pending.request_id + ", " + pending.who + ")";
+  cell(tr, reading, "num");
+  cell(tr, state);
+}
+
+function deviceChoices(states) {   // the form's devices and their fields, kept as chosen
+  const roles = Object.keys(states).filter((r) => DEVICE_FIELDS[states[r].kind]);
+  const sel = $("device-role");
+  if (sel.dataset.roles !== roles.join(",")) {
+    const keep = sel.value;
+    sel.innerHTML = "";
+    for (const r of roles) sel.add(new Option(r, r));
+    if (roles.includes(keep)) sel.value = keep;
+    sel.dataset.roles = roles.join(",");
+  }
+  const kind = states[sel.value] ? states[sel.value].kind : "";
+  const fields = DEVICE_FIELDS[kind] || [];
+  const box = $("device-field");
+  if (box.dataset.kind !== kind) {
+    box.innerHTML = "";
+    for (const f of fields) box.add(new Option(f, f));
+    box.dataset.kind = kind;
+  }
+}
+
+function settingValue(text) {   // as JSON carries it: true/false, a number, else the text
+  const t = text.trim();
+  if (t === "true" || t === "false") return t === "true";
+  if (t !== "" && !isNaN(Number(t))) return Number(t);
+  return t;
+}
+
+async function setDevice() {
+  const role = $("device-role").value, field = $("device-field").value;
+  if (!role || !field) return;
+  const value = settingValue($("device-value").value);
+  // "applying…" comes with the server's applying event (published before this answer;
+  // its end may even arrive first on a fast device), never from the answer itself
+  await command("set " + role + " " + field, "/bench/devices/" + encodeURIComponent(role) +
+                "/settings", {changes: {[field]: value}});
+}
+
 // The camera's settings come with the idle bench's devices messages; during a run the
-// run sets them, and the latest frame says the exposure it was taken with. (The power
-// meter's state is in no message: it has no row.)
+// run sets them, and the latest frame says the exposure it was taken with.
 function cameraRow(body, d) {
   let reading = null, state = "";
   if (d.owner === "run") {
@@ -815,6 +903,9 @@ function wire() {
     if (confirm("Abort the run? It stays at the head of the queue, resumable.")) command("abort", "/run/abort");
   };
   $("stop-all").onclick = () => command("stop all", "/bench/stop-all");
+  $("device-apply").onclick = setDevice;
+  $("device-role").onchange = () => { deviceChoices(S.devices ? S.devices.states || {} : {});
+                                      S.dirty = true; };
   $("answer-retry").onclick = () => command("retry", "/run/resume", {answer: "retry"});
   $("answer-skip").onclick = () => command("skip", "/run/resume", {answer: "skip"});
   $("answer-abort").onclick = () => command("abort", "/run/abort");
