@@ -333,6 +333,9 @@ def detection_table(pairs: list[tuple[float, bool]]) -> list[str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--first-seed", type=int, default=1,
+                    help="seeds run are first-seed … first-seed + seeds − 1 (to split a run "
+                         "over processes)")
     ap.add_argument("--empty-seeds", type=int, default=None,
                     help="seeds of the empty scene (default --seeds; cheap: no render)")
     ap.add_argument("--walls", nargs="*", default=None, help="wall names (default all)")
@@ -369,7 +372,7 @@ def main() -> None:
                        else args.seeds)
             # --report tabulates every seed stored, however many
             seeds = (sorted(sd for (w, sc, sd) in done if (w, sc) == (wname, sname))
-                     if args.report else range(1, n_seeds + 1))
+                     if args.report else range(args.first_seed, args.first_seed + n_seeds))
             for seed in seeds:
                 rec = done.get((wname, sname, seed))
                 if rec is None and args.report:
