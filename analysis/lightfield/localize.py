@@ -594,6 +594,33 @@ def _inseparable_notes(cands: list[_Candidate], res: list[Resolution]) -> list[s
     return out
 
 
+def _side_by_side(
+    cands: list[_Candidate], tests: dict[tuple[int, int], Any], blur_at: Any
+) -> tuple[list[_Candidate], list[str]]:
+    """Flag "unresolved" each pair of components on one line of sight (within one
+    transverse blur across, ``blur_at(z)`` at the nearer one's depth, depth intervals
+    overlapping) that its test of one against two (:func:`.extended.one_or_two`, ``tests``
+    by index pair) judged two points but fitted side by side, more than a blur apart
+    across: the search's arrangement is not the data's.  Returns the candidates and one
+    note per such pair naming both arrangements."""
+    out, notes = list(cands), []
+    for (i, j), t in tests.items():
+        ci, cj = cands[i], cands[j]
+        blur = float(blur_at(max(ci.z, cj.z)))
+        on_sight = (abs(ci.y - cj.y) <= blur and ci.interval[0] <= cj.interval[1]
+                    and cj.interval[0] <= ci.interval[1])
+        if t.extended or not on_sight or abs(t.points_mm[1, 0] - t.points_mm[0, 0]) <= blur:
+            continue
+        (y1, z1), (y2, z2) = t.points_mm
+        notes.append(f"the components at ({ci.y:.1f}, {ci.z:.1f}) and ({cj.y:.1f}, {cj.z:.1f}) "
+                     f"mm, on one line of sight, fit better as two points side by side at "
+                     f"({y1:.1f}, {z1:.1f}) and ({y2:.1f}, {z2:.1f}) mm: their depths are "
+                     f"flagged unresolved")
+        out[i] = _replace_quality(out[i], "unresolved")
+        out[j] = _replace_quality(out[j], "unresolved")
+    return out, notes
+
+
 def detect_objects(
     lf_wall: LightField2D,
     *,
@@ -1099,17 +1126,9 @@ def detect_objects(
         across_mm=[resolution(max(cands[i].z, cands[j].z)).transverse_mm for i, j in pairs])
     # two points on one line of sight that fit better side by side (the test's fit started
     # across): the search's arrangement is not the data's — flagged, never "resolved"
-    for (i, j), t in pair_tests.items():
-        if (not t.extended and sightline(cands[i], cands[j])
-                and abs(t.points_mm[1, 0] - t.points_mm[0, 0])
-                > resolution(max(cands[i].z, cands[j].z)).transverse_mm):
-            (y1, z1), (y2, z2) = t.points_mm
-            notes.append(f"the components at ({cands[i].y:.1f}, {cands[i].z:.1f}) and "
-                         f"({cands[j].y:.1f}, {cands[j].z:.1f}) mm, on one line of sight, "
-                         f"fit better as two points side by side at ({y1:.1f}, {z1:.1f}) and "
-                         f"({y2:.1f}, {z2:.1f}) mm: their depths are flagged unresolved")
-            cands[i] = _replace_quality(cands[i], "unresolved")
-            cands[j] = _replace_quality(cands[j], "unresolved")
+    cands, side_notes = _side_by_side(cands, pair_tests,
+                                      lambda z: resolution(z).transverse_mm)
+    notes += side_notes
     for line in sight:
         if len(line) > 1:
             joined = [gr for gr in groups if set(gr) & set(line)]
