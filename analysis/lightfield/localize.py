@@ -701,9 +701,9 @@ def detect_objects(
     strongest peak) is then off unless given; without ``noise_power`` it defaults to 0.3
     and no significance is computed (NaN).
     """
-    from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
     from dataclasses import replace
 
+    from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
     from .significance import (
         amplitude_fit,
         depth_span,
@@ -951,7 +951,7 @@ def detect_objects(
             cell_q = r_c.depth_mm / c.z**2
 
             def minus_sig(u: NDArray[Any], c: _Candidate = c, r_c: Resolution = r_c,
-                          cell_q: float = cell_q) -> float:
+                          cell_q: float = cell_q, fixed: NDArray[Any] = fixed) -> float:
                 # (u0, u1): offsets in cells, δy across and δz/D² in inverse depth
                 yt = c.y + u[0] * r_c.transverse_mm
                 zt = -1.0 / (1.0 / abs(c.z) + u[1] * cell_q)

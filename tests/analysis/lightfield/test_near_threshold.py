@@ -37,7 +37,7 @@ def test_a_bright_object_keeps_the_depths_within_the_threshold_chi2():
     lo, hi = _bounds(40.0, 4.4)
     prof = _profile(-200.0, 60.0)
     floor = 1.0 - (4.4 / 40.0) ** 2
-    idx = np.flatnonzero((ZS >= lo) & (ZS <= hi))
+    idx = np.flatnonzero((lo <= ZS) & (hi >= ZS))
     assert np.all(prof[idx] ** 2 >= floor)
     # the grid points just outside are excluded by the same Δχ² bound
     assert prof[idx[0] - 1] ** 2 < floor and prof[idx[-1] + 1] ** 2 < floor
@@ -81,9 +81,7 @@ def test_a_dim_object_above_the_threshold_at_its_place_is_found_beside_a_bright_
     bench.score(det, objects, bench.blur_of(p_hat, solvable), s)
     assert det.count == 2 and s.detected == 2 and s.confidently_wrong == 0
     k = int(np.argmin(det.significance))
-    y, z = det.positions_mm[k]
-    r = det.resolutions[k]
-    assert abs(y - 20.0) < r.transverse_mm
+    assert abs(det.positions_mm[k, 0] - 20.0) < det.resolutions[k].transverse_mm
     far, near = det.depth_interval_mm[k]
     assert far <= -220.0 <= near
     assert det.brightness_rp[k] > 0
