@@ -936,7 +936,10 @@ def detect_objects(
         found, rest = list(found), []
         fixed = np.asarray([(o.y, o.z) for o in found], dtype=float).reshape(-1, 2)
         for c, sg in weaker:
-            if not s_star - RESCUE_MARGIN <= sg < s_star or unresolvable(c, found):
+            # within two cells of a reported object the two responses overlap: moving the
+            # candidate there would share that object's light, not find a second one
+            if (not s_star - RESCUE_MARGIN <= sg < s_star
+                    or any(near(c, o, EXTENDED_RANGE) for o in found)):
                 rest.append((c, sg))
                 continue
             # a sub-cell move is judged by the point model only where that model explains
@@ -955,20 +958,23 @@ def detect_objects(
                 # (u0, u1): offsets in cells, δy across and δz/D² in inverse depth
                 yt = c.y + u[0] * r_c.transverse_mm
                 zt = -1.0 / (1.0 / abs(c.z) + u[1] * cell_q)
-                if not (abs(u[0]) <= 1.0 and abs(u[1]) <= 2.0 and box[0][0] <= yt <= box[0][1]
+                if not (abs(u[0]) <= 0.5 and abs(u[1]) <= 1.0 and box[0][0] <= yt <= box[0][1]
                         and box[1][0] <= zt <= box[1][1]):
                     return 0.0
                 amp_t, sig_t, _ = assess(np.vstack([fixed, [(yt, zt)]]))
-                return -float(sig_t[-1]) if amp_t[-1] > 0 else 0.0
+                # never by taking a reported object's light: each must still clear it
+                if amp_t[-1] <= 0 or np.any(sig_t[:-1] < s_star):
+                    return 0.0
+                return -float(sig_t[-1])
 
             # a coarse grid over the cell, then the simplex from its best point (both
             # deterministic)
-            grid = [(u0, u1) for u0 in (-0.5, 0.0, 0.5) for u1 in (-1.0, -0.5, 0.0, 0.5, 1.0)]
+            grid = [(u0, u1) for u0 in (-0.25, 0.0, 0.25) for u1 in (-0.5, 0.0, 0.5)]
             start = min(grid, key=lambda u: minus_sig(np.asarray(u)))
             opt = minimize(minus_sig, np.asarray(start, dtype=float), method="Nelder-Mead",
                            options={"xatol": 0.02, "fatol": 1e-3, "maxfev": 60,
                                     "initial_simplex": np.asarray(start) + np.array(
-                                        [[0.0, 0.0], [0.25, 0.0], [0.0, 0.5]])})
+                                        [[0.0, 0.0], [0.125, 0.0], [0.0, 0.25]])})
             best = -float(opt.fun)
             y1 = c.y + float(opt.x[0]) * r_c.transverse_mm
             z1 = -1.0 / (1.0 / abs(c.z) + float(opt.x[1]) * cell_q)
