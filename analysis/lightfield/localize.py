@@ -454,9 +454,10 @@ MAX_EXAMINED = 3 * MAX_BELOW
 #: and beside a bright object that peak is pulled off the dim one's position by the bright
 #: one's model mismatch (behind the brushed metal a 100× dimmer disc scored 4.1σ at
 #: (17.8, −208) mm against a 4.5σ threshold; at its true (20, −220) mm the same fit gives
-#: 4.7σ).  The fitted position only moves the candidate to the maximum of the likelihood
-#: the threshold already assumes is taken over every cell, so the false-alarm rate keeps
-#: its meaning; candidates further below cannot clear the threshold by a sub-cell move.
+#: 4.7σ, and at (20.1, −215.2) mm, within its cell, 4.8σ).  The move stays inside the
+#: candidate's own resolution cell, whose maximum the threshold already counts (one trial a
+#: cell), so the false-alarm rate keeps its meaning; a wider move (±1 δy, ±2 δz/D²) let a
+#: candidate behind the glossy paper take a dim object's light 15 mm away.
 RESCUE_MARGIN = 1.0
 
 #: Residual power over the noise's beyond which the point-source model is not trusted for
@@ -928,9 +929,9 @@ def detect_objects(
     def rescue(found: list[_Candidate], weaker: list[tuple[_Candidate, float]]
                ) -> tuple[list[_Candidate], list[tuple[_Candidate, float]]]:
         """Candidates within :data:`RESCUE_MARGIN` below the threshold, their significance
-        maximised over positions within one resolution cell (δy across, 2 δz/D² in inverse
-        depth; the others held where they were found): those that clear the threshold
-        there join the objects, at that position."""
+        maximised over their own resolution cell (±½ δy across, ±1 δz/D² in inverse depth;
+        the reported objects held where they were found, each still clearing the
+        threshold): those that clear it there join the objects, at that position."""
         from scipy.optimize import minimize
 
         found, rest = list(found), []
