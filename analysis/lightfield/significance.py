@@ -51,6 +51,7 @@ from .spectral import coefficients
 __all__ = [
     "AmplitudeFit",
     "amplitude_fit",
+    "depth_span",
     "false_alarm_probability",
     "snr_threshold",
     "with_leak",
@@ -131,6 +132,39 @@ def with_leak(fit: AmplitudeFit, responses: NDArray[Any], share: float) -> NDArr
     np.fill_diagonal(leak, 0.0)
     sd = np.hypot(fit.sigma, share * leak.sum(axis=1))
     return fit.amplitudes / np.where(sd > 0, sd, np.inf)
+
+
+def depth_span(
+    profile: ArrayLike, i_ref: int, significance: float, threshold: float
+) -> tuple[int, int]:
+    """Indices bounding the depths an object's data do not exclude at the detection's own
+    confidence: the contiguous run around ``i_ref`` where ``Δχ²(z) = s² − s(z)² < s*²``.
+
+    ``profile`` (N_z,) is the data's normalised matched filter along the object's line of
+    sight (profiled over y; the point-source likelihood statistic, whose square is the χ²
+    a point there removes), ``significance`` s the object's, ``threshold`` s* the scan's.
+    The significance at depth z is taken as ``s(z) = s · profile(z)/profile(i_ref)`` (the
+    statistic in units of its noise, which is the same at every trial point for a
+    unit-norm kernel).  The bound ``s*²`` is the profile-likelihood interval (Wilks 1938:
+    Δχ² of the profiled parameter) at the confidence the detection claims: an object at
+    the threshold has no depth the data exclude, while a bright one (s ≫ s*) keeps
+    ``profile/profile(i_ref) ≥ √(1 − (s*/s)²)``, a fraction of a resolution cell.
+    (Behind the glossy paper a dim disc at 4.8σ against 4.2σ was placed 1.4 depth cells from
+    its true depth, where the data still gave 2.8σ: Δχ² = 15 < s*² = 17.6.)
+    """
+    v = np.asarray(profile, dtype=float)
+    ref = float(v[i_ref])
+    if not (ref > 0 and np.isfinite(significance) and np.isfinite(threshold)):
+        return i_ref, i_ref
+    floor = max(1.0 - (threshold / significance) ** 2, 0.0) if significance > 0 else 0.0
+    ratio = v / ref
+    inside = (ratio > 0) & (ratio * ratio >= floor)
+    lo = hi = i_ref
+    while lo > 0 and inside[lo - 1]:
+        lo -= 1
+    while hi < v.size - 1 and inside[hi + 1]:
+        hi += 1
+    return lo, hi
 
 
 def snr_threshold(false_alarm_per_scan: float, n_cells: float) -> float:

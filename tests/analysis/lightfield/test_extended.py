@@ -149,3 +149,28 @@ def test_a_pair_side_by_side_seen_in_depth_stays_two_at_its_true_places(seed):
     assert not t.extended and t.statistic > t.penalty
     assert np.allclose(np.sort(t.points_mm[:, 0]), [-9.0, 9.0], atol=0.5)
     assert np.allclose(t.points_mm[:, 1], -D1, atol=5.0)
+
+
+def test_two_components_on_one_line_of_sight_that_fit_better_side_by_side_are_flagged():
+    """The pair 18 mm apart side by side, left by the search as two "resolved" components
+    on one line of sight (ON_SIGHT, depth intervals overlapping): its test fits two points
+    across, more than a blur apart, so both depths are flagged unresolved and a note names
+    both arrangements (ADR 0032, "Line of sight and across")."""
+    from analysis.lightfield.localize import _Candidate, _side_by_side
+
+    t = _synthetic("two", 2e-4, 1, start=ON_SIGHT, across_mm=16.0)
+    assert not t.extended
+
+    def cand(y, z):
+        return _Candidate(y, z, "resolved", (z, z, z), (z - 40.0, z + 40.0), np.zeros(0), None)
+
+    on_sight = [cand(*ON_SIGHT[0]), cand(*ON_SIGHT[1])]
+    out, notes = _side_by_side(on_sight, {(0, 1): t}, lambda z: 16.0)
+    assert [c.quality for c in out] == ["unresolved", "unresolved"]
+    (note,) = notes
+    assert "side by side" in note and "flagged unresolved" in note
+    # the same test on components already side by side (not on one line of sight), or
+    # with a blur wider than the fitted pair, flags nothing
+    apart = [cand(-9.0, -D1), cand(9.0, -D1)]
+    assert _side_by_side(apart, {(0, 1): t}, lambda z: 16.0)[1] == []
+    assert _side_by_side(on_sight, {(0, 1): t}, lambda z: 20.0)[1] == []
