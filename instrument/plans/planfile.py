@@ -80,8 +80,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
-from instrument.bench.profile import AXIS_ROLES, FieldError, ProfileError, _Validator
+from instrument.bench.profile import AXIS_ROLES, FieldError, _Validator
 from instrument.plans.commands import DARK_POLICIES, DETECTORS, MODES, AcquisitionPolicy
+from instrument.plans.errors import PlanError
 from instrument.plans.polarimetry import parse_polarimetry
 from instrument.plans.ranges import FloatRange
 
@@ -97,10 +98,6 @@ KNOWN_BRDF_MODELS = ("phong", "lambertian", "mirror")
 ORDERS = ("optimised", "raster")
 #: The largest point count a plan may expand to (protects against typos like step=1e-6).
 MAX_POINTS = 1_000_000
-
-
-class PlanError(ProfileError):
-    """A plan file failed validation; ``errors`` lists every offending field."""
 
 
 @dataclass(frozen=True)

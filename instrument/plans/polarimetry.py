@@ -38,6 +38,7 @@ from typing import Any
 from instrument.bench.optics import OpticalTrain
 from instrument.bench.profile import BenchProfile, FieldError, _Validator
 from instrument.plans.commands import ScanPoint
+from instrument.plans.errors import PlanError
 
 __all__ = ["DEFAULT_STEPS", "FAR_FROM_OPTIMUM", "MIN_STEPS", "POLARIMETRY_KINDS", "Conditioning",
            "conditioning", "parse_polarimetry", "plan_wavelengths", "polarimetry_axis"]
@@ -120,7 +121,6 @@ def _kappa(steps: int, ratio: float, psg_deg: float, psa_deg: float) -> float:
 
 def _train(profile: BenchProfile) -> OpticalTrain:
     """The profile's train with a retarder on a mount in each arm, or a PlanError."""
-    from instrument.plans.planfile import PlanError
 
     optics = profile.optics
     problems = []
@@ -187,7 +187,6 @@ def polarimetry_axis(pol: dict[str, Any], profile: BenchProfile, body: list[Scan
         steps make the instrument matrix singular.
     """
     from analysis.polarimetry.drr import drr_angles
-    from instrument.plans.planfile import PlanError
 
     train = _train(profile)
     steps, ratio = int(pol["steps"]), float(pol["ratio"])
@@ -216,7 +215,6 @@ def polarimetry_axis(pol: dict[str, Any], profile: BenchProfile, body: list[Scan
 
 
 def _check_limits(profile: BenchProfile, targets: list[dict[str, float]]) -> None:
-    from instrument.plans.planfile import PlanError
 
     errors = []
     for role in dict.fromkeys(r for t in targets for r in t):

@@ -74,8 +74,10 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
     examples = Path(__file__).resolve().parents[3] / "examples"
     benches = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
                "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
-               "brdf_inplane_spin": str(examples / "bench_sim_laser.toml")}
+               "brdf_inplane_spin": str(examples / "bench_sim_laser.toml"),
+               "brdf_polarimetric": "sim-polarimetric"}
     directional = {"brdf_inplane", "brdf_inplane_spin", "brdf_lobe", "brdf_hemisphere",
+                   "brdf_polarimetric",
                    "calibration_reference",
                    "calibration_signature", "brdf_spectral_lockin", "calibration_nd"}
     names = sorted(p.stem for p in examples.glob("*.toml")
