@@ -162,8 +162,8 @@ def path_bounds(geometry: GeometrySpec, here: np.ndarray, there: np.ndarray,
     delta = separation_deg(kin, {r: poses[..., k] for k, r in enumerate(TYPE_I_AXES)})
     travel = np.abs(np.diff(poses, axis=1)).sum(axis=2)        # (K, segments)
     need = src.half_width_deg + det.half_width_deg + sample_step_deg(geometry) / 2
-    clear: np.ndarray = ((delta[:, :-1] + delta[:, 1:] - travel) / 2 >= need).all(axis=1)
-    blocked: np.ndarray = (delta < need - sample_step_deg(geometry) / 2).any(axis=1)
+    clear: np.ndarray = np.all((delta[:, :-1] + delta[:, 1:] - travel) / 2 >= need, axis=1)
+    blocked: np.ndarray = np.any(delta < need - sample_step_deg(geometry) / 2, axis=1)
     return clear, blocked
 
 
