@@ -18,7 +18,9 @@ import gc
 import tempfile
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 from PySide6.QtCore import QEvent, QSettings
 from PySide6.QtWidgets import QApplication
@@ -84,6 +86,12 @@ def _settle(seconds: float = 0.3) -> None:
         time.sleep(0.01)
 
 
+def _arrived(session: Any, role: str, target: float) -> bool:
+    """Whether ``role`` stands at ``target`` (its read-back), no longer moving."""
+    state = session.states()[role]
+    return bool(abs(state.value("position") - target) < 0.01 and not state.value("moving"))
+
+
 def _grab(window: MainWindow, dock: str, path: Path) -> Path:
     d = window.docks[dock]
     d.show()
@@ -124,8 +132,7 @@ def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
                           for r in axes), 120, "homing")
         for role, target in pose.items():  # one after the other: each passes the guard
             s.submit(MoveTo(role, target))
-            _wait(lambda r=role, t=target: abs(s.states()[r].value("position") - t) < 0.01
-                  and not s.states()[r].value("moving"), 60, f"the move of {role}")
+            _wait(partial(_arrived, s, role, target), 60, f"the move of {role}")
         s.submit(SetLight(True))
         _wait(lambda: s.states()["source"].value("on") is True, 20, "the light")
         _settle(0.8)
