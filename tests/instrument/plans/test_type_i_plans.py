@@ -18,6 +18,7 @@ from instrument.bench.profile import load_profile, parse_profile
 from instrument.plans.build import build_plan
 from instrument.plans.planfile import load_plan, parse_plan
 from tests.instrument import tomlw
+from tests.instrument.bench.test_spectral_bench import LOCKIN_PLAN
 
 ROOT = Path(__file__).resolve().parents[3]
 TYPE_I = load_profile("sim-type-i")
@@ -174,23 +175,8 @@ def test_the_estimate_counts_the_legs_of_split_moves():
     assert routed > concurrent  # the README's plan has moves past the source arm
 
 
-SPECTRAL_RUN = """
-[plan]
-kind = "brdf_in_plane"
-name = "spectral, both goniometer types"
-[sample]
-name = "spectral"
-[scan]
-theta_i = [30]
-theta_r = [-50, 10, 45]
-[acquisition]
-detectors = ["lockin"]
-dark = "none"
-frames = 2
-[spectral]
-filters = [1, 3]
-order = "motion"
-"""
+#: The spectral bench's lock-in scan with a wavelength axis of two filters.
+SPECTRAL_RUN = LOCKIN_PLAN + '[spectral]\nfilters = [1, 3]\norder = "motion"\n'
 
 
 @pytest.mark.slow
@@ -219,10 +205,11 @@ def test_a_spectral_plan_runs_through_the_engine_on_type_i_and_reads_as_on_type_
     def readings(run):
         rows = run.brdf_rows()
         # the read-back angles, to within the stages' tolerance: θr, its side of the
-        # normal in the plane of incidence (φr ≈ 0 or 180°) and the filter
-        side = np.round(np.cos(np.radians(run.phi_r[rows]))).astype(int)
-        key = zip(np.round(run.theta_r[rows], 1), side, run.filter_position[rows],
-                  strict=True)
+        # normal in the plane of incidence (φr ≈ 0 or 180°; none at the normal) and the
+        # filter
+        theta_r = np.round(run.theta_r[rows], 1)
+        side = np.where(theta_r == 0, 0, np.round(np.cos(np.radians(run.phi_r[rows]))))
+        key = zip(theta_r, side.astype(int), run.filter_position[rows], strict=True)
         return dict(zip(key, run.lockin_r_v[rows], strict=True))
 
     on_i, on_ii = readings(runs["i"]), readings(runs["ii"])
