@@ -10,7 +10,9 @@ For each example plan on ``sim-type-i`` (and on its type (ii) twin for compariso
 * the motion time the plan's estimate gives (every move with both arms together, the
   slowest axis per step: ``Plan.estimate().motion_s``) and the motion time of the routes
   the engine will run (each leg's slowest axis, legs one after the other), both in the
-  instrument's own time (the profile's velocities, not the emulators' speed-up).
+  instrument's own time (the profile's velocities, not the emulators' speed-up);
+* on type (i), the same for the order the concurrent cost alone gives (every move both
+  arms together: the planner before the order priced routes), built in the same process.
 
     python benchmarks/bench_type_i_routes.py
 """
@@ -31,6 +33,7 @@ from instrument.bench.kinematics import TYPE_I_AXES  # noqa: E402
 from instrument.bench.profile import load_profile  # noqa: E402
 from instrument.plans.build import build_plan  # noqa: E402
 from instrument.plans.planfile import load_plan  # noqa: E402
+from instrument.plans.route_costs import RouteCosts  # noqa: E402
 
 PLANS = (("brdf_inplane.toml", "sim"), ("brdf_hemisphere.toml", "sim-out-of-plane"),
          ("brdf_lobe.toml", "sim"))
@@ -53,23 +56,38 @@ def routed_motion_s(plan) -> tuple[int, int, float]:
     return moves, split, total
 
 
+def build(spec, profile, *, price_routes: bool = True):
+    """(plan, CPU seconds of build_plan); without ``price_routes`` the order costs every
+    move as both arms together (the planner before the order priced routes)."""
+    of = RouteCosts.of
+    if not price_routes:
+        RouteCosts.of = classmethod(lambda cls, *a, **k: None)  # type: ignore[method-assign]
+    try:
+        t0 = time.process_time()
+        plan = build_plan(spec, profile)
+        return plan, time.process_time() - t0
+    finally:
+        RouteCosts.of = of  # type: ignore[method-assign]
+
+
 def main() -> None:
     print("| plan | bench | points | build CPU s | moves | split | estimate motion s | "
-          "routed motion s |")
-    print("|---|---|---|---|---|---|---|---|")
+          "routed motion s | concurrent-cost order: build CPU s, split, routed s |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for example, twin in PLANS:
         spec = load_plan(ROOT / "examples" / example)
         for bench in ("sim-type-i", twin):
             profile = load_profile(bench)
-            t0 = time.process_time()
-            plan = build_plan(spec, profile)
-            cpu = time.process_time() - t0
+            plan, cpu = build(spec, profile)
             est = plan.estimate().motion_s
             if profile.geometry.is_type_i:
                 moves, split, routed = routed_motion_s(plan)
-                tail = f"{moves} | {split} | {est:.1f} | {routed:.1f}"
+                before, cpu_b = build(spec, profile, price_routes=False)
+                _, split_b, routed_b = routed_motion_s(before)
+                tail = (f"{moves} | {split} | {est:.1f} | {routed:.1f} | {cpu_b:.2f}, "
+                        f"{split_b}, {routed_b:.1f}")
             else:
-                tail = f"{len(plan.points) - 1} | – | {est:.1f} | {est:.1f}"
+                tail = f"{len(plan.points) - 1} | – | {est:.1f} | {est:.1f} | –"
             print(f"| {example} | {bench} | {len(plan.points)} | {cpu:.2f} | {tail} |")
 
 

@@ -5,6 +5,11 @@ bench, home and move the stages, stream the camera, load a plan, run it (a pictu
 taken while it runs), fit the finished run in the browser — and saves each view with
 ``QWidget.grab()``. ``python docs/screenshots/render.py [FOLDER]`` runs it; a test renders
 them and checks that none is blank. Works offscreen (``QT_QPA_PLATFORM=offscreen``).
+
+On a type (i) bench (``--bench sim-type-i``) the stages are its four arm axes and the
+pictures are the views that differ from a type (ii) bench's, :data:`TYPE_I_VIEWS`: the
+bench panel with the arms' axes and the goniometer view of both arms over the stationary
+sample, saved with the suffix ``_type_i``.
 """
 
 from __future__ import annotations
@@ -13,7 +18,9 @@ import gc
 import tempfile
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 from PySide6.QtCore import QEvent, QSettings
 from PySide6.QtWidgets import QApplication
@@ -21,12 +28,24 @@ from PySide6.QtWidgets import QApplication
 from gui.app import create_window
 from gui.model.session import Home, MoveTo, SetLight
 from gui.qt.main_window import MainWindow
+from instrument.bench.kinematics import TYPE_I_AXES
 
-__all__ = ["VIEWS", "render_all"]
+__all__ = ["TYPE_I_VIEWS", "VIEWS", "render_all"]
 
 #: File names (without .png) of the pictures, in the order they are taken.
 VIEWS = ("bench", "goniometer", "camera", "plan_editor", "run_in_progress", "run_browser_fit",
          "main_window")
+#: The pictures of a type (i) bench (module docstring).
+TYPE_I_VIEWS = ("bench", "goniometer")
+
+#: Where the stages stand in the bench picture, by role, in the order they are moved: on
+#: a type (ii) bench the sample turned and the detector out of the beam; on a type (i)
+#: bench the source arm at θi = 40° and the detector arm near the mirror direction, its
+#: rail turned 20° out of the plane of incidence (manual moves pass the arms' guard).
+POSES = {
+    "type_ii": {"detector_theta": 50.0, "sample_theta": 25.0},
+    "type_i": {"source_arc": -20.0, "detector_arc": 25.0, "detector_azimuth": 20.0},
+}
 
 PLAN = """# the screenshots' scan: in-plane BRDF with dark frames, for a fit
 [plan]
@@ -67,6 +86,12 @@ def _settle(seconds: float = 0.3) -> None:
         time.sleep(0.01)
 
 
+def _arrived(session: Any, role: str, target: float) -> bool:
+    """Whether ``role`` stands at ``target`` (its read-back), no longer moving."""
+    state = session.states()[role]
+    return bool(abs(state.value("position") - target) < 0.01 and not state.value("moving"))
+
+
 def _grab(window: MainWindow, dock: str, path: Path) -> Path:
     d = window.docks[dock]
     d.show()
@@ -78,7 +103,8 @@ def _grab(window: MainWindow, dock: str, path: Path) -> Path:
 
 
 def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
-    """Take every picture of :data:`VIEWS` into ``out_dir``; returns name → path."""
+    """Take every picture of :data:`VIEWS` (:data:`TYPE_I_VIEWS` on a type (i) bench)
+    into ``out_dir``; returns name → path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     app = QApplication.instance() or QApplication([])
@@ -94,19 +120,23 @@ def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
         s = window.session
         _wait(lambda: s.connected and len(window.bench_panel.panels) == len(s.states())
               and bool(s.states()), 60, "the bench")
-        for role in ("sample_theta", "detector_theta", "camera_z"):
+        profile = s.profile
+        type_i = profile is not None and profile.geometry.is_type_i
+        suffix = "_type_i" if type_i else ""
+        pose = POSES["type_i" if type_i else "type_ii"]
+        axes = [r for r in (*TYPE_I_AXES, "sample_theta", "detector_theta", "camera_z")
+                if r in s.states()]
+        for role in axes:
             s.submit(Home(role))
         _wait(lambda: all(s.states()[r].value("homed") and not s.states()[r].value("moving")
-                          for r in ("sample_theta", "detector_theta", "camera_z")), 120,
-              "homing")
-        s.submit(MoveTo("detector_theta", 50.0))
-        s.submit(MoveTo("sample_theta", 25.0))
-        _wait(lambda: abs(s.states()["detector_theta"].value("position") - 50) < 0.01
-              and not s.states()["sample_theta"].value("moving"), 60, "the moves")
+                          for r in axes), 120, "homing")
+        for role, target in pose.items():  # one after the other: each passes the guard
+            s.submit(MoveTo(role, target))
+            _wait(partial(_arrived, s, role, target), 60, f"the move of {role}")
         s.submit(SetLight(True))
         _wait(lambda: s.states()["source"].value("on") is True, 20, "the light")
         _settle(0.8)
-        shots["bench"] = _grab(window, "bench", out / "bench.png")
+        shots["bench"] = _grab(window, "bench", out / f"bench{suffix}.png")
 
         plan_path = work / "screenshot_plan.toml"
         plan_path.write_text(PLAN, encoding="utf-8")
@@ -115,7 +145,9 @@ def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
         _wait(lambda: editor.validation is not None and editor.validation.ok, 60,
               "the plan's validation")
         _settle(0.5)
-        shots["goniometer"] = _grab(window, "goniometer", out / "goniometer.png")
+        shots["goniometer"] = _grab(window, "goniometer", out / f"goniometer{suffix}.png")
+        if type_i:
+            return shots
 
         cam = window.camera
         cam.stream.click()
@@ -168,10 +200,11 @@ def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
     return shots
 
 
-def main(out_dir: str | None = None) -> int:
-    """Render the screenshots into ``out_dir`` (default: ``docs/screenshots``)."""
+def main(out_dir: str | None = None, bench: str = "sim") -> int:
+    """Render the screenshots of ``bench`` into ``out_dir`` (default:
+    ``docs/screenshots``)."""
     folder = Path(out_dir) if out_dir else Path(__file__).resolve().parents[1] / "docs" / \
         "screenshots"
-    for name, path in render_all(folder).items():
+    for name, path in render_all(folder, bench=bench).items():
         print(f"{name}: {path}")
     return 0

@@ -1,5 +1,7 @@
 """Render the screenshots on the simulated bench: ``python docs/screenshots/render.py
-[FOLDER] [--only gui|dashboard]`` (default: this folder, both).
+[FOLDER] [--only gui|dashboard] [--bench sim-type-i]`` (default: this folder, both).
+``--bench sim-type-i`` renders the GUI's type (i) pictures only (``bench_type_i.png``,
+``goniometer_type_i.png``).
 
 The GUI's pictures (offscreen: ``QT_QPA_PLATFORM=offscreen``), then the bench server's web
 dashboard in a headless Chromium (Debian's ``chromium`` package, driven by Playwright).
@@ -16,11 +18,13 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("folder", nargs="?", default=str(Path(__file__).resolve().parent))
     p.add_argument("--only", choices=("gui", "dashboard"), default=None)
+    p.add_argument("--bench", choices=("sim", "sim-type-i"), default="sim",
+                   help="sim-type-i: the GUI's type (i) pictures only")
     args = p.parse_args(argv)
     if args.only in (None, "gui"):
         from gui.screenshots import main as render_gui
-        render_gui(args.folder)
-    if args.only in (None, "dashboard"):
+        render_gui(args.folder, args.bench)
+    if args.only in (None, "dashboard") and args.bench == "sim":
         from instrument.server.dashboard.chromium import chromium_missing
         from instrument.server.dashboard.screenshots import render_dashboard
         if (why := chromium_missing()) is not None:

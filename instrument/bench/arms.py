@@ -38,12 +38,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from instrument.bench.dynamics import AxisDynamics, move_progress, move_time, step_time
+from instrument.bench.dynamics import (
+    AxisDynamics,
+    move_progress,
+    move_time,
+    move_times,
+    moves_progress,
+    step_time,
+)
 from instrument.bench.kinematics import TYPE_I_AXES, TypeIKinematics, kinematics_of
 from instrument.bench.profile import ArmSpec, GeometrySpec
 
-__all__ = ["ARM_RULES", "PathCheck", "Route", "arm_violations", "path_clear", "safe_route",
-           "separation_deg"]
+__all__ = ["ARM_RULES", "BOUND_SEGMENTS", "PathCheck", "Route", "arm_violations", "path_bounds",
+           "path_clear", "safe_route", "sample_step_deg", "separation_deg"]
 
 #: The rules a type (i) pose can break near the source direction (a plan's
 #: ``skip_beam_points`` drops such points, as it drops the type (ii) beam cone).
@@ -51,6 +58,8 @@ ARM_RULES = ("arms", "beam", "view")
 #: Largest head movement (degrees) between two samples of a path; smaller when the arms
 #: are narrow (a quarter of the narrower head's half-width).
 MAX_STEP_DEG = 0.5
+#: Stretches of a path :func:`path_bounds` bounds before :func:`path_clear` samples it.
+BOUND_SEGMENTS = 64
 #: Azimuth detours :func:`safe_route` tries (degrees aside, either way).
 DETOURS_DEG = (20.0, 45.0, 90.0)
 
@@ -113,6 +122,51 @@ def arm_violations(geometry: GeometrySpec, pose: Mapping[str, float], *, light: 
     return out
 
 
+def sample_step_deg(geometry: GeometrySpec) -> float:
+    """ε of the module docstring: the largest head movement between two samples of a
+    path (:data:`MAX_STEP_DEG`, or a quarter of the narrower head's half-width)."""
+    src, det = _arms(geometry)
+    return min(MAX_STEP_DEG, min(src.half_width_deg, det.half_width_deg) / 4)
+
+
+def path_bounds(geometry: GeometrySpec, here: np.ndarray, there: np.ndarray,
+                dynamics: Mapping[str, AxisDynamics] | None = None, *,
+                segments: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Which moves ``here[k]`` → ``there[k]`` (arm axes in :data:`TYPE_I_AXES` order,
+    shape (K, 4)) :func:`path_clear` would find clear, and which it would find blocked,
+    each proven without its fine sampling (neither: sample the path).
+
+    δ is 1-Lipschitz in each head's direction, and a head whose arc turns by Δa and
+    azimuth by Δϕ (each monotonic) travels at most |Δa| + |Δϕ| on the sphere (its speed²
+    is ȧ² + sin²a ϕ̇²). Over a stretch of the path from pose A to pose B, with L the two
+    heads' bound and s the part travelled, δ ≥ max(δ_A − s, δ_B − (L − s)) ≥
+    (δ_A + δ_B − L)/2. The timed path (``dynamics``) is cut into ``segments`` stretches
+    of equal time (without ``dynamics``: one, the whole move); at or above the sampled
+    check's threshold α_s + α_d + ε/2 on every stretch, every sample passes it. Blocked:
+    a pose of the path with δ below the threshold less ε/2; the fine sampling has a
+    sample within ε/2 of head travel of it, below the threshold."""
+    src, det = _arms(geometry)
+    kin = kinematics_of(geometry)
+    assert isinstance(kin, TypeIKinematics)
+    a, b = np.asarray(here, float), np.asarray(there, float)
+    if dynamics is None or segments <= 1:
+        poses = np.stack([a, b], axis=1)                        # (K, 2, 4)
+    else:
+        dist = b - a
+        ends = np.stack([move_times(dist[:, k], dynamics[r])
+                         - np.where(dist[:, k] != 0, dynamics[r].settle_s, 0.0)
+                         for k, r in enumerate(TYPE_I_AXES)], axis=1).max(axis=1)
+        t = ends[:, None] * np.linspace(0.0, 1.0, segments + 1)[None, :]
+        poses = np.stack([a[:, None, k] + moves_progress(dist[:, None, k], dynamics[r], t)
+                          for k, r in enumerate(TYPE_I_AXES)], axis=-1)
+    delta = separation_deg(kin, {r: poses[..., k] for k, r in enumerate(TYPE_I_AXES)})
+    travel = np.abs(np.diff(poses, axis=1)).sum(axis=2)        # (K, segments)
+    need = src.half_width_deg + det.half_width_deg + sample_step_deg(geometry) / 2
+    clear: np.ndarray = np.all((delta[:, :-1] + delta[:, 1:] - travel) / 2 >= need, axis=1)
+    blocked: np.ndarray = np.any(delta < need - sample_step_deg(geometry) / 2, axis=1)
+    return clear, blocked
+
+
 @dataclass(frozen=True)
 class PathCheck:
     """A move's timed path: whether it keeps the heads apart, and its closest approach."""
@@ -132,7 +186,7 @@ def path_clear(geometry: GeometrySpec, dynamics: Mapping[str, AxisDynamics],
     dist = {r: float(there[r]) - float(here[r]) for r in TYPE_I_AXES}
     seconds = max(move_time(d, dynamics[r]) - dynamics[r].settle_s if d else 0.0
                   for r, d in dist.items())
-    eps = min(MAX_STEP_DEG, min(src.half_width_deg, det.half_width_deg) / 4)
+    eps = sample_step_deg(geometry)
     speed = sum(dynamics[r].velocity for r, d in dist.items() if d)
     n = max(2, math.ceil(seconds * speed / eps) + 1) if seconds > 0 else 1
     t = np.linspace(0.0, seconds, n)
@@ -218,6 +272,19 @@ def safe_route(geometry: GeometrySpec, dynamics: Mapping[str, AxisDynamics],
     every waypoint inside ``limits``), or None when none of the tried routes is clear."""
     h = {r: float(here[r]) for r in TYPE_I_AXES}
     t = {r: float(there[r]) for r in TYPE_I_AXES}
+    checked: dict[tuple[float, ...], bool] = {}  # candidates share legs
+
+    def clear(a: dict[str, float], b: dict[str, float]) -> bool:
+        key = tuple(a[r] for r in TYPE_I_AXES) + tuple(b[r] for r in TYPE_I_AXES)
+        if key not in checked:
+            # the bound proves most legs clear without sampling their path
+            clear_, blocked = path_bounds(geometry, np.array([key[:4]]),
+                                          np.array([key[4:]]), dynamics,
+                                          segments=BOUND_SEGMENTS)
+            checked[key] = bool(clear_[0] or (not blocked[0]
+                                              and path_clear(geometry, dynamics, a, b).clear))
+        return checked[key]
+
     for how, waypoints in _candidates(h, t):
         if limits is not None and not all(_within(w, limits) for w in waypoints):
             continue
@@ -227,7 +294,7 @@ def safe_route(geometry: GeometrySpec, dynamics: Mapping[str, AxisDynamics],
         for w in waypoints:
             if w == at:
                 continue
-            if not path_clear(geometry, dynamics, at, w).clear:
+            if not clear(at, w):
                 ok = False
                 break
             moves.append(w)

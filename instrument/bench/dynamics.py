@@ -22,7 +22,7 @@ import numpy as np
 from instrument.bench.profile import BenchProfile
 
 __all__ = ["DEFAULT_DYNAMICS", "AxisDynamics", "dynamics_of", "move_progress", "move_time",
-           "move_times", "route_time", "step_time"]
+           "move_times", "moves_progress", "route_time", "step_time"]
 
 
 @dataclass(frozen=True)
@@ -59,23 +59,27 @@ def move_progress(distance: float, dyn: AxisDynamics, t: np.ndarray) -> np.ndarr
     """Signed distance covered ``t`` seconds (array) after the start of one trapezoidal
     move of ``distance`` (the profile of the module docstring; the settle time comes after
     arrival and moves nothing)."""
-    d = abs(float(distance))
     t = np.asarray(t, dtype=float)
-    if d == 0.0:
-        return np.zeros_like(t)
-    v, a = dyn.velocity, dyn.acceleration
-    if d >= v * v / a:
-        ta, total = v / a, d / v + v / a
-    else:
-        ta = math.sqrt(d / a)
-        total = 2.0 * ta
-        v = a * ta
+    return moves_progress(np.full(t.shape, float(distance)), dyn, t)
+
+
+def moves_progress(distance: np.ndarray, dyn: AxisDynamics, t: np.ndarray) -> np.ndarray:
+    """:func:`move_progress` of many moves at once: ``distance`` and ``t`` broadcast
+    together (each element the distance covered by its move at its time)."""
+    dist = np.asarray(distance, dtype=float)
+    t = np.asarray(t, dtype=float)
+    d = np.abs(dist)
+    v0, a = dyn.velocity, dyn.acceleration
+    full = d >= v0 * v0 / a                       # reaches its top speed
+    ta = np.where(full, v0 / a, np.sqrt(d / a))
+    total = np.where(full, d / v0 + v0 / a, 2.0 * ta)
+    v = np.where(full, v0, a * ta)
     rise = 0.5 * a * np.minimum(t, ta) ** 2
-    cruise = v * np.clip(t - ta, 0.0, max(total - 2.0 * ta, 0.0))
+    cruise = v * np.clip(t - ta, 0.0, np.maximum(total - 2.0 * ta, 0.0))
     fall_t = np.clip(t - (total - ta), 0.0, ta)
     fall = v * fall_t - 0.5 * a * fall_t ** 2
-    covered: np.ndarray = np.minimum(rise + cruise + fall, d)
-    return math.copysign(1.0, float(distance)) * covered
+    covered: np.ndarray = np.sign(dist) * np.minimum(rise + cruise + fall, d)
+    return covered
 
 
 def move_time(distance: float, dyn: AxisDynamics) -> float:

@@ -37,6 +37,7 @@ from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
 from instrument.plans.polarimetry import plan_wavelengths, polarimetry_axis
 from instrument.plans.ranges import float_range
+from instrument.plans.route_costs import RouteCosts
 from instrument.plans.spin import check_spinner
 
 __all__ = ["EVENTS", "Plan", "PlanEstimate", "build_plan", "dynamics_of", "guarded_points",
@@ -567,7 +568,9 @@ def build_plan(spec: PlanSpec, profile: BenchProfile, *,
             and all(len(p.targets) == len(axes) for p in body)):
         t = np.array([[dict(p.targets)[r] for r in axes] for p in body])
         st = None if start is None else np.array([start.get(r, 0.0) for r in axes])
-        order = optimise_order(t, axes, dynamics_of(profile, axes), start=st)
+        dyn = dynamics_of(profile, axes)
+        costs = RouteCosts.of(profile, t, axes, dyn, start=st)  # None on type (ii)
+        order = optimise_order(t, axes, dyn, start=st, costs=costs)
         body = _routable(profile, body, [body[int(j)] for j in order], start)
     elif profile.geometry.is_type_i:
         _routable(profile, body, body, start)

@@ -146,6 +146,10 @@ class RunEngine:
         The driver of an adaptive plan (:mod:`instrument.plans.adaptive`): when every
         point of the plan is done it is asked for more, which are committed to the run
         file's planned table (:meth:`RunStore.extend_plan`) before they are run.
+    wait
+        Waits out a known, bounded time: the sample spinner's acceleration ramp, at the
+        start and when it spins up again after a pause (tests pass an emulated clock's
+        ``advance``).
     """
 
     def __init__(self, bench: Bench, plan: Plan, store: RunStore, *,
@@ -153,8 +157,12 @@ class RunEngine:
                  move_timeout_factor: float = 3.0, move_timeout_min_s: float = 10.0,
                  poll_s: float = 0.002,
                  reopen_store: Callable[[], tuple[RunStore, set[int]]] | None = None,
-                 adaptive: AdaptiveDriver | None = None) -> None:
+                 adaptive: AdaptiveDriver | None = None,
+                 wait: Callable[[float], object] = time.sleep) -> None:
         self.bench = bench
+        #: Waits out a bounded, known time (the spinner's ramp); an emulated clock's
+        #: ``advance`` in tests.
+        self._wait = wait
         #: An adaptive plan's driver: asked for more points when the plan's are done.
         self._adaptive = adaptive
         self.plan = plan
@@ -438,9 +446,23 @@ class RunEngine:
                 self._emit(AxisHomed(role, after.position, time.monotonic() - t0))
         spin = self.plan.spec.acquisition.spin_deg_s
         if spin > 0.0:
-            # spun through the run and stopped by make_safe with the other axes (ADR 0098)
-            start_spinner(self.bench.devices, spin)
+            # spun through the run; make_safe stops it with the other axes (ADR 0098)
+            start_spinner(self.bench.devices, spin, sleep=self._wait)
+            self._spin_stopped = False
             self.store_event("spinning", device=SPIN_ROLE, deg_per_s=spin)
+
+    def _spin_up(self, st: _PointState) -> None:
+        """Spin the sample again after a pause stopped it (``make_safe``), waiting for its
+        speed before the next exposure (ADR 0098): a frame taken on a sample still
+        ramping up, or standing, would average fewer speckle patterns than the
+        reduction's σ assume. A failure is the spinner's fault, handled by its policy."""
+        spin = self.plan.spec.acquisition.spin_deg_s
+        if spin <= 0.0 or not self._spin_stopped:
+            return
+        self._retry(SPIN_ROLE, self._policy(SPIN_ROLE), "spin",
+                    lambda: start_spinner(self.bench.devices, spin, sleep=self._wait), st)
+        self._spin_stopped = False
+        self.store_event("spinning", device=SPIN_ROLE, deg_per_s=spin, index=st.index)
 
     def _loop(self) -> str:
         while True:
@@ -525,6 +547,7 @@ class RunEngine:
         self._move(move, st)
         # Durability: the previous point is on disk before this one acquires anything.
         self._commit_wait_or_pause(move.index)
+        self._spin_up(st)
         self._acquire(acq, st)
         return st
 
@@ -539,7 +562,10 @@ class RunEngine:
     def _enter_pause(self, reason: str, index: int | None) -> bool:
         """Make safe, report, wait for resume or abort; return whether the operator asked
         to skip the point (:meth:`resume`)."""
+        # A pause is for a person at the bench (a door opened, a sample touched): every
+        # axis stands still, the spinner too; it spins up again before the next exposure.
         self.bench.make_safe()
+        self._spin_stopped = True
         self._light = None  # re-applied on resume
         if not self._store_broken:
             assert self._writer is not None
@@ -572,6 +598,7 @@ class RunEngine:
 
     _store_broken = False
     _light_wanted: bool | None = None
+    _spin_stopped = True  # the spinner is not (known to be) at the plan's speed
 
     def _reopen_store(self) -> None:
         assert self._writer is not None

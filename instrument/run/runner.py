@@ -191,11 +191,13 @@ def check_bench_for_plan(plan: Plan, bench: Bench) -> None:
 def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_DIR,
               fsync: bool = True, sync_interval_s: float = 0.25,
               min_free_bytes: int = 64 << 20, catalog: bool = True,
-              run_id: str | None = None, adaptive: AdaptivePlan | None = None) -> RunEngine:
+              run_id: str | None = None, adaptive: AdaptivePlan | None = None,
+              wait: Callable[[float], object] = time.sleep) -> RunEngine:
     """Create the run file and catalog row; return the (not yet started) engine.
 
     With ``adaptive`` (:mod:`instrument.plans.adaptive`), ``plan`` is its base plan built
     for this bench, and the run asks the adaptive plan for more points when they are done.
+    ``wait`` is the engine's (:class:`~instrument.run.engine.RunEngine`).
     """
     check_bench_for_plan(plan, bench)
     runs_dir = Path(runs_dir).resolve()  # messages name the file unambiguously
@@ -208,7 +210,8 @@ def start_run(plan: Plan, bench: Bench, *, runs_dir: str | Path = DEFAULT_RUNS_D
                             min_free_bytes=min_free_bytes)
     engine = RunEngine(bench, plan, store, reopen_store=_reopener(
         path, fsync=fsync, sync_interval_s=sync_interval_s, min_free_bytes=min_free_bytes,
-        catalog=catalog), adaptive=None if adaptive is None else AdaptiveDriver(adaptive))
+        catalog=catalog), adaptive=None if adaptive is None else AdaptiveDriver(adaptive),
+        wait=wait)
     if catalog:
         cat = Catalog(runs_dir)
         cat.add(RunRow(run_id, plan.spec.sample_name, plan.kind, plan.spec.name,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PySide6.QtGui import QImage
 
-from gui.screenshots import VIEWS, render_all
+from gui.screenshots import TYPE_I_VIEWS, VIEWS, render_all
 from tests.gui.conftest import flush_deleted
 
 
@@ -27,4 +27,16 @@ def test_every_view_renders_and_none_is_blank(qtbot, tmp_path):
         assert px.shape[0] > 150 and px.shape[1] > 300, name
         colours = np.unique(px.reshape(-1, 3)[:: max(1, px.size // 3 // 200000)], axis=0)
         assert len(colours) > 50, f"{name} looks blank ({len(colours)} colours)"
+        assert px.std() > 10, f"{name} looks blank"
+
+
+@pytest.mark.slow
+def test_the_type_i_bench_renders_its_arms_panel_and_view(qtbot, tmp_path):
+    shots = render_all(tmp_path, bench="sim-type-i")
+    flush_deleted()
+    assert tuple(shots) == TYPE_I_VIEWS
+    assert {p.name for p in shots.values()} == {"bench_type_i.png", "goniometer_type_i.png"}
+    for name, path in shots.items():
+        px = _pixels(path)
+        assert px.shape[0] > 150 and px.shape[1] > 300, name
         assert px.std() > 10, f"{name} looks blank"

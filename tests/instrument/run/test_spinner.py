@@ -134,3 +134,50 @@ def test_spinning_with_hdr_brackets_is_refused() -> None:
         parse_plan(PLAN.replace('mode = "fixed"', 'mode = "auto"\nhdr = true'))
     assert any(e.path == "acquisition.spin_deg_s" and "hdr = false" in e.message
                for e in err.value.errors)
+
+
+def test_a_pause_stops_the_spinner_and_resume_spins_it_up_before_the_next_exposure(
+        tmp_path: Path) -> None:
+    """A pause is for a person at the bench: the sample stands still with every axis. On
+    resume the spinner is back at speed before the next frame is exposed (the reduction's
+    σ assume it turns through every exposure). The spinner's emulated clock is held: its
+    ramps pass only as the engine waits them out, and its stop as the test advances it."""
+    import threading
+
+    from instrument.run.events import Paused
+    from instrument.run.runner import start_run
+
+    profile = load_profile(spinning_bench(tmp_path))
+    plan = build_plan(parse_plan(PLAN), profile)
+    with open_bench(profile) as bench:
+        spinner = registry.get("simapt", "sample_spin")
+        assert registry.get("simapt", "sample_theta").clock is not spinner.clock
+        with spinner.clock.held() as clock:
+            engine = start_run(plan, bench, runs_dir=tmp_path / "runs", fsync=False,
+                               catalog=False, wait=clock.advance)
+            rates: dict[int, float] = {}
+            paused = threading.Event()
+            while_paused: list[tuple[bool, float]] = []
+
+            def on(ev: object) -> None:
+                if getattr(ev, "index", None) == 0 and type(ev).__name__ == "PointCompleted":
+                    engine.pause("door opened")
+                if isinstance(ev, Paused):
+                    clock.advance(5.0)  # its deceleration, in emulated time
+                    with spinner.lock:
+                        while_paused.append((spinner.stage.is_moving(),
+                                             get_world("sim").spin()[1]))
+                    paused.set()
+
+            engine.subscribe(on)
+            engine.subscribe_frames(lambda i, _f: rates.setdefault(i, get_world("sim")
+                                                                   .spin()[1]))
+            engine.start()
+            assert paused.wait(120)
+            assert while_paused == [(False, 0.0)]
+            engine.resume()
+            engine.wait(120)
+        assert rates == {0: pytest.approx(8.0, rel=1e-12), 1: pytest.approx(8.0, rel=1e-12)}
+        kinds = [(e["kind"], e.get("index")) for e in read_events(engine.store.path)
+                 if e["kind"] in ("spinning", "paused", "resumed")]
+        assert kinds == [("spinning", None), ("paused", 1), ("resumed", 1), ("spinning", 1)]
