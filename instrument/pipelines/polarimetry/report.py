@@ -19,7 +19,7 @@ import numpy as np
 
 from instrument.pipelines.polarimetry.reduce import MuellerPoint, dop
 
-__all__ = ["GRID_FIGURE", "DOP_FIGURE", "series", "write_report"]
+__all__ = ["DOP_FIGURE", "GRID_FIGURE", "series", "write_report"]
 
 GRID_FIGURE = "mueller_grid.png"
 DOP_FIGURE = "dop.png"

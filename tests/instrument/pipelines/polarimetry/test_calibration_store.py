@@ -68,12 +68,12 @@ def test_fit_takes_the_newest_valid_calibration_of_the_runs_bench(tmp_path):
 def test_a_file_that_is_not_a_calibration_is_refused_by_name(tmp_path):
     bad = tmp_path / "camera_calibration.json"
     bad.write_text(json.dumps({"K": 1.0}), encoding="utf-8")
-    with pytest.raises(CalibrationError, match="camera_calibration.json is not a polarimeter"):
+    with pytest.raises(CalibrationError, match=r"camera_calibration\.json is not a polarimeter"):
         load_calibration(bad)
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps({"kind": "polarimeter_calibration", "params": [1, 2]}),
                       encoding="utf-8")
-    with pytest.raises(CalibrationError, match="broken.json: malformed"):
+    with pytest.raises(CalibrationError, match=r"broken\.json: malformed"):
         load_calibration(broken)
     with pytest.raises(CalibrationError, match="cannot read"):
         load_calibration(tmp_path / "missing.json")
