@@ -14,9 +14,11 @@ eq. 5, for each element):
 
     F = M / (S · Ω · cos θr),   Ω = π a² / (4 d²)   (aperture a at distance d)
 
-S is the air scan's scale with a calibration; without one it is 2·P (the profile's source
-power P, taken as polarised along the generator's polariser: a unit unpolarised source
-passes ½). The normalised matrix m_ij/m00 does not depend on S, Ω or cos θr.
+S is the air scan's scale with a calibration, divided by the fraction
+``1 − exp(−2a²/(4w²))`` of a Gaussian beam of 1/e² radius w (the profile's) that the
+aperture a took in straight through; without a calibration it is 2·P (the profile's
+source power P, taken as polarised along the generator's polariser: a unit unpolarised
+source passes ½). The normalised matrix m_ij/m00 does not depend on S, Ω or cos θr.
 
 Decomposition (Lu & Chipman 1996, :func:`analysis.polarimetry.decomposition.decompose`)
 and realizability (Cloude's coherency matrix, :func:`analysis.polarimetry.realizability`)
@@ -89,7 +91,17 @@ def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> S
                          "Mueller-matrix BRDF needs the receiver's solid angle") from None
     omega, _ = solid_angle_sr(aperture, distance)
     if cal is not None:
-        return Scale(cal.source_scale_w, omega, "the calibration's air scan")
+        w = prof.get("simulation", {}).get("source", {}).get("beam_radius_mm",
+                                                             geo.get("beam_radius_mm"))
+        if w is None:
+            return Scale(cal.source_scale_w, omega,
+                         "the calibration's air scan (the whole beam taken as inside the "
+                         "meter's aperture)")
+        # the air scan read the part of the Gaussian beam inside the aperture
+        inside = 1.0 - math.exp(-2.0 * (aperture / 2.0) ** 2 / float(w) ** 2)
+        return Scale(cal.source_scale_w / inside, omega,
+                     f"the calibration's air scan over the {inside:.1%} of the beam "
+                     f"(1/e² radius {float(w):g} mm) inside the meter's aperture")
     power = prof.get("simulation", {}).get("source", {}).get("power_w")
     if power is None:
         raise ValueError("the source power is unknown (no calibration and no simulated "
