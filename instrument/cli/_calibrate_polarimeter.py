@@ -144,11 +144,11 @@ def run_polarimeter(args: argparse.Namespace) -> int:
     if args.steps < 25:
         print(f"error: --steps must be ≥ 25 (fewer equal steps alias), got {args.steps}")
         return 2
-    if "[simulation.scene]" not in profile.source_text or "optics" not in \
-            profile.source_text:
-        print(f"error: bench {profile.name!r} is not a simulated polarimetric bench: the "
-              "reference scans are automated on simulated benches only (a real bench needs "
-              "each reference placed by hand)")
+    simulated = re.search(r"^\[simulation\.scene\]", profile.source_text, re.MULTILINE)
+    if profile.optics is None or simulated is None:
+        print(f"error: bench {profile.name!r} is not a simulated polarimetric bench (an "
+              "[optics] train and a [simulation.scene]): the reference scans are automated "
+              "on simulated benches only (a real bench needs each reference placed by hand)")
         return 2
     refs = [("air", 0.0), *(("polariser", a) for a in polarisers),
             ("retarder", float(args.retarder_deg))]

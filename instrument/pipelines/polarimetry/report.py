@@ -91,21 +91,29 @@ def _dop(path: Path, points: Sequence[MuellerPoint]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    groups = series(points)
+    cols = min(len(groups), 4)
+    rows = math.ceil(len(groups) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.6 * rows), sharey=True,
+                             squeeze=False)
     markers = {"unpolarised": "o", "H": ">", "V": "^", "+45°": "s", "−45°": "D",
                "depolarisation index": "x"}
-    for label, pts in series(points).items():
+    for ax, (label, pts) in zip(axes.ravel(), groups.items(), strict=False):
         tr = np.array([p.group.theta_r for p in pts])
         values = [dop(p.brdf.m) for p in pts]
-        for name, mk in markers.items():
-            ax.plot(tr, [v[name] for v in values], marker=mk, ls="-" if
-                    name == "depolarisation index" else ":",
-                    label=f"{name} ({label})" if len(markers) else name)
-    ax.set_xlabel("θr (deg)")
-    ax.set_ylabel("degree of polarisation (1)")
-    ax.set_ylim(0.0, 1.05)
-    ax.set_title("Degree of polarisation of the scattered light, by incident state")
-    ax.legend(fontsize=7, ncol=2)
+        for k, (name, mk) in enumerate(markers.items()):
+            ax.plot(tr, [v[name] for v in values], marker=mk, color=f"C{k}",
+                    ls="-" if name == "depolarisation index" else ":", label=name)
+        ax.set_title(label, fontsize=9)
+        ax.set_xlabel("θr (deg)")
+        ax.set_ylim(0.0, 1.05)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("degree of polarisation (1)")
+    for ax in axes.ravel()[len(groups):]:
+        ax.set_visible(False)
+    axes[0, 0].legend(fontsize=7, title="incident light", title_fontsize=7)
+    fig.suptitle("Degree of polarisation of the scattered light, by incident state; "
+                 "depolarisation index (Gil & Bernabeu 1985)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -100,3 +100,32 @@ def test_degree_of_polarisation_of_a_polariser_and_a_depolariser():
     assert d["H"] == pytest.approx(0.2) and d["unpolarised"] == pytest.approx(0.0)
     assert d["depolarisation index"] == pytest.approx(0.2)
     assert dop(np.eye(4))["depolarisation index"] == pytest.approx(1.0)
+
+
+def test_the_reference_profile_puts_the_reference_in_a_straight_through_beam():
+    from instrument.bench.profile import load_profile, parse_profile
+    from instrument.cli._calibrate_polarimeter import _simulated_reference
+
+    text = load_profile("sim-polarimetric").source_text
+    ref = _simulated_reference(text, "retarder", 30.0)
+    prof = parse_profile(ref)
+    assert prof.name == "sim-polarimetric"
+    assert "simsmc://detector_theta_straight?sr=181&kind=rotary" in ref
+    assert prof.axes["detector_theta"].limits == (-170.0, 181.0)
+    assert ref.count("[simulation.scene]") == 1 and "pbrdf" not in ref.split(
+        "[simulation.scene]")[1]
+    assert 'sample = "retarder"' in ref and "orientation_deg = 30.0" in ref
+    air = _simulated_reference(text, "air", 0.0)
+    assert 'sample = "air"' in air and "[simulation.scene.air]" not in air
+    # the hidden optics stay: they are what the calibration finds
+    assert "[[simulation.optics.source]]" in air
+
+
+def test_calibrate_polarimeter_refuses_a_bench_without_a_simulated_scene(capsys):
+    from instrument.cli import main
+
+    assert main(["calibrate", "polarimeter", "--bench", "sim"]) == 2
+    assert "not a simulated polarimetric bench" in capsys.readouterr().out
+    assert main(["calibrate", "polarimeter", "--bench", "sim-polarimetric", "--steps",
+                 "20"]) == 2
+    assert "--steps must be ≥ 25" in capsys.readouterr().out
