@@ -58,8 +58,9 @@ def run_polarimetric(args: argparse.Namespace) -> int:
                f"{d.sigma[2]:.2g} rad, Δ {d.params[4]:.3f} ± {d.sigma[4]:.2g}")
         flag = "  NOT REALIZABLE within σ (kept, not projected)" if \
             p.realizability.flagged else ""
+        unit = "" if p.group.transmitted else " 1/sr"
         print(f"  {p.group.label():<28} m00 {p.brdf.m[0, 0]:.4g} ± {p.brdf.sigma[0, 0]:.2g}"
-              f" 1/sr  κ {p.condition:.3g}  {dec}{flag}")
+              f"{unit}  κ {p.condition:.3g}  {dec}{flag}")
     fit = s["pbrdf"]
     if fit is not None:
         print(f"pBRDF ({fit['distribution']} facets + Lambertian depolariser): "

@@ -75,7 +75,7 @@ def choose_calibration(path: str | Path, bench: str, calibration: str | Path | N
 
 def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
                fixed: Sequence[str], distribution: str) -> dict[str, Any] | None:
-    use = [p for p in points if p.brdf.normalised_valid]
+    use = [p for p in points if p.brdf.normalised_valid and not p.group.transmitted]
     if not use:
         return None
     ang = {name: np.radians([getattr(p.group, name) for p in use])
@@ -152,6 +152,9 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     if flagged:
         notes.append(f"not physically realizable within σ (kept as measured, not "
                      f"projected): {', '.join(flagged)}")
+    if any(p.group.transmitted for p in points):
+        notes.append("straight-through groups (detector arm in the beam) are transmittance "
+                     "matrices (unitless), not BRDFs, and are left out of the pBRDF fit")
     notes.append("m00 in 1/sr through the source scale " + scale.source
                  + " and the receiver's solid angle (point receiver); m_ij/m00 does not "
                  "depend on either")

@@ -56,8 +56,16 @@ class StepGroup:
     intensity: np.ndarray
     sigma: np.ndarray
 
+    @property
+    def transmitted(self) -> bool:
+        """Taken straight through (θr ≥ 90°: the detector arm in the beam, a reference)."""
+        return not (abs(self.theta_r) < 90.0 and abs(self.theta_i) < 90.0)
+
     def label(self) -> str:
         """``θi 50.0° θr 50.0°`` (with φr off the plane and λ when known)."""
+        if self.transmitted:
+            return "straight through" + (f" λ {self.wavelength_nm:.0f} nm" if
+                                         math.isfinite(self.wavelength_nm) else "")
         text = f"θi {self.theta_i:.1f}° θr {self.theta_r:.1f}°"
         if abs(math.remainder(self.phi_r - self.phi_i, 360.0)) < 179.0:
             text += f" φr {self.phi_r:.1f}°"

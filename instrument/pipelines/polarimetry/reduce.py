@@ -18,7 +18,9 @@ S is the air scan's scale with a calibration, divided by the fraction
 ``1 − exp(−2a²/(4w²))`` of a Gaussian beam of 1/e² radius w (the profile's) that the
 aperture a took in straight through; without a calibration it is 2·P (the profile's
 source power P, taken as polarised along the generator's polariser: a unit unpolarised
-source passes ½). The normalised matrix m_ij/m00 does not depend on S, Ω or cos θr.
+source passes ½). The normalised matrix m_ij/m00 does not depend on S, Ω or cos θr. A group
+taken straight through (the detector arm in the beam: a reference sample, θr ≥ 90°) is
+divided by S alone: its matrix is the sample's transmittance matrix (unitless).
 
 Decomposition (Lu & Chipman 1996, :func:`analysis.polarimetry.decomposition.decompose`)
 and realizability (Cloude's coherency matrix, :func:`analysis.polarimetry.realizability`)
@@ -57,6 +59,12 @@ class Scale:
     source_w: float
     solid_angle_sr: float
     source: str
+    #: What a straight-through reading of a unit source gives (the air scan's own scale,
+    #: the aperture's part of the beam included): divides a transmitted group.
+    direct_w: float = math.nan
+
+    def through(self) -> float:
+        return self.direct_w if math.isfinite(self.direct_w) else self.source_w
 
 
 @dataclass(frozen=True)
@@ -101,7 +109,8 @@ def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> S
         inside = 1.0 - math.exp(-2.0 * (aperture / 2.0) ** 2 / float(w) ** 2)
         return Scale(cal.source_scale_w / inside, omega,
                      f"the calibration's air scan over the {inside:.1%} of the beam "
-                     f"(1/e² radius {float(w):g} mm) inside the meter's aperture")
+                     f"(1/e² radius {float(w):g} mm) inside the meter's aperture",
+                     direct_w=cal.source_scale_w)
     power = prof.get("simulation", {}).get("source", {}).get("power_w")
     if power is None:
         raise ValueError("the source power is unknown (no calibration and no simulated "
@@ -134,7 +143,9 @@ def reduce_group(prun: PolarimetricRun, g: StepGroup, cal: PolarimeterCalibratio
         w = cal.drr.instrument_matrix(g.psg_retarder_deg, g.psa_retarder_deg)
         raw = reduce_calibrated(g.intensity, g.sigma, cal.drr, g.psg_retarder_deg,
                                 g.psa_retarder_deg)
-    factor = scale.source_w * scale.solid_angle_sr * math.cos(math.radians(g.theta_r))
+    # straight through (the detector arm in the beam, θr ≥ 90°): a transmittance, unitless
+    factor = (scale.through() if g.transmitted else
+              scale.source_w * scale.solid_angle_sr * math.cos(math.radians(g.theta_r)))
     brdf = estimate(raw.m / factor, raw.cov / factor**2, chi2=raw.chi2, dof=raw.dof)
     decomposition, note = None, ""
     try:

@@ -30,7 +30,7 @@ def series(points: Sequence[MuellerPoint]) -> dict[str, list[MuellerPoint]]:
     out: dict[str, list[MuellerPoint]] = {}
     for p in points:
         g = p.group
-        name = f"θi {g.theta_i:.0f}°"
+        name = "straight through" if g.transmitted else f"θi {g.theta_i:.0f}°"
         if math.isfinite(g.wavelength_nm):
             name += f", {g.wavelength_nm:.0f} nm"
         out.setdefault(name, []).append(p)
