@@ -14,39 +14,21 @@ and the fraction within 2σ.
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from analysis.polarimetry.elements import rotated
-from hw_mocks.sim.world import find_world
-from instrument.bench.profile import load_profile
 from instrument.cli import main
 from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
-from instrument.run.runfile import read_run
+from tests.instrument.pipelines.polarimetry.closed_loop import (
+    fast_bench,
+    plan_text,
+    pulls,
+    run_with_truth,
+)
 
-PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "glass"
-order = "raster"
-[sample]
-name = "glass"
-[scan]
-theta_i = [50.0]
-theta_r = [40.0, 50.0]
-[acquisition]
-detectors = ["power_meter"]
-dark = "per_point"
-[polarimetry]
-mode = "drr"
-steps = 25
-"""
-FRAME_DEG = 0.3
 TRUTH = (1.5, 0.0, 0.15, 0.3)
 
 
@@ -54,47 +36,24 @@ def one(seed: int, folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, fl
     """One seed: the glass run, the calibration measured on the references, both fits.
     Returns the uncalibrated and calibrated pulls, the pBRDF pulls and the calibration's
     wall time."""
-    text = load_profile("sim-polarimetric").source_text
-    text = text.replace("model=K10CR1&speed=50", "model=K10CR1&speed=5000").replace(
-        "world=sim-polarimetric&seed=2", f"world=sim-polarimetric&seed={seed}")
-    bench = folder / f"bench{seed}.toml"
-    bench.write_text(text, encoding="utf-8")
-    plan = folder / "plan.toml"
-    plan.write_text(PLAN, encoding="utf-8")
-    out = folder / f"runs{seed}"
-    assert main(["run", str(plan), "--bench", str(bench), "--out", str(out), "--no-fsync",
-                 "--quiet"]) == 0
-    (path,) = out.glob("*.h5")
-    world = find_world("sim-polarimetric")
-    assert world is not None
-    run = read_run(path)
-    truths = {}
-    for row in (0, 25):
-        state = world.snapshot()
-        pose = world.pose({a: float(run.positions[row, k]) for k, a in enumerate(run.axes)})
-        state = replace(state, source=replace(state.source, on=True), pose=pose)
-        head = world.power_meter
-        m = np.asarray(state.scene.mueller_on_aperture(  # type: ignore[union-attr]
-            pose.detector_dir * head.distance_mm, -pose.detector_dir,
-            head.aperture_diameter_mm, state))
-        truths[round(float(run.theta_r[row]))] = rotated(m / m[0, 0],
-                                                         -math.radians(FRAME_DEG))
+    sub = folder / f"seed{seed}"
+    sub.mkdir()
+    bench = fast_bench(sub, seed=seed)
+    path, truths = run_with_truth(sub, bench, plan_text("glass", "50.0", "40.0, 50.0"))
+    out = path.parent
     t0 = time.perf_counter()
     assert main(["calibrate", "polarimeter", "--bench", str(bench), "--out", str(out),
                  "--steps", "25", "--no-fsync"]) == 0
     t_cal = time.perf_counter() - t0
-    pulls = []
+    found = []
     for which in ("none", None):
         done = fit_polarimetric_run(path, calibration=which, report=False, write=False)
-        ps = []
-        for p in done.points:
-            s = p.brdf.sigma_normalised.ravel()[1:]
-            ps.append((p.brdf.m_normalised.ravel()[1:] - truths[round(p.group.theta_r)]
-                       .ravel()[1:]) / s)
-        pulls.append(np.concatenate(ps))
+        found.append(np.concatenate([
+            pulls(p, truths[(round(p.group.theta_i), round(p.group.theta_r))])
+            for p in done.points]))
     fit = done.summary["pbrdf"]
     par = np.array([(fit["params"][k] - TRUTH[k]) / fit["stderr"][k] for k in (0, 2, 3)])
-    return pulls[0], pulls[1], par, t_cal
+    return found[0], found[1], par, t_cal
 
 
 def main_() -> None:

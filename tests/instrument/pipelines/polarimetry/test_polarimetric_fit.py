@@ -21,7 +21,6 @@ import pytest
 
 from analysis.polarimetry.calibration import DrrCalibration
 from analysis.polarimetry.elements import rotated
-from hw_mocks.sim.world import find_world
 from instrument.bench.profile import load_profile
 from instrument.cli import main
 from instrument.pipelines.brdf.pipeline import fit_run
@@ -31,33 +30,17 @@ from instrument.pipelines.polarimetry.calibration import (
     save_calibration,
 )
 from instrument.pipelines.polarimetry.pipeline import UNCALIBRATED, fit_polarimetric_run
-from instrument.run.runfile import RunFileError, read_run
-
-PLAN = """
-[plan]
-kind = "brdf_in_plane"
-name = "glass, polarimetric"
-order = "raster"
-
-[sample]
-name = "glass"
-
-[scan]
-theta_i = [50.0]
-theta_r = [40.0, 50.0]
-
-[acquisition]
-detectors = ["power_meter"]
-dark = "per_point"
-
-[polarimetry]
-mode = "drr"
-steps = 25
-"""
+from instrument.run.runfile import RunFileError
+from tests.instrument.pipelines.polarimetry.closed_loop import (
+    FRAME_DEG,
+    fast_bench,
+    plan_text,
+    pulls,
+    run_with_truth,
+)
 
 #: The hidden optics in the calibration's frame (the generator polariser's axis is 0):
 #: every lab angle less the generator polariser's hidden 0.3°.
-FRAME_DEG = 0.3
 HIDDEN = np.array([2.0 - FRAME_DEG, -2.0 - FRAME_DEG, math.radians(94.5),
                    math.radians(85.5), -0.3 - FRAME_DEG])
 #: The hidden sample (the profile's [simulation.scene.pbrdf]): n, k, rms slope, albedo.
@@ -67,33 +50,14 @@ TRUTH = (1.5, 0.0, 0.15, 0.3)
 @pytest.fixture(scope="module")
 def glass_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("polfit")
-    text = load_profile("sim-polarimetric").source_text
-    bench = folder / "bench.toml"  # the mounts turn 100× faster than the built-in ones
-    bench.write_text(text.replace("model=K10CR1&speed=50", "model=K10CR1&speed=5000"),
-                     encoding="utf-8")
-    plan = folder / "plan.toml"
-    plan.write_text(PLAN, encoding="utf-8")
-    out = folder / "runs"
-    assert main(["run", str(plan), "--bench", str(bench), "--out", str(out), "--no-fsync",
-                 "--quiet"]) == 0
-    (path,) = out.glob("*.h5")
-    # the world's truth now, while the emulated bench's world is still alive: per
-    # geometry (θr), the aperture-averaged matrix at the read-back pose of its first step
-    world = find_world("sim-polarimetric")
-    run = read_run(path)
-    truths = {round(float(run.theta_r[row])): _truth_at(world, run, row)
-              for row in (0, 25)}
-    return path, truths, bench
+    bench = fast_bench(folder)
+    path, truths = run_with_truth(folder, bench, plan_text("glass", "50.0", "40.0, 50.0"))
+    return path, {tr: m for (_, tr), m in truths.items()}, bench
 
 
 def _pulls(points, truths) -> np.ndarray:
     """(measured − truth)/σ of the 15 normalised elements of every geometry."""
-    out = []
-    for p in points:
-        truth = truths[round(p.group.theta_r)]
-        s = p.brdf.sigma_normalised.ravel()[1:]
-        out.append((p.brdf.m_normalised.ravel()[1:] - truth.ravel()[1:]) / s)
-    return np.concatenate(out)
+    return np.concatenate([pulls(p, truths[round(p.group.theta_r)]) for p in points])
 
 
 def _check_pbrdf(fit: dict) -> None:
@@ -151,11 +115,9 @@ def test_with_the_hidden_optics_as_calibration_the_truth_is_recovered(glass_run)
     nominal = fit_polarimetric_run(glass_run, calibration="none", report=False, write=False)
     for p, q in zip(done.points, nominal.points, strict=True):
         truth = truths[round(p.group.theta_r)]
-        pull = (p.brdf.m_normalised - truth) / np.where(p.brdf.sigma_normalised > 0,
-                                                         p.brdf.sigma_normalised, 1.0)
+        pull = pulls(p, truth)
         assert np.all(np.abs(pull) < 3.5), np.round(pull, 2)
-        off = (q.brdf.m_normalised - truth) / np.where(q.brdf.sigma_normalised > 0,
-                                                        q.brdf.sigma_normalised, 1.0)
+        off = pulls(q, truth)
         assert np.max(np.abs(off)) > 3.0, np.round(off, 2)
         d = p.decomposition
         assert d is not None and d.sigma is not None
@@ -189,19 +151,6 @@ def test_calibrate_polarimeter_then_fit_recovers_the_hidden_sample(glass_run, ca
     _check_pbrdf(done.summary["pbrdf"])
 
 
-def _truth_at(world, run, row: int) -> np.ndarray:
-    """The world's aperture-averaged matrix of the glass at a row's read-back pose,
-    normalised, in the calibration's frame."""
-    state = world.snapshot()
-    pose = world.pose({axis: float(run.positions[row, k]) for k, axis in enumerate(run.axes)})
-    state = replace(state, source=replace(state.source, on=True), pose=pose)
-    head = world.power_meter
-    m = np.asarray(state.scene.mueller_on_aperture(pose.detector_dir * head.distance_mm,
-                                                   -pose.detector_dir,
-                                                   head.aperture_diameter_mm, state))
-    return rotated(m / m[0, 0], -math.radians(FRAME_DEG))
-
-
 @pytest.mark.slow  # 3 straight-through scans and a calibration: 20-40 s
 @pytest.mark.parametrize(("kind", "angle"), [("air", 0.0), ("polariser", 30.0),
                                              ("retarder", 0.0)])
@@ -210,7 +159,6 @@ def test_references_through_the_calibrated_fit(glass_run, kind, angle, tmp_path)
     straight through, recovered within their σ with the measured calibration (the frame
     of the generator polariser, 0.3° off the lab's) and visibly off without it."""
     from analysis.polarimetry.elements import linear_polariser, linear_retarder
-    from instrument.bench.profile import load_profile
     from instrument.cli._calibrate_polarimeter import _reference_run
 
     path, _, bench = glass_run
