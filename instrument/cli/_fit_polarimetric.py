@@ -35,7 +35,8 @@ def run_polarimetric(args: argparse.Namespace) -> int:
             done = fit_polarimetric_run(
                 args.run, calibration=getattr(args, "calibration", None), start=start,
                 fixed=fixed, distribution=getattr(args, "distribution", "beckmann"),
-                report_dir=args.out, write=not args.no_write)
+                report_dir=args.out, write=not args.no_write,
+                into_run=bool(getattr(args, "into_run", False)))
     except (ValueError, RunBusy, PolarimetryInputError) as err:
         print(f"error: {err}")
         return 2
@@ -75,4 +76,6 @@ def run_polarimetric(args: argparse.Namespace) -> int:
         print(f"report: {done.report}")
     if done.results is not None:
         print(f"results: {done.results}")
+    if getattr(args, "into_run", False):
+        print(f"results also written into {args.run} (/entry/analysis)")
     return 0

@@ -31,7 +31,10 @@ from instrument.pipelines.polarimetry.calibration import (
 from instrument.pipelines.polarimetry.readings import read_polarimetric
 from instrument.pipelines.polarimetry.reduce import MuellerPoint, reduce_group, source_scale
 from instrument.pipelines.polarimetry.report import series, write_report
-from instrument.pipelines.polarimetry.results import write_polarimetric_results
+from instrument.pipelines.polarimetry.results import (
+    write_into_run,
+    write_polarimetric_results,
+)
 from instrument.run.paths import results_dir
 from instrument.run.runfile import check_run_file
 
@@ -110,11 +113,12 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
                          start: Sequence[float] = DEFAULT_START,
                          fixed: Sequence[str] = ("k",), distribution: str = "beckmann",
                          report_dir: str | Path | None = None, report: bool = True,
-                         write: bool = True) -> PolarimetricFit:
+                         write: bool = True, into_run: bool = False) -> PolarimetricFit:
     """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
 
     ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
-    for the newest valid calibration of the run's bench beside the run.
+    for the newest valid calibration of the run's bench beside the run. ``into_run`` also
+    writes the results into the run file's ``/entry/analysis``.
 
     Raises
     ------
@@ -180,5 +184,7 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
                    "fixed": list(fixed), "distribution": distribution}
         saved = write_polarimetric_results(path, points, summary, run_id=run.run_id,
                                            options=options, folder=folder)
+    if into_run:
+        write_into_run(path, points, summary)
     return PolarimetricFit(points=tuple(points), summary=summary, calibration=cal,
                            report=page, results=saved)

@@ -29,9 +29,14 @@ import numpy as np
 from analysis.polarimetry.decomposition import PARAMETERS
 from instrument.pipelines.polarimetry.reduce import MuellerPoint
 from instrument.run.paths import results_path
-from instrument.run.results import put_json, write_results_file
+from instrument.run.results import (
+    open_for_results,
+    put_json,
+    replace_group,
+    write_results_file,
+)
 
-__all__ = ["PROGRAM", "write_polarimetric_results"]
+__all__ = ["PROGRAM", "write_into_run", "write_polarimetric_results"]
 
 PROGRAM = "scatterlab fit"
 
@@ -105,3 +110,11 @@ def write_polarimetric_results(path: str | Path, points: Sequence[MuellerPoint],
                             folder=folder) as g:
         fill(g, points, summary)
     return results_path(path, "fit", folder)
+
+
+def write_into_run(path: str | Path, points: Sequence[MuellerPoint],
+                   summary: Mapping[str, Any]) -> None:
+    """Write ``/entry/analysis`` into the run file itself (``--into-run``), replacing an
+    earlier one."""
+    with open_for_results(path) as f:
+        fill(replace_group(f["entry"], "analysis", "NXprocess"), points, summary)

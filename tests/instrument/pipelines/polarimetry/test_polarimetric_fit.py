@@ -99,6 +99,11 @@ def test_uncalibrated_fit_says_so_and_is_visibly_off(glass_run, capsys):
         assert g["decomposition/params"].shape == (2, 5)
         assert not np.any(g["realizability/flagged"][()])
         assert "pbrdf" in g
+    assert main(["fit", str(glass_run), "--no-write", "--into-run"]) == 0
+    assert "results also written into" in capsys.readouterr().out
+    with h5py.File(glass_run) as f:
+        assert f["entry/analysis"].attrs["kind"] == "polarimetric"
+        assert f["entry/analysis/mueller/m"].shape == (2, 4, 4)
     # the scalar pipeline alone still refuses it (it would mix the analyser's states)
     with pytest.raises(RunFileError, match="polarimetric run"):
         fit_run(glass_run, report=False, write=False)
