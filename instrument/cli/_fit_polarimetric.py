@@ -49,7 +49,8 @@ def run_polarimetric(args: argparse.Namespace) -> int:
         print(f"warning: {s['calibration_text']}")
     else:
         print(s["calibration_text"])
-    print(f"{len(done.points)} geometries, Mueller-matrix BRDF (m00 in 1/sr, m_ij/m00 ± σ; "
+    n = len(done.points)
+    print(f"{n} geometr{'y' if n == 1 else 'ies'}, Mueller-matrix BRDF (m00 in 1/sr, m_ij/m00 ± σ; "
           "D, R, Δ of the Lu–Chipman decomposition):")
     for p in done.points:
         d = p.decomposition
