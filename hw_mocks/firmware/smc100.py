@@ -164,6 +164,7 @@ class Smc100Emulator(FirmwareEmulator):
         settle_s: float = 0.01,
         clock: Clock | None = None,
         seed: int = 0,
+        software_limits: tuple[float, float] | None = None,
     ) -> None:
         super().__init__(name, clock=clock, seed=seed)
         if not 1 <= address <= 31:
@@ -193,6 +194,8 @@ class Smc100Emulator(FirmwareEmulator):
             "OH": self.model.home_velocity, "OT": float(homing_timeout_s),
             "SL": self.model.software_limits[0], "SR": self.model.software_limits[1],
         }
+        if software_limits is not None:  # a controller configured for more travel (SL/SR)
+            self.stored["SL"], self.stored["SR"] = (float(v) for v in software_limits)
         self.params = dict(self.stored)
         self._apply_params()
         self.state = _NOTREF_RESET

@@ -63,6 +63,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     c.add_argument("--bootstrap", type=int, default=400,
                    help="parametric bootstrap draws for the uncertainties (default 400)")
     c.set_defaults(func=run)
+    from instrument.cli._calibrate_polarimeter import register_polarimeter
+
+    register_polarimeter(what)
 
 
 def _option_error(args: argparse.Namespace) -> str | None:

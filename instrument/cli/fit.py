@@ -29,6 +29,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--into-run", action="store_true",
                    help="also write the results into the run file (/entry/analysis), for "
                    "tools that expect one file; by default the run file is only read")
+    pol = p.add_argument_group("polarimetric runs (a run with an optical train)")
+    pol.add_argument("--calibration", default=None, metavar="FILE|none",
+                     help="polarimeter calibration (scatterlab calibrate polarimeter) to "
+                     "reduce with; 'none' for the nominal optics (default: the newest valid "
+                     "calibration of the run's bench in calibrations/ beside the run)")
+    pol.add_argument("--pbrdf-start", default=None, metavar="N,K,ALPHA,ALBEDO",
+                     help="start values of the pBRDF fit (default 1.5,0,0.2,0.1: a rough "
+                     "dielectric)")
+    pol.add_argument("--pbrdf-fixed", default="k", metavar="NAMES",
+                     help="comma-separated pBRDF parameters held at their start value "
+                     "(default: k, a dielectric; '' fits all four)")
+    pol.add_argument("--distribution", default="beckmann", choices=("beckmann", "ggx"),
+                     help="facet-slope distribution of the pBRDF (default: beckmann)")
     p.set_defaults(func=run)
 
 
@@ -148,6 +161,10 @@ def run(args: argparse.Namespace) -> int:
     from instrument.pipelines.brdf.report import unit_text
     from instrument.run.results import RunBusy
 
+    if _polarimetric(args.run):
+        from instrument.cli._fit_polarimetric import run_polarimetric
+
+        return run_polarimetric(args)
     spectral = _spectral_wanted(args)
     if spectral is None:
         return 2
@@ -224,6 +241,16 @@ def run(args: argparse.Namespace) -> int:
     if args.into_run:
         print(f"results also written into {args.run} (/entry/analysis)")
     return 0
+
+
+def _polarimetric(path: str) -> bool:
+    """Whether the run records an optical train (a polarimetric run, ADR 0112)."""
+    from instrument.pipelines.polarimetry.readings import is_polarimetric
+
+    try:
+        return is_polarimetric(path)
+    except (OSError, KeyError, ValueError):
+        return False  # the ordinary path reports the run file's problem in its words
 
 
 def _spectral_wanted(args: argparse.Namespace) -> bool | None:

@@ -307,6 +307,16 @@ def test_url_options_reach_the_emulator():
     port.close()
 
 
+def test_software_limits_from_the_url_let_a_detector_arm_reach_the_beam():
+    port = serial.serial_for_url("simsmc://straight?kind=rotary&sr=181&step=0.001",
+                                 baudrate=57600, timeout=0.2)
+    port.write(b"1SR?\r\n")
+    assert port.read_until(b"\r\n") == b"1SR181.000000\r\n"
+    port.write(b"1SL?\r\n")  # the other limit stays the stage model's
+    assert port.read_until(b"\r\n") == b"1SL-170.000000\r\n"
+    port.close()
+
+
 def test_wrong_baud_rate_gets_no_answer():
     port = serial.serial_for_url("simsmc://baud", baudrate=921600, timeout=0.05)
     port.write(b"1TS\r\n")

@@ -63,16 +63,16 @@ def fit_options(options: ReductionOptions | None = None,
 def refuse_polarimetric(path: str | Path) -> None:
     """A polarimetric run (its file records an optical train, ADR 0112) holds K retarder
     steps per geometry: the scalar reduction would treat them as repeated points of one
-    BRDF and mix the analyser's states. Refused until the Mueller-matrix reduction is part
-    of ``fit``."""
+    BRDF and mix the analyser's states. Its reduction is the Mueller-matrix pipeline
+    (:mod:`instrument.pipelines.polarimetry`), which ``scatterlab fit`` chooses for it."""
     with open_run(path) as f:
         polarimetric = "optical_train" in f["entry/instrument"]
     if polarimetric:
         raise RunFileError(
             f"{path} is a polarimetric run (dual-rotating-retarder steps at every "
-            "geometry); `scatterlab fit` does not reduce it to Mueller matrices in this "
-            "version: reduce it with analysis.polarimetry.drr as the guide's polarimetry "
-            "chapter shows (docs/guide/polarimetry.md)")
+            "geometry): the scalar BRDF fit would mix the analyser's states; reduce it to "
+            "Mueller matrices with `scatterlab fit` (or "
+            "instrument.pipelines.polarimetry.pipeline.fit_polarimetric_run)")
 
 
 def fit_run(

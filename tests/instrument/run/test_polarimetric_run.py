@@ -214,5 +214,5 @@ def test_the_engine_records_the_mounts_and_recovers_the_hidden_mueller_matrix(tm
     # Brewster's neighbourhood: strongly p-suppressing at 50° on glass
     assert truth[0, 1] / truth[0, 0] < -0.5
     # the scalar fit would mix the analyser's states: refused, naming the way to reduce it
-    with pytest.raises(RunFileError, match=r"polarimetric run.*analysis\.polarimetry\.drr"):
+    with pytest.raises(RunFileError, match=r"polarimetric run.*scatterlab fit"):
         fit_run(path, report=False, write=False)

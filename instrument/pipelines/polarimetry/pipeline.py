@@ -1,0 +1,190 @@
+"""A polarimetric run file → Mueller matrices, decompositions, the pBRDF fit, the report
+and the results file (what ``scatterlab fit`` does for a run with an optical train).
+
+Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`), choose
+the calibration (:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every
+geometry (:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix
+with its full covariance (:func:`analysis.polarimetry.pbrdf.fit_pbrdf`, judged by the
+goodness-of-fit gate of ADR 0051), draw the report
+(:mod:`~instrument.pipelines.polarimetry.report`) and write ``results.h5``
+(:mod:`~instrument.pipelines.polarimetry.results`), all under ``DIR/RUN/fit/`` next to the
+run file ``DIR/RUN.h5`` (ADR 0013). The run file is only read.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from analysis.polarimetry.pbrdf import PBRDF_PARAMS, fit_pbrdf, pbrdf
+from analysis.polarimetry.validation import PolarimetryInputError
+from instrument.pipelines.polarimetry.calibration import (
+    PolarimeterCalibration,
+    find_calibration,
+    load_calibration,
+)
+from instrument.pipelines.polarimetry.readings import read_polarimetric
+from instrument.pipelines.polarimetry.reduce import MuellerPoint, reduce_group, source_scale
+from instrument.pipelines.polarimetry.report import series, write_report
+from instrument.pipelines.polarimetry.results import (
+    write_into_run,
+    write_polarimetric_results,
+)
+from instrument.run.paths import results_dir
+from instrument.run.runfile import check_run_file
+
+__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run"]
+
+#: Start values (n, k, alpha, albedo) of the pBRDF fit: a rough dielectric.
+DEFAULT_START = (1.5, 0.0, 0.2, 0.1)
+
+#: What the report and the console say when no calibration is used.
+UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
+                "misalignment; run scatterlab calibrate polarimeter")
+
+
+@dataclass(frozen=True)
+class PolarimetricFit:
+    """What :func:`fit_polarimetric_run` produced."""
+
+    points: tuple[MuellerPoint, ...]
+    summary: dict[str, Any]
+    calibration: PolarimeterCalibration | None
+    report: Path | None
+    results: Path | None
+
+
+def choose_calibration(path: str | Path, bench: str, calibration: str | Path | None
+                       ) -> PolarimeterCalibration | None:
+    """The calibration to use: ``"none"`` none, a file that one, else the newest valid
+    one of the bench beside the run (:func:`find_calibration`).
+
+    Raises
+    ------
+    CalibrationError
+        A named file that is not a usable calibration.
+    """
+    if calibration is None:
+        return find_calibration(path, bench)
+    if str(calibration) == "none":
+        return None
+    return load_calibration(calibration)
+
+
+def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
+               fixed: Sequence[str], distribution: str) -> dict[str, Any] | None:
+    use = [p for p in points if p.brdf.normalised_valid and not p.group.transmitted]
+    if not use:
+        return None
+    ang = {name: np.radians([getattr(p.group, name) for p in use])
+           for name in ("theta_i", "phi_i", "theta_r", "phi_r")}
+    fit = fit_pbrdf(np.array([p.brdf.m for p in use]), np.array([p.brdf.cov for p in use]),
+                    ang["theta_i"], ang["phi_i"], ang["theta_r"], ang["phi_r"],
+                    start=start, fixed=fixed, distribution=distribution)
+    gof = fit.goodness
+    return {"param_names": list(PBRDF_PARAMS), "params": fit.params.tolist(),
+            "stderr": fit.sigma.tolist(), "covariance": fit.cov.tolist(),
+            "fixed": list(fixed), "distribution": distribution,
+            "adequate": bool(gof.adequate), "verdict": gof.verdict(), "chi2": gof.chi2,
+            "dof": gof.dof, "p_value": gof.p_value}
+
+
+def _model_curves(points: Sequence[MuellerPoint], fit: dict[str, Any]
+                  ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The fitted pBRDF along each series' θr range (for the grid figure)."""
+    out = {}
+    for label, pts in series(points).items():
+        g0 = pts[0].group
+        lo, hi = min(p.group.theta_r for p in pts), max(p.group.theta_r for p in pts)
+        tr = np.linspace(lo - 2.0, hi + 2.0, 60) if hi > lo else np.array([lo])
+        tr = np.clip(tr, 0.0, 89.0)
+        f = pbrdf(fit["params"], math.radians(g0.theta_i), math.radians(g0.phi_i),
+                  np.radians(tr), math.radians(g0.phi_r), distribution=fit["distribution"])
+        out[label] = (tr, f)
+    return out
+
+
+def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = None,
+                         start: Sequence[float] = DEFAULT_START,
+                         fixed: Sequence[str] = ("k",), distribution: str = "beckmann",
+                         report_dir: str | Path | None = None, report: bool = True,
+                         write: bool = True, into_run: bool = False) -> PolarimetricFit:
+    """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
+
+    ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
+    for the newest valid calibration of the run's bench beside the run. ``into_run`` also
+    writes the results into the run file's ``/entry/analysis``.
+
+    Raises
+    ------
+    RunFileError
+        Not a readable polarimetric run.
+    CalibrationError
+        A named calibration that cannot be used, or one of another bench.
+    ValueError
+        No readings, unknown noise or receiver geometry, or too few steps per geometry.
+    """
+    check_run_file(path, "fit")
+    prun = read_polarimetric(path)
+    bench = str(prun.run.profile().get("bench", {}).get("name", ""))
+    cal = choose_calibration(path, bench, calibration)
+    notes: list[str] = []
+    if cal is not None and cal.bench != bench:
+        from instrument.pipelines.polarimetry.calibration import CalibrationError
+
+        raise CalibrationError(f"{cal.path} calibrates bench {cal.bench!r}, the run was "
+                               f"taken on {bench!r}")
+    if cal is not None and not cal.valid:
+        notes.append(f"the calibration {cal.path} failed its quality gate ({cal.quality}); "
+                     "used because it was named")
+    cal_text = (UNCALIBRATED if cal is None else
+                f"calibrated with {cal.path} ({cal.date}): {cal.describe()}")
+    scale = source_scale(prun, cal)
+    points = []
+    for g in prun.groups:
+        try:
+            points.append(reduce_group(prun, g, cal, scale))
+        except PolarimetryInputError as err:
+            raise ValueError(f"{g.label()}: {g.rows.size} steps do not determine the "
+                             f"Mueller matrix ({err})") from None
+    flagged = [p.group.label() for p in points if p.realizability.flagged]
+    if flagged:
+        notes.append(f"not physically realizable within σ (kept as measured, not "
+                     f"projected): {', '.join(flagged)}")
+    if any(p.group.transmitted for p in points):
+        notes.append("straight-through groups (detector arm in the beam) are transmittance "
+                     "matrices (unitless), not BRDFs, and are left out of the pBRDF fit")
+    notes.append("m00 in 1/sr through the source scale " + scale.source
+                 + " and the receiver's solid angle (point receiver); m_ij/m00 does not "
+                 "depend on either")
+    fit = _pbrdf_fit(points, start, fixed, distribution)
+    summary: dict[str, Any] = {
+        "calibrated": cal is not None,
+        "calibration": "" if cal is None or cal.path is None else str(cal.path),
+        "calibration_text": cal_text, "scale_source": scale.source,
+        "source_scale_w": scale.source_w, "solid_angle_sr": scale.solid_angle_sr,
+        "noise": prun.noise_source, "notes": notes, "pbrdf": fit,
+    }
+    folder = Path(report_dir) if report_dir is not None else results_dir(path, "fit")
+    run = prun.run
+    page = None
+    if report:
+        page = write_report(folder, points,
+                            title=f"Mueller-matrix BRDF of {run.sample_name or run.run_id} "
+                            f"(run {run.run_id})", summary=summary,
+                            model=_model_curves(points, fit) if fit else None)
+    saved = None
+    if write:
+        options = {"calibration": summary["calibration"] or "none", "start": list(start),
+                   "fixed": list(fixed), "distribution": distribution}
+        saved = write_polarimetric_results(path, points, summary, run_id=run.run_id,
+                                           options=options, folder=folder)
+    if into_run:
+        write_into_run(path, points, summary)
+    return PolarimetricFit(points=tuple(points), summary=summary, calibration=cal,
+                           report=page, results=saved)
