@@ -37,7 +37,8 @@ def main() -> None:
         print(f"{gens!s:<18} {angles:<37} {best[0]:.2f}")
     print("\nκ of the default settings against the amplitude")
     for amp in (1.0, 1.84, 2.405, 3.05, 3.5):
-        print(f"  A = {amp:5.3f} rad  κ = {pem_condition_number(pem_settings(), amplitude_rad=amp):.2f}")
+        kappa = pem_condition_number(pem_settings(), amplitude_rad=amp)
+        print(f"  A = {amp:5.3f} rad  κ = {kappa:.2f}")
 
 
 if __name__ == "__main__":
