@@ -406,7 +406,9 @@ class VirtualBench:
         # a polarimetric bench: the elements' mounts are part of the state (and its key)
         mounts = {role: self.position(role) for role in optics.mounts}
         key += (tuple(round(mounts[r], 9) for r in optics.mounts),)
-        state = optics.state(mounts.__getitem__, source.wavelength_nm)
+        pems = {url: _modulator_reading(url) for url in optics.modulators}
+        key += (tuple(round(pems[u][0], 9) for u in optics.modulators),)
+        state = optics.state(mounts.__getitem__, source.wavelength_nm, pems.__getitem__)
         return WorldState(positions=positions, pose=self.pose(positions), source=source,
                           scene=scene, key=key, optics=state)
 
@@ -520,6 +522,14 @@ class VirtualBench:
         target.bound_world = self.name
         self._bound_meter = target
         return target
+
+
+def _modulator_reading(url: str) -> tuple[float, float]:
+    """(drive 0..1, frequency Hz) of a PEM controller's emulator now."""
+    emulator = _emulator_for(url)
+    with emulator.lock:
+        drive = 0.0 if emulator.faulted else float(emulator.drive)
+    return drive, float(emulator.resonance_hz())
 
 
 def _url_of(target: Any) -> str:
