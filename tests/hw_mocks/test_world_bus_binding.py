@@ -15,7 +15,7 @@ from hw_mocks.sim.world import RoleSpec, VirtualBench
 from instrument.bench.devices import simulation_config
 from instrument.bench.profile import load_profile
 
-BUS = "simell://polarimeter?addresses=0123&speed=5"
+BUS = "simell://polarimeter?addresses=0123&speed=20"
 
 
 def test_the_ell14_profile_binds_each_mount_by_its_address():

@@ -24,7 +24,7 @@ READS = 6  # snapshots per setting: their scatter is each reading's σ
 
 def pem_bench(sample: str) -> str:
     text = load_profile("sim-polarimetric-pem").source_text
-    text = text.replace("speed=5", "speed=50").replace("speed=20", "speed=200")
+    text = text.replace("speed=20", "speed=200")
     # µW of light keeps the photodiode's 1f/2f within the lock-in's 1 V range
     text = text.replace("power_w = 1e-3", "power_w = 1e-6")
     # the detector straight through the reference (beyond the SMC100's travel: a fixed

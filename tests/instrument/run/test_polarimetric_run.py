@@ -52,7 +52,7 @@ def fast_profile(name: str = "sim-polarimetric") -> str:
     # the mounts turn 10× faster than the built-in profile's emulated K10CR1s (ELL14s)
     text = load_profile(name).source_text
     return text.replace("model=K10CR1&speed=50", "model=K10CR1&speed=500").replace(
-        "addresses=0123&speed=5", "addresses=0123&speed=50")
+        "addresses=0123&speed=20", "addresses=0123&speed=200")
 
 
 def test_a_polarimetric_plan_steps_both_retarders_at_every_geometry():
