@@ -449,6 +449,7 @@ class Sr830LockIn(LockIn):
         self._command("HARM", value)
 
     def read_harmonics(self, harmonics: tuple[int, ...] = (1, 2), *,
+                       n_time_constants: float | None = None,
                        timeout: float = 60.0) -> dict[int, LockInReading]:
         """One settled snapshot per detection harmonic, the harmonic restored afterwards.
 
@@ -458,7 +459,9 @@ class Sr830LockIn(LockIn):
         manual p. 5-4): a 50 kHz head's 2f (100 kHz) fits; a higher harmonic or a faster
         head is refused by the instrument with :class:`CommandRejected` naming ``HARM``.
         Each harmonic change waits the present filter's 99 % settling time (:meth:`settle`,
-        ``timeout`` each).
+        ``timeout`` each), or ``n_time_constants`` × τ: after a 99 % wait up to 1 % of the
+        step between the two harmonics' outputs is still in the reading, which a
+        polarimeter reduced to 10⁻³ has to wait out (e.g. 15 τ).
         """
         self._check_open("read_harmonics")
         if not harmonics:
@@ -468,12 +471,21 @@ class Sr830LockIn(LockIn):
         try:
             for n in harmonics:
                 self.harmonic = n
-                self.settle(timeout=timeout)
+                self.settle(n_time_constants, timeout=timeout)
                 readings[n] = self.snapshot()
         finally:
             if self.harmonic != before:
                 self.harmonic = before
         return readings
+
+    def read_aux_input(self, channel: int = 1) -> float:
+        """The voltage at the rear-panel Aux In ``channel`` (1-4), volts (``OAUX?``, manual
+        p. 5-13): e.g. a photodiode's DC output beside its AC signal on the input, the DC
+        channel of a PEM polarimeter."""
+        self._check_open("read_aux_input")
+        if isinstance(channel, bool) or not isinstance(channel, int) or not 1 <= channel <= 4:
+            raise ValueError(f"{self.name}: an aux input is 1 to 4, got {channel!r}")
+        return self._ask("OAUX?", channel, parse=parse_float)
 
     @property
     def reference_slope(self) -> str:

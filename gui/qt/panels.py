@@ -715,6 +715,78 @@ class FilterWheelPanel(DevicePanel):
         self.status.setText(badge("connected", state.connected))
 
 
+class ModulatorPanel(DevicePanel):
+    """A photoelastic modulator: its peak retardation (waves at the wavelength, and the
+    radians the 1f/2f Bessel weights take) and the modulation frequency the lock-in takes
+    as its reference; set the amplitude and the wavelength it is expressed at. The
+    frequency is the optical head's resonance: read back, never set."""
+
+    def __init__(self, role: str, session: BenchSession, parent: QWidget | None = None
+                 ) -> None:
+        super().__init__(role, session, parent)
+        self.amplitude = QLabel("—")
+        self.amplitude.setObjectName("amplitude")
+        self.amplitude.setStyleSheet("font-size: 13pt; font-weight: 600")
+        self.frequency = QLabel("—")
+        self.frequency.setObjectName("frequency")
+        self.frequency.setToolTip("the optical head's resonance: the lock-in's reference "
+                                  "(harmonics 1 and 2 carry the polarisation signals)")
+        self.new_amplitude = spin_box(0.0, 5.0, 4, 0.383, "waves", step=0.01)
+        self.new_amplitude.setObjectName("new_amplitude")
+        self.new_amplitude.setToolTip("peak retardation in waves at the wavelength; "
+                                      "type a new one and press Set")
+        self.amplitude_field = SetpointField(self.new_amplitude, "retardation")
+        self.set_amplitude = QPushButton("Set")
+        self.set_amplitude.setObjectName("set_amplitude")
+        self.new_wavelength = spin_box(100.0, 25000.0, 1, 632.8, "nm")
+        self.new_wavelength.setObjectName("new_wavelength")
+        self.new_wavelength.setToolTip("the wavelength the amplitude is expressed at (the "
+                                       "drive stays: the same nanometres are fewer waves "
+                                       "at a longer wavelength)")
+        self.wavelength_field = SetpointField(self.new_wavelength, "wavelength")
+        self.set_wavelength = QPushButton("Set")
+        self.set_wavelength.setObjectName("set_wavelength")
+        form = QFormLayout(self.body)
+        form.setContentsMargins(0, 0, 0, 0)
+        form.addRow("amplitude", self.amplitude)
+        form.addRow("frequency", self.frequency)
+        for label, box, button in (("set amplitude", self.new_amplitude, self.set_amplitude),
+                                   ("at wavelength", self.new_wavelength,
+                                    self.set_wavelength)):
+            row = QHBoxLayout()
+            row.addWidget(box, 1)
+            row.addWidget(button)
+            form.addRow(label, row)
+        self.set_amplitude.clicked.connect(lambda: self.session.submit(
+            SetSetting(self.role, "retardation_waves", self.new_amplitude.value())))
+        self.set_wavelength.clicked.connect(lambda: self.session.submit(
+            SetSetting(self.role, "wavelength_nm", self.new_wavelength.value())))
+        self.controls(self.new_amplitude, self.set_amplitude, self.new_wavelength,
+                      self.set_wavelength)
+
+    def show_state(self, state: DeviceState) -> None:
+        waves = state.values.get("retardation_waves")
+        wl = state.info.get("wavelength_nm")
+        freq = state.values.get("frequency_hz")
+        if waves is None:
+            self.amplitude.setText("—")
+        else:
+            at = "" if wl is None else f" at {wl:g} nm"
+            self.amplitude.setText(f"{waves:.4f} waves{at} ({2.0 * math.pi * waves:.3f} rad)")
+        self.frequency.setText(fmt.si(freq, "Hz"))
+        self.amplitude_field.follow(waves)
+        self.wavelength_field.follow(wl)
+        self.status.setText(badge("connected", state.connected))
+
+    def show_result(self, result: CommandResult) -> None:
+        super().show_result(result)
+        if isinstance(result.command, SetSetting):
+            if result.command.name == "retardation_waves":
+                self.amplitude_field.settled()
+            elif result.command.name == "wavelength_nm":
+                self.wavelength_field.settled()
+
+
 def fill(box: QComboBox, items: list[tuple[str, Any]]) -> None:
     """Replace a choice box's items, keeping the selected value where it is still there."""
     current = box.currentData()
@@ -734,3 +806,4 @@ register_panel("power_meter", PowerMeterPanel)
 register_panel("lockin", LockInPanel)
 register_panel("shutter", ShutterPanel)
 register_panel("filter_wheel", FilterWheelPanel)
+register_panel("modulator", ModulatorPanel)

@@ -145,8 +145,18 @@ class ElliptecEmulator(FirmwareEmulator):
 
     @property
     def stage(self) -> StageMechanics:
-        """The first module's mechanics (the virtual bench reads one stage per emulator)."""
+        """The first module's mechanics (what a virtual-bench role without an address
+        reads)."""
         return next(iter(self.modules.values())).stage
+
+    def stage_at(self, address: str) -> StageMechanics:
+        """The mechanics of the module at ``address``: a virtual-bench role bound by
+        address (``{url, address}``) reads each mount of the bus as its own axis."""
+        module = self.modules.get(str(address).upper())
+        if module is None:
+            raise KeyError(f"{self.scheme}://{self.name} has no module at address "
+                           f"{address!r}; its addresses are {''.join(self.modules)}")
+        return module.stage
 
     # backdoor -----------------------------------------------------------------
     def position_pulses(self, address: str = "0") -> int:

@@ -38,12 +38,13 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, replace
+from typing import Any
 
 from hw_mocks.firmware.sr830 import InputSignal, Sr830Emulator
 from hw_mocks.sim.world import VirtualBench, find_world
 
-__all__ = ["ELEMENTARY_CHARGE_C", "ChoppedPhotodiode", "LockInBinding", "bind_lockin",
-           "split_power_w"]
+__all__ = ["ELEMENTARY_CHARGE_C", "ChoppedPhotodiode", "LockInBinding",
+           "ModulatedLockInBinding", "bind_lockin", "split_power_w"]
 
 ELEMENTARY_CHARGE_C = 1.602176634e-19
 #: Fundamental (rms) of a 0…1 square wave of 50 % duty: (2/π)/√2 = √2/π.
@@ -126,7 +127,7 @@ class LockInBinding:
         self.emulator = emulator
         self.world_name = world_name
         self.photodiode = photodiode
-        self._cache: dict[tuple, tuple[float, float]] = {}
+        self._cache: dict[tuple, Any] = {}  # a subclass caches its own readings
         self._lock = threading.Lock()
 
     def powers_w(self) -> tuple[float, float]:
@@ -154,15 +155,89 @@ class LockInBinding:
         )
 
 
+class ModulatedLockInBinding(LockInBinding):
+    """The lock-in behind a photodiode lit through a PEM generator (no chopper).
+
+    The world's polarisation state gives the generator's mean and its 1f and 2f parts
+    (:class:`~hw_mocks.sim.polarisation.PolarisationState`); the detector's power is
+    linear in the generator, so each part's power is the source-borne power with the
+    generator replaced by that part (ambient light, which the PEM does not modulate,
+    subtracted). The input the SR830 sees: the 1f term as the fundamental and the 2f term
+    as harmonic 2, their signs as phases 0°/180° (RMS volts: the lock-in's convention and
+    that of :func:`analysis.polarimetry.drr.pem_instrument_rows`), at the reference of the
+    PEM controller, which drives REF IN (the emulator's ``reference_input_hz`` follows
+    it). The photodiode's DC output (mean signal plus ambient) is wired to the lock-in's
+    Aux In 1, where ``OAUX? 1`` reads it: the DC channel in the same volts as 1f and 2f.
+    """
+
+    def harmonic_powers_w(self) -> tuple[float, float, float, float, float | None]:
+        """(mean, 1f RMS, 2f RMS source-borne power, ambient power, modulation Hz)."""
+        world = find_world(self.world_name)
+        if world is None:
+            return 0.0, 0.0, 0.0, 0.0, None
+        state = world.snapshot()
+        key = (state.key, world.power_meter, self.photodiode.aperture_diameter_mm, "pem")
+        with self._lock:
+            cached: tuple[float, float, float, float, float | None] | None = \
+                self._cache.get(key)
+        if cached is not None:
+            return cached
+        head = world.power_meter
+        diameter = head.aperture_diameter_mm if self.photodiode.aperture_diameter_mm is None \
+            else self.photodiode.aperture_diameter_mm
+        center, facing = state.pose.detector_dir * head.distance_mm, -state.pose.detector_dir
+        dark = replace(state, source=replace(state.source, on=False))
+        ambient = state.scene.power_on_aperture(center, facing, diameter, dark)
+        optics = state.optics
+        if optics is None or not state.source.on:
+            result: tuple[float, float, float, float, float | None] = (
+                0.0, 0.0, 0.0, ambient, None if optics is None else optics.modulation_hz)
+        else:
+            def borne(generator: Any) -> float:
+                probe = replace(state, optics=replace(optics, generator=generator))
+                return state.scene.power_on_aperture(center, facing, diameter, probe) - ambient
+
+            parts = dict(optics.harmonics)
+            result = (max(borne(optics.generator), 0.0),
+                      borne(parts[1]) if 1 in parts else 0.0,
+                      borne(parts[2]) if 2 in parts else 0.0, ambient, optics.modulation_hz)
+        with self._lock:
+            if len(self._cache) > 256:
+                self._cache.clear()
+            self._cache[key] = result
+        return result
+
+    def __call__(self) -> InputSignal:
+        mean_w, first_w, second_w, ambient_w, frequency = self.harmonic_powers_w()
+        pd = self.photodiode
+        volts = pd.volts_per_watt
+        if frequency:
+            self.emulator.reference_input_hz = frequency
+        dc_v = volts * (mean_w + ambient_w)
+        self.emulator.aux_inputs_v[0] = dc_v
+        mean_current_a = pd.responsivity_a_per_w * (mean_w + ambient_w)
+        shot = pd.transimpedance_v_per_a * math.sqrt(2.0 * ELEMENTARY_CHARGE_C * mean_current_a)
+        return InputSignal(
+            ac_rms_v=volts * abs(first_w), phase_deg=0.0 if first_w >= 0 else 180.0,
+            frequency_hz=None, dc_v=dc_v,
+            noise_v_per_rthz=math.hypot(self.emulator.input_noise_v_per_rthz, shot),
+            harmonics=((2, volts * abs(second_w), 0.0 if second_w >= 0 else 180.0),),
+        )
+
+
 def bind_lockin(emulator: Sr830Emulator, world: VirtualBench | str,
-                photodiode: ChoppedPhotodiode | None = None) -> LockInBinding:
+                photodiode: ChoppedPhotodiode | None = None, *,
+                modulated: bool = False) -> LockInBinding:
     """Feed ``emulator`` the chopped photodiode signal at the detector of ``world``.
 
     ``world`` is a :class:`VirtualBench` or the name of one (looked up at each reading).
-    Returns the binding (also set as ``emulator.input_signal``).
+    ``modulated``: the photodiode sees the world's PEM generator instead of a chopped beam
+    (:class:`ModulatedLockInBinding`). Returns the binding (also set as
+    ``emulator.input_signal``).
     """
     name = world.name if isinstance(world, VirtualBench) else str(world)
-    binding = LockInBinding(emulator, name, photodiode or ChoppedPhotodiode())
+    kind = ModulatedLockInBinding if modulated else LockInBinding
+    binding = kind(emulator, name, photodiode or ChoppedPhotodiode())
     with emulator.lock:
         emulator.input_signal = binding
         emulator.bound_world = name

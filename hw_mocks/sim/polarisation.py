@@ -51,6 +51,25 @@ difference is the misalignment a calibration has to find)::
     retardance_deg = 94.5   # or a list with retardance_nm
 
 The element's axis stands at orientation + mount position (the stage's physical angle).
+
+A photoelastic modulator in the source arm (``kind = "pem"``, at most one) is a retarder
+whose retardance oscillates, δ(t) = A sin ωt, with its axis at ``orientation_deg`` (a PEM
+head does not turn; ``mount`` may be left out). A is read from its controller's emulator
+(``modulator``, a ``simpem://`` URL) each snapshot: A = 2π · drive · ``nm_per_drive`` / λ,
+``nm_per_drive`` being the head's true calibration (the driver is told a nominal one)::
+
+    [[simulation.optics.source]]
+    kind = "pem"
+    orientation_deg = 45.0
+    modulator = "simpem://pem"
+    nm_per_drive = 1230.0
+
+Every element of a retarder's Mueller matrix is affine in (cos δ, sin δ), so
+M(δ) = M₀ + M_c cos δ + M_s sin δ (from M(0), M(π) and M(π/2)); with the Jacobi–Anger
+expansions (Abramowitz & Stegun 9.1.42–43) the light leaving the generator is, per unit
+source power, a steady part (M₀ + J₀(A) M_c) g and the RMS amplitudes √2 J₁(A) M_s g of its
+sin ωt term and √2 J₂(A) M_c g of its cos 2ωt term (:attr:`PolarisationState.harmonics`):
+what a detector's lock-in reads at 1f and 2f.
 """
 
 from __future__ import annotations
@@ -63,6 +82,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import special
 
 __all__ = ["HiddenElement", "HiddenTrain", "PolarisationState", "analysed_intensity",
            "jones_to_mueller",
@@ -154,6 +174,8 @@ class HiddenElement:
     retardance_deg: tuple[float, ...] = ()
     retardance_nm: tuple[float, ...] = ()
     extinction: float = 0.0
+    modulator: str | None = None   # a PEM's controller (simpem:// URL)
+    nm_per_drive: float = 0.0      # a PEM head's true calibration
 
     def mueller(self, mount_deg: float, wavelength_nm: float) -> NDArray[np.float64]:
         theta = math.radians(self.orientation_deg + mount_deg)
@@ -166,7 +188,9 @@ class HiddenElement:
         return retarder_mueller(theta, math.radians(delta))
 
 
-_KEYS = {"kind", "mount", "orientation_deg", "retardance_deg", "retardance_nm", "extinction"}
+_KEYS = {"kind", "mount", "orientation_deg", "retardance_deg", "retardance_nm", "extinction",
+         "modulator", "nm_per_drive"}
+_KINDS = ("polariser", "retarder", "pem")
 
 
 def _hidden_element(cfg: Any, where: str) -> HiddenElement:
@@ -177,9 +201,11 @@ def _hidden_element(cfg: Any, where: str) -> HiddenElement:
         raise ValueError(f"[simulation.optics] {where}: unknown keys {sorted(unknown)}; "
                          f"known {sorted(_KEYS)}")
     kind = cfg.get("kind")
-    if kind not in ("polariser", "retarder"):
-        raise ValueError(f"[simulation.optics] {where}.kind must be polariser or retarder, "
+    if kind not in _KINDS:
+        raise ValueError(f"[simulation.optics] {where}.kind must be one of {list(_KINDS)}, "
                          f"got {kind!r}")
+    if kind == "pem":
+        return _hidden_pem(cfg, where)
     mount = cfg.get("mount")
     if mount is not None and not isinstance(mount, str):
         raise ValueError(f"[simulation.optics] {where}.mount must be a role name")
@@ -205,6 +231,34 @@ def _hidden_element(cfg: Any, where: str) -> HiddenElement:
     return HiddenElement(kind, mount, orientation, retardance, wavelengths, extinction)
 
 
+def _hidden_pem(cfg: Mapping[str, Any], where: str) -> HiddenElement:
+    modulator = cfg.get("modulator")
+    if not isinstance(modulator, str) or not modulator.startswith("simpem://"):
+        raise ValueError(f"[simulation.optics] {where}.modulator must be the PEM "
+                         f"controller's simpem:// URL, got {modulator!r}")
+    nm_per_drive = float(cfg.get("nm_per_drive", 0.0))
+    orientation = float(cfg.get("orientation_deg", 0.0))
+    if not (math.isfinite(nm_per_drive) and nm_per_drive > 0 and math.isfinite(orientation)):
+        raise ValueError(f"[simulation.optics] {where}: a pem needs nm_per_drive > 0 (nm "
+                         "of peak retardation at drive 1) and a finite orientation_deg")
+    mount = cfg.get("mount")
+    if mount is not None and not isinstance(mount, str):
+        raise ValueError(f"[simulation.optics] {where}.mount must be a role name")
+    return HiddenElement("pem", mount, orientation, modulator=modulator,
+                         nm_per_drive=nm_per_drive)
+
+
+def _pem_channels(e: HiddenElement, theta_deg: float, amplitude_rad: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The PEM's steady, 1f and 2f Mueller parts (module docstring)."""
+    theta = math.radians(theta_deg)
+    m_plus, m_minus = retarder_mueller(theta, 0.0), retarder_mueller(theta, math.pi)
+    m0, mc = 0.5 * (m_plus + m_minus), 0.5 * (m_plus - m_minus)
+    ms = retarder_mueller(theta, math.pi / 2) - m0
+    j0, j1, j2 = (float(special.jv(n, amplitude_rad)) for n in (0, 1, 2))
+    return m0 + j0 * mc, math.sqrt(2.0) * j1 * ms, math.sqrt(2.0) * j2 * mc
+
+
 @dataclass(frozen=True)
 class PolarisationState:
     """The train as it stands now, for one snapshot of the world.
@@ -217,6 +271,11 @@ class PolarisationState:
 
     generator: NDArray[np.float64]
     analyser: NDArray[np.float64]
+    #: A PEM generator's modulated parts: (harmonic n, Stokes vector of its RMS amplitude)
+    #: for n = 1 (the sin ωt term) and 2 (the cos 2ωt term); ``generator`` is the mean.
+    harmonics: tuple[tuple[int, NDArray[np.float64]], ...] = ()
+    #: The modulation frequency ω/2π in Hz (None without a PEM).
+    modulation_hz: float | None = None
 
 
 @dataclass(frozen=True)
@@ -247,6 +306,9 @@ class HiddenTrain:
             if not isinstance(raw, Sequence) or isinstance(raw, str):
                 raise ValueError(f"[simulation.optics] {arm} must be an array of tables")
             arms[arm] = tuple(_hidden_element(e, f"{arm}[{i}]") for i, e in enumerate(raw))
+        pems = [e for e in (*arms["source"], *arms["detector"]) if e.kind == "pem"]
+        if pems and (len(pems) > 1 or any(e.kind == "pem" for e in arms["detector"])):
+            raise ValueError("[simulation.optics]: one pem at most, in the source arm")
         normalised = (1.0, stokes[1] / s0, stokes[2] / s0, stokes[3] / s0)
         return cls(normalised, arms["source"], arms["detector"])
 
@@ -254,13 +316,35 @@ class HiddenTrain:
     def mounts(self) -> tuple[str, ...]:
         return tuple(e.mount for e in (*self.source, *self.detector) if e.mount is not None)
 
-    def state(self, position: Callable[[str], float], wavelength_nm: float
+    @property
+    def modulators(self) -> tuple[str, ...]:
+        """The PEM controllers' URLs (their drive is part of the world's state)."""
+        return tuple(e.modulator for e in self.source if e.modulator is not None)
+
+    def state(self, position: Callable[[str], float], wavelength_nm: float,
+              modulator: Callable[[str], tuple[float, float]] | None = None
               ) -> PolarisationState:
-        """The generator and analyser now, with each mount's angle from ``position``."""
+        """The generator and analyser now, with each mount's angle from ``position`` and a
+        PEM controller's (drive 0..1, frequency Hz) from ``modulator``."""
         g = np.array(self.source_stokes)
+        parts: list[tuple[int, NDArray[np.float64]]] = []
+        frequency = None
         for e in self.source:
-            g = e.mueller(position(e.mount) if e.mount else 0.0, wavelength_nm) @ g
+            mount = position(e.mount) if e.mount else 0.0
+            if e.kind == "pem":
+                if modulator is None or e.modulator is None:
+                    raise ValueError("a pem in [simulation.optics] needs its controller read")
+                drive, frequency = modulator(e.modulator)
+                amplitude = 2.0 * math.pi * drive * e.nm_per_drive / wavelength_nm
+                steady, first, second = _pem_channels(e, e.orientation_deg + mount, amplitude)
+                parts = [(1, first @ g), (2, second @ g)]
+                g = steady @ g
+                continue
+            m_e = e.mueller(mount, wavelength_nm)
+            g = m_e @ g
+            parts = [(n, m_e @ v) for n, v in parts]
         m = np.eye(4)
         for e in self.detector:
             m = e.mueller(position(e.mount) if e.mount else 0.0, wavelength_nm) @ m
-        return PolarisationState(generator=g, analyser=m[0].copy())
+        return PolarisationState(generator=g, analyser=m[0].copy(), harmonics=tuple(parts),
+                                 modulation_hz=frequency)

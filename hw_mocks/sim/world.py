@@ -103,13 +103,16 @@ class RoleSpec:
     Either ``url`` (an emulator, ``scheme://name?options``; its stage's physical position)
     or the constant ``value``. ``scale`` and ``offset`` map the stage to the world
     (``world = scale · stage + offset``): a sign flip, or a mounting offset to be found by a
-    calibration.
+    calibration. ``address`` picks one module of an emulator that carries several on one
+    bus (an Elliptec bus, ``simell://bus?addresses=0123``: the emulator's
+    ``stage_at(address)``); without it the emulator's one ``stage`` is read.
     """
 
     url: str | None = None
     value: float = 0.0
     scale: float = 1.0
     offset: float = 0.0
+    address: str | None = None
 
     @classmethod
     def parse(cls, spec: Any) -> RoleSpec:
@@ -121,14 +124,18 @@ class RoleSpec:
             registry.parse_url(spec)  # validates the form
             return cls(url=spec)
         if isinstance(spec, Mapping):
-            unknown = set(spec) - {"url", "value", "scale", "offset"}
+            unknown = set(spec) - {"url", "value", "scale", "offset", "address"}
             if unknown:
                 raise ValueError(f"unknown role keys {sorted(unknown)}")
             if spec.get("url") is not None:
                 registry.parse_url(str(spec["url"]))
+            address = spec.get("address")
+            if address is not None and spec.get("url") is None:
+                raise ValueError(f"a role's 'address' ({address!r}) needs the bus's 'url'")
             return cls(
                 url=spec.get("url"), value=float(spec.get("value", 0.0)),
                 scale=float(spec.get("scale", 1.0)), offset=float(spec.get("offset", 0.0)),
+                address=None if address is None else str(address).upper(),
             )
         raise TypeError(f"a role is a URL, a number or a table, got {spec!r}")
 
@@ -331,7 +338,8 @@ class VirtualBench:
         emulator = _emulator_for(spec.url)
         # The stage updates itself when read; the link's thread may be moving it now.
         with emulator.lock:
-            physical = float(emulator.stage.physical_position())
+            stage = emulator.stage if spec.address is None else emulator.stage_at(spec.address)
+            physical = float(stage.physical_position())
         return spec.scale * physical + spec.offset
 
     def spin(self) -> tuple[float, float]:
@@ -398,7 +406,9 @@ class VirtualBench:
         # a polarimetric bench: the elements' mounts are part of the state (and its key)
         mounts = {role: self.position(role) for role in optics.mounts}
         key += (tuple(round(mounts[r], 9) for r in optics.mounts),)
-        state = optics.state(mounts.__getitem__, source.wavelength_nm)
+        pems = {url: _modulator_reading(url) for url in optics.modulators}
+        key += (tuple(round(pems[u][0], 9) for u in optics.modulators),)
+        state = optics.state(mounts.__getitem__, source.wavelength_nm, pems.__getitem__)
         return WorldState(positions=positions, pose=self.pose(positions), source=source,
                           scene=scene, key=key, optics=state)
 
@@ -521,6 +531,14 @@ class VirtualBench:
         target.bound_world = self.name
         self._bound_meter = target
         return target
+
+
+def _modulator_reading(url: str) -> tuple[float, float]:
+    """(drive 0..1, frequency Hz) of a PEM controller's emulator now."""
+    emulator = _emulator_for(url)
+    with emulator.lock:
+        drive = 0.0 if emulator.faulted else float(emulator.drive)
+    return drive, float(emulator.resonance_hz())
 
 
 def _url_of(target: Any) -> str:

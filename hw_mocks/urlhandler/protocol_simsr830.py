@@ -35,7 +35,11 @@ same instrument, as reconnecting a cable does):
     Name of a virtual bench: the input is the chopped photodiode signal at the detector
     (:mod:`hw_mocks.sim.photodiode`), with ``responsivity`` (A/W, default 0.4), ``gain``
     (transimpedance V/A, default 1e6) and optional ``aperture_mm`` (default: the world's
-    power-meter head). Needs ``chopper``.
+    power-meter head). Needs ``chopper``, or ``reference=pem``.
+``reference``
+    ``pem``: REF IN is driven by the world's photoelastic modulator, whose generator lights
+    the photodiode (:class:`hw_mocks.sim.photodiode.ModulatedLockInBinding`: 1f and 2f on
+    the input, the photodiode's DC on Aux In 1); no chopper.
 """
 
 from __future__ import annotations
@@ -52,7 +56,7 @@ from hw_mocks.link import EmulatedSerial
 __all__ = ["Serial", "host_sleep", "make_emulator"]
 
 _KNOWN = {"baud", "speed", "step", "clock", "seed", "chopper", "noise", "outx", "agan",
-          "serial", "model", "world", "responsivity", "gain", "aperture_mm"}
+          "serial", "model", "world", "responsivity", "gain", "aperture_mm", "reference"}
 
 
 def _clock(options: dict[str, str]) -> Clock:
@@ -89,16 +93,21 @@ def make_emulator(name: str, options: dict[str, str]) -> Sr830Emulator:
     if "world" in options:
         from hw_mocks.sim.photodiode import ChoppedPhotodiode, bind_lockin
 
-        if chopper is None:
+        modulated = options.get("reference") == "pem"
+        if options.get("reference") not in (None, "pem"):
+            raise ValueError(f"simsr830 reference={options['reference']!r}: the only choice "
+                             "is 'pem' (leave it out for a chopper)")
+        if chopper is None and not modulated:
             raise ValueError("a simsr830 URL with world= needs chopper=<Hz> (the light is "
-                             "chopped; the chopper's reference drives REF IN)")
+                             "chopped; the chopper's reference drives REF IN) or "
+                             "reference=pem")
         aperture = options.get("aperture_mm")
         photodiode = ChoppedPhotodiode(
             responsivity_a_per_w=float(options.get("responsivity", 0.4)),
             transimpedance_v_per_a=float(options.get("gain", 1e6)),
             aperture_diameter_mm=float(aperture) if aperture is not None else None,
         )
-        bind_lockin(emulator, options["world"], photodiode)
+        bind_lockin(emulator, options["world"], photodiode, modulated=modulated)
     return emulator
 
 

@@ -214,13 +214,15 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
     """The world name and the virtual-bench configuration for an emulated profile.
 
     What the profile already says is not repeated in ``[simulation]``: each motion role is
-    bound to its device URL (a type (i) arm's with its stage offset), the power-meter head
+    bound to its device URL (a type (i) arm's with its stage offset; a mount on a bus of
+    addressed modules, an Elliptec ELL14's, with its ``options.address``, so each mount
+    of the bus is its own axis of the world), the power-meter head
     to the ``simusb://`` power meter, and the arm length to the geometry's detector
     distance, unless the table overrides them.
     """
     config = dict(profile.simulation or {})
     world = str(config.pop("world", "sim"))
-    roles: dict[str, Any] = {role: spec.url for role, spec in profile.axes.items()
+    roles: dict[str, Any] = {role: _role_binding(spec) for role, spec in profile.axes.items()
                              if spec.is_simulated}
     geo = profile.geometry
     for arm, spec in (("source", geo.source_arm), ("detector", geo.detector_arm)):
@@ -249,6 +251,15 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
         head.setdefault("aperture_diameter_mm", profile.geometry.detector_aperture_mm)
         config["power_meter"] = head
     return world, config
+
+
+def _role_binding(spec: DeviceSpec) -> Any:
+    """What the virtual bench reads for one simulated motion device: its URL, or, for a
+    module on a shared bus (an ``address`` option), the URL and that address."""
+    address = spec.options.get("address")
+    if address is None:
+        return spec.url
+    return {"url": spec.url, "address": str(address)}
 
 
 def configure_simulation(profile: BenchProfile) -> None:

@@ -48,10 +48,11 @@ steps = 25
 """
 
 
-def fast_profile() -> str:
-    # the mounts turn 10× faster than the built-in profile's emulated K10CR1s
-    text = load_profile("sim-polarimetric").source_text
-    return text.replace("model=K10CR1&speed=50", "model=K10CR1&speed=500")
+def fast_profile(name: str = "sim-polarimetric") -> str:
+    # the mounts turn 10× faster than the built-in profile's emulated K10CR1s (ELL14s)
+    text = load_profile(name).source_text
+    return text.replace("model=K10CR1&speed=50", "model=K10CR1&speed=500").replace(
+        "addresses=0123&speed=20", "addresses=0123&speed=200")
 
 
 def test_a_polarimetric_plan_steps_both_retarders_at_every_geometry():
@@ -159,9 +160,13 @@ def test_the_planner_shows_the_condition_number(capsys, tmp_path):
 
 
 @pytest.mark.slow  # 25 emulated mount moves and aperture integrals: 40-65 s on a loaded box
-def test_the_engine_records_the_mounts_and_recovers_the_hidden_mueller_matrix(tmp_path):
+# the same bench with its K10CR1 mounts, and with four ELL14s on one Elliptec bus, each
+# module its own axis of the world (bound by address)
+@pytest.mark.parametrize("bench_name", ["sim-polarimetric", "sim-polarimetric-ell14"])
+def test_the_engine_records_the_mounts_and_recovers_the_hidden_mueller_matrix(tmp_path,
+                                                                           bench_name):
     bench = tmp_path / "bench.toml"
-    bench.write_text(fast_profile(), encoding="utf-8")
+    bench.write_text(fast_profile(bench_name), encoding="utf-8")
     plan = tmp_path / "plan.toml"
     plan.write_text(PLAN, encoding="utf-8")
     out = tmp_path / "runs"
@@ -194,7 +199,7 @@ def test_the_engine_records_the_mounts_and_recovers_the_hidden_mueller_matrix(tm
     # the meter's noise (profile: relative_noise, floor; the dark's floor as well)
     sigma = np.hypot(1e-4 * power, math.sqrt(2.0) * 2.6e-10)
     est = reduce(power, sigma, w)
-    world = find_world("sim-polarimetric")
+    world = find_world(bench_name)
     state = world.snapshot()
     state = replace(state, source=replace(state.source, on=True))  # off after the run
     head = world.power_meter
