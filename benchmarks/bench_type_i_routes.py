@@ -1,5 +1,5 @@
 """Type (i) routes: what guarding the arms' paths costs the planner, and what split moves
-cost the scan (ADR 0104).
+cost the scan (ADR 0099).
 
 For each example plan on ``sim-type-i`` (and on its type (ii) twin for comparison):
 

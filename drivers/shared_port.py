@@ -3,7 +3,7 @@
 Devices opened with the same port string (or the same ``serial.SerialBase`` object) share
 one :class:`SharedPort`: one :class:`~drivers.transport.SerialChannel`, one lock (one
 exchange at a time on the wire) and a user count; the port closes with its last user
-(ADR 0007 for Zaber chains, ADR 0104 for Elliptec buses). A driver keeps its own
+(ADR 0007 for Zaber chains, ADR 0100 for Elliptec buses). A driver keeps its own
 :class:`PortRegistry`, so two protocols never share a port by accident, and may subclass
 :class:`SharedPort` for per-bus state (message ids, mailboxes of other addresses).
 """

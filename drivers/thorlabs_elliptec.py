@@ -9,7 +9,7 @@ How this driver deals with the protocol
   serial line (an interface board, or the ELLB distribution bus). Every mount opened with
   the same port string (or port object) shares one port, one lock (one exchange at a time)
   and a mailbox per address: a reply read while waiting for another address's is kept for
-  it, never dropped. The port closes with the last mount (ADR 0104).
+  it, never dropped. The port closes with the last mount (ADR 0100).
 * **Units.** Positions are encoder pulses; the degrees per pulse come from the module's
   own ``in`` reply (ELL14: 360° per 143360 pulses), read on open. A module whose travel is
   not 360 is refused (this is a rotation-mount driver).

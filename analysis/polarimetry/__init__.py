@@ -2,7 +2,7 @@
 
 Pure numerics on arrays (no I/O, no other project package). Conventions (Stokes
 (I, Q, U, V), angles, handedness, row-major ``vec``) are stated once in
-:mod:`analysis.polarimetry.elements` and in ADR 0110.
+:mod:`analysis.polarimetry.elements` and in ADR 0102.
 """
 
 from analysis.polarimetry.calibration import (

@@ -28,7 +28,7 @@ calibration) are the quality indicators.
 The dual rotating retarder is not separable: its K settings change generator and analyser
 together (one row ``vec(a_k g_kᵀ)`` per step), so no 4×4 ``B`` exists and ECM does not
 apply directly; :mod:`analysis.polarimetry.calibration` fits the DRR's hidden parameters
-by least squares on the same reference measurements instead (ADR 0110).
+by least squares on the same reference measurements instead (ADR 0102).
 """
 
 from __future__ import annotations

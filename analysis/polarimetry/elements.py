@@ -1,6 +1,6 @@
 """Mueller matrices of the elements of a polarimeter, with the conventions stated once.
 
-Conventions (ADR 0110)
+Conventions (ADR 0102)
 ----------------------
 * Stokes vector ``S = (I, Q, U, V)``: ``Q = I(0°) − I(90°)``, ``U = I(45°) − I(135°)``,
   ``V = I(R) − I(L)``, intensities behind ideal analysers.

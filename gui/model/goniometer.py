@@ -9,7 +9,7 @@ Two pictures, both in millimetres or degrees of the bench's own conventions
   beam, the half-plane behind the sample, the profile's arm-collision zones as wedges of
   the arm's or the normal's azimuth) and the plan's detector positions, done and to do.
   It is the whole truth for an in-plane bench.
-* :func:`arms_view` — a type (i) bench (ADR 0104) seen from above, the same projection
+* :func:`arms_view` — a type (i) bench (ADR 0099) seen from above, the same projection
   as the hemisphere's: the stationary sample at the centre, each arm's rail (a diameter
   at its azimuth) and head, the zones the guard keeps the detector out of around the
   source head (the arms touching; the beam or the view), and the plan's detector

@@ -22,7 +22,7 @@ as unknown (taken as 0, with a warning naming the key to set).
 In plane (ADR 0012) θi is the source's angle less the sample stage's and θr the
 detector arm's less the sample stage's: σθi = σ_sample, σθr = σ_sample ⊕ σ_arm (the
 sample stage's error shifts both; their correlation is left out). On a type (i)
-goniometer (ADR 0104) the sample stands still and θi, θr are the arcs' own angles:
+goniometer (ADR 0099) the sample stands still and θi, θr are the arcs' own angles:
 σθi = σ_source_arc, σθr = σ_detector_arc (the azimuth stages move φ, not θ).
 """
 

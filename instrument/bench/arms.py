@@ -1,6 +1,6 @@
 """The guard's rules for a type (i) goniometer, and collision-free paths between poses.
 
-Geometry (ADR 0104): each arm's head (the source, or the detector with its aperture, on
+Geometry (ADR 0099): each arm's head (the source, or the detector with its aperture, on
 its carriage) sits at its radius r from the sample centre, ``width_mm`` w wide across the
 arc, so seen from the sample it is a disc of angular half-width α = atan(w/2 / r). With δ
 the angle between the two heads' directions (the bistatic angle 2β) a pose is refused by

@@ -226,7 +226,7 @@ def simulation_config(profile: BenchProfile) -> tuple[str, dict[str, Any]]:
                              if spec.is_simulated}
     geo = profile.geometry
     for arm, spec in (("source", geo.source_arm), ("detector", geo.detector_arm)):
-        # a type (i) arm's stage reads its angle plus the profile's offset (ADR 0104)
+        # a type (i) arm's stage reads its angle plus the profile's offset (ADR 0099)
         for axis, offset in ((f"{arm}_arc", 0.0 if spec is None else spec.arc_offset_deg),
                              (f"{arm}_azimuth",
                               0.0 if spec is None else spec.azimuth_offset_deg)):

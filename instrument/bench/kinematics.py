@@ -39,7 +39,7 @@ detector), ω = (sinθ cosφ, sinθ sinφ, cosθ). This is the convention of
 at φi = 0 and the specular detector at detector_theta = 2·sample_theta. When θ = 0 the
 azimuth is undefined and reported as 0.
 
-Type (i) goniometer (:class:`TypeIKinematics`, ADR 0104)
+Type (i) goniometer (:class:`TypeIKinematics`, ADR 0099)
 ----------------------------------------------------------
 The sample lies still, normal up: the sample frame *is* the lab frame (x_s = +X,
 y_s = +Y, z_s = +Z). The source and the detector each ride an arc rail whose plane turns

@@ -49,7 +49,7 @@ Schema (all lengths in mm, angles in degrees)::
     [geometry]                         # goniometer geometry
     goniometer = "type_ii"             # "type_ii": fixed source, the sample rotates, the
                                        # detector orbits (default); "type_i": source and
-                                       # detector arms over a stationary sample (ADR 0104)
+                                       # detector arms over a stationary sample (ADR 0099)
     kind = "in_plane"                  # "in_plane" | "out_of_plane" (type_i: out_of_plane)
     detector_distance_mm = 300.0       # sample centre to detector aperture
     detector_aperture_mm = 5.0         # diameter of the detector's limiting aperture
@@ -141,7 +141,7 @@ AXIS_ROLES = (
     "psa_retarder",
     "psa_polariser",
 )
-#: ``geometry.goniometer``: the two designs (ADR 0104).
+#: ``geometry.goniometer``: the two designs (ADR 0099).
 GONIOMETER_TYPES = ("type_ii", "type_i")
 
 #: The role of a sample spinner: a continuous-rotation stage turning the sample about its
@@ -265,7 +265,7 @@ class CollisionZone:
 
 @dataclass(frozen=True)
 class ArmSpec:
-    """One arm of a type (i) goniometer (ADR 0104): its head (the source or the detector
+    """One arm of a type (i) goniometer (ADR 0099): its head (the source or the detector
     on its carriage) at ``radius_mm`` from the sample centre, ``width_mm`` wide across the
     arc; the stage readings at the pole (arc) and at sample azimuth 0 (azimuth); for the
     detector, the full angle of its view cone beyond the aperture."""

@@ -244,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _polarimetric(path: str) -> bool:
-    """Whether the run records an optical train (a polarimetric run, ADR 0112)."""
+    """Whether the run records an optical train (a polarimetric run, ADR 0103)."""
     from instrument.pipelines.polarimetry.readings import is_polarimetric
 
     try:

@@ -156,7 +156,7 @@ class Plan:
     def _routes_extra_s(self, t: np.ndarray, dyn: dict[str, AxisDynamics]) -> float:
         """Seconds a type (i) bench's routes add to the moves between the rows of ``t``
         (targets, axes :attr:`axes`): the legs of a split move one after the other, less
-        the one concurrent move :func:`route_time` counted (ADR 0104). 0 on type (ii)."""
+        the one concurrent move :func:`route_time` counted (ADR 0099). 0 on type (ii)."""
         geo = self.profile.geometry
         if not geo.is_type_i or not all(r in self.axes for r in TYPE_I_AXES):
             return 0.0

@@ -1,4 +1,4 @@
-"""Move costs on a type (i) bench that price the arms' routes (ADR 0104).
+"""Move costs on a type (i) bench that price the arms' routes (ADR 0099).
 
 The engine moves both arms at once where their timed path keeps the heads apart and
 otherwise runs the legs of :func:`instrument.bench.arms.safe_route` one after the other.

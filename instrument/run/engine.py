@@ -789,7 +789,7 @@ class RunEngine:
         self._move_together(targets, st)
 
     def _route(self, targets: dict[str, float]) -> list[dict[str, float]]:
-        """The intermediate moves before ``targets`` on a type (i) bench (ADR 0104): none
+        """The intermediate moves before ``targets`` on a type (i) bench (ADR 0099): none
         when the arms can move together from where they stand, else the legs of
         :func:`instrument.bench.arms.safe_route`. Decided before anything moves: a move
         with no collision-free route pauses the run instead."""

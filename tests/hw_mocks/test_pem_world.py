@@ -2,7 +2,7 @@
 
 The world's own algebra (Jones matrices, the PEM controller's live drive) against a
 numerical time average over one modulation period, and against the analysis's
-instrument rows (written independently, ADR 0110)."""
+instrument rows (written independently, ADR 0102)."""
 
 from __future__ import annotations
 

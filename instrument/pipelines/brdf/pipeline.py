@@ -61,7 +61,7 @@ def fit_options(options: ReductionOptions | None = None,
 
 
 def refuse_polarimetric(path: str | Path) -> None:
-    """A polarimetric run (its file records an optical train, ADR 0112) holds K retarder
+    """A polarimetric run (its file records an optical train, ADR 0103) holds K retarder
     steps per geometry: the scalar reduction would treat them as repeated points of one
     BRDF and mix the analyser's states. Its reduction is the Mueller-matrix pipeline
     (:mod:`instrument.pipelines.polarimetry`), which ``scatterlab fit`` chooses for it."""

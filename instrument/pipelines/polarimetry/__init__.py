@@ -1,4 +1,4 @@
-"""The Mueller-matrix pipeline of ``scatterlab fit`` for a polarimetric run (ADR 0119).
+"""The Mueller-matrix pipeline of ``scatterlab fit`` for a polarimetric run (ADR 0104).
 
 :mod:`~instrument.pipelines.polarimetry.readings` reads the run (the optical train, per
 point the geometry, wavelength, step, mounts' read-back angles and the meter's reading

@@ -1,4 +1,4 @@
-"""A polarimetric run's readings, grouped by geometry and wavelength (ADR 0112 layout).
+"""A polarimetric run's readings, grouped by geometry and wavelength (ADR 0103 layout).
 
 A dual-rotating-retarder run stores, per point: the geometry (read-back angles), the
 mounts' read-back angles as columns of ``entry/points/positions``, the step index k in
@@ -91,7 +91,7 @@ class PolarimetricRun:
 
 
 def is_polarimetric(path: str | Path) -> bool:
-    """Whether the run file records an optical train (a polarimetric run, ADR 0112)."""
+    """Whether the run file records an optical train (a polarimetric run, ADR 0103)."""
     with open_run(path) as f:
         return "entry" in f and "instrument" in f["entry"] and \
             "optical_train" in f["entry/instrument"]
@@ -168,7 +168,7 @@ def read_polarimetric(path: str | Path, run: RunData | None = None) -> Polarimet
     noise = meter_noise(run.profile())
     floor = noise.floor_w or 0.0
     net = power - dark
-    # a reading's noise and its own dark's floor (ADR 0112: a dark per point)
+    # a reading's noise and its own dark's floor (ADR 0103: a dark per point)
     sigma = np.hypot(noise.relative * np.abs(power), math.sqrt(2.0) * floor)
     if np.any(sigma[rows] <= 0):
         raise ValueError("the power meter's noise is unknown (no relative_noise or "

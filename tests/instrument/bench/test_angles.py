@@ -77,7 +77,7 @@ def test_the_theta_i_slope_is_not_differenced_across_a_coarse_grid():
 
 def test_on_a_type_i_bench_each_arc_alone_sets_its_angle():
     """The sample stands still: σθi is the source arc's read-back, σθr the detector
-    arc's, nothing shared (ADR 0104)."""
+    arc's, nothing shared (ADR 0099)."""
     data = _profile("sim-type-i")
     data["devices"]["source_arc"]["repeatability"] = 0.002
     data["devices"]["detector_arc"]["readback_resolution"] = 0.001

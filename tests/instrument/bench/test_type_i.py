@@ -1,4 +1,4 @@
-"""Type (i) goniometer (ADR 0104): profile keys, kinematics, the guard's arm rules, routes
+"""Type (i) goniometer (ADR 0099): profile keys, kinematics, the guard's arm rules, routes
 between poses, manual moves and the cost of concurrent arm moves."""
 
 from __future__ import annotations

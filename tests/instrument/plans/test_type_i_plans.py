@@ -1,4 +1,4 @@
-"""Every BRDF plan kind on the type (i) bench (ADR 0104): the plan speaks in scattering
+"""Every BRDF plan kind on the type (i) bench (ADR 0099): the plan speaks in scattering
 angles, the profile decides the axes; a plan the arms cannot run is refused before any
 motion."""
 
@@ -186,7 +186,7 @@ def test_a_spectral_plan_runs_through_the_engine_on_type_i_and_reads_as_on_type_
     """The engine runs a wavelength axis on the type (i) arms (the filter wheel turned per
     filter, the arms routed between points); every point is stored with its filter, and
     the lock-in reads the same light as on sim-spectral at the same angles and filter:
-    the world renders the same sample on both types (ADR 0104)."""
+    the world renders the same sample on both types (ADR 0099)."""
     from instrument.cli import main
     from instrument.run.runfile import read_run
 

@@ -1,4 +1,4 @@
-"""The travel-optimised order on a type (i) bench prices the arms' routes (ADR 0104): a
+"""The travel-optimised order on a type (i) bench prices the arms' routes (ADR 0099): a
 move costs what the engine's route takes, so the order avoids detours where a cheaper
 order exists; the bound that spares most paths their sampling agrees with the sampling."""
 

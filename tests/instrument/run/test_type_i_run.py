@@ -1,4 +1,4 @@
-"""Runs on the emulated type (i) bench (``sim-type-i``, ADR 0104): the engine moves the
+"""Runs on the emulated type (i) bench (``sim-type-i``, ADR 0099): the engine moves the
 arms over the wire, splits a move that would bring them together, and the readings are
 those of the ``sim`` bench at the same angles."""
 

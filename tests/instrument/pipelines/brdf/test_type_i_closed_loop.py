@@ -1,4 +1,4 @@
-"""The same hidden sample on both goniometer types (ADR 0104): the simulated world renders
+"""The same hidden sample on both goniometer types (ADR 0099): the simulated world renders
 the same BRDF for the same scattering angles, so a type (ii) scan (``sim``) and a type (i)
 scan (``sim-type-i``) of one sample fit to the same parameters."""
 
