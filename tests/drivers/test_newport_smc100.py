@@ -528,6 +528,9 @@ def test_unplugged_mid_move_is_typed_and_the_move_is_found_finished(transport, s
 
 def test_error_state_during_move_raises_controller_error_and_enable_recovers(faulty):
     axis, faults = faulty
+    # no lost or late reply is injected here: a generous deadline, so that a loaded host's
+    # emulator thread on a pty (not the fault under test) cannot time a reply out
+    axis.reply_timeout = 5.0
     axis.velocity = 1.0
     # Emulated time stands while the fault is injected, so the move is still on when the
     # first poll of the wait meets it, whatever the host's load (on the running clock a

@@ -38,6 +38,7 @@ from tests.drivers.fault_checks import corrupted_reads
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
+    QUERY_RETRIES,
     motion_fault_session,
     query_survives,
     unplug_during_move,
@@ -359,6 +360,9 @@ def faulty(homed):
 @pytest.mark.parametrize("kind, params", QUERY_FAULTS)
 def test_query_faults_recover(faulty, kind, params):
     mount, faults = faulty
+    # more retries than a driver's default: a fault costs one attempt, and on a loaded
+    # host an emulator thread on a pty may miss the 0.1 s deadline of another
+    mount.retries = QUERY_RETRIES
     mount.move_to(4.0, wait=True, timeout=30)
     query_survives(faults, kind, params, lambda: mount.position_pulses, round(4.0 / DEG))
 

@@ -53,7 +53,7 @@ def test_the_in_process_flag_is_parsed_and_selects_the_full_window(monkeypatch, 
 
     help_text = build_parser(["gui"])._subparsers._group_actions[0].choices["gui"] \
         .format_help()
-    assert "--in-process" in help_text and "per-device panels" in help_text
+    assert "--in-process" in help_text and "region of interest" in help_text
 
 
 @pytest.mark.timeout(300)
