@@ -347,6 +347,7 @@ def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
     assert got["idx"] == list(range(12))
 
 
+@pytest.mark.slow  # a server, Chromium and a run: 25 s
 def test_a_resumed_runs_backfill_is_plotted_with_the_points_that_follow(bench_file,
                                                                         start_server,
                                                                         tmp_path):
@@ -438,6 +439,7 @@ def test_the_device_table_has_the_cameras_settings_and_during_a_run_its_frames_e
         assert page.errors == []
 
 
+@pytest.mark.slow  # a server, Chromium and a run: 25 s
 def test_an_operator_sets_a_device_from_the_device_table(bench_file, start_server,
                                                           tmp_path):
     server = start_server(bench_file())

@@ -20,6 +20,7 @@ from tests.waiting import wait_for
 THETA_R = [-60.0, -40.0, 10.0, 40.0, 60.0]  # theta_i = 20: -20 is the beam
 
 
+@pytest.mark.slow  # real server processes, a restart: 30-40 s
 @pytest.mark.timeout(900)
 def test_a_run_resumed_after_a_restart_is_shown_whole(bench_file, start_server):
     bench = bench_file()
@@ -91,6 +92,7 @@ def _run_data(server, name: str, *, idle_polls: int) -> dict[str, np.ndarray]:
         return {k: p[k][:][order] for k in ("index", "power_w", "signal", "positions")}
 
 
+@pytest.mark.slow  # real server processes, a restart: 30-40 s
 @pytest.mark.timeout(900)
 def test_a_runs_data_do_not_depend_on_the_idle_polls_before_it(bench_file, start_server,
                                                                tmp_path):
