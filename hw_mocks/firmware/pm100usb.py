@@ -52,9 +52,9 @@ Measurement model (documented emulator choices, not a calibration):
   wrong wavelength setting scales the reading by ``R(λ_light)/R(λ_set)``.
 * Each sample carries Gaussian noise ``σ_I = sqrt(noise_floor_a² + (relative_noise·R·P)²)``;
   an ``AVER:COUN n`` reading is the mean of ``n`` samples (σ/√n).
-* Which noise: alone, the readings draw from one seeded stream, in order. Bound to a
-  virtual bench (:meth:`hw_mocks.sim.world.VirtualBench.bind_power_meter`), each reading's
-  noise is keyed to the bench state it reads (:attr:`Pm100usbFirmware.noise_state`: stage
+* Which noise: the readings draw from one seeded stream, in order. Where a caller sets
+  :attr:`Pm100usbFirmware.noise_state` (the virtual bench does not: ADR 0101), each
+  reading's noise is keyed to the state it returns (:attr:`Pm100usbFirmware.noise_state`: stage
   positions and the light at the sample) — seed, state, which visit of that state (a
   state is visited anew each time the readings' state changes to it) and which reading of
   the visit. Readings taken while the bench rests between runs (a server polling the

@@ -26,7 +26,7 @@ element's axis stands at ``orientation_deg + mount position``.
 
 These are the **nominal** values: what the analysis is told. The emulated bench's hidden
 truth (misalignments, retardance errors) lives in ``[simulation.optics]``
-(:mod:`hw_mocks.sim.polarisation`) and is never read by the analysis.
+(``hw_mocks.sim.polarisation``) and is never read by the analysis.
 
 A photoelastic modulator (``kind = "pem"``) has a fixed orientation; its ``mount`` may be
 left out. Its retardation amplitude is set on the modulator, not here.

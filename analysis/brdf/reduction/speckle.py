@@ -36,7 +36,7 @@ patterns decorrelate every Δφ_c = λ / (L · max(|ω_i,t + ω_r,t|, a)) and an
 t at the spin rate ω averages N = max(1, ω t / Δφ_c). Frames taken at other spin angles
 (HDR brackets, repeats) see other patterns; a merge weighing them by exposure averages
 N = ω Σt / Δφ_c (the caller passes Σt). The simulated bench draws its
-patterns by the same model (:mod:`hw_mocks.sim.speckle`, ADR 0098).
+patterns by the same model (``hw_mocks.sim.speckle``, ADR 0098).
 """
 
 from __future__ import annotations

@@ -62,9 +62,11 @@ def _pulls(points, truths) -> np.ndarray:
 
 def _check_pbrdf(fit: dict) -> None:
     assert fit["adequate"], fit["verdict"]
+    # One seed, three free parameters: at 2σ each, one in seven runs would fail by chance
+    # alone; at 3σ, one in 120 (the pulls over seeds are in BENCHMARKS.md, polarimetry).
     for k, (name, truth_v) in enumerate(zip(fit["param_names"], TRUTH, strict=True)):
         if name not in fit["fixed"]:
-            assert abs(fit["params"][k] - truth_v) < 2.0 * fit["stderr"][k], (
+            assert abs(fit["params"][k] - truth_v) < 3.0 * fit["stderr"][k], (
                 name, fit["params"][k], fit["stderr"][k])
 
 
