@@ -132,7 +132,7 @@ def sample_step_deg(geometry: GeometrySpec) -> float:
 def path_bounds(geometry: GeometrySpec, here: np.ndarray, there: np.ndarray,
                 dynamics: Mapping[str, AxisDynamics] | None = None, *,
                 segments: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Which moves ``here[k]`` → ``there[k]`` (arm axes in :data:`TYPE_I_AXES` order,
+    """Which moves ``here[k]`` → ``there[k]`` (arm axes in ``TYPE_I_AXES`` order,
     shape (K, 4)) :func:`path_clear` would find clear, and which it would find blocked,
     each proven without its fine sampling (neither: sample the path).
 

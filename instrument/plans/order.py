@@ -104,7 +104,7 @@ def _two_opt(t: np.ndarray, order: np.ndarray, axes: Sequence[str],
 
 def path_cost(costs: np.ndarray, order: np.ndarray) -> float:
     """Seconds of visiting the points in ``order`` with the move costs ``costs`` (shape
-    (N + 1, N + 1), row N the start: :func:`instrument.plans.route_costs.move_cost_matrix`)."""
+    (N + 1, N + 1), row N the start: ``instrument.plans.route_costs.move_cost_matrix``)."""
     n = len(costs) - 1
     return float(costs[n, order[0]] + costs[order[:-1], order[1:]].sum())
 
@@ -155,9 +155,9 @@ def _two_opt_by_cost(costs: np.ndarray, order: np.ndarray, max_passes: int) -> n
 
 
 class MoveCosts(Protocol):
-    """Move costs as the engine runs the moves (:class:`instrument.plans.route_costs.
-    RouteCosts`): a matrix, row N the start, whose entries may be provisional until
-    :meth:`price` has priced the moves of an order exactly."""
+    """Move costs as the engine runs the moves (``RouteCosts`` of
+    ``instrument.plans.route_costs``): a matrix, row N the start, whose entries may be
+    provisional until :meth:`price` has priced the moves of an order exactly."""
 
     matrix: np.ndarray
 

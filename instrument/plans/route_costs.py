@@ -13,8 +13,8 @@ have their timed path sampled (:func:`instrument.bench.arms.path_clear`). Search
 is the dear part (tens of sampled legs), so it is done lazily: a move that needs one is
 first priced as its arms one after the other (the cheapest split), and
 :meth:`RouteCosts.price` replaces that by the searched route's time for the moves an order
-actually uses; the order is then optimised again (:func:`instrument.plans.order.
-optimise_order`) until the moves it uses are all priced exactly. The matrix holds every
+actually uses; the order is then optimised again (``optimise_order`` of
+``instrument.plans.order``) until the moves it uses are all priced exactly. The matrix holds every
 ordered pair, so it is built for at most :data:`MAX_POINTS` points; a larger plan is
 ordered with the concurrent cost, as before, and its moves are routed as they come.
 """
@@ -41,11 +41,11 @@ MAX_POINTS = 400
 class RouteCosts:
     """Seconds of the move from each point to each other, as the engine runs it.
 
-    :attr:`matrix` has shape (N + 1, N + 1) for ``targets`` of shape (N, A) (columns
+    ``matrix`` has shape (N + 1, N + 1) for ``targets`` of shape (N, A) (columns
     ``axes``): ``matrix[i, j]`` the move from row i to row j, ``matrix[N, j]`` from
     ``start`` (0 without one), ``matrix[:, N]`` unused (0). A move with no collision-free
     route costs ``inf``. Entries of moves that need a route are provisional until
-    :meth:`price` has searched it (:attr:`exact`).
+    :meth:`price` has searched it (``exact``).
     """
 
     def __init__(self, profile: BenchProfile, targets: np.ndarray, axes: Sequence[str],
