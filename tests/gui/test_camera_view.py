@@ -93,7 +93,10 @@ def test_a_rejected_exposure_shows_the_drivers_error(qtbot, make_window, fast_be
     cam.set_exposure.click()
     qtbot.waitUntil(lambda: w.session.states()["camera"].value("exposure_us") == 2500.0,
                     timeout=60000)
-    assert cam.error.text() == ""
+    # The state poll can show the new exposure before the command's own result reaches the
+    # view; the error clears when that result arrives, so wait for it rather than race it.
+    qtbot.waitUntil(lambda: cam.error.text() == "", timeout=60000)
+    assert w.session.states()["camera"].value("exposure_us") == 2500.0
 
 
 def test_a_refused_exposure_does_not_stay_in_the_field(qtbot, make_window, fast_bench_file):
