@@ -78,6 +78,20 @@ def _brewster(outcomes: list[Outcome]) -> None:
           f"(Rp = {f[0, 0] - f[0, 1]:.1e})")
 
 
+def _load(paths: list[str]) -> list[Outcome]:
+    """The outcomes saved by ``--save`` runs (matrices absent in older files: NaN)."""
+    out = []
+    for p in paths:
+        z = np.load(p.strip())
+        nan = np.full((len(z["names"]), 4, 4), np.nan)
+        m = z.get("m_normalised", nan)
+        t = z.get("truth", nan)
+        out += [Outcome(sample(str(n)), int(s), c, u, mi, ti) for n, s, c, u, mi, ti in
+                zip(z["names"], z["seeds"], z["calibrated"], z["nominal"], m, t,
+                    strict=True)]
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
@@ -85,7 +99,17 @@ def main() -> int:
     ap.add_argument("--samples", default=None,
                     help="comma-separated sample names (default: all ten)")
     ap.add_argument("--save", default=None, help="npz of the pulls, rewritten every seed")
+    ap.add_argument("--load", default=None,
+                    help="comma-separated npz files of earlier --save runs: print their "
+                    "pooled table and report instead of running")
     args = ap.parse_args()
+    if args.load:
+        outcomes = _load(args.load.split(","))
+        print(f"{len({o.seed for o in outcomes})} seed(s) from {args.load}")
+        _table(outcomes)
+        _brewster(outcomes)
+        print(report(outcomes))
+        return 0
     chosen = (SAMPLES if args.samples is None
               else tuple(sample(n.strip()) for n in args.samples.split(",")))
     outcomes: list[Outcome] = []
@@ -103,7 +127,9 @@ def main() -> int:
                 np.savez(args.save, names=[o.sample.name for o in outcomes],
                          seeds=[o.seed for o in outcomes],
                          calibrated=np.array([o.calibrated for o in outcomes]),
-                         nominal=np.array([o.nominal for o in outcomes]))
+                         nominal=np.array([o.nominal for o in outcomes]),
+                         m_normalised=np.array([o.m_normalised for o in outcomes]),
+                         truth=np.array([o.truth for o in outcomes]))
     print(f"{args.seeds} seed(s) × {len(chosen)} samples × 15 normalised elements, 25 steps "
           f"each ({time.perf_counter() - t0:.0f} s wall)")
     _table(outcomes)

@@ -161,6 +161,7 @@ def _print_polarimetric_front(spec: PlanSpec, profile: BenchProfile, png: Path) 
     from instrument.plans.pareto_plot import write_polarimetric_tradeoff_png
     from instrument.plans.polarimetric_tradeoff import (
         DEFAULT_STEP_COUNTS,
+        TYPICAL_READING_W,
         PolarimetricOption,
         polarimetric_sweep,
     )
@@ -172,8 +173,10 @@ def _print_polarimetric_front(spec: PlanSpec, profile: BenchProfile, png: Path) 
     # the plan's own steps are regular (the plan was built); the candidates are ≥ 25
     results = polarimetric_sweep(spec, profile, [PolarimetricOption(k) for k in steps])
     noise = meter_noise(tomllib.loads(profile.source_text) if profile.source_text else {})
+    floor = "" if noise.floor_w is None else (
+        f" and a floor of {noise.floor_w:.2g} W against {TYPICAL_READING_W:.0e} W readings")
     print(f"  speed against accuracy (σ of m_ij/m00 predicted for a non-depolarising "
-          f"sample, readings' noise {noise.source}); the Pareto front:")
+          f"sample, readings' noise {noise.source}{floor}); the Pareto front:")
     print(f"    {'steps':>5}  {'points':>6}  {'duration':>9}  {'κ':>5}  {'σ mean':>8}  "
           f"{'σ worst':>8}")
     for r in pareto_front(results, "sigma_mean"):
