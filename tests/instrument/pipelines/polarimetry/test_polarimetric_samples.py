@@ -55,7 +55,10 @@ def test_the_validation_matrix_with_and_without_the_calibration(calibration, tmp
         assert "not visibly off" in second and second in text
         assert np.max(np.abs(found.m_normalised.ravel()[1:])) < 0.05
         return
-    assert second.endswith("— visibly off") and second in text, second
+    # the dielectric at 20° reflects little light, and its σ hides part of the bias: 3.4 to
+    # 5σ over ten seeds (3.8 for this one); every other sample is tens of σ off
+    expected = "marginally off" if sample.name == "dielectric 20°" else "visibly off"
+    assert second.endswith(f"— {expected}") and second in text, second
     if sample.name.startswith("dielectric"):
         # Brewster's angle (56.3°) shows: near and beyond it the specular reflection is
         # mostly s light (m01/m00 → −1), at 20° much less so
@@ -70,6 +73,7 @@ def test_the_report_judges_pulls_by_the_seeds_pooled():
     assert first.endswith("— recovered") and second.endswith("— visibly off")
     assert verdict(good + 3.5, good)[0].endswith("NOT recovered")
     assert "not visibly off" in verdict(good, good)[1]
+    assert verdict(good, good + 4.0)[1].endswith("— marginally off")
     # ten seeds: one element at 3.2σ of 150 is expected; the fraction and spread judge
     pooled = rng.standard_normal(150)
     pooled[0] = 3.2

@@ -143,8 +143,11 @@ RECOVERED_WITHIN_2 = 0.85
 #: 1.3 (the spread of 150 unit normal pulls is 1 ± 0.06; 1.3 is five of those off).
 POOLED_WITHIN_2 = 0.9
 POOLED_SPREAD = 1.3
-#: The nominal reduction counts as visibly off when some element is > 5σ from the truth.
+#: The nominal reduction counts as visibly off when some element is > 5σ from the truth,
+#: as marginally off from 3σ (a dim sample's larger σ hides part of the polarimeter's bias:
+#: the dielectric at 20° reflects about 4 % of the light).
 VISIBLY_OFF = 5.0
+MARGINALLY_OFF = 3.0
 
 
 def verdict(calibrated: np.ndarray, nominal: np.ndarray) -> tuple[str, str]:
@@ -159,9 +162,10 @@ def verdict(calibrated: np.ndarray, nominal: np.ndarray) -> tuple[str, str]:
     first = (f"calibrated: {np.mean(c < 2.0):.0%} within 2σ, pull spread "
              f"{np.std(np.ravel(calibrated)):.2f}, max |pull| {np.max(c):.1f} — "
              + ("recovered" if ok else "NOT recovered"))
-    off = bool(np.max(n) > VISIBLY_OFF)
-    second = (f"uncalibrated: {np.mean(n < 2.0):.0%} within 2σ, max |pull| {np.max(n):.1f} — "
-              + ("visibly off" if off else
+    worst = float(np.max(n))
+    second = (f"uncalibrated: {np.mean(n < 2.0):.0%} within 2σ, max |pull| {worst:.1f} — "
+              + ("visibly off" if worst > VISIBLY_OFF else
+                 "marginally off" if worst > MARGINALLY_OFF else
                  "not visibly off (the polarimeter's errors do not show in this sample)"))
     return first, second
 
