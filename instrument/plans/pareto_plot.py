@@ -29,11 +29,11 @@ def draw_front(ax: Any, front: Sequence[Traded], param: str, *, label: str | Non
 
 def write_polarimetric_tradeoff_png(results: Sequence[Any], path: str | Path, *,
                                     title: str = "", chosen: int | None = None) -> Path:
-    """The polarimetric trade of ``results`` (:class:`~instrument.plans.
-    polarimetric_tradeoff.PolarimetricResult`) as a PNG: left, the mean and the worst
-    predicted σ of the normalised elements against the duration with their Pareto fronts
-    (each point labelled with its steps; ``chosen``, the plan's own steps, ringed); right,
-    κ against the steps.
+    """The polarimetric trade of ``results``
+    (:class:`~instrument.plans.polarimetric_tradeoff.PolarimetricResult`) as a PNG:
+    left, the mean and the worst predicted σ of the normalised elements against the
+    duration with their Pareto fronts (each point labelled with its steps; ``chosen``, the
+    plan's own steps, ringed); right, κ against the steps.
 
     Raises
     ------

@@ -3,16 +3,18 @@ number κ against the dual rotating retarder's steps per geometry and the scan's
 
 For a candidate step count K the planner predicts
 
-* the **duration** with the engine's own estimator (:meth:`instrument.plans.build.Plan.
-  estimate`: the instrument's own motion time along the route, the four mounts' moves
-  included, and acquisition; the same figure as :mod:`instrument.plans.tradeoff`'s);
+* the **duration** with the engine's own estimator
+  (:meth:`instrument.plans.build.Plan.estimate`: the instrument's own motion time along
+  the route, the four mounts' moves included, and acquisition; the same figure as
+  :mod:`instrument.plans.tradeoff`'s);
 * **κ**, the condition number of the instrument matrix W of the K steps with the
   profile's nominal retardances (Smith 2002, Appl. Opt. 41, 2488), the worst over
   the plan's wavelengths;
 * the **σ of the normalised elements** m_ij/m00 of a *prior* sample (the identity, i.e. a
   non-depolarising, non-diattenuating sample, unless given) from the weighted
-  least-squares covariance (WᵀΣ⁻¹W)⁻¹ of the reduction (:func:`analysis.polarimetry.drr.
-  reduce`, ADR 0102), propagated to first order through the division by m00;
+  least-squares covariance (WᵀΣ⁻¹W)⁻¹ of the reduction
+  (:func:`analysis.polarimetry.drr.reduce`, ADR 0102), propagated to first order through
+  the division by m00;
   the readings' σ is the power meter's noise of the profile
   (:func:`instrument.bench.meter_noise.meter_noise`): its relative noise times the
   noise-free intensity W·vec(M), in quadrature with its absolute floor (``noise_floor_w``)
