@@ -43,6 +43,7 @@ from analysis.brdf import get_model  # noqa: E402
 from analysis.brdf.fit import fit_brdf  # noqa: E402
 from instrument.bench.profile import BenchProfile, parse_profile  # noqa: E402
 from instrument.cli._cluster import add_cluster_options, mapper, open_cluster  # noqa: E402
+from instrument.plans.pareto_plot import draw_front  # noqa: E402
 from instrument.plans.planfile import parse_plan  # noqa: E402
 from instrument.plans.tradeoff import (  # noqa: E402
     ScanOption,
@@ -175,8 +176,7 @@ def _plot(rows: list[dict], front: set[int], path: Path) -> None:
                     color=colors[r["step"]], ms=6)
             ax.plot(r["duration_s"], r["pred"], markers.get(r["frames"], "o"), mfc="none",
                     color=colors[r["step"]], ms=9, alpha=0.7)
-        ax.step([r["duration_s"] for r in fr], [r["pred"] for r in fr], where="post",
-                color="k", lw=1.0)
+        draw_front(ax, [r["result"] for r in fr], PARAM)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(f"exposure cap {cap / 1e3:g} ms", fontsize=9)

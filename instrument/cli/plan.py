@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -45,6 +46,13 @@ def coverage_path(args: argparse.Namespace) -> Path:
     if args.png:
         return Path(args.png)
     return Path(args.out) / f"{Path(args.plan).stem}_coverage.png"
+
+
+def tradeoff_path(args: argparse.Namespace) -> Path:
+    """The polarimetric trade's picture: the coverage picture's name with ``_tradeoff``."""
+    cov = coverage_path(args)
+    stem = cov.stem.removesuffix("_coverage")
+    return cov.with_name(f"{stem}_tradeoff.png")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
     print("  acquisition: " + ", ".join(f"{k} {_value(v)}" for k, v in acq.items()))
     if spec.polarimetry is not None:
         _print_polarimetry(spec, profile)
+        if _print_polarimetric_front(spec, profile, tradeoff_path(args)) != 0:
+            return 2
     if any(p.angles is not None for p in plan.points):
         from instrument.plans.coverage import write_coverage_png
 
@@ -141,3 +151,45 @@ def _print_polarimetry(spec: PlanSpec, profile: BenchProfile) -> None:
                   f"Mueller elements' σ grows with it; retarders of about "
                   f"{c.optimum_retardance_deg:g}° would do better")
 
+
+
+def _print_polarimetric_front(spec: PlanSpec, profile: BenchProfile, png: Path) -> int:
+    """The speed/accuracy trade of the steps per geometry (the Pareto front of the mean σ
+    of the normalised elements against the duration) and its picture; 2 when the picture
+    cannot be written."""
+    from instrument.bench.meter_noise import meter_noise
+    from instrument.plans.pareto_plot import write_polarimetric_tradeoff_png
+    from instrument.plans.polarimetric_tradeoff import (
+        DEFAULT_STEP_COUNTS,
+        TYPICAL_READING_W,
+        PolarimetricOption,
+        polarimetric_sweep,
+    )
+    from instrument.plans.tradeoff import pareto_front
+
+    pol = spec.polarimetry
+    assert pol is not None
+    steps = sorted({*DEFAULT_STEP_COUNTS, int(pol["steps"])})
+    # the plan's own steps are regular (the plan was built); the candidates are ≥ 25
+    results = polarimetric_sweep(spec, profile, [PolarimetricOption(k) for k in steps])
+    noise = meter_noise(tomllib.loads(profile.source_text) if profile.source_text else {})
+    floor = "" if noise.floor_w is None else (
+        f" and a floor of {noise.floor_w:.2g} W against {TYPICAL_READING_W:.0e} W readings")
+    print(f"  speed against accuracy (σ of m_ij/m00 predicted for a non-depolarising "
+          f"sample, readings' noise {noise.source}{floor}); the Pareto front:")
+    print(f"    {'steps':>5}  {'points':>6}  {'duration':>9}  {'κ':>5}  {'σ mean':>8}  "
+          f"{'σ worst':>8}")
+    for r in pareto_front(results, "sigma_mean"):
+        mine = "  ← this plan" if r.option.steps == int(pol["steps"]) else ""
+        print(f"    {r.option.steps:5d}  {r.n_points:6d}  {fmt_s(r.duration_s):>9}  "
+              f"{r.kappa:5.3g}  {r.sigma['sigma_mean']:8.2g}  {r.sigma['sigma_max']:8.2g}"
+              f"{mine}")
+    try:
+        write_polarimetric_tradeoff_png(results, png, chosen=int(pol["steps"]), title=(
+            f"{spec.name} on {profile.name}: dual rotating retarder, speed against "
+            "accuracy"))
+    except OSError as err:
+        print(f"error: cannot write the trade-off picture {png} ({err})", file=sys.stderr)
+        return 2
+    print(f"  trade-off picture: {png}")
+    return 0

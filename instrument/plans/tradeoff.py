@@ -37,6 +37,7 @@ import math
 import tomllib
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -58,6 +59,7 @@ __all__ = [
     "OptionResult",
     "Prior",
     "ScanOption",
+    "Traded",
     "default_options",
     "fastest_for_target",
     "pareto_front",
@@ -240,10 +242,25 @@ def sweep(spec: PlanSpec, profile: BenchProfile, options: Iterable[ScanOption], 
                        det=det))
 
 
-def pareto_front(results: Sequence[OptionResult], param: str) -> list[OptionResult]:
-    """Candidates not beaten in both duration and σ(param), fastest first."""
+class Traded(Protocol):
+    """A predicted candidate: its duration and σ per axis (an :class:`OptionResult`, or a
+    :class:`instrument.plans.polarimetric_tradeoff.PolarimetricResult`)."""
+
+    @property
+    def duration_s(self) -> float: ...
+
+    @property
+    def sigma(self) -> dict[str, float]: ...
+
+
+_T = TypeVar("_T", bound=Traded)
+
+
+def pareto_front(results: Sequence[_T], param: str) -> list[_T]:
+    """Candidates not beaten in both duration and σ(param), fastest first (the scalar
+    scan's options and the polarimetric step counts alike)."""
     ordered = sorted(results, key=lambda r: (r.duration_s, r.sigma[param]))
-    front: list[OptionResult] = []
+    front: list[_T] = []
     best = math.inf
     for r in ordered:
         if r.sigma[param] < best:

@@ -1,8 +1,11 @@
 """Hidden-truth closed loops through the engine, the emulated drivers and ``scatterlab
-fit`` with a measured polarimeter calibration: the Fresnel dielectric at θi 20°, 50°
-and 70° (Brewster's angle, 56.3°, shows in m01/m00), a rough metal, a depolarising
-diffuser; and ``examples/brdf_polarimetric.toml``, whose pBRDF fit recovers the hidden
-glass. Every test here runs the engine: all are slow.
+fit`` with a measured polarimeter calibration: the validation matrix (validation.py: air,
+a polariser at 0°, 30° and 45°, a quarter-wave plate, the Fresnel dielectric at θi 20°, 50°
+and 70° — Brewster's angle, 56.3°, shows in m01/m00 —, a rough metal, a depolarising
+diffuser), one seed each; and ``examples/brdf_polarimetric.toml``, whose pBRDF fit
+recovers the hidden glass. The ten-seed statistics (fraction within 2σ, pull spread) are
+``benchmarks/bench_polarimetric_validation.py``'s. Every test here runs the engine: all
+are slow.
 """
 
 from __future__ import annotations
@@ -13,14 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from instrument.cli import main
 from instrument.pipelines.polarimetry.calibration import calibration_folder
 from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
-from tests.instrument.pipelines.polarimetry.closed_loop import (
-    fast_bench,
-    plan_text,
-    pulls,
-    run_with_truth,
+from tests.instrument.pipelines.polarimetry.closed_loop import fast_bench, run_with_truth
+from tests.instrument.pipelines.polarimetry.validation import (
+    SAMPLES,
+    calibrate,
+    measure,
+    report,
+    verdict,
 )
 
 ROOT = Path(__file__).resolve().parents[4]
@@ -28,48 +32,54 @@ ROOT = Path(__file__).resolve().parents[4]
 
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("polcal")
-    assert main(["calibrate", "polarimeter", "--bench", str(fast_bench(folder)), "--out",
-                 str(folder), "--steps", "25", "--no-fsync"]) == 0
-    (file,) = calibration_folder(folder).glob("polarimeter-*.json")
+    _, file = calibrate(tmp_path_factory.mktemp("polcal"), None)
     return file
 
 
-GLASS = '[simulation.scene.pbrdf]\nn = 1.5\nslope_rms = 0.15\nalbedo = 0.05\n\n'
-METAL = '[simulation.scene.pbrdf]\nn = 1.4\nk = 7.6\nslope_rms = 0.1\n\n'
-DIFFUSER = '[simulation.scene.pbrdf]\nn = 1.5\nalbedo = 0.8\nspecular = 0.0\n\n'
-
-
-@pytest.mark.slow  # one engine run of 25 steps and two reductions each: 20-40 s
-@pytest.mark.parametrize(("name", "scene", "ti", "tr"), [
-    ("dielectric 20°", GLASS, 20.0, 20.0),
-    ("dielectric 50°", GLASS, 50.0, 50.0),
-    ("dielectric 70°", GLASS, 70.0, 70.0),
-    ("rough metal", METAL, 50.0, 50.0),
-    ("diffuser", DIFFUSER, 30.0, 10.0),
-])
-def test_hidden_samples_are_recovered_with_the_calibration(calibration, tmp_path, name,
-                                                           scene, ti, tr):
-    path, truths = run_with_truth(tmp_path, fast_bench(tmp_path, scene),
-                                  plan_text(name, str(ti), str(tr)))
-    (point,) = fit_polarimetric_run(path, calibration=calibration, report=False,
-                                    write=False).points
-    truth = truths[(round(ti), round(tr))]
-    pull = pulls(point, truth)
-    assert np.all(np.abs(pull) < 3.0), np.round(pull, 2)
-    assert np.mean(np.abs(pull) < 2.0) >= 0.85
-    (nominal,) = fit_polarimetric_run(path, calibration="none", report=False,
-                                      write=False).points
-    if name == "diffuser":  # an ideal depolariser: only m00, which W's errors keep
-        assert point.decomposition is not None
-        assert point.decomposition.value("depolarisation_power") > 0.9
+@pytest.mark.slow  # one engine run of 25 steps and two reductions each: 15-40 s
+@pytest.mark.parametrize("sample", SAMPLES, ids=[s.name for s in SAMPLES])
+def test_the_validation_matrix_with_and_without_the_calibration(calibration, tmp_path,
+                                                                sample):
+    found = measure(sample, None, tmp_path, calibration)
+    # one seed, 15 elements: at 2σ each, one seed in two would fail somewhere by chance
+    # alone; 3σ for all 15 fails one seed in 25 (the 2σ standard over ten seeds is the
+    # benchmark's, BENCHMARKS.md)
+    assert np.all(np.abs(found.calibrated) < 3.0), np.round(found.calibrated, 2)
+    first, second = verdict(found.calibrated, found.nominal)
+    assert first.startswith("calibrated:")
+    text = report([found])
+    assert text.splitlines()[0] == f"{sample.name} (1 seed):"
+    if sample.name == "diffuser":
+        # an ideal depolariser: only m00, which the polarimeter's errors keep; the report
+        # says the uncalibrated elements do not show them
+        assert "not visibly off" in second and second in text
+        assert np.max(np.abs(found.m_normalised.ravel()[1:])) < 0.05
         return
-    assert np.max(np.abs(pulls(nominal, truth))) > 3.0
-    if name.startswith("dielectric"):
+    # the dielectric at 20° reflects little light, and its σ hides part of the bias: 3.4 to
+    # 6.1σ over ten seeds (3.8 for this one, the profile's seed 2); every other sample is
+    # tens of σ off (BENCHMARKS.md, polarimetric validation)
+    expected = "marginally off" if sample.name == "dielectric 20°" else "visibly off"
+    assert second.endswith(f"— {expected}") and second in text, second
+    if sample.name.startswith("dielectric"):
         # Brewster's angle (56.3°) shows: near and beyond it the specular reflection is
         # mostly s light (m01/m00 → −1), at 20° much less so
-        m01 = point.brdf.m_normalised[0, 1]
-        assert (m01 > -0.3) if ti < 30.0 else (m01 < -0.5), m01
+        m01 = found.m_normalised[0, 1]
+        assert (m01 > -0.3) if sample.theta_i < 30.0 else (m01 < -0.5), m01
+
+
+def test_the_report_judges_pulls_by_the_seeds_pooled():
+    rng = np.random.default_rng(7)
+    good = rng.standard_normal(15) * 0.5
+    first, second = verdict(good, good + 20.0)
+    assert first.endswith("— recovered") and second.endswith("— visibly off")
+    assert verdict(good + 3.5, good)[0].endswith("NOT recovered")
+    assert "not visibly off" in verdict(good, good)[1]
+    assert verdict(good, good + 4.0)[1].endswith("— marginally off")
+    # ten seeds: one element at 3.2σ of 150 is expected; the fraction and spread judge
+    pooled = rng.standard_normal(150)
+    pooled[0] = 3.2
+    assert verdict(pooled, pooled)[0].endswith("— recovered")
+    assert verdict(2.0 * pooled, pooled)[0].endswith("NOT recovered")
 
 
 @pytest.mark.slow  # the example's 4 geometries × 36 steps: 60-120 s
