@@ -74,6 +74,20 @@ def test_errors_are_typed_and_unsolicited_ones_kept():
     port.assert_complete()
 
 
+@pytest.mark.parametrize("command, text", [
+    (":MOD:DRV?", "nan"), (":MOD:DRV?", "-0.2"), (":MOD:DRV?", "1.5"), (":MOD:DRV?", "inf"),
+    (":MOD:FREQ?", "nan"), (":MOD:FREQ?", "0"), (":MOD:FREQ?", "-50000")])
+def test_an_answer_outside_its_range_is_a_protocol_error(command, text):
+    steps = [IDN, (command.encode() + b"\n", f"[{command}]({text})\n".encode())]
+    pem, port = transcript_pem(steps)
+    read = {":MOD:DRV?": lambda: pem.drive, ":MOD:FREQ?": lambda: pem.frequency_hz}[command]
+    with pytest.raises(ProtocolError) as info:
+        read()
+    assert info.value.device == "pem" and info.value.command == command
+    assert text in str(info.value)
+    port.assert_complete()
+
+
 def test_values_outside_the_drive_are_refused_before_sending():
     pem, port = transcript_pem([IDN])
     with pytest.raises(ValueError, match=r"above the controller's 1\.0"):
