@@ -18,6 +18,7 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from drivers.apt_protocol import MessageId
 from drivers.base import AxisKind
 from drivers.errors import (
     ConnectionFailed,
@@ -29,7 +30,6 @@ from drivers.errors import (
     StateError,
     UnsupportedFeature,
 )
-from drivers.apt_protocol import MessageId
 from drivers.thorlabs_apt import STAGES, AptMotor
 from hw_mocks import registry
 from hw_mocks.clock import ScaledClock
