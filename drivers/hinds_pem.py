@@ -38,6 +38,7 @@ half-wave waveform, or V₂f/V_DC between parallel polarisers). The driver conve
 
 from __future__ import annotations
 
+import collections
 import math
 import re
 import time
@@ -61,6 +62,7 @@ from drivers.errors import (
 from drivers.transport import SerialChannel, open_serial
 
 __all__ = [
+    "NOTICES_KEPT",
     "Pem200",
     "PemAnswer",
     "PemCommandError",
@@ -75,6 +77,8 @@ T = TypeVar("T")
 _TERMINATOR = b"\n"
 _ANSWER_RE = re.compile(r"([\[<])([^\[\]<>()]+)([\]>])\(([^()]*)\)")
 _MAX_LINE = 256
+#: Unsolicited controller errors kept in :attr:`Pem200.notices`.
+NOTICES_KEPT = 200
 
 
 @dataclass(frozen=True)
@@ -183,8 +187,10 @@ class Pem200(Modulator):
         self.nm_per_drive = float(nm_per_drive)
         self._wavelength_nm = float(wavelength_nm)
         self.reply_timeout = float(reply_timeout)
-        #: Errors the controller sent on its own (not answers to a command), newest last.
-        self.notices: list[PemAnswer] = []
+        #: Errors the controller sent on its own (not answers to a command), newest last;
+        #: the latest ``NOTICES_KEPT`` (a controller warning every few seconds of a long
+        #: session must not grow the driver without bound).
+        self.notices: collections.deque[PemAnswer] = collections.deque(maxlen=NOTICES_KEPT)
         self._owned = not isinstance(port, serial.SerialBase)
         raw = open_serial(port, device=name, baudrate=baudrate)
         try:
