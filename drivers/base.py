@@ -1319,7 +1319,7 @@ class FilterWheel(Device):
 class WavelengthSetting(Device):
     """A device whose readings or settings depend on the light's wavelength (a power
     meter's responsivity correction, a modulator's retardation in waves): the
-    :attr:`wavelength_nm` property, checked by :meth:`_checked_wavelength_nm` before the
+    :attr:`wavelength_nm` property, checked by ``_checked_wavelength_nm`` before the
     ``_do_set_wavelength_nm`` hook sees it."""
 
     @property
