@@ -1764,13 +1764,14 @@ class Modulator(WavelengthSetting):
     """A photoelastic modulator (PEM): a retarder whose retardation oscillates at the
     resonance of its optical head, δ(t) = 2π·A·sin(2π f t).
 
-    ``A`` is the peak retardation in waves at :attr:`wavelength_nm` (a half-wave modulator
-    at 633 nm: ``A = 0.5``), :attr:`retardation_rad` the same in radians (2πA, the
-    argument of the Bessel functions J₁, J₂ that weight the detector's 1f and 2f terms);
+    ``A`` is the peak retardation in waves at the wavelength
+    (:attr:`~WavelengthSetting.wavelength_nm`; a half-wave modulator at 633 nm:
+    ``A = 0.5``), :attr:`retardation_rad` the same in radians (2πA, the argument of the
+    Bessel functions J₁, J₂ that weight the detector's 1f and 2f terms);
     :attr:`frequency_hz` is the modulation frequency f the lock-in takes as its reference
     (its harmonics 1 and 2 carry the polarisation signals). A modulator's retardation in
     nanometres is fixed by its drive, so the same drive is fewer waves at a longer
-    wavelength: setting :attr:`wavelength_nm` keeps the drive and changes ``A``.
+    wavelength: setting the wavelength keeps the drive and changes ``A``.
 
     Parameters
     ----------
@@ -1780,7 +1781,7 @@ class Modulator(WavelengthSetting):
 
     @property
     def retardation_waves(self) -> float:
-        """Peak retardation amplitude in waves at :attr:`wavelength_nm`."""
+        """Peak retardation amplitude in waves at :attr:`~WavelengthSetting.wavelength_nm`."""
         self._check_open("retardation_waves")
         return self._do_get_retardation_waves()
 
