@@ -7,7 +7,8 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
       sample/      NXsample     name, description
       instrument/  NXinstrument bench_profile (TOML text), geometry attrs,
                                 <role>/ (NXpositioner | NXdetector | NXsource | NXmonitor)
-                                with the device identity and retry policy as attributes;
+                                with the device identity and retry policy as attributes
+                                (a camera's also its gain and pixel_format at the start);
                                 optical_train (JSON, a polarimetric run only: the
                                 profile's nominal [optics] and the plan's [polarimetry];
                                 the mounts' read-back angles are columns of positions)

@@ -82,6 +82,17 @@ def static_axis_positions(bench: Bench, moved: tuple[str, ...]) -> dict[str, Any
     return out
 
 
+def camera_settings(cam: Camera) -> dict[str, str]:
+    """The camera's gain (the device's units: dB for the simulated camera) and pixel format
+    as a run starts, for its instrument metadata: a radiometric calibration holds for these
+    settings only (:meth:`instrument.run.runfile.RunData.camera_calibration`). The engine
+    changes neither during a run."""
+    try:
+        return {"gain": repr(float(cam.gain)), "pixel_format": cam.pixel_format.name}
+    except DeviceError as err:
+        return {"settings_error": str(err)}
+
+
 def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
     identities: dict[str, dict[str, str]] = {}
     for role, dev in bench.devices.items():
@@ -92,6 +103,8 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
         spec = bench.profile.devices.get(role)
         if spec is not None:
             identities[role].update(driver=spec.driver, url=spec.url)
+        if isinstance(dev, Camera):
+            identities[role].update(camera_settings(dev))
     pts = plan.points
     targets = plan.targets_array().tolist()
     angles = [list(p.angles.as_tuple()) if p.angles else [math.nan] * 4 for p in pts]

@@ -50,6 +50,9 @@ def test_recovers_the_simulated_sensor_within_two_sigma(recovered, truth_values)
     assert e["saturation_capacity_e"][1] < 0.02 * truth_values["saturation_capacity_e"]
     assert e["warnings"] == []
     assert e["camera_settings"]["camera"] == "scatterlab SimCam EMVA1288 SIM000007"
+    # the settings the calibration holds for, as the run file recorded them
+    assert e["camera_settings"]["gain_db"] == 0.0
+    assert e["camera_settings"]["pixel_format"] == "MONO12"
 
 
 def test_writes_the_file_fit_reads_and_the_report(recovered, ptc_run) -> None:
