@@ -22,17 +22,19 @@ from tests.instrument.pipelines.polarimetry.closed_loop import (
     pulls,
     run_with_truth,
 )
+from tests.shared_files import made_once
 
 ROOT = Path(__file__).resolve().parents[4]
 
 
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("polcal")
-    assert main(["calibrate", "polarimeter", "--bench", str(fast_bench(folder)), "--out",
-                 str(folder), "--steps", "25", "--no-fsync"]) == 0
-    (file,) = calibration_folder(folder).glob("polarimeter-*.json")
-    return file
+    def calibrate(folder: Path) -> Path:
+        assert main(["calibrate", "polarimeter", "--bench", str(fast_bench(folder)), "--out",
+                     str(folder), "--steps", "25", "--no-fsync"]) == 0
+        (file,) = calibration_folder(folder).glob("polarimeter-*.json")
+        return file
+    return made_once(tmp_path_factory, "polcal", calibrate)  # once per session
 
 
 GLASS = '[simulation.scene.pbrdf]\nn = 1.5\nslope_rms = 0.15\nalbedo = 0.05\n\n'
