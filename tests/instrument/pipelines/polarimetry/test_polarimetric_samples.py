@@ -26,14 +26,16 @@ from tests.instrument.pipelines.polarimetry.validation import (
     report,
     verdict,
 )
+from tests.shared_files import made_once
 
 ROOT = Path(__file__).resolve().parents[4]
 
 
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory) -> Path:
-    _, file = calibrate(tmp_path_factory.mktemp("polcal"), None)
-    return file
+    def make(folder: Path) -> Path:
+        return calibrate(folder, None)[1]
+    return made_once(tmp_path_factory, "polcal", make)  # once per session
 
 
 @pytest.mark.slow  # one engine run of 25 steps and two reductions each: 15-40 s
