@@ -16,8 +16,9 @@ def _start(text: str | None) -> tuple[float, ...]:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"--pbrdf-start must be four numbers n,k,alpha,albedo, got {text!r}")
+    if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"--pbrdf-start must be four or five numbers "
+                         f"n,k,alpha,albedo[,frame_deg], got {text!r}")
     return values
 
 

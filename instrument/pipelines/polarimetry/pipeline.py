@@ -40,8 +40,9 @@ from instrument.run.runfile import check_run_file
 
 __all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run"]
 
-#: Start values (n, k, alpha, albedo) of the pBRDF fit: a rough dielectric.
-DEFAULT_START = (1.5, 0.0, 0.2, 0.1)
+#: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
+#: the polarimeter's nominal frame.
+DEFAULT_START = (1.5, 0.0, 0.2, 0.1, 0.0)
 
 #: What the report and the console say when no calibration is used.
 UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
