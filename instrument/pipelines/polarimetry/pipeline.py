@@ -40,7 +40,8 @@ from instrument.pipelines.polarimetry.results import (
 from instrument.run.paths import results_dir
 from instrument.run.runfile import check_run_file
 
-__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run"]
+__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run",
+           "polarimetric_options"]
 
 #: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
 #: the polarimeter's nominal frame.
@@ -77,6 +78,18 @@ def choose_calibration(path: str | Path, bench: str, calibration: str | Path | N
     if str(calibration) == "none":
         return None
     return load_calibration(calibration)
+
+
+def polarimetric_options(calibration: PolarimeterCalibration | None,
+                         start: Sequence[float], fixed: Sequence[str] | None,
+                         distribution: str) -> dict[str, Any]:
+    """The options :func:`fit_polarimetric_run` records in ``results.h5`` (a batch compares
+    them to tell whether a run is already done)."""
+    used = "none" if calibration is None or calibration.path is None else str(
+        calibration.path)
+    return {"calibration": used, "start": [float(v) for v in start],
+            "fixed": "select" if fixed is None else list(fixed),
+            "distribution": distribution}
 
 
 def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
@@ -200,9 +213,7 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
                             model=_model_curves(points, fit) if fit else None)
     saved = None
     if write:
-        options = {"calibration": summary["calibration"] or "none", "start": list(start),
-                   "fixed": "select" if fixed is None else list(fixed),
-                   "distribution": distribution}
+        options = polarimetric_options(cal, start, fixed, distribution)
         saved = write_polarimetric_results(path, points, summary, run_id=run.run_id,
                                            options=options, folder=folder)
     if into_run:
