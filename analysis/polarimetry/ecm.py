@@ -32,9 +32,11 @@ Uncertainty. With the standard deviations of the measured intensities (``sigma_a
 GUM's Supplement 1, §7), each search started at the measured solution's orientations;
 ``method="linear"`` is first-order propagation ``J Σ Jᵀ`` (JCGM 100:2008, eq. 13) with
 ``J`` the Jacobian of the whole calibration map by central differences of one σ in each
-intensity. The two agree within the Monte Carlo's sampling error (tested); the Monte
-Carlo is the default because ECM's azimuth search and eigen-decomposition are not
-differentiable in closed form.
+intensity. The two agree within the Monte Carlo's sampling error where the references'
+eigenvalues are well apart (partial polarisers and retarders; tested). The Monte Carlo is
+the default: with ideal polarisers (Ψ = 0) the vanishing eigenvalue pair is noise, its
+assignment in eqs. 9–11 is not differentiable there, and first order misstates σ by up to
+a third (measured with polarisers at 0° and 90° and a retarder at 1e-3 noise).
 
 The dual rotating retarder is not separable: its K settings change generator and analyser
 together (one row ``vec(a_k g_kᵀ)`` per step), so no 4×4 ``B`` exists and ECM does not
@@ -274,9 +276,8 @@ def ecm_calibrate(b_air: ArrayLike, b_samples: Sequence[ArrayLike],
     if np.linalg.cond(b0) > 1e12:
         raise PolarimetryInputError("b_air", "is singular: the four generator or analyser "
                                     "states are not independent")
-    cal = _solve(b0, bs, th0, search=True)
     if sigma_air is None and sigma_samples is None:
-        return cal
+        return _solve(b0, bs, th0, search=True)
     if sigma_air is None or sigma_samples is None:
         raise PolarimetryInputError("sigma_air" if sigma_air is None else "sigma_samples",
                                     "give the σ of the air and of every sample's "
@@ -291,6 +292,9 @@ def ecm_calibrate(b_air: ArrayLike, b_samples: Sequence[ArrayLike],
         raise PolarimetryInputError("sigma_air", "standard deviations must be ≥ 0")
     if method not in _METHODS:
         raise PolarimetryInputError("method", f"must be one of {_METHODS}, got {method!r}")
+    if method == "monte_carlo" and n_draws < 10:
+        raise PolarimetryInputError("n_draws", f"must be ≥ 10, got {n_draws}")
+    cal = _solve(b0, bs, th0, search=True)
     start = np.array([smp.theta_deg for smp in cal.samples])
     x0 = np.concatenate([b0.ravel(), *(b.ravel() for b in bs)])
     sig = np.concatenate([s0.ravel(), *(s.ravel() for s in ss)])
@@ -300,8 +304,6 @@ def ecm_calibrate(b_air: ArrayLike, b_samples: Sequence[ArrayLike],
         return _vec(_solve(parts[0], list(parts[1:]), start, search=False))
 
     if method == "monte_carlo":
-        if n_draws < 10:
-            raise PolarimetryInputError("n_draws", f"must be ≥ 10, got {n_draws}")
         rng = np.random.default_rng(seed)
         draws = np.array([at(x0 + sig * rng.standard_normal(x0.size))
                           for _ in range(n_draws)])
