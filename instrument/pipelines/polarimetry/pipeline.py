@@ -4,7 +4,8 @@ and the results file (what ``scatterlab fit`` does for a run with an optical tra
 Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`), choose
 the calibration (:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every
 geometry (:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix
-with its full covariance (:func:`analysis.polarimetry.pbrdf.fit_pbrdf`, judged by the
+with its full covariance (the variant the data need,
+:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`, ADR 0107, judged by the
 goodness-of-fit gate of ADR 0051), draw the report
 (:mod:`~instrument.pipelines.polarimetry.report`) and write ``results.h5``
 (:mod:`~instrument.pipelines.polarimetry.results`), all under ``DIR/RUN/fit/`` next to the
@@ -15,13 +16,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from analysis.polarimetry.pbrdf import PBRDF_PARAMS, fit_pbrdf, pbrdf
+from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf, pbrdf
+from analysis.polarimetry.pbrdf_selection import PBRDF_VARIANTS, select_pbrdf
 from analysis.polarimetry.validation import PolarimetryInputError
 from instrument.pipelines.polarimetry.calibration import (
     PolarimeterCalibration,
@@ -38,10 +40,12 @@ from instrument.pipelines.polarimetry.results import (
 from instrument.run.paths import results_dir
 from instrument.run.runfile import check_run_file
 
-__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run"]
+__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run",
+           "polarimetric_options"]
 
-#: Start values (n, k, alpha, albedo) of the pBRDF fit: a rough dielectric.
-DEFAULT_START = (1.5, 0.0, 0.2, 0.1)
+#: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
+#: the polarimeter's nominal frame.
+DEFAULT_START = (1.5, 0.0, 0.2, 0.1, 0.0)
 
 #: What the report and the console say when no calibration is used.
 UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
@@ -76,20 +80,46 @@ def choose_calibration(path: str | Path, bench: str, calibration: str | Path | N
     return load_calibration(calibration)
 
 
+def polarimetric_options(calibration: PolarimeterCalibration | None,
+                         start: Sequence[float], fixed: Sequence[str] | None,
+                         distribution: str) -> dict[str, Any]:
+    """The options :func:`fit_polarimetric_run` records in ``results.h5`` (a batch compares
+    them to tell whether a run is already done)."""
+    used = "none" if calibration is None or calibration.path is None else str(
+        calibration.path)
+    return {"calibration": used, "start": [float(v) for v in start],
+            "fixed": "select" if fixed is None else list(fixed),
+            "distribution": distribution}
+
+
 def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
-               fixed: Sequence[str], distribution: str) -> dict[str, Any] | None:
+               fixed: Sequence[str] | None, distribution: str) -> dict[str, Any] | None:
+    """The pBRDF fit: with ``fixed`` None the variant the data need (ADR 0107), else the
+    one model with those parameters held."""
     use = [p for p in points if p.brdf.normalised_valid and not p.group.transmitted]
     if not use:
         return None
-    ang = {name: np.radians([getattr(p.group, name) for p in use])
-           for name in ("theta_i", "phi_i", "theta_r", "phi_r")}
-    fit = fit_pbrdf(np.array([p.brdf.m for p in use]), np.array([p.brdf.cov for p in use]),
-                    ang["theta_i"], ang["phi_i"], ang["theta_r"], ang["phi_r"],
-                    start=start, fixed=fixed, distribution=distribution)
+    ang = [np.radians([getattr(p.group, name) for p in use])
+           for name in ("theta_i", "phi_i", "theta_r", "phi_r")]
+    m = np.array([p.brdf.m for p in use])
+    cov = np.array([p.brdf.cov for p in use])
+    selection: dict[str, Any] | None = None
+    fit: PbrdfFit
+    if fixed is None:
+        sel = select_pbrdf(m, cov, *ang, start=start, distribution=distribution)
+        fit = sel.chosen_fit
+        held = list(dict.fromkeys(PBRDF_VARIANTS[sel.chosen]))
+        variant = sel.chosen
+        selection = {"criterion": sel.criterion, "rule": sel.rule,
+                     "table": [asdict(r) for r in sel.table]}
+    else:
+        fit = fit_pbrdf(m, cov, *ang, start=start, fixed=fixed, distribution=distribution)
+        held, variant = list(fixed), "fixed by the user"
     gof = fit.goodness
     return {"param_names": list(PBRDF_PARAMS), "params": fit.params.tolist(),
             "stderr": fit.sigma.tolist(), "covariance": fit.cov.tolist(),
-            "fixed": list(fixed), "distribution": distribution,
+            "fixed": held, "distribution": distribution, "variant": variant,
+            "selection": selection,
             "adequate": bool(gof.adequate), "verdict": gof.verdict(), "chi2": gof.chi2,
             "dof": gof.dof, "p_value": gof.p_value}
 
@@ -111,14 +141,17 @@ def _model_curves(points: Sequence[MuellerPoint], fit: dict[str, Any]
 
 def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = None,
                          start: Sequence[float] = DEFAULT_START,
-                         fixed: Sequence[str] = ("k",), distribution: str = "beckmann",
+                         fixed: Sequence[str] | None = None, distribution: str = "beckmann",
                          report_dir: str | Path | None = None, report: bool = True,
                          write: bool = True, into_run: bool = False) -> PolarimetricFit:
     """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
 
     ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
     for the newest valid calibration of the run's bench beside the run. ``into_run`` also
-    writes the results into the run file's ``/entry/analysis``.
+    writes the results into the run file's ``/entry/analysis``. ``fixed`` None (the
+    default) chooses the pBRDF variant the data need
+    (:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`); a list of parameter
+    names fits the one model with those held at ``start``.
 
     Raises
     ------
@@ -180,8 +213,7 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
                             model=_model_curves(points, fit) if fit else None)
     saved = None
     if write:
-        options = {"calibration": summary["calibration"] or "none", "start": list(start),
-                   "fixed": list(fixed), "distribution": distribution}
+        options = polarimetric_options(cal, start, fixed, distribution)
         saved = write_polarimetric_results(path, points, summary, run_id=run.run_id,
                                            options=options, folder=folder)
     if into_run:
