@@ -573,6 +573,7 @@ class RunEngine:
         self.bench.make_safe()
         self._spin_stopped = True
         self._light = None  # re-applied on resume
+        self._pem_state = None  # the modulator too: an operator may have set it meanwhile
         if not self._store_broken:
             assert self._writer is not None
             try:

@@ -7,6 +7,11 @@ harmonic after the plan's settle; the fit reduces each geometry with ``reduce_pe
 the DRR's pipeline. The closed loop compares every normalised element with the world's
 own truth on the aperture (``mueller_on_aperture``): the hidden train of this bench has no
 misalignment, so the nominal reduction is unbiased.
+
+The DC's σ holds the SR830's Aux In quantisation (1/3 mV over √12), which the emulator's
+Aux In does not have (it answers six digits): on the emulated bench σ is larger than the
+scatter of the elements (pulls of a few tenths), and the 2σ checks are bias checks at that
+σ (a few 10⁻³ of m00).
 """
 
 from __future__ import annotations
@@ -192,9 +197,9 @@ def test_a_dual_rotating_retarder_calibration_is_refused_for_a_pem_run(polariser
                              write=False)
 
 
-@pytest.mark.slow  # 3 seeds × two references (48 points through the engine)
+@pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~3 min
 @pytest.mark.parametrize("reference", ["polariser", "quarter_wave"])
-@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("seed", range(1, 11))
 def test_references_over_seeds_within_2_sigma(tmp_path, reference, seed):
     bench = fast_pem_bench(tmp_path, reference, power_w=1e-6, seed=seed)
     path, truths = run_with_truth(tmp_path, bench, plan_text(ti="10.0", tr="10.0"), steps=8,
