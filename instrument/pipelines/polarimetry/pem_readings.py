@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.brdf.reduction.lockin import pooled_reading_sigma
 from analysis.polarimetry.pem import PemSetting
 from instrument.pipelines.polarimetry.readings import (
     PemGroup,
@@ -27,6 +28,8 @@ from instrument.pipelines.polarimetry.readings import (
     _element,
     element_axis,
 )
+from instrument.plans.polarimetry_pem import DEFAULT_READS
+from instrument.run.pem_reading import OUTPUT_FLOOR
 from instrument.run.runfile import RunData, RunFileError
 
 __all__ = ["pem_groups"]
@@ -66,6 +69,14 @@ def pem_groups(path: str | Path, run: RunData, train: Mapping[str, Any],
     if bad.any():
         raise RunFileError(f"{path}: {int(bad.sum())} PEM point(s) lack their DC/1f/2f "
                            "readings, σ or the modulator's amplitude (pem_* columns)")
+    # 1f and 2f: σ from the run's lock-in noise model (var of a snapshot = a + b·|X|,
+    # fitted to every point's spread, ADR 0053) rather than each point's own spread of a
+    # few snapshots, itself uncertain by 1/√(2(n−1)); never below the outputs' floor
+    reads = int(train.get("polarimetry", {}).get("reads", DEFAULT_READS))
+    for col, harmonic in ((1, 1), (2, 2)):
+        floor = OUTPUT_FLOOR * _column(run, f"pem_{harmonic}f_sensitivity_v")[rows]
+        pooled, _, _ = pooled_reading_sigma(y[rows, col], s[rows, col], reads)
+        s[rows, col] = np.maximum(pooled, np.nan_to_num(floor))
     g_pol = element_axis(run, train, "psg_polariser", "psg", "polariser")
     a_ret = element_axis(run, train, "psa_retarder", "psa", "retarder")
     try:
@@ -93,5 +104,6 @@ def pem_groups(path: str | Path, run: RunData, train: Mapping[str, Any],
             intensity=y[idx, 0], sigma=s[idx, 0],
             pem=PemGroup(readings=y[idx], sigmas=s[idx], settings=settings,
                          amplitude_rad=amplitude)))
-    return groups, ("the lock-in: each harmonic's scatter over its snapshots (at least 1e-5 "
-                    "of its full scale), the Aux In's quantisation for the DC")
+    return groups, ("the lock-in: each harmonic's noise model fitted to the run's snapshot "
+                    "spreads (at least 1e-5 of its full scale); the DC's spread with the Aux "
+                    "In's quantisation")

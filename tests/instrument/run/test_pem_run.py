@@ -197,17 +197,27 @@ def test_a_dual_rotating_retarder_calibration_is_refused_for_a_pem_run(polariser
                              write=False)
 
 
-@pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~3 min
+@pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~5 min
 @pytest.mark.parametrize("reference", ["polariser", "quarter_wave"])
-@pytest.mark.parametrize("seed", range(1, 11))
-def test_references_over_seeds_within_2_sigma(tmp_path, reference, seed):
-    bench = fast_pem_bench(tmp_path, reference, power_w=1e-6, seed=seed)
-    path, truths = run_with_truth(tmp_path, bench, plan_text(ti="10.0", tr="10.0"), steps=8,
-                                  world_name="sim-polarimetric-pem", frame_deg=0.0,
-                                  straight_through=True)
-    (point,) = fit_polarimetric_run(path, report=False, write=False).points
-    (truth,) = truths.values()
-    assert np.all(np.abs(pulls(point, truth)) < 2.0), np.round(pulls(point, truth), 2)
+def test_references_over_ten_seeds_within_2_sigma(tmp_path, reference):
+    """150 pulls per reference: with σ right, 95 % within 2σ and none far out; at least
+    90 % within 2σ (a binomial 3.7σ below 95 % would fail by chance 1 in 10⁴) and none
+    beyond 4σ. A single-seed "every element within 2σ" cannot hold over 150 honest
+    pulls."""
+    found = []
+    for seed in range(1, 11):
+        sub = tmp_path / f"s{seed}"
+        sub.mkdir()
+        bench = fast_pem_bench(sub, reference, power_w=1e-6, seed=seed)
+        path, truths = run_with_truth(sub, bench, plan_text(ti="10.0", tr="10.0"), steps=8,
+                                      world_name="sim-polarimetric-pem", frame_deg=0.0,
+                                      straight_through=True)
+        (point,) = fit_polarimetric_run(path, report=False, write=False).points
+        (truth,) = truths.values()
+        found.append(pulls(point, truth))
+    pull = np.concatenate(found)
+    assert np.mean(np.abs(pull) < 2.0) >= 0.9 and np.all(np.abs(pull) < 4.0), np.round(
+        np.array(found), 2)
 
 
 @pytest.mark.slow  # the glass's pBRDF per world state: about a minute
