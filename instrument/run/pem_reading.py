@@ -13,7 +13,8 @@ the engine's retry policy handles like any failed reading.
 
 * 1f, 2f: the standard error of the in-phase outputs X over the snapshots, at least
   :data:`OUTPUT_FLOOR` × the full scale (the outputs' resolution, and the modulator drive's
-  six-digit rounding, which no scatter of snapshots shows);
+  six-digit rounding, which no scatter of snapshots shows); the fit pools these spreads
+  into the run's noise model (:mod:`instrument.pipelines.polarimetry.pem_readings`);
 * DC: the standard error of ``reads`` Aux In readings combined with the Aux In's
   quantisation, 1/3 mV (SR830 manual, specifications: Aux inputs 16-bit, ±10.5 V) over √12
   — an error a mean of quantised readings does not average away.

@@ -197,7 +197,7 @@ def test_a_dual_rotating_retarder_calibration_is_refused_for_a_pem_run(polariser
                              write=False)
 
 
-@pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~5 min
+@pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~2.5 min
 @pytest.mark.parametrize("reference", ["polariser", "quarter_wave"])
 def test_references_over_ten_seeds_within_2_sigma(tmp_path, reference):
     """150 pulls per reference: with σ right, 95 % within 2σ and none far out; at least
