@@ -181,9 +181,9 @@ class BenchTiming:
 
     def pem_reading_s(self, time_constants: float, reads: int) -> float:
         """Seconds one PEM setting's readings take (:mod:`instrument.run.pem_reading`): per
-        harmonic (1f, 2f) a settle of ``time_constants`` τ, two settling waits to choose
-        the range and one before each further snapshot of ``reads``."""
-        per = time_constants * self.lockin_tau_s + self.lockin_settle_s * (int(reads) + 1)
+        harmonic (1f, 2f) a settle of ``time_constants`` τ, then the engine's lock-in
+        reading of ``reads`` snapshots (:meth:`lockin_reading_s`)."""
+        per = time_constants * self.lockin_tau_s + self.lockin_reading_s(reads)
         return 2.0 * per
 
     def wheel_move_s(self, start: int, end: int) -> float:

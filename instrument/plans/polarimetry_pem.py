@@ -95,8 +95,8 @@ def parse_pem(v: _Validator, t: dict[str, Any]) -> dict[str, Any]:
                 f"from 1 to 100 (15 leaves 3e-7 of a step), got {tau!r}")
         tau = DEFAULT_TIME_CONSTANTS
     reads = t.get("reads", DEFAULT_READS)
-    if not isinstance(reads, int) or isinstance(reads, bool) or not 2 <= reads <= 100:
-        v.error("polarimetry.reads", f"must be an integer from 2 to 100 (snapshots per "
+    if not isinstance(reads, int) or isinstance(reads, bool) or not 4 <= reads <= 100:
+        v.error("polarimetry.reads", f"must be an integer from 4 to 100 (snapshots per "
                 f"harmonic; their scatter is the reading's σ), got {reads!r}")
         reads = DEFAULT_READS
     return {"mode": "pem", "amplitude_waves": None if waves is None else float(waves),

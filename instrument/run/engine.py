@@ -1102,7 +1102,8 @@ class RunEngine:
             cast(HarmonicLockIn, lockin),
             time_constants=float(pol.get("time_constants", DEFAULT_TIME_CONSTANTS)),
             reads=int(pol.get("reads", DEFAULT_READS)),
-            retries=self.LOCKIN_OVERLOAD_RETRIES), st)
+            snapshots=lambda: self._lockin_snapshots(int(pol.get("reads", DEFAULT_READS)))),
+            st)
         out["lockin_time_constant_s"] = float(lockin.time_constant_s)
         if self._pem_state is not None:
             out.update({k: v for k, v in self._pem_state.items() if k != "waves"})

@@ -5,9 +5,9 @@ Per harmonic (1, then 2) the lock-in's ``HARM`` is set, its output filter settle
 plan's ``time_constants`` × τ (the 99 % wait leaves 1 % of the 1f–2f step, a 10⁻³ bias of
 the reduced matrix: ADR 0105), the range is chosen for that harmonic (1f and 2f differ by
 up to ten times) and ``reads`` snapshots are taken one settling wait apart. The harmonic
-is restored to 1 afterwards, also on an error. An overload during the snapshots re-ranges
-and reads again; one that persists raises :class:`~drivers.errors.ControllerError`, which
-the engine's retry policy handles like any failed reading.
+is restored to 1 afterwards, also on an error. The range choice and the snapshots are the
+engine's lock-in readings (an overload re-ranges and reads again; one that persists raises
+:class:`~drivers.errors.ControllerError`, which the device's retry policy handles).
 
 σ of each channel (volts):
 
@@ -27,11 +27,10 @@ reduction uses the signed X).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
-
-from drivers.errors import ControllerError
 
 __all__ = ["AUX_RESOLUTION_V", "OUTPUT_FLOOR", "HarmonicLockIn", "read_pem"]
 
@@ -52,51 +51,34 @@ class HarmonicLockIn(Protocol):
     def settle(self, n_time_constants: float | None = None, *,
                timeout: float = 60.0) -> float: ...
 
-    def auto_range(self) -> float: ...
-
-    def snapshot(self) -> Any: ...
-
-    def overload_status(self) -> Any: ...
-
     def read_aux_input(self, channel: int = 1) -> float: ...
 
 
-def _harmonic(li: HarmonicLockIn, n: int, time_constants: float, reads: int,
-              retries: int) -> dict[str, float]:
-    for _ in range(retries + 1):
-        li.harmonic = n
-        li.settle(time_constants, timeout=max(60.0, 2 * time_constants
-                                              * float(li.time_constant_s)))
-        li.auto_range()
-        li.overload_status()  # clear the flags the ranging latched
-        snaps = []
-        for k in range(reads):
-            if k:
-                li.settle()
-            snaps.append(li.snapshot())
-        if not li.overload_status().overloaded:
-            x = np.array([s.x_v for s in snaps])
-            fs = float(li.sensitivity_v)
-            return {f"pem_{n}f_v": float(x.mean()),
-                    f"pem_u_{n}f_v": max(float(x.std(ddof=1) / math.sqrt(x.size)),
-                                         OUTPUT_FLOOR * fs),
-                    f"pem_{n}f_y_v": float(np.mean([s.y_v for s in snaps])),
-                    f"pem_{n}f_theta_deg": float(np.mean([s.theta_deg for s in snaps])),
-                    f"pem_{n}f_sensitivity_v": fs}
-    raise ControllerError(f"the input stays overloaded at every range at harmonic {n} (too "
-                          "much light, or the dynamic reserve is too low)", device=li.name,
-                          command="read PEM")
+def _harmonic(li: HarmonicLockIn, n: int, time_constants: float,
+              snapshots: Callable[[], list[Any]]) -> dict[str, float]:
+    li.harmonic = n
+    li.settle(time_constants, timeout=max(60.0, 2 * time_constants * float(li.time_constant_s)))
+    snaps = snapshots()
+    x = np.array([s.x_v for s in snaps])
+    fs = float(li.sensitivity_v)
+    return {f"pem_{n}f_v": float(x.mean()),
+            f"pem_u_{n}f_v": max(float(x.std(ddof=1) / math.sqrt(x.size)), OUTPUT_FLOOR * fs),
+            f"pem_{n}f_y_v": float(np.mean([s.y_v for s in snaps])),
+            f"pem_{n}f_theta_deg": float(np.mean([s.theta_deg for s in snaps])),
+            f"pem_{n}f_sensitivity_v": fs}
 
 
 def read_pem(li: HarmonicLockIn, *, time_constants: float, reads: int,
-             retries: int = 3) -> dict[str, float]:
+             snapshots: Callable[[], list[Any]]) -> dict[str, float]:
     """DC, 1f and 2f of the present setting with their σ (module docstring), as run-file
-    columns (:data:`~instrument.run.layout.PEM_FIELDS`; the modulator's are the engine's)."""
+    columns (:data:`~instrument.run.layout.PEM_FIELDS`; the modulator's are the engine's).
+    ``snapshots`` takes one harmonic's readings once its settle is over: the engine's
+    range choice and overload handling, ``reads`` snapshots one settling wait apart."""
     reads = max(int(reads), 2)
     out = {"pem_time_constants": float(time_constants)}
     try:
         for n in (1, 2):
-            out.update(_harmonic(li, n, time_constants, reads, retries))
+            out.update(_harmonic(li, n, time_constants, snapshots))
     finally:
         if li.harmonic != 1:
             li.harmonic = 1

@@ -116,7 +116,7 @@ def test_scatterlab_plan_prints_the_pem_condition_number(capsys, tmp_path):
     ("steps = 36", "polarimetry.steps"),
     ("amplitude_waves = 3.0", "polarimetry.amplitude_waves"),
     ("analyser_deg = [0.0, 45.0]", "polarimetry.analyser_deg"),
-    ("reads = 1", "polarimetry.reads"),
+    ("reads = 3", "polarimetry.reads"),
     ("time_constants = 0.1", "polarimetry.time_constants"),
     ("colour = 1", "polarimetry.colour"),
 ])
@@ -158,7 +158,7 @@ def polariser_run(tmp_path_factory):  # type: ignore[no-untyped-def]
                           straight_through=True)
 
 
-def test_a_polariser_through_run_and_fit_is_recovered_within_2_sigma(polariser_run, capsys):
+def test_a_polariser_through_run_and_fit_is_recovered_within_3_sigma(polariser_run, capsys):
     path, truths = polariser_run
     run = read_run(path)
     # what the run file records per point
@@ -184,9 +184,10 @@ def test_a_polariser_through_run_and_fit_is_recovered_within_2_sigma(polariser_r
     sigma = point.brdf.sigma_normalised.ravel()[1:]
     assert np.all(sigma > 0) and np.all(sigma < 0.05)
     (truth,) = truths.values()
-    # 15 elements of one seed at 2σ: the polariser's elements are large (m01/m00 = 0.5,
-    # m02/m00 = 0.87) and their σ ~1e-3, so a bias of 1e-3 would show
-    assert np.all(np.abs(pulls(point, truth)) < 2.0), np.round(pulls(point, truth), 2)
+    # 15 elements of one seed at 3σ: at 2σ all fifteen would hold only about half the
+    # time with σ right (0.954¹⁵), at 3σ 96 %; the ten-seed test below checks 2σ as a
+    # proportion. The V elements' σ is ~1e-3 of m00, so a bias of a few 1e-3 shows.
+    assert np.all(np.abs(pulls(point, truth)) < 3.0), np.round(pulls(point, truth), 2)
 
 
 def test_a_dual_rotating_retarder_calibration_is_refused_for_a_pem_run(polariser_run,
