@@ -134,12 +134,22 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
 
 def optical_train_json(plan: Plan) -> str:
     """The optical train's provenance of a polarimetric plan (the profile's nominal
-    ``[optics]`` and the plan's ``[polarimetry]``), JSON; empty for any other plan."""
+    ``[optics]`` and the plan's ``[polarimetry]``; in PEM mode with the amplitude set and
+    the settings ``[polariser, analyser retarder, PEM axis, analyser polariser]`` (deg)
+    that the points' ``pem_setting`` indexes), JSON; empty for any other plan."""
     optics = plan.profile.optics
     if plan.spec.polarimetry is None or optics is None:
         return ""
-    return json.dumps({"optics": optics.as_dict(), "polarimetry": plan.spec.polarimetry},
-                      sort_keys=True)
+    pol = dict(plan.spec.polarimetry)
+    if pol["mode"] == "pem":
+        # the settings the points' pem_setting index into, and the amplitude they set
+        from instrument.plans.polarimetry_pem import pem_train, plan_settings, plan_waves
+
+        train = pem_train(plan.profile)
+        pol["amplitude_waves"] = plan_waves(pol, plan.profile, train)
+        pol["settings"] = [[s.polariser_deg, s.analyser_retarder_deg, s.pem_axis_deg,
+                            s.analyser_polariser_deg] for s in plan_settings(pol, train)]
+    return json.dumps({"optics": optics.as_dict(), "polarimetry": pol}, sort_keys=True)
 
 
 #: Seconds between catalog updates of a running run's point count (a short SQLite write

@@ -1,10 +1,12 @@
 """A polarimetric run file → Mueller matrices, decompositions, the pBRDF fit, the report
 and the results file (what ``scatterlab fit`` does for a run with an optical train).
 
-Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`), choose
-the calibration (:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every
-geometry (:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix
-with its full covariance (the variant the data need,
+Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`; a PEM
+run's DC, 1f and 2f readings by :mod:`~instrument.pipelines.polarimetry.pem_readings`,
+reduced with its nominal train and no calibration, ADR 0106), choose the calibration
+(:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every geometry
+(:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix with its
+full covariance (the variant the data need,
 :func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`, ADR 0107, judged by the
 goodness-of-fit gate of ADR 0051), draw the report
 (:mod:`~instrument.pipelines.polarimetry.report`) and write ``results.h5``
@@ -40,8 +42,8 @@ from instrument.pipelines.polarimetry.results import (
 from instrument.run.paths import results_dir
 from instrument.run.runfile import check_run_file
 
-__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run",
-           "polarimetric_options"]
+__all__ = ["DEFAULT_START", "UNCALIBRATED", "UNCALIBRATED_PEM", "PolarimetricFit",
+           "fit_polarimetric_run", "polarimetric_options"]
 
 #: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
 #: the polarimeter's nominal frame.
@@ -50,6 +52,10 @@ DEFAULT_START = (1.5, 0.0, 0.2, 0.1, 0.0)
 #: What the report and the console say when no calibration is used.
 UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
                 "misalignment; run scatterlab calibrate polarimeter")
+#: ... for a PEM run, which the eigenvalue calibration (of a DRR) does not cover.
+UNCALIBRATED_PEM = ("PEM run reduced with the nominal optical train (DC, 1f and 2f rows at "
+                    "the modulator's amplitude; the mounts' read-back angles): elements may "
+                    "be biased by the train's own misalignment")
 
 
 @dataclass(frozen=True)
@@ -165,7 +171,12 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     check_run_file(path, "fit")
     prun = read_polarimetric(path)
     bench = str(prun.run.profile().get("bench", {}).get("name", ""))
-    cal = choose_calibration(path, bench, calibration)
+    pem = prun.polarimetry.get("mode") == "pem"
+    if pem and calibration is not None and str(calibration) != "none":
+        raise ValueError("a PEM run is reduced with its nominal optical train: the "
+                         "polarimeter calibration (eigenvalue method) is of a dual rotating "
+                         "retarder; leave --calibration out")
+    cal = None if pem else choose_calibration(path, bench, calibration)
     notes: list[str] = []
     if cal is not None and cal.bench != bench:
         from instrument.pipelines.polarimetry.calibration import CalibrationError
@@ -175,7 +186,7 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     if cal is not None and not cal.valid:
         notes.append(f"the calibration {cal.path} failed its quality gate ({cal.quality}); "
                      "used because it was named")
-    cal_text = (UNCALIBRATED if cal is None else
+    cal_text = (UNCALIBRATED_PEM if pem else UNCALIBRATED if cal is None else
                 f"calibrated with {cal.path} ({cal.date}): {cal.describe()}")
     scale = source_scale(prun, cal)
     points = []
