@@ -113,7 +113,9 @@ def run(args: argparse.Namespace) -> int:
     print("  acquisition: " + ", ".join(f"{k} {_value(v)}" for k, v in acq.items()))
     if spec.polarimetry is not None:
         _print_polarimetry(spec, profile)
-        if _print_polarimetric_front(spec, profile, tradeoff_path(args)) != 0:
+        # the front sweeps the DRR's steps per geometry; a PEM plan has fixed settings
+        if spec.polarimetry["mode"] != "pem" and _print_polarimetric_front(
+                spec, profile, tradeoff_path(args)) != 0:
             return 2
     if any(p.angles is not None for p in plan.points):
         from instrument.plans.coverage import write_coverage_png
@@ -162,7 +164,6 @@ def _print_polarimetry(spec: PlanSpec, profile: BenchProfile) -> None:
             print(f"  warning: κ is more than {FAR_FROM_OPTIMUM:g}× the optimum's: the "
                   f"Mueller elements' σ grows with it; retarders of about "
                   f"{c.optimum_retardance_deg:g}° would do better")
-
 
 
 def _print_polarimetric_front(spec: PlanSpec, profile: BenchProfile, png: Path) -> int:
