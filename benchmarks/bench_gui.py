@@ -14,9 +14,14 @@ With ``--server`` the scan runs in a bench server process of its own (the ideal 
 behind ``scatterlab serve``'s service and app, started by this script as a child) and the
 GUI is the client window (docs/decisions/0084): its plot is fed by the event stream.
 
-Latency is measured by a heartbeat: a 5 ms ``QTimer`` on the GUI thread records when it
-fires; the worst (and 99th-percentile) delay beyond its period is how long the GUI thread
-was unable to react. Target: ≤ 50 ms.
+Latency is measured by a heartbeat: a 5 ms precise ``QTimer`` on the GUI thread records
+when it fires; a beat's delay beyond its period is how long the GUI thread was unable to
+react just before it. The worst is the longest of these. The p99 is taken over *time*, not
+over beats (:func:`time_p99`): the delay that an event (a click, a key) arriving at a random
+moment of the scan exceeds with probability 1 %. Over beats, a 40 ms stall is one beat
+against the eight that fire in 40 ms of an idle loop, so the per-beat p99 (printed too, for
+comparison with the earlier rows of BENCHMARKS.md) understates how often an operator meets
+a stall. Target: worst ≤ 50 ms, p99 ≤ 16 ms.
 
     python benchmarks/bench_gui.py                 # everything
     python benchmarks/bench_gui.py --quick         # 2,000 scan points, 3 s of camera
@@ -38,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
-from PySide6.QtCore import QSettings, QTimer  # noqa: E402
+from PySide6.QtCore import QSettings, Qt, QTimer  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
 from benchmarks.power_meter_scan import power_meter_scan  # noqa: E402
@@ -52,12 +57,35 @@ from tests.instrument.helpers import ideal_bench  # noqa: E402
 HEARTBEAT_MS = 5
 
 
+def time_p99(delays: np.ndarray, duration_s: float, q: float = 0.99) -> float:
+    """The delay (s) that an event arriving at a uniformly random moment of ``duration_s``
+    exceeds with probability ``1 − q``, from the heartbeat's delays: a beat ``d`` late
+    means the GUI thread was busy for the last ``d`` before it, so an event arriving in
+    that stretch waits between ``d`` and 0 (uniformly), and the time during which the wait
+    exceeds ``x`` is ``Σ max(d − x, 0)``. Solved for ``x`` by bisection."""
+    d = np.asarray(delays, float)
+    d = d[d > 0]
+    budget = (1.0 - q) * duration_s
+    if d.size == 0 or d.sum() <= budget:
+        return 0.0
+    lo, hi = 0.0, float(d.max())
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if np.maximum(d - mid, 0.0).sum() > budget:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
 class Heartbeat:
     """Records the GUI thread's delays beyond a fixed timer period."""
 
     def __init__(self, period_ms: int = HEARTBEAT_MS) -> None:
         self.period = period_ms / 1000.0
         self.timer = QTimer()
+        # precise: a coarse timer may fire up to 5 % of its period off its schedule
+        self.timer.setTimerType(Qt.TimerType.PreciseTimer)
         self.timer.setInterval(period_ms)
         self.timer.timeout.connect(self._beat)
         self.t: list[float] = []
@@ -70,15 +98,17 @@ class Heartbeat:
         self.timer.start()
 
     def stop(self, *, settle_s: float = 0.0) -> dict[str, float]:
-        """Worst and 99th-percentile delay; ``steady_max_ms`` leaves out the first
-        ``settle_s`` seconds (the run's start)."""
+        """Worst delay, its 99th percentile over time (:func:`time_p99`) and over beats;
+        ``steady_max_ms`` leaves out the first ``settle_s`` seconds (the run's start)."""
         self.timer.stop()
         t = np.array(self.t)
         gaps = np.diff(t) - self.period if len(t) > 1 else np.zeros(1)
         late = t[1:] > t[0] + settle_s if len(t) > 1 else np.ones(1, bool)
         steady = gaps[late] if late.any() else gaps
+        duration = float(t[-1] - t[0]) if len(t) > 1 else 0.0
         return {"max_ms": 1e3 * float(gaps.max()),
-                "p99_ms": 1e3 * float(np.percentile(gaps, 99)),
+                "p99_ms": 1e3 * time_p99(gaps, duration),
+                "beat_p99_ms": 1e3 * float(np.percentile(gaps, 99)),
                 "steady_max_ms": 1e3 * float(steady.max()), "beats": len(t)}
 
 
@@ -327,8 +357,9 @@ def main() -> int:
               f"at most {scan['slot_max_ms']:.1f} ms CPU, "
               f"{scan['slot_total_s']:.2f} s CPU in all; GUI heartbeat worst "
               f"{scan['max_ms']:.1f} ms (after the first 0.5 s: "
-              f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "
-              f"({scan['beats']} beats); event-loop passes (painting included) p99 "
+              f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms over time "
+              f"({scan['beat_p99_ms']:.1f} ms over {scan['beats']} beats); event-loop "
+              f"passes (painting included) p99 "
               f"{scan['pass_p99_ms']:.1f} ms, at most {scan['pass_max_ms']:.1f} ms CPU, "
               f"{scan['pass_total_s']:.2f} s CPU in all")
         if args.stalls:
@@ -338,7 +369,7 @@ def main() -> int:
     print(f"scan: {scan['points']} points ({scan['status']}) in {scan['seconds']:.1f} s "
           f"({scan['points'] / scan['seconds']:.0f} points/s), live plot {scan['plotted']} "
           f"points; GUI heartbeat worst {scan['max_ms']:.1f} ms (after the first 0.5 s: "
-          f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms "
+          f"{scan['steady_max_ms']:.1f} ms), p99 {scan['p99_ms']:.1f} ms over time "
           f"({scan['beats']} beats)")
     if args.scan_only:
         return 0

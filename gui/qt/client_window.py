@@ -39,6 +39,7 @@ from PySide6.QtWidgets import (
     QProgressBar,
     QPushButton,
     QScrollArea,
+    QSizePolicy,
     QSplitter,
     QTabWidget,
     QVBoxLayout,
@@ -75,6 +76,18 @@ def panel_changes(command) -> dict | None:
         value = command.args[0] if command.args else True
         return {PANEL_ACTIONS[command.name]: value}
     return None
+
+
+def steady_label(label: QLabel, *, lines: int, chars: str = "") -> None:
+    """A label whose text changes at every redraw (a run's progress, an axis's position)
+    without moving the widgets around it: its size no longer follows its text (a fixed
+    height of ``lines`` lines; at least as wide as ``chars``), so a new text repaints the
+    label alone instead of re-laying out and repainting its column (BENCHMARKS.md gui)."""
+    label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Fixed)
+    metrics = label.fontMetrics()
+    label.setFixedHeight(lines * metrics.lineSpacing() + 2 * label.margin() + 2)
+    if chars:
+        label.setMinimumWidth(metrics.horizontalAdvance(chars))
 
 
 class _PanelSession:
@@ -188,6 +201,7 @@ class ClientWindow(QMainWindow):
         rl = QVBoxLayout(rbox)
         self.run_label = QLabel("no run")
         self.run_label.setWordWrap(True)
+        steady_label(self.run_label, lines=3)
         self.progress = QProgressBar()
         # no text: a changed percentage makes QProgressBar repaint at once, not on the
         # next paint (the run label says n of N)
@@ -640,6 +654,7 @@ class ClientWindow(QMainWindow):
     def _add_axis_row(self, role: str) -> None:
         r = len(self.axis_rows) + 1
         label = QLabel(role)
+        steady_label(label, lines=1, chars=f"{role}: -0000.000 moving (not homed)")
         spin = QDoubleSpinBox()
         spin.setRange(-1e6, 1e6)
         spin.setDecimals(3)

@@ -20,7 +20,14 @@ from dataclasses import replace
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QStackedWidget, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (
+    QHBoxLayout,
+    QLabel,
+    QSizePolicy,
+    QStackedWidget,
+    QVBoxLayout,
+    QWidget,
+)
 
 from gui.model.live import LiveSnapshot, decade_label, log_ticks, plot_kind, signed_theta_r
 
@@ -32,6 +39,12 @@ __all__ = ["DecadeAxis", "LivePlot"]
 #: (20 curves of 470 points: 19 ms of CPU per repaint at 2 px, 5.5 ms at 1 px;
 #: BENCHMARKS.md gui).
 MARKERS_UP_TO = 600
+#: The in-plane view's margin beyond the data when it has to grow: a fraction of the data's
+#: span (θr in degrees; the signal in decades), at least the minimum given. The view
+#: grows only when a point falls outside it, so that a redraw repaints the new curve only,
+#: not both axes and every curve with them (BENCHMARKS.md gui).
+VIEW_MARGIN = 0.25
+VIEW_MIN_SPAN = (20.0, 0.5)
 PALETTE = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#4e342e",
            "#ad1457"]
 
@@ -64,6 +77,8 @@ class LivePlot(QWidget):
         self.n_plotted = 0
         self.caption = QLabel("no run yet")
         self.caption.setObjectName("live_caption")
+        # its text changes at every redraw: its width must not resize the plot below it
+        self.caption.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Fixed)
         self.stack = QStackedWidget()
         # in-plane
         self.in_plane = pg.PlotWidget(background="w",
@@ -78,6 +93,11 @@ class LivePlot(QWidget):
         self.in_plane_legend = QLabel("")
         self.in_plane_legend.setObjectName("in_plane_legend")
         self.in_plane_legend.setAlignment(Qt.AlignTop | Qt.AlignLeft)
+        # as wide as its widest row from the start: a row added with a new θi then does
+        # not narrow (and so resize and repaint) the plot beside it
+        self.in_plane_legend.setMinimumWidth(self.in_plane_legend.fontMetrics()
+                                             .horizontalAdvance("━━ θi = -88.88°  "))
+        self._view: tuple[float, float, float, float] | None = None
         self._legend_rows: list[str] = []
         in_plane_page = QWidget()
         row = QHBoxLayout(in_plane_page)
@@ -159,6 +179,8 @@ class LivePlot(QWidget):
                 plot.setLabel("left", "signal (DN/µs)")
         self._legend_rows = []
         self.in_plane_legend.setText("")
+        self._view = None
+        self.in_plane.enableAutoRange()
         self.nd_points.setData([], [])
         self.n_nd = 0
         self.polar_points.clear()
@@ -213,9 +235,11 @@ class LivePlot(QWidget):
                                          f"θi = {value:g}°")
                 self.in_plane_legend.setText("<br>".join(self._legend_rows))
                 self._curves[value] = curve
-            curve.setData(x, y)
+            curve.setData(x, y, skipFiniteCheck=True)  # selected finite and > 0 above
             self._counts[value] = n
         self.n_plotted = plotted
+        if sel.any():
+            self._keep_in_view(tr[sel], np.log10(snap.signal[sel]))
         behind = sel & _behind_filter(snap)
         if int(behind.sum()) != self.n_nd:
             self.n_nd = int(behind.sum())
@@ -225,6 +249,23 @@ class LivePlot(QWidget):
                 rows.append("□ read through an ND filter")
             self._legend_rows = rows
             self.in_plane_legend.setText("<br>".join(rows))
+
+    def _keep_in_view(self, x: np.ndarray, log_y: np.ndarray) -> None:
+        """Show every point (``x``: θr, ``log_y``: log10 of the signal) without letting
+        pyqtgraph auto-range: its range follows every new extreme, and each change
+        repaints both axes and every curve. Here the view grows only when a point falls
+        outside it, by :data:`VIEW_MARGIN` of the data's span: a handful of times a run."""
+        x0, x1 = float(x.min()), float(x.max())
+        y0, y1 = float(log_y.min()), float(log_y.max())
+        v = self._view
+        if v is not None and v[0] <= x0 and x1 <= v[1] and v[2] <= y0 and y1 <= v[3]:
+            return
+        if v is not None:  # never shrink during a run: keep what was shown in view
+            x0, x1, y0, y1 = min(x0, v[0]), max(x1, v[1]), min(y0, v[2]), max(y1, v[3])
+        mx = VIEW_MARGIN * max(x1 - x0, VIEW_MIN_SPAN[0])
+        my = VIEW_MARGIN * max(y1 - y0, VIEW_MIN_SPAN[1])
+        self._view = (x0 - mx, x1 + mx, y0 - my, y1 + my)
+        self.in_plane.setRange(xRange=self._view[:2], yRange=self._view[2:], padding=0)
 
     def _draw_hemisphere(self, snap: LiveSnapshot, ok: np.ndarray) -> None:
         sel = ok & np.isfinite(snap.theta_r) & (snap.signal > 0)

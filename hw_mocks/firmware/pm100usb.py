@@ -52,15 +52,16 @@ Measurement model (documented emulator choices, not a calibration):
   wrong wavelength setting scales the reading by ``R(λ_light)/R(λ_set)``.
 * Each sample carries Gaussian noise ``σ_I = sqrt(noise_floor_a² + (relative_noise·R·P)²)``;
   an ``AVER:COUN n`` reading is the mean of ``n`` samples (σ/√n).
-* Which noise: the readings draw from one seeded stream, in order. Where a caller sets
-  :attr:`Pm100usbFirmware.noise_state` (the virtual bench does not: ADR 0101), each
-  reading's noise is keyed to the state it returns (:attr:`Pm100usbFirmware.noise_state`: stage
+* Which noise: alone, the readings draw from one seeded stream, in order. Bound to a
+  virtual bench (:meth:`hw_mocks.sim.world.VirtualBench.bind_power_meter`), each reading's
+  noise is keyed to the bench state it reads (:attr:`Pm100usbFirmware.noise_state`: stage
   positions and the light at the sample) — seed, state, which visit of that state (a
   state is visited anew each time the readings' state changes to it) and which reading of
-  the visit. Readings taken while the bench rests between runs (a server polling the
-  meter) then leave a run's readings unchanged: the run moves the bench to each point,
-  a new visit, and draws the same values however many readings came before. ``I_dark`` stays in the
-  reading until a dark zero measures it (:meth:`zero_samples` samples); ``*RST`` forgets
+  the visit, hashed together into one key per reading (ADR 0111). Readings taken while
+  the bench rests between runs (a server polling the meter) then leave a run's readings
+  unchanged: the run moves the bench to each point, a new visit, and draws the same
+  values however many readings came before. ``I_dark`` stays in the reading until a dark
+  zero measures it (:meth:`zero_samples` samples); ``*RST`` forgets
   the zero ("no way of resetting the zero value other than full device reset").
 * Zeroing runs :attr:`zero_duration_s` on the emulator clock; ``ZERO:STAT?`` answers 1
   while it runs and 0 when done (the convention most open drivers poll for).
@@ -327,7 +328,13 @@ class Pm100usbFirmware(FirmwareEmulator):
             self._visit = [digest, self._visits[digest], 0]
         visit = self._visit
         visit[2] += 1
-        return np.random.default_rng([self._seed, digest, visit[1], visit[2]])
+        # one 128-bit key hashed from every part (seed, state, visit, reading), not the
+        # parts as separate seed words: each reading's generator is as unrelated to the
+        # others as a hash makes it, with no reliance on how SeedSequence mixes words that
+        # repeat from seed to seed (the states of one plan do)
+        key = hashlib.blake2b(f"{self._seed}|{digest}|{visit[1]}|{visit[2]}".encode(),
+                              digest_size=16).digest()
+        return np.random.default_rng(int.from_bytes(key, "little"))
 
     def _measure_power_w(self) -> float:
         current = self._sample_current_a(self.average_count)

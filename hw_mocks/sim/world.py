@@ -512,10 +512,10 @@ class VirtualBench:
 
         ``target`` is the firmware object, a ``simusb://name`` URL (the device is created
         through :func:`hw_mocks.usb.backend_from_url` if needed), or ``None`` for
-        ``power_meter.url``. Sets its ``optical_power_w`` callable and the light's
-        wavelength (followed at every reading: :meth:`light_wavelength_nm`). Its noise
-        stays one stream in reading order: keying it to :meth:`reading_state` left the
-        readings' scatter larger than the σ the reduction gives them (ADR 0101).
+        ``power_meter.url``. Sets its ``optical_power_w`` callable, the light's
+        wavelength (followed at every reading: :meth:`light_wavelength_nm`) and the state
+        its noise is keyed to (:meth:`reading_state`), so that readings the bench takes
+        while it rests (a server's idle polls) leave a run's readings unchanged (ADR 0111).
         """
         target = self.power_meter.url if target is None else target
         if target is None:
@@ -528,6 +528,7 @@ class VirtualBench:
             target = usb.get_firmware(name)
         target.optical_power_w = self.optical_power_w
         target.light_wavelength_nm = self.light_wavelength_nm
+        target.noise_state = self.reading_state
         target.bound_world = self.name
         self._bound_meter = target
         return target

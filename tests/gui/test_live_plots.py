@@ -3,6 +3,7 @@ map fills with directions."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -138,3 +139,46 @@ def test_a_large_in_plane_plot_is_drawn_thin_without_markers_or_grid(qtbot, n_to
     assert (curve.opts["symbol"] is None) == large
     grid = plot.in_plane.getAxis("bottom").grid
     assert (grid is False or grid == 0) == large
+
+
+def test_a_fast_in_plane_scan_ends_with_every_point_plotted_and_in_view(qtbot):
+    """The in-plane view grows only when a point falls outside it (not pyqtgraph's
+    auto-range at every redraw, which repaints both axes and every curve): at the end of
+    a scan every point is on its curve and inside the view, and the view changed a few
+    times, not at every redraw."""
+    from gui.model.live import LiveData
+    from gui.qt.live_plot import LivePlot
+    from instrument.run.events import PointCompleted
+
+    plot = LivePlot()
+    qtbot.addWidget(plot)
+    plot.resize(800, 500)
+    plot.show()
+    plot.start("brdf_in_plane")
+    vb = plot.in_plane.getViewBox()
+    theta_r = np.arange(-85.0, 86.0)
+    angles = np.array([(ti, 180.0, tr, 0.0) for ti in (10.0, 30.0, 50.0, 70.0)
+                       for tr in theta_r])
+    n = len(angles)
+    rng = np.random.default_rng(5)
+    # a lobe over three decades, with noise: new extremes keep arriving during the scan
+    signal = 1e-4 * (1 + 1e3 * np.exp(-((angles[:, 2] - angles[:, 0]) / 8) ** 2)) \
+        * rng.uniform(0.8, 1.2, n)
+    live = LiveData("brdf_in_plane", n, planned_angles=angles)
+    views = []
+    for k in range(n):
+        live.on_event(PointCompleted(k, "", "ok", {}, tuple(angles[k]), 1000.0,
+                                     float("nan"), float(signal[k]), 0))
+        if k % 25 == 24 or k == n - 1:  # a redraw every 25 points
+            plot.update_from(live.snapshot())
+            views.append(plot._view)
+    assert plot.n_plotted == n
+    assert sum(len(c.getData()[0]) for c in plot._curves.values()) == n
+    (x0, x1), (y0, y1) = vb.viewRange()
+    assert x0 <= theta_r.min() and theta_r.max() <= x1
+    assert y0 <= np.log10(signal.min()) and np.log10(signal.max()) <= y1
+    changes = sum(a != b for a, b in itertools.pairwise(views))
+    assert changes <= len(views) // 3, (changes, len(views))
+    # a new run starts from an empty view again
+    plot.start("brdf_in_plane")
+    assert plot._view is None and plot.n_plotted == 0

@@ -201,6 +201,30 @@ def test_refused_while_the_queue_runs_or_a_run_owns_the_bench(server):
     assert server.ended(r.json()["request_id"])["state"] == "done"
 
 
+def test_refused_while_the_queue_runs_before_its_first_run_has_started(server):
+    """Between *start queue* and the first run's start (here: the runner waits for a wheel
+    move held in progress) no run owns the bench yet, but its next run may take it at any
+    moment: a new setting is refused with 409, nothing is sent or announced."""
+    svc = server.service
+    svc.hold = True
+    rid = server.settings("filter_wheel", position=3).json()["request_id"]
+    assert svc.inside.wait(HOLD_S), "the worker never started the move"
+    assert server.post("/queue", plan=plan_text("next", [-60.0, 40.0])).status_code == 200
+    assert server.post("/queue/start").status_code == 200
+    assert svc.queue_running and svc.engine is None  # the queue runs; no run yet
+    r = server.settings("power_meter", wavelength_nm=800.0)
+    assert r.status_code == 409, r.text
+    assert r.json()["detail"].startswith("the queue is running")
+    assert [e["request_id"] for e in server.events()] == [rid]  # the refused one: no event
+    assert not any(m.type == "run_started" for m in list(server.messages))
+    assert svc.bench.power_meter.wavelength_nm == 633.0  # never sent
+    svc.hold = False
+    svc.go_on.set()
+    wait_for(lambda: any(m.type == "item_finished" for m in list(server.messages)), HOLD_S,
+             "the run to end")
+    assert server.events(rid)[-1]["state"] == "done"
+
+
 def test_the_queue_waits_for_a_setting_in_progress(server):
     """A run never starts while a device is being set: the queue runner waits for it."""
     svc = server.service

@@ -6,6 +6,7 @@ or a printed line, with a generous limit (ADR 0020)."""
 from __future__ import annotations
 
 import h5py
+import numpy as np
 import pytest
 
 from gui.model.remote import RemoteState
@@ -67,6 +68,42 @@ def test_a_run_resumed_after_a_restart_is_shown_whole(bench_file, start_server):
     drawn = {i["index"]: i["power_w"] for i in backfill[0].data["items"]}
     assert drawn == {k: power[k] for k in stored}  # the values in the file, as stored
     w.close()
+
+
+def _run_data(server, name: str, *, idle_polls: int) -> dict[str, np.ndarray]:
+    """Run one plan (power meter, a dark reading at every point) on ``server`` after at
+    least ``idle_polls`` power-meter readings of the sampler (each a ``devices`` message
+    with a new read_at); the run's arrays."""
+    w = Watcher(server.url)
+    assert w.hello.wait(60)
+
+    def polls() -> int:
+        return len({m.data["states"]["power_meter"]["read_at"] for m in w.of("devices")
+                    if "power_meter" in (m.data.get("states") or {})})
+    wait_for(lambda: polls() >= idle_polls, 300, f"{idle_polls} idle readings")
+    with BenchClient(server.url) as c:
+        c.add_plan(plan_text(name, THETA_R) + 'dark = "per_point"\n')
+        c.start_queue()
+        wait_idle(c, "the run to end")
+        path = c.history()[-1]["run_file"]
+    w.close()
+    with h5py.File(path) as f:
+        p = f["entry/points"]
+        order = np.argsort(p["index"][:])
+        return {k: p[k][:][order] for k in ("index", "power_w", "power_dark_w", "signal",
+                                           "positions")}
+
+
+@pytest.mark.slow  # two real server processes: 30-40 s
+@pytest.mark.timeout(900)
+def test_a_runs_data_do_not_depend_on_the_idle_polls_before_it(bench_file, start_server,
+                                                               tmp_path):
+    bench = bench_file()
+    quick = _run_data(start_server(bench, tmp_path / "a"), "same", idle_polls=0)
+    late = _run_data(start_server(bench, tmp_path / "b"), "same", idle_polls=12)
+    for key in quick:
+        np.testing.assert_array_equal(quick[key], late[key], err_msg=key)  # bit for bit
+    assert np.isfinite(quick["power_w"]).all() and np.isfinite(quick["power_dark_w"]).all()
 
 
 @pytest.mark.timeout(300)

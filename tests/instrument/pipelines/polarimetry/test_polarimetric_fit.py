@@ -185,7 +185,11 @@ def test_references_through_the_calibrated_fit(glass_run, kind, angle, tmp_path)
     assert done.group.transmitted
     s = np.where(done.brdf.sigma_normalised > 0, done.brdf.sigma_normalised, 1.0)
     pull = ((done.brdf.m_normalised - truth) / s).ravel()[1:]
-    assert np.all(np.abs(pull) < 3.0), np.round(pull, 2)
+    # 15 elements of one seed: at 3σ each, one realisation in 25 fails by chance alone; a
+    # 3σ test of the fifteen together (0.27 %, Bonferroni) puts each at 3.74σ, and their
+    # RMS must stay below 1.6 (χ² with 15 dof: 0.1 % by chance)
+    assert np.all(np.abs(pull) < 3.74), np.round(pull, 2)
+    assert np.sqrt(np.mean(pull**2)) < 1.6, np.round(pull, 2)
     assert np.mean(np.abs(pull) < 2.0) >= 0.85
     assert done.brdf.m[0, 0] == pytest.approx(ideal[0, 0], rel=2e-3)  # a transmittance
     (nominal,) = fit_polarimetric_run(run, calibration="none", report=False,
