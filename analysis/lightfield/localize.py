@@ -904,7 +904,9 @@ def detect_objects(
         while fit.amplitudes.size > 1:
             s = strengths(fit)
             pts = [as_cand(p_) for p_ in fit.positions]
-            weak_first = [int(i) for i in np.argsort(s)]
+            # ties broken by position, so the order never follows rounding noise
+            weak_first = [int(i) for i in np.lexsort((fit.positions[:, 1],
+                                                      fit.positions[:, 0], s))]
             drop, refit = None, None
             for k in weak_first:
                 stronger = [pts[j] for j in range(s.size) if s[j] > s[k]]
@@ -1084,7 +1086,7 @@ def detect_objects(
                 if j != k:
                     own = own - other.model
             cands[k] = refine(own, cand.y, cand.z)
-    cands.sort(key=lambda c: -float(c.model.num.max()))
+    cands.sort(key=lambda c: (-float(c.model.num.max()), c.y, c.z))
     kept: list[_Candidate] = []
     for c in cands:
         if float(c.model.num.max()) >= threshold_rel * first and not unresolvable(c, kept):
@@ -1099,8 +1101,9 @@ def detect_objects(
     amps = np.zeros(len(cands))
     notes: list[str] = []
     if noise is not None and cands:
-        amps, sig, mismatch = assess(np.asarray([(c.y, c.z) for c in cands]))
-        order = [int(k) for k in np.argsort(-sig)]
+        pos_sig = np.asarray([(c.y, c.z) for c in cands], dtype=float).reshape(-1, 2)
+        amps, sig, mismatch = assess(pos_sig)
+        order = [int(k) for k in np.lexsort((pos_sig[:, 1], pos_sig[:, 0], -sig))]
         keep = [k for k in order if sig[k] >= s_star and amps[k] > 0]
         # light from outside the solvable angles (.edge_light): the rows a stronger
         # object's unmodelled light reaches are no evidence for a weaker candidate
@@ -1219,9 +1222,8 @@ def detect_objects(
     # (20, −220) mm, 5.0σ at its place, was reported at (8.2, −179.0) mm, 4.4σ, where the
     # residual's matched filter peaked after the bright disc's subtraction, 1.03 blurs
     # across from it; a point near the threshold is placed no better than that
-    across = [(min(cands[j].y for j in gr) if len(gr) > 1 else c.y,
-               max(cands[j].y for j in gr) if len(gr) > 1 else c.y)
-              for c, gr in zip(merged, groups, strict=True)]
+    across = [(min(cands_pos[j][0] for j in gr), max(cands_pos[j][0] for j in gr))
+              for gr in groups]
     for k, gr in enumerate(groups):
         c = cands[k]
         if len(gr) > 1 or c.mf_profile.size == 0 or not np.isfinite(signif[k]):
@@ -1285,7 +1287,7 @@ def detect_objects(
         bright_conv.append(float(row.conventional[0, 0]))
         res.append(resolution(c.z))
         intervals.append(c.interval)
-    below.sort(key=lambda cs: -cs[1])
+    below.sort(key=lambda cs: (-cs[1], cs[0].y, cs[0].z))
     free = [(c, sg) for c, sg in below if not shadowed(c, cands)]
     if free and np.isfinite(s_star):
         c, sg = free[0]

@@ -92,9 +92,7 @@ def amplitude_fit(
     k = responses.shape[0]
     n = use.size
     x = responses.reshape(k, -1).T
-    gram = x.T @ x
-    ginv = np.linalg.pinv(gram)
-    amp = ginv @ (x.T @ g_rays.ravel())
+    ginv, amp = _least_squares(x, g_rays.ravel())
     phi_ = np.asarray(phi, dtype=float)
     npw = np.asarray(noise_power, dtype=float)
     v = np.where((phi_ > 0) & np.isfinite(npw), phi_**2 * np.where(np.isfinite(npw), npw, 0.0),
@@ -120,6 +118,30 @@ def amplitude_fit(
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None) * np.maximum(local, mismatch))
     signif = np.where(sigma > 0, amp / np.where(sigma > 0, sigma, 1.0), np.inf)
     return AmplitudeFit(amp, sigma, signif, mismatch)
+
+
+def _least_squares(
+    x: NDArray[Any], y: NDArray[Any]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``((XᵀX)⁺, X⁺ y)`` from the SVD of ``X`` with unit-norm columns, not from ``XᵀX``.
+
+    The normal equations square the condition number: two overlapping point responses
+    (a pair one blur apart) made ``pinv(XᵀX)`` lose half the digits, and behind the brushed
+    metal the located objects then depended on how many threads the BLAS used (its
+    blocking changes the rounding).  Scaling the columns to unit norm (Golub & Van Loan,
+    *Matrix Computations*, 4th ed., §5.3.5 and §3.5.2 on equilibration) and solving on
+    ``X`` itself keeps the condition number of ``X``.  Singular values below
+    ``max(n, K) ε s_max`` count as zero, as ``pinv`` does.
+    """
+    norms = np.sqrt(np.einsum("ik,ik->k", x, x))
+    d = np.where(norms > 0, norms, 1.0)
+    u, s, vt = np.linalg.svd(x / d, full_matrices=False)
+    keep = s > max(x.shape) * np.finfo(float).eps * (s[0] if s.size else 0.0)
+    inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+    v_scaled = vt.T * inv_s  # V S⁻¹
+    amp = (v_scaled @ (u.T @ y)) / d
+    ginv = (v_scaled @ v_scaled.T) / np.outer(d, d)
+    return ginv, amp
 
 
 def with_leak(fit: AmplitudeFit, responses: NDArray[Any], share: float) -> NDArray[np.float64]:
