@@ -719,6 +719,8 @@ def detect_objects(
     """
     from dataclasses import replace
 
+    from scipy.ndimage import binary_dilation
+
     from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
     from .significance import (
         amplitude_fit,
@@ -728,8 +730,6 @@ def detect_objects(
         snr_threshold,
         with_leak,
     )
-    from scipy.ndimage import binary_dilation
-
     from .spectral import fourier_orders
 
     y = np.asarray(y_mm, dtype=float)
