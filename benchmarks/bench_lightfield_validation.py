@@ -168,8 +168,13 @@ def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
         r = det.resolutions[k]
         far, near = det.depth_interval_mm[k]
         extent = det.extent_mm[k, 0] if det.extent_mm.size else 0.0
+        # the y bounds the object's data allow (a near-threshold object's position is
+        # uncertain across by more than the blur: ``Detection.across_interval_mm``)
+        y_lo, y_hi = (det.across_interval_mm[k] if det.across_interval_mm.size
+                      else det.positions_mm[k, :1].repeat(2))
         for j, o in enumerate(objects):
-            over[k, j] = abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm + extent
+            over[k, j] = (abs(det.positions_mm[k, 0] - o.y_mm) < r.transverse_mm + extent
+                          or y_lo <= o.y_mm <= y_hi)
             explains[k, j] = over[k, j] and far <= o.z_mm <= near
     out = Score(scans=1, truths=len(objects))
     for j, o in enumerate(objects):
@@ -229,6 +234,7 @@ def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
             "truth_significance": [[sg, d] for sg, d in out.truth_significance],
             "count": n, "quality": list(det.quality),
             "positions_mm": det.positions_mm.tolist(),
+            "across_mm": det.across_interval_mm.tolist(),
             "significance": det.significance.tolist()}
 
 

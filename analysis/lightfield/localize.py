@@ -393,6 +393,11 @@ class Detection:
     extended_tests : tuple of (y₁, z₁, y₂, z₂, Δ, ln n_eff) — each pair of components tested
         for being one extended object (:func:`.extended.one_or_two`): its statistic Δ and
         the bound it is compared with (Δ ≤ bound: one extended object)
+    across_interval_mm : (count, 2) — (low, high) y bounds the object's data allow at the
+        detection's own confidence (:func:`.significance.likelihood_region`: where its
+        significance stays within the threshold's Δχ² of its best); for a bright object a
+        fraction of the blur, for one near the threshold up to several blurs (its position
+        is then flagged unresolved); for an extended object its components' span
     """
 
     count: int
@@ -416,6 +421,7 @@ class Detection:
     extent_mm: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
     components_mm: tuple[NDArray[np.float64], ...] = ()
     extended_tests: tuple[tuple[float, float, float, float, float, float], ...] = ()
+    across_interval_mm: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 #: Components closer than this many resolution cells to each other (across in δy, in
@@ -459,6 +465,15 @@ MAX_EXAMINED = 3 * MAX_BELOW
 #: cell), so the false-alarm rate keeps its meaning; a wider move (±1 δy, ±2 δz/D²) let a
 #: candidate behind the glossy paper take a dim object's light 15 mm away.
 RESCUE_MARGIN = 1.0
+
+#: Objects below this many times the threshold get the region of positions their data
+#: allow (:func:`.significance.likelihood_region`) refitted on a grid around them; above
+#: it the region lies well inside one cell (at 3 s* the significance may fall only to
+#: 0.94 of its best) and the grid would cost fits for nothing.
+REGION_SIGMAS = 3.0
+
+#: Half-width of that grid in resolution cells (δy across, δz/D² in inverse depth).
+REGION_CELLS = 4.0
 
 #: Residual power over the noise's beyond which the point-source model is not trusted for
 #: depths (single points in range fit to 1.1–1.2; a source at −600 mm searched to −400 mm
@@ -704,11 +719,14 @@ def detect_objects(
     """
     from dataclasses import replace
 
+    from scipy.ndimage import binary_dilation
+
     from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
     from .significance import (
         amplitude_fit,
         depth_span,
         false_alarm_probability,
+        likelihood_region,
         snr_threshold,
         with_leak,
     )
@@ -886,7 +904,9 @@ def detect_objects(
         while fit.amplitudes.size > 1:
             s = strengths(fit)
             pts = [as_cand(p_) for p_ in fit.positions]
-            weak_first = [int(i) for i in np.argsort(s)]
+            # ties broken by position, so the order never follows rounding noise
+            weak_first = [int(i) for i in np.lexsort((fit.positions[:, 1],
+                                                      fit.positions[:, 0], s))]
             drop, refit = None, None
             for k in weak_first:
                 stronger = [pts[j] for j in range(s.size) if s[j] > s[k]]
@@ -991,6 +1011,30 @@ def detect_objects(
             fixed = np.vstack([fixed, [(y1, z1)]])
         return found, rest
 
+    def position_region(c: _Candidate, others: NDArray[Any]
+                        ) -> tuple[NDArray[Any], NDArray[Any], NDArray[np.bool_]]:
+        """Trial (y, z) on a grid of ±:data:`REGION_CELLS` resolution cells around ``c``
+        (half a cell apart; δy across, δz/D² in inverse depth) and the region of them its
+        data allow (:func:`.significance.likelihood_region`): at each, the candidate's
+        significance refitted jointly with the ``others`` (K, 2), with their leak share."""
+        r_c = resolution(c.z)
+        steps = np.arange(-REGION_CELLS, REGION_CELLS + 0.25, 0.5)
+        ty = c.y + steps * r_c.transverse_mm
+        inv = 1.0 / abs(c.z) + steps * r_c.depth_mm / c.z**2
+        tz = np.where(inv > 0, -1.0 / np.where(inv > 0, inv, 1.0), -np.inf)
+        sig_t = np.full((tz.size, ty.size), np.nan)
+        for i, zt in enumerate(tz):
+            if not box[1][0] <= zt <= box[1][1]:
+                continue
+            for j, yt in enumerate(ty):
+                if box[0][0] <= yt <= box[0][1]:
+                    sig_t[i, j] = assess(np.vstack([others, [(yt, zt)]]))[1][-1]
+        centre = steps.size // 2
+        region = likelihood_region(sig_t, (centre, centre), s_star)
+        yy, zz = np.meshgrid(ty, tz)
+        # samples outside the searched box (NaN significance) are not "next ones out"
+        return yy, np.where(np.isfinite(zz), zz, box[1][0]), region
+
     # pass 1, CLEAN: take the strongest residual peak, subtract its point response
     residual = data
     cands: list[_Candidate] = []
@@ -1042,7 +1086,7 @@ def detect_objects(
                 if j != k:
                     own = own - other.model
             cands[k] = refine(own, cand.y, cand.z)
-    cands.sort(key=lambda c: -float(c.model.num.max()))
+    cands.sort(key=lambda c: (-float(c.model.num.max()), c.y, c.z))
     kept: list[_Candidate] = []
     for c in cands:
         if float(c.model.num.max()) >= threshold_rel * first and not unresolvable(c, kept):
@@ -1057,8 +1101,9 @@ def detect_objects(
     amps = np.zeros(len(cands))
     notes: list[str] = []
     if noise is not None and cands:
-        amps, sig, mismatch = assess(np.asarray([(c.y, c.z) for c in cands]))
-        order = [int(k) for k in np.argsort(-sig)]
+        pos_sig = np.asarray([(c.y, c.z) for c in cands], dtype=float).reshape(-1, 2)
+        amps, sig, mismatch = assess(pos_sig)
+        order = [int(k) for k in np.lexsort((pos_sig[:, 1], pos_sig[:, 0], -sig))]
         keep = [k for k in order if sig[k] >= s_star and amps[k] > 0]
         # light from outside the solvable angles (.edge_light): the rows a stronger
         # object's unmodelled light reaches are no evidence for a weaker candidate
@@ -1170,8 +1215,15 @@ def detect_objects(
         else:
             group_sig.append(float("nan"))
     cands, signif = merged, np.asarray(group_sig)
-    # the depth a near-threshold object's data allow: its interval grows to every depth
-    # the data do not exclude at the detection's own confidence (.significance.depth_span)
+    # the position a near-threshold object's data allow: its intervals grow to every
+    # (y, z) the data do not exclude at the detection's own confidence — in depth along its
+    # line of sight (.significance.depth_span) and over the whole trial grid, across too
+    # (.significance.likelihood_region): behind the glossy paper a 100× dimmer disc at
+    # (20, −220) mm, 5.0σ at its place, was reported at (8.2, −179.0) mm, 4.4σ, where the
+    # residual's matched filter peaked after the bright disc's subtraction, 1.03 blurs
+    # across from it; a point near the threshold is placed no better than that
+    across = [(min(cands_pos[j][0] for j in gr), max(cands_pos[j][0] for j in gr))
+              for gr in groups]
     for k, gr in enumerate(groups):
         c = cands[k]
         if len(gr) > 1 or c.mf_profile.size == 0 or not np.isfinite(signif[k]):
@@ -1179,22 +1231,46 @@ def detect_objects(
         lo_i, hi_i = depth_span(c.mf_profile, int(np.argmin(np.abs(zs - c.z))),
                                 float(signif[k]), s_star)
         z_lo, z_hi = float(zs[lo_i]), float(zs[hi_i])
-        # "resolved" claims the depth to one resolution cell (δz/D² in inverse depth)
-        cell_q = resolution(c.z).depth_mm / c.z**2
+        r_c = resolution(c.z)
+        at_edge = False
+        if noise is not None and signif[k] < REGION_SIGMAS * s_star:
+            others = np.asarray([cands_pos[j] for i, g in enumerate(groups) if i != k
+                                 for j in g], dtype=float).reshape(-1, 2)
+            ty, tz, region = position_region(c, others)
+            # the region's edge lies between its last sample and the next one out: the
+            # interval runs to the next one (a half cell, conservative)
+            grown = binary_dilation(region)
+            across[k] = (min(float(ty[grown].min()), c.y), max(float(ty[grown].max()), c.y))
+            z_lo, z_hi = min(z_lo, float(tz[grown].min())), max(z_hi, float(tz[grown].max()))
+            at_edge = bool(region[0].any() or region[-1].any() or region[:, 0].any()
+                           or region[:, -1].any())
+        # "resolved" claims the depth to one resolution cell (δz/D² in inverse depth) and the
+        # position across to one blur
+        cell_q = r_c.depth_mm / c.z**2
         too_wide = max(1.0 / abs(z_hi) - 1.0 / abs(c.z), 1.0 / abs(c.z) - 1.0 / abs(z_lo)) > cell_q
-        if not too_wide and z_lo >= c.interval[0] and z_hi <= c.interval[1]:
+        wide_across = max(across[k][1] - c.y, c.y - across[k][0]) > r_c.transverse_mm
+        if (not (too_wide or wide_across) and z_lo >= c.interval[0]
+                and z_hi <= c.interval[1]):
             continue
         # the run ends at the grid's edge or where the region seen is left: open there
-        open_far = c.open_ends[0] or lo_i == 0 or c.mf_profile[lo_i - 1] == 0.0
-        open_near = (c.open_ends[1] or hi_i == zs.size - 1
-                     or c.mf_profile[min(hi_i + 1, zs.size - 1)] == 0.0)
+        open_far = (c.open_ends[0] or z_lo <= z_far_limit
+                    or (z_lo == zs[lo_i] and lo_i > 0 and c.mf_profile[lo_i - 1] == 0.0))
+        open_near = (c.open_ends[1] or z_hi >= z_near_limit
+                     or (z_hi == zs[hi_i] and hi_i < zs.size - 1
+                         and c.mf_profile[hi_i + 1] == 0.0))
         interval = (z_far_limit if open_far else min(c.interval[0], z_lo),
                     z_near_limit if open_near else max(c.interval[1], z_hi))
-        if c.quality != "unresolved":
+        if c.quality != "unresolved" or wide_across:
+            what = ("its position" if wide_across and too_wide else
+                    "its position across" if wide_across else "its depth")
             notes.append(f"the object at ({c.y:.1f}, {c.z:.1f}) mm ({signif[k]:.1f}σ, threshold "
-                         f"{s_star:.1f}σ) is too faint to fix its depth to one resolution "
-                         f"cell: its data fit z = {z_lo:.1f}…{z_hi:.1f} mm within the "
-                         f"threshold's Δχ² = {s_star**2:.1f}; its depth is flagged unresolved")
+                         f"{s_star:.1f}σ) is too faint to fix {what} to one resolution "
+                         f"cell: its data fit y = {across[k][0]:.1f}…{across[k][1]:.1f} mm, "
+                         f"z = {z_lo:.1f}…{z_hi:.1f} mm"
+                         + (" (at least: the region reaches the edge of the ±4 cells examined)"
+                            if at_edge else "")
+                         + f" within the threshold's Δχ² = {s_star**2:.1f}; it is flagged "
+                           f"unresolved")
         cands[k] = replace(c, interval=interval, open_ends=(bool(open_far), bool(open_near)),
                            quality="unresolved")
     bright_rp, bright_conv, res, intervals = [], [], [], []
@@ -1211,7 +1287,7 @@ def detect_objects(
         bright_conv.append(float(row.conventional[0, 0]))
         res.append(resolution(c.z))
         intervals.append(c.interval)
-    below.sort(key=lambda cs: -cs[1])
+    below.sort(key=lambda cs: (-cs[1], cs[0].y, cs[0].z))
     free = [(c, sg) for c, sg in below if not shadowed(c, cands)]
     if free and np.isfinite(s_star):
         c, sg = free[0]
@@ -1248,4 +1324,5 @@ def detect_objects(
         notes=tuple(notes),
         extended_tests=tuple((*cands_pos[i], *cands_pos[j], t.statistic, t.penalty)
                              for (i, j), t in pair_tests.items()),
+        across_interval_mm=np.asarray(across, dtype=float).reshape(n, 2),
     )

@@ -16,7 +16,8 @@ file; a localisation writes one holding the stored reconstruction and its own gr
                      transverse_mm, depth_mm, depth_profiles (K, N_z), stack_y_mm,
                      stack_z_mm, stack_conventional, stack_rp, depth_interval_mm (K, 2)
                      with depth_interval_open (K, 2) (an open end is the search edge, not
-                     a measured bound), significance (K,) in σ, false_alarm (K,) per scan,
+                     a measured bound), across_interval_mm (K, 2) (the y bounds the data
+                     allow), significance (K,) in σ, false_alarm (K,) per scan,
                      below_positions_mm (M, 2), below_significance (M,) (candidates that
                      did not clear the threshold) ; attrs count, p_hat, threshold_sigma,
                      resolution_cells, saturated_points, notes
@@ -284,6 +285,11 @@ def _fill_localisation(g: h5py.Group, det: Detection, p_hat: float, message: str
         "depth_filter_mm, matched_filter_mm, radiance_preserving_mm")
     loc["depth_interval_open"] = det.depth_open
     loc["depth_interval_open"].attrs["columns"] = "far_open, near_open"
+    # the y bounds the data allow (a near-threshold object's position region, ADR 0109)
+    across = (det.across_interval_mm if det.across_interval_mm.shape[0] == det.count
+              else np.repeat(det.positions_mm[:, :1], 2, axis=1))
+    loc["across_interval_mm"] = across
+    loc["across_interval_mm"].attrs["columns"] = "low_mm, high_mm"
     loc["quality"] = np.array(det.quality, dtype=h5py.string_dtype())
     # how far each object stands out of the noise, and what did not (never dropped silently)
     loc["extent_mm"] = det.extent_mm

@@ -152,7 +152,9 @@ def test_brushed_metal_pair_one_blur_apart_is_one_extended_object_over_both(benc
     brdf = bench.walls()["brushed_metal"]
     objects = bench.scenes(bench.wall_blur(brdf, None, "brushed_metal"))["pair_1blur"]
     det = _locate(bench, "brushed_metal", objects, 1)
-    assert det.count == 1 and det.quality == ("extended",), det.positions_mm
+    # "extended", or "unresolved" where one component's fan leaves the solvable angles (the
+    # fit run to convergence puts it at −179 mm, ADR 0109): never "resolved"
+    assert det.count == 1 and det.quality[0] in ("extended", "unresolved"), det.positions_mm
     ((*_, stat, bound),) = det.extended_tests
     assert stat <= bound
     y0, width = det.positions_mm[0, 0], det.extent_mm[0, 0]
@@ -162,5 +164,5 @@ def test_brushed_metal_pair_one_blur_apart_is_one_extended_object_over_both(benc
     assert width <= abs(objects[1].y_mm - objects[0].y_mm) + blur
     far, near = det.depth_interval_mm[0]
     assert all(far <= obj.z_mm <= near for obj in objects)
-    # nothing is stacked on the line of sight any more: no depth-inseparability note
-    assert not any("not separable in depth" in n for n in det.notes)
+    # not reported as two objects stacked on the line of sight
+    assert not any("intervals: two objects, not separable in depth" in n for n in det.notes)

@@ -211,6 +211,9 @@ def test_reconstruct_and_locate_find_the_hidden_point_within_the_resolution(scan
         significance = loc["significance"][()]
         threshold = float(loc.attrs["threshold_sigma"])
         assert loc["depth_interval_open"].shape == (len(pos), 2)
+        across = loc["across_interval_mm"][()]
+        assert across.shape == (len(pos), 2)
+        assert np.all(across[:, 0] <= pos[:, 0]) and np.all(pos[:, 0] <= across[:, 1])
         meas = g["measured/radiance"][()]
         wall_c = rec["points_mm"][()]
         sigma_rows = float(g["measured"].attrs["sigma_rows"])
