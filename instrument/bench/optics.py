@@ -8,6 +8,7 @@ the order the light meets them::
     kind = "polariser"                 # "polariser" | "retarder" | "pem"
     mount = "psg_polariser"            # the bench axis that turns it (a motion device)
     orientation_deg = 0.0              # nominal transmission / fast axis at mount 0
+    extinction = 1e-5                  # polariser only: datasheet power extinction ratio
 
     [[optics.source]]
     kind = "retarder"
@@ -28,6 +29,13 @@ These are the **nominal** values: what the analysis is told. The emulated bench'
 truth (misalignments, retardance errors) lives in ``[simulation.optics]``
 (``hw_mocks.sim.polarisation``) and is never read by the analysis.
 
+A polariser's ``extinction`` is the power extinction ratio ε of its datasheet (the
+transmittance of light polarised across its axis over that along it): about 10⁻⁵ for a
+Glan–Taylor or Glan–Thompson prism, 10⁻³ to 10⁻⁴ for a film polariser. It must lie in
+[0, 1); left out it is 0, an ideal polariser, which is what the reduction assumed before
+the field existed (state the datasheet's value: at ε = 10⁻⁵ an ideal model biases the
+calibration by a few of its σ, ADR 0108).
+
 A photoelastic modulator (``kind = "pem"``) has a fixed orientation; its ``mount`` may be
 left out. Its retardation amplitude is set on the modulator, not here.
 """
@@ -44,7 +52,8 @@ __all__ = ["ARMS", "ELEMENT_KINDS", "OpticalElement", "OpticalTrain", "parse_opt
 #: Arm key → what it is (for messages).
 ARMS = {"source": "source arm (PSG)", "detector": "detector arm (PSA)"}
 ELEMENT_KINDS = ("polariser", "retarder", "pem")
-_ELEMENT_KEYS = {"kind", "mount", "orientation_deg", "retardance_deg", "retardance_nm"}
+_ELEMENT_KEYS = {"kind", "mount", "orientation_deg", "retardance_deg", "retardance_nm",
+                 "extinction"}
 
 
 @dataclass(frozen=True)
@@ -53,6 +62,7 @@ class OpticalElement:
 
     ``retardance_deg`` holds one value (any wavelength) or values at
     ``retardance_nm``, interpolated linearly and constant beyond the ends.
+    ``extinction`` is a polariser's power extinction ratio (0: ideal; module docstring).
     """
 
     kind: str
@@ -60,6 +70,7 @@ class OpticalElement:
     orientation_deg: float
     retardance_deg: tuple[float, ...] = ()
     retardance_nm: tuple[float, ...] = ()
+    extinction: float = 0.0
 
     def retardance_at(self, wavelength_nm: float) -> float:
         """Nominal retardance (degrees) at ``wavelength_nm``; NaN for a polariser."""
@@ -86,6 +97,8 @@ class OpticalElement:
             out["retardance_deg"] = list(self.retardance_deg)
         if self.retardance_nm:
             out["retardance_nm"] = list(self.retardance_nm)
+        if self.kind == "polariser":
+            out["extinction"] = self.extinction
         return out
 
 
@@ -197,10 +210,20 @@ def _element(e: Any, path: str, axes: set[str], error: Any) -> OpticalElement | 
                 error(f"{path}.{key}", f"only a retarder takes {key!r} (a {kind} has none "
                       "here)")
                 ok = False
+    extinction = e.get("extinction", 0.0)
+    if kind != "polariser" and "extinction" in e:
+        error(f"{path}.extinction", f"only a polariser takes 'extinction' (a {kind} has "
+              "none here)")
+        ok = False
+    elif not (_number(extinction) and 0.0 <= extinction < 1.0):
+        error(f"{path}.extinction", "must be the polariser's power extinction ratio in "
+              "[0, 1) from its datasheet (e.g. 1e-5 for a Glan-Taylor prism, 1e-3 for a "
+              f"film polariser; 0 for ideal), got {extinction!r}")
+        ok = False
     if not ok:
         return None
     return OpticalElement(str(kind), None if mount is None else str(mount), float(orientation),
-                          retardance, wavelengths)
+                          retardance, wavelengths, float(extinction))
 
 
 def _retardance(e: dict[str, Any], path: str, error: Any

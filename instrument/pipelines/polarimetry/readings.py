@@ -89,6 +89,11 @@ class PolarimetricRun:
         el = _element(self.train, arm, "retarder")
         return _interp(el, wavelength_nm)
 
+    def extinction(self, arm: str) -> float:
+        """Power extinction ratio of the arm's polariser as the run's optical train stores
+        it (the profile's datasheet value); 0 (ideal) for runs recorded before the field."""
+        return float(_element(self.train, arm, "polariser").get("extinction", 0.0))
+
 
 def is_polarimetric(path: str | Path) -> bool:
     """Whether the run file records an optical train (a polarimetric run, ADR 0103)."""
