@@ -27,7 +27,9 @@ Lam & Young, *Polarized Light and Optical Systems*, 2018, ch. 6, the linear diat
 with q = 1, r = ε; Goldstein 2011, §5.2 with ``p_x² = 1``, ``p_y² = ε``). Only its first
 row and first column enter W: the generator acts on an unpolarised source and the
 detector reads intensity, so ``g ∝ Ret · ½(1+ε, (1−ε) cos 2p, (1−ε) sin 2p, 0)`` and
-likewise for the analyser row.
+likewise for the analyser row. A source already polarised along the generator's axis
+(a laser) leaks less through it: :func:`generator_extinction` gives the extinction the
+generator row takes then.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ __all__ = [
     "condition_number",
     "drr_angles",
     "estimate",
+    "generator_extinction",
     "generator_stokes",
     "instrument_matrix",
     "normalise",
@@ -85,6 +88,31 @@ def check_extinction(name: str, value: float) -> float:
             name, f"must be a power extinction ratio in [0, 1) (the crossed/parallel "
             f"transmittance from the polariser's datasheet, 0 for an ideal one), got {value!r}")
     return e
+
+
+def generator_extinction(extinction: float, source_dop: float = 0.0) -> float:
+    """Effective extinction of the generator's polariser for a partly polarised source.
+
+    A source of degree of linear polarisation s along the polariser's axis, Stokes
+    ``(1, s, 0, 0)`` in its frame, leaves the partial polariser (q = 1, r = ε) as
+    ``½(1+ε + (1−ε)s, 1−ε + (1+ε)s, 0, 0)``: the state an unpolarised source leaves a
+    polariser of extinction ``ε' = ε (1 − s)/(1 + s)`` in, up to the intensity (equate the
+    degrees of polarisation; the matrix of the module docstring). ``s = 0`` (unpolarised)
+    gives ε; a laser polarised 0.98 along the axis 0.01 ε. A source polarised slightly
+    off the axis also turns the generated state by ~√ε of its misalignment (10⁻³° here);
+    the calibration's azimuth 0 is the generated state's, so that is absorbed.
+
+    Raises
+    ------
+    PolarimetryInputError
+        ε outside [0, 1) or s outside [0, 1].
+    """
+    e = check_extinction("extinction", extinction)
+    s = _scalar("source_dop", source_dop)
+    if not 0.0 <= s <= 1.0:
+        raise PolarimetryInputError(
+            "source_dop", f"must be a degree of polarisation in [0, 1], got {source_dop!r}")
+    return e * (1.0 - s) / (1.0 + s)
 
 
 def _polariser_row(p_rad: float, extinction: float) -> NDArray[np.float64]:

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.polarimetry.drr import generator_extinction
 from instrument.bench.meter_noise import meter_noise
 from instrument.run.runfile import RunData, RunFileError, as_text, open_run, read_planned
 
@@ -90,9 +91,15 @@ class PolarimetricRun:
         return _interp(el, wavelength_nm)
 
     def extinction(self, arm: str) -> float:
-        """Power extinction ratio of the arm's polariser as the run's optical train stores
-        it (the profile's datasheet value); 0 (ideal) for runs recorded before the field."""
-        return float(_element(self.train, arm, "polariser").get("extinction", 0.0))
+        """Extinction of the arm's polariser that W takes: the datasheet value the run's
+        optical train stores, for the generator lowered by the source's own polarisation
+        (:func:`analysis.polarimetry.drr.generator_extinction`); 0 (ideal) for runs
+        recorded before the field."""
+        el = _element(self.train, arm, "polariser")
+        eps = float(el.get("extinction", 0.0))
+        if arm == "psg":
+            return generator_extinction(eps, float(el.get("source_dop", 0.0)))
+        return eps
 
 
 def is_polarimetric(path: str | Path) -> bool:

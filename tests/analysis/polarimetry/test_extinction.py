@@ -23,6 +23,7 @@ from analysis.polarimetry import (
     reduce,
 )
 from analysis.polarimetry.calibration import ReferenceScan, calibrate_drr
+from analysis.polarimetry.drr import generator_extinction
 
 QWP = math.pi / 2
 #: Hidden DRR: retarder offsets (deg), retardances (rad), analyser polariser (deg).
@@ -158,3 +159,21 @@ def test_calibration_keeps_the_extinction_it_assumed():
     with pytest.raises(PolarimetryInputError) as err:
         calibrate_drr(scans, psg_retardance=QWP, psa_retardance=QWP, psa_extinction=1.0)
     assert err.value.argument == "psa_extinction"
+
+
+@given(st.floats(0.0, 0.999), st.floats(0.0, 1.0))
+def test_a_polarised_source_leaks_through_the_generator_as_a_smaller_extinction(eps, dop):
+    # the partial polariser on (1, s, 0, 0) sends the state of ε' on an unpolarised source
+    sent = diattenuator(0.0, 1.0, eps) @ np.array([1.0, dop, 0.0, 0.0])
+    e_eff = generator_extinction(eps, dop)
+    assert sent[1] / sent[0] == pytest.approx((1.0 - e_eff) / (1.0 + e_eff), abs=1e-12)
+    assert generator_extinction(eps) == eps
+
+
+def test_generator_extinction_input_checks():
+    with pytest.raises(PolarimetryInputError) as err:
+        generator_extinction(1e-5, 1.5)
+    assert err.value.argument == "source_dop"
+    with pytest.raises(PolarimetryInputError) as err:
+        generator_extinction(-1.0, 0.5)
+    assert err.value.argument == "extinction"

@@ -143,3 +143,16 @@ def test_only_a_polariser_takes_an_extinction():
     _, errors = parse({"source": [{"kind": "retarder", "mount": "psg_retarder",
                                    "retardance_deg": 90.0, "extinction": 1e-5}]})
     assert [p for p, _ in errors] == ["optics.source[0].extinction"]
+
+
+def test_the_sources_polarisation_is_the_generator_polarisers_only():
+    train, errors = parse({"source": [{"kind": "polariser", "mount": "psg_polariser",
+                                       "extinction": 1e-5, "source_dop": 0.98}]})
+    assert not errors and train is not None and train.source[0].source_dop == 0.98
+    assert train.as_dict()["source"][0]["source_dop"] == 0.98
+    _, errors = parse({"detector": [{"kind": "polariser", "mount": "psa_polariser",
+                                     "source_dop": 0.98}]})
+    assert [p for p, _ in errors] == ["optics.detector[0].source_dop"]
+    _, errors = parse({"source": [{"kind": "polariser", "mount": "psg_polariser",
+                                   "source_dop": 1.5}]})
+    assert [p for p, _ in errors] == ["optics.source[0].source_dop"]
