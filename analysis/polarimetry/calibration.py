@@ -190,8 +190,8 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
     for name, val in (("psg_retardance", psg_retardance), ("psa_retardance", psa_retardance)):
         if not math.isfinite(float(val)):
             raise PolarimetryInputError(name, f"must be finite, got {val!r}")
-    ext = {"psg_extinction": check_extinction("psg_extinction", psg_extinction),
-           "psa_extinction": check_extinction("psa_extinction", psa_extinction)}
+    e_g = check_extinction("psg_extinction", psg_extinction)
+    e_a = check_extinction("psa_extinction", psa_extinction)
     n_extra = {"air": 0, "polariser": 1, "retarder": 2}
     x0 = [0.0, 0.0, float(psg_retardance), float(psa_retardance), 0.0]
     lo = [-30.0, -30.0, 0.0, 0.0, -30.0]
@@ -218,7 +218,8 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
             "scans", f"hold {n_data} readings for {len(x0)} parameters; add steps or scans")
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        cal = DrrCalibration(params=x[:5], cov=np.zeros((5, 5)), **ext)
+        cal = DrrCalibration(params=x[:5], cov=np.zeros((5, 5)), psg_extinction=e_g,
+                             psa_extinction=e_a)
         out = []
         for s, sl in zip(scans, slices, strict=True):
             w = cal.instrument_matrix(s.psg_retarder_deg, s.psa_retarder_deg)
@@ -235,7 +236,7 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
     sample_params = tuple(tuple(float(v) for v in res.x[sl]) for sl in slices)
     return DrrCalibration(params=np.asarray(res.x[:5], dtype=float), cov=cov_full[:5, :5],
                           sample_params=sample_params, chi2=float(2.0 * res.cost),
-                          dof=n_data - len(x0), **ext)
+                          dof=n_data - len(x0), psg_extinction=e_g, psa_extinction=e_a)
 
 
 def reduce_calibrated(intensities: ArrayLike, sigmas: ArrayLike, calibration: DrrCalibration,
