@@ -55,8 +55,12 @@ __all__ = [
     "Roi",
     "Shutter",
     "ShutterState",
+    "WavelengthSetting",
     "WheelSpeed",
+    "check_settings",
+    "finite_positive",
     "parse_filters",
+    "retry_count",
 ]
 
 
@@ -139,6 +143,38 @@ class Device(ABC):
     def __repr__(self) -> str:
         state = "closed" if self._closed else "open"
         return f"<{type(self).__name__} {self.name!r} {state}>"
+
+
+
+# --------------------------------------------------------------------------- settings checks
+# The checks every driver's constructor makes of its link and device settings, so that a
+# bad bench profile value is refused the same way (a ValueError naming the setting)
+# whichever driver it reaches.
+
+
+def finite_positive(value: float, what: str) -> float:
+    """``value`` as a float if it is a finite number > 0; else ``ValueError`` naming
+    ``what`` (``TypeError`` for a bool, which would pass as 1)."""
+    if isinstance(value, bool):
+        raise TypeError(f"{what} must be a number, got {value!r}")
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{what} must be a finite number > 0, got {value}")
+    return value
+
+
+def retry_count(retries: int) -> int:
+    """``retries`` (extra attempts after a lost or garbled reply) as an int if it is a
+    non-negative whole number; else ``ValueError``."""
+    if int(retries) != retries or retries < 0:
+        raise ValueError(f"retries must be a non-negative integer, got {retries}")
+    return int(retries)
+
+
+def check_settings(**positive: float) -> None:
+    """Each keyword's value must be a finite number > 0 (:func:`finite_positive`)."""
+    for what, value in positive.items():
+        finite_positive(value, what)
 
 
 # --------------------------------------------------------------------------- motion
@@ -380,7 +416,7 @@ class MotionAxis(Device):
     @velocity.setter
     def velocity(self, value: float) -> None:
         self._check_open("set velocity")
-        value = _positive(value, "velocity")
+        value = finite_positive(value, "velocity")
         self._do_set_velocity(value)
 
     @property
@@ -392,7 +428,7 @@ class MotionAxis(Device):
     @acceleration.setter
     def acceleration(self, value: float) -> None:
         self._check_open("set acceleration")
-        value = _positive(value, "acceleration")
+        value = finite_positive(value, "acceleration")
         self._do_set_acceleration(value)
 
     # helpers ------------------------------------------------------------------
@@ -404,6 +440,10 @@ class MotionAxis(Device):
         if not status.is_homed:
             raise NotHomedError("axis is not homed", device=self.name, command=command,
                                 hint="call home() first")
+        # A controller in an error state may take the move and refuse it later, or carry
+        # it out from a position it no longer trusts: refuse here, saying how to clear it.
+        if status.error:
+            self._raise_status_error(status, command)
 
     def _wait_for(self, done: Callable[[AxisStatus], bool], timeout: float,
                   command: str) -> AxisStatus:
@@ -438,7 +478,9 @@ class MotionAxis(Device):
         from drivers.errors import ControllerError
 
         raise ControllerError(status.error or "controller error", device=self.name,
-                              command=command)
+                              command=command,
+                              hint="enable() clears the controller's error; home() again "
+                                   "if the axis may have lost its position")
 
     # hooks --------------------------------------------------------------------
     @abstractmethod
@@ -477,13 +519,6 @@ class MotionAxis(Device):
 
     @abstractmethod
     def _do_set_acceleration(self, value: float) -> None: ...
-
-
-def _positive(value: float, what: str) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{what} must be a finite number > 0, got {value}")
-    return value
 
 
 # --------------------------------------------------------------------------- camera
@@ -1148,7 +1183,7 @@ class FilterWheel(Device):
     ) -> None:
         super().__init__(name)
         self._filters = parse_filters(filters)
-        self.move_timeout_factor = _positive(move_timeout_factor, "move_timeout_factor")
+        self.move_timeout_factor = finite_positive(move_timeout_factor, "move_timeout_factor")
         self.move_timeout_margin_s = float(move_timeout_margin_s)
         if not (math.isfinite(self.move_timeout_margin_s) and self.move_timeout_margin_s >= 0):
             raise ValueError("move_timeout_margin_s must be finite and >= 0")
@@ -1281,20 +1316,41 @@ class FilterWheel(Device):
 # --------------------------------------------------------------------------- power meter
 
 
-class PowerMeter(Device):
-    """An optical power meter (photodiode or thermal sensor head)."""
-
-    #: Wavelength correction range in nm, (min, max); drivers read it from the device.
-    wavelength_range_nm: tuple[float, float] = (200.0, 20000.0)
+class WavelengthSetting(Device):
+    """A device whose readings or settings depend on the light's wavelength (a power
+    meter's responsivity correction, a modulator's retardation in waves): the
+    :attr:`wavelength_nm` property, checked by ``_checked_wavelength_nm`` before the
+    ``_do_set_wavelength_nm`` hook sees it."""
 
     @property
     def wavelength_nm(self) -> float:
+        """The wavelength setting, nm."""
         self._check_open("wavelength_nm")
         return self._do_get_wavelength_nm()
 
     @wavelength_nm.setter
     def wavelength_nm(self, value: float) -> None:
         self._check_open("set wavelength_nm")
+        self._do_set_wavelength_nm(self._checked_wavelength_nm(value))
+
+    def _checked_wavelength_nm(self, value: float) -> float:
+        """The value the hook gets; by default any finite number > 0."""
+        return finite_positive(value, f"{self.name}: wavelength")
+
+    @abstractmethod
+    def _do_get_wavelength_nm(self) -> float: ...
+
+    @abstractmethod
+    def _do_set_wavelength_nm(self, value: float) -> None: ...
+
+
+class PowerMeter(WavelengthSetting):
+    """An optical power meter (photodiode or thermal sensor head)."""
+
+    #: Wavelength correction range in nm, (min, max); drivers read it from the device.
+    wavelength_range_nm: tuple[float, float] = (200.0, 20000.0)
+
+    def _checked_wavelength_nm(self, value: float) -> float:
         value = float(value)
         low, high = self.wavelength_range_nm
         if not (math.isfinite(value) and low <= value <= high):
@@ -1302,7 +1358,7 @@ class PowerMeter(Device):
                 f"{self.name}: wavelength {value:g} nm outside the sensor's "
                 f"[{low:g}, {high:g}] nm"
             )
-        self._do_set_wavelength_nm(value)
+        return value
 
     @property
     def averaging(self) -> int:
@@ -1335,12 +1391,6 @@ class PowerMeter(Device):
         """Dark-zero the sensor: the light must be blocked."""
         self._check_open("zero")
         self._do_zero(timeout)
-
-    @abstractmethod
-    def _do_get_wavelength_nm(self) -> float: ...
-
-    @abstractmethod
-    def _do_set_wavelength_nm(self, value: float) -> None: ...
 
     @abstractmethod
     def _do_get_averaging(self) -> int: ...
@@ -1479,7 +1529,7 @@ class LockIn(Device):
         Raises ``ValueError`` for a non-finite or non-positive value, or one outside the
         table's range.
         """
-        value = _finite_positive(value, f"{self.name}: time constant")
+        value = finite_positive(value, f"{self.name}: time constant")
         table = self.time_constants_s
         low, high = table[0], table[-1]
         if not low * (1 - self._TABLE_RTOL) <= value <= high * (1 + self._TABLE_RTOL):
@@ -1493,7 +1543,7 @@ class LockIn(Device):
         Raises ``ValueError`` for a non-finite or non-positive value or one above the largest
         full scale.
         """
-        value = _finite_positive(value, f"{self.name}: sensitivity")
+        value = finite_positive(value, f"{self.name}: sensitivity")
         for full_scale in self.sensitivities_v:
             if full_scale >= value * (1 - self._TABLE_RTOL):
                 return full_scale
@@ -1704,32 +1754,24 @@ class LockIn(Device):
     def _do_status(self) -> LockInStatus: ...
 
 
-def _finite_positive(value: float, what: str) -> float:
-    if isinstance(value, bool):
-        raise TypeError(f"{what} must be a number, got {value!r}")
-    value = float(value)
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{what} must be a finite number > 0, got {value}")
-    return value
-
-
 # --------------------------------------------------------------------------- modulator
 # Kept in one self-contained section, like the lock-in's.
 
 __all__ += ["Modulator"]
 
 
-class Modulator(Device):
+class Modulator(WavelengthSetting):
     """A photoelastic modulator (PEM): a retarder whose retardation oscillates at the
     resonance of its optical head, δ(t) = 2π·A·sin(2π f t).
 
-    ``A`` is the peak retardation in waves at :attr:`wavelength_nm` (a half-wave modulator
-    at 633 nm: ``A = 0.5``), :attr:`retardation_rad` the same in radians (2πA, the
-    argument of the Bessel functions J₁, J₂ that weight the detector's 1f and 2f terms);
+    ``A`` is the peak retardation in waves at the wavelength
+    (:attr:`~WavelengthSetting.wavelength_nm`; a half-wave modulator at 633 nm:
+    ``A = 0.5``), :attr:`retardation_rad` the same in radians (2πA, the argument of the
+    Bessel functions J₁, J₂ that weight the detector's 1f and 2f terms);
     :attr:`frequency_hz` is the modulation frequency f the lock-in takes as its reference
     (its harmonics 1 and 2 carry the polarisation signals). A modulator's retardation in
     nanometres is fixed by its drive, so the same drive is fewer waves at a longer
-    wavelength: setting :attr:`wavelength_nm` keeps the drive and changes ``A``.
+    wavelength: setting the wavelength keeps the drive and changes ``A``.
 
     Parameters
     ----------
@@ -1738,19 +1780,8 @@ class Modulator(Device):
     """
 
     @property
-    def wavelength_nm(self) -> float:
-        """The wavelength the retardation amplitude is expressed at, nm."""
-        self._check_open("wavelength_nm")
-        return self._do_get_wavelength_nm()
-
-    @wavelength_nm.setter
-    def wavelength_nm(self, value: float) -> None:
-        self._check_open("set wavelength_nm")
-        self._do_set_wavelength_nm(_finite_positive(value, f"{self.name}: wavelength"))
-
-    @property
     def retardation_waves(self) -> float:
-        """Peak retardation amplitude in waves at :attr:`wavelength_nm`."""
+        """Peak retardation amplitude in waves at :attr:`~WavelengthSetting.wavelength_nm`."""
         self._check_open("retardation_waves")
         return self._do_get_retardation_waves()
 
@@ -1775,12 +1806,6 @@ class Modulator(Device):
         """The modulation frequency (the head's resonance), Hz: the lock-in's reference."""
         self._check_open("frequency_hz")
         return self._do_get_frequency_hz()
-
-    @abstractmethod
-    def _do_get_wavelength_nm(self) -> float: ...
-
-    @abstractmethod
-    def _do_set_wavelength_nm(self, value: float) -> None: ...
 
     @abstractmethod
     def _do_get_retardation_waves(self) -> float: ...

@@ -238,8 +238,8 @@ def parse_status(data: str) -> int:
 def parse_velocity(data: str) -> int:
     """``GV`` data: the velocity as a percentage of the maximum (1..100)."""
     value = _hex(data, 2, "a velocity")
-    if not 0 <= value <= 100:
-        raise ProtocolError(f"velocity {value} % is not a percentage")
+    if not 1 <= value <= 100:
+        raise ProtocolError(f"velocity {value} % is outside the module's 1..100 %")
     return value
 
 

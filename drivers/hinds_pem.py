@@ -38,6 +38,7 @@ half-wave waveform, or V₂f/V_DC between parallel polarisers). The driver conve
 
 from __future__ import annotations
 
+import collections
 import math
 import re
 import time
@@ -47,7 +48,7 @@ from typing import TypeVar
 
 import serial
 
-from drivers.base import DeviceIdentity, Modulator
+from drivers.base import DeviceIdentity, Modulator, check_settings, retry_count
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
@@ -61,18 +62,23 @@ from drivers.errors import (
 from drivers.transport import SerialChannel, open_serial
 
 __all__ = [
+    "NOTICES_KEPT",
     "Pem200",
     "PemAnswer",
     "PemCommandError",
     "PemFault",
     "PemOutOfRange",
     "parse_answer",
+    "parse_drive",
+    "parse_frequency",
 ]
 
 T = TypeVar("T")
 _TERMINATOR = b"\n"
 _ANSWER_RE = re.compile(r"([\[<])([^\[\]<>()]+)([\]>])\(([^()]*)\)")
 _MAX_LINE = 256
+#: Unsolicited controller errors kept in :attr:`Pem200.notices`.
+NOTICES_KEPT = 200
 
 
 @dataclass(frozen=True)
@@ -105,6 +111,35 @@ def parse_answer(line: bytes) -> PemAnswer:
         raise ProtocolError(f"malformed answer {text[:60]!r}: expected [ID](args) or "
                             f"<ID>(message)")
     return PemAnswer(match[2], match[4], match[1] == "<")
+
+
+def parse_drive(text: str) -> float:
+    """``:MOD:DRV?`` data: the drive, a fraction 0..1 of the controller's full scale.
+
+    Raises
+    ------
+    ValueError
+        Not a number, or outside 0..1 (a retardation computed from it would be wrong).
+    """
+    value = float(text)
+    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+        raise ValueError(f"drive {value:g} is outside the controller's 0..1")
+    return value
+
+
+def parse_frequency(text: str) -> float:
+    """``:MOD:FREQ?`` data: the modulation frequency in Hz, a finite number > 0 (the
+    lock-in takes it as its reference).
+
+    Raises
+    ------
+    ValueError
+        Not a number, or not finite and > 0.
+    """
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"frequency {value:g} Hz is not a finite number > 0")
+    return value
 
 
 class PemCommandError(ControllerError):
@@ -145,19 +180,17 @@ class Pem200(Modulator):
     def __init__(self, port: str | serial.SerialBase, *, name: str, nm_per_drive: float,
                  wavelength_nm: float = 632.8, baudrate: int = 250000,
                  reply_timeout: float = 1.0, retries: int = 2) -> None:
-        for value, what in ((nm_per_drive, "nm_per_drive"), (wavelength_nm, "wavelength_nm"),
-                            (reply_timeout, "reply_timeout")):
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{what} must be a finite number > 0, got {value}")
-        if int(retries) != retries or retries < 0:
-            raise ValueError(f"retries must be a non-negative integer, got {retries}")
+        check_settings(nm_per_drive=nm_per_drive, wavelength_nm=wavelength_nm,
+                       reply_timeout=reply_timeout)
+        self.retries = retry_count(retries)
         super().__init__(name)
         self.nm_per_drive = float(nm_per_drive)
         self._wavelength_nm = float(wavelength_nm)
         self.reply_timeout = float(reply_timeout)
-        self.retries = int(retries)
-        #: Errors the controller sent on its own (not answers to a command), newest last.
-        self.notices: list[PemAnswer] = []
+        #: Errors the controller sent on its own (not answers to a command), newest last;
+        #: the latest ``NOTICES_KEPT`` (a controller warning every few seconds of a long
+        #: session must not grow the driver without bound).
+        self.notices: collections.deque[PemAnswer] = collections.deque(maxlen=NOTICES_KEPT)
         self._owned = not isinstance(port, serial.SerialBase)
         raw = open_serial(port, device=name, baudrate=baudrate)
         try:
@@ -245,7 +278,7 @@ class Pem200(Modulator):
     def drive(self) -> float:
         """The modulator drive, 0..1 (``:MOD:DRV?``)."""
         self._check_open("drive")
-        return self._ask(":MOD:DRV?", float)
+        return self._ask(":MOD:DRV?", parse_drive)
 
     def reset(self) -> None:
         """``*RST``: clear a fault; the drive returns to 0."""
@@ -280,7 +313,7 @@ class Pem200(Modulator):
         self._exchange(f":MOD:DRV {drive:.6f}", retry=True)
 
     def _do_get_frequency_hz(self) -> float:
-        return self._ask(":MOD:FREQ?", float)
+        return self._ask(":MOD:FREQ?", parse_frequency)
 
     def _do_close(self) -> None:
         channel, self._channel = self._channel, None

@@ -50,7 +50,7 @@ from typing import TypeVar
 
 import serial
 
-from drivers.base import AxisKind, AxisStatus, DeviceIdentity, MotionAxis
+from drivers.base import AxisKind, AxisStatus, DeviceIdentity, MotionAxis, retry_count
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
@@ -163,8 +163,7 @@ class Smc100Axis(MotionAxis):
         format_command(address, "TS")  # validates the address before anything opens
         if not reply_timeout > 0 or not reset_timeout > 0:
             raise ValueError("timeouts must be > 0")
-        if int(retries) != retries or retries < 0:
-            raise ValueError(f"retries must be a non-negative integer, got {retries}")
+        retries = retry_count(retries)
         super().__init__(
             name, kind=kind, soft_limits=soft_limits or (-math.inf, math.inf),
             position_tolerance=position_tolerance, poll_interval=poll_interval,

@@ -78,6 +78,7 @@ from drivers.base import (
     LockInReading,
     LockInStatus,
     ReferenceSource,
+    retry_count,
 )
 from drivers.errors import (
     ConnectionFailed,
@@ -201,8 +202,7 @@ class Sr830LockIn(LockIn):
             raise ValueError(f"baudrate must be a positive integer, got {baudrate!r}")
         if not reply_timeout > 0 or not auto_gain_timeout > 0:
             raise ValueError("timeouts must be > 0")
-        if int(retries) != retries or retries < 0:
-            raise ValueError(f"retries must be a non-negative integer, got {retries}")
+        retries = retry_count(retries)
         super().__init__(name, sleep=sleep)
         self.reply_timeout = float(reply_timeout)
         self.retries = int(retries)

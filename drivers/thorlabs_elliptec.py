@@ -65,7 +65,14 @@ from typing import TypeVar
 
 import serial
 
-from drivers.base import AxisKind, AxisStatus, DeviceIdentity, MotionAxis
+from drivers.base import (
+    AxisKind,
+    AxisStatus,
+    DeviceIdentity,
+    MotionAxis,
+    check_settings,
+    retry_count,
+)
 from drivers.elliptec_protocol import (
     BAUDRATE,
     STATUS_BUSY,
@@ -213,12 +220,9 @@ class ElliptecMount(MotionAxis):
         encode_command(address, "gs")  # validates the address before anything opens
         if home_direction not in ("cw", "ccw"):
             raise ValueError(f"home_direction must be 'cw' or 'ccw', got {home_direction!r}")
-        for value, what in ((reply_timeout, "reply_timeout"), (max_velocity, "max_velocity"),
-                            (nominal_acceleration, "nominal_acceleration")):
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{what} must be a finite number > 0, got {value}")
-        if int(retries) != retries or retries < 0:
-            raise ValueError(f"retries must be a non-negative integer, got {retries}")
+        check_settings(reply_timeout=reply_timeout, max_velocity=max_velocity,
+                       nominal_acceleration=nominal_acceleration)
+        retries = retry_count(retries)
         if flush_s < 0:
             raise ValueError(f"flush_s must be >= 0, got {flush_s}")
         super().__init__(name, kind=AxisKind.ROTARY,

@@ -96,7 +96,7 @@ from typing import TypeVar
 
 import serial
 
-from drivers.base import AxisKind, AxisStatus, DeviceIdentity, MotionAxis
+from drivers.base import AxisKind, AxisStatus, DeviceIdentity, MotionAxis, retry_count
 from drivers.errors import (
     ConnectionFailed,
     ControllerError,
@@ -302,8 +302,7 @@ class ZaberAxis(MotionAxis):
             raise ValueError(f"resolution must be a positive integer, got {resolution}")
         if not reply_timeout > 0 or flush_s < 0:
             raise ValueError("reply_timeout must be > 0 and flush_s >= 0")
-        if int(retries) != retries or retries < 0:
-            raise ValueError(f"retries must be a non-negative integer, got {retries}")
+        retries = retry_count(retries)
         if position_tolerance is None:
             position_tolerance = 0.01 if kind is AxisKind.ROTARY else 0.001
         if position_tolerance < microstep_size:

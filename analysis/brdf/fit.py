@@ -49,7 +49,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares
 
 from analysis.brdf.geometry import Geometry, make_geometry
 from analysis.brdf.model import BRDFModel
@@ -436,6 +435,11 @@ def _solve(
         if res.status > 0 or solver == "lm":
             return res
         u0 = np.clip(res.x, lo_u + 1e-10 * span, hi_u - 1e-10 * span)
+    # SciPy's optimiser is imported where it is used: importing this module (the bench
+    # server, the planners and the emulated bench reach it through analysis.brdf) then
+    # does not load scipy.optimize, about 1 s of CPU per process that never fits.
+    from scipy.optimize import least_squares
+
     ls = least_squares(
         _residuals,
         u0,

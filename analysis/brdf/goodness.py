@@ -30,7 +30,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.stats import chi2 as chi2_dist
 
 __all__ = ["DEFAULT_ALPHA", "GoodnessOfFit", "OffsetPattern", "goodness_of_fit", "offset_pattern"]
 
@@ -132,6 +131,10 @@ def goodness_of_fit(residuals: ArrayLike, n_params: int, *,
     dof = int(r.size - n_params)
     chi2 = float(r @ r)
     ok = dof > 0 and np.isfinite(chi2)
+    # imported here, not at the top: scipy.stats costs about 1 s of CPU to import, which
+    # a process that imports the BRDF package without testing a fit should not pay
+    from scipy.stats import chi2 as chi2_dist
+
     p = float(chi2_dist.sf(chi2, dof)) if ok else float("nan")
     order = np.argsort(-np.abs(np.nan_to_num(r, nan=np.inf)), kind="stable")
     big = [int(i) for i in order if abs(r[i]) > OUTLIER_Z or not np.isfinite(r[i])]

@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import erf
 
 from analysis.brdf.geometry import MU_FLOOR as MU_FLOOR  # re-exported: rough_surface uses it
 
@@ -105,6 +104,10 @@ def ggx_mu_lambda(mu: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
 def beckmann_mu_lambda(mu: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
     """μ·Λ_Beckmann(μ) = μ(erf(a) − 1)/2 + α sinθ e^{−a²}/(2√π), a = μ/(α sinθ)
     (Heitz 2014, eq. 80, multiplied by μ so that it is finite at grazing)."""
+    # imported where it is used: scipy.special costs about 1 s of CPU to import, which a
+    # process that imports the models without a Beckmann term (the bench server) saves
+    from scipy.special import erf
+
     mu = np.clip(np.asarray(mu, dtype=float), 0.0, 1.0)
     al = np.asarray(alpha, dtype=float)
     s = np.sqrt(np.clip(1.0 - mu * mu, 0.0, 1.0))

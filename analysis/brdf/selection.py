@@ -257,11 +257,15 @@ def select_model(
                 cv_score=cv, cv_stderr=cv_se, converged=fit.converged,
             )
         )
-    chosen, rule = _choose(rows, criterion, delta)
+    chosen, rule = choose_by_criterion(rows, criterion, delta)
     return SelectionResult(chosen, criterion, rule, tuple(rows), fits)
 
 
-def _choose(rows: list[ModelScore], criterion: str, delta: float) -> tuple[str, str]:
+def choose_by_criterion(rows: Sequence[ModelScore], criterion: str,
+                        delta: float) -> tuple[str, str]:
+    """The rule of :func:`select_model` on a filled comparison table: the chosen name and
+    the rule in words (shared with the polarimetric selection,
+    :mod:`analysis.polarimetry.pbrdf_selection`)."""
     scores = np.array([r.score(criterion) for r in rows])
     ok = np.isfinite(scores)
     if not np.any(ok):

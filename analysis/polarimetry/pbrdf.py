@@ -30,9 +30,17 @@ Passive Sensors 1, 169 (2002)): the Mueller-matrix BRDF (unit 1/sr) of a rough s
   Mueller matrix into the global frames). In this frame a smooth dielectric at Brewster's
   angle has ``m01 = −m00`` (only s light, which is −Q, is reflected).
 * ``ρ`` the albedo of an ideal depolarising Lambertian layer.
+* The polarimeter's frame. A calibrated polarimeter measures in its own frame, whose
+  azimuth origin is the generator polariser's axis (ADR 0102): reference samples fix
+  every angle relative to it, never to the sample. If that axis stands at ``φ_f`` from
+  the plane of incidence, the measured matrix is ``R(φ_f) F R(−φ_f)``
+  (:func:`analysis.polarimetry.elements.rotated` by ``−φ_f``). The fit estimates
+  ``φ_f`` with the sample (a parameter in degrees, ``frame_deg``): a 0.3° frame turns
+  m01 into m02 by sin 0.6° ≈ 1 %, several σ of a 36-step reduction (ADR 0107).
 
 Parameters of the fit, in this order: ``n``, ``k`` (the complex index), ``alpha``
-(roughness), ``albedo``; any of them can be held fixed. The fit minimises
+(roughness), ``albedo``, ``frame_deg``; any of them can be held fixed. Functions that
+take a parameter vector also take the first four alone (the frame at 0). The fit minimises
 ``χ² = Σ_g rᵀ C_g⁻¹ r`` over the geometries g (r the 16 residuals of the Mueller matrix,
 ``C_g`` its 16×16 covariance from :func:`analysis.polarimetry.drr.reduce`), by whitening
 with ``C_g^(−½)`` (pseudo-inverse: a normalised matrix's ``m00`` has zero variance), and
@@ -53,14 +61,15 @@ from scipy import optimize
 from analysis.brdf.fresnel import fresnel
 from analysis.brdf.goodness import GoodnessOfFit, goodness_of_fit
 from analysis.brdf.microfacet import beckmann_d, ggx_d, smith_visibility
+from analysis.polarimetry.elements import rotation
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
 __all__ = ["PBRDF_PARAMS", "PbrdfFit", "fit_pbrdf", "fresnel_mueller", "pbrdf"]
 
 #: Parameter names, in the order of the parameter vector.
-PBRDF_PARAMS = ("n", "k", "alpha", "albedo")
-_LOWER = np.array([1.0 + 1e-6, 0.0, 1e-3, 0.0])
-_UPPER = np.array([10.0, 20.0, 1.5, 1.0])
+PBRDF_PARAMS = ("n", "k", "alpha", "albedo", "frame_deg")
+_LOWER = np.array([1.0 + 1e-6, 0.0, 1e-3, 0.0, -45.0])
+_UPPER = np.array([10.0, 20.0, 1.5, 1.0, 45.0])
 _DISTRIBUTIONS = ("beckmann", "ggx")
 
 
@@ -134,18 +143,26 @@ def _geometry(theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
 
 
 def _evaluate(p: NDArray[np.float64], g: _Geometry, distribution: str) -> NDArray[np.float64]:
-    n, k, alpha, albedo = (float(v) for v in p)
+    n, k, alpha, albedo, frame_deg = (float(v) for v in p)
     d = (beckmann_d(g.cos_theta_h, alpha) if distribution == "beckmann"
          else ggx_d(g.cos_theta_h, alpha))
     vis = smith_visibility(g.mu_i, g.mu_r, alpha, distribution=distribution)
     f = fresnel_mueller(g.cos_beta, complex(n, k))
     spec = (d * vis)[:, None, None] * (g.rot_out @ f @ g.rot_in)
     spec[:, 0, 0] += albedo / math.pi
+    if frame_deg != 0.0:  # the polarimeter's frame (module docstring)
+        phi = math.radians(frame_deg)
+        spec = rotation(phi) @ spec @ rotation(-phi)
     return spec
 
 
 def _check_params(params: ArrayLike, distribution: str) -> NDArray[np.float64]:
-    p = check_array("params", params, shape=(4,))
+    p = check_array("params", params)
+    if p.shape == (4,):
+        p = np.append(p, 0.0)
+    if p.shape != (5,):
+        raise PolarimetryInputError("params", f"must hold 4 or 5 values {PBRDF_PARAMS}, "
+                                    f"got shape {p.shape}")
     if distribution not in _DISTRIBUTIONS:
         raise PolarimetryInputError("distribution", f"must be one of {_DISTRIBUTIONS}, "
                                     f"got {distribution!r}")
@@ -162,9 +179,10 @@ def pbrdf(params: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: Arra
 
     Parameters
     ----------
-    params : array_like of shape (4,)
-        ``(n, k, alpha, albedo)``: index n + ik (k ≥ 0), roughness (Beckmann rms slope or
-        GGX width), Lambertian albedo of the depolarising layer.
+    params : array_like of shape (5,) or (4,)
+        ``(n, k, alpha, albedo, frame_deg)``: index n + ik (k ≥ 0), roughness (Beckmann
+        rms slope or GGX width), Lambertian albedo of the depolarising layer, azimuth of
+        the polarimeter's frame from the plane of incidence in degrees (0 if left out).
     theta_i, phi_i, theta_r, phi_r : array_like, broadcast together to N geometries
         Polar angles from the normal and azimuths, radians (conventions of
         :mod:`analysis.brdf.geometry`; the specular direction is φr = φi + π).
@@ -183,11 +201,12 @@ class PbrdfFit:
 
     Attributes
     ----------
-    params : ndarray of shape (4,)
-        ``(n, k, alpha, albedo)`` at the minimum (fixed ones at their given values).
-    sigma : ndarray of shape (4,)
+    params : ndarray of shape (5,)
+        ``(n, k, alpha, albedo, frame_deg)`` at the minimum (fixed ones at their given
+        values).
+    sigma : ndarray of shape (5,)
         Standard errors (0 for fixed parameters).
-    cov : ndarray of shape (4, 4)
+    cov : ndarray of shape (5, 5)
         Covariance of the parameters (zero rows/columns for fixed ones).
     goodness : GoodnessOfFit
         χ², degrees of freedom, p-value and verdict (the project's gate).
@@ -222,8 +241,9 @@ def fit_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike
         Covariance of each row-major ``vec(m[g])``.
     theta_i, phi_i, theta_r, phi_r : array_like of shape (N,)
         The geometries, radians.
-    start : array_like of shape (4,)
-        Start values ``(n, k, alpha, albedo)`` (and the values of fixed parameters).
+    start : array_like of shape (5,) or (4,)
+        Start values ``(n, k, alpha, albedo, frame_deg)`` (and the values of fixed
+        parameters); four values start the frame at 0.
     fixed : sequence of str
         Names from :data:`PBRDF_PARAMS` held at their start value (e.g. ``("k",)`` for a
         dielectric).
@@ -265,7 +285,7 @@ def fit_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike
                                  method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
                                  gtol=1e-12)
     cov_free = np.linalg.pinv(res.jac.T @ res.jac)
-    cov_full = np.zeros((4, 4))
+    cov_full = np.zeros((5, 5))
     cov_full[np.ix_(free, free)] = cov_free
     gof = goodness_of_fit(res.fun, int(free.sum()))
     return PbrdfFit(params=full(res.x), sigma=np.sqrt(np.clip(np.diag(cov_full), 0, None)),

@@ -13,21 +13,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from analysis.errors import InputError
+
 __all__ = ["PolarimetryInputError", "check_array", "check_covariance", "check_mueller"]
 
 
-class PolarimetryInputError(ValueError):
-    """An argument of a polarimetry function is non-finite, mis-shaped or out of domain.
-
-    Attributes
-    ----------
-    argument : str
-        The name of the offending argument, as in the function's signature.
-    """
-
-    def __init__(self, argument: str, problem: str) -> None:
-        self.argument = argument
-        super().__init__(f"{argument} {problem}")
+class PolarimetryInputError(InputError):
+    """An argument of a polarimetry function is non-finite, mis-shaped or out of domain
+    (``argument`` names it)."""
 
 
 def check_array(name: str, value: Any, *, ndim: int | None = None,

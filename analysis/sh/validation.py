@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import DTypeLike
 
+from analysis.errors import InputError
+
 __all__ = [
     "SHInputError",
     "check_coefficients",
@@ -30,18 +32,9 @@ __all__ = [
 ]
 
 
-class SHInputError(ValueError):
-    """An argument of a spherical-harmonic function is NaN, inf or outside its domain.
-
-    Attributes
-    ----------
-    argument : str
-        The name of the offending argument, as in the function's signature.
-    """
-
-    def __init__(self, argument: str, problem: str) -> None:
-        self.argument = argument
-        super().__init__(f"{argument} {problem}")
+class SHInputError(InputError):
+    """An argument of a spherical-harmonic function is NaN, inf or outside its domain
+    (``argument`` names it)."""
 
 
 def check_finite(name: str, value: Any, *, dtype: DTypeLike = float,

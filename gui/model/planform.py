@@ -251,11 +251,22 @@ SPECTRAL = [
 POLARIMETRY = [
     _f("polarimetry.mode", "polarimetry", "choice",
        "drr: a dual rotating retarder scan at every geometry (the bench's [optics] names "
-       "the retarders); none: no polarimetry", ("", "drr")),
+       "the retarders); pem: a photoelastic modulator read at 1f and 2f by the lock-in at "
+       "fixed settings; none: no polarimetry", ("", "drr", "pem")),
     _f("polarimetry.steps", "retarder steps", "integer",
-       f"steps per geometry, at least {MIN_STEPS} (default {DEFAULT_STEPS})"),
+       f"drr: steps per geometry, at least {MIN_STEPS} (default {DEFAULT_STEPS})"),
     _f("polarimetry.ratio", "retarder ratio", "number",
-       "the analyser retarder turns this many times as far (default 5)"),
+       "drr: the analyser retarder turns this many times as far (default 5)"),
+    _f("polarimetry.amplitude_waves", "PEM amplitude (waves)", "number",
+       "pem: the modulator's peak retardation (default: the profile's setting)"),
+    _f("polarimetry.generator_deg", "PEM source polariser (deg)", "list",
+       "pem: the source polariser's settings (default 0, 45)"),
+    _f("polarimetry.analyser_deg", "PEM analyser retarder (deg)", "list",
+       "pem: the analyser retarder's settings (default -75, -37.5, 37.5, 75)"),
+    _f("polarimetry.time_constants", "PEM settle (τ)", "number",
+       "pem: lock-in time constants waited before each harmonic (default 15)"),
+    _f("polarimetry.reads", "PEM snapshots", "integer",
+       "pem: lock-in snapshots per harmonic (default 6)"),
 ]
 
 

@@ -106,7 +106,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_discrete_lyapunov
 
 from hw_mocks.clock import Clock, HostPacedClock
 from hw_mocks.emulator import FirmwareEmulator
@@ -222,6 +221,10 @@ def _noise_model(poles: int) -> tuple[np.ndarray, float]:
     """Sub-step transition matrix and the stationary output variance per unit input
     variance for noise held constant over τ/16 sub-steps (solved once per pole count)."""
     if poles not in _NOISE_GAIN:
+        # imported here, once per pole count: scipy.linalg costs a noticeable part of a
+        # second to import, which an emulated bench whose lock-in never reads noise saves
+        from scipy.linalg import solve_discrete_lyapunov
+
         a = _cascade_matrix(1.0 / _SUBSTEPS_PER_TAU, poles)
         b = (np.eye(poles) - a) @ np.ones(poles)
         p = solve_discrete_lyapunov(a, np.outer(b, b))

@@ -81,7 +81,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from drivers.base import Camera, DeviceIdentity, Frame, PixelFormat, Roi
 from drivers.errors import DeviceTimeout
@@ -422,6 +421,8 @@ class SimulatedCamera(Camera):
         lit_r, lit_c = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
         r0, r1 = max(lit_r[0] - grow, 0), min(lit_r[-1] + grow + 1, todo.shape[0])
         c0, c1 = max(lit_c[0] - grow, 0), min(lit_c[-1] + grow + 1, todo.shape[1])
+        from scipy import ndimage  # where used: see _pupil_integral
+
         near = ndimage.distance_transform_edt(~todo[r0:r1, c0:c1]) <= grow
         atol = 1e-9 * float(np.abs(chief).max())
         rho = grid.pupil_radius_mm
@@ -545,6 +546,12 @@ class SimulatedCamera(Camera):
         # far outside a lit region (a sharp edge, e.g. the sample's rim seen at grazing)
         # collect light too: grow the refined region by that blur in pixels.
         grow = self._blur_px(state, focus)
+        # scipy.ndimage is imported where a frame is rendered, not with the module: every
+        # emulated bench imports this module (each server start, each test process) and
+        # the import costs about 1 s of CPU, which a bench that never renders a camera
+        # frame saves
+        from scipy import ndimage
+
         todo = ndimage.binary_dilation(todo, structure=_disk_structure(grow))
         atol = 1e-9 * float(np.abs(chief).max())
 

@@ -82,7 +82,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import special
 
 __all__ = ["HiddenElement", "HiddenTrain", "PolarisationState", "analysed_intensity",
            "jones_to_mueller",
@@ -255,6 +254,10 @@ def _pem_channels(e: HiddenElement, theta_deg: float, amplitude_rad: float
     m_plus, m_minus = retarder_mueller(theta, 0.0), retarder_mueller(theta, math.pi)
     m0, mc = 0.5 * (m_plus + m_minus), 0.5 * (m_plus - m_minus)
     ms = retarder_mueller(theta, math.pi / 2) - m0
+    # imported here: scipy.special costs about 1 s of CPU to import, and every emulated
+    # bench (a server, a test process) loads this module whether or not it has a PEM
+    from scipy import special
+
     j0, j1, j2 = (float(special.jv(n, amplitude_rad)) for n in (0, 1, 2))
     return m0 + j0 * mc, math.sqrt(2.0) * j1 * ms, math.sqrt(2.0) * j2 * mc
 

@@ -54,7 +54,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import fft as sfft
 
 __all__ = ["EXACT_PATTERNS", "SpeckleOptics", "decorrelation_angle_deg",
            "speckle_image", "speckle_seed"]
@@ -116,6 +115,8 @@ def decorrelation_angle_deg(wavelength_nm: float, beam_radius_mm: float, cos_i: 
 def _band(shape: tuple[int, int], spacing_um: float, optics: SpeckleOptics
           ) -> NDArray[np.bool_]:
     """The pupil's coherent pass band on the FFT grid: |f| ≤ 1/(2 λ F#)."""
+    from scipy import fft as sfft  # where used: see speckle_image
+
     cutoff = 1.0 / (2.0 * optics.grain_um)
     fy = sfft.fftfreq(shape[0], d=spacing_um)
     fx = sfft.fftfreq(shape[1], d=spacing_um)
@@ -163,6 +164,12 @@ def speckle_image(coherent: NDArray[np.floating], optics: SpeckleOptics,
     c0 = max(int(cols.min()) - MARGIN_PX, 0)
     c1 = min(int(cols.max()) + MARGIN_PX + 1, rate.shape[1])
     box = rate[r0:r1, c0:c1]
+    # scipy.fft is imported here, not at the top: every emulated bench (each server
+    # start, each test process) imports this module, and scipy.fft with the part of
+    # scipy.special it loads costs about 0.5-1 s of CPU that a bench without a laser's
+    # speckle never needs
+    from scipy import fft as sfft
+
     s = optics.subsamples
     h, w = box.shape
     shape = (sfft.next_fast_len(h * s), sfft.next_fast_len(w * s))

@@ -18,6 +18,9 @@ same instrument, as reconnecting a cable does):
     the same values on a quiet and on a loaded machine. Not with ``speed``/``step``. A
     host on the far side of a pty cannot pace it (:func:`hw_mocks.pty_server.serve_url`
     serves such a URL on the wall clock).
+``sleep``
+    With ``clock=host``, ``sleep=0``: the driver's waits advance the emulated clock without
+    sleeping on the host (tests: the same readings as a paced run, none of its wall time).
 ``seed``
     Seeds the fault injector and the input noise.
 ``chopper``
@@ -55,7 +58,7 @@ from hw_mocks.link import EmulatedSerial
 
 __all__ = ["Serial", "host_sleep", "make_emulator"]
 
-_KNOWN = {"baud", "speed", "step", "clock", "seed", "chopper", "noise", "outx", "agan",
+_KNOWN = {"baud", "speed", "step", "clock", "sleep", "seed", "chopper", "noise", "outx", "agan",
           "serial", "model", "world", "responsivity", "gain", "aperture_mm", "reference"}
 
 
@@ -69,6 +72,9 @@ def _clock(options: dict[str, str]) -> Clock:
     if "speed" in options or "step" in options:
         raise ValueError("simsr830: clock=host paces emulated time by the host's waits; it "
                          "takes no speed= or step=")
+    if options.get("sleep", "1") not in ("0", "1"):
+        raise ValueError(f"simsr830 sleep={options['sleep']!r}: 0 (advance the clock "
+                         "without sleeping) or 1 (the default)")
     return HostPacedClock()
 
 
@@ -124,8 +130,11 @@ def host_sleep(url: str) -> Callable[[float], None] | None:
     if not isinstance(clock, HostPacedClock):
         return None
 
+    real = options.get("sleep", "1") != "0"
+
     def sleep(seconds: float) -> None:
-        time.sleep(seconds)
+        if real:
+            time.sleep(seconds)
         clock.advance(max(float(seconds), 0.0))
 
     return sleep

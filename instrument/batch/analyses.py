@@ -39,6 +39,7 @@ from instrument.run.runfile import read_summary
 if TYPE_CHECKING:
     from instrument.pipelines.brdf.pipeline import FitRun
     from instrument.pipelines.lightfield.results import LocalisationResult, ReconstructionResult
+    from instrument.pipelines.polarimetry.pipeline import PolarimetricFit
     from instrument.pipelines.spheres.analyse import SphereAnalysis
     from instrument.pipelines.spheres.capture import SphereCapture
 
@@ -59,6 +60,7 @@ __all__ = [
     "locate_arguments",
     "locate_record",
     "locate_row",
+    "polarimetric_row",
     "reconstruct_arguments",
     "reconstruct_record",
     "reconstruct_row",
@@ -168,9 +170,22 @@ def _param_text(name: str, value: float, err: float, unit: str) -> str:
 
 
 def fit_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
-    """What :func:`instrument.pipelines.brdf.pipeline.fit_run` records for these options."""
+    """What :func:`instrument.pipelines.brdf.pipeline.fit_run` records for these options
+    (for a polarimetric run, what its pipeline records with its defaults)."""
     from instrument.pipelines.brdf.pipeline import fit_options
+    from instrument.pipelines.polarimetry.readings import is_polarimetric
 
+    if is_polarimetric(path):
+        from instrument.pipelines.polarimetry.pipeline import (
+            DEFAULT_START,
+            choose_calibration,
+            polarimetric_options,
+        )
+        from instrument.run.runfile import read_run
+
+        bench = str(read_run(path).profile().get("bench", {}).get("name", ""))
+        return polarimetric_options(choose_calibration(path, bench, None), DEFAULT_START,
+                                    None, "beckmann")
     return fit_options(**fit_arguments(options))
 
 
@@ -184,11 +199,61 @@ def analyse_fit(path: str | Path, options: Mapping[str, Any], *,
     AnalysisFailed
         The chosen model's fit did not converge (the results file is written, as by
         ``scatterlab fit``).
+
+    A polarimetric run (one with an optical train, ADR 0103) goes through its own
+    pipeline, as ``scatterlab fit`` sends it: Mueller matrices, decompositions and the pBRDF
+    variant the data need, with the newest valid calibration of its bench beside the run
+    (:func:`instrument.pipelines.polarimetry.pipeline.fit_polarimetric_run` defaults; the
+    scalar options do not apply to it).
     """
     from instrument.pipelines.brdf.pipeline import fit_run
+    from instrument.pipelines.polarimetry.readings import is_polarimetric
 
+    if is_polarimetric(path):
+        from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
+
+        return polarimetric_row(fit_polarimetric_run(path, report_dir=folder, report=report,
+                                                     write=True))
     return fit_row(fit_run(path, **fit_arguments(options), report_dir=folder, report=report,
                            write=True))
+
+
+def polarimetric_row(done: PolarimetricFit) -> Analysed:
+    """The summary row of a polarimetric fit: the geometries, the chosen pBRDF variant,
+    its gate and every free parameter with its σ; uncalibrated, unrealizable matrices and
+    a failed gate are flagged.
+
+    Raises
+    ------
+    AnalysisFailed
+        No pBRDF fit (only straight-through groups) or one whose parameters are not finite.
+    """
+    s = done.summary
+    values: dict[str, Any] = {"n_geometries": len(done.points),
+                              "calibrated": bool(s["calibrated"])}
+    flags = [str(n) for n in s["notes"] if "not physically realizable" in str(n)]
+    if not s["calibrated"]:
+        flags.append(str(s["calibration_text"]))
+    fit = s["pbrdf"]
+    if fit is None:
+        raise AnalysisFailed("no pBRDF fit: no reflection geometry with a valid matrix",
+                             Analysed("no pBRDF fit", values, flags).row())
+    values.update({"model": fit["variant"], "chi2": float(fit["chi2"]),
+                   "dof": int(fit["dof"]), "adequate": bool(fit["adequate"])})
+    free = [(n, v, e) for n, v, e in zip(fit["param_names"], fit["params"], fit["stderr"],
+                                         strict=True) if n not in fit["fixed"]]
+    for name, value, err in free:
+        values[name] = float(value)
+        values[f"{name}_sigma"] = float(err)
+    if not fit["adequate"]:
+        flags.append(f"pBRDF {fit['variant']}: {fit['verdict']}")
+    text = f"pBRDF {fit['variant']}: " + ", ".join(
+        _param_text(n, v, e, "deg" if n == "frame_deg" else "") for n, v, e in free)
+    out = Analysed(text, values, flags)
+    if not all(math.isfinite(v) for _n, v, _e in free):
+        raise AnalysisFailed(f"the pBRDF fit of {fit['variant']} gave non-finite "
+                             "parameters", out.row())
+    return out
 
 
 def fit_row(done: FitRun) -> Analysed:

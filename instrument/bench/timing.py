@@ -151,6 +151,8 @@ class BenchTiming:
     point_overhead_s: float = POINT_OVERHEAD_S
     #: One settling wait of the lock-in's output filter (s; 0 without a lock-in).
     lockin_settle_s: float = 0.0
+    #: The lock-in's time constant τ (s; 0 without a lock-in).
+    lockin_tau_s: float = 0.0
     #: The filter wheel's slots (0: no wheel).
     wheel_slots: int = 0
     #: How many times faster than the FW102C's high speed the wheel turns (an emulated
@@ -176,6 +178,13 @@ class BenchTiming:
         """Seconds one lock-in reading takes: a settling wait per snapshot (at least four,
         as the engine reads) and two to choose the range."""
         return self.lockin_settle_s * (max(int(frames), 4) + 2)
+
+    def pem_reading_s(self, time_constants: float, reads: int) -> float:
+        """Seconds one PEM setting's readings take (:mod:`instrument.run.pem_reading`): per
+        harmonic (1f, 2f) a settle of ``time_constants`` τ, then the engine's lock-in
+        reading of ``reads`` snapshots (:meth:`lockin_reading_s`)."""
+        per = time_constants * self.lockin_tau_s + self.lockin_reading_s(reads)
+        return 2.0 * per
 
     def wheel_move_s(self, start: int, end: int) -> float:
         """Seconds the filter wheel takes from slot ``start`` to ``end`` (the shorter way
@@ -210,7 +219,7 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
                 assumed.append(f"{camera.role}.{key} not in the profile: {costs[key]:.3g} s "
                                f"assumed ({why})")
     lockin = next((d for d in profile.devices.values() if d.driver == "sr830"), None)
-    settle = 0.0
+    settle = tau = 0.0
     if lockin is not None:
         tau = float(lockin.settings.get("time_constant_s", LOCKIN_POWER_UP[0]))
         slope = int(lockin.settings.get("filter_slope_db_per_oct", LOCKIN_POWER_UP[1]))
@@ -227,7 +236,8 @@ def bench_timing(profile: BenchProfile, axes: Iterable[str] = ()) -> BenchTiming
     return BenchTiming(speed, home,
                        1.0 if camera is None or exposes_in_wall_time(camera) else 0.0,
                        costs["frame_overhead_s"], costs["scene_change_s"],
-                       lockin_settle_s=settle, wheel_slots=slots, wheel_speed=wheel_speed,
+                       lockin_settle_s=settle, lockin_tau_s=tau, wheel_slots=slots,
+                       wheel_speed=wheel_speed,
                        assumed=tuple(assumed),
                        render_s=_scene_render_s(profile, camera),
                        power_meter_integral_s=_integral_s(profile, "pm100usb"),

@@ -16,8 +16,9 @@ def _start(text: str | None) -> tuple[float, ...]:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"--pbrdf-start must be four numbers n,k,alpha,albedo, got {text!r}")
+    if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"--pbrdf-start must be four or five numbers "
+                         f"n,k,alpha,albedo[,frame_deg], got {text!r}")
     return values
 
 
@@ -29,8 +30,9 @@ def run_polarimetric(args: argparse.Namespace) -> int:
 
     try:
         start = _start(getattr(args, "pbrdf_start", None))
-        fixed = tuple(n.strip() for n in str(getattr(args, "pbrdf_fixed", "k")).split(",")
-                      if n.strip())
+        text = getattr(args, "pbrdf_fixed", None)
+        fixed = (None if text is None else
+                 tuple(n.strip() for n in str(text).split(",") if n.strip()))
         with writing_outputs(args.run, "fit", "fit", args.out):
             done = fit_polarimetric_run(
                 args.run, calibration=getattr(args, "calibration", None), start=start,
@@ -65,8 +67,12 @@ def run_polarimetric(args: argparse.Namespace) -> int:
               f"{unit}  κ {p.condition:.3g}  {dec}{flag}")
     fit = s["pbrdf"]
     if fit is not None:
-        print(f"pBRDF ({fit['distribution']} facets + Lambertian depolariser): "
-              f"{fit['verdict']}")
+        print(f"pBRDF {fit['variant']} ({fit['distribution']} facets): {fit['verdict']}")
+        if fit.get("selection"):
+            sel = fit["selection"]
+            print(f"  chosen by {sel['rule']}: " + ", ".join(
+                f"{r['name']} {sel['criterion'].upper()} {r[sel['criterion']]:.1f}"
+                for r in sel["table"]))
         for name, v, e in zip(fit["param_names"], fit["params"], fit["stderr"],
                               strict=True):
             held = " (fixed)" if name in fit["fixed"] else ""

@@ -91,7 +91,7 @@ def _settings(data: RunData) -> dict[str, Any]:
     """The camera's gain and pixel format during the sweep as the run recorded them (None:
     not recorded; the calibration holds for these settings only), and its identity."""
     cam = data.identities.get("camera", {})
-    return {"gain_db": data.acquisition.get("gain_db"), "pixel_format": cam.get("pixel_format"),
+    return {"gain_db": data.camera_gain(), "pixel_format": cam.get("pixel_format"),
             "camera": " ".join(str(cam[k]) for k in ("vendor", "model", "serial") if k in cam)}
 
 

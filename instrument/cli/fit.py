@@ -34,12 +34,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                      help="polarimeter calibration (scatterlab calibrate polarimeter) to "
                      "reduce with; 'none' for the nominal optics (default: the newest valid "
                      "calibration of the run's bench in calibrations/ beside the run)")
-    pol.add_argument("--pbrdf-start", default=None, metavar="N,K,ALPHA,ALBEDO",
-                     help="start values of the pBRDF fit (default 1.5,0,0.2,0.1: a rough "
-                     "dielectric)")
-    pol.add_argument("--pbrdf-fixed", default="k", metavar="NAMES",
-                     help="comma-separated pBRDF parameters held at their start value "
-                     "(default: k, a dielectric; '' fits all four)")
+    pol.add_argument("--pbrdf-start", default=None, metavar="N,K,ALPHA,ALBEDO[,FRAME]",
+                     help="start values of the pBRDF fit (default 1.5,0,0.2,0.1,0: a rough "
+                     "dielectric in the polarimeter's nominal frame, degrees)")
+    pol.add_argument("--pbrdf-fixed", default=None, metavar="NAMES",
+                     help="comma-separated pBRDF parameters held at their start value, "
+                     "one model (e.g. k for a dielectric; '' fits all five); default: "
+                     "the variant the data need, by BIC and the goodness-of-fit gate")
     pol.add_argument("--distribution", default="beckmann", choices=("beckmann", "ggx"),
                      help="facet-slope distribution of the pBRDF (default: beckmann)")
     p.set_defaults(func=run)

@@ -141,9 +141,21 @@ def _print_polarimetry(spec: PlanSpec, profile: BenchProfile) -> None:
 
     pol = spec.polarimetry
     assert pol is not None
+    wavelengths = plan_wavelengths(profile, plan_filter_wavelengths(spec, profile))
+    if pol["mode"] == "pem":
+        from instrument.plans.polarimetry_pem import pem_conditioning
+
+        n = len(pol["generator_deg"]) * len(pol["analyser_deg"])
+        gen, ana = ("/".join(f"{x:g}" for x in pol[k]) for k in ("generator_deg",
+                                                                   "analyser_deg"))
+        print(f"  polarimetry: photoelastic modulator, {n} settings per geometry (source "
+              f"polariser {gen}° × analyser retarder {ana}°), DC on Aux In 1, 1f and 2f after "
+              f"{pol['time_constants']:g} τ, {pol['reads']} snapshots each")
+        for pc in pem_conditioning(pol, profile, wavelengths):
+            print(f"    {pc.describe()}")
+        return
     print(f"  polarimetry: dual rotating retarder, {pol['steps']} steps per geometry, "
           f"ratio {pol['ratio']:g}")
-    wavelengths = plan_wavelengths(profile, plan_filter_wavelengths(spec, profile))
     for c in conditioning(pol, profile, wavelengths):
         print(f"    {c.describe()}")
         if c.far_from_optimum:

@@ -36,6 +36,7 @@ from instrument.plans.grid import dedupe_reciprocal, equal_solid_angle_grid, spe
 from instrument.plans.order import optimise_order
 from instrument.plans.planfile import MAX_POINTS, PlanError, PlanSpec
 from instrument.plans.polarimetry import plan_wavelengths, polarimetry_axis
+from instrument.plans.polarimetry_pem import pem_axis
 from instrument.plans.ranges import float_range
 from instrument.plans.route_costs import RouteCosts
 from instrument.plans.spin import check_spinner
@@ -263,7 +264,11 @@ class Plan:
                 slot = int(want)
             total += self._integrals_s(timing, p.light, moved or turned or lit is not p.light,
                                        where, dark_seen, events)
-            if pol.uses_lockin and timing.lockin_settle_s > 0:
+            pem = self.spec.polarimetry if "pem_setting" in dict(p.meta) else None
+            if pem is not None:
+                # a PEM setting: 1f and 2f each settled for the plan's time constants
+                total += timing.pem_reading_s(pem["time_constants"], pem["reads"])
+            elif pol.uses_lockin and timing.lockin_settle_s > 0:
                 reads = 2 if (pol.dark == "per_point" and p.light
                               and pol.reads_dark("lockin")) else 1
                 total += reads * timing.lockin_reading_s(pol.frames)
@@ -617,14 +622,18 @@ def plan_filter_wavelengths(spec: PlanSpec, profile: BenchProfile) -> list[float
 
 def _polarimetry(spec: PlanSpec, profile: BenchProfile, body: list[ScanPoint]
                  ) -> list[ScanPoint]:
-    """``body`` with the dual-rotating-retarder steps at every lit point
-    (:mod:`instrument.plans.polarimetry`), within the point limit."""
+    """``body`` with the dual-rotating-retarder steps (:mod:`instrument.plans.polarimetry`)
+    or the PEM settings (:mod:`instrument.plans.polarimetry_pem`) at every lit point,
+    within the point limit."""
     assert spec.polarimetry is not None
     wavelengths = plan_wavelengths(profile, plan_filter_wavelengths(spec, profile))
-    out = polarimetry_axis(spec.polarimetry, profile, body, wavelengths)
+    pem = spec.polarimetry["mode"] == "pem"
+    out = (pem_axis(spec.polarimetry, profile, body, spec.acquisition, wavelengths) if pem
+           else polarimetry_axis(spec.polarimetry, profile, body, wavelengths))
     if len(out) > MAX_POINTS:
         raise PlanError(f"plan {spec.name!r}", [FieldError(
-            "polarimetry.steps", f"expands to {len(out)} points; at most {MAX_POINTS}")])
+            "polarimetry.analyser_deg" if pem else "polarimetry.steps",
+            f"expands to {len(out)} points; at most {MAX_POINTS}")])
     return out
 
 

@@ -32,7 +32,7 @@ as a :class:`~instrument.bench.profile.FieldError` (``scan.theta_i[2]: ...``) in
     [polarimetry]                 # a Mueller-matrix scan at every geometry (optional;
     mode = "drr"                  # brdf_in_plane and brdf_hemisphere plans):
     steps = 36                    # instrument.plans.polarimetry
-    ratio = 5
+    ratio = 5                     # (mode = "pem": instrument.plans.polarimetry_pem)
 
 [scan] by kind (angles in degrees; a *range* is ``{start, stop, step}`` inclusive, or an
 explicit list):
@@ -115,7 +115,8 @@ class PlanSpec:
     #: :data:`SPECTRAL_ORDERS`), or None.
     spectral: dict[str, Any] | None = None
     #: ``[polarimetry]``: ``{"mode": "drr", "steps": K, "ratio": r}``
-    #: (:mod:`instrument.plans.polarimetry`), or None.
+    #: (:mod:`instrument.plans.polarimetry`), PEM mode's table
+    #: (:mod:`instrument.plans.polarimetry_pem`), or None.
     polarimetry: dict[str, Any] | None = None
 
 

@@ -3,7 +3,7 @@
 A plan's ``[polarimetry]`` table::
 
     [polarimetry]
-    mode = "drr"        # dual rotating retarder; "pem" is refused (see below)
+    mode = "drr"        # dual rotating retarder; "pem": instrument.plans.polarimetry_pem
     steps = 36          # K ≥ 16 retarder steps per geometry (default 36)
     ratio = 5           # the analyser retarder turns ratio × as far (default 5, Azzam 1978)
 
@@ -23,9 +23,9 @@ optimum retardance for the same steps, and a warning where κ is more than
 :data:`FAR_FROM_OPTIMUM` times the optimum's. For 16 to 24 steps (except 23) the equal
 steps alias and W is singular: such a plan is refused.
 
-PEM mode (a photoelastic modulator read by the lock-in at 1f and 2f) needs the modulator's
-driver and the lock-in's harmonic readings, which this version has not: it is refused
-with a field error.
+PEM mode (a photoelastic modulator read by the lock-in at 1f and 2f at fixed generator
+and analyser settings) is parsed, judged and expanded by
+:mod:`instrument.plans.polarimetry_pem`.
 """
 
 from __future__ import annotations
@@ -61,17 +61,18 @@ def parse_polarimetry(v: _Validator, t: Any, kind: str | None) -> dict[str, Any]
     if not isinstance(t, dict):
         v.error("polarimetry", "must be a table (mode, steps, ratio)")
         return None
-    v.unknown(t, "polarimetry", {"mode", "steps", "ratio"})
     if kind is not None and kind not in POLARIMETRY_KINDS:
         v.error("polarimetry", f"a {kind} plan has no polarimetry axis; only "
                 f"{', '.join(POLARIMETRY_KINDS)} plans take one")
     mode = t.get("mode", "drr")
     if mode == "pem":
-        v.error("polarimetry.mode", "PEM mode (a photoelastic modulator read at 1f and 2f "
-                "by the lock-in) is not available in this version: use mode = \"drr\" (a "
-                "dual rotating retarder)")
-    elif mode != "drr":
-        v.error("polarimetry.mode", f"must be \"drr\" (dual rotating retarder), got {mode!r}")
+        from instrument.plans.polarimetry_pem import parse_pem
+
+        return parse_pem(v, t)
+    v.unknown(t, "polarimetry", {"mode", "steps", "ratio"})
+    if mode != "drr":
+        v.error("polarimetry.mode", f"must be \"drr\" (dual rotating retarder) or \"pem\" "
+                f"(a photoelastic modulator read at 1f and 2f), got {mode!r}")
     steps = t.get("steps", DEFAULT_STEPS)
     if (not isinstance(steps, int) or isinstance(steps, bool)
             or not MIN_STEPS <= steps <= MAX_STEPS):

@@ -38,7 +38,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from drivers.base import AxisStatus, Camera, Frame, MotionAxis, PowerMeter
+from drivers.base import AxisStatus, Camera, Frame, LockIn, Modulator, MotionAxis, PowerMeter
 from drivers.errors import ControllerError, DeviceError, LimitError, MotionError
 from instrument.bench.arms import safe_route
 from instrument.bench.devices import Bench
@@ -48,6 +48,7 @@ from instrument.bench.profile import SPIN_ROLE, RetryPolicy
 from instrument.plans.adaptive import AdaptiveDriver
 from instrument.plans.build import Plan, dynamics_of
 from instrument.plans.commands import Acquire, AcquisitionPolicy, Move, PointDone, SetLight
+from instrument.plans.polarimetry_pem import DEFAULT_READS, DEFAULT_TIME_CONSTANTS
 from instrument.run.events import (
     AxisHomed,
     Event,
@@ -59,6 +60,7 @@ from instrument.run.events import (
     RunFinished,
     RunStarted,
 )
+from instrument.run.pem_reading import HarmonicLockIn, read_pem
 from instrument.run.spinner import start_spinner
 from instrument.run.storage import (
     STATUS_OK,
@@ -192,6 +194,10 @@ class RunEngine:
         self._camera = bench.camera
         self._pm = bench.power_meter
         self._lockin = getattr(bench, "lockin", None)
+        # A PEM polarimeter's modulator (ADR 0106): set to each point's amplitude.
+        self._modulator = next((d for d in bench.devices.values()
+                                if isinstance(d, Modulator)), None)
+        self._pem_state: dict[str, float] | None = None  # what the modulator was set to
         self._wheel = getattr(bench, "filter_wheel", None)
         self._wheel_slot: int | None = None  # the slot this engine last put in the beam
         # The attenuation ladder for a camera that saturates at its shortest exposure: the
@@ -567,6 +573,7 @@ class RunEngine:
         self.bench.make_safe()
         self._spin_stopped = True
         self._light = None  # re-applied on resume
+        self._pem_state = None  # the modulator too: an operator may have set it meanwhile
         if not self._store_broken:
             assert self._writer is not None
             try:
@@ -957,7 +964,10 @@ class RunEngine:
                 self._select_filter(ladder[level][0], st)
             if pm is not None:
                 st.power_w = self._read_power(pm, st)
-            if lockin is not None:
+            pem = dict(self.plan.points[acq.index].meta).get("pem_waves")
+            if lockin is not None and pem is not None and acq.light:
+                st.extra.update(self._read_pem(lockin, float(pem), st))
+            elif lockin is not None:
                 role = self._roles[id(lockin)]
                 st.extra.update(self._retry(role, self._policies[role], "read lock-in",
                                             lambda: self._read_lockin(policy.frames), st))
@@ -1067,6 +1077,37 @@ class RunEngine:
                 "lockin_sensitivity_v": float(li.sensitivity_v),
                 "lockin_time_constant_s": float(li.time_constant_s),
                 "lockin_overload": 0.0}
+
+    def _read_pem(self, lockin: LockIn, waves: float, st: _PointState) -> dict[str, float]:
+        """A PEM setting (:mod:`instrument.run.pem_reading`): the modulator set to ``waves``
+        (when it is not already), then the lock-in's DC, 1f and 2f, each through its
+        device's retry policy; the modulator's amplitude (rad at its wavelength setting),
+        wavelength setting and frequency as read back with them."""
+        pol = self.plan.spec.polarimetry or {}
+        mod = self._modulator
+        if mod is not None and (self._pem_state is None
+                                or self._pem_state["waves"] != waves):
+            role = self._roles[id(mod)]
+
+            def set_pem() -> dict[str, float]:
+                mod.retardation_waves = waves
+                return {"waves": waves, "pem_amplitude_rad": float(mod.retardation_rad),
+                        "pem_wavelength_nm": float(mod.wavelength_nm),
+                        "pem_frequency_hz": float(mod.frequency_hz)}
+
+            self._pem_state = self._retry(role, self._policies[role], "set modulator",
+                                          set_pem, st)
+        role = self._roles[id(lockin)]
+        out = self._retry(role, self._policies[role], "read PEM", lambda: read_pem(
+            cast(HarmonicLockIn, lockin),
+            time_constants=float(pol.get("time_constants", DEFAULT_TIME_CONSTANTS)),
+            reads=int(pol.get("reads", DEFAULT_READS)),
+            snapshots=lambda: self._lockin_snapshots(int(pol.get("reads", DEFAULT_READS)))),
+            st)
+        out["lockin_time_constant_s"] = float(lockin.time_constant_s)
+        if self._pem_state is not None:
+            out.update({k: v for k, v in self._pem_state.items() if k != "waves"})
+        return dict(out)
 
     def _lockin_snapshots(self, n: int) -> list[Any]:
         """``max(n, 4)`` settled snapshots of the lock-in on a range that does not overload

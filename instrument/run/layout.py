@@ -7,7 +7,8 @@ Layout (``/entry`` is an NXentry; every group carries an ``NX_class`` attribute)
       sample/      NXsample     name, description
       instrument/  NXinstrument bench_profile (TOML text), geometry attrs,
                                 <role>/ (NXpositioner | NXdetector | NXsource | NXmonitor)
-                                with the device identity and retry policy as attributes;
+                                with the device identity and retry policy as attributes
+                                (a camera's also its gain and pixel_format at the start);
                                 optical_train (JSON, a polarimetric run only: the
                                 profile's nominal [optics] and the plan's [polarimetry];
                                 the mounts' read-back angles are columns of positions)
@@ -56,6 +57,7 @@ __all__ = [
     "DETECTOR_FIELDS",
     "FRAMES_LOST",
     "FRAMES_LOST_NOTE",
+    "PEM_FIELDS",
     "REMEASURED_NOTE",
     "STATUS_OK",
     "STATUS_SKIPPED",
@@ -83,12 +85,21 @@ STR_FIELDS = ("label", "note")
 #: ``dark = "per_point"``, the point's dark readings (light off: shutter closed or source
 #: off): the power meter's (W) and the lock-in's mean X, Y (V) and the standard error of
 #: one component (V rms); the slot of the neutral-density filter the camera read the point
-#: through when it clipped at its shortest exposure (NaN: open beam).
+#: through when it clipped at its shortest exposure (NaN: open beam). A PEM polarimeter's
+#: point (ADR 0106) adds :data:`PEM_FIELDS`: the DC on Aux In 1,
+#: the in-phase 1f and 2f (signed V rms) with their σ, Y, phase θ and full scale, the settle
+#: in time constants, and the modulator's amplitude (rad at its wavelength setting, nm) and
+#: frequency (Hz).
+PEM_FIELDS = ("pem_dc_v", "pem_u_dc_v", "pem_1f_v", "pem_u_1f_v", "pem_1f_y_v",
+              "pem_1f_theta_deg", "pem_1f_sensitivity_v", "pem_2f_v", "pem_u_2f_v",
+              "pem_2f_y_v", "pem_2f_theta_deg", "pem_2f_sensitivity_v",
+              "pem_time_constants", "pem_amplitude_rad", "pem_wavelength_nm",
+              "pem_frequency_hz")
 DETECTOR_FIELDS = ("lockin_r_v", "lockin_u_r_v", "lockin_x_v", "lockin_y_v",
                    "lockin_theta_deg", "lockin_sensitivity_v", "lockin_time_constant_s",
                    "lockin_overload", "filter_position", "wavelength_nm", "bandwidth_nm",
                    "power_dark_w", "lockin_dark_x_v", "lockin_dark_y_v", "lockin_dark_u_v",
-                   "nd_position")
+                   "nd_position", *PEM_FIELDS)
 FRAME_FIELDS = ("frame_point", "frame_exposure_us", "frame_light", "frame_timestamp",
                 "frame_saturated")
 STATUS_OK, STATUS_SKIPPED = 0, 1
@@ -227,7 +238,9 @@ UNITS = {"t_start": "s", "t_end": "s", "theta_i": "deg", "phi_i": "deg", "theta_
           "lockin_theta_deg": "deg", "lockin_sensitivity_v": "V",
           "lockin_time_constant_s": "s", "wavelength_nm": "nm", "bandwidth_nm": "nm",
           "power_dark_w": "W", "lockin_dark_x_v": "V", "lockin_dark_y_v": "V",
-          "lockin_dark_u_v": "V"}
+          "lockin_dark_u_v": "V", **{name: "V" for name in PEM_FIELDS if name.endswith("_v")},
+          "pem_1f_theta_deg": "deg", "pem_2f_theta_deg": "deg", "pem_amplitude_rad": "rad",
+          "pem_wavelength_nm": "nm", "pem_frequency_hz": "Hz"}
 
 
 def new_run_file(path: Path, h: RunHeader) -> h5py.File:

@@ -213,8 +213,18 @@ class RunData:
         return camera_calibration_for(
             self.profile(), calibration_file=calibration_file,
             stored_file=self.calibration.get("camera_calibration"),
-            gain_db=float(self.acquisition.get("gain_db", 0.0)),
+            gain_db=self.camera_gain() or 0.0,
             pixel_format=self.identities.get("camera", {}).get("pixel_format"))
+
+    def camera_gain(self) -> float | None:
+        """The camera's gain as the run started (attribute ``gain`` of
+        ``/entry/instrument/camera``, the device's units); None where the run file does
+        not record it."""
+        text = self.identities.get("camera", {}).get("gain")
+        try:
+            return None if text is None else float(text)
+        except ValueError:
+            return None
 
     @contextlib.contextmanager
     def frames(self) -> Iterator[h5py.Dataset]:

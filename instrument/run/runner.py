@@ -82,6 +82,17 @@ def static_axis_positions(bench: Bench, moved: tuple[str, ...]) -> dict[str, Any
     return out
 
 
+def camera_settings(cam: Camera) -> dict[str, str]:
+    """The camera's gain (the device's units: dB for the simulated camera) and pixel format
+    as a run starts, for its instrument metadata: a radiometric calibration holds for these
+    settings only (:meth:`instrument.run.runfile.RunData.camera_calibration`). The engine
+    changes neither during a run."""
+    try:
+        return {"gain": repr(float(cam.gain)), "pixel_format": cam.pixel_format.name}
+    except DeviceError as err:
+        return {"settings_error": str(err)}
+
+
 def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
     identities: dict[str, dict[str, str]] = {}
     for role, dev in bench.devices.items():
@@ -92,6 +103,8 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
         spec = bench.profile.devices.get(role)
         if spec is not None:
             identities[role].update(driver=spec.driver, url=spec.url)
+        if isinstance(dev, Camera):
+            identities[role].update(camera_settings(dev))
     pts = plan.points
     targets = plan.targets_array().tolist()
     angles = [list(p.angles.as_tuple()) if p.angles else [math.nan] * 4 for p in pts]
@@ -121,12 +134,22 @@ def header_for(plan: Plan, bench: Bench, run_id: str) -> RunHeader:
 
 def optical_train_json(plan: Plan) -> str:
     """The optical train's provenance of a polarimetric plan (the profile's nominal
-    ``[optics]`` and the plan's ``[polarimetry]``), JSON; empty for any other plan."""
+    ``[optics]`` and the plan's ``[polarimetry]``; in PEM mode with the amplitude set and
+    the settings ``[polariser, analyser retarder, PEM axis, analyser polariser]`` (deg)
+    that the points' ``pem_setting`` indexes), JSON; empty for any other plan."""
     optics = plan.profile.optics
     if plan.spec.polarimetry is None or optics is None:
         return ""
-    return json.dumps({"optics": optics.as_dict(), "polarimetry": plan.spec.polarimetry},
-                      sort_keys=True)
+    pol = dict(plan.spec.polarimetry)
+    if pol["mode"] == "pem":
+        # the settings the points' pem_setting index into, and the amplitude they set
+        from instrument.plans.polarimetry_pem import pem_train, plan_settings, plan_waves
+
+        train = pem_train(plan.profile)
+        pol["amplitude_waves"] = plan_waves(pol, plan.profile, train)
+        pol["settings"] = [[s.polariser_deg, s.analyser_retarder_deg, s.pem_axis_deg,
+                            s.analyser_polariser_deg] for s in plan_settings(pol, train)]
+    return json.dumps({"optics": optics.as_dict(), "polarimetry": pol}, sort_keys=True)
 
 
 #: Seconds between catalog updates of a running run's point count (a short SQLite write

@@ -52,9 +52,7 @@ from instrument.bench.devices import Bench, open_bench
 from instrument.bench.guard import GuardError
 from instrument.bench.manual import MoveRefused, check_light_on, plan_home, plan_manual_move
 from instrument.bench.profile import BenchProfile, ProfileError
-from instrument.pipelines.brdf.second_pass import is_second_pass, second_pass_plan
 from instrument.plans import build_plan, parse_plan
-from instrument.plans.lobe import lobe_of
 from instrument.run import events as ev
 from instrument.run.engine import EngineState, RunEngine
 from instrument.run.locks import LockHeld, hold
@@ -785,6 +783,12 @@ class BenchService:
         ``scatterlab run`` plans it (:mod:`instrument.pipelines.brdf.second_pass`), unless
         it could not beat a single pass of equal time (the note says so, as ``run``
         does). Each step is announced on the event stream (``second_pass``)."""
+        # Imported here, not at the top: the lobe planner and the second pass fit BRDF
+        # models (SciPy, the BRDF pipeline), which every server start would otherwise
+        # import (about 1 s of CPU) though only a finished lobe plan's run needs them.
+        from instrument.pipelines.brdf.second_pass import is_second_pass, second_pass_plan
+        from instrument.plans.lobe import lobe_of
+
         spec = parse_plan(item.plan_text or "", source=f"queue item {item.id}")
         if lobe_of(spec) is None or is_second_pass(finished):
             return None, ""

@@ -78,6 +78,9 @@ def unplug_during_move(axis: MotionAxis, emulator: FirmwareEmulator, transport: 
     """
     axis = unplug_and_replug(axis, emulator.faults, transport, lambda: axis.wait(60), reopen,
                              command=command)
+    # The short reply timeout only made the dead link's DeviceTimeout quick; back on the
+    # cable the reads below must not fail because a loaded host answered late.
+    axis.reply_timeout = max(axis.reply_timeout, 5.0)
     deadline = time.monotonic() + 60.0  # returns as soon as the move has ended
     while axis.is_moving and time.monotonic() < deadline:
         time.sleep(0.005)

@@ -69,6 +69,9 @@ def test_status_codes_and_their_meanings():
     assert parse_velocity("64") == 100
     with pytest.raises(ProtocolError):
         parse_velocity("65")
+    assert parse_velocity("01") == 1
+    with pytest.raises(ProtocolError, match=r"1\.\.100"):
+        parse_velocity("00")  # a module takes 1..100 % (sv 0 is refused): 0 is no reading
 
 
 def test_reply_parsing_and_resynchronisation():

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from drivers.base import DeviceIdentity, Modulator
 from drivers.errors import ConnectionFailed, DeviceTimeout, ProtocolError, StateError
 from drivers.hinds_pem import (
+    NOTICES_KEPT,
     Pem200,
     PemAnswer,
     PemCommandError,
@@ -67,10 +68,35 @@ def test_errors_are_typed_and_unsolicited_ones_kept():
     with pytest.raises(PemFault) as fault:
         pem.frequency_hz  # noqa: B018
     assert isinstance(fault.value, StateError) and fault.value.command == ":MOD:FREQ?"
-    assert pem.notices == [PemAnswer("TEMP", "head temperature high", True)]
+    assert list(pem.notices) == [PemAnswer("TEMP", "head temperature high", True)]
     with pytest.raises(PemCommandError) as unknown:
         pem.drive  # noqa: B018
     assert unknown.value.code == "SCPINOP"
+    port.assert_complete()
+
+
+@pytest.mark.parametrize("command, text", [
+    (":MOD:DRV?", "nan"), (":MOD:DRV?", "-0.2"), (":MOD:DRV?", "1.5"), (":MOD:DRV?", "inf"),
+    (":MOD:FREQ?", "nan"), (":MOD:FREQ?", "0"), (":MOD:FREQ?", "-50000")])
+def test_an_answer_outside_its_range_is_a_protocol_error(command, text):
+    steps = [IDN, (command.encode() + b"\n", f"[{command}]({text})\n".encode())]
+    pem, port = transcript_pem(steps)
+    read = {":MOD:DRV?": lambda: pem.drive, ":MOD:FREQ?": lambda: pem.frequency_hz}[command]
+    with pytest.raises(ProtocolError) as info:
+        read()
+    assert info.value.device == "pem" and info.value.command == command
+    assert text in str(info.value)
+    port.assert_complete()
+
+
+def test_only_the_latest_unsolicited_errors_are_kept():
+    notices = b"".join(f"<TEMP>(warning {i})\n".encode() for i in range(NOTICES_KEPT + 50))
+    steps = [IDN, (b":MOD:FREQ?\n", notices + b"[:MOD:FREQ?](50012.500)\n")]
+    pem, port = transcript_pem(steps, reply_timeout=5.0)
+    assert pem.frequency_hz == pytest.approx(50012.5)
+    assert len(pem.notices) == NOTICES_KEPT
+    assert pem.notices[-1].text == f"warning {NOTICES_KEPT + 49}"  # newest last
+    assert pem.notices[0].text == "warning 50"
     port.assert_complete()
 
 

@@ -18,6 +18,7 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from drivers.apt_protocol import MessageId
 from drivers.base import AxisKind
 from drivers.errors import (
     ConnectionFailed,
@@ -721,6 +722,27 @@ def test_motion_refused_in_error_state_names_the_command():
     with pytest.raises(ControllerError) as info:
         motor.move_to(1.0)
     assert info.value.code == 7
+
+
+def test_move_on_an_axis_in_error_state_is_refused_before_anything_is_sent():
+    motor = open_url(stage="PRM1-Z8")
+    motor.home(timeout=5.0)
+    emu = registry.get("simapt", "ax")
+    emu.enter_error_state("7")
+    with pytest.raises(ControllerError):
+        motor.status()  # the error event is read (and reported) here
+    assert motor.status().error  # the status bits keep it
+    sent = len(emu.received_log)
+    with pytest.raises(ControllerError) as info:
+        motor.move_to(1.0)
+    err = info.value
+    assert err.device == "ax" and err.command == "move_to"
+    assert "enable" in (err.hint or "")
+    move_header = struct.pack("<H", MessageId.MOT_MOVE_ABSOLUTE)
+    assert move_header not in emu.received_log[sent:]  # no move reached the controller
+    motor.enable()  # the recovery the error names
+    motor.move_to(1.0, wait=True, timeout=10.0)
+    assert motor.position == pytest.approx(1.0, abs=motor.position_tolerance)
 
 
 def test_failed_open_is_connection_failed_and_the_handed_in_port_stays_open():

@@ -19,7 +19,8 @@ EXAMPLES = [p for p in EXAMPLES if p.stem not in EXPLICIT_POINTS]
 BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
          "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
          "brdf_inplane_spin": str(_EXAMPLE_DIR / "bench_sim_laser.toml"),
-         "brdf_polarimetric": "sim-polarimetric"}
+         "brdf_polarimetric": "sim-polarimetric",
+         "brdf_polarimetric_pem": "sim-polarimetric-pem"}
 
 
 def _validated(qtbot, editor):

@@ -1,10 +1,13 @@
 """A polarimetric run file → Mueller matrices, decompositions, the pBRDF fit, the report
 and the results file (what ``scatterlab fit`` does for a run with an optical train).
 
-Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`), choose
-the calibration (:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every
-geometry (:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix
-with its full covariance (:func:`analysis.polarimetry.pbrdf.fit_pbrdf`, judged by the
+Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`; a PEM
+run's DC, 1f and 2f readings by :mod:`~instrument.pipelines.polarimetry.pem_readings`,
+reduced with its nominal train and no calibration, ADR 0106), choose the calibration
+(:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every geometry
+(:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix with its
+full covariance (the variant the data need,
+:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`, ADR 0107, judged by the
 goodness-of-fit gate of ADR 0051), draw the report
 (:mod:`~instrument.pipelines.polarimetry.report`) and write ``results.h5``
 (:mod:`~instrument.pipelines.polarimetry.results`), all under ``DIR/RUN/fit/`` next to the
@@ -15,13 +18,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from analysis.polarimetry.pbrdf import PBRDF_PARAMS, fit_pbrdf, pbrdf
+from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf, pbrdf
+from analysis.polarimetry.pbrdf_selection import PBRDF_VARIANTS, select_pbrdf
 from analysis.polarimetry.validation import PolarimetryInputError
 from instrument.pipelines.polarimetry.calibration import (
     PolarimeterCalibration,
@@ -38,14 +42,20 @@ from instrument.pipelines.polarimetry.results import (
 from instrument.run.paths import results_dir
 from instrument.run.runfile import check_run_file
 
-__all__ = ["DEFAULT_START", "UNCALIBRATED", "PolarimetricFit", "fit_polarimetric_run"]
+__all__ = ["DEFAULT_START", "UNCALIBRATED", "UNCALIBRATED_PEM", "PolarimetricFit",
+           "fit_polarimetric_run", "polarimetric_options"]
 
-#: Start values (n, k, alpha, albedo) of the pBRDF fit: a rough dielectric.
-DEFAULT_START = (1.5, 0.0, 0.2, 0.1)
+#: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
+#: the polarimeter's nominal frame.
+DEFAULT_START = (1.5, 0.0, 0.2, 0.1, 0.0)
 
 #: What the report and the console say when no calibration is used.
 UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
                 "misalignment; run scatterlab calibrate polarimeter")
+#: ... for a PEM run, which the eigenvalue calibration (of a DRR) does not cover.
+UNCALIBRATED_PEM = ("PEM run reduced with the nominal optical train (DC, 1f and 2f rows at "
+                    "the modulator's amplitude; the mounts' read-back angles): elements may "
+                    "be biased by the train's own misalignment")
 
 
 @dataclass(frozen=True)
@@ -76,20 +86,46 @@ def choose_calibration(path: str | Path, bench: str, calibration: str | Path | N
     return load_calibration(calibration)
 
 
+def polarimetric_options(calibration: PolarimeterCalibration | None,
+                         start: Sequence[float], fixed: Sequence[str] | None,
+                         distribution: str) -> dict[str, Any]:
+    """The options :func:`fit_polarimetric_run` records in ``results.h5`` (a batch compares
+    them to tell whether a run is already done)."""
+    used = "none" if calibration is None or calibration.path is None else str(
+        calibration.path)
+    return {"calibration": used, "start": [float(v) for v in start],
+            "fixed": "select" if fixed is None else list(fixed),
+            "distribution": distribution}
+
+
 def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
-               fixed: Sequence[str], distribution: str) -> dict[str, Any] | None:
+               fixed: Sequence[str] | None, distribution: str) -> dict[str, Any] | None:
+    """The pBRDF fit: with ``fixed`` None the variant the data need (ADR 0107), else the
+    one model with those parameters held."""
     use = [p for p in points if p.brdf.normalised_valid and not p.group.transmitted]
     if not use:
         return None
-    ang = {name: np.radians([getattr(p.group, name) for p in use])
-           for name in ("theta_i", "phi_i", "theta_r", "phi_r")}
-    fit = fit_pbrdf(np.array([p.brdf.m for p in use]), np.array([p.brdf.cov for p in use]),
-                    ang["theta_i"], ang["phi_i"], ang["theta_r"], ang["phi_r"],
-                    start=start, fixed=fixed, distribution=distribution)
+    ang = [np.radians([getattr(p.group, name) for p in use])
+           for name in ("theta_i", "phi_i", "theta_r", "phi_r")]
+    m = np.array([p.brdf.m for p in use])
+    cov = np.array([p.brdf.cov for p in use])
+    selection: dict[str, Any] | None = None
+    fit: PbrdfFit
+    if fixed is None:
+        sel = select_pbrdf(m, cov, *ang, start=start, distribution=distribution)
+        fit = sel.chosen_fit
+        held = list(dict.fromkeys(PBRDF_VARIANTS[sel.chosen]))
+        variant = sel.chosen
+        selection = {"criterion": sel.criterion, "rule": sel.rule,
+                     "table": [asdict(r) for r in sel.table]}
+    else:
+        fit = fit_pbrdf(m, cov, *ang, start=start, fixed=fixed, distribution=distribution)
+        held, variant = list(fixed), "fixed by the user"
     gof = fit.goodness
     return {"param_names": list(PBRDF_PARAMS), "params": fit.params.tolist(),
             "stderr": fit.sigma.tolist(), "covariance": fit.cov.tolist(),
-            "fixed": list(fixed), "distribution": distribution,
+            "fixed": held, "distribution": distribution, "variant": variant,
+            "selection": selection,
             "adequate": bool(gof.adequate), "verdict": gof.verdict(), "chi2": gof.chi2,
             "dof": gof.dof, "p_value": gof.p_value}
 
@@ -111,14 +147,17 @@ def _model_curves(points: Sequence[MuellerPoint], fit: dict[str, Any]
 
 def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = None,
                          start: Sequence[float] = DEFAULT_START,
-                         fixed: Sequence[str] = ("k",), distribution: str = "beckmann",
+                         fixed: Sequence[str] | None = None, distribution: str = "beckmann",
                          report_dir: str | Path | None = None, report: bool = True,
                          write: bool = True, into_run: bool = False) -> PolarimetricFit:
     """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
 
     ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
     for the newest valid calibration of the run's bench beside the run. ``into_run`` also
-    writes the results into the run file's ``/entry/analysis``.
+    writes the results into the run file's ``/entry/analysis``. ``fixed`` None (the
+    default) chooses the pBRDF variant the data need
+    (:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`); a list of parameter
+    names fits the one model with those held at ``start``.
 
     Raises
     ------
@@ -132,7 +171,12 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     check_run_file(path, "fit")
     prun = read_polarimetric(path)
     bench = str(prun.run.profile().get("bench", {}).get("name", ""))
-    cal = choose_calibration(path, bench, calibration)
+    pem = prun.polarimetry.get("mode") == "pem"
+    if pem and calibration is not None and str(calibration) != "none":
+        raise ValueError("a PEM run is reduced with its nominal optical train: the "
+                         "polarimeter calibration (eigenvalue method) is of a dual rotating "
+                         "retarder; leave --calibration out")
+    cal = None if pem else choose_calibration(path, bench, calibration)
     notes: list[str] = []
     if cal is not None and cal.bench != bench:
         from instrument.pipelines.polarimetry.calibration import CalibrationError
@@ -142,7 +186,7 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     if cal is not None and not cal.valid:
         notes.append(f"the calibration {cal.path} failed its quality gate ({cal.quality}); "
                      "used because it was named")
-    cal_text = (UNCALIBRATED if cal is None else
+    cal_text = (UNCALIBRATED_PEM if pem else UNCALIBRATED if cal is None else
                 f"calibrated with {cal.path} ({cal.date}): {cal.describe()}")
     scale = source_scale(prun, cal)
     points = []
@@ -180,8 +224,7 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
                             model=_model_curves(points, fit) if fit else None)
     saved = None
     if write:
-        options = {"calibration": summary["calibration"] or "none", "start": list(start),
-                   "fixed": list(fixed), "distribution": distribution}
+        options = polarimetric_options(cal, start, fixed, distribution)
         saved = write_polarimetric_results(path, points, summary, run_id=run.run_id,
                                            options=options, folder=folder)
     if into_run:

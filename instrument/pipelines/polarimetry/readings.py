@@ -24,14 +24,27 @@ from typing import Any
 import numpy as np
 
 from analysis.polarimetry.drr import generator_extinction
+from analysis.polarimetry.pem import PemSetting
 from instrument.bench.meter_noise import meter_noise
 from instrument.run.runfile import RunData, RunFileError, as_text, open_run, read_planned
 
-__all__ = ["MOUNT_ROLES", "PolarimetricRun", "StepGroup", "is_polarimetric",
+__all__ = ["MOUNT_ROLES", "PemGroup", "PolarimetricRun", "StepGroup", "is_polarimetric",
            "read_polarimetric"]
 
 #: The mount roles a dual-rotating-retarder run moves (instrument.bench.optics).
 MOUNT_ROLES = ("psg_polariser", "psg_retarder", "psa_retarder", "psa_polariser")
+
+
+@dataclass(frozen=True)
+class PemGroup:
+    """One geometry's PEM readings: per point the DC, 1f and 2f (V; the lock-in's signed
+    RMS in-phase outputs) with their σ, the setting as the mounts reached it, and the
+    modulator's amplitude at the group's wavelength (rad)."""
+
+    readings: np.ndarray
+    sigmas: np.ndarray
+    settings: tuple[PemSetting, ...]
+    amplitude_rad: float
 
 
 @dataclass(frozen=True)
@@ -56,6 +69,9 @@ class StepGroup:
     psa_polariser_deg: float
     intensity: np.ndarray
     sigma: np.ndarray
+    #: A PEM run's group: its DC, 1f and 2f readings and settings (ADR 0106); ``None`` for a
+    #: dual rotating retarder's. ``intensity``/``sigma`` then hold the DC channel.
+    pem: PemGroup | None = None
 
     @property
     def transmitted(self) -> bool:
@@ -148,7 +164,7 @@ def read_polarimetric(path: str | Path, run: RunData | None = None) -> Polarimet
     Raises
     ------
     RunFileError
-        Not a polarimetric run, a mode other than ``drr``, no power-meter readings, or a
+        Not a polarimetric run, an unknown mode, no readings of the mode's detector, or a
         mount's read-back column missing.
     """
     from instrument.run.runfile import read_run
@@ -160,17 +176,65 @@ def read_polarimetric(path: str | Path, run: RunData | None = None) -> Polarimet
                                "entry/instrument/optical_train)")
         train = json.loads(as_text(f["entry/instrument/optical_train"][()]))
     pol = dict(train.get("polarimetry", {}))
-    if pol.get("mode", "drr") != "drr":
-        raise RunFileError(f"{path}: polarimetry mode {pol.get('mode')!r} is not reduced by "
-                           "this version (only 'drr')")
-    missing = [r for r in ("psg_retarder", "psa_retarder") if r not in run.axes]
-    if missing:
-        raise RunFileError(f"{path} has no read-back angles of {missing}: the run did not "
-                           "move the retarders")
+    mode = pol.get("mode", "drr")
+    if mode not in ("drr", "pem"):
+        raise RunFileError(f"{path}: polarimetry mode {mode!r} is not reduced by this "
+                           "version (only 'drr' and 'pem')")
     planned = read_planned(path)
     rows = np.flatnonzero((run.point_status == 0) & (run.label == "sample"))
     if rows.size == 0:
         raise ValueError(f"{path} holds no completed sample points")
+    wl = _wavelength(run)
+    keys, metas = _geometries(run, planned, rows, wl)
+    if mode == "pem":
+        from instrument.pipelines.polarimetry.pem_readings import pem_groups
+
+        groups, source = pem_groups(path, run, train, keys, metas, wl)
+    else:
+        groups, source = _drr_groups(path, run, train, keys, metas, wl)
+    groups.sort(key=lambda g: (g.wavelength_nm if math.isfinite(g.wavelength_nm) else 0.0,
+                               g.theta_i, g.phi_r, g.theta_r))
+    return PolarimetricRun(run=run, train=train, polarimetry=pol, groups=tuple(groups),
+                           noise_source=source)
+
+
+def _geometries(run: RunData, planned: Any, rows: np.ndarray, wl: np.ndarray
+                ) -> tuple[dict[tuple[float, ...], list[int]], dict[int, dict[str, Any]]]:
+    """The rows of each planned geometry and wavelength (module docstring), and each row's
+    planned meta."""
+    keys: dict[tuple[float, ...], list[int]] = {}
+    metas: dict[int, dict[str, Any]] = {}
+    for r in rows:
+        k = int(run.index[r])
+        # the point's meta is stored as a list of [key, value] pairs
+        meta = dict(json.loads(planned.meta[k])) if k < len(planned.meta) and \
+            planned.meta[k] else {}
+        metas[int(r)] = meta
+        ang = planned.angles[k] if k < len(planned.angles) else [
+            run.theta_i[r], run.phi_i[r], run.theta_r[r], run.phi_r[r]]
+        key = (*(round(float(a), 3) for a in ang), round(float(wl[r]), 1)
+               if math.isfinite(wl[r]) else math.nan, float(meta.get("filter", -1)))
+        keys.setdefault(key, []).append(int(r))
+    return keys, metas
+
+
+def element_axis(run: RunData, train: Mapping[str, Any], role: str, arm: str, kind: str
+                 ) -> np.ndarray:
+    """Each point's axis of an element (deg): its nominal orientation plus its mount's
+    read-back position (0 where the run did not move the mount)."""
+    base = float(_element(train, arm, kind).get("orientation_deg", 0.0))
+    pos = run.position(role)
+    return base + np.where(np.isfinite(pos), pos, 0.0)
+
+
+def _drr_groups(path: str | Path, run: RunData, train: dict[str, Any],
+                keys: dict[tuple[float, ...], list[int]], metas: dict[int, dict[str, Any]],
+                wl: np.ndarray) -> tuple[list[StepGroup], str]:
+    missing = [r for r in ("psg_retarder", "psa_retarder") if r not in run.axes]
+    if missing:
+        raise RunFileError(f"{path} has no read-back angles of {missing}: the run did not "
+                           "move the retarders")
+    rows = np.array([r for members in keys.values() for r in members])
     power = np.asarray(run.power_w, dtype=float)
     dark = run.power_dark_w
     dark = np.zeros_like(power) if dark is None else np.nan_to_num(np.asarray(dark, float))
@@ -185,32 +249,13 @@ def read_polarimetric(path: str | Path, run: RunData | None = None) -> Polarimet
     if np.any(sigma[rows] <= 0):
         raise ValueError("the power meter's noise is unknown (no relative_noise or "
                          "noise_floor_w in the profile): the Mueller matrices need it")
-    wl = _wavelength(run)
-    optics = {arm: {kind: _element(train, arm, kind) for kind in ("polariser", "retarder")}
-              for arm in ("psg", "psa")}
-
-    def axis(role: str, arm: str, kind: str) -> np.ndarray:
-        base = float(optics[arm][kind].get("orientation_deg", 0.0))
-        pos = run.position(role)
-        return base + np.where(np.isfinite(pos), pos, 0.0)
-
-    g_ret, a_ret = axis("psg_retarder", "psg", "retarder"), axis("psa_retarder", "psa",
-                                                                   "retarder")
-    g_pol, a_pol = axis("psg_polariser", "psg", "polariser"), axis("psa_polariser", "psa",
-                                                                     "polariser")
-    keys: dict[tuple[float, ...], list[int]] = {}
+    g_ret = element_axis(run, train, "psg_retarder", "psg", "retarder")
+    a_ret = element_axis(run, train, "psa_retarder", "psa", "retarder")
+    g_pol = element_axis(run, train, "psg_polariser", "psg", "polariser")
+    a_pol = element_axis(run, train, "psa_polariser", "psa", "polariser")
     steps = np.full(run.n_points, -1)
-    for r in rows:
-        k = int(run.index[r])
-        # the point's meta is stored as a list of [key, value] pairs
-        meta = dict(json.loads(planned.meta[k])) if k < len(planned.meta) and \
-            planned.meta[k] else {}
+    for r, meta in metas.items():
         steps[r] = int(meta.get("drr_step", -1))
-        ang = planned.angles[k] if k < len(planned.angles) else [
-            run.theta_i[r], run.phi_i[r], run.theta_r[r], run.phi_r[r]]
-        key = (*(round(float(a), 3) for a in ang), round(float(wl[r]), 1)
-               if math.isfinite(wl[r]) else math.nan, float(meta.get("filter", -1)))
-        keys.setdefault(key, []).append(int(r))
     groups = []
     for members in keys.values():
         idx = np.array(sorted(members, key=lambda r: (steps[r], r)))
@@ -222,7 +267,4 @@ def read_polarimetric(path: str | Path, run: RunData | None = None) -> Polarimet
             psg_polariser_deg=float(np.mean(g_pol[idx])),
             psa_polariser_deg=float(np.mean(a_pol[idx])),
             intensity=net[idx], sigma=sigma[idx]))
-    groups.sort(key=lambda g: (g.wavelength_nm if math.isfinite(g.wavelength_nm) else 0.0,
-                               g.theta_i, g.phi_r, g.theta_r))
-    return PolarimetricRun(run=run, train=train, polarimetry=pol, groups=tuple(groups),
-                           noise_source=noise.source)
+    return groups, noise.source

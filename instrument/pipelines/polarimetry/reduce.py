@@ -44,6 +44,7 @@ from analysis.polarimetry.drr import (
     instrument_matrix,
     reduce,
 )
+from analysis.polarimetry.pem import pem_design
 from analysis.polarimetry.realizability import Realizability, realizability
 from analysis.polarimetry.validation import PolarimetryInputError
 from instrument.pipelines.polarimetry.calibration import PolarimeterCalibration
@@ -81,7 +82,8 @@ class MuellerPoint:
 
 
 def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> Scale:
-    """S and Ω of the module docstring, and where S came from.
+    """S and Ω of the module docstring, and where S came from (a PEM run's S in volts
+    through the photodiode's responsivity and transimpedance).
 
     Raises
     ------
@@ -115,8 +117,26 @@ def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> S
     if power is None:
         raise ValueError("the source power is unknown (no calibration and no simulated "
                          "source power): run scatterlab calibrate polarimeter")
+    if prun.polarimetry.get("mode") == "pem":
+        return _pem_scale(prof, float(power), omega)
     return Scale(2.0 * float(power), omega,
                  "2 × the profile's source power (taken as polarised along the generator)")
+
+
+def _pem_scale(prof: dict[str, object], power_w: float, omega: float) -> Scale:
+    """A PEM run reads volts: the unit-source scale is 2P (as for a DRR) times the
+    photodiode's volts per watt, its responsivity × transimpedance (``[photodiode]``)."""
+    pd = prof.get("photodiode")
+    pd = pd if isinstance(pd, dict) else {}
+    resp, gain = pd.get("responsivity_a_per_w"), pd.get("transimpedance_v_per_a")
+    if not isinstance(resp, int | float) or not isinstance(gain, int | float):
+        raise ValueError("a PEM run reads the photodiode in volts: the Mueller-matrix BRDF "
+                         "needs [photodiode] responsivity_a_per_w (one value) and "
+                         "transimpedance_v_per_a in the bench profile")
+    volts = float(resp) * float(gain)
+    return Scale(2.0 * power_w * volts, omega,
+                 f"2 × the profile's source power × the photodiode's {volts:.4g} V/W "
+                 "(responsivity × transimpedance)")
 
 
 def _nominal_matrix(prun: PolarimetricRun, g: StepGroup) -> np.ndarray:
@@ -137,7 +157,14 @@ def reduce_group(prun: PolarimetricRun, g: StepGroup, cal: PolarimeterCalibratio
     PolarimetryInputError
         Too few or degenerate steps for the 16 elements (fewer than 25 equal steps).
     """
-    if cal is None:
+    if g.pem is not None:
+        # DC, 1f and 2f of every setting (analysis.polarimetry.pem), nominal analyser
+        # retardance; a PEM run takes no DRR calibration (the pipeline refuses one)
+        w = pem_design(g.pem.settings, amplitude_rad=g.pem.amplitude_rad,
+                       analyser_retardance_rad=math.radians(
+                           prun.retardance_deg("psa", g.wavelength_nm)))
+        raw = reduce(g.pem.readings.ravel(), g.pem.sigmas.ravel(), w)
+    elif cal is None:
         w = _nominal_matrix(prun, g)
         raw = reduce(g.intensity, g.sigma, w)
     else:

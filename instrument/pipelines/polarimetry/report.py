@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import html
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -125,6 +125,20 @@ def _fmt(v: float, s: float | None = None, digits: int = 4) -> str:
     return f"{v:.{digits}g} ± {s:.2g}"
 
 
+def _selection_html(fit: Mapping[str, Any]) -> str:
+    """The variants' comparison table (empty when one model was named)."""
+    sel = fit.get("selection")
+    if not sel:
+        return ""
+    e = html.escape
+    crit = str(sel["criterion"])
+    rows = "".join(f"<tr><td>{e(r['name'])}{' (chosen)' if r['name'] == fit['variant'] else ''}"
+                   f"</td><td>{r['n_params']}</td><td>{r['chi2']:.1f}</td>"
+                   f"<td>{r[crit]:.1f}</td></tr>" for r in sel["table"])
+    return (f"<p>Variant chosen by {e(str(sel['rule']))}.</p><table><tr><th>variant</th>"
+            f"<th>parameters</th><th>χ²</th><th>{e(crit.upper())}</th></tr>{rows}</table>")
+
+
 def write_report(folder: Path, points: Sequence[MuellerPoint], *, title: str,
                  summary: dict[str, Any],
                  model: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> Path:
@@ -155,10 +169,10 @@ def write_report(folder: Path, points: Sequence[MuellerPoint], *, title: str,
             f"<tr><td>{e(n)}</td><td>{_fmt(v, s)}</td><td>{'fixed' if n in fit['fixed'] else ''}"
             "</td></tr>" for n, v, s in zip(fit["param_names"], fit["params"], fit["stderr"],
                                              strict=True))
-        fit_html = (f"<p>{e(fit['distribution'])} microfacet Fresnel pBRDF plus a "
-                    f"depolarising Lambertian layer (Priest &amp; Germer 2000): "
+        fit_html = (f"<p>{e(fit['distribution'])} microfacet Fresnel pBRDF (Priest &amp; "
+                    f"Germer 2000), variant {e(str(fit.get('variant', '')))}: "
                     f"{e(fit['verdict'])}</p><table><tr><th>parameter</th><th>value ± σ"
-                    f"</th><th></th></tr>{cells}</table>")
+                    f"</th><th></th></tr>{cells}</table>{_selection_html(fit)}")
     page = folder / "index.html"
     page.write_text(
         f"<!doctype html><html><head><meta charset='utf-8'><title>{e(title)}</title>"

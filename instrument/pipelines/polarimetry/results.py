@@ -12,9 +12,11 @@ The group (NXprocess, ``program = "scatterlab fit"``, ``kind = "polarimetric"``)
   R in rad, retardance axis in deg, Δ), ``valid`` and ``note`` (why a matrix has none);
 * ``realizability/``: ``eigenvalues`` and ``sigma`` (N, 4) of the coherency matrix,
   ``p_value``, ``flagged`` (flagged matrices are kept as measured, never projected);
-* ``pbrdf/`` (when fitted): ``params``, ``stderr``, ``covariance``, ``param_names``,
-  ``fixed``; attributes ``distribution``, the goodness-of-fit gate's ``adequate``,
-  ``verdict``, ``chi2``, ``dof``, ``p_value``.
+* ``pbrdf/`` (when fitted): ``params``, ``stderr``, ``covariance``, ``param_names``
+  (n, k, alpha, albedo, frame_deg), ``fixed``; attributes ``distribution``, ``variant``
+  (the chosen variant, ADR 0107), the goodness-of-fit gate's ``adequate``, ``verdict``,
+  ``chi2``, ``dof``, ``p_value``; ``selection_json`` (criterion, rule and every
+  variant's scores) when the variant was chosen from the data.
 """
 
 from __future__ import annotations
@@ -96,8 +98,11 @@ def fill(g: h5py.Group, points: Sequence[MuellerPoint], summary: Mapping[str, An
         _strings(f, "fixed", fit["fixed"])
         for key in ("params", "stderr", "covariance"):
             f.create_dataset(key, data=np.asarray(fit[key], dtype=float))
-        for key in ("distribution", "adequate", "verdict", "chi2", "dof", "p_value"):
+        for key in ("distribution", "adequate", "verdict", "chi2", "dof", "p_value",
+                    "variant"):
             f.attrs[key] = fit[key]
+        if fit.get("selection"):
+            put_json(f, "selection_json", fit["selection"])
     put_json(g, "summary_json", dict(summary))
 
 

@@ -19,7 +19,7 @@ from analysis.polarimetry import (
     reduce,
 )
 from analysis.polarimetry.calibration import ReferenceScan, calibrate_drr
-from analysis.polarimetry.ecm import ecm_calibrate
+from analysis.polarimetry.ecm import ecm_calibrate, retarder_diattenuator
 
 OPT = math.radians(127)
 STATES = (-45.0, 0.0, 30.0, 60.0)
@@ -169,3 +169,60 @@ def test_closed_loop_every_element_within_2_sigma_over_10_seeds():
     assert np.mean(np.abs(p) < 2.0) > 0.93
     assert 0.9 < p.std() < 1.1
     assert np.mean(uncal_inside) < 0.6  # uncalibrated: visibly off
+
+
+def test_ecm_covariance_monte_carlo_agrees_with_first_order_propagation():
+    # references whose eigenvalues are all well apart (partial polarisers and a retarder):
+    # the calibration map is then smooth at the noise's scale and first order holds. (For
+    # ideal polarisers the vanishing eigenvalue pair is noise, the map is not
+    # differentiable there and only the Monte Carlo, the default, is valid.)
+    w_true, a_true = _separable(2.0, OPT * 1.05, 0.5)
+    refs = [retarder_diattenuator(0.0, 0.5, math.radians(20), 0.3),
+            retarder_diattenuator(math.radians(60), 0.5, math.radians(25), 0.5),
+            retarder_diattenuator(math.radians(30), 0.9, math.radians(45), 1.4)]
+    noise = 1e-3
+    rng = np.random.default_rng(11)
+
+    def meas(m):
+        return a_true @ m @ w_true + noise * rng.standard_normal((4, 4))
+
+    b0, bs = meas(np.eye(4)), [meas(m) for m in refs]
+    sig = np.full((4, 4), noise)
+    common = {"sigma_air": sig, "sigma_samples": [sig] * 3}
+    mc = ecm_calibrate(b0, bs, [0.0, 60.0, 30.0], n_draws=100, seed=3, **common)
+    lin = ecm_calibrate(b0, bs, [0.0, 60.0, 30.0], method="linear", **common)
+    assert mc.cov is not None and lin.cov is not None and mc.cov.shape == (32, 32)
+    assert "Monte Carlo" in mc.cov_method and "first order" in lin.cov_method
+    # the calibration itself does not depend on how its uncertainty is found
+    np.testing.assert_allclose(mc.w, lin.w, atol=1e-12)
+    s_mc, s_lin = np.sqrt(np.diag(mc.cov)), np.sqrt(np.diag(lin.cov))
+    # 100 draws: a standard deviation's sampling error is 1/√200 ≈ 7 %; 30 % is 4.2 of it
+    big = s_lin > 0.05 * s_lin.max()
+    np.testing.assert_allclose(s_mc[big], s_lin[big], rtol=0.3)
+    assert np.median(np.abs(s_mc[big] / s_lin[big] - 1.0)) < 0.1
+    # σ of the order of the noise, through the conditioning of B₀ and the references
+    assert 0.1 * noise < np.median(s_lin[:16]) < 100 * noise
+    assert mc.cov_w is not None and mc.cov_a is not None
+    np.testing.assert_array_equal(mc.cov_w, mc.cov[:16, :16])
+
+
+def test_ecm_covariance_input_checks():
+    sig = np.full((4, 4), 1e-3)
+    b0 = np.diag([1.0, 0.5, 0.4, 0.3])
+    bs = [b0 @ linear_polariser(0.0) + 1e-3, b0 @ linear_polariser(math.pi / 2) + 1e-3]
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(b0, bs, [0.0, 90.0], sigma_air=sig)
+    assert err.value.argument == "sigma_samples"
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(b0, bs, [0.0, 90.0], sigma_air=sig, sigma_samples=[sig])
+    assert err.value.argument == "sigma_samples"
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(b0, bs, [0.0, 90.0], sigma_air=sig, sigma_samples=[sig, sig],
+                      method="bootstrap")
+    assert err.value.argument == "method"
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(b0, bs, [0.0, 90.0], sigma_air=-sig, sigma_samples=[sig, sig])
+    assert err.value.argument == "sigma_air"
+    with pytest.raises(PolarimetryInputError) as err:
+        ecm_calibrate(b0, bs, [0.0, 90.0], sigma_air=sig, sigma_samples=[sig, sig], n_draws=5)
+    assert err.value.argument == "n_draws"

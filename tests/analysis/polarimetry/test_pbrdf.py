@@ -16,6 +16,7 @@ from analysis.polarimetry import (
     linear_retarder,
     reduce,
 )
+from analysis.polarimetry.elements import rotated
 from analysis.polarimetry.pbrdf import PBRDF_PARAMS, fit_pbrdf, fresnel_mueller, pbrdf
 
 
@@ -141,9 +142,11 @@ def _synthetic(truth, seed, noise_rel=0.01):
 
 @pytest.mark.parametrize(("truth", "fixed", "start"), [
     # rough metal (aluminium-like index at 633 nm) with a weak diffuse layer
-    ((1.4, 7.6, 0.2, 0.05), (), (1.8, 6.0, 0.3, 0.1)),
+    ((1.4, 7.6, 0.2, 0.05, 0.0), (), (1.8, 6.0, 0.3, 0.1, 0.0)),
     # dielectric (k held at 0) with a depolarising diffuse layer
-    ((1.5, 0.0, 0.3, 0.4), ("k",), (1.3, 0.0, 0.2, 0.2)),
+    ((1.5, 0.0, 0.3, 0.4, 0.0), ("k",), (1.3, 0.0, 0.2, 0.2, 0.0)),
+    # the same in a polarimeter frame 2° off the plane of incidence
+    ((1.5, 0.0, 0.3, 0.4, 2.0), ("k",), (1.3, 0.0, 0.2, 0.2, 0.0)),
 ])
 def test_parameters_recovered_within_2_sigma(truth, fixed, start):
     pulls = []
@@ -154,8 +157,34 @@ def test_parameters_recovered_within_2_sigma(truth, fixed, start):
         free = [i for i, name in enumerate(PBRDF_PARAMS) if name not in fixed]
         pulls.append((fit.params[free] - np.array(truth)[free]) / fit.sigma[free])
     p = np.abs(np.array(pulls))
-    # 4 seeds × ≤4 parameters at 2σ: ~1 of 16 exceeds by chance; none beyond 3.5σ
+    # 4 seeds × ≤5 parameters at 2σ: ~1 of 20 exceeds by chance; none beyond 3.5σ
     assert np.sum(p > 2.0) <= 3 and np.all(p < 3.5)
+
+
+def test_the_frame_parameter_turns_the_matrix_about_the_beam():
+    # measured in a frame at φ_f from the plane of incidence: R(φ_f) F R(−φ_f)
+    ti, tr = np.array([0.6, 0.9]), np.array([0.8, 0.7])
+    plain = pbrdf((1.5, 0.0, 0.2, 0.1), ti, 0.0, tr, math.pi)
+    turned = pbrdf((1.5, 0.0, 0.2, 0.1, 3.0), ti, 0.0, tr, math.pi)
+    for f, g in zip(plain, turned, strict=True):
+        np.testing.assert_allclose(g, rotated(f, -math.radians(3.0)), atol=1e-15)
+    # a turned frame moves m01 into m02 by −sin 2φ_f
+    assert turned[0, 0, 2] == pytest.approx(-plain[0, 0, 1] * math.sin(math.radians(6.0)),
+                                            rel=1e-12)
+
+
+def test_frame_left_out_of_the_fit_leaves_chi2_at_zero_noise():
+    # noise-free data 0.3° turned: with the frame held at 0 the residual χ² is the
+    # systematic alone (the example's failing gate, ADR 0107); fitted, it vanishes
+    truth = (1.5, 0.0, 0.15, 0.3, 0.3)
+    m, cov, ti, pi_, tr, pr = _synthetic(truth, 0, noise_rel=0.0)
+    m = pbrdf(truth, ti, pi_, tr, pr)
+    held = fit_pbrdf(m, cov, ti, pi_, tr, pr, start=(1.5, 0, 0.2, 0.1, 0.0),
+                     fixed=("k", "frame_deg"))
+    fitted = fit_pbrdf(m, cov, ti, pi_, tr, pr, start=(1.5, 0, 0.2, 0.1, 0.0), fixed=("k",))
+    assert held.goodness.chi2 > 1.0
+    assert fitted.goodness.chi2 < 1e-8
+    assert fitted.params[4] == pytest.approx(0.3, abs=1e-6)
 
 
 def test_fit_input_checks():
@@ -174,6 +203,9 @@ def test_fit_input_checks():
     with pytest.raises(PolarimetryInputError) as err:
         pbrdf((1.5, 0.0, 0.2, 0.1), 2.0, 0.0, 0.1, math.pi)
     assert err.value.argument == "theta_i"
+    with pytest.raises(PolarimetryInputError, match="4 or 5 values") as err:
+        pbrdf((1.5, 0.0, 0.2), 0.1, 0.0, 0.1, math.pi)
+    assert err.value.argument == "params"
 
 
 def test_ggx_m00_is_the_registry_model_ggx_conductor_plus_lambert():

@@ -26,7 +26,8 @@ BENCH = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfie
          "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
          "brdf_inplane_spin": str(Path(__file__).resolve().parents[3] / "examples"
                                   / "bench_sim_laser.toml"),
-         "brdf_polarimetric": "sim-polarimetric"}
+         "brdf_polarimetric": "sim-polarimetric",
+         "brdf_polarimetric_pem": "sim-polarimetric-pem"}
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)

@@ -75,9 +75,10 @@ def test_every_example_plan_dry_runs(tmp_path, capsys):
     benches = {"brdf_hemisphere": "sim_out_of_plane", "lightfield_scan": "sim-lightfield",
                "sphere_capture": "sim-spheres", "brdf_spectral_lockin": "sim-spectral",
                "brdf_inplane_spin": str(examples / "bench_sim_laser.toml"),
-               "brdf_polarimetric": "sim-polarimetric"}
+               "brdf_polarimetric": "sim-polarimetric",
+               "brdf_polarimetric_pem": "sim-polarimetric-pem"}
     directional = {"brdf_inplane", "brdf_inplane_spin", "brdf_lobe", "brdf_hemisphere",
-                   "brdf_polarimetric",
+                   "brdf_polarimetric", "brdf_polarimetric_pem",
                    "calibration_reference",
                    "calibration_signature", "brdf_spectral_lockin", "calibration_nd"}
     names = sorted(p.stem for p in examples.glob("*.toml")

@@ -332,7 +332,8 @@ _EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[3] / "example
 #: Every example plan with the bench it is written for (fuzzed below, each kind).
 _EXAMPLE_BENCH = {p.stem: {"brdf_hemisphere": "sim_out_of_plane",
                            "lightfield_scan": "sim-lightfield", "lightfield": "sim-lightfield",
-                           "sphere_capture": "sim-spheres"}.get(p.stem, "sim")
+                           "sphere_capture": "sim-spheres",
+                           "brdf_polarimetric_pem": "sim-polarimetric-pem"}.get(p.stem, "sim")
                   for p in sorted(_EXAMPLES.glob("*.toml"))
                   if "[plan]" in p.read_text(encoding="utf-8")}  # not the bench profiles
 

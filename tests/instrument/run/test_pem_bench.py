@@ -31,12 +31,18 @@ def pem_bench(sample: str) -> str:
     # transmission arm, as a polarimeter's calibration stand has)
     text = text.replace("[simulation.source]", "[simulation.roles]\ndetector_theta = 180.0\n\n"
                         "[simulation.source]")
-    if sample == "quarter_wave":
-        text = text.replace('sample = "polariser"\n\n[simulation.scene.polariser]\n'
-                            "orientation_deg = 30.0",
-                            'sample = "retarder"\n\n[simulation.scene.retarder]\n'
-                            "orientation_deg = 20.0\nretardance_deg = 90.0")
-    return text
+    return with_reference(text, sample)
+
+
+def with_reference(text: str, sample: str) -> str:
+    """The profile with its glass replaced by a transmissive reference: a linear polariser
+    at 30° or a quarter-wave plate at 20°."""
+    scene = text.index("[simulation.scene]")
+    table = ("orientation_deg = 30.0" if sample == "polariser"
+             else "orientation_deg = 20.0\nretardance_deg = 90.0")
+    kind = "polariser" if sample == "polariser" else "retarder"
+    return (text[:scene] + f'[simulation.scene]\nkind = "polarimetric"\nsample = "{kind}"\n\n'
+            f"[simulation.scene.{kind}]\n{table}\n")
 
 
 @pytest.mark.slow  # eight settings × four harmonic pairs on the emulated lock-in

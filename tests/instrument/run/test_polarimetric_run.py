@@ -127,7 +127,7 @@ def test_polarimetry_across_a_hemisphere_and_a_wavelength_axis(capsys, tmp_path)
 
 
 @pytest.mark.parametrize(("table", "field"), [
-    ('mode = "pem"', "polarimetry.mode"),
+    ('mode = "pem"\nsteps = 25', "polarimetry.steps"),  # PEM mode has no retarder steps
     ('mode = "rotating_analyser"', "polarimetry.mode"),
     ("steps = 12", "polarimetry.steps"),
     ("ratio = 1", "polarimetry.ratio"),

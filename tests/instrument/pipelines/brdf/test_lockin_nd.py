@@ -29,6 +29,7 @@ from instrument.pipelines.brdf.spectral import (
 )
 from instrument.run.runfile import RunData, read_run
 from tests.instrument.pipelines.brdf.test_nd_filters import run_plan, sharp_bench
+from tests.shared_files import made_once
 
 pytestmark = pytest.mark.slow  # one run through the engine, about 45 s
 
@@ -69,11 +70,12 @@ TRUE_T = 0.1043  # ND1 on the bench (sim.toml [simulation.filter_wheel])
 
 @pytest.fixture(scope="module")
 def peak_run(tmp_path_factory) -> Path:
-    tmp = tmp_path_factory.mktemp("lockin_nd")
-    bench = sharp_bench(tmp)
-    bench.write_text(bench.read_text(encoding="utf-8").replace("[geometry]", LOCKIN, 1),
-                     encoding="utf-8")
-    return run_plan(tmp, PLAN, bench, "peak")
+    def scan(tmp: Path) -> Path:
+        bench = sharp_bench(tmp)
+        bench.write_text(bench.read_text(encoding="utf-8").replace("[geometry]", LOCKIN, 1),
+                         encoding="utf-8")
+        return run_plan(tmp, PLAN, bench, "peak")
+    return made_once(tmp_path_factory, "lockin_nd", scan)  # once per session, not per worker
 
 
 def _reduced(run: RunData):

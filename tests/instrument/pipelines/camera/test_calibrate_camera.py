@@ -18,6 +18,7 @@ from instrument.pipelines.brdf.analyse import analyse
 from instrument.pipelines.brdf.reduce import ReductionOptions, reduce_run
 from tests.instrument.pipelines.camera.ptc_sim import run_ptc, truth, z_scores
 from tests.instrument.sim_scan import SAMPLES, ScanSetup, render, write_run_file
+from tests.shared_files import made_once
 
 
 @pytest.fixture(scope="module")
@@ -27,16 +28,19 @@ def truth_values():
 
 @pytest.fixture(scope="module")
 def ptc_run(tmp_path_factory):
-    return run_ptc(7, tmp_path_factory.mktemp("ptc"))
+    # the seeded sweep once per session, not once per xdist worker (tests/shared_files.py)
+    return made_once(tmp_path_factory, "ptc", lambda folder: run_ptc(7, folder))
 
 
 @pytest.fixture(scope="module")
 def recovered(ptc_run, truth_values, tmp_path_factory):
-    out = tmp_path_factory.mktemp("cal") / "camera.json"
-    rc = main(["calibrate", "camera", str(ptc_run), "-o", str(out), "--photons-per-pixel-s",
-               repr(truth_values["photons_per_pixel_s"])])
-    assert rc == 0
-    return out
+    def calibrate(folder):
+        out = folder / "camera.json"
+        rc = main(["calibrate", "camera", str(ptc_run), "-o", str(out),
+                   "--photons-per-pixel-s", repr(truth_values["photons_per_pixel_s"])])
+        assert rc == 0
+        return out
+    return made_once(tmp_path_factory, "cal", calibrate)
 
 
 def test_recovers_the_simulated_sensor_within_two_sigma(recovered, truth_values) -> None:
@@ -50,6 +54,9 @@ def test_recovers_the_simulated_sensor_within_two_sigma(recovered, truth_values)
     assert e["saturation_capacity_e"][1] < 0.02 * truth_values["saturation_capacity_e"]
     assert e["warnings"] == []
     assert e["camera_settings"]["camera"] == "scatterlab SimCam EMVA1288 SIM000007"
+    # the settings the calibration holds for, as the run file recorded them
+    assert e["camera_settings"]["gain_db"] == 0.0
+    assert e["camera_settings"]["pixel_format"] == "MONO12"
 
 
 def test_writes_the_file_fit_reads_and_the_report(recovered, ptc_run) -> None:

@@ -43,6 +43,7 @@ from instrument.pipelines.lightfield.reconstruct import NOISE_DISAGREEMENT_FACTO
 from instrument.pipelines.lightfield.results import GROUP
 from instrument.pipelines.lightfield.scan import MeasuredScan, assemble, read_scan
 from instrument.run.paths import results_dir, results_path
+from tests.shared_files import made_once
 
 ROOT = Path(__file__).resolve().parents[4]
 EXAMPLE = ROOT / "examples" / "lightfield_scan.toml"
@@ -146,11 +147,12 @@ def test_assembly_puts_a_known_field_back_on_the_grid():
 # ------------------------------------------------------------------------ end to end
 @pytest.fixture(scope="module")
 def scan_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("lfruns")
-    assert main(["run", str(EXAMPLE), "--bench", "sim-lightfield", "--out", str(out),
-                 "--no-fsync", "--quiet"]) == 0
-    (run,) = sorted(out.glob("*.h5"))
-    return run
+    def scan(out: Path) -> Path:
+        assert main(["run", str(EXAMPLE), "--bench", "sim-lightfield", "--out", str(out),
+                     "--no-fsync", "--quiet"]) == 0
+        (run,) = sorted(out.glob("*.h5"))
+        return run
+    return made_once(tmp_path_factory, "lfruns", scan)  # once per session, not per worker
 
 
 def test_scan_records_one_light_field_row_per_stage_position(scan_run):

@@ -59,31 +59,39 @@ def fast_bench(folder: Path, scene: str | None = None, seed: int | None = None) 
     return path
 
 
-def run_with_truth(folder: Path, bench: Path, plan: str, steps: int = 25
+def run_with_truth(folder: Path, bench: Path, plan: str, steps: int = 25, *,
+                   world_name: str = "sim-polarimetric", frame_deg: float = FRAME_DEG,
+                   straight_through: bool = False
                    ) -> tuple[Path, dict[tuple[int, int], np.ndarray]]:
     """Run ``plan`` on ``bench``; the world's aperture-averaged, normalised matrix at each
-    geometry's read-back pose (keyed by rounded (θi, θr)), in the calibration's frame,
-    taken while the emulated bench's world is still alive."""
+    geometry's read-back pose (keyed by rounded (θi, θr)), in the calibration's frame
+    (turned by ``frame_deg``), taken while the emulated bench's world ``world_name`` is
+    still alive. ``steps``: points per geometry. ``straight_through``: the world's own pose
+    (a reference in the beam, the world's detector arm held by ``[simulation.roles]``)
+    instead of the run's read-back one."""
     path_plan = folder / "plan.toml"
     path_plan.write_text(plan, encoding="utf-8")
     out = folder / "runs"
     assert main(["run", str(path_plan), "--bench", str(bench), "--out", str(out),
                  "--no-fsync", "--quiet"]) == 0
     (path,) = out.glob("*.h5")
-    world = find_world("sim-polarimetric")
+    world = find_world(world_name)
     assert world is not None
     run = read_run(path)
     truths = {}
     for row in range(0, run.n_points, steps):
-        pose = world.pose({a: float(run.positions[row, k]) for k, a in enumerate(run.axes)})
-        state = replace(world.snapshot(), pose=pose)
+        state = world.snapshot()
+        if not straight_through:
+            state = replace(state, pose=world.pose(
+                {a: float(run.positions[row, k]) for k, a in enumerate(run.axes)}))
+        pose = state.pose
         state = replace(state, source=replace(state.source, on=True))
         head = world.power_meter
         m = np.asarray(state.scene.mueller_on_aperture(  # type: ignore[union-attr]
             pose.detector_dir * head.distance_mm, -pose.detector_dir,
             head.aperture_diameter_mm, state))
         key = (round(float(run.theta_i[row])), round(float(run.theta_r[row])))
-        truths[key] = rotated(m / m[0, 0], -math.radians(FRAME_DEG))
+        truths[key] = rotated(m / m[0, 0], -math.radians(frame_deg))
     return path, truths
 
 

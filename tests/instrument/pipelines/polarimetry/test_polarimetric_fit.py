@@ -43,8 +43,9 @@ from tests.instrument.pipelines.polarimetry.closed_loop import (
 #: every lab angle less the generator polariser's hidden 0.3°.
 HIDDEN = np.array([2.0 - FRAME_DEG, -2.0 - FRAME_DEG, math.radians(94.5),
                    math.radians(85.5), -0.3 - FRAME_DEG])
-#: The hidden sample (the profile's [simulation.scene.pbrdf]): n, k, rms slope, albedo.
-TRUTH = (1.5, 0.0, 0.15, 0.3)
+#: The hidden sample (the profile's [simulation.scene.pbrdf]): n, k, rms slope, albedo, and
+#: the polarimeter frame's azimuth from the plane of incidence (the generator polariser's).
+TRUTH = (1.5, 0.0, 0.15, 0.3, FRAME_DEG)
 
 
 @pytest.fixture(scope="module")

@@ -26,14 +26,16 @@ from tests.instrument.pipelines.polarimetry.validation import (
     report,
     verdict,
 )
+from tests.shared_files import made_once
 
 ROOT = Path(__file__).resolve().parents[4]
 
 
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory) -> Path:
-    _, file = calibrate(tmp_path_factory.mktemp("polcal"), None)
-    return file
+    def make(folder: Path) -> Path:
+        return calibrate(folder, None)[1]
+    return made_once(tmp_path_factory, "polcal", make)  # once per session
 
 
 @pytest.mark.slow  # one engine run of 25 steps and two reductions each: 15-40 s
@@ -91,10 +93,10 @@ def test_the_example_plan_fit_recovers_the_hidden_glass(calibration, tmp_path):
     assert done.summary["calibrated"]
     assert len(done.points) == 4
     fit = done.summary["pbrdf"]
-    # at 36 steps the gate sees χ²/dof ≈ 1.7 (61 dof): the point-receiver pBRDF leaves out
-    # the aperture and footprint averages the world applies; the parameters still agree
-    assert fit["chi2"] / fit["dof"] < 3.0, fit["verdict"]
-    # three parameters of one seed: 3σ each (at 2σ one run in seven fails by chance)
-    for k, truth in ((0, 1.5), (2, 0.15), (3, 0.3)):
+    # the gate passes: the fit estimates the polarimeter's frame (the generator
+    # polariser's hidden 0.3° from the plane of incidence, ADR 0107) with the sample
+    assert fit["adequate"], fit["verdict"]
+    # four parameters of one seed: 3σ each (at 2σ one run in five fails by chance)
+    for k, truth in ((0, 1.5), (2, 0.15), (3, 0.3), (4, 0.3)):
         assert abs(fit["params"][k] - truth) < 3.0 * fit["stderr"][k], (
             fit["param_names"][k], fit["params"][k], fit["stderr"][k])

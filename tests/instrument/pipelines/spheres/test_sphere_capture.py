@@ -56,6 +56,7 @@ from instrument.pipelines.spheres.results import read_sphere_results, summary
 from instrument.plans import PlanError, build_plan, parse_plan
 from instrument.run.paths import results_path
 from instrument.run.runfile import read_run
+from tests.shared_files import made_once
 
 ROOT = Path(__file__).resolve().parents[4]
 EXAMPLE = ROOT / "examples" / "sphere_capture.toml"
@@ -250,12 +251,14 @@ def test_fuzzed_sphere_capture_plans_parse_or_fail_with_field_errors(stations, n
 # ------------------------------------------------------------------ end to end
 @pytest.fixture(scope="module")
 def capture_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("spheres")
-    rc = main(["run", str(EXAMPLE), "--bench", str(PROFILE), "--out", str(out),
-               "--no-fsync", "--quiet"])
-    assert rc == 0
-    (path,) = out.glob("*.h5")
-    return path
+    def capture(out: Path) -> Path:
+        rc = main(["run", str(EXAMPLE), "--bench", str(PROFILE), "--out", str(out),
+                   "--no-fsync", "--quiet"])
+        assert rc == 0
+        (path,) = out.glob("*.h5")
+        return path
+    # the seeded capture (~10 s of CPU) once per session, not once per xdist worker
+    return made_once(tmp_path_factory, "spheres", capture)
 
 
 def test_capture_holds_hdr_brackets_with_darks(capture_run):
