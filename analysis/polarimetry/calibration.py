@@ -15,19 +15,32 @@ the same retarder-offset and retardance errors of a DRR from the air measurement
 form to first order; the joint fit here needs no small-error assumption and also uses the
 polariser and retarder scans. The covariance of the fitted parameters is
 ``(JᵀJ)⁻¹`` of the whitened residuals at the solution.
+
+The two fixed polarisers' extinction ratios ε are known, not fitted: they come from the
+polarisers' datasheets (the profile's ``[optics]``) and enter the model's W as partial
+polarisers (:mod:`analysis.polarimetry.drr`). ε changes a reading by about ε of the
+parallel intensity, a tenth of one reading's noise on a bench whose meter has a relative
+noise of 10⁻⁴, so the reference scans would determine it only loosely (ADR 0108); held at
+the datasheet value it shifts the five parameters without widening their covariance.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from analysis.polarimetry.drr import MuellerEstimate, estimate, instrument_matrix, reduce
+from analysis.polarimetry.drr import (
+    MuellerEstimate,
+    check_extinction,
+    estimate,
+    instrument_matrix,
+    reduce,
+)
 from analysis.polarimetry.elements import linear_polariser, linear_retarder
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
@@ -107,6 +120,9 @@ class DrrCalibration:
         Weighted residual sum of squares.
     dof : int
         Number of readings minus fitted parameters.
+    psg_extinction, psa_extinction : float
+        The generator's and analyser's polariser extinction ratios the fit assumed
+        (datasheet values, not fitted; 0 for ideal polarisers).
     """
 
     params: NDArray[np.float64]
@@ -114,6 +130,12 @@ class DrrCalibration:
     sample_params: tuple[tuple[float, ...], ...] = field(default=())
     chi2: float = 0.0
     dof: int = 0
+    psg_extinction: float = 0.0
+    psa_extinction: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("psg_extinction", "psa_extinction"):
+            object.__setattr__(self, name, check_extinction(name, getattr(self, name)))
 
     @property
     def sigma(self) -> NDArray[np.float64]:
@@ -127,7 +149,8 @@ class DrrCalibration:
         return instrument_matrix(check_array("psg_retarder_deg", psg_retarder_deg) + g_off,
                                  check_array("psa_retarder_deg", psa_retarder_deg) + a_off,
                                  psg_retardance=d_g, psa_retardance=d_a,
-                                 psa_polariser_deg=p_a)
+                                 psa_polariser_deg=p_a, psg_extinction=self.psg_extinction,
+                                 psa_extinction=self.psa_extinction)
 
 
 def _sample_matrix(kind: str, p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -139,7 +162,8 @@ def _sample_matrix(kind: str, p: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
-                  psa_retardance: float) -> DrrCalibration:
+                  psa_retardance: float, psg_extinction: float = 0.0,
+                  psa_extinction: float = 0.0) -> DrrCalibration:
     """Fit the DRR's hidden parameters to reference scans (see the module docstring).
 
     Parameters
@@ -149,11 +173,15 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
         determines all five instrument parameters.
     psg_retardance, psa_retardance : float
         Nominal retardances, radians (start values).
+    psg_extinction, psa_extinction : float
+        The polarisers' power extinction ratios in [0, 1), from their datasheets (held
+        fixed; 0 models ideal polarisers).
 
     Raises
     ------
     PolarimetryInputError
-        No scans, no air scan, or too few readings for the parameters.
+        No scans, no air scan, too few readings for the parameters, or an extinction
+        outside [0, 1).
     """
     if not scans:
         raise PolarimetryInputError("scans", "must hold at least an air scan")
@@ -162,6 +190,8 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
     for name, val in (("psg_retardance", psg_retardance), ("psa_retardance", psa_retardance)):
         if not math.isfinite(float(val)):
             raise PolarimetryInputError(name, f"must be finite, got {val!r}")
+    e_g = check_extinction("psg_extinction", psg_extinction)
+    e_a = check_extinction("psa_extinction", psa_extinction)
     n_extra = {"air": 0, "polariser": 1, "retarder": 2}
     x0 = [0.0, 0.0, float(psg_retardance), float(psa_retardance), 0.0]
     lo = [-30.0, -30.0, 0.0, 0.0, -30.0]
@@ -188,7 +218,8 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
             "scans", f"hold {n_data} readings for {len(x0)} parameters; add steps or scans")
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        cal = DrrCalibration(params=x[:5], cov=np.zeros((5, 5)))
+        cal = DrrCalibration(params=x[:5], cov=np.zeros((5, 5)), psg_extinction=e_g,
+                             psa_extinction=e_a)
         out = []
         for s, sl in zip(scans, slices, strict=True):
             w = cal.instrument_matrix(s.psg_retarder_deg, s.psa_retarder_deg)
@@ -205,7 +236,7 @@ def calibrate_drr(scans: Sequence[ReferenceScan], *, psg_retardance: float,
     sample_params = tuple(tuple(float(v) for v in res.x[sl]) for sl in slices)
     return DrrCalibration(params=np.asarray(res.x[:5], dtype=float), cov=cov_full[:5, :5],
                           sample_params=sample_params, chi2=float(2.0 * res.cost),
-                          dof=n_data - len(x0))
+                          dof=n_data - len(x0), psg_extinction=e_g, psa_extinction=e_a)
 
 
 def reduce_calibrated(intensities: ArrayLike, sigmas: ArrayLike, calibration: DrrCalibration,
@@ -229,7 +260,7 @@ def reduce_calibrated(intensities: ArrayLike, sigmas: ArrayLike, calibration: Dr
         for sign in (1.0, -1.0):
             p = calibration.params.copy()
             p[i] += sign * step
-            cal = DrrCalibration(params=p, cov=calibration.cov)
+            cal = replace(calibration, params=p)
             w = cal.instrument_matrix(psg_retarder_deg, psa_retarder_deg)
             shifted.append(reduce(intensities, sigmas, w).m.ravel())
         jac[:, i] = (shifted[0] - shifted[1]) / (2.0 * step)

@@ -17,6 +17,19 @@ with its full 16×16 covariance (:func:`reduce`).
 
 Retardances are in radians, retarder and polariser angles in degrees (as the stage
 reports them).
+
+The fixed polarisers are partial (non-ideal) linear polarisers: diattenuators with
+principal intensity transmittances ``q = 1`` along the axis and ``r = ε`` across it, ε the
+power extinction ratio of the datasheet (about 10⁻⁵ for a Glan–Taylor prism, 10⁻³ for a
+film polariser; 0 is the ideal polariser). Their Mueller matrix at axis 0 is
+``½ [[1+ε, 1−ε, 0, 0], [1−ε, 1+ε, 0, 0], [0, 0, 2√ε, 0], [0, 0, 0, 2√ε]]`` (Chipman,
+Lam & Young, *Polarized Light and Optical Systems*, 2018, ch. 6, the linear diattenuator
+with q = 1, r = ε; Goldstein 2011, §5.2 with ``p_x² = 1``, ``p_y² = ε``). Only its first
+row and first column enter W: the generator acts on an unpolarised source and the
+detector reads intensity, so ``g ∝ Ret · ½(1+ε, (1−ε) cos 2p, (1−ε) sin 2p, 0)`` and
+likewise for the analyser row. A source already polarised along the generator's axis
+(a laser) leaks less through it: :func:`generator_extinction` gives the extinction the
+generator row takes then.
 """
 
 from __future__ import annotations
@@ -29,15 +42,17 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from analysis.polarimetry.elements import linear_polariser, linear_retarder
+from analysis.polarimetry.elements import diattenuator, linear_polariser, linear_retarder
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
 __all__ = [
     "MuellerEstimate",
     "analyser_row",
+    "check_extinction",
     "condition_number",
     "drr_angles",
     "estimate",
+    "generator_extinction",
     "generator_stokes",
     "instrument_matrix",
     "normalise",
@@ -58,26 +73,91 @@ def _scalar(name: str, value: float) -> float:
     return v
 
 
+def check_extinction(name: str, value: float) -> float:
+    """A polariser's power extinction ratio ε, validated: finite and ``0 ≤ ε < 1``.
+
+    Raises
+    ------
+    PolarimetryInputError
+        Naming ``name``, where ε is outside [0, 1) (1 would pass both polarisations
+        equally: no polariser).
+    """
+    e = _scalar(name, value)
+    if not 0.0 <= e < 1.0:
+        raise PolarimetryInputError(
+            name, f"must be a power extinction ratio in [0, 1) (the crossed/parallel "
+            f"transmittance from the polariser's datasheet, 0 for an ideal one), got {value!r}")
+    return e
+
+
+def generator_extinction(extinction: float, source_dop: float = 0.0) -> float:
+    """Effective extinction of the generator's polariser for a partly polarised source.
+
+    A source of degree of linear polarisation s along the polariser's axis, Stokes
+    ``(1, s, 0, 0)`` in its frame, leaves the partial polariser (q = 1, r = ε) as
+    ``½(1+ε + (1−ε)s, 1−ε + (1+ε)s, 0, 0)``: the state an unpolarised source leaves a
+    polariser of extinction ``ε' = ε (1 − s)/(1 + s)`` in, up to the intensity (equate the
+    degrees of polarisation; the matrix of the module docstring). ``s = 0`` (unpolarised)
+    gives ε; a laser polarised 0.98 along the axis 0.01 ε. A source polarised slightly
+    off the axis also turns the generated state by ~√ε of its misalignment (10⁻³° here);
+    the calibration's azimuth 0 is the generated state's, so that is absorbed.
+
+    Raises
+    ------
+    PolarimetryInputError
+        ε outside [0, 1) or s outside [0, 1].
+    """
+    e = check_extinction("extinction", extinction)
+    s = _scalar("source_dop", source_dop)
+    if not 0.0 <= s <= 1.0:
+        raise PolarimetryInputError(
+            "source_dop", f"must be a degree of polarisation in [0, 1], got {source_dop!r}")
+    return e * (1.0 - s) / (1.0 + s)
+
+
+def _polariser_row(p_rad: float, extinction: float) -> NDArray[np.float64]:
+    """First row of a partial polariser at axis p: ½(1+ε, (1−ε) cos 2p, (1−ε) sin 2p, 0).
+
+    Also its first column (the matrix is symmetric): the Stokes vector it passes from a
+    unit unpolarised source. Module docstring for the source of the matrix.
+    """
+    e = extinction
+    return 0.5 * np.array([1.0 + e, (1.0 - e) * math.cos(2 * p_rad),
+                           (1.0 - e) * math.sin(2 * p_rad), 0.0])
+
+
+def _polariser(p_rad: float, extinction: float) -> NDArray[np.float64]:
+    return linear_polariser(p_rad) if extinction == 0.0 else diattenuator(p_rad, 1.0,
+                                                                          extinction)
+
+
 def generator_stokes(retarder_deg: float, retardance: float,
-                     polariser_deg: float = 0.0) -> NDArray[np.float64]:
-    """Stokes vector (shape (4,)) of a PSG: polariser, then retarder, unit unpolarised source."""
+                     polariser_deg: float = 0.0, extinction: float = 0.0
+                     ) -> NDArray[np.float64]:
+    """Stokes vector (shape (4,)) of a PSG: polariser (extinction ε), then retarder, unit
+    unpolarised source."""
     p = math.radians(_scalar("polariser_deg", polariser_deg))
     t = math.radians(_scalar("retarder_deg", retarder_deg))
-    return linear_retarder(t, retardance) @ linear_polariser(p) @ _UNPOLARISED
+    e = check_extinction("extinction", extinction)
+    return linear_retarder(t, retardance) @ _polariser(p, e) @ _UNPOLARISED
 
 
 def analyser_row(retarder_deg: float, retardance: float,
-                 polariser_deg: float = 0.0) -> NDArray[np.float64]:
-    """First row (shape (4,)) of a PSA's Mueller matrix: retarder, then polariser, detector."""
+                 polariser_deg: float = 0.0, extinction: float = 0.0) -> NDArray[np.float64]:
+    """First row (shape (4,)) of a PSA's Mueller matrix: retarder, then polariser
+    (extinction ε), detector."""
     p = math.radians(_scalar("polariser_deg", polariser_deg))
     t = math.radians(_scalar("retarder_deg", retarder_deg))
-    return (linear_polariser(p) @ linear_retarder(t, retardance))[0].copy()
+    e = check_extinction("extinction", extinction)
+    return (_polariser(p, e) @ linear_retarder(t, retardance))[0].copy()
 
 
 def instrument_matrix(psg_retarder_deg: ArrayLike, psa_retarder_deg: ArrayLike, *,
                       psg_retardance: float, psa_retardance: float,
                       psg_polariser_deg: float = 0.0,
-                      psa_polariser_deg: float = 0.0) -> NDArray[np.float64]:
+                      psa_polariser_deg: float = 0.0,
+                      psg_extinction: float = 0.0,
+                      psa_extinction: float = 0.0) -> NDArray[np.float64]:
     """The DRR instrument matrix W: row k is ``w_k = vec(a_k g_kᵀ)`` (Goldstein 1992).
 
     Parameters
@@ -88,6 +168,9 @@ def instrument_matrix(psg_retarder_deg: ArrayLike, psa_retarder_deg: ArrayLike, 
         Retardances, radians (π/2 for a quarter-wave plate).
     psg_polariser_deg, psa_polariser_deg : float
         Transmission axes of the fixed polarisers, degrees.
+    psg_extinction, psa_extinction : float
+        The polarisers' power extinction ratios ε in [0, 1) (datasheet values; 0 is an
+        ideal polariser and gives W exactly as for ``linear_polariser``).
 
     Returns
     -------
@@ -104,10 +187,10 @@ def instrument_matrix(psg_retarder_deg: ArrayLike, psa_retarder_deg: ArrayLike, 
     d_a = _scalar("psa_retardance", psa_retardance)
     p_g = math.radians(_scalar("psg_polariser_deg", psg_polariser_deg))
     p_a = math.radians(_scalar("psa_polariser_deg", psa_polariser_deg))
-    # vectorised over the steps: g_k = Ret(θ_k) · Pol(p_g) · (1,0,0,0),
+    # vectorised over the steps: g_k = Ret(θ_k) · Pol_ε(p_g) · (1,0,0,0),
     # a_k = [Pol(p_a) · Ret(θ'_k)] row 0; the same matrices as elements.py (tested equal)
-    pol_g = 0.5 * np.array([1.0, math.cos(2 * p_g), math.sin(2 * p_g), 0.0])
-    pol_a = 0.5 * np.array([1.0, math.cos(2 * p_a), math.sin(2 * p_a), 0.0])
+    pol_g = _polariser_row(p_g, check_extinction("psg_extinction", psg_extinction))
+    pol_a = _polariser_row(p_a, check_extinction("psa_extinction", psa_extinction))
     gen = np.einsum("kij,j->ki", _retarders(np.radians(g_ang), d_g), pol_g)
     ana = np.einsum("i,kij->kj", pol_a, _retarders(np.radians(a_ang), d_a))
     return (ana[:, :, None] * gen[:, None, :]).reshape(g_ang.size, 16)

@@ -8,6 +8,8 @@ the order the light meets them::
     kind = "polariser"                 # "polariser" | "retarder" | "pem"
     mount = "psg_polariser"            # the bench axis that turns it (a motion device)
     orientation_deg = 0.0              # nominal transmission / fast axis at mount 0
+    extinction = 1e-5                  # polariser only: datasheet power extinction ratio
+    source_dop = 0.98                  # PSG polariser only: the source's polarisation
 
     [[optics.source]]
     kind = "retarder"
@@ -28,6 +30,17 @@ These are the **nominal** values: what the analysis is told. The emulated bench'
 truth (misalignments, retardance errors) lives in ``[simulation.optics]``
 (``hw_mocks.sim.polarisation``) and is never read by the analysis.
 
+A polariser's ``extinction`` is the power extinction ratio ε of its datasheet (the
+transmittance of light polarised across its axis over that along it): about 10⁻⁵ for a
+Glan–Taylor or Glan–Thompson prism, 10⁻³ to 10⁻⁴ for a film polariser. It must lie in
+[0, 1); left out it is 0, an ideal polariser, which is what the reduction assumed before
+the field existed (state the datasheet's value: at ε = 10⁻⁵ an ideal model biases the
+calibration by a few of its σ, ADR 0108). The source arm's polariser may also take
+``source_dop``, the degree of linear polarisation of the source along its axis (a laser
+of polarisation ratio R:1 gives (R − 1)/(R + 1); 0, the default, for an unpolarised
+source): a polarised source leaks through the generator less than its extinction says
+(:func:`analysis.polarimetry.drr.generator_extinction`).
+
 A photoelastic modulator (``kind = "pem"``) has a fixed orientation; its ``mount`` may be
 left out. Its retardation amplitude is set on the modulator, not here.
 """
@@ -44,7 +57,8 @@ __all__ = ["ARMS", "ELEMENT_KINDS", "OpticalElement", "OpticalTrain", "parse_opt
 #: Arm key → what it is (for messages).
 ARMS = {"source": "source arm (PSG)", "detector": "detector arm (PSA)"}
 ELEMENT_KINDS = ("polariser", "retarder", "pem")
-_ELEMENT_KEYS = {"kind", "mount", "orientation_deg", "retardance_deg", "retardance_nm"}
+_ELEMENT_KEYS = {"kind", "mount", "orientation_deg", "retardance_deg", "retardance_nm",
+                 "extinction", "source_dop"}
 
 
 @dataclass(frozen=True)
@@ -53,6 +67,8 @@ class OpticalElement:
 
     ``retardance_deg`` holds one value (any wavelength) or values at
     ``retardance_nm``, interpolated linearly and constant beyond the ends.
+    ``extinction`` is a polariser's power extinction ratio (0: ideal) and ``source_dop``
+    the source's degree of polarisation along the generator polariser (module docstring).
     """
 
     kind: str
@@ -60,6 +76,8 @@ class OpticalElement:
     orientation_deg: float
     retardance_deg: tuple[float, ...] = ()
     retardance_nm: tuple[float, ...] = ()
+    extinction: float = 0.0
+    source_dop: float = 0.0
 
     def retardance_at(self, wavelength_nm: float) -> float:
         """Nominal retardance (degrees) at ``wavelength_nm``; NaN for a polariser."""
@@ -86,6 +104,9 @@ class OpticalElement:
             out["retardance_deg"] = list(self.retardance_deg)
         if self.retardance_nm:
             out["retardance_nm"] = list(self.retardance_nm)
+        if self.kind == "polariser":
+            out["extinction"] = self.extinction
+            out["source_dop"] = self.source_dop
         return out
 
 
@@ -197,10 +218,30 @@ def _element(e: Any, path: str, axes: set[str], error: Any) -> OpticalElement | 
                 error(f"{path}.{key}", f"only a retarder takes {key!r} (a {kind} has none "
                       "here)")
                 ok = False
+    extinction = e.get("extinction", 0.0)
+    if kind != "polariser" and "extinction" in e:
+        error(f"{path}.extinction", f"only a polariser takes 'extinction' (a {kind} has "
+              "none here)")
+        ok = False
+    elif not (_number(extinction) and 0.0 <= extinction < 1.0):
+        error(f"{path}.extinction", "must be the polariser's power extinction ratio in "
+              "[0, 1) from its datasheet (e.g. 1e-5 for a Glan-Taylor prism, 1e-3 for a "
+              f"film polariser; 0 for ideal), got {extinction!r}")
+        ok = False
+    source_dop = e.get("source_dop", 0.0)
+    if "source_dop" in e and not (kind == "polariser" and path.startswith("optics.source")):
+        error(f"{path}.source_dop", "only the source arm's polariser (the generator's) "
+              "takes 'source_dop', the source's degree of polarisation along its axis")
+        ok = False
+    elif not (_number(source_dop) and 0.0 <= source_dop <= 1.0):
+        error(f"{path}.source_dop", "must be the source's degree of linear polarisation "
+              "along the polariser's axis in [0, 1] (a laser of polarisation ratio R:1: "
+              f"(R - 1)/(R + 1); 0 for an unpolarised source), got {source_dop!r}")
+        ok = False
     if not ok:
         return None
     return OpticalElement(str(kind), None if mount is None else str(mount), float(orientation),
-                          retardance, wavelengths)
+                          retardance, wavelengths, float(extinction), float(source_dop))
 
 
 def _retardance(e: dict[str, Any], path: str, error: Any

@@ -69,6 +69,7 @@ class PolarimeterCalibration:
             "sigma": [float(v) for v in d.sigma],
             "covariance": np.asarray(d.cov, dtype=float).tolist(),
             "chi2": d.chi2, "dof": d.dof,
+            "psg_extinction": d.psg_extinction, "psa_extinction": d.psa_extinction,
             "sample_params": [list(p) for p in d.sample_params],
             "source_scale_w": self.source_scale_w,
             "references": list(self.references),
@@ -142,7 +143,10 @@ def load_calibration(path: str | Path) -> PolarimeterCalibration:
         drr = DrrCalibration(params=params, cov=cov,
                              sample_params=tuple(tuple(float(v) for v in sp)
                                                  for sp in data.get("sample_params", [])),
-                             chi2=float(data["chi2"]), dof=int(data["dof"]))
+                             chi2=float(data["chi2"]), dof=int(data["dof"]),
+                             # files written before the field modelled ideal polarisers
+                             psg_extinction=float(data.get("psg_extinction", 0.0)),
+                             psa_extinction=float(data.get("psa_extinction", 0.0)))
         return PolarimeterCalibration(
             drr=drr, bench=str(data["bench"]), source_scale_w=float(data["source_scale_w"]),
             date=str(data["date"]), references=tuple(data.get("references", [])),

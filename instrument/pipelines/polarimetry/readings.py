@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.polarimetry.drr import generator_extinction
 from analysis.polarimetry.pem import PemSetting
 from instrument.bench.meter_noise import meter_noise
 from instrument.run.runfile import RunData, RunFileError, as_text, open_run, read_planned
@@ -104,6 +105,17 @@ class PolarimetricRun:
         """Nominal retardance (degrees) of the arm's retarder at a wavelength."""
         el = _element(self.train, arm, "retarder")
         return _interp(el, wavelength_nm)
+
+    def extinction(self, arm: str) -> float:
+        """Extinction of the arm's polariser that W takes: the datasheet value the run's
+        optical train stores, for the generator lowered by the source's own polarisation
+        (:func:`analysis.polarimetry.drr.generator_extinction`); 0 (ideal) for runs
+        recorded before the field."""
+        el = _element(self.train, arm, "polariser")
+        eps = float(el.get("extinction", 0.0))
+        if arm == "psg":
+            return generator_extinction(eps, float(el.get("source_dop", 0.0)))
+        return eps
 
 
 def is_polarimetric(path: str | Path) -> bool:

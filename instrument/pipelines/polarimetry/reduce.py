@@ -144,7 +144,8 @@ def _nominal_matrix(prun: PolarimetricRun, g: StepGroup) -> np.ndarray:
         g.psg_retarder_deg, g.psa_retarder_deg,
         psg_retardance=math.radians(prun.retardance_deg("psg", g.wavelength_nm)),
         psa_retardance=math.radians(prun.retardance_deg("psa", g.wavelength_nm)),
-        psg_polariser_deg=g.psg_polariser_deg, psa_polariser_deg=g.psa_polariser_deg)
+        psg_polariser_deg=g.psg_polariser_deg, psa_polariser_deg=g.psa_polariser_deg,
+        psg_extinction=prun.extinction("psg"), psa_extinction=prun.extinction("psa"))
 
 
 def reduce_group(prun: PolarimetricRun, g: StepGroup, cal: PolarimeterCalibration | None,

@@ -36,7 +36,9 @@ class ReferenceRun:
     retardance_deg: float = 90.0
 
 
-def _scan(ref: ReferenceRun) -> tuple[ReferenceScan, float, float, str]:
+def _scan(ref: ReferenceRun) -> tuple[ReferenceScan, dict[str, float], str]:
+    """The run's scan, the nominal optics the fit starts from or holds (retardances in
+    radians, the polarisers' datasheet extinctions) and the bench's name."""
     prun = read_polarimetric(ref.path)
     if len(prun.groups) != 1:
         raise ValueError(f"{ref.path}: a reference run holds one straight-through position, "
@@ -47,8 +49,11 @@ def _scan(ref: ReferenceRun) -> tuple[ReferenceScan, float, float, str]:
                          psa_retarder_deg=g.psa_retarder_deg, angle_deg=ref.angle_deg,
                          retardance=math.radians(ref.retardance_deg))
     bench = str(prun.run.profile().get("bench", {}).get("name", ""))
-    return (scan, math.radians(prun.retardance_deg("psg", g.wavelength_nm)),
-            math.radians(prun.retardance_deg("psa", g.wavelength_nm)), bench)
+    nominal = {"psg_retardance": math.radians(prun.retardance_deg("psg", g.wavelength_nm)),
+               "psa_retardance": math.radians(prun.retardance_deg("psa", g.wavelength_nm)),
+               "psg_extinction": prun.extinction("psg"),
+               "psa_extinction": prun.extinction("psa")}
+    return scan, nominal, bench
 
 
 def calibrate_from_runs(refs: Sequence[ReferenceRun], *, bench: str | None = None
@@ -63,15 +68,15 @@ def calibrate_from_runs(refs: Sequence[ReferenceRun], *, bench: str | None = Non
     """
     if not any(r.kind == "air" for r in refs):
         raise ValueError("the calibration needs an air run (no sample, straight through)")
-    scans, benches = [], set()
-    psg = psa = math.pi / 2
+    scans, benches, trains = [], set(), []
     for r in refs:
-        scan, psg, psa, b = _scan(r)
+        scan, nominal, b = _scan(r)
         scans.append(scan)
         benches.add(b)
+        trains.append(nominal)
     if len(benches) != 1:
         raise ValueError(f"the reference runs were taken on different benches {benches}")
-    drr = calibrate_drr(scans, psg_retardance=psg, psa_retardance=psa)
+    drr = calibrate_drr(scans, **trains[-1])
     air = next(k for k, r in enumerate(refs) if r.kind == "air")
     ok, why = quality(drr)
     return PolarimeterCalibration(

@@ -114,3 +114,45 @@ def test_a_profile_reports_optics_errors_by_field():
         parse_profile(text)
     assert [e.path for e in err.value.errors] == ["optics.detector[1].mount"]
     assert "psa_polarizer" in str(err.value)
+
+
+@given(st.floats(0.0, 0.999))
+def test_a_polarisers_extinction_is_kept_and_stored_with_the_train(extinction):
+    train, errors = parse({"source": [{"kind": "polariser", "mount": "psg_polariser",
+                                       "extinction": extinction}]})
+    assert not errors and train is not None
+    assert train.source[0].extinction == extinction
+    assert train.as_dict()["source"][0]["extinction"] == extinction
+
+
+def test_a_polariser_without_extinction_is_ideal():
+    train, errors = parse({"source": [{"kind": "polariser", "mount": "psg_polariser"}]})
+    assert not errors and train is not None and train.source[0].extinction == 0.0
+
+
+@given(st.one_of(st.floats(max_value=-1e-300), st.floats(min_value=1.0),
+                 st.just(math.nan), st.just("1e-5"), st.just(True)))
+def test_an_extinction_outside_0_to_1_is_refused_on_its_field(extinction):
+    _, errors = parse({"detector": [{"kind": "polariser", "mount": "psa_polariser",
+                                     "extinction": extinction}]})
+    assert [p for p, _ in errors] == ["optics.detector[0].extinction"]
+    assert "datasheet" in errors[0][1]
+
+
+def test_only_a_polariser_takes_an_extinction():
+    _, errors = parse({"source": [{"kind": "retarder", "mount": "psg_retarder",
+                                   "retardance_deg": 90.0, "extinction": 1e-5}]})
+    assert [p for p, _ in errors] == ["optics.source[0].extinction"]
+
+
+def test_the_sources_polarisation_is_the_generator_polarisers_only():
+    train, errors = parse({"source": [{"kind": "polariser", "mount": "psg_polariser",
+                                       "extinction": 1e-5, "source_dop": 0.98}]})
+    assert not errors and train is not None and train.source[0].source_dop == 0.98
+    assert train.as_dict()["source"][0]["source_dop"] == 0.98
+    _, errors = parse({"detector": [{"kind": "polariser", "mount": "psa_polariser",
+                                     "source_dop": 0.98}]})
+    assert [p for p, _ in errors] == ["optics.detector[0].source_dop"]
+    _, errors = parse({"source": [{"kind": "polariser", "mount": "psg_polariser",
+                                   "source_dop": 1.5}]})
+    assert [p for p, _ in errors] == ["optics.source[0].source_dop"]
