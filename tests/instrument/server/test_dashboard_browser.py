@@ -248,8 +248,8 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-# slow: two server starts and Chromium; the page's event stream is followed to a run's end in
-# the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it
+# slow: 6.5 s CPU (two server starts and Chromium); the page's event stream is followed to a
+# run's end in the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it
 @pytest.mark.slow
 def test_the_page_reconnects_by_itself_after_the_server_restarts(bench_file, tmp_path):
     bench, runs = bench_file(), tmp_path / "runs"
@@ -280,8 +280,9 @@ def test_the_page_reconnects_by_itself_after_the_server_restarts(bench_file, tmp
 MAX_PLOT_POINTS, MAX_LOG = 4000, 300
 
 
-# slow: a server and Chromium; the page's plot and log in a browser are checked in the default
-# run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it (every point plotted)
+# slow: 3.6 s CPU (a server and Chromium); the page's plot and log in a browser are checked in
+# the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it (every point
+# plotted)
 @pytest.mark.slow
 def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_server,
                                                            tmp_path):
@@ -326,8 +327,8 @@ SPAN_JS = """
             const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));"""
 
 
-# slow: a server and Chromium; each point plotted once over a whole run is checked in the
-# default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it
+# slow: 4.2 s CPU (a server and Chromium); each point plotted once over a whole run is checked in
+# the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it
 @pytest.mark.slow
 def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
                                                                       start_server, tmp_path):
@@ -381,9 +382,10 @@ def test_a_resumed_runs_backfill_is_plotted_with_the_points_that_follow(bench_fi
     assert any("5 points stored before it was resumed" in t for t in got["log"])
 
 
-# slow: a server and Chromium; the same polar map's geometry (x = θr cos φr, y = θr sin φr)
-# is checked in the GUI's plot in the default run by tests/gui/test_live_plots.py::
-# test_the_hemisphere_map_fills; the page's own mapping and log colour run in CI's slow run
+# slow: 4.6 s CPU (a server and Chromium); the same polar map's geometry (x = θr cos φr, y = θr
+# sin φr) is checked in the GUI's plot in the default run by
+# test_live_plots.py::test_the_hemisphere_map_fills; the page's own mapping and log colour run in
+# CI's slow run
 @pytest.mark.slow
 def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, start_server,
                                                                   tmp_path):
@@ -428,9 +430,9 @@ def test_the_screenshot_script_renders_the_dashboards_pictures_none_blank(tmp_pa
         assert len(np.unique(px.reshape(-1, 3)[::7], axis=0)) > 50, f"{name} looks blank"
 
 
-# slow: a server and Chromium; the camera settings through the server are checked in the
-# default run by tests/gui/test_client_window.py::test_the_camera_settings_are_set_through_the_
-# server_between_runs_only
+# slow: 4.3 s CPU (a server and Chromium); the camera settings through the server are checked in
+# the default run by
+# test_client_window.py::test_the_camera_settings_are_set_through_the_server_between_runs_only
 @pytest.mark.slow
 def test_the_device_table_has_the_cameras_settings_and_during_a_run_its_frames_exposure(
         bench_file, start_server, tmp_path):
