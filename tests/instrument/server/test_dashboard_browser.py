@@ -83,6 +83,9 @@ def test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it(bench_file, st
                     pytest.raises(ClientError) as err:
                 obs.pause()
             assert err.value.status == 403
+            # the page sees "finished" from the event stream; the history row may land a
+            # moment later on a loaded host
+            wait_for(op.history, what="the finished run in the history", timeout=60)
             (h,) = op.history()
         assert h["outcome"] == "finished"
         n = len(THETA_R)
@@ -199,6 +202,7 @@ def test_an_operator_answers_an_injected_fault_with_skip(bench_file, start_serve
         assert page.is_hidden("#fault-box")
         assert "(1 skipped)" in page.inner_text("#run-numbers")
         with BenchClient(server.url, keys["observer"]) as obs:
+            wait_for(obs.history, what="the finished run in the history", timeout=60)
             (h,) = obs.history()
         with h5py.File(h["run_file"]) as f:
             assert (f["entry/points/status"][:] == 1).sum() == 1  # one point skipped
