@@ -155,6 +155,12 @@ def test_an_observer_key_sees_the_controls_greyed_with_the_reason(server, open_w
                     timeout=WAIT_MS)
 
 
+# slow: 4.0 s CPU (a server process and a run); the cheaper
+# test_a_fault_on_the_emulated_bench_reaches_every_client_and_an_operator_answers ([retry],
+# test_server_e2e.py) checks the same retry answered through the server, and
+# test_run_control.py::test_a_device_fault_pauses_the_run_and_the_operator_chooses[retry] the
+# GUI's fault box and retry button, in the default run
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_a_fault_is_shown_and_answered_retry_from_the_gui(server, open_window, qtbot):
     srv = server(fault="simsmc:detector_theta:1", pause_on_fault=True)
@@ -437,6 +443,11 @@ def test_the_lock_in_and_filter_wheel_panels_show_the_servers_state(server, open
         observer.close()
 
 
+# slow: 2.4 s CPU (a server process); the cheaper
+# test_bench_panel.py::test_launch_connect_home_jog checks the same power-meter panel (reading in
+# W at 633 nm), and test_the_lock_in_and_filter_wheel_panels_show_the_servers_state the same
+# panels showing the server's published state, in the default run
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_the_power_meter_panel_shows_the_servers_reading(server, open_window, qtbot):
     srv = server(profile="sim")

@@ -90,6 +90,13 @@ def _run(bench, wall: str, scene: str, seeds) -> object:
     return s
 
 
+# slow: 9.7 s CPU; the cheaper
+# test_extended.py::test_a_bar_across_seen_as_two_points_in_depth_is_one_extended_object checks
+# the same case (two components on one line of sight, as the near-mirror search left this disc)
+# becoming one extended object of its width, and
+# test_a_bar_twice_the_blur_is_one_extended_object_with_its_width the width through the renderer,
+# in the default run
+@pytest.mark.slow
 def test_a_disc_wider_than_the_blur_before_a_near_mirror_is_one_object_of_its_size(bench):
     """The 3 mm disc before the 0.1° wall (blur 2.6 mm at −200 mm) was two "resolved"
     points on its line of sight, 6.5 mm apart in depth, in every seed: now one extended

@@ -83,6 +83,9 @@ def test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it(bench_file, st
                     pytest.raises(ClientError) as err:
                 obs.pause()
             assert err.value.status == 403
+            # the page sees "finished" from the event stream; the history row may land a
+            # moment later on a loaded host
+            wait_for(op.history, what="the finished run in the history", timeout=60)
             (h,) = op.history()
         assert h["outcome"] == "finished"
         n = len(THETA_R)
@@ -199,6 +202,7 @@ def test_an_operator_answers_an_injected_fault_with_skip(bench_file, start_serve
         assert page.is_hidden("#fault-box")
         assert "(1 skipped)" in page.inner_text("#run-numbers")
         with BenchClient(server.url, keys["observer"]) as obs:
+            wait_for(obs.history, what="the finished run in the history", timeout=60)
             (h,) = obs.history()
         with h5py.File(h["run_file"]) as f:
             assert (f["entry/points/status"][:] == 1).sum() == 1  # one point skipped
@@ -248,6 +252,9 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+# slow: 6.5 s CPU (two server starts and Chromium); the page's event stream is followed to a
+# run's end in the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it
+@pytest.mark.slow
 def test_the_page_reconnects_by_itself_after_the_server_restarts(bench_file, tmp_path):
     bench, runs = bench_file(), tmp_path / "runs"
     listen = f"127.0.0.1:{_free_port()}"
@@ -277,6 +284,10 @@ def test_the_page_reconnects_by_itself_after_the_server_restarts(bench_file, tmp
 MAX_PLOT_POINTS, MAX_LOG = 4000, 300
 
 
+# slow: 3.6 s CPU (a server and Chromium); the page's plot and log in a browser are checked in
+# the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it (every point
+# plotted)
+@pytest.mark.slow
 def test_the_plot_and_the_log_stay_bounded_over_a_long_run(bench_file, start_server,
                                                            tmp_path):
     """An 8-hour run's worth of points (100,000, in the server's batches) and 1,000 log
@@ -320,6 +331,9 @@ SPAN_JS = """
             const span = (a, b) => Array.from({length: b - a}, (_, k) => pt(a + k));"""
 
 
+# slow: 4.2 s CPU (a server and Chromium); each point plotted once over a whole run is checked in
+# the default run by test_an_observer_watches_a_run_to_its_end_and_cannot_pause_it
+@pytest.mark.slow
 def test_points_read_so_far_and_the_streams_overlap_are_plotted_once(bench_file,
                                                                       start_server, tmp_path):
     """The prefill's order of events, driven through the page's own handlers: stream points
@@ -372,6 +386,11 @@ def test_a_resumed_runs_backfill_is_plotted_with_the_points_that_follow(bench_fi
     assert any("5 points stored before it was resumed" in t for t in got["log"])
 
 
+# slow: 4.6 s CPU (a server and Chromium); the same polar map's geometry (x = θr cos φr, y = θr
+# sin φr) is checked in the GUI's plot in the default run by
+# test_live_plots.py::test_the_hemisphere_map_fills; the page's own mapping and log colour run in
+# CI's slow run
+@pytest.mark.slow
 def test_a_hemisphere_scan_is_a_polar_map_coloured_by_log_signal(bench_file, start_server,
                                                                   tmp_path):
     """As the GUI's: x = θr cos φr, y = θr sin φr, the colour mapping log10 of the signal
@@ -415,6 +434,10 @@ def test_the_screenshot_script_renders_the_dashboards_pictures_none_blank(tmp_pa
         assert len(np.unique(px.reshape(-1, 3)[::7], axis=0)) > 50, f"{name} looks blank"
 
 
+# slow: 4.3 s CPU (a server and Chromium); the camera settings through the server are checked in
+# the default run by
+# test_client_window.py::test_the_camera_settings_are_set_through_the_server_between_runs_only
+@pytest.mark.slow
 def test_the_device_table_has_the_cameras_settings_and_during_a_run_its_frames_exposure(
         bench_file, start_server, tmp_path):
     server = start_server(bench_file())

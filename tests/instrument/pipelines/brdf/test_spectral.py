@@ -186,11 +186,20 @@ def test_run_without_wavelength_axis_is_one_lock_in_group_or_refused() -> None:
         analyse_spectral(run, SpectralOptions(detector="camera"))
 
 
-def test_report_and_results(tmp_path: Path) -> None:
+# slow: 6.7 s CPU, 5.7 s of it the three per-wavelength reports' figures; the cheaper
+# test_fit_report.py::test_cli_fit_writes_analysis_and_report checks the same report writer
+# (write_report, one per wavelength here) in the default run, and test_results below this
+# one's results file
+@pytest.mark.slow
+def test_report(tmp_path: Path) -> None:
     fit = analyse_spectral(synthetic_run(5), SpectralOptions(u_incident_power_rel=0.01))
     page = write_spectral_report(tmp_path, fit)
     assert page.is_file() and (tmp_path / "spectral.png").is_file()
     assert (tmp_path / "550nm" / "index.html").is_file()
+
+
+def test_results(tmp_path: Path) -> None:
+    fit = analyse_spectral(synthetic_run(5), SpectralOptions(u_incident_power_rel=0.01))
     run_file = tmp_path / "run.h5"
     saved = write_spectral_results(run_file, fit, options=SpectralOptions(), folder=tmp_path)
     with h5py.File(saved, "r") as f:
