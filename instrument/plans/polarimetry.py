@@ -39,6 +39,7 @@ from instrument.bench.optics import OpticalTrain
 from instrument.bench.profile import BenchProfile, FieldError, _Validator
 from instrument.plans.commands import ScanPoint
 from instrument.plans.errors import PlanError
+from instrument.plans.mount_limits import check_mount_limits
 
 __all__ = ["DEFAULT_STEPS", "FAR_FROM_OPTIMUM", "MIN_STEPS", "POLARIMETRY_KINDS", "Conditioning",
            "conditioning", "parse_polarimetry", "plan_wavelengths", "polarimetry_axis"]
@@ -203,7 +204,7 @@ def polarimetry_axis(pol: dict[str, Any], profile: BenchProfile, body: list[Scan
                   if e.kind == "polariser" and e.mount is not None)
     moves = [((psg.mount, float(g % 360.0)), (psa.mount, float(a % 360.0)))
              for g, a in zip(theta_g, theta_a, strict=True)]
-    _check_limits(profile, [dict((*fixed, *m)) for m in moves])
+    check_mount_limits(profile, [dict((*fixed, *m)) for m in moves])
     out: list[ScanPoint] = []
     for p in body:
         if not p.light:
@@ -213,23 +214,3 @@ def polarimetry_axis(pol: dict[str, Any], profile: BenchProfile, body: list[Scan
             out.append(replace(p, targets=(*p.targets, *fixed, *move),
                                meta=(*p.meta, ("drr_step", k))))
     return out
-
-
-def _check_limits(profile: BenchProfile, targets: list[dict[str, float]]) -> None:
-
-    errors = []
-    for role in dict.fromkeys(r for t in targets for r in t):
-        spec = profile.devices.get(role)
-        if spec is None:
-            errors.append(FieldError(f"devices.{role}", "the optical train's mount is not a "
-                                     "device of this bench"))
-            continue
-        values = [t[role] for t in targets if role in t]
-        if spec.limits is not None and (min(values) < spec.limits[0]
-                                        or max(values) > spec.limits[1]):
-            errors.append(FieldError(f"devices.{role}.limits", f"the scan turns this mount "
-                                     f"from {min(values):g}° to {max(values):g}°, outside "
-                                     f"its limits {list(spec.limits)}: give it at least "
-                                     "[0, 360]"))
-    if errors:
-        raise PlanError(f"bench {profile.name!r}", errors)

@@ -40,6 +40,7 @@ from instrument.bench.optics import OpticalElement, OpticalTrain
 from instrument.bench.profile import BenchProfile, FieldError, _Validator
 from instrument.plans.commands import AcquisitionPolicy, ScanPoint
 from instrument.plans.errors import PlanError
+from instrument.plans.mount_limits import check_mount_limits
 
 __all__ = ["DEFAULT_READS", "DEFAULT_TIME_CONSTANTS", "PEM_KEYS", "PemConditioning",
            "PemTrain", "parse_pem", "pem_axis", "pem_conditioning", "pem_train",
@@ -238,8 +239,6 @@ def pem_axis(pol: dict[str, Any], profile: BenchProfile, body: list[ScanPoint],
         The bench is not a PEM polarimeter, the plan does not read the lock-in, a mount's
         limits do not hold its settings, or the settings miss some elements.
     """
-    from instrument.plans.polarimetry import _check_limits
-
     train = pem_train(profile)
     if tuple(acquisition.detectors) != ("lockin",):
         raise PlanError(f"bench {profile.name!r}", [FieldError(
@@ -266,7 +265,7 @@ def pem_axis(pol: dict[str, Any], profile: BenchProfile, body: list[ScanPoint],
               (train.retarder.mount,
                s.analyser_retarder_deg - train.retarder.orientation_deg))
              for s in settings]
-    _check_limits(profile, [dict((*fixed, *m)) for m in moves])
+    check_mount_limits(profile, [dict((*fixed, *m)) for m in moves])
     # the analyser's settings back and forth (a snake): one turn less per generator setting
     n_a = len(pol["analyser_deg"])
     order = [g * n_a + (a if g % 2 == 0 else n_a - 1 - a)

@@ -22,11 +22,11 @@ import numpy as np
 
 from analysis.brdf.reduction.lockin import pooled_reading_sigma
 from analysis.polarimetry.pem import PemSetting
-from instrument.pipelines.polarimetry.readings import (
+from instrument.pipelines.polarimetry.groups import (
     PemGroup,
     StepGroup,
-    _element,
     element_axis,
+    train_element,
 )
 from instrument.plans.polarimetry_pem import DEFAULT_READS
 from instrument.run.pem_reading import OUTPUT_FLOOR
@@ -55,7 +55,7 @@ def pem_groups(path: str | Path, run: RunData, train: Mapping[str, Any],
         The train has no PEM, no polariser before it or no analyser retarder, or a point
         lacks its readings, σ, amplitude or setting index.
     """
-    pem = _element(train, "psg", "pem")
+    pem = train_element(train, "psg", "pem")
     for role in ("psg_polariser", "psa_retarder"):
         if role not in run.axes:
             raise RunFileError(f"{path} has no read-back angles of {role!r}: the run did "
