@@ -77,6 +77,15 @@ FLOAT_FIELDS = ("t_start", "t_end", "theta_i", "phi_i", "theta_r", "phi_r", "exp
                 "power_w", "signal")
 INT_FIELDS = ("index", "status", "n_frames", "frame_start", "retries")
 STR_FIELDS = ("label", "note")
+#: A PEM polarimeter's per-point readings (ADR 0106): the DC on Aux In 1, the in-phase 1f
+#: and 2f (signed V rms) with their σ, Y, phase θ and full scale, the settle in time
+#: constants, and the modulator's amplitude (rad at its wavelength setting, nm) and
+#: frequency (Hz).
+PEM_FIELDS = ("pem_dc_v", "pem_u_dc_v", "pem_1f_v", "pem_u_1f_v", "pem_1f_y_v",
+              "pem_1f_theta_deg", "pem_1f_sensitivity_v", "pem_2f_v", "pem_u_2f_v",
+              "pem_2f_y_v", "pem_2f_theta_deg", "pem_2f_sensitivity_v",
+              "pem_time_constants", "pem_amplitude_rad", "pem_wavelength_nm",
+              "pem_frequency_hz")
 #: Per-point readings of the optional detectors and of the light's band, NaN where the bench
 #: has no such device (and in files written before they existed: readers must not require
 #: them): the lock-in's mean R over the point's readings and its standard error (V rms), X,
@@ -85,16 +94,8 @@ STR_FIELDS = ("label", "note")
 #: ``dark = "per_point"``, the point's dark readings (light off: shutter closed or source
 #: off): the power meter's (W) and the lock-in's mean X, Y (V) and the standard error of
 #: one component (V rms); the slot of the neutral-density filter the camera read the point
-#: through when it clipped at its shortest exposure (NaN: open beam). A PEM polarimeter's
-#: point (ADR 0106) adds :data:`PEM_FIELDS`: the DC on Aux In 1,
-#: the in-phase 1f and 2f (signed V rms) with their σ, Y, phase θ and full scale, the settle
-#: in time constants, and the modulator's amplitude (rad at its wavelength setting, nm) and
-#: frequency (Hz).
-PEM_FIELDS = ("pem_dc_v", "pem_u_dc_v", "pem_1f_v", "pem_u_1f_v", "pem_1f_y_v",
-              "pem_1f_theta_deg", "pem_1f_sensitivity_v", "pem_2f_v", "pem_u_2f_v",
-              "pem_2f_y_v", "pem_2f_theta_deg", "pem_2f_sensitivity_v",
-              "pem_time_constants", "pem_amplitude_rad", "pem_wavelength_nm",
-              "pem_frequency_hz")
+#: through when it clipped at its shortest exposure (NaN: open beam); a PEM polarimeter's
+#: point adds :data:`PEM_FIELDS`.
 DETECTOR_FIELDS = ("lockin_r_v", "lockin_u_r_v", "lockin_x_v", "lockin_y_v",
                    "lockin_theta_deg", "lockin_sensitivity_v", "lockin_time_constant_s",
                    "lockin_overload", "filter_position", "wavelength_nm", "bandwidth_nm",

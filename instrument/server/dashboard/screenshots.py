@@ -107,7 +107,9 @@ def render_dashboard(out_dir: str | Path) -> dict[str, Path]:
             shots["dashboard_observer"] = _shot(obs, out / "dashboard_observer.png")
             obs.context.close()
             ada.stop_queue()  # the first scan goes on to its end; the second waits
-            _wait(lambda: ada.status()["run"] is None, 1800, "the end of the first scan")
+            # the history row lands a moment after the run leaves the status
+            _wait(lambda: ada.status()["run"] is None and bool(ada.history()), 1800,
+                  "the end of the first scan")
             (first,) = ada.history()
             fit_run(first["run_file"])
             page.click("#runs-refresh")

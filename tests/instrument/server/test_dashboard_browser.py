@@ -174,6 +174,7 @@ def test_an_operator_pauses_and_resumes_a_run_and_adds_a_plan_file(bench_file, s
         wait_run_state(page, "finished")
         assert "resumed" in page.inner_text("#log")
         with BenchClient(server.url, keys["observer"]) as obs:
+            wait_for(obs.history, what="the finished run in the history", timeout=60)
             (h,) = obs.history()
         assert h["outcome"] == "finished"
         with h5py.File(h["run_file"]) as f:
