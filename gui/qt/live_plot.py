@@ -98,6 +98,8 @@ class LivePlot(QWidget):
         self.in_plane_legend.setMinimumWidth(self.in_plane_legend.fontMetrics()
                                              .horizontalAdvance("━━ θi = -88.88°  "))
         self._view: tuple[float, float, float, float] | None = None
+        #: the data's extent (θr, log10 signal) the view was last grown for
+        self._extent: tuple[float, float, float, float] | None = None
         self._legend_rows: list[str] = []
         in_plane_page = QWidget()
         row = QHBoxLayout(in_plane_page)
@@ -180,6 +182,7 @@ class LivePlot(QWidget):
         self._legend_rows = []
         self.in_plane_legend.setText("")
         self._view = None
+        self._extent = None
         self.in_plane.enableAutoRange()
         self.nd_points.setData([], [])
         self.n_nd = 0
@@ -260,8 +263,12 @@ class LivePlot(QWidget):
         v = self._view
         if v is not None and v[0] <= x0 and x1 <= v[1] and v[2] <= y0 and y1 <= v[3]:
             return
-        if v is not None:  # never shrink during a run: keep what was shown in view
-            x0, x1, y0, y1 = min(x0, v[0]), max(x1, v[1]), min(y0, v[2]), max(y1, v[3])
+        e = self._extent
+        if e is not None:  # the data seen so far; the view never shrinks during a run
+            x0, x1, y0, y1 = min(x0, e[0]), max(x1, e[1]), min(y0, e[2]), max(y1, e[3])
+        # the margin is taken on the data's extent, not on the previous view: margins on
+        # margins compounded at each growth (a run's view ended twice the data's width)
+        self._extent = (x0, x1, y0, y1)
         mx = VIEW_MARGIN * max(x1 - x0, VIEW_MIN_SPAN[0])
         my = VIEW_MARGIN * max(y1 - y0, VIEW_MIN_SPAN[1])
         self._view = (x0 - mx, x1 + mx, y0 - my, y1 + my)
