@@ -88,10 +88,10 @@ def test_the_planner_judges_each_wavelength_at_its_own_amplitude(capsys, tmp_pat
     assert main(["plan", str(path), "--bench", BENCH, "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     # 2π · 0.3828 · 633/550 and 633/650; the zero-order quarter wave's 90° · 633/λ
-    assert f"at 550 nm (PEM amplitude {amplitude_at(550.0):.3f} rad, analyser retardance " \
-           "103.58°)" in out
-    assert f"at 650 nm (PEM amplitude {amplitude_at(650.0):.3f} rad, analyser retardance " \
-           "87.65°)" in out
+    assert f"κ = 7.32 at 550 nm (PEM amplitude {amplitude_at(550.0):.3f} rad, analyser " \
+           "retardance 103.58°)" in out
+    assert f"κ = 10.1 at 650 nm (PEM amplitude {amplitude_at(650.0):.3f} rad, analyser " \
+           "retardance 87.65°)" in out
     assert f"{amplitude_at(550.0):.3f}" == "2.768" and f"{amplitude_at(650.0):.3f}" == "2.342"
 
 
@@ -111,7 +111,9 @@ def test_each_wavelength_is_reduced_at_the_modulators_amplitude_there(spectral_r
     assert [g.wavelength_nm for g in groups] == [550.0, 650.0]
     for g in groups:
         assert g.pem is not None
-        # 1/λ at a fixed drive: 2.768 rad at 550 nm, 2.342 rad at 650 nm
+        # 1/λ at a fixed drive: 2.768 rad at 550 nm, 2.342 rad at 650 nm (that the world
+        # modulates with these is what the closed loop below shows: the elements agree
+        # with its truth within σ, and with the 633 nm amplitude they would not)
         assert g.pem.amplitude_rad == pytest.approx(amplitude_at(g.wavelength_nm), rel=1e-4)
 
 
