@@ -197,10 +197,22 @@ def test_a_polariser_through_run_and_fit_is_recovered_within_3_sigma(polariser_r
 
 def test_a_dual_rotating_retarder_calibration_is_refused_for_a_pem_run(polariser_run,
                                                                       tmp_path):
+    from analysis.polarimetry.calibration import DrrCalibration
+    from instrument.pipelines.polarimetry.calibration import (
+        CalibrationError,
+        PolarimeterCalibration,
+        save_calibration,
+    )
+
     path, _ = polariser_run
-    with pytest.raises(ValueError, match="PEM run is reduced with its nominal"):
-        fit_polarimetric_run(path, calibration=tmp_path / "cal.json", report=False,
-                             write=False)
+    drr = DrrCalibration(params=np.array([0.0, 0.0, np.pi / 2, np.pi / 2, 0.0]),
+                         cov=np.eye(5) * 1e-6, chi2=10.0, dof=10)
+    file = save_calibration(PolarimeterCalibration(
+        drr=drr, bench="sim-polarimetric-pem", source_scale_w=1.0, date="2026-01-01"),
+        tmp_path, "drr.json")
+    with pytest.raises(CalibrationError, match=r"a dual rotating retarder \(mode 'drr'\).*"
+                       r"'pem' run"):
+        fit_polarimetric_run(path, calibration=file, report=False, write=False)
 
 
 @pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~2.5 min
