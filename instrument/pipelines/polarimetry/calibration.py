@@ -188,7 +188,8 @@ def find_calibration(run_path: str | Path, bench: str, mode: str = "drr"
             cal = load_calibration(f)
         except CalibrationError:
             continue  # a damaged file is not a candidate; naming it with --calibration says why
-        if cal.bench == bench and cal.mode == mode and cal.valid and (best is None or cal.date > best.date):
+        if (cal.bench == bench and cal.mode == mode and cal.valid
+                and (best is None or cal.date > best.date)):
             best = cal
     return best
 

@@ -66,13 +66,13 @@ def test_calibrated_pem_runs_recover_the_truth_and_nominal_ones_are_off(pem_cali
 
 def test_a_calibration_of_the_other_mode_is_refused_by_name(pem_calibration, tmp_path):
     folder, _, file = pem_calibration
-    with pytest.raises(CalibrationError, match="a PEM polarimeter.*'drr' run"):
+    with pytest.raises(CalibrationError, match=r"a PEM polarimeter.*'drr' run"):
         choose_calibration(tmp_path / "run.h5", "sim-polarimetric-pem", file, "drr")
     data = json.loads(file.read_text(encoding="utf-8"))
     data["mode"] = "drr"
     drr = tmp_path / "drr.json"
     drr.write_text(json.dumps(data), encoding="utf-8")
-    with pytest.raises(CalibrationError, match="a dual rotating retarder.*'pem' run"):
+    with pytest.raises(CalibrationError, match=r"a dual rotating retarder.*'pem' run"):
         choose_calibration(tmp_path / "run.h5", "sim-polarimetric-pem", drr, "pem")
     # found beside the run for a PEM run, never for a DRR run
     run = folder / "run.h5"
