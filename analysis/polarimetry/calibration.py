@@ -44,8 +44,8 @@ from analysis.polarimetry.drr import (
 from analysis.polarimetry.elements import linear_polariser, linear_retarder
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
-__all__ = ["DrrCalibration", "ReferenceFit", "ReferenceScan", "calibrate_drr", "fit_references",
-           "reduce_calibrated", "reduce_propagated"]
+__all__ = ["DrrCalibration", "FittedPolarimeter", "ReferenceFit", "ReferenceScan",
+           "calibrate_drr", "fit_references", "reduce_calibrated", "reduce_propagated"]
 
 _KINDS = ("air", "polariser", "retarder")
 
@@ -102,14 +102,15 @@ class ReferenceScan:
 
 
 @dataclass(frozen=True)
-class DrrCalibration:
-    """Fitted DRR parameters; :meth:`instrument_matrix` is what a calibrated reduction uses.
+class FittedPolarimeter:
+    """A polarimeter's fitted instrument parameters, what a DRR's and a PEM's calibration
+    share (:class:`DrrCalibration`,
+    :class:`~analysis.polarimetry.pem_calibration.PemCalibration`).
 
     Attributes
     ----------
     params : ndarray of shape (5,)
-        :data:`INSTRUMENT_PARAMS`: retarder offsets (deg, added to the commanded angles),
-        retardances (rad), analyser polariser axis (deg; the generator polariser is 0).
+        The instrument parameters (the subclass names them).
     cov : ndarray of shape (5, 5)
         Their covariance.
     sample_params : tuple of tuple of float
@@ -142,6 +143,16 @@ class DrrCalibration:
     def sigma(self) -> NDArray[np.float64]:
         """Standard deviations of :attr:`params`."""
         return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+
+
+@dataclass(frozen=True)
+class DrrCalibration(FittedPolarimeter):
+    """Fitted DRR parameters; :meth:`instrument_matrix` is what a calibrated reduction uses.
+
+    ``params`` are :data:`INSTRUMENT_PARAMS`: retarder offsets (deg, added to the commanded
+    angles), retardances (rad), analyser polariser axis (deg; the generator polariser is
+    0); the other fields are :class:`FittedPolarimeter`'s.
+    """
 
     def instrument_matrix(self, psg_retarder_deg: ArrayLike,
                           psa_retarder_deg: ArrayLike) -> NDArray[np.float64]:

@@ -32,12 +32,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from analysis.polarimetry.calibration import fit_references, reduce_propagated
+from analysis.polarimetry.calibration import (
+    FittedPolarimeter,
+    fit_references,
+    reduce_propagated,
+)
 from analysis.polarimetry.drr import MuellerEstimate, check_extinction
 from analysis.polarimetry.pem import CHANNELS, PemSetting, pem_design
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
@@ -78,27 +82,10 @@ class PemReferenceScan:
 
 
 @dataclass(frozen=True)
-class PemCalibration:
-    """Fitted PEM parameters (:data:`PEM_PARAMS`), their covariance, each reference's
-    nuisance parameters (as :class:`~analysis.polarimetry.calibration.DrrCalibration`'s),
-    χ², dof and the extinctions the fit held."""
-
-    params: NDArray[np.float64]
-    cov: NDArray[np.float64]
-    sample_params: tuple[tuple[float, ...], ...] = field(default=())
-    chi2: float = 0.0
-    dof: int = 0
-    psg_extinction: float = 0.0
-    psa_extinction: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("psg_extinction", "psa_extinction"):
-            object.__setattr__(self, name, check_extinction(name, getattr(self, name)))
-
-    @property
-    def sigma(self) -> NDArray[np.float64]:
-        """Standard deviations of :attr:`params`."""
-        return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+class PemCalibration(FittedPolarimeter):
+    """Fitted PEM parameters (:data:`PEM_PARAMS`); the covariance, each reference's
+    nuisance parameters, χ², dof and the extinctions the fit held are
+    :class:`~analysis.polarimetry.calibration.FittedPolarimeter`'s."""
 
     def design(self, settings: Sequence[PemSetting], amplitude_rad: float
                ) -> NDArray[np.float64]:
