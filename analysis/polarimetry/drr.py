@@ -391,7 +391,8 @@ def estimate(m: ArrayLike, cov: ArrayLike, *, chi2: float, dof: int) -> MuellerE
 
 def pem_instrument_rows(analysers: ArrayLike, *, amplitude_rad: float,
                         pem_axis_deg: float = 45.0,
-                        polariser_deg: float = 0.0) -> NDArray[np.float64]:
+                        polariser_deg: float = 0.0,
+                        polariser_extinction: float = 0.0) -> NDArray[np.float64]:
     """Rows of the instrument matrix for a PEM generator read at DC, 1f and 2f.
 
     The generator is a polariser at ``polariser_deg`` followed by a photoelastic modulator
@@ -419,6 +420,9 @@ def pem_instrument_rows(analysers: ArrayLike, *, amplitude_rad: float,
         analyser setting.
     amplitude_rad : float
         Peak retardation A of the PEM, radians (2.405 rad zeroes J₀).
+    polariser_extinction : float
+        The source polariser's power extinction ratio ε (a partial polariser, as in
+        :func:`instrument_matrix`; 0 is ideal).
 
     Returns
     -------
@@ -431,9 +435,10 @@ def pem_instrument_rows(analysers: ArrayLike, *, amplitude_rad: float,
     amp = _scalar("amplitude_rad", amplitude_rad)
     pem_axis_deg = _scalar("pem_axis_deg", pem_axis_deg)
     polariser_deg = _scalar("polariser_deg", polariser_deg)
-    g_plus = generator_stokes(pem_axis_deg, 0.0, polariser_deg)       # g0 + gc
-    g_minus = generator_stokes(pem_axis_deg, math.pi, polariser_deg)  # g0 − gc
-    g_quarter = generator_stokes(pem_axis_deg, math.pi / 2, polariser_deg)  # g0 + gs
+    e = polariser_extinction
+    g_plus = generator_stokes(pem_axis_deg, 0.0, polariser_deg, e)       # g0 + gc
+    g_minus = generator_stokes(pem_axis_deg, math.pi, polariser_deg, e)  # g0 − gc
+    g_quarter = generator_stokes(pem_axis_deg, math.pi / 2, polariser_deg, e)  # g0 + gs
     g0 = 0.5 * (g_plus + g_minus)
     gc = 0.5 * (g_plus - g_minus)
     gs = g_quarter - g0

@@ -88,24 +88,34 @@ def pem_settings(generator_polariser_deg: Sequence[float] = DEFAULT_GENERATOR_PO
 
 
 def pem_design(settings: Sequence[PemSetting], *, amplitude_rad: float,
-               analyser_retardance_rad: float = math.pi / 2) -> NDArray[np.float64]:
+               analyser_retardance_rad: float = math.pi / 2, psg_extinction: float = 0.0,
+               psa_extinction: float = 0.0) -> NDArray[np.float64]:
     """The stacked instrument matrix, shape (3·S, 16): rows 3s, 3s+1, 3s+2 are setting
-    s's DC, 1f and 2f channels (:func:`~analysis.polarimetry.drr.pem_instrument_rows`)."""
+    s's DC, 1f and 2f channels (:func:`~analysis.polarimetry.drr.pem_instrument_rows`).
+
+    ``psg_extinction``, ``psa_extinction``: the source and analyser polarisers' power
+    extinction ratios ε, partial polarisers as in the DRR's W
+    (:func:`~analysis.polarimetry.drr.instrument_matrix`; 0 is ideal and gives the ideal
+    rows bit for bit). The generator's is the effective one for the source's own
+    polarisation (:func:`~analysis.polarimetry.drr.generator_extinction`)."""
     if not settings:
         raise PolarimetryInputError("settings", "needs at least one setting")
     rows = [pem_instrument_rows(
         analyser_row(s.analyser_retarder_deg, analyser_retardance_rad,
-                     s.analyser_polariser_deg)[None, :],
+                     s.analyser_polariser_deg, psa_extinction)[None, :],
         amplitude_rad=amplitude_rad, pem_axis_deg=s.pem_axis_deg,
-        polariser_deg=s.polariser_deg) for s in settings]
+        polariser_deg=s.polariser_deg, polariser_extinction=psg_extinction)
+        for s in settings]
     return np.vstack(rows)
 
 
 def pem_condition_number(settings: Sequence[PemSetting], *, amplitude_rad: float,
-                         analyser_retardance_rad: float = math.pi / 2) -> float:
+                         analyser_retardance_rad: float = math.pi / 2,
+                         psg_extinction: float = 0.0, psa_extinction: float = 0.0) -> float:
     """κ of :func:`pem_design` (∞ when the settings miss some elements)."""
     w = pem_design(settings, amplitude_rad=amplitude_rad,
-                   analyser_retardance_rad=analyser_retardance_rad)
+                   analyser_retardance_rad=analyser_retardance_rad,
+                   psg_extinction=psg_extinction, psa_extinction=psa_extinction)
     return condition_number(w)
 
 

@@ -125,6 +125,20 @@ class OpticalTrain:
     def mounts(self) -> tuple[str, ...]:
         return tuple(e.mount for e in (*self.source, *self.detector) if e.mount is not None)
 
+    def extinctions(self) -> dict[str, float]:
+        """The polarisers' extinction the instrument matrix takes, as keyword arguments
+        (``psg_extinction``, ``psa_extinction``): the generator's lowered by the source's
+        own polarisation (:func:`analysis.polarimetry.drr.generator_extinction`), 0 for an
+        arm without a polariser. What the planner's κ and σ use, as W and the calibration
+        do."""
+        from analysis.polarimetry.drr import generator_extinction
+
+        gen = next((e for e in self.source if e.kind == "polariser"), None)
+        ana = next((e for e in self.detector if e.kind == "polariser"), None)
+        return {"psg_extinction": 0.0 if gen is None else generator_extinction(
+                    gen.extinction, gen.source_dop),
+                "psa_extinction": 0.0 if ana is None else ana.extinction}
+
     def as_dict(self) -> dict[str, Any]:
         return {"source": [e.as_dict() for e in self.source],
                 "detector": [e.as_dict() for e in self.detector]}

@@ -13,6 +13,11 @@ scan uses the profile with its ``[simulation.scene]`` replaced by the reference,
 emulated detector-arm controller's software limit opened to reach 180°. A real bench needs
 an operator to place each reference; this version automates the simulated benches only.
 
+On a PEM bench (a ``kind = "pem"`` element in the source arm) each reference is a PEM
+run (``[polarimetry] mode = "pem"``, the lock-in read at its 2 × 4 settings) and the fit is
+the PEM train's (ADR 0113); the simulated straight-through beam is attenuated to 1 µW, as
+a calibration stand's neutral density keeps the photodiode within the lock-in's range.
+
 Exit status: 0 written (valid), 1 written but failing its quality gate, 2 on errors.
 """
 
@@ -53,6 +58,24 @@ mode = "drr"
 steps = {steps}
 """
 
+#: ... on a PEM bench: the lock-in at the default settings.
+_PEM_POLARIMETRY = """
+[acquisition]
+detectors = ["lockin"]
+
+[polarimetry]
+mode = "pem"
+"""
+
+#: The simulated source power of a PEM reference scan (W): 1 mW straight through would
+#: read 400 V at the photodiode's 0.4 A/W × 1 MΩ; 1 µW reads 0.4 V.
+PEM_REFERENCE_POWER_W = 1e-6
+
+
+def is_pem_bench(profile: BenchProfile) -> bool:
+    """Whether the bench's polarimeter is a PEM's (a modulator in its source arm)."""
+    return profile.optics is not None and any(e.kind == "pem" for e in profile.optics.source)
+
 
 def register_polarimeter(what: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     c = what.add_parser("polarimeter", help=HELP_POLARIMETER)
@@ -62,7 +85,8 @@ def register_polarimeter(what: argparse._SubParsersAction[argparse.ArgumentParse
                    help="folder of the reference runs; the calibration goes into "
                    "OUT/calibrations/ (default: runs)")
     c.add_argument("--steps", type=int, default=36,
-                   help="retarder steps per reference scan (25 or more; default 36)")
+                   help="retarder steps per reference scan (25 or more; default 36; a PEM "
+                   "bench takes its 2 × 4 settings)")
     c.add_argument("--polariser-deg", default="0,45",
                    help="azimuths of the linear-polariser references (default 0,45)")
     c.add_argument("--retarder-deg", type=float, default=30.0,
@@ -73,7 +97,8 @@ def register_polarimeter(what: argparse._SubParsersAction[argparse.ArgumentParse
     c.set_defaults(func=run_polarimeter)
 
 
-def _simulated_reference(profile_text: str, kind: str, angle: float) -> str:
+def _simulated_reference(profile_text: str, kind: str, angle: float, pem: bool = False
+                         ) -> str:
     """The profile with its scene replaced by a reference and the detector arm's emulated
     controller opened to the straight-through position."""
     cut = re.search(r"^\[simulation\.scene(\.[^\]]*)?\]", profile_text, re.MULTILINE)
@@ -92,6 +117,9 @@ def _simulated_reference(profile_text: str, kind: str, angle: float) -> str:
     body = re.sub(r"(simsmc://detector_theta)\?", r"\1_straight?sr=181&", body)
     body = re.sub(r'(\[devices\.detector_theta\][^\[]*?limits = \[)([-\d.]+), [-\d.]+\]',
                   r"\1\2, 181.0]", body, flags=re.DOTALL)
+    if pem:
+        body = re.sub(r"(\[simulation\.source\][^\[]*?power_w = )[-+.\deE]+",
+                      rf"\g<1>{PEM_REFERENCE_POWER_W:g}", body, flags=re.DOTALL)
     scene = f'\n[simulation.scene]\nkind = "polarimetric"\nsample = "{kind}"\n'
     if table:
         scene += f"\n[simulation.scene.{kind}]\n{table}"
@@ -111,10 +139,14 @@ def _reference_run(profile: BenchProfile, kind: str, angle: float, args: argpars
     out.mkdir(parents=True, exist_ok=True)
     name = kind if kind == "air" else f"{kind} {angle:g}°"
     ref_profile = out / f".{profile.name}-{kind}-{angle:g}.toml"
-    ref_profile.write_text(_simulated_reference(profile.source_text, kind, angle),
+    pem = is_pem_bench(profile)
+    ref_profile.write_text(_simulated_reference(profile.source_text, kind, angle, pem),
                            encoding="utf-8")
     prof = load_profile(ref_profile)
-    plan = build_plan(parse_plan(_PLAN.format(name=name, steps=args.steps)), prof)
+    text = _PLAN.format(name=name, steps=args.steps)
+    if pem:
+        text = text[:text.index("[acquisition]")] + _PEM_POLARIMETRY
+    plan = build_plan(parse_plan(text), prof)
     straight = {"detector_theta": 180.0, "sample_theta": 0.0}
     plan = replace(plan, points=tuple(
         replace(p, targets=tuple((r, straight.get(r, v)) for r, v in p.targets))
@@ -141,7 +173,7 @@ def run_polarimeter(args: argparse.Namespace) -> int:
     except ValueError as err:
         print(f"error: {err}")
         return 2
-    if args.steps < 25:
+    if args.steps < 25 and not is_pem_bench(profile):
         print(f"error: --steps must be ≥ 25 (fewer equal steps alias), got {args.steps}")
         return 2
     simulated = re.search(r"^\[simulation\.scene\]", profile.source_text, re.MULTILINE)

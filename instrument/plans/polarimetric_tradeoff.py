@@ -151,10 +151,13 @@ def predict_polarimetric(spec: PlanSpec, profile: BenchProfile, option: Polarime
     rel, floor = noise.relative, (noise.floor_w or 0.0) / reading_w
     m = np.eye(4) if prior is None else np.asarray(prior, dtype=float)
     g, a = drr_angles(int(option.steps), float(pol["ratio"]))
+    # the polarisers' datasheet extinction, as the run's W takes it (ADR 0108, 0113)
+    extinction = {} if profile.optics is None else profile.optics.extinctions()
     kappa, mean, worst = 0.0, 0.0, 0.0
     for c in conditioning(pol, profile, wavelengths):
         w = instrument_matrix(g, a, psg_retardance=math.radians(c.psg_retardance_deg),
-                              psa_retardance=math.radians(c.psa_retardance_deg))
+                              psa_retardance=math.radians(c.psa_retardance_deg),
+                              **extinction)
         s = element_sigma(w, m, rel, floor).ravel()[1:]
         kappa = max(kappa, c.kappa)
         mean, worst = max(mean, float(s.mean())), max(worst, float(s.max()))

@@ -112,12 +112,13 @@ class Conditioning:
                 f"{self.optimum_retardance_deg:g}°")
 
 
-def _kappa(steps: int, ratio: float, psg_deg: float, psa_deg: float) -> float:
+def _kappa(steps: int, ratio: float, psg_deg: float, psa_deg: float,
+           extinction: dict[str, float] | None = None) -> float:
     from analysis.polarimetry.drr import condition_number, drr_angles, instrument_matrix
 
     g, a = drr_angles(steps, ratio)
     w = instrument_matrix(g, a, psg_retardance=math.radians(psg_deg),
-                          psa_retardance=math.radians(psa_deg))
+                          psa_retardance=math.radians(psa_deg), **(extinction or {}))
     return condition_number(w)
 
 
@@ -172,7 +173,8 @@ def conditioning(pol: dict[str, Any], profile: BenchProfile,
     for lam in at_wavelengths:
         at = 550.0 if lam is None else lam
         dg, da = psg.retardance_at(at), psa.retardance_at(at)
-        out.append(Conditioning(lam, dg, da, _kappa(steps, ratio, dg, da), best_kappa,
+        out.append(Conditioning(lam, dg, da, _kappa(steps, ratio, dg, da,
+                                                    train.extinctions()), best_kappa,
                                 float(best_deg)))
     return out
 

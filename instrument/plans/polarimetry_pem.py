@@ -215,6 +215,8 @@ def pem_conditioning(pol: dict[str, Any], profile: BenchProfile,
     settings = plan_settings(pol, train)
     waves = plan_waves(pol, profile, train)
     at_pem = _pem_wavelength(profile, train)
+    assert profile.optics is not None  # pem_train checked
+    extinction = profile.optics.extinctions()
     out = []
     at_wavelengths: list[float | None] = [*wavelengths] or [None]
     for lam in at_wavelengths:
@@ -222,7 +224,7 @@ def pem_conditioning(pol: dict[str, Any], profile: BenchProfile,
         amp = 2.0 * math.pi * waves * ratio
         ret = train.retarder.retardance_at(550.0 if lam is None else lam)
         kappa = pem_condition_number(settings, amplitude_rad=amp,
-                                     analyser_retardance_rad=math.radians(ret))
+                                     analyser_retardance_rad=math.radians(ret), **extinction)
         out.append(PemConditioning(lam, amp, ret, kappa))
     return out
 

@@ -3,7 +3,11 @@ looked up by ``scatterlab fit``.
 
 A calibration is the fit of the dual rotating retarder's five hidden parameters
 (:func:`analysis.polarimetry.calibration.calibrate_drr`: retarder offsets, retardances,
-analyser polariser axis) to reference scans, with their covariance and the fit's χ².
+analyser polariser axis) to reference scans, with their covariance and the fit's χ²; on
+a PEM polarimeter the five of :func:`analysis.polarimetry.pem_calibration.calibrate_pem`
+(modulator amplitude and axis, analyser retarder axis and retardance, analyser polariser
+axis; ADR 0113). The file's ``mode`` (``"drr"``, or ``"pem"``; files without it are a
+DRR's) says which, and a run is reduced only with a calibration of its own mode.
 It is stored as JSON (``polarimeter-<bench>-<time>.json``) in a ``calibrations/``
 folder beside the runs, with its provenance: the bench, the reference runs, the date and
 the software version. ``fit`` uses the calibration it is given (``--calibration FILE``),
@@ -26,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from analysis.polarimetry.calibration import INSTRUMENT_PARAMS, DrrCalibration
+from analysis.polarimetry.pem_calibration import PEM_PARAMS, PemCalibration
 from instrument.version import software_version
 
 __all__ = ["CALIBRATION_KIND", "CalibrationError", "PolarimeterCalibration",
@@ -46,10 +51,12 @@ class PolarimeterCalibration:
 
     ``source_scale_w`` is the intensity (W) of the unit unpolarised source that the
     instrument matrix assumes, measured on the air scan: a reduced matrix divided by it
-    is a transmittance.
+    is a transmittance. ``drr`` holds the fitted parameters: a
+    :class:`~analysis.polarimetry.calibration.DrrCalibration` or, for a PEM polarimeter,
+    a :class:`~analysis.polarimetry.pem_calibration.PemCalibration` (:attr:`mode`).
     """
 
-    drr: DrrCalibration
+    drr: DrrCalibration | PemCalibration
     bench: str
     source_scale_w: float
     date: str
@@ -59,12 +66,17 @@ class PolarimeterCalibration:
     path: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def mode(self) -> str:
+        """``"pem"`` for a PEM polarimeter's calibration, else ``"drr"``."""
+        return "pem" if isinstance(self.drr, PemCalibration) else "drr"
+
     def to_dict(self) -> dict[str, Any]:
         d = self.drr
         return {
-            "kind": CALIBRATION_KIND, "bench": self.bench, "date": self.date,
-            "software_version": software_version(),
-            "param_names": list(INSTRUMENT_PARAMS),
+            "kind": CALIBRATION_KIND, "mode": self.mode, "bench": self.bench,
+            "date": self.date, "software_version": software_version(),
+            "param_names": list(PEM_PARAMS if self.mode == "pem" else INSTRUMENT_PARAMS),
             "params": [float(v) for v in d.params],
             "sigma": [float(v) for v in d.sigma],
             "covariance": np.asarray(d.cov, dtype=float).tolist(),
@@ -79,13 +91,18 @@ class PolarimeterCalibration:
     def describe(self) -> str:
         """One line: the fitted parameters with σ (angles in degrees)."""
         p, s = self.drr.params, self.drr.sigma
+        if self.mode == "pem":
+            return (f"PEM amplitude × {p[0]:.4f} ± {s[0]:.4f}, PEM axis {p[1]:+.3f} ± "
+                    f"{s[1]:.3f}°, analyser retarder {p[2]:+.3f} ± {s[2]:.3f}° "
+                    f"({math.degrees(p[3]):.2f} ± {math.degrees(s[3]):.2f}°), analyser "
+                    f"polariser {p[4]:+.3f} ± {s[4]:.3f}°")
         return (f"retarder offsets {p[0]:+.3f} ± {s[0]:.3f}° / {p[1]:+.3f} ± {s[1]:.3f}°, "
                 f"retardances {math.degrees(p[2]):.2f} ± {math.degrees(s[2]):.2f}° / "
                 f"{math.degrees(p[3]):.2f} ± {math.degrees(s[3]):.2f}°, analyser polariser "
                 f"{p[4]:+.3f} ± {s[4]:.3f}°")
 
 
-def quality(drr: DrrCalibration) -> tuple[bool, str]:
+def quality(drr: DrrCalibration | PemCalibration) -> tuple[bool, str]:
     """The gate of the module docstring: (valid, the reason in words)."""
     if drr.dof <= 0:
         return False, "no degrees of freedom left: add steps or reference scans"
@@ -140,13 +157,17 @@ def load_calibration(path: str | Path) -> PolarimeterCalibration:
         cov = np.asarray(data["covariance"], dtype=float)
         if params.shape != (5,) or cov.shape != (5, 5):
             raise ValueError("params must hold 5 numbers and covariance 5×5")
-        drr = DrrCalibration(params=params, cov=cov,
-                             sample_params=tuple(tuple(float(v) for v in sp)
-                                                 for sp in data.get("sample_params", [])),
-                             chi2=float(data["chi2"]), dof=int(data["dof"]),
-                             # files written before the field modelled ideal polarisers
-                             psg_extinction=float(data.get("psg_extinction", 0.0)),
-                             psa_extinction=float(data.get("psa_extinction", 0.0)))
+        mode = data.get("mode", "drr")  # files before PEM calibrations are a DRR's
+        if mode not in ("drr", "pem"):
+            raise ValueError(f"mode must be 'drr' or 'pem', got {mode!r}")
+        kind = PemCalibration if mode == "pem" else DrrCalibration
+        drr = kind(params=params, cov=cov,
+                   sample_params=tuple(tuple(float(v) for v in sp)
+                                       for sp in data.get("sample_params", [])),
+                   chi2=float(data["chi2"]), dof=int(data["dof"]),
+                   # files written before the field modelled ideal polarisers
+                   psg_extinction=float(data.get("psg_extinction", 0.0)),
+                   psa_extinction=float(data.get("psa_extinction", 0.0)))
         return PolarimeterCalibration(
             drr=drr, bench=str(data["bench"]), source_scale_w=float(data["source_scale_w"]),
             date=str(data["date"]), references=tuple(data.get("references", [])),
@@ -156,8 +177,10 @@ def load_calibration(path: str | Path) -> PolarimeterCalibration:
         raise CalibrationError(f"{p}: malformed polarimeter calibration ({err})") from None
 
 
-def find_calibration(run_path: str | Path, bench: str) -> PolarimeterCalibration | None:
-    """The newest valid calibration of ``bench`` in ``calibrations/`` next to the run."""
+def find_calibration(run_path: str | Path, bench: str, mode: str = "drr"
+                     ) -> PolarimeterCalibration | None:
+    """The newest valid calibration of ``bench`` and of the run's polarimeter ``mode``
+    (``"drr"`` or ``"pem"``) in ``calibrations/`` next to the run."""
     folder = calibration_folder(Path(run_path).resolve().parent)
     best: PolarimeterCalibration | None = None
     for f in sorted(folder.glob("polarimeter-*.json")):
@@ -165,7 +188,8 @@ def find_calibration(run_path: str | Path, bench: str) -> PolarimeterCalibration
             cal = load_calibration(f)
         except CalibrationError:
             continue  # a damaged file is not a candidate; naming it with --calibration says why
-        if cal.bench == bench and cal.valid and (best is None or cal.date > best.date):
+        if (cal.bench == bench and cal.mode == mode and cal.valid
+                and (best is None or cal.date > best.date)):
             best = cal
     return best
 

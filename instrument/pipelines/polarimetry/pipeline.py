@@ -3,8 +3,8 @@ and the results file (what ``scatterlab fit`` does for a run with an optical tra
 
 Steps: read and group the run (:mod:`~instrument.pipelines.polarimetry.readings`; a PEM
 run's DC, 1f and 2f readings by :mod:`~instrument.pipelines.polarimetry.pem_readings`,
-reduced with its nominal train and no calibration, ADR 0106), choose the calibration
-(:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every geometry
+ADR 0106), choose the calibration of the run's polarimeter (a DRR's or a PEM's, ADR 0113;
+:mod:`~instrument.pipelines.polarimetry.calibration`), reduce every geometry
 (:mod:`~instrument.pipelines.polarimetry.reduce`), fit the pBRDF to every matrix with its
 full covariance (the variant the data need,
 :func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`, ADR 0107, judged by the
@@ -28,6 +28,7 @@ from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf, pbrdf
 from analysis.polarimetry.pbrdf_selection import PBRDF_VARIANTS, select_pbrdf
 from analysis.polarimetry.validation import PolarimetryInputError
 from instrument.pipelines.polarimetry.calibration import (
+    CalibrationError,
     PolarimeterCalibration,
     find_calibration,
     load_calibration,
@@ -52,10 +53,11 @@ DEFAULT_START = (1.5, 0.0, 0.2, 0.1, 0.0)
 #: What the report and the console say when no calibration is used.
 UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
                 "misalignment; run scatterlab calibrate polarimeter")
-#: ... for a PEM run, which the eigenvalue calibration (of a DRR) does not cover.
+#: ... for a PEM run.
 UNCALIBRATED_PEM = ("PEM run reduced with the nominal optical train (DC, 1f and 2f rows at "
                     "the modulator's amplitude; the mounts' read-back angles): elements may "
-                    "be biased by the train's own misalignment")
+                    "be biased by the train's own misalignment; run scatterlab calibrate "
+                    "polarimeter on the PEM bench")
 
 
 @dataclass(frozen=True)
@@ -69,21 +71,28 @@ class PolarimetricFit:
     results: Path | None
 
 
-def choose_calibration(path: str | Path, bench: str, calibration: str | Path | None
-                       ) -> PolarimeterCalibration | None:
+def choose_calibration(path: str | Path, bench: str, calibration: str | Path | None,
+                       mode: str = "drr") -> PolarimeterCalibration | None:
     """The calibration to use: ``"none"`` none, a file that one, else the newest valid
-    one of the bench beside the run (:func:`find_calibration`).
+    one of the bench and the polarimeter ``mode`` beside the run (:func:`find_calibration`).
 
     Raises
     ------
     CalibrationError
-        A named file that is not a usable calibration.
+        A named file that is not a usable calibration, or one of the other polarimeter
+        mode (a DRR's for a PEM run or the reverse).
     """
     if calibration is None:
-        return find_calibration(path, bench)
+        return find_calibration(path, bench, mode)
     if str(calibration) == "none":
         return None
-    return load_calibration(calibration)
+    cal = load_calibration(calibration)
+    if cal.mode != mode:
+        names = {"drr": "a dual rotating retarder", "pem": "a PEM polarimeter"}
+        raise CalibrationError(f"{cal.path} calibrates {names[cal.mode]} (mode "
+                               f"{cal.mode!r}); the run {path} is a {mode!r} run: name a "
+                               f"calibration of its own mode, or --calibration none")
+    return cal
 
 
 def polarimetric_options(calibration: PolarimeterCalibration | None,
@@ -164,7 +173,8 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     RunFileError
         Not a readable polarimetric run.
     CalibrationError
-        A named calibration that cannot be used, or one of another bench.
+        A named calibration that cannot be used, one of another bench, or one of the other
+        polarimeter mode (a DRR's for a PEM run, a PEM's for a DRR run).
     ValueError
         No readings, unknown noise or receiver geometry, or too few steps per geometry.
     """
@@ -172,21 +182,15 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     prun = read_polarimetric(path)
     bench = str(prun.run.profile().get("bench", {}).get("name", ""))
     pem = prun.polarimetry.get("mode") == "pem"
-    if pem and calibration is not None and str(calibration) != "none":
-        raise ValueError("a PEM run is reduced with its nominal optical train: the "
-                         "polarimeter calibration (eigenvalue method) is of a dual rotating "
-                         "retarder; leave --calibration out")
-    cal = None if pem else choose_calibration(path, bench, calibration)
+    cal = choose_calibration(path, bench, calibration, "pem" if pem else "drr")
     notes: list[str] = []
     if cal is not None and cal.bench != bench:
-        from instrument.pipelines.polarimetry.calibration import CalibrationError
-
         raise CalibrationError(f"{cal.path} calibrates bench {cal.bench!r}, the run was "
                                f"taken on {bench!r}")
     if cal is not None and not cal.valid:
         notes.append(f"the calibration {cal.path} failed its quality gate ({cal.quality}); "
                      "used because it was named")
-    cal_text = (UNCALIBRATED_PEM if pem else UNCALIBRATED if cal is None else
+    cal_text = ((UNCALIBRATED_PEM if pem else UNCALIBRATED) if cal is None else
                 f"calibrated with {cal.path} ({cal.date}): {cal.describe()}")
     scale = source_scale(prun, cal)
     points = []

@@ -5,7 +5,10 @@ Instrument matrix (:func:`analysis.polarimetry.drr.instrument_matrix`, Goldstein
 from the retarders' read-back axes and, uncalibrated, the optical train's nominal
 retardances (at the group's wavelength) and polariser axes; calibrated, from
 :meth:`analysis.polarimetry.calibration.DrrCalibration.instrument_matrix` and the
-calibration's covariance added to the matrix's (:func:`reduce_calibrated`).
+calibration's covariance added to the matrix's (:func:`reduce_calibrated`). A PEM run's
+rows (:func:`analysis.polarimetry.pem.pem_design`) take the same polarisers' extinction;
+calibrated, the PEM calibration's train
+(:meth:`analysis.polarimetry.pem_calibration.PemCalibration.reduce`, ADR 0113).
 
 Units. W is for a unit unpolarised source, so the reduced matrix is in watts per unit
 source. The Mueller-matrix BRDF (1/sr) divides it by the unit-source intensity S, the
@@ -35,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.brdf.reduction.detector import solid_angle_sr
-from analysis.polarimetry.calibration import reduce_calibrated
+from analysis.polarimetry.calibration import DrrCalibration, reduce_calibrated
 from analysis.polarimetry.decomposition import PolarDecomposition, decompose
 from analysis.polarimetry.drr import (
     MuellerEstimate,
@@ -45,6 +48,7 @@ from analysis.polarimetry.drr import (
     reduce,
 )
 from analysis.polarimetry.pem import pem_design
+from analysis.polarimetry.pem_calibration import PemCalibration
 from analysis.polarimetry.realizability import Realizability, realizability
 from analysis.polarimetry.validation import PolarimetryInputError
 from instrument.pipelines.polarimetry.calibration import PolarimeterCalibration
@@ -100,7 +104,7 @@ def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> S
         raise ValueError(f"the run's bench profile names no [geometry] {err.args[0]}: the "
                          "Mueller-matrix BRDF needs the receiver's solid angle") from None
     omega, _ = solid_angle_sr(aperture, distance)
-    if cal is not None:
+    if cal is not None and cal.mode == "drr":
         w = prof.get("simulation", {}).get("source", {}).get("beam_radius_mm",
                                                              geo.get("beam_radius_mm"))
         if w is None:
@@ -113,6 +117,8 @@ def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> S
                      f"the calibration's air scan over the {inside:.1%} of the beam "
                      f"(1/e² radius {float(w):g} mm) inside the meter's aperture",
                      direct_w=cal.source_scale_w)
+    # a PEM calibration's air scan is taken through an attenuator (the photodiode's DC
+    # range), so its scale is not the sample runs' source: they keep the profile's (ADR 0113)
     power = prof.get("simulation", {}).get("source", {}).get("power_w")
     if power is None:
         raise ValueError("the source power is unknown (no calibration and no simulated "
@@ -157,20 +163,29 @@ def reduce_group(prun: PolarimetricRun, g: StepGroup, cal: PolarimeterCalibratio
     PolarimetryInputError
         Too few or degenerate steps for the 16 elements (fewer than 25 equal steps).
     """
-    if g.pem is not None:
+    # the pipeline pairs a PEM run with a PEM calibration only (choose_calibration)
+    fitted = None if cal is None else cal.drr
+    if g.pem is not None and isinstance(fitted, PemCalibration):
+        # the PEM calibration's train (ADR 0113), its covariance propagated
+        w = fitted.design(g.pem.settings, g.pem.amplitude_rad)
+        raw = fitted.reduce(g.pem.readings, g.pem.sigmas, g.pem.settings,
+                            g.pem.amplitude_rad)
+    elif g.pem is not None:
         # DC, 1f and 2f of every setting (analysis.polarimetry.pem), nominal analyser
-        # retardance; a PEM run takes no DRR calibration (the pipeline refuses one)
+        # retardance and the polarisers' datasheet extinction
         w = pem_design(g.pem.settings, amplitude_rad=g.pem.amplitude_rad,
                        analyser_retardance_rad=math.radians(
-                           prun.retardance_deg("psa", g.wavelength_nm)))
+                           prun.retardance_deg("psa", g.wavelength_nm)),
+                       psg_extinction=prun.extinction("psg"),
+                       psa_extinction=prun.extinction("psa"))
         raw = reduce(g.pem.readings.ravel(), g.pem.sigmas.ravel(), w)
-    elif cal is None:
+    elif isinstance(fitted, DrrCalibration):
+        w = fitted.instrument_matrix(g.psg_retarder_deg, g.psa_retarder_deg)
+        raw = reduce_calibrated(g.intensity, g.sigma, fitted, g.psg_retarder_deg,
+                                g.psa_retarder_deg)
+    else:
         w = _nominal_matrix(prun, g)
         raw = reduce(g.intensity, g.sigma, w)
-    else:
-        w = cal.drr.instrument_matrix(g.psg_retarder_deg, g.psa_retarder_deg)
-        raw = reduce_calibrated(g.intensity, g.sigma, cal.drr, g.psg_retarder_deg,
-                                g.psa_retarder_deg)
     # straight through (the detector arm in the beam, θr ≥ 90°): a transmittance, unitless
     factor = (scale.through() if g.transmitted else
               scale.source_w * scale.solid_angle_sr * math.cos(math.radians(g.theta_r)))

@@ -5,8 +5,10 @@ The plan expands every geometry into the 2 × 4 fixed settings; the engine sets 
 modulator, reads the photodiode's DC on the lock-in's Aux In 1 and the 1f and 2f by
 harmonic after the plan's settle; the fit reduces each geometry with ``reduce_pem`` and
 the DRR's pipeline. The closed loop compares every normalised element with the world's
-own truth on the aperture (``mueller_on_aperture``): the hidden train of this bench has no
-misalignment, so the nominal reduction is unbiased.
+own truth on the aperture (``mueller_on_aperture``): with the bench's hidden train made
+ideal (``ideal_train``), the nominal reduction is unbiased; the calibrated reduction of
+the misaligned train is tested in ``tests/instrument/pipelines/polarimetry/
+test_pem_calibration.py``.
 
 The DC's σ holds the SR830's Aux In quantisation (1/3 mV over √12), which the emulator's
 Aux In does not have (it answers six digits): on the emulated bench σ is larger than the
@@ -30,7 +32,7 @@ from instrument.plans.errors import PlanError
 from instrument.plans.planfile import parse_plan
 from instrument.run.runfile import read_planned, read_run
 from tests.instrument.pipelines.polarimetry.closed_loop import pulls, run_with_truth
-from tests.instrument.run.test_pem_bench import with_reference
+from tests.instrument.run.test_pem_bench import ideal_train, with_reference
 
 EXAMPLE = Path(__file__).parents[3] / "examples" / "brdf_polarimetric_pem.toml"
 
@@ -57,11 +59,14 @@ def plan_text(name: str = "pem", ti: str = "50.0", tr: str = "50.0", extra: str 
 
 
 def fast_pem_bench(folder: Path, reference: str | None = None, power_w: float = 1e-3,
-                   seed: int = 5) -> Path:
+                   seed: int = 5, ideal: bool = True) -> Path:
     """``sim-polarimetric-pem`` with mounts 10× faster; with ``reference`` its glass
     replaced by a transmissive reference in the straight-through beam (the world's detector
-    arm at 180°, whatever the plan's angles), at ``power_w`` of light."""
+    arm at 180°, whatever the plan's angles), at ``power_w`` of light. ``ideal``: its hidden
+    train without the misalignments (for the nominal reduction's tests)."""
     text = load_profile("sim-polarimetric-pem").source_text.replace("speed=20", "speed=200")
+    if ideal:
+        text = ideal_train(text)
     text = text.replace("power_w = 1e-3", f"power_w = {power_w:g}")
     # the lock-in's waits advance its emulated clock without sleeping
     text = text.replace("clock=host&seed=5", f"clock=host&sleep=0&seed={seed}")
@@ -192,10 +197,22 @@ def test_a_polariser_through_run_and_fit_is_recovered_within_3_sigma(polariser_r
 
 def test_a_dual_rotating_retarder_calibration_is_refused_for_a_pem_run(polariser_run,
                                                                       tmp_path):
+    from analysis.polarimetry.calibration import DrrCalibration
+    from instrument.pipelines.polarimetry.calibration import (
+        CalibrationError,
+        PolarimeterCalibration,
+        save_calibration,
+    )
+
     path, _ = polariser_run
-    with pytest.raises(ValueError, match="PEM run is reduced with its nominal"):
-        fit_polarimetric_run(path, calibration=tmp_path / "cal.json", report=False,
-                             write=False)
+    drr = DrrCalibration(params=np.array([0.0, 0.0, np.pi / 2, np.pi / 2, 0.0]),
+                         cov=np.eye(5) * 1e-6, chi2=10.0, dof=10)
+    file = save_calibration(PolarimeterCalibration(
+        drr=drr, bench="sim-polarimetric-pem", source_scale_w=1.0, date="2026-01-01"),
+        tmp_path, "drr.json")
+    with pytest.raises(CalibrationError, match=r"a dual rotating retarder \(mode 'drr'\).*"
+                       r"'pem' run"):
+        fit_polarimetric_run(path, calibration=file, report=False, write=False)
 
 
 @pytest.mark.slow  # 10 seeds × two references (160 points through the engine): ~2.5 min

@@ -4,7 +4,10 @@ the polarimetric fit, on ``sim-polarimetric`` (retarders 2° off, retardances 5 
 quarter wave, polarisers 0.3° off).
 
 Shared by the slow tests (one seed, 3σ) and ``benchmarks/bench_polarimetric_validation.py``
-(ten seeds, the fraction within 2σ and the pull spread). The samples:
+(ten seeds, the fraction within 2σ and the pull spread). With ``pem=True`` the same
+samples go through ``sim-polarimetric-pem`` (modulator amplitude 3 % high and its axis
+0.4° off, polarisers ±0.3°, analyser retarder −0.4°) and its PEM calibration (ADR 0113;
+``benchmarks/bench_pem_calibration.py``). The samples:
 
 * straight through (the detector arm at 180°, as the calibration's reference scans): air,
   a linear polariser at 0°, 30° and 45°, a quarter-wave plate at 0°; truth: the ideal
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -92,11 +96,27 @@ class Outcome:
     truth: np.ndarray
 
 
-def calibrate(folder: Path, seed: int | None) -> tuple[Path, Path]:
+def _bench(folder: Path, scene: str | None, seed: int | None, pem: bool) -> Path:
+    """The fast DRR bench, or the fast, misaligned PEM bench (its lock-in's ``seed``)."""
+    if not pem:
+        return fast_bench(folder, scene, seed=seed)
+    from tests.instrument.run.test_pem_run import fast_pem_bench
+
+    path = fast_pem_bench(folder, seed=5 if seed is None else seed, ideal=False)
+    if scene is not None:
+        text = re.sub(r"\[simulation\.scene\.pbrdf\][^\[]*", scene,
+                      path.read_text(encoding="utf-8"), flags=re.DOTALL)
+        path = path.with_name(f"scene-{abs(hash(scene)) % 10**8}-{path.name}")
+        path.write_text(text, encoding="utf-8")
+    return path
+
+
+def calibrate(folder: Path, seed: int | None, pem: bool = False) -> tuple[Path, Path]:
     """``scatterlab calibrate polarimeter`` on the fast bench of ``seed`` (None: the
-    profile's own) with 25 steps: (the bench profile, the calibration file)."""
+    profile's own) with 25 steps (a PEM bench: its 2 × 4 settings): (the bench profile,
+    the calibration file)."""
     folder.mkdir(parents=True, exist_ok=True)
-    bench = fast_bench(folder, seed=seed)
+    bench = _bench(folder, None, seed, pem)
     assert main(["calibrate", "polarimeter", "--bench", str(bench), "--out", str(folder),
                  "--steps", str(STEPS), "--no-fsync"]) == 0
     (file,) = calibration_folder(folder).glob("polarimeter-*.json")
@@ -110,17 +130,26 @@ def _ideal(s: Sample) -> np.ndarray:
     return np.asarray(rotated(m / m[0, 0], math.radians(s.angle_deg - FRAME_DEG)))
 
 
-def measure(s: Sample, seed: int | None, folder: Path, calibration: Path) -> Outcome:
-    """Run ``s`` on the fast bench of ``seed`` and fit it with the calibration and with
-    the nominal optics."""
+def measure(s: Sample, seed: int | None, folder: Path, calibration: Path,
+            pem: bool = False) -> Outcome:
+    """Run ``s`` on the fast bench of ``seed`` (``pem``: the PEM bench) and fit it with
+    the calibration and with the nominal optics."""
     from instrument.cli._calibrate_polarimeter import _reference_run
 
     folder.mkdir(parents=True, exist_ok=True)
     if s.reference is not None:
-        bench = fast_bench(folder, seed=seed)
+        bench = _bench(folder, None, seed, pem)
         args = argparse.Namespace(out=str(folder), steps=STEPS, no_fsync=True)
         path = _reference_run(load_profile(bench), s.reference, s.angle_deg, args)
         truth = _ideal(s)
+    elif pem:
+        from tests.instrument.run.test_pem_run import plan_text as pem_plan
+
+        bench = _bench(folder, s.scene, seed, pem)
+        path, truths = run_with_truth(folder, bench, pem_plan(
+            s.name, str(s.theta_i), str(s.theta_r)), steps=8,
+            world_name="sim-polarimetric-pem")
+        truth = truths[(round(s.theta_i), round(s.theta_r))]
     else:
         bench = fast_bench(folder, s.scene, seed=seed)
         path, truths = run_with_truth(folder, bench, plan_text(
