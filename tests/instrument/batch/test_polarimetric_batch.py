@@ -205,3 +205,22 @@ def test_a_bad_calibration_or_pbrdf_option_stops_the_batch_with_nothing_written(
     assert out.startswith("error: ") and words in out, out
     assert _written(runs) == before  # no results folder, no record beside either run
     assert not summary.exists()
+
+
+@pytest.mark.slow  # the run made once (see above) and one fit
+def test_fit_takes_the_same_calibration_name_and_start_values(glass_and_scalar, tmp_path,
+                                                              capsys):
+    runs = _copy(glass_and_scalar, tmp_path / "runs")
+    glass = runs / "glass.h5"
+    assert main(["fit", str(glass), "--calibration", "lab-a", "--pbrdf-start",
+                 "1.5,0,0.2,0.2", "--pbrdf-fixed", "k,frame_deg", "--no-write"]) == 0
+    out = capsys.readouterr().out
+    cal = calibration_folder(runs) / "lab-a.json"
+    assert f"calibrated with {cal}" in out
+    lines = {ln.split()[0]: ln for ln in out.splitlines() if ln.startswith("  ") and
+             ln.split() and ln.split()[0] in ("n", "k", "alpha", "albedo", "frame_deg")}
+    for name in ("k", "frame_deg"):  # held at the start values given
+        assert lines[name].endswith("(fixed)") and float(lines[name].split()[1]) == 0.0
+    assert not lines["alpha"].endswith("(fixed)")
+    assert main(["fit", str(glass), "--calibration", "lab-b", "--no-write"]) == 2
+    assert "no polarimeter calibration of that name" in capsys.readouterr().out
