@@ -55,7 +55,9 @@ class PolarimetricTrade:
 @dataclass(frozen=True)
 class PemSummary:
     """What the planner computes for a PEM plan: κ per wavelength
-    (:class:`instrument.plans.polarimetry_pem.PemConditioning`) and the plan's estimate."""
+    (:class:`instrument.plans.polarimetry_pem.PemConditioning`) and the plan's estimate
+    (``duration_s``: the instrument's own motion and acquisition time, the figure the
+    trades compare, :attr:`instrument.plans.build.PlanEstimate.real_time_s`)."""
 
     conditioning: list[Any]
     n_points: int
@@ -103,5 +105,5 @@ def pem_summary(spec: PlanSpec, profile: BenchProfile) -> PemSummary:
     wavelengths = plan_wavelengths(profile, plan_filter_wavelengths(spec, profile))
     est = build_plan(spec, profile).estimate()
     return PemSummary(pem_conditioning(pol, profile, wavelengths), est.n_points,
-                      est.total_s, float(pol["time_constants"]), int(pol["reads"]),
+                      est.real_time_s, float(pol["time_constants"]), int(pol["reads"]),
                       len(pol["generator_deg"]) * len(pol["analyser_deg"]))

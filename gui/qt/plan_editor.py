@@ -681,8 +681,9 @@ class PlanEditor(QWidget):
             for c in pem.conditioning])
         self.planner_result.setText(
             f"PEM plan: {pem.settings} settings per geometry, {pem.n_points} points, "
-            f"estimated {fmt.duration(pem.duration_s)}. The planner predicts no σ for PEM "
-            f"plans, so there is no speed/accuracy front: the time is set by the lock-in's "
+            f"{fmt.duration(pem.duration_s)} of instrument time. The planner predicts no "
+            f"σ for PEM plans, so there is no speed/accuracy front: the time is set by the "
+            f"lock-in's "
             f"settle ({pem.time_constants:g} τ per harmonic) and the snapshots per harmonic "
             f"({pem.reads}); the table gives κ of the DC/1f/2f instrument matrix per "
             "wavelength.")

@@ -128,7 +128,8 @@ def test_a_pem_plan_shows_its_conditioning_and_no_front(qtbot, make_window):
         assert float(kappa) == pytest.approx(c.kappa, rel=SHOWN)
         assert float(amp) == pytest.approx(c.amplitude_rad, abs=5e-4)
         assert float(ret) == pytest.approx(c.analyser_retardance_deg)
-    assert f"{editor.plan.estimate().n_points} points" in text
+    est = editor.plan.estimate()
+    assert f"{est.n_points} points, {fmt.duration(est.real_time_s)} of instrument time" in text
     # nothing to apply: a row of the conditioning is not a choice of scan
     editor.choose_row(0)
     assert not editor.apply_best.isEnabled()
