@@ -21,10 +21,14 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SHOWN = 5e-3
 
 
-def _validated(qtbot, editor) -> None:
+def _editor(qtbot, make_window, path: Path, bench: str):
+    """The plan editor of a window on ``bench`` with plan ``path`` open and validated."""
+    editor = make_window(bench).plan_editor
+    assert editor.open_plan(path)
     qtbot.waitUntil(lambda: editor.status.text() not in ("", "checking …")
                     and editor.validation is not None, timeout=60000)
     assert editor.validation.ok, (editor.validation.errors, editor.validation.general)
+    return editor
 
 
 def _cells(table) -> list[list[str]]:
@@ -35,10 +39,7 @@ def _cells(table) -> list[list[str]]:
 def test_a_drr_plan_shows_the_polarimetric_front_and_applies_the_chosen_row(qtbot,
                                                                             make_window):
     path = EXAMPLES / "brdf_polarimetric.toml"
-    w = make_window("sim-polarimetric")
-    editor = w.plan_editor
-    assert editor.open_plan(path)
-    _validated(qtbot, editor)
+    editor = _editor(qtbot, make_window, path, "sim-polarimetric")
     assert "retarder steps per geometry" in editor.planner_box.title()
     editor.target_sigma.setValue(0.003)
     editor.run_planner()
@@ -86,10 +87,8 @@ def test_a_drr_plan_shows_the_polarimetric_front_and_applies_the_chosen_row(qtbo
 
 
 def test_an_unknown_axis_is_named(qtbot, make_window):
-    w = make_window("sim-polarimetric")
-    editor = w.plan_editor
-    assert editor.open_plan(EXAMPLES / "brdf_polarimetric.toml")
-    _validated(qtbot, editor)
+    editor = _editor(qtbot, make_window, EXAMPLES / "brdf_polarimetric.toml",
+                     "sim-polarimetric")
     editor.target_param.setText("m01")
     editor.run_planner()
     qtbot.waitUntil(lambda: editor.planner_result.text().startswith("planner"),
@@ -105,10 +104,7 @@ def test_a_pem_plan_shows_its_conditioning_and_no_front(qtbot, make_window):
     from instrument.plans.polarimetry_pem import pem_conditioning
 
     path = EXAMPLES / "brdf_polarimetric_pem.toml"
-    w = make_window("sim-polarimetric-pem")
-    editor = w.plan_editor
-    assert editor.open_plan(path)
-    _validated(qtbot, editor)
+    editor = _editor(qtbot, make_window, path, "sim-polarimetric-pem")
     assert "PEM" in editor.planner_box.title()
     editor.run_planner()
     qtbot.waitUntil(lambda: editor.planner_result.text().startswith(("PEM plan", "planner")),

@@ -160,21 +160,19 @@ def test_batch_fit_passes_the_calibration_and_pbrdf_options_to_polarimetric_runs
     # the batch recorded the options, and the same batch again finds the run done
     assert _options(tmp_path)["polarimetric"] == {
         "calibration": "lab-a", "start": start, "fixed": ["k"], "distribution": "beckmann"}
-    again = tmp_path / "again"
-    assert main(["batch", "fit", str(glass), "--workers", "0", "--calibration", "lab-a",
-                 "--pbrdf-start", "alpha=0.2,albedo=0.2", "--pbrdf-fixed", "k",
-                 "--summary-dir", str(again)]) == 0
-    (table,) = again.glob("batch-fit-*.csv")
-    with open(table, newline="", encoding="utf-8") as fh:
-        assert [r["status"] for r in csv.DictReader(fh)] == ["skipped"]
+    assert _statuses(glass, tmp_path / "again", "alpha=0.2,albedo=0.2") == ["skipped"]
     # other start values are other options: fitted again
-    other = tmp_path / "other"
-    assert main(["batch", "fit", str(glass), "--workers", "0", "--calibration", "lab-a",
-                 "--pbrdf-start", "alpha=0.25,albedo=0.2", "--pbrdf-fixed", "k",
-                 "--summary-dir", str(other)]) == 0
-    (table,) = other.glob("batch-fit-*.csv")
+    assert _statuses(glass, tmp_path / "other", "alpha=0.25,albedo=0.2") == ["analysed"]
+
+
+def _statuses(run: Path, summary: Path, start: str) -> list[str]:
+    """The statuses of a batch fit of ``run`` with calibration lab-a, k held and ``start``."""
+    assert main(["batch", "fit", str(run), "--workers", "0", "--calibration", "lab-a",
+                 "--pbrdf-start", start, "--pbrdf-fixed", "k", "--summary-dir",
+                 str(summary)]) == 0
+    (table,) = summary.glob("batch-fit-*.csv")
     with open(table, newline="", encoding="utf-8") as fh:
-        assert [r["status"] for r in csv.DictReader(fh)] == ["analysed"]
+        return [r["status"] for r in csv.DictReader(fh)]
 
 
 def _options(folder: Path) -> dict:
