@@ -10,6 +10,11 @@ On a type (i) bench (``--bench sim-type-i``) the stages are its four arm axes an
 pictures are the views that differ from a type (ii) bench's, :data:`TYPE_I_VIEWS`: the
 bench panel with the arms' axes and the goniometer view of both arms over the stationary
 sample, saved with the suffix ``_type_i``.
+
+:func:`render_polarimetric_planner` takes the plan editor on ``sim-polarimetric`` with the
+example dual-rotating-retarder plan and its speed/accuracy trade of the steps per geometry
+(``plan_editor_polarimetric.png``); it needs no connected bench (the planner reads the
+profile), so ``render.py --only polarimetric`` takes it alone.
 """
 
 from __future__ import annotations
@@ -30,13 +35,18 @@ from gui.model.session import Home, MoveTo, SetLight
 from gui.qt.main_window import MainWindow
 from instrument.bench.kinematics import TYPE_I_AXES
 
-__all__ = ["TYPE_I_VIEWS", "VIEWS", "render_all"]
+__all__ = ["POLARIMETRIC_VIEW", "TYPE_I_VIEWS", "VIEWS", "render_all",
+           "render_polarimetric_planner"]
 
 #: File names (without .png) of the pictures, in the order they are taken.
 VIEWS = ("bench", "goniometer", "camera", "plan_editor", "run_in_progress", "run_browser_fit",
          "main_window")
 #: The pictures of a type (i) bench (module docstring).
 TYPE_I_VIEWS = ("bench", "goniometer")
+#: The polarimetric planner's picture (:func:`render_polarimetric_planner`).
+POLARIMETRIC_VIEW = "plan_editor_polarimetric"
+#: Its plan: the example DRR plan (36 steps per geometry), on the bench it is written for.
+POLARIMETRIC_PLAN = Path(__file__).resolve().parents[1] / "examples" / "brdf_polarimetric.toml"
 
 #: Where the stages stand in the bench picture, by role, in the order they are moved: on
 #: a type (ii) bench the sample turned and the detector out of the beam; on a type (i)
@@ -198,6 +208,42 @@ def render_all(out_dir: str | Path, *, bench: str = "sim") -> dict[str, Path]:
         QApplication.sendPostedEvents(None, QEvent.DeferredDelete)
         gc.collect()
     return shots
+
+
+def render_polarimetric_planner(out_dir: str | Path) -> Path:
+    """The plan editor on ``sim-polarimetric`` with the example DRR plan, its Pareto front
+    of the steps per geometry (target mean σ 0.003) and the fastest row reaching it chosen;
+    returns the picture's path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    app = QApplication.instance() or QApplication([])
+    work = Path(tempfile.mkdtemp(prefix="scatterlab-screenshots-"))
+    settings = QSettings(str(work / "gui.ini"), QSettings.IniFormat)
+    window = create_window(bench="sim-polarimetric", out=work / "runs", settings=settings,
+                           fsync=False)
+    try:
+        window.resize(1680, 1050)
+        window.show()
+        window.default_sizes()
+        editor = window.plan_editor
+        editor.open_plan(POLARIMETRIC_PLAN)
+        _wait(lambda: editor.validation is not None and editor.validation.ok, 60,
+              "the plan's validation")
+        editor.target_sigma.setValue(0.003)
+        editor.run_planner()
+        _wait(lambda: editor.planner_result.text().startswith(("fastest", "no step",
+                                                                "planner")), 120,
+              "the polarimetric trade")
+        best = editor._best
+        if best is not None:
+            editor.choose_row(next(k for k, r in enumerate(editor._front) if r is best))
+        return _grab(window, "plan", out / f"{POLARIMETRIC_VIEW}.png")
+    finally:
+        window.close()
+        window.deleteLater()
+        app.processEvents()
+        QApplication.sendPostedEvents(None, QEvent.DeferredDelete)
+        gc.collect()
 
 
 def main(out_dir: str | None = None, bench: str = "sim") -> int:

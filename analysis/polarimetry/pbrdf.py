@@ -64,13 +64,18 @@ from analysis.brdf.microfacet import beckmann_d, ggx_d, smith_visibility
 from analysis.polarimetry.elements import rotation
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
-__all__ = ["PBRDF_PARAMS", "PbrdfFit", "fit_pbrdf", "fresnel_mueller", "pbrdf"]
+__all__ = ["PBRDF_BOUNDS", "PBRDF_PARAMS", "PbrdfFit", "fit_pbrdf", "fresnel_mueller", "pbrdf"]
 
 #: Parameter names, in the order of the parameter vector.
 PBRDF_PARAMS = ("n", "k", "alpha", "albedo", "frame_deg")
 _LOWER = np.array([1.0 + 1e-6, 0.0, 1e-3, 0.0, -45.0])
 _UPPER = np.array([10.0, 20.0, 1.5, 1.0, 45.0])
 _DISTRIBUTIONS = ("beckmann", "ggx")
+#: Each parameter's closed interval (lower, upper) of the fit: a start value outside it
+#: is refused (callers that take start values from users check them against it).
+PBRDF_BOUNDS: dict[str, tuple[float, float]] = {
+    name: (float(lo), float(hi)) for name, lo, hi in zip(PBRDF_PARAMS, _LOWER, _UPPER,
+                                                         strict=True)}
 
 
 def fresnel_mueller(cos_beta: ArrayLike, n: complex) -> NDArray[np.float64]:

@@ -80,8 +80,12 @@ class FitSettings:
                      "receiver_distance_mm": self.distance_mm,
                      "u_distance_mm": self.distance_u_mm,
                      "u_incident_power_rel": self.incident_power_u}
+        from instrument.batch.polarimetric_options import polarimetric_fit_options
+
+        # a polarimetric run is fitted with fit's defaults (newest calibration beside it)
         return {"reduction": reduction, "models": list(self.models or default_candidates()),
-                "criterion": "bic", "run_cv": True, "n_bootstrap": 0}
+                "criterion": "bic", "run_cv": True, "n_bootstrap": 0,
+                "polarimetric": polarimetric_fit_options()}
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,11 @@ edit wins): each problem is shown under its field, problems of the whole plan (p
 guard rejects) below the form, and **Start** stays disabled while any exist. The preview
 gives the points, the travel per axis, the estimated duration and the coverage picture of
 ``scatterlab plan``. The planner searches the θr step, exposure cap and frame count for
-the fastest in-plane scan whose predicted uncertainty of a parameter reaches a target.
+the fastest in-plane scan whose predicted uncertainty of a parameter reaches a target; for
+a dual-rotating-retarder plan it trades the retarder steps per geometry instead (the
+Pareto front of ``scatterlab plan``, ADR 0108), and for a PEM plan it shows κ per
+wavelength. Either runs on the background thread; a row of the front chosen in the table
+is what **Apply** writes into the plan.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import numpy as np
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QImage, QPixmap
 from PySide6.QtWidgets import (
+    QAbstractItemView,
     QCheckBox,
     QComboBox,
     QDialog,
@@ -41,12 +46,22 @@ from PySide6.QtWidgets import (
 
 from gui.model import format as fmt
 from gui.model.planform import KIND_TITLES, FieldSpec, PlanForm, Validation
+from gui.model.polarimetric_planner import PemSummary, PolarimetricTrade
 from gui.qt.background import Background, JobDone
 from instrument.bench.profile import BenchProfile
 from instrument.plans.build import Plan
 from instrument.plans.planfile import KINDS, PlanError
 
 __all__ = ["PlanEditor"]
+
+#: The planner table's columns: the scalar trade's, the DRR trade's, the PEM conditioning's.
+SCALAR_COLUMNS = ("duration", "σ", "points", "option")
+DRR_COLUMNS = ("steps", "points", "duration", "κ", "σ mean", "σ worst")
+PEM_COLUMNS = ("λ (nm)", "κ", "PEM amplitude (rad)", "analyser retardance (°)")
+#: The planner box's title per plan (no polarimetry, DRR, PEM).
+PLANNER_TITLES = {"": "Speed / accuracy planner (in-plane BRDF)",
+                  "drr": "Speed / accuracy planner (polarimetry: retarder steps per geometry)",
+                  "pem": "Planner (PEM polarimetry: conditioning)"}
 
 SECTIONS = (("plan", "Plan"), ("sample", "Sample"), ("scan", "Scan"),
             ("acquisition", "Acquisition"), ("calibration", "Calibration runs"),
@@ -420,6 +435,7 @@ class PlanEditor(QWidget):
             self.status.setText(f"{result.count()} problem(s) on bench {bench!r}: "
                                 "Start is disabled until they are fixed")
         self._show_preview(result, image)
+        self._show_planner_kind(result)
         self._update_start()
         self.planChanged.emit(self.plan)
         self.validated.emit(result)
@@ -470,8 +486,9 @@ class PlanEditor(QWidget):
 
     # the speed/accuracy planner -------------------------------------------------------
     def _planner_box(self) -> QGroupBox:
-        box = QGroupBox("Speed / accuracy planner (in-plane BRDF)")
+        box = QGroupBox(PLANNER_TITLES[""])
         box.setObjectName("planner")
+        self.planner_box = box
         self.target_sigma = QDoubleSpinBox()
         self.target_sigma.setObjectName("target_sigma")
         self.target_sigma.setDecimals(5)
@@ -488,10 +505,15 @@ class PlanEditor(QWidget):
         self.planner_result = QLabel("")
         self.planner_result.setObjectName("planner_result")
         self.planner_result.setWordWrap(True)
-        self.pareto = QTableWidget(0, 4)
+        self.pareto = QTableWidget(0, len(SCALAR_COLUMNS))
         self.pareto.setObjectName("pareto")
-        self.pareto.setHorizontalHeaderLabels(["duration", "σ", "points", "option"])
+        self.pareto.setHorizontalHeaderLabels(list(SCALAR_COLUMNS))
         self.pareto.setMaximumHeight(150)
+        self.pareto.setSelectionBehavior(QAbstractItemView.SelectRows)
+        self.pareto.setSelectionMode(QAbstractItemView.SingleSelection)
+        self.pareto.setEditTriggers(QAbstractItemView.NoEditTriggers)
+        self.pareto.setToolTip("the Pareto front, fastest first; choose a row, then Apply "
+                               "writes it into the plan")
         form = QFormLayout(box)
         row = QHBoxLayout()
         row.addWidget(self.target_sigma)
@@ -505,12 +527,49 @@ class PlanEditor(QWidget):
         form.addRow(self.pareto)
         self.find.clicked.connect(self.run_planner)
         self.apply_best.clicked.connect(self._apply_best)
+        self.pareto.itemSelectionChanged.connect(self._row_chosen)
         self._best = None
+        self._front: list = []
         return box
+
+    @staticmethod
+    def _polarimetry_mode(spec) -> str:
+        """'' (no polarimetry), 'drr' or 'pem' for a plan spec (or None)."""
+        pol = getattr(spec, "polarimetry", None)
+        return "" if not pol else str(pol.get("mode") or "drr")
+
+    def _show_planner_kind(self, result: Validation) -> None:
+        """Title and target field for the kind of trade the validated plan has."""
+        mode = (self._polarimetry_mode(result.spec) if result.spec is not None
+                else str(self.form.get("polarimetry.mode") or ""))
+        mode = mode if mode in PLANNER_TITLES else ""
+        self.planner_box.setTitle(PLANNER_TITLES[mode])
+        self.target_param.setPlaceholderText(
+            "sigma_mean (or sigma_max, kappa)" if mode == "drr" else
+            "parameter (default: the model's last)")
+        self.target_param.setEnabled(mode != "pem")
+        self.target_sigma.setEnabled(mode != "pem")
+        self.find.setText("Show the conditioning" if mode == "pem" else
+                          "Find the fastest scan")
+
+    def _set_table(self, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
+        self.pareto.blockSignals(True)  # a refill is not a choice of row
+        self.pareto.clearSelection()
+        self.pareto.setColumnCount(len(columns))
+        self.pareto.setHorizontalHeaderLabels(list(columns))
+        self.pareto.setRowCount(len(rows))
+        for k, cells in enumerate(rows):
+            for j, text in enumerate(cells):
+                self.pareto.setItem(k, j, QTableWidgetItem(text))
+        self.pareto.resizeColumnsToContents()
+        self.pareto.blockSignals(False)
 
     def run_planner(self) -> int | None:
         spec = self.validation.spec if self.validation is not None else None
         profile = self.profile_for_validation()
+        mode = self._polarimetry_mode(spec)
+        if spec is not None and profile is not None and mode:
+            return self._run_polarimetric_planner(spec, profile, mode)
         if spec is None or profile is None or "theta_r" not in spec.scan:
             self.planner_result.setText("the planner needs a valid in-plane plan (θr) and a "
                                         "bench")
@@ -542,17 +601,37 @@ class PlanEditor(QWidget):
         self.apply_best.setEnabled(False)
         return self.background.submit("planner", job)
 
+    def _run_polarimetric_planner(self, spec, profile: BenchProfile, mode: str) -> int:
+        """The DRR trade (or the PEM conditioning) on the background thread."""
+        target = self.target_sigma.value()
+        axis = self.target_param.text().strip() or None
+
+        def job():
+            from gui.model.polarimetric_planner import pem_summary, plan_trade
+
+            if mode == "pem":
+                return pem_summary(spec, profile)
+            return plan_trade(spec, profile, axis, target)
+
+        self.planner_result.setText("computing …" if mode == "pem" else "searching …")
+        self.apply_best.setEnabled(False)
+        return self.background.submit("planner", job)
+
     def _planner_done(self, done: JobDone) -> None:
         if done.error is not None:
             self.planner_result.setText(f"planner: {done.error}")
             return
+        if isinstance(done.result, PolarimetricTrade):
+            self._show_trade(done.result)
+            return
+        if isinstance(done.result, PemSummary):
+            self._show_pem(done.result)
+            return
         param, target, front, best, results = done.result
-        self.pareto.setRowCount(len(front))
-        for k, r in enumerate(front):
-            for j, text in enumerate((fmt.duration(r.duration_s), f"{r.sigma[param]:.3g}",
-                                      str(r.n_points), r.option.label())):
-                self.pareto.setItem(k, j, QTableWidgetItem(text))
-        self.pareto.resizeColumnsToContents()
+        self._front = list(front)
+        self._set_table(SCALAR_COLUMNS, [
+            (fmt.duration(r.duration_s), f"{r.sigma[param]:.3g}", str(r.n_points),
+             r.option.label()) for r in front])
         self._best = best
         if best is None:
             reach = min(r.sigma[param] for r in results)
@@ -566,9 +645,76 @@ class PlanEditor(QWidget):
             f"σ = {best.sigma[param]:.3g}")
         self.apply_best.setEnabled(True)
 
+    def _show_trade(self, trade: PolarimetricTrade) -> None:
+        """The DRR front in the table (the plan's own steps marked), the fastest
+        candidate reaching the target as the point Apply writes."""
+        self._front = list(trade.front)
+        self._set_table(DRR_COLUMNS, [
+            (f"{r.option.steps}" + (" (this plan)" if r.option.steps == trade.plan_steps
+                                    else ""),
+             str(r.n_points), fmt.duration(r.duration_s), f"{r.kappa:.3g}",
+             f"{r.sigma['sigma_mean']:.3g}", f"{r.sigma['sigma_max']:.3g}")
+            for r in trade.front])
+        self._best = trade.best
+        what = {"sigma_mean": "mean σ(m_ij/m00)", "sigma_max": "worst σ(m_ij/m00)",
+                "kappa": "κ"}[trade.axis]
+        if trade.best is None:
+            reach = min(r.sigma[trade.axis] for r in trade.results)
+            self.planner_result.setText(
+                f"no step count reaches {what} ≤ {trade.target:g} (best {reach:.3g}): "
+                "longer integration per reading lowers σ at every step count")
+            return
+        b = trade.best
+        self.planner_result.setText(
+            f"fastest for {what} ≤ {trade.target:g}: {b.option.steps} steps per geometry — "
+            f"{b.n_points} points, {fmt.duration(b.duration_s)}, κ {b.kappa:.3g}, "
+            f"σ mean {b.sigma['sigma_mean']:.3g}, worst {b.sigma['sigma_max']:.3g} "
+            "(predicted for a non-depolarising sample; choose a row to apply another)")
+        self.apply_best.setEnabled(True)
+
+    def _show_pem(self, pem: PemSummary) -> None:
+        """A PEM plan: κ per wavelength and the estimate; no front (none is computed)."""
+        self._front, self._best = [], None
+        self._set_table(PEM_COLUMNS, [
+            ("—" if c.wavelength_nm is None else f"{c.wavelength_nm:g}", f"{c.kappa:.3g}",
+             f"{c.amplitude_rad:.3f}", f"{c.analyser_retardance_deg:g}")
+            for c in pem.conditioning])
+        self.planner_result.setText(
+            f"PEM plan: {pem.settings} settings per geometry, {pem.n_points} points, "
+            f"{fmt.duration(pem.duration_s)} of instrument time. The planner predicts no "
+            f"σ for PEM plans, so there is no speed/accuracy front: the time is set by the "
+            f"lock-in's "
+            f"settle ({pem.time_constants:g} τ per harmonic) and the snapshots per harmonic "
+            f"({pem.reads}); the table gives κ of the DC/1f/2f instrument matrix per "
+            "wavelength.")
+
+    def _row_chosen(self) -> None:
+        """A row of the front chosen in the table becomes the point Apply writes."""
+        rows = {i.row() for i in self.pareto.selectedIndexes()}
+        if len(rows) != 1 or not self._front:
+            return
+        (k,) = rows
+        if k >= len(self._front):
+            return
+        self._best = self._front[k]
+        self.apply_best.setEnabled(True)
+        self.planner_result.setText(f"chosen: {self._best.option.label()} — "
+                                    f"{self._best.n_points} points, "
+                                    f"{fmt.duration(self._best.duration_s)}; Apply writes it "
+                                    "into the plan")
+
+    def choose_row(self, k: int) -> None:
+        """Choose row ``k`` of the front, as a click on it does (tests, screenshots)."""
+        self.pareto.selectRow(k)
+
     def _apply_best(self) -> None:
         best = self._best
         if best is None:
+            return
+        from instrument.plans.polarimetric_tradeoff import PolarimetricResult
+
+        if isinstance(best, PolarimetricResult):
+            self.set_field("polarimetry.steps", str(best.option.steps))
             return
         o = best.option
         current = self.form.get("scan.theta_r") or ""

@@ -171,21 +171,24 @@ def _param_text(name: str, value: float, err: float, unit: str) -> str:
 
 def fit_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
     """What :func:`instrument.pipelines.brdf.pipeline.fit_run` records for these options
-    (for a polarimetric run, what its pipeline records with its defaults)."""
+    (for a polarimetric run, what its pipeline records with the options under
+    ``"polarimetric"``)."""
     from instrument.pipelines.brdf.pipeline import fit_options
     from instrument.pipelines.polarimetry.readings import is_polarimetric
 
     if is_polarimetric(path):
+        from instrument.batch.polarimetric_options import fit_keywords, is_pem
         from instrument.pipelines.polarimetry.pipeline import (
-            DEFAULT_START,
             choose_calibration,
             polarimetric_options,
         )
         from instrument.run.runfile import read_run
 
+        kw = fit_keywords(path, options.get("polarimetric"))
         bench = str(read_run(path).profile().get("bench", {}).get("name", ""))
-        return polarimetric_options(choose_calibration(path, bench, None), DEFAULT_START,
-                                    None, "beckmann")
+        # as the pipeline chooses: a PEM run's reduction uses no calibration
+        cal = None if is_pem(path) else choose_calibration(path, bench, kw["calibration"])
+        return polarimetric_options(cal, kw["start"], kw["fixed"], kw["distribution"])
     return fit_options(**fit_arguments(options))
 
 
@@ -202,18 +205,22 @@ def analyse_fit(path: str | Path, options: Mapping[str, Any], *,
 
     A polarimetric run (one with an optical train, ADR 0103) goes through its own
     pipeline, as ``scatterlab fit`` sends it: Mueller matrices, decompositions and the pBRDF
-    variant the data need, with the newest valid calibration of its bench beside the run
-    (:func:`instrument.pipelines.polarimetry.pipeline.fit_polarimetric_run` defaults; the
-    scalar options do not apply to it).
+    fit, with the options under ``"polarimetric"``
+    (:func:`instrument.batch.polarimetric_options.fit_keywords`: the calibration chosen,
+    by default the newest valid one of its bench beside the run; the pBRDF start values,
+    parameters held and distribution); the scalar options do not apply to it, nor the
+    polarimetric ones to a scalar run.
     """
     from instrument.pipelines.brdf.pipeline import fit_run
     from instrument.pipelines.polarimetry.readings import is_polarimetric
 
     if is_polarimetric(path):
+        from instrument.batch.polarimetric_options import fit_keywords
         from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
 
-        return polarimetric_row(fit_polarimetric_run(path, report_dir=folder, report=report,
-                                                     write=True))
+        return polarimetric_row(fit_polarimetric_run(
+            path, **fit_keywords(path, options.get("polarimetric")), report_dir=folder,
+            report=report, write=True))
     return fit_row(fit_run(path, **fit_arguments(options), report_dir=folder, report=report,
                            write=True))
 

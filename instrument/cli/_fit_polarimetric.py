@@ -4,40 +4,24 @@
 from __future__ import annotations
 
 import argparse
-import math
-
-
-def _start(text: str | None) -> tuple[float, ...]:
-    from instrument.pipelines.polarimetry.pipeline import DEFAULT_START
-
-    if text is None:
-        return DEFAULT_START
-    try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"--pbrdf-start must be four or five numbers "
-                         f"n,k,alpha,albedo[,frame_deg], got {text!r}")
-    return values
 
 
 def run_polarimetric(args: argparse.Namespace) -> int:
     from analysis.polarimetry.validation import PolarimetryInputError
+    from instrument.batch.polarimetric_options import fit_keywords, is_pem
     from instrument.cli._writing import writing_outputs
+    from instrument.cli.fit import polarimetric_options
     from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
     from instrument.run.results import RunBusy
 
     try:
-        start = _start(getattr(args, "pbrdf_start", None))
-        text = getattr(args, "pbrdf_fixed", None)
-        fixed = (None if text is None else
-                 tuple(n.strip() for n in str(text).split(",") if n.strip()))
+        options = polarimetric_options(args)
+        keywords = fit_keywords(args.run, options)
+        if options["calibration"] not in (None, "none") and is_pem(args.run):
+            keywords["calibration"] = options["calibration"]  # the pipeline says why not
         with writing_outputs(args.run, "fit", "fit", args.out):
             done = fit_polarimetric_run(
-                args.run, calibration=getattr(args, "calibration", None), start=start,
-                fixed=fixed, distribution=getattr(args, "distribution", "beckmann"),
-                report_dir=args.out, write=not args.no_write,
+                args.run, **keywords, report_dir=args.out, write=not args.no_write,
                 into_run=bool(getattr(args, "into_run", False)))
     except (ValueError, RunBusy, PolarimetryInputError) as err:
         print(f"error: {err}")

@@ -1,7 +1,10 @@
 """``scatterlab batch ANALYSIS RUN...``: one analysis over many runs, on a Dask cluster.
 
 ANALYSIS is ``fit``, ``reconstruct``, ``locate`` or ``spheres``, with the options of the
-single-run command of that name (the same option definitions). Runs are named by files,
+single-run command of that name (the same option definitions; ``fit``'s polarimetric
+options — calibration, pBRDF start values, parameters held — go to the polarimetric runs
+only, and a calibration that cannot be used with one of them stops the batch before it
+analyses anything). Runs are named by files,
 folders, globs or a catalog query. By default a local cluster of worker processes (one per
 core, one BLAS thread each) analyses them; ``--scheduler`` uses an existing cluster,
 ``--workers 0`` analyses them here one after another without Dask. Each run's outputs go
@@ -164,6 +167,16 @@ def run(args: argparse.Namespace) -> int:
     if args.retries < 0:
         print(f"error: --retries must be ≥ 0, got {args.retries}")
         return 2
+    if analysis.name == "fit":
+        from instrument.batch.polarimetric_options import batch_notes, check_runs
+
+        try:  # a calibration that cannot be used stops the batch before it writes anything
+            by_kind = check_runs(runs, options.get("polarimetric"))
+        except ValueError as err:  # CalibrationError is a ValueError
+            print(f"error: {err}")
+            return 2
+        for note in batch_notes(by_kind, options.get("polarimetric")):
+            print(note)
     if not runs:
         print(f"no runs match the catalog query ({query.describe() if query else ''}) in "
               f"{args.catalog}")

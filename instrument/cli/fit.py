@@ -29,20 +29,6 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--into-run", action="store_true",
                    help="also write the results into the run file (/entry/analysis), for "
                    "tools that expect one file; by default the run file is only read")
-    pol = p.add_argument_group("polarimetric runs (a run with an optical train)")
-    pol.add_argument("--calibration", default=None, metavar="FILE|none",
-                     help="polarimeter calibration (scatterlab calibrate polarimeter) to "
-                     "reduce with; 'none' for the nominal optics (default: the newest valid "
-                     "calibration of the run's bench in calibrations/ beside the run)")
-    pol.add_argument("--pbrdf-start", default=None, metavar="N,K,ALPHA,ALBEDO[,FRAME]",
-                     help="start values of the pBRDF fit (default 1.5,0,0.2,0.1,0: a rough "
-                     "dielectric in the polarimeter's nominal frame, degrees)")
-    pol.add_argument("--pbrdf-fixed", default=None, metavar="NAMES",
-                     help="comma-separated pBRDF parameters held at their start value, "
-                     "one model (e.g. k for a dielectric; '' fits all five); default: "
-                     "the variant the data need, by BIC and the goodness-of-fit gate")
-    pol.add_argument("--distribution", default="beckmann", choices=("beckmann", "ggx"),
-                     help="facet-slope distribution of the pBRDF (default: beckmann)")
     p.set_defaults(func=run)
 
 
@@ -104,6 +90,32 @@ def add_fit_options(p: argparse.ArgumentParser,
                         "and report the bootstrap σ and 95 %% interval (default: 0, off)")
     p.add_argument("--no-cv", action="store_true",
                    help="skip the cross-validation columns of the comparison")
+    add_polarimetric_options(p)
+
+
+def add_polarimetric_options(p: argparse.ArgumentParser) -> None:
+    """The options of the polarimetric fit (runs with an optical train; scalar runs do not
+    take them), shared by ``scatterlab fit`` and ``scatterlab batch fit``."""
+    pol = p.add_argument_group("polarimetric runs (a run with an optical train; scalar runs "
+                               "ignore these)")
+    pol.add_argument("--calibration", default=None, metavar="NAME|FILE|none",
+                     help="polarimeter calibration (scatterlab calibrate polarimeter) to "
+                     "reduce with: a file, the NAME of a file in calibrations/ beside each "
+                     "run, or 'none' for the nominal optics (default: the newest valid "
+                     "calibration of the run's bench in calibrations/ beside the run); PEM "
+                     "runs take none")
+    pol.add_argument("--pbrdf-start", default=None,
+                     metavar="N,K,ALPHA,ALBEDO[,FRAME] | NAME=VALUE,...",
+                     help="start values of the pBRDF fit: four or five numbers, or "
+                     "name=value pairs changing only those (e.g. alpha=0.3,albedo=0.05); "
+                     "default 1.5,0,0.2,0.1,0: a rough dielectric in the polarimeter's "
+                     "nominal frame, degrees")
+    pol.add_argument("--pbrdf-fixed", default=None, metavar="NAMES",
+                     help="comma-separated pBRDF parameters held at their start value, "
+                     "one model (e.g. k for a dielectric; '' fits all five); default: "
+                     "the variant the data need, by BIC and the goodness-of-fit gate")
+    pol.add_argument("--distribution", default="beckmann", choices=("beckmann", "ggx"),
+                     help="facet-slope distribution of the pBRDF (default: beckmann)")
 
 
 #: Companion files of the fit options that are not runs, by option name and attribute (a
@@ -152,7 +164,25 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
         "criterion": args.criterion,
         "run_cv": not args.no_cv,
         "n_bootstrap": int(args.bootstrap),
+        "polarimetric": polarimetric_options(args),
     }
+
+
+def polarimetric_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The polarimetric fit's options as plain data
+    (:func:`instrument.batch.polarimetric_options.polarimetric_fit_options`).
+
+    Raises
+    ------
+    instrument.batch.polarimetric_options.PolarimetricOptionError
+        An option that cannot be used (named, with the pBRDF parameter at fault).
+    """
+    from instrument.batch.polarimetric_options import polarimetric_fit_options
+
+    return polarimetric_fit_options(getattr(args, "calibration", None),
+                                    getattr(args, "pbrdf_start", None),
+                                    getattr(args, "pbrdf_fixed", None),
+                                    getattr(args, "distribution", "beckmann"))
 
 
 def run(args: argparse.Namespace) -> int:

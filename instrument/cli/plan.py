@@ -173,18 +173,15 @@ def _print_polarimetric_front(spec: PlanSpec, profile: BenchProfile, png: Path) 
     from instrument.bench.meter_noise import meter_noise
     from instrument.plans.pareto_plot import write_polarimetric_tradeoff_png
     from instrument.plans.polarimetric_tradeoff import (
-        DEFAULT_STEP_COUNTS,
         TYPICAL_READING_W,
-        PolarimetricOption,
+        plan_candidates,
         polarimetric_sweep,
     )
     from instrument.plans.tradeoff import pareto_front
 
     pol = spec.polarimetry
     assert pol is not None
-    steps = sorted({*DEFAULT_STEP_COUNTS, int(pol["steps"])})
-    # the plan's own steps are regular (the plan was built); the candidates are ≥ 25
-    results = polarimetric_sweep(spec, profile, [PolarimetricOption(k) for k in steps])
+    results = polarimetric_sweep(spec, profile, plan_candidates(spec))
     noise = meter_noise(tomllib.loads(profile.source_text) if profile.source_text else {})
     floor = "" if noise.floor_w is None else (
         f" and a floor of {noise.floor_w:.2g} W against {TYPICAL_READING_W:.0e} W readings")

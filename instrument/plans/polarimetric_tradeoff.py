@@ -51,6 +51,7 @@ __all__ = [
     "PolarimetricOption",
     "PolarimetricResult",
     "element_sigma",
+    "plan_candidates",
     "polarimetric_sweep",
     "predict_polarimetric",
 ]
@@ -177,3 +178,13 @@ def polarimetric_sweep(spec: PlanSpec, profile: BenchProfile,
         else list(options))
     return [predict_polarimetric(spec, profile, o, prior=prior, reading_w=reading_w)
             for o in chosen]
+
+
+def plan_candidates(spec: PlanSpec) -> list[PolarimetricOption]:
+    """The candidates the planner shows for ``spec`` (``scatterlab plan`` and the GUI's
+    plan editor): :data:`DEFAULT_STEP_COUNTS` and the plan's own steps, fewest first (the
+    plan's own steps are regular once the plan is built; the defaults are all ≥ 25)."""
+    if spec.polarimetry is None:
+        raise ValueError(f"plan {spec.name!r} has no [polarimetry] table")
+    steps = sorted({*DEFAULT_STEP_COUNTS, int(spec.polarimetry["steps"])})
+    return [PolarimetricOption(k) for k in steps]

@@ -269,9 +269,9 @@ def pareto_front(results: Sequence[_T], param: str) -> list[_T]:
     return front
 
 
-def fastest_for_target(results: Sequence[OptionResult], param: str, target: float
-                       ) -> OptionResult | None:
-    """The fastest candidate with predicted σ(param) ≤ target (None if none reaches it)."""
+def fastest_for_target(results: Sequence[_T], param: str, target: float) -> _T | None:
+    """The fastest candidate with predicted σ(param) ≤ target (None if none reaches it;
+    the scalar scan's options and the polarimetric step counts alike)."""
     ok = [r for r in results if r.sigma[param] <= target]
     return min(ok, key=lambda r: (r.duration_s, r.sigma[param])) if ok else None
 

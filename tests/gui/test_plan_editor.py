@@ -102,3 +102,12 @@ def test_the_planner_finds_the_fastest_scan_and_applies_it(qtbot, make_window):
     editor.apply_best.click()
     assert editor.form.get("acquisition.frames") == str(best.frames)
     assert f"step {best.theta_r_step_deg:g}" in editor.form.get("scan.theta_r")
+    # a row of the front chosen in the table is what Apply writes instead
+    k = editor.pareto.rowCount() - 1
+    chosen = editor._front[k].option
+    editor.choose_row(k)
+    assert editor.planner_result.text().startswith(f"chosen: {chosen.label()}")
+    editor.apply_best.click()
+    assert editor.form.get("acquisition.frames") == str(chosen.frames)
+    assert f"step {chosen.theta_r_step_deg:g}" in editor.form.get("scan.theta_r")
+    assert editor.form.get("acquisition.max_exposure_us") == f"{chosen.max_exposure_us:g}"

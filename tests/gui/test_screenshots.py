@@ -40,3 +40,16 @@ def test_the_type_i_bench_renders_its_arms_panel_and_view(qtbot, tmp_path):
         px = _pixels(path)
         assert px.shape[0] > 150 and px.shape[1] > 300, name
         assert px.std() > 10, f"{name} looks blank"
+
+
+@pytest.mark.slow
+def test_the_polarimetric_planner_picture_shows_the_front_with_a_row_chosen(qtbot,
+                                                                            tmp_path):
+    from gui.screenshots import POLARIMETRIC_VIEW, render_polarimetric_planner
+
+    path = render_polarimetric_planner(tmp_path)
+    flush_deleted()
+    assert path.name == f"{POLARIMETRIC_VIEW}.png"
+    px = _pixels(path)
+    assert px.shape[0] > 150 and px.shape[1] > 300
+    assert px.std() > 10, "the picture looks blank"

@@ -1,0 +1,301 @@
+"""The polarimetric fit's options of ``scatterlab fit`` and ``scatterlab batch fit``: which
+polarimeter calibration, the pBRDF start values, the parameters held and the facet
+distribution.
+
+They are parsed once, from the command line, into plain JSON-able data
+(:func:`polarimetric_fit_options`; a batch sends them to its worker processes and records
+them) and resolved per run (:func:`fit_keywords`): a calibration NAME is a file in the
+``calibrations/`` folder beside *each* run, so runs of several folders each use their own
+folder's file of that name. :func:`check_runs` resolves and loads the calibration for every
+polarimetric run of a batch before anything is analysed, so that a wrong name stops the
+batch with nothing written.
+
+Scalar runs do not take these options (:func:`given` lists those set, for the one line
+``scatterlab batch fit`` prints when the batch holds scalar runs too).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from analysis.polarimetry.pbrdf import PBRDF_BOUNDS, PBRDF_PARAMS
+from instrument.pipelines.polarimetry.calibration import (
+    CalibrationError,
+    calibration_folder,
+    load_calibration,
+)
+
+__all__ = ["DISTRIBUTIONS", "BatchRuns", "PolarimetricOptionError", "batch_notes",
+           "calibration_choice",
+           "check_runs", "fit_keywords", "given", "is_pem", "parse_fixed", "parse_start",
+           "polarimetric_fit_options", "resolve_calibration"]
+
+#: The facet-slope distributions of the pBRDF (``--distribution``).
+DISTRIBUTIONS = ("beckmann", "ggx")
+#: The option names as on the command line, by key of the plain options.
+OPTION_NAMES = {"calibration": "--calibration", "start": "--pbrdf-start",
+                "fixed": "--pbrdf-fixed", "distribution": "--distribution"}
+
+
+class PolarimetricOptionError(ValueError):
+    """A polarimetric fit option that cannot be used: ``option`` names it as on the command
+    line and ``parameter`` the pBRDF parameter at fault (None when it is not one)."""
+
+    def __init__(self, option: str, message: str, parameter: str | None = None) -> None:
+        super().__init__(f"{option}: {message}")
+        self.option = option
+        self.parameter = parameter
+
+
+def _default_start() -> tuple[float, ...]:
+    from instrument.pipelines.polarimetry.pipeline import DEFAULT_START
+
+    return DEFAULT_START
+
+
+def parse_start(text: str | None) -> list[float] | None:
+    """``--pbrdf-start``: four or five numbers ``n,k,alpha,albedo[,frame_deg]``, or
+    ``name=value`` pairs (``alpha=0.3,albedo=0.05``) that change only those parameters of
+    the default start (:data:`instrument.pipelines.polarimetry.pipeline.DEFAULT_START`).
+    None: the default.
+
+    Raises
+    ------
+    PolarimetricOptionError
+        Not numbers, an unknown parameter name, a parameter given twice, a non-finite
+        value or one outside the parameter's bounds (the parameter named).
+    """
+    if text is None:
+        return None
+    opt = OPTION_NAMES["start"]
+    parts = [p.strip() for p in str(text).split(",") if p.strip()]
+    keyed = [p for p in parts if "=" in p]
+    if not parts or (keyed and len(keyed) != len(parts)):
+        raise PolarimetricOptionError(opt, "give four or five numbers n,k,alpha,albedo"
+                                      "[,frame_deg] or name=value pairs (e.g. alpha=0.3), "
+                                      f"not both; got {text!r}")
+    values = list(_default_start())
+    if keyed:
+        seen: set[str] = set()
+        for part in keyed:
+            name, _, raw = (s.strip() for s in part.partition("="))
+            if name not in PBRDF_PARAMS:
+                raise PolarimetricOptionError(opt, f"no pBRDF parameter {name!r}; the "
+                                              f"parameters are {', '.join(PBRDF_PARAMS)}",
+                                              name)
+            if name in seen:
+                raise PolarimetricOptionError(opt, f"{name} is given twice", name)
+            seen.add(name)
+            values[PBRDF_PARAMS.index(name)] = _number(opt, name, raw)
+    else:
+        if len(parts) not in (4, 5):
+            raise PolarimetricOptionError(opt, "give four or five numbers n,k,alpha,albedo"
+                                          f"[,frame_deg], got {len(parts)}: {text!r}")
+        values = [_number(opt, name, raw) for name, raw in zip(PBRDF_PARAMS, parts,
+                                                                strict=False)]
+        if len(values) == 4:
+            values.append(0.0)  # the frame at the polarimeter's own, as the fit takes it
+    for name, v in zip(PBRDF_PARAMS, values, strict=True):
+        lo, hi = PBRDF_BOUNDS[name]
+        if not lo <= v <= hi:
+            raise PolarimetricOptionError(opt, f"{name} = {v:g} is outside the fit's "
+                                          f"bounds [{lo:g}, {hi:g}]", name)
+    return values
+
+
+def _number(option: str, name: str, raw: str) -> float:
+    try:
+        v = float(raw)
+    except ValueError:
+        raise PolarimetricOptionError(option, f"{name} must be a number, got {raw!r}",
+                                      name) from None
+    if not math.isfinite(v):
+        raise PolarimetricOptionError(option, f"{name} must be finite, got {raw!r}", name)
+    return v
+
+
+def parse_fixed(text: str | None) -> list[str] | None:
+    """``--pbrdf-fixed``: comma-separated pBRDF parameter names ('' holds none and fits
+    all five); None: the variant the data need.
+
+    Raises
+    ------
+    PolarimetricOptionError
+        An unknown name (named).
+    """
+    if text is None:
+        return None
+    names = [n.strip() for n in str(text).split(",") if n.strip()]
+    for n in names:
+        if n not in PBRDF_PARAMS:
+            raise PolarimetricOptionError(OPTION_NAMES["fixed"], f"no pBRDF parameter "
+                                          f"{n!r}; the parameters are "
+                                          f"{', '.join(PBRDF_PARAMS)}", n)
+    return list(dict.fromkeys(names))
+
+
+def calibration_choice(text: str | None) -> str | None:
+    """``--calibration``: None (the newest valid calibration of the run's bench beside each
+    run), ``"none"`` (the nominal optics), a file (made absolute, for worker processes in
+    other folders) or a NAME of a file in ``calibrations/`` beside each run (kept as
+    given). A value with a folder in it, or naming a file that exists here, is a file.
+
+    Raises
+    ------
+    PolarimetricOptionError
+        A file path that does not exist.
+    """
+    if text is None or text == "none":
+        return text
+    p = Path(text)
+    if p.is_file():
+        return str(p.resolve())
+    if len(p.parts) > 1 or p.is_absolute():
+        raise PolarimetricOptionError(OPTION_NAMES["calibration"], f"no such file {text}; "
+                                      "give a calibration file, the name of one in "
+                                      "calibrations/ beside the runs, or 'none'")
+    return text
+
+
+def polarimetric_fit_options(calibration: str | None = None, start: str | None = None,
+                             fixed: str | None = None, distribution: str = "beckmann"
+                             ) -> dict[str, Any]:
+    """The options as plain data from their command-line text (module docstring).
+
+    Raises
+    ------
+    PolarimetricOptionError
+        An option that cannot be used (named, with the pBRDF parameter at fault).
+    """
+    if distribution not in DISTRIBUTIONS:
+        raise PolarimetricOptionError(OPTION_NAMES["distribution"], f"one of "
+                                      f"{', '.join(DISTRIBUTIONS)}, got {distribution!r}")
+    return {"calibration": calibration_choice(calibration), "start": parse_start(start),
+            "fixed": parse_fixed(fixed), "distribution": distribution}
+
+
+def given(options: Mapping[str, Any] | None) -> list[str]:
+    """The options set to other than their defaults, as on the command line."""
+    defaults = polarimetric_fit_options()
+    return [OPTION_NAMES[k] for k in OPTION_NAMES
+            if (options or {}).get(k, defaults[k]) != defaults[k]]
+
+
+def resolve_calibration(run_path: str | Path, choice: str | None) -> str | None:
+    """The calibration argument of
+    :func:`instrument.pipelines.polarimetry.pipeline.fit_polarimetric_run` for one run:
+    None, ``"none"`` and files as they are; a NAME the file ``NAME`` (or ``NAME.json``) in
+    ``calibrations/`` beside the run.
+
+    Raises
+    ------
+    CalibrationError
+        No calibration of that name beside the run (the folder and what it holds named).
+    """
+    if choice is None or choice == "none" or Path(choice).is_absolute():
+        return choice
+    folder = calibration_folder(Path(run_path).resolve().parent)
+    for name in (choice, f"{choice}.json"):
+        if (folder / name).is_file():
+            return str(folder / name)
+    there = sorted(p.name for p in folder.glob("*.json")) if folder.is_dir() else []
+    held = (f"it holds {', '.join(there)}" if there else "it holds no calibration"
+            if folder.is_dir() else "there is no such folder")
+    raise CalibrationError(f"--calibration {choice}: no polarimeter calibration of that "
+                           f"name in {folder} beside run {Path(run_path).name} ({held}); "
+                           "give a calibration file, a name from that folder, or 'none'")
+
+
+def is_pem(run_path: str | Path) -> bool:
+    """Whether the run's plan is a PEM plan (its polarimetry reduced with the nominal
+    optical train: the polarimeter calibration, of a dual rotating retarder, does not
+    apply)."""
+    from instrument.run.runfile import read_run
+
+    return (read_run(run_path).plan().polarimetry or {}).get("mode") == "pem"
+
+
+def fit_keywords(run_path: str | Path, options: Mapping[str, Any] | None
+                 ) -> dict[str, Any]:
+    """Keyword arguments of :func:`~instrument.pipelines.polarimetry.pipeline.
+    fit_polarimetric_run` for one run from the plain options (None or missing keys: the
+    defaults; a PEM run takes no calibration)."""
+    o = {**polarimetric_fit_options(), **(options or {})}
+    start = _default_start() if o["start"] is None else tuple(float(v) for v in o["start"])
+    choice = o["calibration"]
+    if choice not in (None, "none") and is_pem(run_path):
+        choice = None
+    return {"calibration": resolve_calibration(run_path, choice), "start": start,
+            "fixed": None if o["fixed"] is None else tuple(o["fixed"]),
+            "distribution": str(o["distribution"])}
+
+
+@dataclass(frozen=True)
+class BatchRuns:
+    """A batch's runs by kind: ``polarimetric`` (DRR and PEM), of which ``pem``, and
+    ``scalar``."""
+
+    polarimetric: list[Path]
+    pem: list[Path]
+    scalar: list[Path]
+
+
+def check_runs(runs: Iterable[str | Path], options: Mapping[str, Any] | None) -> BatchRuns:
+    """The runs by kind; for each dual-rotating-retarder run the calibration chosen is
+    resolved, read and checked to be of the run's bench, before any run is analysed.
+
+    Raises
+    ------
+    CalibrationError
+        A calibration name or file that cannot be used with one of the runs (the first
+        such run named).
+    """
+    from instrument.pipelines.polarimetry.readings import is_polarimetric
+    from instrument.run.runfile import read_run
+
+    out = BatchRuns([], [], [])
+    choice = (options or {}).get("calibration")
+    loaded: dict[str, Any] = {}
+    for run in map(Path, runs):
+        try:
+            pol = is_polarimetric(run)
+            pem = pol and is_pem(run)
+        except (OSError, KeyError, ValueError):
+            pol = pem = False  # the analysis reports the run file's problem in its words
+        (out.polarimetric if pol else out.scalar).append(run)
+        if pem:
+            out.pem.append(run)
+        if not pol or pem or choice is None or choice == "none":
+            continue
+        path = resolve_calibration(run, choice)
+        assert path is not None
+        cal = loaded.get(path) or load_calibration(path)
+        loaded[path] = cal
+        bench = str(read_run(run).profile().get("bench", {}).get("name", ""))
+        if cal.bench != bench:
+            raise CalibrationError(f"--calibration {choice}: {path} calibrates bench "
+                                   f"{cal.bench!r}, run {run.name} was taken on {bench!r}")
+    return out
+
+
+def batch_notes(runs: BatchRuns, options: Mapping[str, Any] | None) -> list[str]:
+    """What a batch says once about runs that do not take the options given: scalar runs
+    take none of them, PEM runs no calibration."""
+    notes = []
+    set_here = given(options)
+    if set_here and runs.scalar:
+        n = len(runs.scalar)
+        notes.append(f"note: {', '.join(set_here)} appl{'ies' if len(set_here) == 1 else 'y'}"
+                     f" to polarimetric runs only; the {n} scalar run{'s' if n > 1 else ''} "
+                     "of this batch " + ("are" if n > 1 else "is") + " fitted without "
+                     + ("it" if len(set_here) == 1 else "them"))
+    if "--calibration" in set_here and runs.pem:
+        n = len(runs.pem)
+        notes.append(f"note: --calibration does not apply to the {n} PEM run"
+                     f"{'s' if n > 1 else ''}: {'they are' if n > 1 else 'it is'} reduced "
+                     "with the nominal optical train")
+    return notes
