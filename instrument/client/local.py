@@ -2,8 +2,9 @@
 
 ``scatterlab gui`` without ``--server`` (and without ``SCATTERLAB_SERVER``) uses the local
 server of its runs folder: the one it (or an earlier GUI) started, if it still answers,
-or a new one — ``scatterlab serve --bench PROFILE --listen 127.0.0.1:0 --runs DIR`` in its
-own session (so it outlives the GUI and a Ctrl-C in the GUI's terminal), its output in
+or a new one — ``scatterlab serve --bench PROFILE --listen 127.0.0.1:0 --runs DIR
+--nice 10`` in its own session (so it outlives the GUI and a Ctrl-C in the GUI's terminal),
+at a lower CPU priority (the window gets the CPU first during a fast scan), its output in
 ``DIR/local-server.log``. ``DIR/local-server.json`` records its address and process id for
 the next GUI and for :func:`stop_local_server`.
 
@@ -25,11 +26,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
-__all__ = ["LOCAL_LOG", "LOCAL_STATE", "LocalServer", "LocalServerError", "local_server",
-           "stop_local_server"]
+__all__ = ["LOCAL_LOG", "LOCAL_NICE", "LOCAL_STATE", "LocalServer", "LocalServerError",
+           "local_server", "stop_local_server"]
 
 LOCAL_STATE = "local-server.json"
 LOCAL_LOG = "local-server.log"
+#: The niceness of a local server (``scatterlab serve --nice``): the GUI on the same PC
+#: gets a CPU first while a fast scan keeps the server's threads busy; an idle GUI costs the
+#: run nothing (docs/decisions/0084, amendment on the local server's priority).
+LOCAL_NICE = 10
 _SERVING = re.compile(r"serving bench '(?P<bench>.*)' on (?P<url>https?://\S+) ")
 
 
@@ -112,9 +117,11 @@ def _recorded(runs_dir: Path) -> dict[str, Any] | None:
 
 
 def local_server(bench: str, runs_dir: str | Path, *, key: str | None = None,
-                 timeout_s: float = 120.0, python: str = sys.executable) -> LocalServer:
+                 timeout_s: float = 120.0, python: str = sys.executable,
+                 nice: int = LOCAL_NICE) -> LocalServer:
     """The local server of ``runs_dir``: the recorded one if it is alive and answers (for
-    any bench: the runs folder has one owner), else a new one for ``bench``.
+    any bench: the runs folder has one owner), else a new one for ``bench``, at niceness
+    ``nice`` (:data:`LOCAL_NICE`: below the GUI's priority).
 
     Raises
     ------
@@ -130,7 +137,7 @@ def local_server(bench: str, runs_dir: str | Path, *, key: str | None = None,
     with open(log_path, "w", encoding="utf-8") as log:
         proc = subprocess.Popen(
             [python, "-m", "instrument.cli", "serve", "--bench", str(bench),
-             "--listen", "127.0.0.1:0", "--runs", str(runs)],
+             "--listen", "127.0.0.1:0", "--runs", str(runs), "--nice", str(nice)],
             stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     deadline = time.monotonic() + timeout_s
