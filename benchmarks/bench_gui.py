@@ -244,7 +244,7 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
     child = subprocess.Popen([sys.executable, __file__, "--serve-ideal", str(work / "srv"),
                               "--server-nice", str(nice)],
                              stdout=subprocess.PIPE, text=True, cwd=ROOT,
-                             start_new_session=True)  # as instrument.client.local starts it
+                             process_group=0)  # as instrument.client.local starts it
     try:
         url = child.stdout.readline().split()[-1]
         window = ClientWindow(url)

@@ -3,8 +3,11 @@
 ``scatterlab gui`` without ``--server`` (and without ``SCATTERLAB_SERVER``) uses the local
 server of its runs folder: the one it (or an earlier GUI) started, if it still answers,
 or a new one — ``scatterlab serve --bench PROFILE --listen 127.0.0.1:0 --runs DIR
---nice 10`` in its own session (so it outlives the GUI and a Ctrl-C in the GUI's terminal),
-at a lower CPU priority (the window gets the CPU first during a fast scan), its output in
+--nice 10`` in a process group of its own (so it outlives the GUI, and a Ctrl-C in the
+GUI's terminal does not reach it) at a lower CPU priority (the window gets the CPU first
+during a fast scan). It stays in the GUI's session, not a new one: with the scheduler's
+autogroups a niceness ranks a process only against those of its own session
+(:mod:`instrument.server.priority`). Its output goes to
 ``DIR/local-server.log``. ``DIR/local-server.json`` records its address and process id for
 the next GUI and for :func:`stop_local_server`.
 
@@ -139,7 +142,10 @@ def local_server(bench: str, runs_dir: str | Path, *, key: str | None = None,
             [python, "-m", "instrument.cli", "serve", "--bench", str(bench),
              "--listen", "127.0.0.1:0", "--runs", str(runs), "--nice", str(nice)],
             stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            start_new_session=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+            # its own process group (POSIX): the terminal's Ctrl-C and hang-up go to the
+            # GUI's group, not to it
+            process_group=0 if os.name == "posix" else None,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"})
     deadline = time.monotonic() + timeout_s
     while True:
         text = log_path.read_text(encoding="utf-8", errors="replace")

@@ -127,7 +127,7 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
     ``nice``: run at this much lower CPU priority (:mod:`instrument.server.priority`;
     the local server a GUI starts uses it so that the window gets the CPU first).
     """
-    from instrument.server.priority import autogroup_niceness, lower_priority
+    from instrument.server.priority import lower_priority
 
     try:  # first, so that every thread the server starts inherits it
         niceness = lower_priority(nice)
@@ -161,10 +161,8 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
     for line in access_lines(where, has_keys=has_keys, require_keys=require_keys):
         say(line)
     if nice:
-        group = autogroup_niceness()
-        say(f"running at niceness {niceness}" + (
-            "" if group is None else f" (its session's scheduling group at {group})") +
-            ": other programs on this PC (a GUI) get the CPU first when both want it")
+        say(f"running at niceness {niceness}: the other programs of its session (the GUI "
+            "that started it) get the CPU first when both want it")
     sys.stdout.flush()
     config = uvicorn.Config(app, log_level="warning", ssl_certfile=cert, ssl_keyfile=key,
                             lifespan="on", timeout_graceful_shutdown=5, **WS_OPTIONS)

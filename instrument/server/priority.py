@@ -18,26 +18,23 @@ Two Linux details decide whether it works:
 * With *autogroups* (``/proc/sys/kernel/sched_autogroup_enabled``, on in most desktop
   distributions) the scheduler first shares the CPUs between sessions (each ``setsid``,
   each terminal) and applies a thread's niceness only against the threads of its own
-  session (sched(7), "The autogroup feature"). The local server runs in a session of its
-  own (``start_new_session``), so its threads' niceness alone would not rank it below the
-  GUI at all. A process that leads its session therefore also raises its autogroup's
-  niceness (``/proc/self/autogroup``; raising it needs no privilege). A server that does
-  not lead its session (``scatterlab serve`` typed in a terminal) leaves the terminal's
-  group alone — it is shared with the shell and whatever else runs there — and its
-  niceness ranks it only against that terminal's other programs.
+  session (sched(7), "The autogroup feature"). The GUI therefore starts its local server
+  in its own session's scheduling group — a process group of its own, not a session
+  (:mod:`instrument.client.local`) — where the niceness ranks the server below the
+  window. (Raising the niceness of a session of the server's own instead,
+  ``/proc/self/autogroup``, ranks it below *every* busy session on the PC: on a shared
+  2-core machine the run then barely started, BENCHMARKS.md gui.) A server typed in a
+  terminal is in that terminal's group and ranks below the other programs of that
+  terminal only.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import time
 from pathlib import Path
 
-__all__ = ["MAX_NICE", "autogroup_niceness", "lower_priority"]
-
-_AUTOGROUP = Path("/proc/self/autogroup")
-_AUTOGROUP_ON = Path("/proc/sys/kernel/sched_autogroup_enabled")
+__all__ = ["MAX_NICE", "lower_priority"]
 
 #: The highest niceness (the lowest priority) POSIX systems accept.
 MAX_NICE = 19
@@ -73,35 +70,5 @@ def lower_priority(nice: int) -> int:
             os.setpriority(os.PRIO_PROCESS, tid, target)
     # the calling thread last (tid 0 above when there is no /proc): new threads inherit it
     os.setpriority(os.PRIO_PROCESS, 0, target)
-    if os.getsid(0) == os.getpid() and autogroup_niceness() is not None:
-        _set_autogroup(target)
     return os.getpriority(os.PRIO_PROCESS, 0)
 
-
-def autogroup_niceness(pid: int | str = "self") -> int | None:
-    """The niceness of process ``pid``'s autogroup, or None when the scheduler does not
-    group by session (autogroups off, or not Linux)."""
-    try:
-        if _AUTOGROUP_ON.read_text(encoding="ascii").strip() != "1":
-            return None
-        # "/autogroup-1413 nice 0"
-        return int(Path(f"/proc/{pid}/autogroup").read_text(encoding="ascii").split()[-1])
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-def _set_autogroup(nice: int) -> None:
-    # The kernel refuses a second change within 0.1 s (EAGAIN) to an unprivileged writer:
-    # one retry after that long. A refusal otherwise (a security module) leaves the
-    # threads' niceness, which ``scatterlab serve``'s start-up line reports with the
-    # group's.
-    for attempt in range(2):
-        try:
-            _AUTOGROUP.write_text(str(nice), encoding="ascii")
-            return
-        except BlockingIOError:
-            if attempt:
-                return
-            time.sleep(0.15)
-        except OSError:
-            return

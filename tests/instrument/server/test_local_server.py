@@ -11,7 +11,6 @@ import pytest
 
 from instrument.client import BenchClient
 from instrument.client.local import LOCAL_NICE, LOCAL_STATE, local_server, stop_local_server
-from instrument.server.priority import autogroup_niceness
 
 
 def _thread_niceness(pid: int) -> set[int]:
@@ -37,9 +36,10 @@ def test_a_local_server_is_started_once_found_again_and_stopped(bench_file, tmp_
             # below the GUI's priority, every thread of it (ADR 0084's amendment)
             want = min(19, os.getpriority(os.PRIO_PROCESS, 0) + LOCAL_NICE)
             assert _thread_niceness(first.pid) == {want}
-            # in a session of its own: its scheduling group too, where there are groups
-            assert autogroup_niceness(first.pid) == (
-                None if autogroup_niceness() is None else want)
+            # in this process's session (its scheduling group under autogroups, where
+            # the niceness counts) but not in its process group (a Ctrl-C here)
+            assert os.getsid(first.pid) == os.getsid(0)
+            assert os.getpgid(first.pid) == first.pid != os.getpgid(0)
         assert "stopped the local server" in stop_local_server(runs)
         assert not first.alive() and not (runs / LOCAL_STATE).exists()
         assert stop_local_server(runs).startswith("no local server is running")

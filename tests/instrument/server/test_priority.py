@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from instrument.server.main import ServeRefused, serve
-from instrument.server.priority import MAX_NICE, autogroup_niceness, lower_priority
+from instrument.server.priority import MAX_NICE, lower_priority
 
 linux = pytest.mark.skipif(not Path("/proc/self/task").is_dir(),
                            reason="per-thread niceness is read from /proc (Linux)")
@@ -21,7 +21,7 @@ linux = pytest.mark.skipif(not Path("/proc/self/task").is_dir(),
 # In a child process: lowering a priority cannot be undone without privileges.
 CHILD = textwrap.dedent("""
     import os, threading
-    from instrument.server.priority import autogroup_niceness, lower_priority
+    from instrument.server.priority import lower_priority
 
     started, done = threading.Event(), threading.Event()
     def before():
@@ -36,36 +36,18 @@ CHILD = textwrap.dedent("""
     later = threading.Thread(target=lambda: late.append(
         os.getpriority(os.PRIO_PROCESS, 0)))
     later.start(); later.join(60)
-    group = autogroup_niceness()
-    print(base, now, os.getpriority(os.PRIO_PROCESS, early.native_id), late[0],
-          "none" if group is None else group)
+    print(base, now, os.getpriority(os.PRIO_PROCESS, early.native_id), late[0])
     done.set()
 """)
 
 
 @linux
-def test_every_thread_before_and_after_the_call_is_lowered_and_its_session_group():
-    """In a session of its own (as the GUI's local server): its threads, and its
-    autogroup where the scheduler groups by session (else the threads' niceness would
-    rank it only against its own threads)."""
-    out = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True,
-                         timeout=120, check=True, cwd=Path(__file__).resolve().parents[3],
-                         start_new_session=True)
-    *numbers, group = out.stdout.split()
-    base, now, early, late = map(int, numbers)
-    want = min(MAX_NICE, base + 4)
-    assert (now, early, late) == (want, want, want)
-    assert group == ("none" if autogroup_niceness() is None else str(want))
-
-
-@linux
-def test_a_process_that_does_not_lead_its_session_leaves_the_group_alone():
-    """``scatterlab serve`` typed in a terminal shares the terminal's group with the
-    shell: only its own threads are lowered."""
+def test_every_thread_before_and_after_the_call_is_lowered():
     out = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True,
                          timeout=120, check=True, cwd=Path(__file__).resolve().parents[3])
-    group = out.stdout.split()[-1]
-    assert group == ("none" if autogroup_niceness() is None else str(autogroup_niceness()))
+    base, now, early, late = map(int, out.stdout.split())
+    want = min(MAX_NICE, base + 4)
+    assert (now, early, late) == (want, want, want)
 
 
 @pytest.mark.parametrize("nice", [-1, MAX_NICE + 1, 100])
