@@ -12,7 +12,10 @@ Measured on the real main window (offscreen, ``QT_QPA_PLATFORM=offscreen``):
 
 With ``--server`` the scan runs in a bench server process of its own (the ideal bench
 behind ``scatterlab serve``'s service and app, started by this script as a child) and the
-GUI is the client window (docs/decisions/0084): its plot is fed by the event stream.
+GUI is the client window (docs/decisions/0084): its plot is fed by the event stream. The
+child runs at the niceness of the local server ``scatterlab gui`` starts
+(:data:`instrument.client.local.LOCAL_NICE`, set as ``scatterlab serve --nice`` sets it);
+``--server-nice N`` measures another (0: the priority of a standalone server).
 
 Latency is measured by a heartbeat: a 5 ms precise ``QTimer`` on the GUI thread records
 when it fires; a beat's delay beyond its period is how long the GUI thread was unable to
@@ -50,6 +53,7 @@ from benchmarks.power_meter_scan import power_meter_scan  # noqa: E402
 from gui.app import create_window  # noqa: E402
 from gui.model.session import StartRun  # noqa: E402
 from instrument.bench.profile import load_profile, parse_profile  # noqa: E402
+from instrument.client.local import LOCAL_NICE  # noqa: E402
 from instrument.plans import build_plan, parse_plan  # noqa: E402
 from instrument.run.catalog import Catalog, RunRow  # noqa: E402
 from tests.instrument.helpers import ideal_bench  # noqa: E402
@@ -159,11 +163,15 @@ def bench_scan(app: QApplication, work: Path, n_points: int) -> dict:
     return out
 
 
-def serve_ideal(runs: str) -> None:
-    """The child of ``--server``: the ideal bench's server on a free loopback port; prints
-    its address, serves until killed."""
+def serve_ideal(runs: str, nice: int) -> None:
+    """The child of ``--server``: the ideal bench's server on a free loopback port, at
+    niceness ``nice`` (as ``scatterlab serve --nice``); prints its address, serves until
+    killed."""
     import socket
 
+    from instrument.server.priority import lower_priority
+
+    lower_priority(nice)  # first, as serve() does: every thread inherits it
     import uvicorn
 
     from instrument.server.app import create_app
@@ -200,8 +208,30 @@ def _gui_thread_costs(window_cls) -> list[float]:
     return costs
 
 
+def _run_delay_s() -> float:
+    """Seconds this (GUI) thread has spent runnable but waiting for a CPU, from the
+    scheduler's own count (``/proc/thread-self/schedstat``, second field, ns; Linux; NaN
+    elsewhere): the part of a late heartbeat that is scheduling, not the window's work."""
+    try:
+        with open("/proc/thread-self/schedstat", encoding="ascii") as f:
+            return int(f.read().split()[1]) * 1e-9
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` so far (``/proc/PID/stat``; Linux;
+    NaN elsewhere)."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
 def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
-                      stalls: bool = False) -> dict:
+                      stalls: bool = False, nice: int) -> dict:
     """The scan in a server process, watched and driven from the client window;
     ``stalls``: also sample where the GUI thread is when its heartbeat is late
     (:mod:`benchmarks.gui_stalls`)."""
@@ -211,8 +241,10 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
     from gui.qt.client_window import ClientWindow
 
     busy = _gui_thread_costs(ClientWindow)
-    child = subprocess.Popen([sys.executable, __file__, "--serve-ideal", str(work / "srv")],
-                             stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    child = subprocess.Popen([sys.executable, __file__, "--serve-ideal", str(work / "srv"),
+                              "--server-nice", str(nice)],
+                             stdout=subprocess.PIPE, text=True, cwd=ROOT,
+                             process_group=0)  # as instrument.client.local starts it
     try:
         url = child.stdout.readline().split()[-1]
         window = ClientWindow(url)
@@ -228,6 +260,7 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
         if sampler is not None:
             sampler.start()
         t0 = time.perf_counter()
+        wait0, server_cpu0 = _run_delay_s(), _cpu_s(child.pid)
         window.start_queue_button.click()
         spin(app, lambda: window.state.run is not None and window.state.run.live is not None,
              120)
@@ -235,6 +268,7 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
         spin(app, lambda: window.state.run.state == "finished"
              and window.state.run.live.n_received >= window.state.run.n_done, 3600, passes)
         elapsed = time.perf_counter() - t0
+        gui_wait, server_cpu = _run_delay_s() - wait0, _cpu_s(child.pid) - server_cpu0
         spin(app, lambda: window.plot.n_plotted >= window.state.run.n_done, 30)
         out = hb.stop(settle_s=0.5)
         if sampler is not None:
@@ -246,7 +280,8 @@ def bench_scan_client(app: QApplication, work: Path, n_points: int, *,
                    slot_max_ms=1e3 * max(busy), slot_total_s=sum(busy),
                    slot_p99_ms=1e3 * float(np.percentile(busy, 99)), slots=len(busy),
                    pass_p99_ms=1e3 * float(np.percentile(passes, 99)),
-                   pass_max_ms=1e3 * max(passes), pass_total_s=sum(passes))
+                   pass_max_ms=1e3 * max(passes), pass_total_s=sum(passes),
+                   gui_wait_s=gui_wait, server_cpu_s=server_cpu, nice=nice)
         window.close()
         window.deleteLater()
         app.processEvents()
@@ -338,17 +373,20 @@ def main() -> int:
                    help="only the scan, with the engine in this process (the baseline)")
     p.add_argument("--stalls", action="store_true",
                    help="with --server: where the GUI thread is when its heartbeat is late")
+    p.add_argument("--server-nice", type=int, default=LOCAL_NICE, metavar="N",
+                   help="with --server: the server process's niceness (default: "
+                   f"{LOCAL_NICE}, as the local server of `scatterlab gui`)")
     p.add_argument("--serve-ideal", default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.serve_ideal:
-        serve_ideal(args.serve_ideal)
+        serve_ideal(args.serve_ideal, args.server_nice)
         return 0
     app = QApplication.instance() or QApplication([])
     work = Path(tempfile.mkdtemp(prefix="bench-gui-"))
     n = 2000 if args.quick else 10_000
     secs = 3.0 if args.quick else 10.0
     if args.server:
-        scan = bench_scan_client(app, work, n, stalls=args.stalls)
+        scan = bench_scan_client(app, work, n, stalls=args.stalls, nice=args.server_nice)
         print(f"scan (engine in a server process, GUI a client): {scan['points']} points "
               f"({scan['status']}) in {scan['seconds']:.1f} s "
               f"({scan['points'] / scan['seconds']:.0f} points/s), live plot "
@@ -361,7 +399,9 @@ def main() -> int:
               f"({scan['beat_p99_ms']:.1f} ms over {scan['beats']} beats); event-loop "
               f"passes (painting included) p99 "
               f"{scan['pass_p99_ms']:.1f} ms, at most {scan['pass_max_ms']:.1f} ms CPU, "
-              f"{scan['pass_total_s']:.2f} s CPU in all")
+              f"{scan['pass_total_s']:.2f} s CPU in all; GUI thread waited "
+              f"{scan['gui_wait_s']:.2f} s for a CPU; server (niceness +{scan['nice']}) "
+              f"{scan['server_cpu_s']:.1f} s CPU")
         if args.stalls:
             print(scan["stalls"])
         return 0

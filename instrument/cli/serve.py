@@ -31,6 +31,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="every request needs an API key, also on loopback before the first "
                    "key exists (without it, a loopback server with no keys treats every "
                    "local client as admin)")
+    p.add_argument("--nice", type=int, default=0, metavar="N",
+                   help="run at a lower CPU priority, niceness raised by N (0-19; default: "
+                   "0). A local server started by `scatterlab gui` uses 10, so the window "
+                   "stays responsive while a fast scan keeps the CPUs busy")
     p.add_argument("--no-fsync", action="store_true",
                    help="do not force each point to stable storage (still safe against a "
                    "crash of the server, not of the computer)")
@@ -72,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         return serve(args.bench, listen=args.listen, runs=args.runs, cert=args.tls_cert,
                      key=args.tls_key, allow=args.allow, fsync=not args.no_fsync,
-                     require_keys=args.require_keys)
+                     require_keys=args.require_keys, nice=args.nice)
     except ServeRefused as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -2,8 +2,12 @@
 
 ``scatterlab gui`` without ``--server`` (and without ``SCATTERLAB_SERVER``) uses the local
 server of its runs folder: the one it (or an earlier GUI) started, if it still answers,
-or a new one — ``scatterlab serve --bench PROFILE --listen 127.0.0.1:0 --runs DIR`` in its
-own session (so it outlives the GUI and a Ctrl-C in the GUI's terminal), its output in
+or a new one — ``scatterlab serve --bench PROFILE --listen 127.0.0.1:0 --runs DIR
+--nice 10`` in a process group of its own (so it outlives the GUI, and a Ctrl-C in the
+GUI's terminal does not reach it) at a lower CPU priority (the window gets the CPU first
+during a fast scan). It stays in the GUI's session, not a new one: with the scheduler's
+autogroups a niceness ranks a process only against those of its own session
+(:mod:`instrument.server.priority`). Its output goes to
 ``DIR/local-server.log``. ``DIR/local-server.json`` records its address and process id for
 the next GUI and for :func:`stop_local_server`.
 
@@ -25,11 +29,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
-__all__ = ["LOCAL_LOG", "LOCAL_STATE", "LocalServer", "LocalServerError", "local_server",
-           "stop_local_server"]
+__all__ = ["LOCAL_LOG", "LOCAL_NICE", "LOCAL_STATE", "LocalServer", "LocalServerError",
+           "local_server", "stop_local_server"]
 
 LOCAL_STATE = "local-server.json"
 LOCAL_LOG = "local-server.log"
+#: The niceness of a local server (``scatterlab serve --nice``): the GUI on the same PC
+#: gets a CPU first while a fast scan keeps the server's threads busy; an idle GUI costs the
+#: run nothing (docs/decisions/0084, amendment on the local server's priority).
+LOCAL_NICE = 10
 _SERVING = re.compile(r"serving bench '(?P<bench>.*)' on (?P<url>https?://\S+) ")
 
 
@@ -112,9 +120,11 @@ def _recorded(runs_dir: Path) -> dict[str, Any] | None:
 
 
 def local_server(bench: str, runs_dir: str | Path, *, key: str | None = None,
-                 timeout_s: float = 120.0, python: str = sys.executable) -> LocalServer:
+                 timeout_s: float = 120.0, python: str = sys.executable,
+                 nice: int = LOCAL_NICE) -> LocalServer:
     """The local server of ``runs_dir``: the recorded one if it is alive and answers (for
-    any bench: the runs folder has one owner), else a new one for ``bench``.
+    any bench: the runs folder has one owner), else a new one for ``bench``, at niceness
+    ``nice`` (:data:`LOCAL_NICE`: below the GUI's priority).
 
     Raises
     ------
@@ -130,9 +140,12 @@ def local_server(bench: str, runs_dir: str | Path, *, key: str | None = None,
     with open(log_path, "w", encoding="utf-8") as log:
         proc = subprocess.Popen(
             [python, "-m", "instrument.cli", "serve", "--bench", str(bench),
-             "--listen", "127.0.0.1:0", "--runs", str(runs)],
+             "--listen", "127.0.0.1:0", "--runs", str(runs), "--nice", str(nice)],
             stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            start_new_session=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+            # its own process group (POSIX): the terminal's Ctrl-C and hang-up go to the
+            # GUI's group, not to it
+            process_group=0 if os.name == "posix" else None,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"})
     deadline = time.monotonic() + timeout_s
     while True:
         text = log_path.read_text(encoding="utf-8", errors="replace")

@@ -116,7 +116,7 @@ def _bind(listen: Listen) -> socket.socket:
 
 def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
           cert: str | None = None, key: str | None = None, allow: Sequence[str] = (),
-          fsync: bool = True, require_keys: bool = False,
+          fsync: bool = True, require_keys: bool = False, nice: int = 0,
           say: Callable[[str], None] = print,
           make_service: Callable[..., BenchService] | None = None) -> int:
     """Run the server until SIGINT/SIGTERM; return an exit code.
@@ -124,7 +124,15 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
     ``make_service(profile, runs_dir, fsync=..., allowed=...)`` builds the service
     (default :class:`~instrument.server.service.BenchService`; tests wrap it).
     ``require_keys``: every request needs a key, also on loopback before any key exists.
+    ``nice``: run at this much lower CPU priority (:mod:`instrument.server.priority`;
+    the local server a GUI starts uses it so that the window gets the CPU first).
     """
+    from instrument.server.priority import lower_priority
+
+    try:  # first, so that every thread the server starts inherits it
+        niceness = lower_priority(nice)
+    except (ValueError, OSError) as err:
+        raise ServeRefused(str(err)) from None
     import uvicorn
 
     from instrument.bench.profile import load_profile
@@ -152,6 +160,9 @@ def serve(profile_name: str, *, listen: str = DEFAULT_LISTEN, runs: str | Path,
     say(f"web dashboard: {scheme}://{shown}:{port}/ (open it in a browser)")
     for line in access_lines(where, has_keys=has_keys, require_keys=require_keys):
         say(line)
+    if nice:
+        say(f"running at niceness {niceness}: the other programs of its session (the GUI "
+            "that started it) get the CPU first when both want it")
     sys.stdout.flush()
     config = uvicorn.Config(app, log_level="warning", ssl_certfile=cert, ssl_keyfile=key,
                             lifespan="on", timeout_graceful_shutdown=5, **WS_OPTIONS)

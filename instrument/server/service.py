@@ -9,7 +9,10 @@ Threads:
 * the **runner** takes the head of the queue when the queue runs and the bench is idle,
   starts (or resumes, exactly as ``scatterlab resume`` does: :func:`resume_run`) its run,
   holds the run's writer lock (``RUN.h5.lock``, so a ``scatterlab resume`` elsewhere is
-  told who continues it) and records the outcome in the history;
+  told who continues it) and records the outcome in the history — before the run leaves
+  the status and before ``run_finished`` goes out (the engine's ``run_finished`` is held
+  back until then), so a client that lists the history when it sees ``run_finished``
+  finds the row;
 * the **sampler** publishes device states at most 10 times a second (read back by the
   engine during a run, polled otherwise) and the run's latest camera frame, decimated for
   display, at most twice a second;
@@ -217,6 +220,9 @@ class BenchService:
         # a run file about to be resumed and its stored points (runner thread; published
         # after the resumed run's run_started by _publish_backfill)
         self._backfill: tuple[str, list[dict[str, Any]]] | None = None
+        # the engine's run_finished message, held back by the worker thread until the
+        # runner has recorded the outcome and cleared the status (_end_run)
+        self._finished_msg: dict[str, Any] | None = None
         # device settings: requests waiting for the settings worker, the one it applies,
         # roles whose state the sampler reads afresh (info included) after a change
         self._settings: collections.deque[_SettingsRequest] = collections.deque()
@@ -750,11 +756,8 @@ class BenchService:
                 self._item_failed(item, f"{type(err).__name__}: {err}")
 
     def _item_failed(self, item: QueueItem, why: str) -> None:
-        with self._cond:
-            self.queue_running = False
-            self.engine = None
-            self.current = None
         self.queue.record(item, "failed", "server", note=why, state="failed")
+        self._end_run(stop_queue=True)
         self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
                                            "outcome": "failed", "run_file": item.run_file})
         self._publish_queue()
@@ -786,12 +789,11 @@ class BenchService:
         # Imported here, not at the top: the lobe planner and the second pass fit BRDF
         # models (SciPy, the BRDF pipeline), which every server start would otherwise
         # import (about 1 s of CPU) though only a finished lobe plan's run needs them.
-        from instrument.pipelines.brdf.second_pass import is_second_pass, second_pass_plan
-        from instrument.plans.lobe import lobe_of
+        from instrument.pipelines.brdf.second_pass import second_pass_plan
 
-        spec = parse_plan(item.plan_text or "", source=f"queue item {item.id}")
-        if lobe_of(spec) is None or is_second_pass(finished):
+        if not self._continues(item, finished):
             return None, ""
+        spec = parse_plan(item.plan_text or "", source=f"queue item {item.id}")
 
         def say(state: str, n_points: int | None, message: str) -> None:
             self.hub.publish("second_pass", {"item_id": item.id, "first_pass": finished,
@@ -818,6 +820,16 @@ class BenchService:
                 raise _StoppedBetweenPasses
             return start_run(second.plan, bench, runs_dir=self.runs_dir,
                              fsync=self.fsync), ""
+
+    @staticmethod
+    def _continues(item: QueueItem, finished: str) -> bool:
+        """Whether the item's run ``finished`` is followed by another (a two-pass lobe
+        plan's first pass): then the item is not over when that run is."""
+        from instrument.pipelines.brdf.second_pass import is_second_pass
+        from instrument.plans.lobe import lobe_of
+
+        spec = parse_plan(item.plan_text or "", source=f"queue item {item.id}")
+        return lobe_of(spec) is not None and not is_second_pass(finished)
 
     def _run_item(self, item: QueueItem) -> None:
         """Run the item: one run, or a two-pass lobe plan's two runs one after the other.
@@ -867,13 +879,16 @@ class BenchService:
             item, finished = self.queue.get(item.id), path
 
     def _drive(self, item: QueueItem, engine: RunEngine, path: str) -> bool:
-        """Run ``engine`` to its end; True when it finished (the caller ends the item),
-        else the outcome is recorded and the queue stops."""
+        """Run ``engine`` to its end; True when it finished and the item goes on (a
+        lobe plan's first pass: the caller plans the second), else the item's outcome is
+        recorded (and, unless it finished, the queue stops). The history row is written
+        before the run leaves the status and before ``run_finished`` is published."""
         self.queue.set_state(item.id, "running", path)
         with self._cond:
             self.current = self.queue.get(item.id)
             self._pause_now = False
             self._last_fault = None
+            self._finished_msg = None
             self.engine = engine
         engine.subscribe(self._on_engine_event)
         engine.subscribe_frames(self._on_frame)
@@ -883,10 +898,16 @@ class BenchService:
         state = engine.state
         with self._cond:
             pause_now, self._pause_now = self._pause_now, False
-            self.engine = None
-            self.current = None
         if state is EngineState.FINISHED:
-            return True
+            if self._continues(item, path):
+                self._end_run(stop_queue=False)
+                return True
+            self.queue.finish(item, "finished", "server", run_file=path)
+            self._end_run(stop_queue=False)
+            self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
+                                               "outcome": "finished", "run_file": path})
+            self._publish_queue()
+            return False
         if pause_now:
             self.queue.record(item, "paused", "server", run_file=path, state="paused",
                               note="stopped at once (pause now); resume continues the file")
@@ -899,12 +920,23 @@ class BenchService:
             self.queue.record(item, state.value, "server", run_file=path, state="failed",
                               note=engine.snapshot().pause_reason or "")
             outcome = state.value
-        with self._cond:
-            self.queue_running = False
+        self._end_run(stop_queue=True)
         self.hub.publish("item_finished", {"item_id": item.id, "name": item.name,
                                            "outcome": outcome, "run_file": path})
         self._publish_queue()
         return False
+
+    def _end_run(self, *, stop_queue: bool) -> None:
+        """After the run's outcome is in the history: the run leaves the status (and the
+        queue stops, when asked), then the held-back ``run_finished`` goes out."""
+        with self._cond:
+            self.engine = None
+            self.current = None
+            if stop_queue:
+                self.queue_running = False
+            finished, self._finished_msg = self._finished_msg, None
+        if finished is not None:
+            self.hub.publish("run_finished", finished)
 
     def _on_engine_event(self, event: ev.Event) -> None:
         """On the engine's worker thread: one queue put per lifecycle event (the hub does
@@ -922,6 +954,12 @@ class BenchService:
                     self._progress = data
             return
         self._flush_display()
+        if isinstance(event, ev.RunFinished):
+            # published by the runner once the history has the outcome (_end_run; it
+            # reads this after joining this thread, so no lock is needed — and none is
+            # taken while the engine calls its subscribers)
+            self._finished_msg = data
+            return
         if isinstance(event, ev.Fault):
             self._last_fault = event
         elif isinstance(event, ev.Paused):

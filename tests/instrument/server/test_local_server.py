@@ -3,10 +3,23 @@ by the next GUI, stopped by ``scatterlab gui --stop-server``."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+from pathlib import Path
+
 import pytest
 
 from instrument.client import BenchClient
-from instrument.client.local import LOCAL_STATE, local_server, stop_local_server
+from instrument.client.local import LOCAL_NICE, LOCAL_STATE, local_server, stop_local_server
+
+
+def _thread_niceness(pid: int) -> set[int]:
+    """The niceness of each thread of process ``pid`` (Linux keeps one per thread)."""
+    out = set()
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
+            out.add(os.getpriority(os.PRIO_PROCESS, int(task.name)))
+    return out
 
 
 @pytest.mark.timeout(600)
@@ -19,6 +32,14 @@ def test_a_local_server_is_started_once_found_again_and_stopped(bench_file, tmp_
         assert not again.started and again.pid == first.pid and again.url == first.url
         with BenchClient(first.url) as c:
             assert c.status()["connected"]
+        if Path(f"/proc/{first.pid}/task").is_dir():
+            # below the GUI's priority, every thread of it (ADR 0084's amendment)
+            want = min(19, os.getpriority(os.PRIO_PROCESS, 0) + LOCAL_NICE)
+            assert _thread_niceness(first.pid) == {want}
+            # in this process's session (its scheduling group under autogroups, where
+            # the niceness counts) but not in its process group (a Ctrl-C here)
+            assert os.getsid(first.pid) == os.getsid(0)
+            assert os.getpgid(first.pid) == first.pid != os.getpgid(0)
         assert "stopped the local server" in stop_local_server(runs)
         assert not first.alive() and not (runs / LOCAL_STATE).exists()
         assert stop_local_server(runs).startswith("no local server is running")

@@ -152,3 +152,39 @@ def test_a_run_file_locked_by_another_process_fails_the_item_and_is_left_alone(t
         for held in svc.other_holders:
             held.__exit__(None, None, None)
         svc.close()
+
+
+class SeenAtPublish(BenchService):
+    """Notes, in the publishing thread at the moment ``run_finished`` or ``item_finished``
+    is handed to the hub, what a client reacting to it would find: the history's outcomes
+    and the status's run. (A client hears a message only after it was published, so
+    whatever holds at that moment holds for every client.)"""
+
+    def __init__(self, *args, **kw) -> None:
+        self.seen: list[tuple[str, list[str], object]] = []
+        super().__init__(*args, **kw)
+        publish = self.hub.publish
+
+        def noting(kind, data):
+            if kind in ("run_finished", "item_finished"):
+                self.seen.append((kind, [h.outcome for h in self.queue.history()],
+                                  self.status()["run"]))
+            publish(kind, data)
+        self.hub.publish = noting
+
+
+@pytest.mark.timeout(600)
+def test_run_finished_is_published_after_the_history_row_and_the_status_cleared(tmp_path):
+    """A client that lists the history in its ``run_finished`` handler finds the run's
+    row: the runner records it, and clears the run from the status, before the engine's
+    ``run_finished`` goes out; ``item_finished`` follows."""
+    svc = SeenAtPublish(parse_profile(fast_profile_text(), source="fast sim"),
+                        tmp_path / "runs", fsync=False)
+    try:
+        svc.add_plan(OPERATOR, plan_text("first", THETA_R))
+        svc.start_queue(OPERATOR)
+        wait_for(lambda: len(svc.seen) == 2, HOLD_S, "the item to finish")
+        assert svc.seen == [("run_finished", ["finished"], None),
+                            ("item_finished", ["finished"], None)]
+    finally:
+        svc.close()
