@@ -235,7 +235,11 @@ def score(det, objects: list[PointObject], blur_at, s: Score) -> dict:
             "count": n, "quality": list(det.quality),
             "positions_mm": det.positions_mm.tolist(),
             "across_mm": det.across_interval_mm.tolist(),
-            "significance": det.significance.tolist()}
+            "significance": det.significance.tolist(),
+            # the strongest candidate examined, reported or below the threshold: on the
+            # empty scene the noise's own maximum, whose tail the threshold is set on
+            "strongest_sigma": float(max(np.max(det.significance, initial=-np.inf),
+                                         np.max(det.below_significance, initial=-np.inf)))}
 
 
 def render(brdf: FlatlandBRDF, objects: list[PointObject], cache: Path | None,
@@ -361,6 +365,7 @@ def main() -> None:
             done[(rec["wall"], rec["scene"], rec["seed"])] = rec
     total = Score()
     empties: dict[str, tuple[int, int]] = {}
+    strongest: dict[str, list[tuple[float, float]]] = {}
     print("| wall | scene | truths | detected | within blur | phantoms | scans w/ phantom "
           "| confidently wrong (split/phantom/sign/excluded/off blur/missed silently "
           "detectable) | of the missed silently, below the detection limit | s/scan |")
@@ -396,6 +401,9 @@ def main() -> None:
                         with args.jsonl.open("a") as f:
                             f.write(json.dumps(rec) + "\n")
                 s.add(from_record(rec))
+                if sname == "empty" and "strongest_sigma" in rec:
+                    strongest.setdefault(wname, []).append((rec["strongest_sigma"],
+                                                            rec["threshold_sigma"]))
             if not s.scans:
                 continue
             total.add(s)
@@ -409,6 +417,27 @@ def main() -> None:
                   f"{s.seconds / max(s.scans, 1):.1f} |", flush=True)
     summary(total)
     print("\n".join(false_alarm_table(empties)))
+    if strongest:
+        print("\n".join(strongest_table(strongest)))
+
+
+def strongest_table(strongest: dict[str, list[tuple[float, float]]]) -> list[str]:
+    """Markdown rows: on the empty scene, the significance of the strongest candidate each
+    scan examined (the noise's maximum over the searched cells) against the scan's
+    threshold: how far below it the noise stays, beyond the count of crossings."""
+    rows = ["| wall | empty scans | strongest candidate: median (σ) | 99th percentile (σ) | "
+            "max (σ) | threshold (σ) | within 1σ of it |", "|---|---|---|---|---|---|---|"]
+    for wname, pairs in strongest.items():
+        v = np.array([p[0] for p in pairs], dtype=float)
+        t = np.array([p[1] for p in pairs], dtype=float)
+        fin = np.isfinite(v)
+        if not fin.any():
+            rows.append(f"| {wname} | {v.size} | none examined | | | {np.median(t):.2f} | 0 |")
+            continue
+        rows.append(f"| {wname} | {v.size} | {np.median(v[fin]):.2f} | "
+                    f"{np.percentile(v[fin], 99):.2f} | {v[fin].max():.2f} | "
+                    f"{np.median(t):.2f} | {int(np.sum(v[fin] >= t[fin] - 1.0))} |")
+    return rows
 
 
 def false_alarm_table(empties: dict[str, tuple[int, int]]) -> list[str]:

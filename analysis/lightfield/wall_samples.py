@@ -66,12 +66,18 @@ def ray_sums(
     s = (1.0 - w) * flat[base] + w * flat[base + 1]
     s = np.where(inside, s, 0.0)
     # the runs' padding (clipped to the last trial point) carries weight 0
-    at = ii.ravel()
-    sums = np.stack([np.bincount(at, weights=(s * u[:, None]).ravel(), minlength=n_y)
-                     for u in sample_weights])
+    sums = np.stack([_weighted_counts(ii, s, u, n_y) for u in sample_weights])
     if not hit_weights.shape[0]:
         return sums, np.zeros((0, n_y))
     ok = ((q >= lo) & (q <= hi) & run).astype(float)
-    hits = np.stack([np.bincount(at, weights=(ok * v[:, None]).ravel(), minlength=n_y)
-                     for v in hit_weights])
-    return sums, hits
+    return sums, np.stack([_weighted_counts(ii, ok, v, n_y) for v in hit_weights])
+
+
+def _weighted_counts(at: NDArray[Any], values: NDArray[Any], weights: NDArray[Any],
+                     n_y: int) -> NDArray[Any]:
+    """``Σ_j values_jk weights_j`` scattered onto the trial points ``at_jk``, over the
+    columns of nonzero weight only (a weight vector is often an indicator of half the
+    rays)."""
+    cols = np.flatnonzero(weights)
+    return np.bincount(at[cols].ravel(), weights=(values[cols] * weights[cols, None]).ravel(),
+                       minlength=n_y)
