@@ -40,7 +40,13 @@ seed is scored (:func:`score`):
   Clopper–Pearson interval of the rate (:func:`false_alarm_table`);
 * the significance of each true object: that of the reported object explaining it, else of
   the strongest candidate below the threshold within its blur (NaN: none examined), for
-  the detection probability against significance.
+  the detection probability against significance;
+* the strongest candidate each scan examined (``strongest_sigma``) and the strongest more
+  than three blurs across from every true object (``strongest_away_sigma``), tabulated
+  against the threshold for the empty and the one-object scene (:func:`strongest_table`):
+  the noise's maximum, beyond the count of crossings.  On the empty scene the Wiener
+  filter passes no order of pure noise (p̂ = −1) and nothing is examined, so the
+  threshold's calibration shows on the one-object scene, where the filter is open.
 
 Run: ``python benchmarks/bench_lightfield_validation.py`` (2 seeds, all walls and scenes);
 ``--seeds 20`` for the matrix, ``--walls``/``--scenes`` for a part of it, ``--jsonl FILE`` to
