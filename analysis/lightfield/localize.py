@@ -60,6 +60,7 @@ from .propagate import project_4d, propagate_4d, sample_columns
 from .ray_fit import JointFit as _JointFit
 from .ray_fit import fit_points as _fit_points
 from .ray_fit import ray_model as _ray_model
+from .wall_samples import ray_sums
 
 __all__ = [
     "BLEND_WIDTH_RATIO",
@@ -125,9 +126,16 @@ def _filtered_masked(
 
 def _stacks(
     lf_wall: LightField2D, y: NDArray[Any], zs: NDArray[Any], a: float, b: float,
-    phi: NDArray[Any] | None = None,
+    phi: NDArray[Any] | None = None, *, dense: bool = False,
+    geometry: tuple[NDArray[Any], NDArray[Any]] | None = None,
 ) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]:
     """One pass over the sheared samples: conventional, RP, measure, MF numerator, MF norm.
+
+    On an increasing y grid the sums run over the rays that meet the wall only
+    (:mod:`.wall_samples`; equal to rounding); ``dense`` (or any other grid) samples every
+    (y, ray) pair, as the reference.  ``geometry`` (the measure and the MF norm of an
+    earlier call on the same grid, rays and filter: they do not depend on the field) saves
+    their sums; it is returned as given.
 
     Without ``phi`` the matched-filter numerator is the line-sample form
     ``|z| Σ_{j ∈ [A, B]} L(y − z tan θ_j, θ_j)/cos θ_j Δθ`` with the squared norm
@@ -157,6 +165,32 @@ def _stacks(
     lo, hi = lf_wall.y_mm[0], lf_wall.y_mm[-1]
     shape = (zs.size, y.size)
     conv, rp, meas, num, norm2 = (np.empty(shape) for _ in range(5))
+    if not dense and y.size > 1 and np.all(np.diff(y) > 0) and lf_wall.y_mm.size > 1:
+        # the same sums over the rays that meet the wall only (.wall_samples)
+        n_c = cols.shape[1]
+        first = (np.arange(n_c) < n_use).astype(float)
+        if phi is None:
+            mf_s, mf_h = np.cos(th[use]) * mf_w, k2 * mf_w
+        else:
+            mf_s = np.concatenate([np.zeros(n_use), mf_w])
+            mf_h = np.concatenate([np.zeros(n_use), k2 * mf_w])
+        u = np.vstack([first, mf_s])
+        # the measure and the model norm depend on the grid and the rays alone
+        v = np.vstack([first, mf_h]) if geometry is None else np.zeros((0, n_c))
+        for i, z in enumerate(zs):
+            (total, s_mf), hits = ray_sums(cols, lo, lf_wall.dy_mm, y, float(z), t, hi,
+                                           u, v)
+            total = total * dth
+            if geometry is None:
+                meas[i] = hits[0] * dth
+                norm2[i] = abs(z) * hits[1] * dth
+            else:
+                meas[i], norm2[i] = geometry[0][i], geometry[1][i]
+            m = meas[i]
+            conv[i] = total / full
+            rp[i] = np.where(m > 0, total / np.where(m > 0, m, 1.0), 0.0)
+            num[i] = abs(z) * s_mf * dth
+        return conv, rp, meas, num, norm2
     for i, z in enumerate(zs):
         q = y[:, None] - z * t[None, :]
         s = sample_columns(cols, lo, lf_wall.dy_mm, q, method="linear")
@@ -762,7 +796,7 @@ def detect_objects(
 
     def model_of(y_ref: float, z_ref: float) -> _Stacks:
         _, rp_m, _, nm, n2 = _stacks(point_response(lf_wall, y_ref, z_ref, phi), y, zs, a, b,
-                                     phi)
+                                     phi, geometry=(meas, norm2))
         return _Stacks(*(np.where(enough, v, 0.0) for v in (_normalised(nm, n2), nm, rp_m)))
 
     def refine(own: _Stacks, y0: float, z0: float) -> _Candidate:

@@ -180,3 +180,16 @@ def test_off_blur_and_silent_misses_count_as_confident_errors(bench):
     rec = bench.score(det, truth, _blur, s)
     assert (s.off_blur, s.missed_silently, s.confidently_wrong) == (1, 1, 2)
     assert bench.from_record({**rec, "seconds": 0.0}).confidently_wrong == 2
+
+
+def test_the_strongest_candidate_away_from_the_truths_leaves_out_their_shadows(bench):
+    """The noise's maximum of a scan with objects: reported objects and candidates below
+    the threshold more than three blurs across from every true object (the blur: 8 mm)."""
+    truth = [PointObject(0.0, -200.0, 1.5, 1.0)]
+    det = _det([(0.0, -200.0), (20.0, -200.0)], [(-220, -180)] * 2, ["resolved"] * 2,
+               [1.0, 0.1], significance=[50.0, 5.0])
+    # the reported one at 20 mm is within 24 mm: left out; the candidate at 40 mm is not
+    assert bench.strongest_away(det, truth, _blur) == pytest.approx(3.1)
+    assert bench.strongest_away(det, [], _blur) == pytest.approx(50.0)
+    far = [PointObject(40.0, -200.0, 1.5, 1.0), *truth]
+    assert bench.strongest_away(det, far, _blur) == float("-inf")

@@ -61,7 +61,7 @@ def test_a_disc_before_a_near_mirror_at_n_theta_1024_is_one_object(tmp_path, cap
         assert "more angles cannot help" in text
 
     # the search around the disc (at 1024 angles the default 120 × 340 mm search costs
-    # minutes of CPU; the narrower one ≈ 50 s)
+    # ≈ 150 s of CPU, BENCHMARKS.md "locate at n_theta 1024"; the narrower one less)
     assert main(["locate", str(run), "--n-theta", "1024", "--no-figures", "--y-range", "-40",
                  "25", "--z-range", "-320", "-100"]) in (0, 1)
     text = capsys.readouterr().out
