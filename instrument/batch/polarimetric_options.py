@@ -178,6 +178,22 @@ def polarimetric_fit_options(calibration: str | None = None, start: str | None =
             "fixed": parse_fixed(fixed), "distribution": distribution}
 
 
+def options_from_arguments(args: Any) -> dict[str, Any]:
+    """The polarimetric fit's options from parsed command-line arguments (``scatterlab fit``
+    and ``scatterlab batch fit`` share them): :func:`polarimetric_fit_options` of
+    ``--calibration``, ``--pbrdf-start``, ``--pbrdf-fixed`` and ``--distribution``.
+
+    Raises
+    ------
+    PolarimetricOptionError
+        An option that cannot be used (named, with the pBRDF parameter at fault).
+    """
+    return polarimetric_fit_options(getattr(args, "calibration", None),
+                                    getattr(args, "pbrdf_start", None),
+                                    getattr(args, "pbrdf_fixed", None),
+                                    getattr(args, "distribution", "beckmann"))
+
+
 def given(options: Mapping[str, Any] | None) -> list[str]:
     """The options set to other than their defaults, as on the command line."""
     defaults = polarimetric_fit_options()

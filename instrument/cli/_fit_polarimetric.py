@@ -8,14 +8,17 @@ import argparse
 
 def run_polarimetric(args: argparse.Namespace) -> int:
     from analysis.polarimetry.validation import PolarimetryInputError
-    from instrument.batch.polarimetric_options import fit_keywords, is_pem
+    from instrument.batch.polarimetric_options import (
+        fit_keywords,
+        is_pem,
+        options_from_arguments,
+    )
     from instrument.cli._writing import writing_outputs
-    from instrument.cli.fit import polarimetric_options
     from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
     from instrument.run.results import RunBusy
 
     try:
-        options = polarimetric_options(args)
+        options = options_from_arguments(args)
         keywords = fit_keywords(args.run, options)
         if options["calibration"] not in (None, "none") and is_pem(args.run):
             keywords["calibration"] = options["calibration"]  # the pipeline says why not

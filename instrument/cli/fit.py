@@ -134,6 +134,7 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
         An option out of range or a companion file that does not exist (named).
     """
     from instrument.batch.analyses import reduction_defaults
+    from instrument.batch.polarimetric_options import options_from_arguments
 
     if args.bootstrap < 0:
         raise ValueError(f"--bootstrap must be ≥ 0 (number of resamples), got {args.bootstrap}")
@@ -164,25 +165,8 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
         "criterion": args.criterion,
         "run_cv": not args.no_cv,
         "n_bootstrap": int(args.bootstrap),
-        "polarimetric": polarimetric_options(args),
+        "polarimetric": options_from_arguments(args),
     }
-
-
-def polarimetric_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The polarimetric fit's options as plain data
-    (:func:`instrument.batch.polarimetric_options.polarimetric_fit_options`).
-
-    Raises
-    ------
-    instrument.batch.polarimetric_options.PolarimetricOptionError
-        An option that cannot be used (named, with the pBRDF parameter at fault).
-    """
-    from instrument.batch.polarimetric_options import polarimetric_fit_options
-
-    return polarimetric_fit_options(getattr(args, "calibration", None),
-                                    getattr(args, "pbrdf_start", None),
-                                    getattr(args, "pbrdf_fixed", None),
-                                    getattr(args, "distribution", "beckmann"))
 
 
 def run(args: argparse.Namespace) -> int:
