@@ -42,6 +42,7 @@ from tests.drivers.serial_faults import (
     QUERY_FAULTS,
     QUERY_RETRIES,
     motion_fault_session,
+    open_patiently,
     query_survives,
     unplug_during_move,
     unplug_during_query,
@@ -279,12 +280,12 @@ def test_errors_pickle_with_code():
 def open_axis(transport: str, name: str, *, kind: str = "rotary", cleanup: list,
               **kw) -> Smc100Axis:
     if transport == "url":
-        return Smc100Axis(f"simsmc://{name}?kind={kind}&speed={SPEED:g}", name=name,
-                          kind=kind, **kw)
+        return open_patiently(Smc100Axis, f"simsmc://{name}?kind={kind}&speed={SPEED:g}",
+                              name=name, kind=kind, **kw)
     emulator = Smc100Emulator(name, kind=kind, clock=ScaledClock(SPEED))
     server = PtyServer(emulator)
     cleanup.append(server)
-    axis = Smc100Axis(server.path, name=name, kind=kind, **kw)
+    axis = open_patiently(Smc100Axis, server.path, name=name, kind=kind, **kw)
     axis.emulator = emulator  # test-side handle on the far end
     return axis
 

@@ -48,6 +48,7 @@ from tests.drivers.serial_faults import (
     QUERY_FAULTS,
     QUERY_RETRIES,
     motion_fault_session,
+    open_patiently,
     query_survives,
     unplug_during_move,
     unplug_during_query,
@@ -404,15 +405,16 @@ def open_axis(transport: str, name: str, *, cleanup: list, kind: str = "rotary",
     kw.setdefault("flush_s", 0.0)
     kw.setdefault("microstep_size", MICROSTEP[kind])
     if transport == "url":
-        axis = ZaberAxis(f"simzaber://{name}?kind={kind}&speed={SPEED:g}{options}",
-                         name=name, kind=kind, **kw)
+        axis = open_patiently(ZaberAxis,
+                              f"simzaber://{name}?kind={kind}&speed={SPEED:g}{options}",
+                              name=name, kind=kind, **kw)
     else:
         emulator = registry.get_or_create(
             "simzaber", name, lambda n, o: ZaberEmulator(n, kinds=(kind,),
                                                          clock=ScaledClock(SPEED)))
         server = PtyServer(emulator)
         cleanup.append(server)
-        axis = ZaberAxis(server.path, name=name, kind=kind, **kw)
+        axis = open_patiently(ZaberAxis, server.path, name=name, kind=kind, **kw)
     cleanup.append(axis)
     return axis
 
