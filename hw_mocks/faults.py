@@ -45,7 +45,10 @@ class FaultRule:
 
     ``nth`` fires on the n-th frame (1-based) counted from when the rule was added;
     otherwise ``probability`` is drawn per frame. ``times`` bounds how often it fires
-    (``None`` = unbounded).
+    (``None`` = unbounded). ``on``: only frames that contain these bytes count and can be
+    hit, so a test can aim at one command's reply (the SMC100's ``TE``, a Zaber move's
+    ``BUSY``) without counting the replies before it: over a pty a loaded host may time
+    out a query and retry it, which adds a reply and would move a counted fault.
     """
 
     kind: enum.Enum  # a FaultKind, or an injector's own kind (e.g. USB faults)
@@ -57,8 +60,10 @@ class FaultRule:
     gap_s: float = 0.01
     nbytes: int = 1
     code: str | None = None
+    on: bytes | None = None
     fired: int = 0
     _base: int = field(default=0, repr=False)
+    _matched: int = field(default=0, repr=False)
 
     def __post_init__(self) -> None:
         if self.nth is None and not 0.0 < self.probability <= 1.0:
@@ -114,21 +119,30 @@ class FaultSchedule:
     def events_seen(self) -> int:
         return self._count
 
-    def next_event(self) -> list[FaultRule]:
-        """Count one event; return the rules that fire on it, in the order added."""
+    def next_event(self, frame: bytes | None = None) -> list[FaultRule]:
+        """Count one event; return the rules that fire on it, in the order added.
+
+        ``frame``: the event's bytes, for rules with ``on`` (an event without bytes never
+        matches them).
+        """
         with self._lock:
             self._count += 1
             n = self._count
-            firing = [r for r in self._rules if self._fires(r, n)]
+            firing = [r for r in self._rules if self._fires(r, n, frame)]
             for rule in firing:
                 rule.fired += 1
                 self.log.append((n, rule.kind))
             self._rules = [r for r in self._rules if r.times is None or r.fired < r.times]
             return firing
 
-    def _fires(self, rule: FaultRule, n: int) -> bool:
+    def _fires(self, rule: FaultRule, n: int, frame: bytes | None) -> bool:
         if rule.times is not None and rule.fired >= rule.times:
             return False
+        if rule.on is not None:
+            if frame is None or rule.on not in frame:
+                return False
+            rule._matched += 1
+            n = rule._base + rule._matched
         if rule.nth is not None:
             return n - rule._base == rule.nth
         return self._rng.random() < rule.probability
@@ -158,7 +172,7 @@ class FaultInjector(FaultSchedule):
         """What actually goes on the wire for ``frame``."""
         with self._lock:
             out = [Delivery(0.0, frame)]
-            for rule in self.next_event():
+            for rule in self.next_event(frame):
                 out = self._apply(rule, out, target)
             return out
 

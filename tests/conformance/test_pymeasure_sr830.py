@@ -31,22 +31,28 @@ import math
 import numpy as np
 import pytest
 
-pymeasure_srs = pytest.importorskip("pymeasure.instruments.srs", reason="pymeasure not installed")
-pytest.importorskip("pyvisa_py", reason="pyvisa-py not installed")
-
-from pymeasure.adapters import VISAAdapter  # noqa: E402
-
-from hw_mocks.clock import ManualClock  # noqa: E402
-from hw_mocks.firmware.sr830 import Sr830Emulator  # noqa: E402
-from hw_mocks.pty_server import PtyServer  # noqa: E402
-from tests.waiting import wait_for  # noqa: E402
+from hw_mocks.clock import ManualClock
+from hw_mocks.firmware.sr830 import Sr830Emulator
+from hw_mocks.pty_server import PtyServer
+from tests.waiting import wait_for
 
 #: VISA timeout, ms: generous (a loaded machine), and the cost of each get_buffer call.
 TIMEOUT_MS = 3000
 
 
 @pytest.fixture
-def bench():
+def pymeasure_srs():
+    """pymeasure's SRS classes, imported by the tests that use them: at collection every
+    test process would pay the import (0.5 s of CPU), and only one of them runs these."""
+    srs = pytest.importorskip("pymeasure.instruments.srs", reason="pymeasure not installed")
+    pytest.importorskip("pyvisa_py", reason="pyvisa-py not installed")
+    return srs
+
+
+@pytest.fixture
+def bench(pymeasure_srs):
+    from pymeasure.adapters import VISAAdapter
+
     clock = ManualClock()
     emulator = Sr830Emulator("pm", clock=clock, input_noise_v_per_rthz=0.0)
     server = PtyServer(emulator)
@@ -67,7 +73,7 @@ def settle(lockin, clock) -> None:
 
 
 
-def test_identity_and_status(bench):
+def test_identity_and_status(bench, pymeasure_srs):
     lockin, emulator, _ = bench
     assert lockin.id == "Stanford_Research_Systems,SR830,s/n00111,ver1.07"
     assert int(lockin.lia_status) == 0 and int(lockin.err_status) == 0
@@ -179,7 +185,7 @@ def test_setups_reset_and_errors(bench):
     assert lockin.ask("*ESR?") == "32"
 
 
-def test_buffer_scan_and_trigger(bench):
+def test_buffer_scan_and_trigger(bench, pymeasure_srs):
     lockin, emulator, clock = bench
     emulator.set_input(0.5)
     lockin.time_constant = 1e-3

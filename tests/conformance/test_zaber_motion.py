@@ -14,19 +14,24 @@ from __future__ import annotations
 
 import pytest
 
-zaber = pytest.importorskip("zaber_motion", reason="zaber-motion not installed")
-zaber_ascii = pytest.importorskip("zaber_motion.ascii")
-
-from hw_mocks.clock import ScaledClock  # noqa: E402
-from hw_mocks.firmware.zaber import ZaberEmulator  # noqa: E402
-from hw_mocks.pty_server import PtyServer  # noqa: E402
+from hw_mocks.clock import ScaledClock
+from hw_mocks.firmware.zaber import ZaberEmulator
+from hw_mocks.pty_server import PtyServer
 
 SPEED = 50.0
 TIMEOUT_MS = 10_000
 
 
 @pytest.fixture
-def link():
+def zaber():
+    """zaber-motion, imported by the tests that use it: at collection every test process
+    would pay its import (0.6 s of CPU), and only one of them runs these tests."""
+    return pytest.importorskip("zaber_motion", reason="zaber-motion not installed")
+
+
+@pytest.fixture
+def link(zaber):
+    zaber_ascii = pytest.importorskip("zaber_motion.ascii")
     emulator = ZaberEmulator("zm", clock=ScaledClock(SPEED))
     server = PtyServer(emulator)
     connection = zaber_ascii.Connection.open_serial_port(server.path)
@@ -67,7 +72,7 @@ def test_power_up_position_warning_settings_and_a_move(link):
         7500 * emulator.axes[1].ms)
 
 
-def test_rejections_become_the_libraries_typed_errors(link):
+def test_rejections_become_the_libraries_typed_errors(link, zaber):
     connection, _ = link
     device = connection.get_device(1)
     axis = device.get_axis(1)

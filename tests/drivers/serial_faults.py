@@ -13,13 +13,37 @@ how to reopen it.
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 from drivers.base import MotionAxis
 from hw_mocks.emulator import FirmwareEmulator
 from hw_mocks.faults import FaultInjector, FaultKind
 from tests.drivers.fault_checks import random_fault_session, unplug_and_replug
+
+_Device = TypeVar("_Device", bound=MotionAxis)
+
+#: Reply timeout of the queries a driver sends while it connects in these tests (status,
+#: the error latch, limits). Over a pty the replies come only when the emulator's thread
+#: runs: under two busy loops the SMC100's connect-time ``TE``, which is never retried
+#: (reading clears the latch), once missed the driver's default 0.5 s.
+CONNECT_REPLY_TIMEOUT_S = 5.0
+
+
+def open_patiently(cls: type[_Device], *args: object, **kw: object) -> _Device:
+    """``cls(*args, **kw)``, connecting with :data:`CONNECT_REPLY_TIMEOUT_S`.
+
+    The opened device then keeps the ``reply_timeout`` the caller asked for, or the
+    driver's default: the tests that time replies out on purpose see the value they set.
+    """
+    wanted = kw.pop("reply_timeout",
+                    inspect.signature(cls).parameters["reply_timeout"].default)
+    device = cls(*args, reply_timeout=CONNECT_REPLY_TIMEOUT_S, **kw)
+    device.reply_timeout = wanted  # type: ignore[attr-defined]
+    return device
+
 
 #: Faults a retried query must survive, with parameters for a 0.1 s reply timeout: the
 #: delay is longer than one reply timeout, so the first attempt always times out.

@@ -42,6 +42,7 @@ from tests.drivers.serial_faults import (
     QUERY_FAULTS,
     QUERY_RETRIES,
     motion_fault_session,
+    open_patiently,
     query_survives,
     unplug_during_move,
     unplug_during_query,
@@ -279,12 +280,12 @@ def test_errors_pickle_with_code():
 def open_axis(transport: str, name: str, *, kind: str = "rotary", cleanup: list,
               **kw) -> Smc100Axis:
     if transport == "url":
-        return Smc100Axis(f"simsmc://{name}?kind={kind}&speed={SPEED:g}", name=name,
-                          kind=kind, **kw)
+        return open_patiently(Smc100Axis, f"simsmc://{name}?kind={kind}&speed={SPEED:g}",
+                              name=name, kind=kind, **kw)
     emulator = Smc100Emulator(name, kind=kind, clock=ScaledClock(SPEED))
     server = PtyServer(emulator)
     cleanup.append(server)
-    axis = Smc100Axis(server.path, name=name, kind=kind, **kw)
+    axis = open_patiently(Smc100Axis, server.path, name=name, kind=kind, **kw)
     axis.emulator = emulator  # test-side handle on the far end
     return axis
 
@@ -456,8 +457,12 @@ def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
 def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
     axis, faults = faulty
     axis.reply_timeout = 0.1
+    # the readiness queries before PA (TS, TP) may time out on a loaded host's pty and be
+    # retried: retries enough for that, and the fault aimed at the first TE reply rather
+    # than at the third reply, which a retry would move onto TP
+    axis.retries = QUERY_RETRIES
     before = len(emulator_of(axis).received_log)
-    faults.schedule(kind, nth=3, **params)  # replies: TS, TP (readiness), then TE after PA
+    faults.schedule(kind, nth=1, on=b"TE", **params)
     with pytest.raises(DeviceTimeout) as info:
         axis.move_to(3.0)
     assert info.value.command == "1PA3" and info.value.device == "beh"

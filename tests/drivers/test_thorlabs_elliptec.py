@@ -40,6 +40,7 @@ from tests.drivers.serial_faults import (
     QUERY_FAULTS,
     QUERY_RETRIES,
     motion_fault_session,
+    open_patiently,
     query_survives,
     unplug_during_move,
     unplug_during_query,
@@ -229,15 +230,16 @@ def open_mount(transport: str, name: str, *, cleanup: list, address: str = "0",
                addresses: str = "0", **kw) -> ElliptecMount:
     kw.setdefault("flush_s", 0.0)
     if transport == "url":
-        mount = ElliptecMount(f"simell://{name}?addresses={addresses}&speed={SPEED:g}",
-                              name=name, address=address, **kw)
+        mount = open_patiently(ElliptecMount,
+                               f"simell://{name}?addresses={addresses}&speed={SPEED:g}",
+                               name=name, address=address, **kw)
     else:
         emulator = registry.get_or_create(
             "simell", name, lambda n, o: ElliptecEmulator(n, addresses=addresses,
                                                           clock=ScaledClock(SPEED)))
         server = PtyServer(emulator)
         cleanup.append(server)
-        mount = ElliptecMount(server.path, name=name, address=address, **kw)
+        mount = open_patiently(ElliptecMount, server.path, name=name, address=address, **kw)
     cleanup.append(mount)
     return mount
 

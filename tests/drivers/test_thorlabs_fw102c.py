@@ -299,6 +299,7 @@ def test_query_faults_recover_by_retry(wheel, kind, params):
 def test_lost_prompt_after_a_real_move_is_recovered(wheel):
     emulator = emulator_of(wheel)
     wheel._link.reply_timeout = 0.1
+    wheel._link.retries = QUERY_RETRIES  # the position query that recovers, on a loaded pty
     emulator.faults.schedule(FaultKind.DROP, nth=2)  # frames: echo, then the prompt
     assert wheel.move_to(2, timeout=0.5) == 2
 

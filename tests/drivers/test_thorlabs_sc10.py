@@ -351,6 +351,7 @@ def test_a_fault_anywhere_in_turn_on_never_double_toggles(shutter, nth):
     """Whatever answer of the sequence is lost, the shutter ends open or the call raises a
     typed error, and ens went out at most once."""
     shutter._link.reply_timeout = 0.1
+    shutter._link.retries = QUERY_RETRIES  # the queries around the fault, on a loaded pty
     emulator = emulator_of(shutter)
     before = len(emulator.lines)
     emulator.faults.schedule(FaultKind.DROP, nth=nth)

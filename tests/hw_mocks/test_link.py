@@ -44,6 +44,18 @@ def test_drop_then_normal():
     assert port.read_until(b"\r\n") == b"OK b\r\n"
 
 
+def test_a_fault_aimed_at_a_reply_counts_only_the_replies_that_contain_its_bytes():
+    """``on=``: the second reply that says "b" is lost, however many other replies came."""
+    port = open_echo()
+    faults = port.emulator.faults
+    faults.schedule(FaultKind.DROP, nth=2, on=b"b")
+    for line in (b"a", b"b", b"a", b"a", b"xb", b"b"):
+        port.write(line + b"\n")
+    expected = b"OK a\r\nOK b\r\nOK a\r\nOK a\r\nOK b\r\n"  # "xb" is the one dropped
+    assert port.read_until(b"OK b\r\nOK a\r\nOK a\r\nOK b\r\n") == expected
+    assert faults.log == [(5, FaultKind.DROP)]
+
+
 def test_delay_keeps_order_and_arrives_late():
     port = open_echo()
     port.emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.1)

@@ -23,21 +23,24 @@ from instrument.pipelines.brdf.analyse import analyse
 from instrument.pipelines.brdf.reduce import ReductionOptions, read_run, reduce_run
 from instrument.pipelines.brdf.report import write_report
 from tests.instrument.sim_scan import SAMPLES, Sample, ScanSetup, render, write_run_file
+from tests.shared_files import made_once
 
 GLOSSY = SAMPLES[1]
 
 
+# Made once per session (3-4 s of CPU each): this module's tests are spread over the test
+# processes, and each process that got one made the run files again.
 @pytest.fixture(scope="module")
 def glossy_run(tmp_path_factory):
-    path = tmp_path_factory.mktemp("runs") / "glossy.h5"
-    return write_run_file(render(ScanSetup(), GLOSSY), 3, path)
+    return made_once(tmp_path_factory, "fit-report-glossy", lambda folder: write_run_file(
+        render(ScanSetup(), GLOSSY), 3, folder / "glossy.h5"))
 
 
 @pytest.fixture(scope="module")
 def reference_run(tmp_path_factory):
-    path = tmp_path_factory.mktemp("runs") / "ptfe.h5"
-    return write_run_file(render(ScanSetup(), Sample("ptfe", "lambert", (0.99,))), 4, path,
-                          kind="reference", run_id="ptfe")
+    return made_once(tmp_path_factory, "fit-report-ptfe", lambda folder: write_run_file(
+        render(ScanSetup(), Sample("ptfe", "lambert", (0.99,))), 4, folder / "ptfe.h5",
+        kind="reference", run_id="ptfe"))
 
 
 def test_fit_says_what_it_assumed_and_what_is_unknown(glossy_run, tmp_path, capsys) -> None:
