@@ -39,6 +39,10 @@ in two passes:
 
 The second pass is a plan of explicit ``points`` with ``first_pass`` naming the first
 pass's run (:func:`second_pass_text`); the analysis reduces the two runs together.
+
+A plan with ``[polarimetry]`` is placed by :func:`place_points_modelled` instead: the same
+greedy design, with σ from a function of the predicted value and one cost per geometry
+(:mod:`instrument.pipelines.polarimetry.lobe` fits both to the polarimetric first pass).
 """
 
 from __future__ import annotations
