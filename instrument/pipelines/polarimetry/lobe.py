@@ -152,7 +152,8 @@ class M00Noise:
         m = np.abs(np.asarray(m00, dtype=float))
         var = self.a + self.b * m + self.c * m**2
         floor = 1e-6 * max(self.a, self.c * float(np.max(m, initial=0.0)) ** 2, 1e-300)
-        return np.sqrt(np.maximum(var, floor))
+        out: NDArray[np.float64] = np.sqrt(np.maximum(var, floor))
+        return out
 
     def describe(self) -> str:
         return (f"σ² = {self.a:.3g} + {self.b:.3g}·m00 + {self.c:.3g}·m00² "
@@ -188,7 +189,9 @@ def _geometries(plan: Plan) -> NDArray[np.float64]:
         if q.light and q.angles is not None:
             a = q.angles.as_tuple()
             seen.setdefault(tuple(round(x, 6) for x in a), a)
-    return np.radians(np.array(list(seen.values()), dtype=float).reshape(-1, 4))
+    out: NDArray[np.float64] = np.radians(np.array(list(seen.values()), dtype=float)
+                                          .reshape(-1, 4))
+    return out
 
 
 def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
