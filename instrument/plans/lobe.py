@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
@@ -75,7 +75,7 @@ from instrument.plans.tradeoff import DetectorSetup, ScanOption
 __all__ = ["LobeSpec", "Placement", "SinglePass", "candidate_pairs", "lobe_of",
            "place_points", "place_points_modelled",
            "plan_budget", "plan_seconds", "second_pass_text",
-           "single_pass_alternative"]
+           "single_pass_alternative", "single_pass_plans"]
 
 
 @dataclass(frozen=True)
@@ -430,14 +430,10 @@ def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float] | np.ndarr
                              option=option, budget=budget, readout_s=readout_s)
 
 
-def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
-                            params: Sequence[float] | NDArray[np.float64], *, seconds: float,
-                            det: DetectorSetup,
-                            option: ScanOption, budget: ErrorBudget, readout_s: float,
-                            frames_per_point: int) -> SinglePass:
-    """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two
-    passes' ``seconds`` pay for, with its predicted σ (the same error budget); the coarsest
-    when none fits."""
+def single_pass_plans(spec: PlanSpec, profile: BenchProfile) -> Iterator[tuple[float, Plan]]:
+    """The one-pass plans a lobe plan is weighed against, coarsest first: its θi and θr
+    range at each step of :data:`SINGLE_PASS_STEPS`, with the first pass's search around
+    specular (built one at a time: the caller stops at the first its time cannot pay)."""
     lobe = lobe_of(spec)
     assert lobe is not None
     scan = {k: v for k, v in spec.scan.items() if k not in ("lobe", "specular")}
@@ -446,11 +442,22 @@ def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFMo
     tr = spec.scan["theta_r"]
     lo, hi = ((float(tr["start"]), float(tr["stop"])) if isinstance(tr, dict)
               else (float(min(tr)), float(max(tr))))
-    p = np.asarray(params, dtype=float)
-    best: SinglePass | None = None
     for step in SINGLE_PASS_STEPS:
         one = replace(spec, scan={**scan, "theta_r": {"start": lo, "stop": hi, "step": step}})
-        plan = build_plan(one, profile)
+        yield step, build_plan(one, profile)
+
+
+def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
+                            params: Sequence[float] | NDArray[np.float64], *, seconds: float,
+                            det: DetectorSetup,
+                            option: ScanOption, budget: ErrorBudget, readout_s: float,
+                            frames_per_point: int) -> SinglePass:
+    """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two
+    passes' ``seconds`` pay for, with its predicted σ (the same error budget); the coarsest
+    when none fits."""
+    p = np.asarray(params, dtype=float)
+    best: SinglePass | None = None
+    for step, plan in single_pass_plans(spec, profile):
         ang, pb = plan_budget(plan, model, p, det=det, option=option, budget=budget,
                               readout_s=readout_s)
         dur = plan_seconds(plan, pb, readout_s, frames_per_point)

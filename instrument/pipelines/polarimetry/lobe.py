@@ -49,13 +49,13 @@ from instrument.pipelines.brdf.second_pass import SecondPass
 from instrument.pipelines.polarimetry.pipeline import reduce_polarimetric
 from instrument.plans.build import Plan, build_plan
 from instrument.plans.lobe import (
-    SINGLE_PASS_STEPS,
     SinglePass,
     candidate_pairs,
     lobe_of,
     pass_move_seconds,
     place_points_modelled,
     second_pass_text,
+    single_pass_plans,
 )
 from instrument.plans.lobe_budget import predicted_covariance
 from instrument.plans.planfile import PlanSpec, parse_plan
@@ -201,18 +201,8 @@ def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFMo
     :data:`~instrument.plans.lobe.SINGLE_PASS_STEPS`, with the first pass's search around
     specular) that ``seconds`` pay for on this bench's estimate, and the σ of the lobe
     parameters it would give with the σ model ``noise``; the coarsest when none fits."""
-    lobe = lobe_of(spec)
-    assert lobe is not None
-    scan = {k: v for k, v in spec.scan.items() if k not in ("lobe", "specular")}
-    scan["specular"] = {"half_width_deg": lobe.search_half_width_deg,
-                        "step_deg": lobe.search_step_deg}
-    tr = spec.scan["theta_r"]
-    lo, hi = ((float(tr["start"]), float(tr["stop"])) if isinstance(tr, dict)
-              else (float(min(tr)), float(max(tr))))
     best: SinglePass | None = None
-    for step in SINGLE_PASS_STEPS:
-        one = replace(spec, scan={**scan, "theta_r": {"start": lo, "stop": hi, "step": step}})
-        plan = build_plan(one, profile)
+    for step, plan in single_pass_plans(spec, profile):
         dur = float(plan.estimate().total_s)
         if best is not None and dur > seconds:
             break
