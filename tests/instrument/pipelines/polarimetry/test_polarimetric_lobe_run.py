@@ -111,7 +111,7 @@ def test_a_pem_lobe_plan_runs_both_passes_and_fits_them_together(
     assert all(p.brdf.m_normalised[0, 1] < -0.5 for p in points[1:4])
 
 
-@pytest.mark.slow  # 9 geometries × 23 retarder steps through the engine: 30-90 s;
+@pytest.mark.slow  # 9 geometries × 23 retarder steps through the engine: ~23 s CPU, 30-90 s;
 # its default-run twin is test_a_pem_lobe_plan_runs_both_passes_and_fits_them_together
 def test_a_drr_lobe_plan_runs_both_passes_and_recovers_the_glass(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
