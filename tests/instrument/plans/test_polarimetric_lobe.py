@@ -65,7 +65,8 @@ def test_scatterlab_plan_prints_the_polarimetric_first_pass_and_the_second(
     per = 23 if mode == "drr" else 8
     assert f"{15 * per} points" in out
     assert "this is the first pass of a two-pass lobe plan" in out
-    assert "adds 4 points placed by Fisher information" in out
+    assert "adds 4 polarimetric geometries (the same [polarimetry] at each) placed by " \
+        "Fisher information" in out
     assert ("condition number" in out) if mode == "drr" else ("κ" in out)
 
 
