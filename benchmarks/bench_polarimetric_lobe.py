@@ -22,9 +22,7 @@ from pathlib import Path
 
 from instrument.cli import main as cli
 from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
-from tests.instrument.pipelines.polarimetry.closed_loop import fast_bench
-from tests.instrument.pipelines.polarimetry.test_polarimetric_fit import _oracle
-from tests.instrument.pipelines.polarimetry.test_polarimetric_lobe_run import PLAN
+from tests.instrument.pipelines.polarimetry.test_polarimetric_lobe_run import drr_lobe_setup
 
 
 def main() -> None:
@@ -32,20 +30,14 @@ def main() -> None:
     parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
+        bench, text = drr_lobe_setup(folder)
         runs = folder / "runs"
-        runs.mkdir()
-        cal = _oracle(runs).path
-        assert cal is not None
-        cal.rename(cal.with_name("polarimeter-hidden-optics.json"))
         plan = folder / "lobe.toml"
-        plan.write_text(PLAN.format(
-            theta_r="{ start = 30.0, stop = 70.0, step = 20.0 }", points=2, search=3.0,
-            prior="lambert+ggx", detector="power_meter", dark='dark = "per_point"',
-            polarimetry='mode = "drr"\nsteps = 23'), encoding="utf-8")
+        plan.write_text(text, encoding="utf-8")
         out = io.StringIO()
         t0, c0 = time.perf_counter(), time.process_time()
         with contextlib.redirect_stdout(out):
-            code = cli(["run", str(plan), "--bench", str(fast_bench(folder)), "--out",
+            code = cli(["run", str(plan), "--bench", str(bench), "--out",
                         str(runs), "--no-fsync", "--quiet"])
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         assert code == 0, out.getvalue()

@@ -111,22 +111,27 @@ def test_a_pem_lobe_plan_runs_both_passes_and_fits_them_together(
     assert all(p.brdf.m_normalised[0, 1] < -0.5 for p in points[1:4])
 
 
-@pytest.mark.slow  # 9 geometries × 23 retarder steps through the engine: ~23 s CPU, 30-90 s;
-# its default-run twin is test_a_pem_lobe_plan_runs_both_passes_and_fits_them_together
-def test_a_drr_lobe_plan_runs_both_passes_and_recovers_the_glass(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bench = fast_bench(tmp_path)
-    # the hidden optics as the bench's newest calibration beside the runs (both passes
-    # are reduced with it, for the placement and for the fit)
-    runs = tmp_path / "runs"
+def drr_lobe_setup(folder: Path) -> tuple[Path, str]:
+    """The DRR test's bench (``folder/runs`` holding the hidden optics as the bench's newest
+    calibration, with which both passes are reduced, for the placement and for the fit)
+    and plan text: 30, 44, 47, 50, 53, 56 and 70° (the search of ±6° every 3°), then two
+    geometries. Shared with ``benchmarks/bench_polarimetric_lobe.py``."""
+    runs = folder / "runs"
     runs.mkdir()
     cal = _oracle(runs).path
     assert cal is not None
     cal.rename(cal.with_name("polarimeter-hidden-optics.json"))
-    # 30, 44, 47, 50, 53, 56 and 70° (the search of ±6° every 3°), then two geometries
     text = PLAN.format(theta_r="{ start = 30.0, stop = 70.0, step = 20.0 }", points=2,
                        search=3.0, prior="lambert+ggx", detector="power_meter",
                        dark='dark = "per_point"', polarimetry='mode = "drr"\nsteps = 23')
+    return fast_bench(folder), text
+
+
+@pytest.mark.slow  # 9 geometries × 23 retarder steps through the engine: ~23 s CPU, 30-90 s;
+# its default-run twin is test_a_pem_lobe_plan_runs_both_passes_and_fits_them_together
+def test_a_drr_lobe_plan_runs_both_passes_and_recovers_the_glass(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bench, text = drr_lobe_setup(tmp_path)
     first, second, printed = _run_both(tmp_path, bench, text, capsys)
     _check_passes(first, second, printed, placed=2, per_geometry=23)
     done = fit_polarimetric_run(second, report=False, write=False)
