@@ -86,8 +86,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {plan.dropped_in_beam} point(s) with the detector in the beam left out")
     lobe = lobe_of(spec)
     if lobe is not None:
+        adds = (f"{lobe.points} polarimetric geometries (the same [polarimetry] at each)"
+                if spec.polarimetry is not None else f"{lobe.points} points")
         print(f"  this is the first pass of a two-pass lobe plan: `scatterlab run` fits it "
-              f"and adds {lobe.points} points placed by Fisher information (a second run)")
+              f"and adds {adds} placed by Fisher information (a second run)")
     for role, dist in est.travel.items():
         unit = "mm" if role == "camera_z" else "deg"
         print(f"  travel {role:<15} {dist:10.1f} {unit}")

@@ -155,8 +155,10 @@ def _second_pass(first: Path, spec: PlanSpec, profile: BenchProfile, bench: Benc
         print(second.refusal())
         print(f"first pass: {first}")
         return 0
-    print(f"second pass: {len(second.plan.points)} points placed by Fisher information on "
-          f"{second.model} fitted to the first pass ({second.verdict})")
+    placed = (f"{len(pl.pairs)} geometries ({len(second.plan.points)} points)"
+              if spec.polarimetry is not None else f"{len(second.plan.points)} points")
+    print(f"second pass: {placed} placed by Fisher information on {second.model} fitted to "
+          f"the first pass ({second.verdict})")
     filtered = sum(s >= 0 for s in pl.slots)
     if filtered or pl.not_measurable:
         print(f"  {filtered} of them read through a neutral-density filter; "

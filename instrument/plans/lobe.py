@@ -39,13 +39,17 @@ in two passes:
 
 The second pass is a plan of explicit ``points`` with ``first_pass`` naming the first
 pass's run (:func:`second_pass_text`); the analysis reduces the two runs together.
+
+A plan with ``[polarimetry]`` is placed by :func:`place_points_modelled` instead: the same
+greedy design, with σ from a function of the predicted value and one cost per geometry
+(:mod:`instrument.pipelines.polarimetry.lobe` fits both to the polarimetric first pass).
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
@@ -69,8 +73,9 @@ from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.plans.tradeoff import DetectorSetup, ScanOption
 
 __all__ = ["LobeSpec", "Placement", "SinglePass", "candidate_pairs", "lobe_of",
-           "place_points", "plan_budget", "plan_seconds", "second_pass_text",
-           "single_pass_alternative"]
+           "place_points", "place_points_modelled",
+           "plan_budget", "plan_seconds", "second_pass_text",
+           "single_pass_alternative", "single_pass_plans"]
 
 
 @dataclass(frozen=True)
@@ -209,6 +214,61 @@ def _joint_shared(first_f: np.ndarray, first_slots: np.ndarray | None,
     return out
 
 
+def _weighted_information(model: BRDFModel, p: np.ndarray, cand: np.ndarray,
+                         sig: np.ndarray, first: np.ndarray, sig1: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """The candidates' Jacobian rows weighted by 1/σ, and the inverse of the first pass's
+    information (JᵀWJ, with a ridge that only keeps it invertible)."""
+    jac = model.jacobian_geometry(p, make_geometry(*cand.T)).reshape(len(cand), -1)
+    j1 = model.jacobian_geometry(p, make_geometry(*first.T)).reshape(len(first), -1)
+    j1 = j1 / sig1[:, None]
+    info0 = j1.T @ j1
+    ridge = 1e-12 * max(float(np.trace(info0)), 1e-300)
+    return jac / sig[:, None], np.linalg.inv(info0 + ridge * np.eye(p.size))
+
+
+def _unmeasured(candidates: Sequence[tuple[float, float]], first: np.ndarray,
+                min_separation_deg: float) -> NDArray[np.bool_]:
+    """Candidates that no first-pass reading measured already. Each direction is used once,
+    too: spreading the points over the region of highest information keeps the design
+    robust to a model that is slightly wrong (a pile of repeats at one angle is optimal
+    only if it is right)."""
+    c_ti = np.array([c[0] for c in candidates])
+    c_tr = np.array([c[1] for c in candidates])
+    free = np.ones(len(candidates), dtype=bool)
+    for ti, tr in _signed(np.degrees(first)):
+        free &= ~((np.abs(c_ti - ti) < 0.05) & (np.abs(c_tr - tr) < min_separation_deg))
+    return free
+
+
+def _target_index(model: BRDFModel, target: str | None) -> int | None:
+    """The index of the target parameter (default the model's last); None: D-optimal."""
+    names = model.param_names
+    return None if target == "all" else names.index(target or names[-1])
+
+
+def _greedy(jac: np.ndarray, inv: np.ndarray, cost: np.ndarray, free: np.ndarray,
+            n_points: int, t: int | None) -> list[int]:
+    """The greedy c-optimal (target index ``t``) or D-optimal (``t`` None) choice per unit
+    time among the ``free`` candidates, each used once (module docstring)."""
+    free = free.copy()
+    chosen: list[int] = []
+    for _ in range(min(int(n_points), int(free.sum()))):
+        q = np.einsum("ij,jk,ik->i", jac, inv, jac)
+        if t is None:
+            value = np.log1p(np.maximum(q, 0.0))
+        else:
+            value = (jac @ inv[:, t]) ** 2 / (1.0 + np.maximum(q, 0.0))
+        gain = np.where(free, value / cost, -np.inf)
+        k = int(np.argmax(gain))
+        free[k] = False
+        chosen.append(k)
+        jk = jac[k]
+        u = inv @ jk
+        inv = inv - np.outer(u, u) / (1.0 + jk @ u)  # Sherman–Morrison
+    return chosen
+
+
 def place_points(
     model: BRDFModel,
     params: Sequence[float] | NDArray[np.float64],
@@ -274,38 +334,11 @@ def place_points(
                       readout_s=readout_s)
     cost = frames_per_point * (pb.t_us * 1e-6 + readout_s) + move_s + pb.extra_s
     sig = np.where(pb.measurable, pb.sigma, 1.0)
-    g = make_geometry(*cand.T)
-    jac = model.jacobian_geometry(p, g).reshape(len(cand), -1) / sig[:, None]
     g1 = make_geometry(*first.T)
-    j1 = model.jacobian_geometry(p, g1).reshape(len(first), -1) / sig1[:, None]
-    info0 = j1.T @ j1
-    ridge = 1e-12 * max(float(np.trace(info0)), 1e-300)
-    inv = np.linalg.inv(info0 + ridge * np.eye(p.size))
-    # each direction once, and none the first pass measured already: spreading the
-    # points over the region of highest information keeps the design robust to a model
-    # that is slightly wrong (a pile of repeats at one angle is optimal only if it is right);
+    jac, inv = _weighted_information(model, p, cand, sig, first, sig1)
     # never a reading predicted to clip (a lower bound the fit leaves out)
-    c_ti = np.array([c[0] for c in candidates])
-    c_tr = np.array([c[1] for c in candidates])
-    free = pb.measurable.copy()
-    for ti, tr in _signed(np.degrees(first)):
-        free &= ~((np.abs(c_ti - ti) < 0.05) & (np.abs(c_tr - tr) < min_separation_deg))
-    chosen: list[int] = []
-    names = model.param_names
-    t = None if target == "all" else names.index(target or names[-1])
-    for _ in range(min(int(n_points), int(free.sum()))):
-        q = np.einsum("ij,jk,ik->i", jac, inv, jac)
-        if t is None:
-            value = np.log1p(np.maximum(q, 0.0))
-        else:
-            value = (jac @ inv[:, t]) ** 2 / (1.0 + np.maximum(q, 0.0))
-        gain = np.where(free, value / cost, -np.inf)
-        k = int(np.argmax(gain))
-        free[k] = False
-        chosen.append(k)
-        jk = jac[k]
-        u = inv @ jk
-        inv = inv - np.outer(u, u) / (1.0 + jk @ u)  # Sherman–Morrison
+    free = pb.measurable & _unmeasured(candidates, first, min_separation_deg)
+    chosen = _greedy(jac, inv, cost, free, n_points, _target_index(model, target))
     f1 = model.evaluate_geometry(p, g1)
     cov_first = predicted_covariance(model, p, first, sig1, shared=first_cov,
                                      scale_rel=budget.scale_rel)
@@ -318,6 +351,47 @@ def place_points(
                      cost[chosen].tolist(), _sigmas(model, cov_first),
                      _sigmas(model, cov_both), pb.slots(budget)[chosen].tolist(),
                      int((~pb.measurable).sum()))
+
+
+def place_points_modelled(
+    model: BRDFModel,
+    params: Sequence[float] | NDArray[np.float64],
+    *,
+    first_angles_rad: np.ndarray,
+    first_sigma: np.ndarray,
+    candidates: Sequence[tuple[float, float]],
+    n_points: int,
+    sigma_of: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    geometry_s: float,
+    min_separation_deg: float = 0.1,
+    target: str | None = None,
+) -> Placement:
+    """:func:`place_points` for readings whose σ is a function of the value alone: the
+    same greedy c- or D-optimal choice per unit time, with each candidate weighed by
+    ``sigma_of`` at the value the model predicts there and every geometry costing
+    ``geometry_s`` seconds (a polarimetric geometry: its K retarder steps or PEM settings,
+    whatever its value). No filters, angular term or shared errors: the caller's σ hold
+    all the fit will use.
+
+    ``first_angles_rad`` (n, 4) and ``first_sigma`` (n,) are the first pass's readings as
+    fitted; ``candidates`` signed (θi, θr) pairs in degrees (:func:`candidate_pairs`).
+    """
+    p = np.asarray(params, dtype=float)
+    first = np.asarray(first_angles_rad, dtype=float)
+    sig1 = np.asarray(first_sigma, dtype=float)
+    cand = _angles_rad(candidates)
+    sig = np.asarray(sigma_of(model.evaluate_geometry(p, make_geometry(*cand.T))), float)
+    jac, inv = _weighted_information(model, p, cand, sig, first, sig1)
+    cost = np.full(len(cand), float(geometry_s))
+    free = _unmeasured(candidates, first, min_separation_deg)
+    chosen = _greedy(jac, inv, cost, free, n_points, _target_index(model, target))
+    cov_first = predicted_covariance(model, p, first, sig1)
+    cov_both = predicted_covariance(model, p, np.concatenate([first, cand[chosen]]),
+                                    np.concatenate([sig1, sig[chosen]]))
+    return Placement([cast("tuple[float, float]", tuple(candidates[k])) for k in chosen],
+                     float(cost[chosen].sum()), cost[chosen].tolist(),
+                     _sigmas(model, cov_first), _sigmas(model, cov_both),
+                     [-1] * len(chosen), 0)
 
 
 @dataclass(frozen=True)
@@ -356,14 +430,10 @@ def plan_budget(plan: Plan, model: BRDFModel, params: Sequence[float] | np.ndarr
                              option=option, budget=budget, readout_s=readout_s)
 
 
-def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
-                            params: Sequence[float] | NDArray[np.float64], *, seconds: float,
-                            det: DetectorSetup,
-                            option: ScanOption, budget: ErrorBudget, readout_s: float,
-                            frames_per_point: int) -> SinglePass:
-    """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two
-    passes' ``seconds`` pay for, with its predicted σ (the same error budget); the coarsest
-    when none fits."""
+def single_pass_plans(spec: PlanSpec, profile: BenchProfile) -> Iterator[tuple[float, Plan]]:
+    """The one-pass plans a lobe plan is weighed against, coarsest first: its θi and θr
+    range at each step of :data:`SINGLE_PASS_STEPS`, with the first pass's search around
+    specular (built one at a time: the caller stops at the first its time cannot pay)."""
     lobe = lobe_of(spec)
     assert lobe is not None
     scan = {k: v for k, v in spec.scan.items() if k not in ("lobe", "specular")}
@@ -372,11 +442,22 @@ def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFMo
     tr = spec.scan["theta_r"]
     lo, hi = ((float(tr["start"]), float(tr["stop"])) if isinstance(tr, dict)
               else (float(min(tr)), float(max(tr))))
-    p = np.asarray(params, dtype=float)
-    best: SinglePass | None = None
     for step in SINGLE_PASS_STEPS:
         one = replace(spec, scan={**scan, "theta_r": {"start": lo, "stop": hi, "step": step}})
-        plan = build_plan(one, profile)
+        yield step, build_plan(one, profile)
+
+
+def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFModel,
+                            params: Sequence[float] | NDArray[np.float64], *, seconds: float,
+                            det: DetectorSetup,
+                            option: ScanOption, budget: ErrorBudget, readout_s: float,
+                            frames_per_point: int) -> SinglePass:
+    """The densest single-pass plan (:data:`SINGLE_PASS_STEPS`) that the lobe plan's two
+    passes' ``seconds`` pay for, with its predicted σ (the same error budget); the coarsest
+    when none fits."""
+    p = np.asarray(params, dtype=float)
+    best: SinglePass | None = None
+    for step, plan in single_pass_plans(spec, profile):
         ang, pb = plan_budget(plan, model, p, det=det, option=option, budget=budget,
                               readout_s=readout_s)
         dur = plan_seconds(plan, pb, readout_s, frames_per_point)
@@ -430,7 +511,9 @@ def second_pass_text(first_text: str, pairs: Sequence[tuple[float, float]],
     data["plan"] = plan
     lines = ["# Second pass of a two-pass lobe plan (instrument.plans.lobe): points placed",
              "# by Fisher information after the first pass named in first_pass."]
-    for section in ("plan", "sample", "scan", "acquisition", "calibration"):
+    # a polarimetric or spectral first pass: the second pass takes the same settings
+    for section in ("plan", "sample", "scan", "acquisition", "calibration", "spectral",
+                    "polarimetry"):
         if section not in data:
             continue
         lines.append(f"\n[{section}]")

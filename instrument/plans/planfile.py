@@ -33,7 +33,8 @@ as a :class:`~instrument.bench.profile.FieldError` (``scan.theta_i[2]: ...``) in
     mode = "drr"                  # brdf_in_plane and brdf_hemisphere plans):
     steps = 36                    # instrument.plans.polarimetry
     ratio = 5                     # (mode = "pem": instrument.plans.polarimetry_pem)
-                                  # (not with a two-pass ``lobe``: refused, ADR 0106)
+                                  # (with a two-pass ``lobe``: both passes polarimetric,
+                                  # instrument.pipelines.polarimetry.lobe, ADR 0106)
 
 [scan] by kind (angles in degrees; a *range* is ``{start, stop, step}`` inclusive, or an
 explicit list):
@@ -170,8 +171,9 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
             calibration[key] = val
     spectral = _spectral(v, data.get("spectral"), kind)
     polarimetry = parse_polarimetry(v, data.get("polarimetry"), kind)
-    if polarimetry is not None and "lobe" in scan:
-        _no_polarimetric_lobe(v)
+    if polarimetry is not None and "lobe" in scan and spectral is not None \
+            and len(spectral["filters"]) > 1:
+        _one_wavelength_polarimetric_lobe(v)
     if v.errors or kind is None:
         raise PlanError(source, v.errors or [FieldError("plan.kind", "is required")])
     return PlanSpec(kind, name, order, sample_name, sample_desc, dict(scan), acq,
@@ -365,17 +367,14 @@ def _lobe(v: _Validator, t: dict[str, Any], path: str) -> None:
                 "lobe.search_step_deg in a two-pass lobe plan")
 
 
-def _no_polarimetric_lobe(v: _Validator) -> None:
-    """A two-pass lobe plan with a ``[polarimetry]`` axis is refused before anything runs
-    (ADR 0106, amendment): the second pass is placed with the camera's noise model and the
-    scalar reduction's covariance (:mod:`instrument.plans.lobe`), which a polarimetric run
-    does not have; without this check the first pass ran in full and the second failed
-    after it."""
-    v.error("scan.lobe", "a two-pass lobe plan takes no [polarimetry] axis (its second "
-            "pass is placed with the camera's noise model, which a polarimetric run's m00 "
-            "does not have): sample the lobe in one pass instead, with theta_r and "
-            "specular = {half_width_deg, step_deg} around the mirror direction, or with "
-            "explicit points")
+def _one_wavelength_polarimetric_lobe(v: _Validator) -> None:
+    """A polarimetric two-pass lobe plan fits the lobe to the first pass's m00 at one
+    wavelength (:mod:`instrument.pipelines.polarimetry.lobe`): over several filters the
+    lobe differs per wavelength and one placement cannot serve them all."""
+    v.error("scan.lobe", "a polarimetric two-pass lobe plan places its second pass from "
+            "the lobe at one wavelength: give [spectral] filters one slot (one plan per "
+            "wavelength), or sample the lobe in one pass with theta_r and "
+            "specular = {half_width_deg, step_deg}")
 
 
 def _hemisphere(v: _Validator, t: dict[str, Any], path: str) -> None:

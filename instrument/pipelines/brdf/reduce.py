@@ -51,8 +51,8 @@ from instrument.pipelines.brdf.attenuation import (
 from instrument.pipelines.brdf.dark import PointDark, power_meter_dark
 from instrument.run.runfile import RunData, read_run
 
-__all__ = ["Reduced", "ReductionOptions", "flat_from_run", "instrument_function",
-           "load_reference_table", "reduce_run"]
+__all__ = ["Reduced", "ReductionOptions", "first_pass_path", "flat_from_run",
+           "instrument_function", "load_reference_table", "reduce_run"]
 
 
 @dataclass(frozen=True)
@@ -339,7 +339,7 @@ def _meter_relative_noise(run: RunData, opts: ReductionOptions) -> MeterNoise:
     return meter_noise(run.profile())
 
 
-def _first_pass(run: RunData) -> Path | None:
+def first_pass_path(run: RunData) -> Path | None:
     """The first-pass run a two-pass lobe plan names (``[scan] first_pass``,
     :mod:`instrument.plans.lobe`), resolved next to the run file."""
     if not run.plan_text:
@@ -573,7 +573,7 @@ def reduce_run(path: str | Path, options: ReductionOptions | None = None) -> Red
         raise ValueError(f"{path}: no measured scattering points")
     # a second pass of a two-pass lobe plan is reduced with its first pass
     parts: list[tuple[RunData, np.ndarray]] = [(run, rows)]
-    first = _first_pass(run)
+    first = first_pass_path(run)
     if first is not None:
         r1 = read_run(first)
         parts.append((r1, r1.brdf_rows()))

@@ -115,6 +115,11 @@ def second_pass_plan(first_run: str | Path, spec: PlanSpec, profile: BenchProfil
     lobe = lobe_of(spec)
     if lobe is None:
         raise ValueError(f"plan {spec.name!r} has no [scan] lobe option")
+    if spec.polarimetry is not None:
+        # m00 of the Mueller reduction and a σ model fitted to it, not the camera's
+        from instrument.pipelines.polarimetry.lobe import polarimetric_second_pass
+
+        return polarimetric_second_pass(first_run, spec, profile)
     run = read_run(first_run)
     reduced = reduce_run(first_run)
     models = [lobe.prior] if lobe.prior else list(DEFAULT_MODELS)

@@ -27,14 +27,20 @@ import numpy as np
 from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf, pbrdf
 from analysis.polarimetry.pbrdf_selection import PBRDF_VARIANTS, select_pbrdf
 from analysis.polarimetry.validation import PolarimetryInputError
+from instrument.pipelines.brdf.reduce import first_pass_path
 from instrument.pipelines.polarimetry.calibration import (
     CalibrationError,
     PolarimeterCalibration,
     find_calibration,
     load_calibration,
 )
-from instrument.pipelines.polarimetry.readings import read_polarimetric
-from instrument.pipelines.polarimetry.reduce import MuellerPoint, reduce_group, source_scale
+from instrument.pipelines.polarimetry.readings import PolarimetricRun, read_polarimetric
+from instrument.pipelines.polarimetry.reduce import (
+    MuellerPoint,
+    Scale,
+    reduce_group,
+    source_scale,
+)
 from instrument.pipelines.polarimetry.report import series, write_report
 from instrument.pipelines.polarimetry.results import (
     write_into_run,
@@ -44,7 +50,8 @@ from instrument.run.paths import results_dir
 from instrument.run.runfile import check_run_file
 
 __all__ = ["DEFAULT_START", "UNCALIBRATED", "UNCALIBRATED_PEM", "PolarimetricFit",
-           "fit_polarimetric_run", "polarimetric_options"]
+           "PolarimetricReduction", "fit_polarimetric_run", "polarimetric_options",
+           "reduce_polarimetric"]
 
 #: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
 #: the polarimeter's nominal frame.
@@ -154,19 +161,23 @@ def _model_curves(points: Sequence[MuellerPoint], fit: dict[str, Any]
     return out
 
 
-def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = None,
-                         start: Sequence[float] = DEFAULT_START,
-                         fixed: Sequence[str] | None = None, distribution: str = "beckmann",
-                         report_dir: str | Path | None = None, report: bool = True,
-                         write: bool = True, into_run: bool = False) -> PolarimetricFit:
-    """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
+@dataclass(frozen=True)
+class PolarimetricReduction:
+    """One run's Mueller matrices and what they were reduced with
+    (:func:`reduce_polarimetric`)."""
 
-    ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
-    for the newest valid calibration of the run's bench beside the run. ``into_run`` also
-    writes the results into the run file's ``/entry/analysis``. ``fixed`` None (the
-    default) chooses the pBRDF variant the data need
-    (:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`); a list of parameter
-    names fits the one model with those held at ``start``.
+    prun: PolarimetricRun
+    calibration: PolarimeterCalibration | None
+    scale: Scale
+    points: tuple[MuellerPoint, ...]
+    pem: bool
+    notes: tuple[str, ...]
+
+
+def reduce_polarimetric(path: str | Path, calibration: str | Path | None = None
+                        ) -> PolarimetricReduction:
+    """Read a polarimetric run and reduce every geometry to its Mueller matrix with
+    covariance (``calibration`` as for :func:`fit_polarimetric_run`).
 
     Raises
     ------
@@ -190,8 +201,6 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     if cal is not None and not cal.valid:
         notes.append(f"the calibration {cal.path} failed its quality gate ({cal.quality}); "
                      "used because it was named")
-    cal_text = ((UNCALIBRATED_PEM if pem else UNCALIBRATED) if cal is None else
-                f"calibrated with {cal.path} ({cal.date}): {cal.describe()}")
     scale = source_scale(prun, cal)
     points = []
     for g in prun.groups:
@@ -200,6 +209,44 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
         except PolarimetryInputError as err:
             raise ValueError(f"{g.label()}: {g.rows.size} steps do not determine the "
                              f"Mueller matrix ({err})") from None
+    return PolarimetricReduction(prun, cal, scale, tuple(points), pem, tuple(notes))
+
+
+def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = None,
+                         start: Sequence[float] = DEFAULT_START,
+                         fixed: Sequence[str] | None = None, distribution: str = "beckmann",
+                         report_dir: str | Path | None = None, report: bool = True,
+                         write: bool = True, into_run: bool = False) -> PolarimetricFit:
+    """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
+
+    ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
+    for the newest valid calibration of the run's bench beside the run. The second pass of
+    a two-pass lobe plan (its plan's ``first_pass``) is fitted with its first pass's
+    geometries, each run reduced with its own source scale. ``into_run`` also
+    writes the results into the run file's ``/entry/analysis``. ``fixed`` None (the
+    default) chooses the pBRDF variant the data need
+    (:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`); a list of parameter
+    names fits the one model with those held at ``start``.
+
+    Raises
+    ------
+    RunFileError, CalibrationError, ValueError
+        As :func:`reduce_polarimetric`.
+    """
+    red = reduce_polarimetric(path, calibration)
+    prun, cal, scale, notes = red.prun, red.calibration, red.scale, list(red.notes)
+    pem = red.pem
+    cal_text = ((UNCALIBRATED_PEM if pem else UNCALIBRATED) if cal is None else
+                f"calibrated with {cal.path} ({cal.date}): {cal.describe()}")
+    points = list(red.points)
+    first = first_pass_path(prun.run)
+    if first is not None:
+        # the second pass of a two-pass lobe plan: both runs' geometries are fitted
+        # together (as reduce_run joins a scalar first pass), each with its own scale
+        red1 = reduce_polarimetric(first, calibration)
+        points = list(red1.points) + points
+        notes.append(f"with the first pass {red1.prun.run.run_id} ({len(red1.points)} "
+                     f"geometries, {first.name}) of the two-pass lobe plan")
     flagged = [p.group.label() for p in points if p.realizability.flagged]
     if flagged:
         notes.append(f"not physically realizable within σ (kept as measured, not "

@@ -1,19 +1,32 @@
-"""A two-pass lobe plan with a ``[polarimetry]`` axis is refused when the plan is read
-(ADR 0106, amendment), in either mode, before anything moves: the lobe's second pass is
-placed with the camera's noise model and the scalar reduction, which a polarimetric run
-does not have. Before the check the first pass ran in full (minutes of retarder steps or
-PEM settings) and the second pass then failed to plan.
+"""A two-pass lobe plan with ``[polarimetry]`` (DRR or PEM, ADR 0106 amendment): the plan is
+accepted, ``scatterlab plan`` prints the polarimetric estimate of the first pass and says
+a second pass follows, the second pass is placed from the first pass's m00 with a σ model
+fitted to it (:mod:`instrument.pipelines.polarimetry.lobe`) and keeps the polarimetry
+settings. The runs through the engine are in
+``tests/instrument/pipelines/polarimetry/test_polarimetric_lobe_run.py``.
 """
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from analysis.brdf import get_model
+from analysis.brdf.geometry import make_geometry
+from instrument.bench.profile import load_profile
 from instrument.cli import main
+from instrument.pipelines.polarimetry.lobe import M00Noise, geometry_seconds
+from instrument.plans.lobe import (
+    _angles_rad,
+    candidate_pairs,
+    place_points_modelled,
+    second_pass_text,
+)
 from instrument.plans.planfile import PlanError, parse_plan
 
 LOBE_PLAN = """
@@ -31,8 +44,9 @@ detectors = ["{detector}"]
 {polarimetry}
 """
 
-DRR = '[polarimetry]\nmode = "drr"\nsteps = 25\n'
+DRR = '[polarimetry]\nmode = "drr"\nsteps = 23\n'
 PEM = '[polarimetry]\nmode = "pem"\n'
+BENCH = {"drr": "sim-polarimetric", "pem": "sim-polarimetric-pem"}
 
 
 def plan(lobe: str = "lobe = { points = 4 }", polarimetry: str = DRR) -> str:
@@ -40,31 +54,43 @@ def plan(lobe: str = "lobe = { points = 4 }", polarimetry: str = DRR) -> str:
     return LOBE_PLAN.format(lobe=lobe, polarimetry=polarimetry, detector=detector)
 
 
-def fields(text: str) -> set[str]:
+@pytest.mark.parametrize("mode", ["drr", "pem"])
+def test_scatterlab_plan_prints_the_polarimetric_first_pass_and_the_second(
+        mode: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "lobe.toml"
+    path.write_text(plan(polarimetry=DRR if mode == "drr" else PEM), encoding="utf-8")
+    assert main(["plan", str(path), "--bench", BENCH[mode], "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    # 5 θr + the search of ±5° at 1° around 50° (50 once): 15 geometries
+    per = 23 if mode == "drr" else 8
+    assert f"{15 * per} points" in out
+    assert "this is the first pass of a two-pass lobe plan" in out
+    assert "adds 4 polarimetric geometries (the same [polarimetry] at each) placed by " \
+        "Fisher information" in out
+    assert ("condition number" in out) if mode == "drr" else ("κ" in out)
+
+
+def test_the_second_pass_keeps_the_polarimetry_and_spectral_settings() -> None:
+    first = plan(polarimetry=PEM + "reads = 4\n") + "[spectral]\nfilters = [2]\n"
+    spec = parse_plan(first)
+    assert spec.polarimetry is not None and spec.scan["lobe"] == {"points": 4}
+    text = second_pass_text(first, [(50.0, 49.5), (50.0, 50.5)], "run-1.h5")
+    data = tomllib.loads(text)
+    assert data["polarimetry"] == {"mode": "pem", "reads": 4}
+    assert data["spectral"] == {"filters": [2]}
+    assert data["scan"] == {"points": [[50.0, 49.5], [50.0, 50.5]], "first_pass": "run-1.h5"}
+    assert parse_plan(text).polarimetry == spec.polarimetry
+
+
+def test_a_polarimetric_lobe_over_several_wavelengths_is_refused_naming_the_lobe() -> None:
+    text = plan(polarimetry=PEM) + "[spectral]\nfilters = [1, 2]\n"
     with pytest.raises(PlanError) as err:
         parse_plan(text)
-    return {e.path for e in err.value.errors}
-
-
-@pytest.mark.parametrize("polarimetry", [DRR, PEM], ids=["drr", "pem"])
-def test_a_polarimetric_lobe_plan_is_refused_naming_the_lobe(polarimetry):
-    with pytest.raises(PlanError) as err:
-        parse_plan(plan(polarimetry=polarimetry))
     assert {e.path for e in err.value.errors} == {"scan.lobe"}
-    assert "specular = {half_width_deg, step_deg}" in str(err.value)
-    # either half alone is a valid plan
-    assert parse_plan(plan(lobe="")).polarimetry is not None
-    assert parse_plan(plan(polarimetry="")).scan["lobe"] == {"points": 4}
-
-
-def test_scatterlab_run_refuses_it_before_the_bench_opens(tmp_path: Path, capsys):
-    path = tmp_path / "lobe.toml"
-    path.write_text(plan(), encoding="utf-8")
-    out = tmp_path / "runs"
-    assert main(["run", str(path), "--bench", "sim-polarimetric", "--out", str(out),
-                 "--quiet"]) == 2
-    assert "scan.lobe" in capsys.readouterr().err
-    assert not list(out.glob("*.h5"))  # no first pass was run
+    assert "one slot" in str(err.value)
+    # one wavelength, or the same filters without the lobe, or without polarimetry
+    assert parse_plan(plan(polarimetry=PEM) + "[spectral]\nfilters = [2]\n") is not None
+    assert parse_plan(plan(lobe="", polarimetry=PEM) + "[spectral]\nfilters = [1, 2]\n")
 
 
 lobe_tables = st.fixed_dictionaries(
@@ -92,11 +118,76 @@ def toml_inline(table: dict[str, object]) -> str:
 
 @settings(max_examples=60, deadline=None)
 @given(lobe=lobe_tables, pol=st.one_of(drr_tables, pem_tables))
-def test_any_valid_lobe_with_any_valid_polarimetry_table_is_refused_by_that_field(lobe, pol):
+def test_any_valid_lobe_with_any_valid_polarimetry_table_is_a_valid_plan(
+        lobe: dict[str, object], pol: dict[str, object]) -> None:
     body = "\n".join(f"{k} = {value(v)}" for k, v in pol.items())
-    text = plan(lobe=f"lobe = {toml_inline(lobe)}", polarimetry=f"[polarimetry]\n{body}\n")
-    assert fields(text) == {"scan.lobe"}
-    # without the polarimetry axis the same lobe table is a valid plan, and the same
-    # polarimetry table without the lobe
-    assert parse_plan(plan(lobe=f"lobe = {toml_inline(lobe)}", polarimetry="")) is not None
-    assert parse_plan(plan(lobe="", polarimetry=f"[polarimetry]\n{body}\n")) is not None
+    spec = parse_plan(plan(lobe=f"lobe = {toml_inline(lobe)}",
+                           polarimetry=f"[polarimetry]\n{body}\n"))
+    assert spec.scan["lobe"]["points"] == lobe["points"]
+    assert spec.polarimetry is not None and spec.polarimetry["mode"] == pol["mode"]
+    # and its second pass reads back with the same polarimetry
+    text = second_pass_text(spec.source_text, [(50.0, 50.25)], "first.h5")
+    assert parse_plan(text).polarimetry == spec.polarimetry
+
+
+# --- the σ model of m00 ---------------------------------------------------------------------
+def test_the_sigma_model_recovers_floor_signal_and_relative_terms() -> None:
+    m00 = np.geomspace(1e-3, 30.0, 25)
+    a, b, c = 4e-8, 2e-6, 1e-5
+    noise = M00Noise.fit(m00, np.sqrt(a + b * m00 + c * m00**2))
+    np.testing.assert_allclose([noise.a, noise.b, noise.c], [a, b, c], rtol=1e-6)
+    # σ measured with a few per cent scatter (a ten-step Mueller reduction's σ): the model
+    # predicts σ within that scatter over the whole range
+    rng = np.random.default_rng(3)
+    sigma = np.sqrt(a + b * m00 + c * m00**2) * (1.0 + 0.03 * rng.standard_normal(m00.size))
+    noisy = M00Noise.fit(m00, sigma)
+    ratio = noisy.sigma(m00) / np.sqrt(a + b * m00 + c * m00**2)
+    assert np.all(np.abs(ratio - 1.0) < 0.1), ratio
+
+
+@settings(max_examples=80, deadline=None)
+@given(pairs=st.lists(st.tuples(st.floats(0.0, 1e3), st.floats(1e-9, 1e2)), min_size=1,
+                      max_size=30))
+def test_the_sigma_model_is_positive_and_finite_for_any_pairs(
+        pairs: list[tuple[float, float]]) -> None:
+    m, s = np.array(pairs).T
+    noise = M00Noise.fit(m, s)
+    assert min(noise.a, noise.b, noise.c) >= 0.0
+    pred = noise.sigma(np.concatenate([m, [0.0, 2e3]]))
+    assert np.all(np.isfinite(pred)) and np.all(pred > 0)
+
+
+def test_the_sigma_model_refuses_pairs_it_cannot_fit() -> None:
+    with pytest.raises(ValueError, match="positive finite σ"):
+        M00Noise.fit([1.0, 2.0], [0.1, 0.0])
+    with pytest.raises(ValueError, match="equal length"):
+        M00Noise.fit([], [])
+
+
+# --- placement ------------------------------------------------------------------------------
+def test_points_are_placed_on_the_lobe_with_the_sigma_model_and_cost_per_geometry() -> None:
+    """A glass-like lobe (Lambert + GGX) seen at 30…70° every 10° and ±5° around specular:
+    with σ from the σ model, the second pass's points fall on the lobe, and they shrink σ
+    of the lobe width."""
+    profile = load_profile("sim-polarimetric")
+    spec = parse_plan(plan('lobe = { points = 4, step_deg = 0.5, prior = "lambert+ggx" }'))
+    model = get_model("lambert+ggx")
+    p = np.array([0.1, 0.5, 0.1])  # ρd, ks, α (rad)
+    first_pairs = [(50.0, float(t)) for t in (30, 40, 45, 46, 47, 48, 49, 50, 51, 52, 53,
+                                              54, 55, 60, 70)]
+    first = _angles_rad(first_pairs)
+    f1 = model.evaluate_geometry(p, make_geometry(*first.T))
+    noise = M00Noise(1e-10, 0.0, 1e-4)  # a floor and 1 % of the value
+    cands = candidate_pairs(spec, profile, 0.5)
+    secs = geometry_seconds(spec, profile, cands[0], 0.5)
+    assert secs > 16 * 0.1  # sixteen retarder steps are not free
+    pl = place_points_modelled(model, p, first_angles_rad=first,
+                               first_sigma=noise.sigma(f1), candidates=cands, n_points=4,
+                               sigma_of=noise.sigma, geometry_s=secs, min_separation_deg=0.25)
+    assert len(pl.pairs) == 4 and pl.seconds == pytest.approx(4 * secs)
+    # on the lobe: where the model is at least 15 % of its peak (within ~16° of the
+    # mirror direction), not on the diffuse floor at the range's ends
+    f2 = model.evaluate_geometry(p, make_geometry(*_angles_rad(pl.pairs).T))
+    assert np.all(f2 > 0.15 * f1.max()), (pl.pairs, f2)
+    target = model.param_names[-1]
+    assert pl.sigma_both[target] < pl.sigma_first[target]
