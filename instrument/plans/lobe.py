@@ -72,7 +72,7 @@ from instrument.plans.lobe_budget import (
 from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.plans.tradeoff import DetectorSetup, ScanOption
 
-__all__ = ["LobeSpec", "Placement", "SinglePass", "candidate_pairs", "lobe_of",
+__all__ = ["LobeSpec", "Placement", "SecondPass", "SinglePass", "candidate_pairs", "lobe_of",
            "place_points", "place_points_modelled",
            "plan_budget", "plan_seconds", "second_pass_text",
            "single_pass_alternative", "single_pass_plans"]
@@ -521,3 +521,32 @@ def second_pass_text(first_text: str, pairs: Sequence[tuple[float, float]],
     text = "\n".join(lines) + "\n"
     parse_plan(text, source="second pass")  # what we write must read back
     return text
+
+
+@dataclass(frozen=True)
+class SecondPass:
+    """The second pass: its plan, the placement behind it, the model that guided it, and
+    the single pass of equal time it was weighed against (``worthwhile``: it beats it)."""
+
+    plan: Plan
+    placement: Placement
+    model: str
+    verdict: str
+    target: str
+    first_seconds: float
+    second_seconds: float
+    alternative: SinglePass
+
+    @property
+    def worthwhile(self) -> bool:
+        return self.placement.sigma_both[self.target] < self.alternative.sigma[self.target]
+
+    def refusal(self) -> str:
+        """The one line that says why the second pass is not run."""
+        a = self.alternative
+        t = self.target
+        return (f"second pass not run: it cannot beat a single pass of equal time — "
+                f"predicted σ({t}) {self.placement.sigma_both[t]:.3g} with it "
+                f"({self.first_seconds + self.second_seconds:.0f} s for both passes) against "
+                f"{a.sigma[t]:.3g} for one pass with θr every {a.theta_r_step_deg:g}° "
+                f"({a.n_points} points, {a.seconds:.0f} s); scan that plan instead")

@@ -17,7 +17,7 @@ running it.
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +29,9 @@ from instrument.bench.timing import bench_timing
 from instrument.pipelines.brdf.analyse import DEFAULT_MODELS, analyse
 from instrument.pipelines.brdf.attenuation import nd_slots, nd_transmissions
 from instrument.pipelines.brdf.reduce import reduce_run
-from instrument.plans.build import Plan, build_plan
+from instrument.plans.build import build_plan
 from instrument.plans.lobe import (
-    Placement,
-    SinglePass,
+    SecondPass,
     candidate_pairs,
     lobe_of,
     pass_move_seconds,
@@ -48,35 +47,6 @@ from instrument.plans.tradeoff import Prior, ScanOption, setup_from_profile
 from instrument.run.runfile import RunData, read_run
 
 __all__ = ["SecondPass", "error_budget", "is_second_pass", "second_pass_plan"]
-
-
-@dataclass(frozen=True)
-class SecondPass:
-    """The second pass: its plan, the placement behind it, the model that guided it, and
-    the single pass of equal time it was weighed against (``worthwhile``: it beats it)."""
-
-    plan: Plan
-    placement: Placement
-    model: str
-    verdict: str
-    target: str
-    first_seconds: float
-    second_seconds: float
-    alternative: SinglePass
-
-    @property
-    def worthwhile(self) -> bool:
-        return self.placement.sigma_both[self.target] < self.alternative.sigma[self.target]
-
-    def refusal(self) -> str:
-        """The one line that says why the second pass is not run."""
-        a = self.alternative
-        t = self.target
-        return (f"second pass not run: it cannot beat a single pass of equal time — "
-                f"predicted σ({t}) {self.placement.sigma_both[t]:.3g} with it "
-                f"({self.first_seconds + self.second_seconds:.0f} s for both passes) against "
-                f"{a.sigma[t]:.3g} for one pass with θr every {a.theta_r_step_deg:g}° "
-                f"({a.n_points} points, {a.seconds:.0f} s); scan that plan instead")
 
 
 def is_second_pass(run_file: str | Path) -> bool:

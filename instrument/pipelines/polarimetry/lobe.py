@@ -45,10 +45,10 @@ from analysis.brdf.model import BRDFModel
 from analysis.brdf.reduction.values import BRDFPoints
 from instrument.bench.profile import BenchProfile
 from instrument.pipelines.brdf.analyse import DEFAULT_MODELS, analyse
-from instrument.pipelines.brdf.second_pass import SecondPass
 from instrument.pipelines.polarimetry.pipeline import reduce_polarimetric
 from instrument.plans.build import Plan, build_plan
 from instrument.plans.lobe import (
+    SecondPass,
     SinglePass,
     candidate_pairs,
     lobe_of,

@@ -14,9 +14,8 @@ from analysis.brdf.fit import fit_brdf
 from analysis.brdf.geometry import make_geometry
 from analysis.brdf.reduction import with_correlated_uncertainty, with_scale_uncertainty
 from instrument.bench.profile import parse_profile
-from instrument.pipelines.brdf.second_pass import SecondPass
 from instrument.plans.build import build_plan
-from instrument.plans.lobe import Placement, SinglePass, _angles_rad
+from instrument.plans.lobe import Placement, SecondPass, SinglePass, _angles_rad
 from instrument.plans.lobe_budget import (
     CLIPPED,
     OPEN,
