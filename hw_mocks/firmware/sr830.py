@@ -31,7 +31,9 @@ interpreted; a mnemonic not in it sets CMD and answers nothing, as the instrumen
 * Display and output: ``DDEF`` (CH1: X, R, X noise, Aux In 1, 2; CH2: Y, θ, Y noise, Aux
   In 3, 4; ratio none or by an Aux In in volts), ``FPOP``, ``OEXP`` (offset −105…105 %,
   expand ×1/×10/×100 as index 0…2), ``AOFF``. Aux I/O: ``OAUX?`` (the rear inputs,
-  :attr:`Sr830Emulator.aux_inputs_v`), ``AUXV`` (±10.5 V, 1 mV).
+  :attr:`Sr830Emulator.aux_inputs_v`, read through the 16-bit A/D: clipped at ±10.5 V and
+  rounded to 21 V / 2¹⁶, :meth:`Sr830Emulator.aux_input_reading`), ``AUXV`` (±10.5 V,
+  1 mV).
 * Setup: ``OUTX OVRM KCLK ALRM SSET RSET`` (nine setups; recalling an empty one is
   refused). Auto functions: ``AGAN ARSV APHS AOFF``.
 * Data storage (:mod:`hw_mocks.firmware.sr830_storage`, on the emulator clock): ``SRAT
@@ -130,6 +132,11 @@ OUTPUT_CLIP = 1.09
 _MAX_LINE = 256
 _MEMORY_TAUS = 50.0
 _SUBSTEPS_PER_TAU = 16
+
+#: Aux In range and A/D step (manual, specifications: four inputs, 16-bit, ±10.5 V,
+#: "1/3 mV resolution": 21 V over 2¹⁶ codes).
+AUX_IN_LIMIT_V = 10.5
+AUX_IN_STEP_V = 2.0 * AUX_IN_LIMIT_V / 2**16
 
 #: Highest detection frequency (``HARM i`` × ``FREQ``), Hz.
 MAX_DETECTION_HZ = 102000.0
@@ -694,6 +701,14 @@ class Sr830Emulator(FirmwareEmulator):
         return answer
 
     # data
+    def aux_input_reading(self, channel: int) -> float:
+        """Aux In ``channel`` (1…4) as the SR830's A/D converts it: the voltage at the
+        rear input clipped to ±10.5 V and rounded to the 16-bit step (21 V / 2¹⁶ ≈
+        0.32 mV). A steady input reads the same code every time; a mean of readings does
+        not average the rounding away."""
+        volts = max(-AUX_IN_LIMIT_V, min(AUX_IN_LIMIT_V, self.aux_inputs_v[channel - 1]))
+        return round(volts / AUX_IN_STEP_V) * AUX_IN_STEP_V
+
     def _reading(self) -> dict[int, float]:
         """The ``SNAP?`` codes' values now: X, Y, R less their offsets (``OEXP``), θ from
         the unoffset X and Y, Aux In 1…4, the reference frequency, the two displays."""
@@ -709,8 +724,8 @@ class Sr830Emulator(FirmwareEmulator):
             2: max(-clip, min(clip, y - offset[1])),
             3: max(-clip, min(clip, math.hypot(x, y) - offset[2])),
             4: theta,
-            5: self.aux_inputs_v[0], 6: self.aux_inputs_v[1],
-            7: self.aux_inputs_v[2], 8: self.aux_inputs_v[3],
+            5: self.aux_input_reading(1), 6: self.aux_input_reading(2),
+            7: self.aux_input_reading(3), 8: self.aux_input_reading(4),
             9: self.detection_frequency_hz(),
         }
         values[10], values[11] = self._displays(values)
@@ -775,7 +790,7 @@ class Sr830Emulator(FirmwareEmulator):
     def _cmd_OAUX(self, query: bool, args: list[str]) -> str:
         if not query or len(args) != 1:
             raise _BadCommand(_ESR_CMD)
-        return _fmt(self.aux_inputs_v[self._channel_arg(args, 4) - 1])
+        return _fmt(self.aux_input_reading(self._channel_arg(args, 4)))
 
     def _cmd_AUXV(self, query: bool, args: list[str]) -> str | None:
         def parse(a: list[str]) -> float:

@@ -34,8 +34,8 @@ import numpy as np
 
 __all__ = ["AUX_RESOLUTION_V", "OUTPUT_FLOOR", "HarmonicLockIn", "read_pem"]
 
-#: The SR830's Aux In resolution (V).
-AUX_RESOLUTION_V = 1.0 / 3.0e3
+#: The SR830's Aux In resolution (V): 16 bits over ±10.5 V (the manual's "1/3 mV").
+AUX_RESOLUTION_V = 21.0 / 2**16
 #: The smallest σ of a harmonic's X, as a fraction of the full scale it was read at.
 OUTPUT_FLOOR = 1e-5
 

@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 
 from hw_mocks.clock import ManualClock
-from hw_mocks.firmware.sr830 import Sr830Emulator
+from hw_mocks.firmware.sr830 import AUX_IN_STEP_V, Sr830Emulator
 from hw_mocks.pty_server import PtyServer
 from tests.waiting import wait_for
 
@@ -135,8 +135,9 @@ def test_readings_snap_aux_and_scaling(bench):
     assert lockin.theta == pytest.approx(30.0, abs=1e-3)
     assert lockin.snap("X", "Y", "R", "Theta", "Frequency", "CH1") == pytest.approx(
         [x, y, 0.2, 30.0, 1000.0, x], rel=1e-5)
-    assert [lockin.aux_in_1, lockin.aux_in_2, lockin.aux_in_3, lockin.aux_in_4] == [
-        1.0, -2.5, 0.25, 7.0]
+    # the inputs as the 16-bit A/D reads them: within half a step (21 V / 2¹⁶)
+    assert [lockin.aux_in_1, lockin.aux_in_2, lockin.aux_in_3, lockin.aux_in_4] == \
+        pytest.approx([1.0, -2.5, 0.25, 7.0], abs=AUX_IN_STEP_V / 2)
     lockin.set_scaling("X", 10.0, 1)  # pymeasure quirk: 1 is index 1, ×10
     assert lockin.get_scaling("X") == (10.0, 10)
     lockin.set_scaling("Y", 5.0, 10)  # index 10 does not exist: refused

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hw_mocks.clock import ManualClock
-from hw_mocks.firmware.sr830 import InputSignal, Sr830Emulator
+from hw_mocks.firmware.sr830 import AUX_IN_STEP_V, InputSignal, Sr830Emulator
 from hw_mocks.firmware.sr830_storage import BUFFER_POINTS, SAMPLE_RATES_HZ
 from tests.hw_mocks.test_sr830_emulator import ask, one
 
@@ -105,12 +105,15 @@ def test_displays_ratios_offsets_and_aux(emu, clock):
     emu.set_input(0.1, phase_deg=90.0)  # X = 0, Y = 0.1 V
     ask(emu, "OFLT 4")
     clock.advance(1.0)
-    assert one(emu, "OAUX? 3") == "4" and one(emu, "SNAP? 5,6,7,8") == "2,-0.5,4,0"
+    # the inputs read through the 16-bit A/D: each within half a step of its voltage
+    assert float(one(emu, "OAUX? 3")) == pytest.approx(4.0, abs=AUX_IN_STEP_V / 2)
+    assert [float(v) for v in one(emu, "SNAP? 5,6,7,8").split(",")] == pytest.approx(
+        [2.0, -0.5, 4.0, 0.0], abs=AUX_IN_STEP_V / 2)
     ask(emu, "DDEF 1,1,1")  # CH1 = R / Aux In 1
     ask(emu, "DDEF 2,1,0")  # CH2 = θ
     ch1, ch2 = (float(v) for v in one(emu, "SNAP? 10,11").split(","))
-    assert ch1 == pytest.approx(0.05) and ch2 == pytest.approx(90.0)
-    assert float(one(emu, "OUTR? 1")) == pytest.approx(0.05)
+    assert ch1 == pytest.approx(0.05, rel=1e-4) and ch2 == pytest.approx(90.0)
+    assert float(one(emu, "OUTR? 1")) == pytest.approx(0.05, rel=1e-4)  # Aux In 1 as quantised
     ask(emu, "AOFF 2")  # Y offset to zero: 10 % of the 1 V full scale
     assert one(emu, "OEXP? 2") == "10.00,0"
     assert float(one(emu, "OUTP? 2")) == pytest.approx(0.0, abs=1e-9)
@@ -218,3 +221,20 @@ def test_any_command_and_arguments_leave_the_emulator_consistent(names, raw_args
     assert int(one(emu, "HARM?")) * float(one(emu, "FREQ?")) <= 102000.0
     assert 0 <= int(one(emu, "SPTS?")) <= BUFFER_POINTS
     assert math.isfinite(float(one(emu, "OUTP? 1")))
+
+
+def test_aux_inputs_read_through_a_16_bit_converter(emu):
+    """SR830 manual, specifications: Aux In ±10.5 V, 16 bits (21 V / 2¹⁶ ≈ 1/3 mV). A
+    steady voltage between two codes reads the nearest code every time (a mean of
+    readings keeps the rounding); beyond the range it reads the limit."""
+    assert 3.1e-4 < AUX_IN_STEP_V < 3.4e-4  # the manual's "1/3 mV"
+    volts = 1234.4 * AUX_IN_STEP_V  # 0.4 of a step above a code
+    emu.aux_inputs_v = [volts, 11.0, -11.0, 0.0]
+    first = {float(one(emu, "OAUX? 1")) for _ in range(5)}
+    assert len(first) == 1
+    code = first.pop()
+    assert code == pytest.approx(1234 * AUX_IN_STEP_V, abs=2e-6)  # six digits
+    assert volts - code == pytest.approx(0.4 * AUX_IN_STEP_V, abs=2e-6)
+    assert float(one(emu, "OAUX? 2")) == pytest.approx(10.5, abs=AUX_IN_STEP_V)
+    assert float(one(emu, "SNAP? 5,7").split(",")[1]) == pytest.approx(-10.5,
+                                                                        abs=AUX_IN_STEP_V)

@@ -19,9 +19,11 @@ eq. 5, for each element):
 
 S is the air scan's scale with a calibration, divided by the fraction
 ``1 − exp(−2a²/(4w²))`` of a Gaussian beam of 1/e² radius w (the profile's) that the
-aperture a took in straight through; without a calibration it is 2·P (the profile's
-source power P, taken as polarised along the generator's polariser: a unit unpolarised
-source passes ½). The normalised matrix m_ij/m00 does not depend on S, Ω or cos θr. A group
+aperture a took in straight through; without a calibration it is 2·P for a DRR (the
+profile's source power P, taken as polarised along the generator's fixed polariser: a
+unit unpolarised source passes ½) and P × the photodiode's V/W for a PEM run (its
+generator polariser turns, so the source is unpolarised: :func:`_pem_scale`). The
+normalised matrix m_ij/m00 does not depend on S, Ω or cos θr. A group
 taken straight through (the detector arm in the beam: a reference sample, θr ≥ 90°) is
 divided by S alone: its matrix is the sample's transmittance matrix (unitless).
 
@@ -130,8 +132,27 @@ def source_scale(prun: PolarimetricRun, cal: PolarimeterCalibration | None) -> S
 
 
 def _pem_scale(prof: dict[str, object], power_w: float, omega: float) -> Scale:
-    """A PEM run reads volts: the unit-source scale is 2P (as for a DRR) times the
-    photodiode's volts per watt, its responsivity × transimpedance (``[photodiode]``)."""
+    """A PEM run reads volts: the unit-source scale is the source power P times the
+    photodiode's volts per watt, its responsivity × transimpedance (``[photodiode]``).
+
+    Why P and not the DRR's 2P. The rows (:func:`analysis.polarimetry.pem.pem_design`)
+    are for a unit *unpolarised* source: after the generator polariser it is
+    ``½(1, cos 2p, sin 2p, 0)``, and the Jacobi–Anger factors (DC ``g₀ + J₀(A) g_c``, 1f
+    ``√2 J₁(A) g_s``, 2f ``√2 J₂(A) g_c``: the lock-in's RMS of the peak amplitudes
+    ``2J₁``, ``2J₂``) are the emulator's and the rows' alike, so the reduced matrix is in
+    volts per unit unpolarised source. A source of power P and degree of linear
+    polarisation d along the polariser's axis passes ``P(1 + d)/2`` where a unit
+    unpolarised one passes ½: S = P(1 + d). The DRR's generator polariser is fixed and its
+    laser polarised along it (d ≈ 1: S ≈ 2P); a PEM generator turns its polariser between
+    0° and 45°, which only an unpolarised source (d = 0) sees equally at both settings
+    (the rows take a unit unpolarised source at every setting): S = P. The DRR's 2P here
+    made every PEM m00 half the truth (ADR 0106, amendment of 2026-11-27).
+
+    Raises
+    ------
+    ValueError
+        No ``[photodiode]`` responsivity and transimpedance.
+    """
     pd = prof.get("photodiode")
     pd = pd if isinstance(pd, dict) else {}
     resp, gain = pd.get("responsivity_a_per_w"), pd.get("transimpedance_v_per_a")
@@ -140,9 +161,10 @@ def _pem_scale(prof: dict[str, object], power_w: float, omega: float) -> Scale:
                          "needs [photodiode] responsivity_a_per_w (one value) and "
                          "transimpedance_v_per_a in the bench profile")
     volts = float(resp) * float(gain)
-    return Scale(2.0 * power_w * volts, omega,
-                 f"2 × the profile's source power × the photodiode's {volts:.4g} V/W "
-                 "(responsivity × transimpedance)")
+    return Scale(power_w * volts, omega,
+                 f"the profile's source power (unpolarised: a PEM generator turns its "
+                 f"polariser) × the photodiode's {volts:.4g} V/W (responsivity × "
+                 "transimpedance)")
 
 
 def _nominal_matrix(prun: PolarimetricRun, g: StepGroup) -> np.ndarray:
