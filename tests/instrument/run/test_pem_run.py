@@ -19,11 +19,13 @@ scatter of the elements (pulls of a few tenths), and the 2σ checks are bias che
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from analysis.brdf.reduction.detector import solid_angle_sr
 from instrument.bench.profile import load_profile, parse_profile
 from instrument.cli import main
 from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
@@ -188,6 +190,13 @@ def test_a_polariser_through_run_and_fit_is_recovered_within_3_sigma(polariser_r
     assert point.group.pem is not None and point.brdf.normalised_valid
     sigma = point.brdf.sigma_normalised.ravel()[1:]
     assert np.all(sigma > 0) and np.all(sigma < 0.05)
+    # the absolute scale: a polariser passes about half of the unpolarised source (the
+    # world's aperture-averaged truth here is 0.4971, BENCHMARKS.md "PEM m00"; σ 7e-4).
+    # The run's θr is 10° (the world holds its arm straight through), so the fit divided
+    # by Ω cos θr: undo it. With the DRR's 2P (the scale before) this read 0.25.
+    factor = solid_angle_sr(5.0, 300.0)[0] * math.cos(math.radians(point.group.theta_r))
+    m00, s00 = point.brdf.m[0, 0] * factor, point.brdf.sigma[0, 0] * factor
+    assert abs(m00 - 0.4971) < 3.0 * s00 < 0.01, (m00, s00)
     (truth,) = truths.values()
     # 15 elements of one seed at 3σ: at 2σ all fifteen would hold only about half the
     # time with σ right (0.954¹⁵), at 3σ 96 %; the ten-seed test below checks 2σ as a
