@@ -167,7 +167,9 @@ class ModulatedLockInBinding(LockInBinding):
     that of :func:`analysis.polarimetry.drr.pem_instrument_rows`), at the reference of the
     PEM controller, which drives REF IN (the emulator's ``reference_input_hz`` follows
     it). The photodiode's DC output (mean signal plus ambient) is wired to the lock-in's
-    Aux In 1, where ``OAUX? 1`` reads it: the DC channel in the same volts as 1f and 2f.
+    Aux In 1, where ``OAUX? 1`` reads it through the SR830's 16-bit converter (the
+    emulator's :meth:`~hw_mocks.firmware.sr830.Sr830Emulator.aux_input_reading`): the DC
+    channel in the same volts as 1f and 2f.
     """
 
     def harmonic_powers_w(self) -> tuple[float, float, float, float, float | None]:

@@ -10,10 +10,9 @@ ideal (``ideal_train``), the nominal reduction is unbiased; the calibrated reduc
 the misaligned train is tested in ``tests/instrument/pipelines/polarimetry/
 test_pem_calibration.py``.
 
-The DC's σ holds the SR830's Aux In quantisation (1/3 mV over √12), which the emulator's
-Aux In does not have (it answers six digits): on the emulated bench σ is larger than the
-scatter of the elements (pulls of a few tenths), and the 2σ checks are bias checks at that
-σ (a few 10⁻³ of m00).
+The DC's σ holds the SR830's Aux In quantisation (21 V / 2¹⁶ over √12), which the
+emulated lock-in's Aux In has too (a steady DC reads one code: the error is the same for
+every seed at one geometry, and distributed over geometries as σ says).
 """
 
 from __future__ import annotations
