@@ -69,13 +69,16 @@ def pem_groups(path: str | Path, run: RunData, train: Mapping[str, Any],
     if bad.any():
         raise RunFileError(f"{path}: {int(bad.sum())} PEM point(s) lack their DC/1f/2f "
                            "readings, σ or the modulator's amplitude (pem_* columns)")
-    # 1f and 2f: σ from the run's lock-in noise model (var of a snapshot = a + b·|X|,
+    # 1f and 2f: σ from the run's lock-in noise model (var of a snapshot = a + b·level,
     # fitted to every point's spread, ADR 0053) rather than each point's own spread of a
-    # few snapshots, itself uncertain by 1/√(2(n−1)); never below the outputs' floor
+    # few snapshots, itself uncertain by 1/√(2(n−1)); never below the outputs' floor. The
+    # level is the DC, not |X|: the noise at 1f and 2f is the amplifier's (a) and the shot
+    # noise of the whole photocurrent (∝ DC), which does not vanish where the harmonic
+    # does (the 45° generator setting, whose 1f and 2f are ~0 under full light)
     reads = int(train.get("polarimetry", {}).get("reads", DEFAULT_READS))
     for col, harmonic in ((1, 1), (2, 2)):
         floor = OUTPUT_FLOOR * _column(run, f"pem_{harmonic}f_sensitivity_v")[rows]
-        pooled, _, _ = pooled_reading_sigma(y[rows, col], s[rows, col], reads)
+        pooled, _, _ = pooled_reading_sigma(y[rows, 0], s[rows, col], reads)
         s[rows, col] = np.maximum(pooled, np.nan_to_num(floor))
     g_pol = element_axis(run, train, "psg_polariser", "psg", "polariser")
     a_ret = element_axis(run, train, "psa_retarder", "psa", "retarder")

@@ -9,6 +9,7 @@ normalised Mueller matrix is compared with the world's own truth on the aperture
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -18,6 +19,7 @@ from analysis.polarimetry.pem import PemSetting, pem_design, pem_settings, reduc
 from hw_mocks.sim.world import find_world
 from instrument.bench.devices import open_bench
 from instrument.bench.profile import load_profile, parse_profile
+from instrument.run.pem_reading import AUX_RESOLUTION_V
 
 READS = 6  # snapshots per setting: their scatter is each reading's σ
 
@@ -122,6 +124,9 @@ def test_a_pem_bench_recovers_a_reference_sample(sample):
     # σ of each mean from its READS snapshots, at least 1 µV: below that the readings'
     # last digits and the model's own rounding (the drive's six decimals) are not noise
     sigmas = np.maximum(np.sqrt(np.array(variances) / READS), 1e-6)
+    # the DC is read through the Aux In's 16-bit converter: a steady input reads one code,
+    # whose rounding no scatter shows (the engine's σ of the DC, instrument.run.pem_reading)
+    sigmas[:, 0] = np.hypot(sigmas[:, 0], AUX_RESOLUTION_V / math.sqrt(12.0))
     w = pem_design(done, amplitude_rad=amplitude)
     (est,) = reduce_pem(["here"] * len(settings), list(range(len(settings))),
                         np.array(readings), sigmas, w).values()
@@ -131,4 +136,6 @@ def test_a_pem_bench_recovers_a_reference_sample(sample):
     assert np.all(sigma > 0) and np.all(sigma < 0.05)
     truth_n = truth / truth[0, 0]
     pull = ((est.m_normalised - truth_n).ravel()[1:] / sigma).reshape(15)
-    assert np.all(np.abs(pull) < 2.0), (np.round(est.m_normalised, 3), np.round(pull, 2))
+    # 15 elements at 3σ: with σ right all hold 96 % of the time (at 2σ about half); the
+    # 2σ bound held before only because the emulated Aux In did not quantise the DC
+    assert np.all(np.abs(pull) < 3.0), (np.round(est.m_normalised, 3), np.round(pull, 2))
