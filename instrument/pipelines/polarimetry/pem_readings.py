@@ -107,6 +107,6 @@ def pem_groups(path: str | Path, run: RunData, train: Mapping[str, Any],
             intensity=y[idx, 0], sigma=s[idx, 0],
             pem=PemGroup(readings=y[idx], sigmas=s[idx], settings=settings,
                          amplitude_rad=amplitude)))
-    return groups, ("the lock-in: each harmonic's noise model fitted to the run's snapshot "
-                    "spreads (at least 1e-5 of its full scale); the DC's spread with the Aux "
-                    "In's quantisation")
+    return groups, ("the lock-in: each harmonic's noise model in the DC fitted to the run's "
+                    "snapshot spreads (at least 1e-5 of its full scale); the DC's spread with "
+                    "the Aux In's quantisation")
