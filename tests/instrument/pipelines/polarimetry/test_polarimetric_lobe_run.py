@@ -9,7 +9,7 @@ DRR (``sim-polarimetric``, its hidden optics held by the calibration beside the 
 goodness-of-fit gate; it is slow (two passes of 23 retarder steps per geometry), and its
 default-run twin is the PEM test: the smallest PEM lobe plan (five geometries, then one)
 through both passes and the joint fit. The PEM runs are not put through the pBRDF gate:
-the emulated lock-in's harmonics carry σ of ~10⁻⁶ of m00 on two columns of the matrix,
+the emulated lock-in's harmonics carry σ of ~10⁻⁵ of m00 on two columns of the matrix,
 where the point-receiver pBRDF and the world's aperture average differ by more.
 """
 
