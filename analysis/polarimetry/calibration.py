@@ -49,7 +49,7 @@ __all__ = ["DrrCalibration", "FittedPolarimeter", "ReferenceFit", "ReferenceScan
 
 _KINDS = ("air", "polariser", "retarder")
 
-#: Names of :attr:`DrrCalibration.params`, in order.
+#: Names of ``DrrCalibration.params``, in order.
 INSTRUMENT_PARAMS = ("psg_retarder_offset_deg", "psa_retarder_offset_deg", "psg_retardance",
                      "psa_retardance", "psa_polariser_deg")
 

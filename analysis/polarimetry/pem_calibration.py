@@ -9,9 +9,10 @@ do not form the square, full-rank ``B`` whose eigenvalues the eigenvalue calibra
 method (Compain, Poirier & Drévillon 1999, Appl. Opt. 38, 3490, eqs. 4–9) needs. The
 equivalent used here is the route :mod:`analysis.polarimetry.calibration` takes for the
 dual rotating retarder: the train's physical parameters are fitted to the reference
-readings by weighted least squares (:func:`~analysis.polarimetry.calibration.
-fit_references`), with each reference's own azimuth (and retardance) and a source scale
-as nuisance parameters, and their covariance ``(JᵀJ)⁻¹``.
+readings by weighted least squares
+(:func:`~analysis.polarimetry.calibration.fit_references`), with each reference's own
+azimuth (and retardance) and a source scale as nuisance parameters, and their covariance
+``(JᵀJ)⁻¹``.
 
 The five parameters (:data:`PEM_PARAMS`), in the frame whose azimuth 0 is the source
 polariser's true axis at mount 0:
@@ -48,7 +49,7 @@ from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
 __all__ = ["PEM_PARAMS", "PemCalibration", "PemReferenceScan", "calibrate_pem"]
 
-#: Names of :attr:`PemCalibration.params`, in order (module docstring).
+#: Names of ``PemCalibration.params``, in order (module docstring).
 PEM_PARAMS = ("amplitude_factor", "pem_axis_offset_deg", "psa_retarder_offset_deg",
               "psa_retardance", "psa_polariser_offset_deg")
 
@@ -103,8 +104,8 @@ class PemCalibration(FittedPolarimeter):
     def reduce(self, readings: NDArray[np.float64], sigmas: NDArray[np.float64],
                settings: Sequence[PemSetting], amplitude_rad: float) -> MuellerEstimate:
         """One geometry's Mueller matrix through :meth:`design`, the calibration's
-        covariance propagated (:func:`~analysis.polarimetry.calibration.
-        reduce_propagated`)."""
+        covariance propagated
+        (:func:`~analysis.polarimetry.calibration.reduce_propagated`)."""
         return reduce_propagated(
             np.ravel(readings), np.ravel(sigmas), self.params, self.cov,
             lambda p: replace(self, params=p).design(settings, amplitude_rad))

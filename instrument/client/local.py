@@ -7,7 +7,7 @@ or a new one — ``scatterlab serve --bench PROFILE --listen 127.0.0.1:0 --runs 
 GUI's terminal does not reach it) at a lower CPU priority (the window gets the CPU first
 during a fast scan). It stays in the GUI's session, not a new one: with the scheduler's
 autogroups a niceness ranks a process only against those of its own session
-(:mod:`instrument.server.priority`). Its output goes to
+(``instrument.server.priority``). Its output goes to
 ``DIR/local-server.log``. ``DIR/local-server.json`` records its address and process id for
 the next GUI and for :func:`stop_local_server`.
 
