@@ -277,9 +277,12 @@ def check_runs(runs: Iterable[str | Path], options: Mapping[str, Any] | None) ->
     choice = (options or {}).get("calibration")
     loaded: dict[str, Any] = {}
     for run in map(Path, runs):
+        data = None
         try:
             pol = is_polarimetric(run)
-            pem = pol and is_pem(run)
+            if pol:  # one read gives the plan's mode and the bench
+                data = read_run(run)
+            pem = data is not None and (data.plan().polarimetry or {}).get("mode") == "pem"
         except (OSError, KeyError, ValueError):
             pol = pem = False  # the analysis reports the run file's problem in its words
         (out.polarimetric if pol else out.scalar).append(run)
@@ -291,7 +294,8 @@ def check_runs(runs: Iterable[str | Path], options: Mapping[str, Any] | None) ->
         assert path is not None
         cal = loaded.get(path) or load_calibration(path)
         loaded[path] = cal
-        bench = str(read_run(run).profile().get("bench", {}).get("name", ""))
+        assert data is not None
+        bench = str(data.profile().get("bench", {}).get("name", ""))
         if cal.bench != bench:
             raise CalibrationError(f"--calibration {choice}: {path} calibrates bench "
                                    f"{cal.bench!r}, run {run.name} was taken on {bench!r}")
