@@ -549,6 +549,7 @@ class BenchSession:
                                          refused=True)
                 kind.actions[name](device, *args)
                 self._info_dirty.add(role)
+                self._report_state_now(role, device)
                 return CommandResult(cmd, True, f"{role}: {name} done")
             case StartStream():
                 return self._start_stream(cmd)
@@ -719,8 +720,17 @@ class BenchSession:
                              f"(settings: {allowed})")
         setattr(device, name, value)  # the driver validates and raises a clear error
         self._info_dirty.add(role)
-        self._last_poll.pop(role, None)
+        self._report_state_now(role, device)
         return CommandResult(cmd, True, f"{role}: {name} = {getattr(device, name)!r}")
+
+    def _report_state_now(self, role: str, device: Device) -> None:
+        """Read ``role``'s state (with its settings) and report it before the command's
+        result: states and results reach the GUI in the order they are reported, so a
+        field that shows the device's setting again when the result arrives already has
+        the new value, never the one polled before the command."""
+        self._last_poll[role] = time.monotonic()
+        self._read(role, device)
+        self.listener.states(self.states())
 
     def _camera(self) -> Camera:
         assert self._bench is not None

@@ -126,6 +126,35 @@ def test_stop_all_stops_a_move_short_of_its_target(session):
     assert s.states()["detector_theta"].value("position") == pytest.approx(pos, abs=0.01)
 
 
+def test_a_settings_new_value_is_reported_before_its_result():
+    """The GUI shows a set-point field's device value again when the Set's result arrives:
+    the state carrying the new setting must reach the listener first, whatever the poll
+    timing (states and results are delivered in the order they are reported)."""
+
+    class OrderRecorder(Recorder):
+        def __init__(self) -> None:
+            super().__init__()
+            self.velocity_at_result: list = []
+
+        def result(self, result) -> None:
+            if isinstance(result.command, SetSetting):
+                state = self.last_states.get("detector_theta")
+                self.velocity_at_result.append(None if state is None
+                                               else state.info.get("velocity"))
+            super().result(result)
+
+    rec = OrderRecorder()
+    s = BenchSession(rec, fsync=False)
+    try:
+        _connect(s, rec, fast_profile())
+        for velocity in (7.0, 3.5):
+            s.submit(SetSetting("detector_theta", "velocity", velocity))
+        assert s.wait_idle(60)
+        assert rec.velocity_at_result == [7.0, 3.5]
+    finally:
+        assert s.close(20)
+
+
 def test_a_rejected_setting_reports_the_drivers_error(session):
     s, rec = session
     _connect(s, rec, fast_profile())
