@@ -20,8 +20,6 @@ geometry is read at every filter).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import tempfile
 import time
 import tomllib
@@ -30,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from analysis.brdf.geometry import make_geometry
+from benchmarks.bench_polarimetric_lobe import run_both_passes
 from instrument.bench.profile import load_profile
-from instrument.cli import main as cli
 from instrument.pipelines.polarimetry.lobe import (
     LobePlacement,
     M00Rows,
@@ -69,22 +67,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         bench, text = spectral_drr_lobe_setup(folder, points=args.points)
-        runs = folder / "runs"
-        plan = folder / "lobe.toml"
-        plan.write_text(text, encoding="utf-8")
-        out = io.StringIO()
-        t0, c0 = time.perf_counter(), time.process_time()
-        with contextlib.redirect_stdout(out):
-            code = cli(["run", str(plan), "--bench", str(bench), "--out",
-                        str(runs), "--no-fsync", "--quiet"])
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        assert code == 0, out.getvalue()
-        for line in out.getvalue().splitlines():
-            if line.startswith(("second pass", "  predicted", "  a single pass", "  the lobe",
-                                "run finished")):
-                print(line)
-        print(f"both passes with the planning between them: {wall:.0f} s wall, "
-              f"{cpu:.0f} s CPU")
+        runs = run_both_passes(folder, bench, text)
         files = sorted(runs.glob("*.h5"))
         second = next(p for p in files
                       if "first_pass" in tomllib.loads(read_run(p).plan_text)["scan"])
