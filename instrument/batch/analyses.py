@@ -177,7 +177,7 @@ def fit_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
     from instrument.pipelines.polarimetry.readings import is_polarimetric
 
     if is_polarimetric(path):
-        from instrument.batch.polarimetric_options import fit_keywords, is_pem
+        from instrument.batch.polarimetric_options import fit_keywords, run_mode
         from instrument.pipelines.polarimetry.pipeline import (
             choose_calibration,
             polarimetric_options,
@@ -186,8 +186,8 @@ def fit_record(path: str | Path, options: Mapping[str, Any]) -> dict[str, Any]:
 
         kw = fit_keywords(path, options.get("polarimetric"))
         bench = str(read_run(path).profile().get("bench", {}).get("name", ""))
-        # as the pipeline chooses: a PEM run's reduction uses no calibration
-        cal = None if is_pem(path) else choose_calibration(path, bench, kw["calibration"])
+        # as the pipeline chooses: the calibration of the run's own mode
+        cal = choose_calibration(path, bench, kw["calibration"], run_mode(path))
         return polarimetric_options(cal, kw["start"], kw["fixed"], kw["distribution"])
     return fit_options(**fit_arguments(options))
 

@@ -6,9 +6,13 @@ They are parsed once, from the command line, into plain JSON-able data
 (:func:`polarimetric_fit_options`; a batch sends them to its worker processes and records
 them) and resolved per run (:func:`fit_keywords`): a calibration NAME is a file in the
 ``calibrations/`` folder beside *each* run, so runs of several folders each use their own
-folder's file of that name. :func:`check_runs` resolves and loads the calibration for every
-polarimetric run of a batch before anything is analysed, so that a wrong name stops the
-batch with nothing written.
+folder's file of that name. The calibration is chosen per polarimeter mode (ADR 0114,
+amendment): ``--calibration NAME`` applies to runs of both modes, and a run of the mode
+the file does not calibrate is refused by name; ``--calibration drr=NAME --calibration
+pem=NAME`` gives each mode its own, the mode not named keeping its default.
+:func:`check_runs` resolves and loads the calibration for every polarimetric run of a
+batch before anything is analysed, so that a wrong name, bench or mode stops the batch
+with nothing written.
 
 Scalar runs do not take these options (:func:`given` lists those set, for the one line
 ``scatterlab batch fit`` prints when the batch holds scalar runs too).
@@ -17,7 +21,7 @@ Scalar runs do not take these options (:func:`given` lists those set, for the on
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,14 +33,16 @@ from instrument.pipelines.polarimetry.calibration import (
     load_calibration,
 )
 
-__all__ = ["DISTRIBUTIONS", "BatchRuns", "PolarimetricOptionError", "batch_notes",
-           "calibration_choice",
-           "check_runs", "fit_keywords", "given", "is_pem", "parse_fixed", "parse_start",
-           "polarimetric_fit_options", "resolve_calibration"]
+__all__ = ["DISTRIBUTIONS", "MODES", "BatchRuns", "PolarimetricOptionError", "batch_notes",
+           "calibration_choice", "calibration_choices", "check_runs", "fit_keywords",
+           "given", "is_pem", "mode_choice", "parse_fixed", "parse_start",
+           "polarimetric_fit_options", "resolve_calibration", "run_mode"]
 
 #: The facet-slope distributions of the pBRDF (``--distribution``).
 DISTRIBUTIONS = ("beckmann", "ggx")
 #: The option names as on the command line, by key of the plain options.
+#: The polarimeter modes a calibration is chosen for (``--calibration MODE=...``), in words.
+MODES = {"drr": "dual-rotating-retarder", "pem": "PEM"}
 OPTION_NAMES = {"calibration": "--calibration", "start": "--pbrdf-start",
                 "fixed": "--pbrdf-fixed", "distribution": "--distribution"}
 
@@ -161,10 +167,60 @@ def calibration_choice(text: str | None) -> str | None:
     return text
 
 
-def polarimetric_fit_options(calibration: str | None = None, start: str | None = None,
+def calibration_choices(values: str | Sequence[str] | Mapping[str, Any] | None
+                        ) -> dict[str, str | None]:
+    """``--calibration``, given once or more, as the choice per polarimeter mode
+    (:data:`MODES`), each as :func:`calibration_choice` makes it. A plain value applies to
+    both modes; ``drr=VALUE`` or ``pem=VALUE`` to that mode only, over a plain value; a
+    mode given nothing keeps the default (None: the newest valid calibration of the run's
+    bench and mode). A mapping by mode (the plain data again) is taken as it is.
+
+    A value that names an existing file is that file even with ``=`` in its name.
+
+    Raises
+    ------
+    PolarimetricOptionError
+        A value given twice for one mode, a mode other than ``drr`` or ``pem`` before
+        ``=``, or a file that does not exist.
+    """
+    if isinstance(values, Mapping):
+        unknown = sorted(set(values) - set(MODES))
+        if unknown:
+            raise PolarimetricOptionError(OPTION_NAMES["calibration"], f"no polarimeter "
+                                          f"mode {unknown[0]!r}; the modes are "
+                                          f"{', '.join(MODES)}")
+        # already plain data (a worker's, or a recorded batch's): files were made absolute
+        return {m: None if values.get(m) is None else str(values[m]) for m in MODES}
+    texts = [values] if isinstance(values, str) else list(values or [])
+    plain: list[str] = []
+    keyed: dict[str, str] = {}
+    opt = OPTION_NAMES["calibration"]
+    for text in texts:
+        mode, sep, rest = str(text).partition("=")
+        if not sep or Path(text).is_file():
+            plain.append(str(text))
+            continue
+        if mode not in MODES:
+            raise PolarimetricOptionError(opt, f"{text!r}: before '=' give the polarimeter "
+                                          f"mode ({' or '.join(MODES)}), e.g. drr=lab-a")
+        if mode in keyed:
+            raise PolarimetricOptionError(opt, f"the {mode} calibration is given twice "
+                                          f"({keyed[mode]!r} and {rest!r})")
+        keyed[mode] = rest
+    if len(plain) > 1:
+        raise PolarimetricOptionError(opt, f"{len(plain)} calibrations for every mode "
+                                      f"({', '.join(map(repr, plain))}): give one, or one "
+                                      "per mode as drr=NAME and pem=NAME")
+    both = calibration_choice(plain[0]) if plain else None
+    return {m: calibration_choice(keyed[m]) if m in keyed else both for m in MODES}
+
+
+def polarimetric_fit_options(calibration: str | Sequence[str] | Mapping[str, Any] | None
+                             = None, start: str | None = None,
                              fixed: str | None = None, distribution: str = "beckmann"
                              ) -> dict[str, Any]:
-    """The options as plain data from their command-line text (module docstring).
+    """The options as plain data from their command-line text (module docstring); the
+    calibration as the choice per mode (:func:`calibration_choices`).
 
     Raises
     ------
@@ -174,7 +230,7 @@ def polarimetric_fit_options(calibration: str | None = None, start: str | None =
     if distribution not in DISTRIBUTIONS:
         raise PolarimetricOptionError(OPTION_NAMES["distribution"], f"one of "
                                       f"{', '.join(DISTRIBUTIONS)}, got {distribution!r}")
-    return {"calibration": calibration_choice(calibration), "start": parse_start(start),
+    return {"calibration": calibration_choices(calibration), "start": parse_start(start),
             "fixed": parse_fixed(fixed), "distribution": distribution}
 
 
@@ -226,27 +282,39 @@ def resolve_calibration(run_path: str | Path, choice: str | None) -> str | None:
                            "give a calibration file, a name from that folder, or 'none'")
 
 
-def is_pem(run_path: str | Path) -> bool:
-    """Whether the run's plan is a PEM plan (its polarimetry reduced with the nominal
-    optical train: the polarimeter calibration, of a dual rotating retarder, does not
-    apply)."""
+def run_mode(run_path: str | Path) -> str:
+    """The polarimeter mode of a polarimetric run's plan: ``"pem"`` or ``"drr"``."""
     from instrument.run.runfile import read_run
 
-    return (read_run(run_path).plan().polarimetry or {}).get("mode") == "pem"
+    return "pem" if (read_run(run_path).plan().polarimetry or {}).get("mode") == "pem" \
+        else "drr"
+
+
+def is_pem(run_path: str | Path) -> bool:
+    """Whether the run's plan is a PEM plan (reduced with a PEM calibration or its nominal
+    train, never a dual rotating retarder's calibration)."""
+    return run_mode(run_path) == "pem"
+
+
+def mode_choice(run_path: str | Path, options: Mapping[str, Any] | None) -> str | None:
+    """The calibration choice (as :func:`calibration_choice` makes it) for the run's mode;
+    the run file is read only when the two modes' choices differ."""
+    choices = calibration_choices((options or {}).get("calibration"))
+    if choices["drr"] == choices["pem"]:
+        return choices["drr"]
+    return choices[run_mode(run_path)]
 
 
 def fit_keywords(run_path: str | Path, options: Mapping[str, Any] | None
                  ) -> dict[str, Any]:
     """Keyword arguments of :func:`~instrument.pipelines.polarimetry.pipeline.
     fit_polarimetric_run` for one run from the plain options (None or missing keys: the
-    defaults; a PEM run takes no calibration)."""
+    defaults): the calibration chosen for the run's mode, a NAME resolved beside the run.
+    A calibration of the other mode is passed on: the pipeline refuses it by name."""
     o = {**polarimetric_fit_options(), **(options or {})}
     start = _default_start() if o["start"] is None else tuple(float(v) for v in o["start"])
-    choice = o["calibration"]
-    if choice not in (None, "none") and is_pem(run_path):
-        choice = None
-    return {"calibration": resolve_calibration(run_path, choice), "start": start,
-            "fixed": None if o["fixed"] is None else tuple(o["fixed"]),
+    return {"calibration": resolve_calibration(run_path, mode_choice(run_path, o)),
+            "start": start, "fixed": None if o["fixed"] is None else tuple(o["fixed"]),
             "distribution": str(o["distribution"])}
 
 
@@ -261,21 +329,23 @@ class BatchRuns:
 
 
 def check_runs(runs: Iterable[str | Path], options: Mapping[str, Any] | None) -> BatchRuns:
-    """The runs by kind; for each dual-rotating-retarder run the calibration chosen is
-    resolved, read and checked to be of the run's bench, before any run is analysed.
+    """The runs by kind; for each polarimetric run the calibration chosen for its mode is
+    resolved, read and checked to be of the run's bench and mode, before any run is
+    analysed.
 
     Raises
     ------
     CalibrationError
-        A calibration name or file that cannot be used with one of the runs (the first
-        such run named).
+        A calibration name or file that cannot be used with one or more of the runs: every
+        such run named (up to five), with what to give instead.
     """
     from instrument.pipelines.polarimetry.readings import is_polarimetric
     from instrument.run.runfile import read_run
 
     out = BatchRuns([], [], [])
-    choice = (options or {}).get("calibration")
+    choices = calibration_choices((options or {}).get("calibration"))
     loaded: dict[str, Any] = {}
+    refused: list[str] = []
     for run in map(Path, runs):
         data = None
         try:
@@ -288,23 +358,38 @@ def check_runs(runs: Iterable[str | Path], options: Mapping[str, Any] | None) ->
         (out.polarimetric if pol else out.scalar).append(run)
         if pem:
             out.pem.append(run)
-        if not pol or pem or choice is None or choice == "none":
+        mode = "pem" if pem else "drr"
+        choice = choices[mode]
+        if not pol or choice is None or choice == "none":
             continue
-        path = resolve_calibration(run, choice)
-        assert path is not None
-        cal = loaded.get(path) or load_calibration(path)
+        try:
+            path = resolve_calibration(run, choice)
+            assert path is not None
+            cal = loaded.get(path) or load_calibration(path)
+        except CalibrationError as err:
+            refused.append(str(err))
+            continue
         loaded[path] = cal
         assert data is not None
         bench = str(data.profile().get("bench", {}).get("name", ""))
-        if cal.bench != bench:
-            raise CalibrationError(f"--calibration {choice}: {path} calibrates bench "
-                                   f"{cal.bench!r}, run {run.name} was taken on {bench!r}")
+        if cal.mode != mode:  # first: the mode says what to give instead
+            refused.append(f"--calibration {choice}: {path} calibrates a {MODES[cal.mode]} "
+                           f"polarimeter, run {run.name} is a {MODES[mode]} run; give one "
+                           f"calibration per mode (--calibration {cal.mode}={choice} "
+                           f"--calibration {mode}=NAME, or {mode}=none for its nominal "
+                           "train)")
+        elif cal.bench != bench:
+            refused.append(f"--calibration {choice}: {path} calibrates bench {cal.bench!r}, "
+                           f"run {run.name} was taken on {bench!r}")
+    if refused:
+        more = f"\n… and {len(refused) - 5} more run(s)" if len(refused) > 5 else ""
+        raise CalibrationError("\n".join(refused[:5]) + more)
     return out
 
 
 def batch_notes(runs: BatchRuns, options: Mapping[str, Any] | None) -> list[str]:
     """What a batch says once about runs that do not take the options given: scalar runs
-    take none of them, PEM runs no calibration."""
+    take none of them."""
     notes = []
     set_here = given(options)
     if set_here and runs.scalar:
@@ -313,9 +398,4 @@ def batch_notes(runs: BatchRuns, options: Mapping[str, Any] | None) -> list[str]
                      f" to polarimetric runs only; the {n} scalar run{'s' if n > 1 else ''} "
                      "of this batch " + ("are" if n > 1 else "is") + " fitted without "
                      + ("it" if len(set_here) == 1 else "them"))
-    if "--calibration" in set_here and runs.pem:
-        n = len(runs.pem)
-        notes.append(f"note: --calibration does not apply to the {n} PEM run"
-                     f"{'s' if n > 1 else ''}: {'they are' if n > 1 else 'it is'} reduced "
-                     "with the nominal optical train")
     return notes

@@ -8,20 +8,14 @@ import argparse
 
 def run_polarimetric(args: argparse.Namespace) -> int:
     from analysis.polarimetry.validation import PolarimetryInputError
-    from instrument.batch.polarimetric_options import (
-        fit_keywords,
-        is_pem,
-        options_from_arguments,
-    )
+    from instrument.batch.polarimetric_options import fit_keywords, options_from_arguments
     from instrument.cli._writing import writing_outputs
     from instrument.pipelines.polarimetry.pipeline import fit_polarimetric_run
     from instrument.run.results import RunBusy
 
     try:
         options = options_from_arguments(args)
-        keywords = fit_keywords(args.run, options)
-        if options["calibration"] not in (None, "none") and is_pem(args.run):
-            keywords["calibration"] = options["calibration"]  # the pipeline says why not
+        keywords = fit_keywords(args.run, options)  # another mode's file: refused by name
         with writing_outputs(args.run, "fit", "fit", args.out):
             done = fit_polarimetric_run(
                 args.run, **keywords, report_dir=args.out, write=not args.no_write,

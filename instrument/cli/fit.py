@@ -98,12 +98,15 @@ def add_polarimetric_options(p: argparse.ArgumentParser) -> None:
     take them), shared by ``scatterlab fit`` and ``scatterlab batch fit``."""
     pol = p.add_argument_group("polarimetric runs (a run with an optical train; scalar runs "
                                "ignore these)")
-    pol.add_argument("--calibration", default=None, metavar="NAME|FILE|none",
+    pol.add_argument("--calibration", default=None, action="append",
+                     metavar="[drr=|pem=]NAME|FILE|none",
                      help="polarimeter calibration (scatterlab calibrate polarimeter) to "
                      "reduce with: a file, the NAME of a file in calibrations/ beside each "
                      "run, or 'none' for the nominal optics (default: the newest valid "
-                     "calibration of the run's bench in calibrations/ beside the run); PEM "
-                     "runs take none")
+                     "calibration of the run's bench and mode in calibrations/ beside the "
+                     "run). It applies to runs of its own mode; a run of the other mode is "
+                     "refused. Give one per mode with drr=... and pem=... (the option "
+                     "twice); a mode not given keeps the default")
     pol.add_argument("--pbrdf-start", default=None,
                      metavar="N,K,ALPHA,ALBEDO[,FRAME] | NAME=VALUE,...",
                      help="start values of the pBRDF fit: four or five numbers, or "

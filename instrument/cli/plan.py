@@ -90,6 +90,12 @@ def run(args: argparse.Namespace) -> int:
                 if spec.polarimetry is not None else f"{lobe.points} points")
         print(f"  this is the first pass of a two-pass lobe plan: `scatterlab run` fits it "
               f"and adds {adds} placed by Fisher information (a second run)")
+        from instrument.plans.lobe import reference_filter
+
+        ref = reference_filter(spec, profile)
+        if ref is not None:
+            print(f"  the lobe is fitted at {ref.describe()}; the second pass reads every "
+                  "filter")
     for role, dist in est.travel.items():
         unit = "mm" if role == "camera_z" else "deg"
         print(f"  travel {role:<15} {dist:10.1f} {unit}")

@@ -159,6 +159,8 @@ def _second_pass(first: Path, spec: PlanSpec, profile: BenchProfile, bench: Benc
               if spec.polarimetry is not None else f"{len(second.plan.points)} points")
     print(f"second pass: {placed} placed by Fisher information on {second.model} fitted to "
           f"the first pass ({second.verdict})")
+    if second.fitted_at:
+        print(f"  {second.fitted_at}")
     filtered = sum(s >= 0 for s in pl.slots)
     if filtered or pl.not_measurable:
         print(f"  {filtered} of them read through a neutral-density filter; "

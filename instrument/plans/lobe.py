@@ -60,7 +60,13 @@ from analysis.brdf.geometry import make_geometry
 from analysis.brdf.model import BRDFModel
 from instrument.bench.dynamics import move_time
 from instrument.bench.profile import BenchProfile
-from instrument.plans.build import Plan, build_plan, dynamics_of, guarded_points
+from instrument.plans.build import (
+    Plan,
+    build_plan,
+    dynamics_of,
+    filter_bands,
+    guarded_points,
+)
 from instrument.plans.lobe_budget import (
     ErrorBudget,
     PointBudget,
@@ -72,9 +78,9 @@ from instrument.plans.lobe_budget import (
 from instrument.plans.planfile import PlanSpec, parse_plan
 from instrument.plans.tradeoff import DetectorSetup, ScanOption
 
-__all__ = ["LobeSpec", "Placement", "SecondPass", "SinglePass", "candidate_pairs", "lobe_of",
-           "place_points", "place_points_modelled",
-           "plan_budget", "plan_seconds", "second_pass_text",
+__all__ = ["LobeSpec", "Placement", "ReferenceFilter", "SecondPass", "SinglePass",
+           "candidate_pairs", "lobe_of", "place_points", "place_points_modelled",
+           "plan_budget", "plan_seconds", "reference_filter", "second_pass_text",
            "single_pass_alternative", "single_pass_plans"]
 
 
@@ -88,6 +94,7 @@ class LobeSpec:
     search_step_deg: float = 1.0
     prior: str | None = None
     target: str | None = None
+    reference_filter: int | None = None
 
 
 def lobe_of(spec: PlanSpec) -> LobeSpec | None:
@@ -95,9 +102,58 @@ def lobe_of(spec: PlanSpec) -> LobeSpec | None:
     lb = spec.scan.get("lobe")
     if lb is None:
         return None
+    ref = lb.get("reference_filter")
     return LobeSpec(int(lb["points"]), float(lb.get("step_deg", 0.25)),
                     float(lb.get("search_half_width_deg", 5.0)),
-                    float(lb.get("search_step_deg", 1.0)), lb.get("prior"), lb.get("target"))
+                    float(lb.get("search_step_deg", 1.0)), lb.get("prior"), lb.get("target"),
+                    None if ref is None else int(ref))
+
+
+@dataclass(frozen=True)
+class ReferenceFilter:
+    """The ``[spectral]`` filter a polarimetric lobe over several filters is fitted at:
+    its slot, its centre wavelength (nm), and ``named`` whether the plan named it
+    (``lobe.reference_filter``) or it is the default, the filter nearest the centre of the
+    plan's band (the midpoint of its shortest and longest centre wavelengths; on a tie, as
+    always for two filters, the shorter wavelength)."""
+
+    slot: int
+    center_nm: float
+    named: bool
+    band_centre_nm: float
+
+    def describe(self) -> str:
+        why = ("named by lobe.reference_filter" if self.named else
+               f"the filter nearest the band's centre, {self.band_centre_nm:g} nm; "
+               "lobe.reference_filter names another")
+        return f"filter {self.slot} ({self.center_nm:g} nm; {why})"
+
+
+def reference_filter(spec: PlanSpec, profile: BenchProfile) -> ReferenceFilter | None:
+    """The filter the lobe of ``spec`` is fitted at (:class:`ReferenceFilter`); None for a
+    plan without a lobe, without ``[spectral]`` or with one filter only (its own).
+
+    Raises
+    ------
+    ValueError
+        A filter of the plan whose band the bench profile does not give.
+    """
+    lobe = lobe_of(spec)
+    filters = list((spec.spectral or {}).get("filters", ()))
+    if lobe is None or len(filters) < 2:
+        return None
+    bands = filter_bands(profile) or {}
+    missing = [f for f in filters if f not in bands]
+    if missing:
+        raise ValueError(f"spectral.filters: slot(s) {missing} have no band in the bench "
+                         f"profile {profile.name!r}")
+    centres = {f: bands[f][0] for f in filters}
+    mid = 0.5 * (min(centres.values()) + max(centres.values()))
+    if lobe.reference_filter is not None:
+        slot = lobe.reference_filter
+    else:
+        slot = min(filters, key=lambda f: (abs(centres[f] - mid), centres[f]))
+    return ReferenceFilter(slot, centres[slot], lobe.reference_filter is not None, mid)
 
 
 def candidate_pairs(spec: PlanSpec, profile: BenchProfile, step_deg: float
@@ -536,6 +592,8 @@ class SecondPass:
     first_seconds: float
     second_seconds: float
     alternative: SinglePass
+    #: where the lobe was fitted, for a plan over several filters (else "")
+    fitted_at: str = ""
 
     @property
     def worthwhile(self) -> bool:

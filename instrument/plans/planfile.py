@@ -49,7 +49,10 @@ explicit list):
   (:mod:`instrument.plans.lobe`): the plan itself is the coarse first pass (the θr grid and
   a search around the mirror direction); ``scatterlab run`` then fits it and runs a second
   plan of N points placed by Fisher information, which names its first pass in
-  ``first_pass = "RUN"`` (the analysis reduces both runs together);
+  ``first_pass = "RUN"`` (the analysis reduces both runs together); a polarimetric lobe
+  plan over several ``[spectral]`` filters fits the lobe at one of them, ``lobe.
+  reference_filter = SLOT`` (default: the filter nearest the centre of the plan's band,
+  :func:`instrument.pipelines.polarimetry.lobe.reference_filter`);
   ``reference`` also takes ``reference_name`` and ``reflectance``;
   ``skip_beam_points = true`` leaves out (and reports) the points whose detector would sit
   in the incident beam instead of rejecting the plan.
@@ -171,9 +174,8 @@ def parse_plan(text: str, *, source: str = "plan") -> PlanSpec:
             calibration[key] = val
     spectral = _spectral(v, data.get("spectral"), kind)
     polarimetry = parse_polarimetry(v, data.get("polarimetry"), kind)
-    if polarimetry is not None and "lobe" in scan and spectral is not None \
-            and len(spectral["filters"]) > 1:
-        _one_wavelength_polarimetric_lobe(v)
+    if isinstance(scan.get("lobe"), dict) and "reference_filter" in scan["lobe"]:
+        _reference_filter(v, scan["lobe"], spectral, polarimetry)
     if v.errors or kind is None:
         raise PlanError(source, v.errors or [FieldError("plan.kind", "is required")])
     return PlanSpec(kind, name, order, sample_name, sample_desc, dict(scan), acq,
@@ -351,6 +353,7 @@ def _lobe(v: _Validator, t: dict[str, Any], path: str) -> None:
     """``lobe = {points, step_deg, search_half_width_deg, search_step_deg, prior}``: sample
     the lobe in two passes (:mod:`instrument.plans.lobe`)."""
     lb = _subtable(v, t, "lobe", path, {"points", "step_deg", "search_half_width_deg",
+                                        "reference_filter",
                                         "search_step_deg", "prior", "target"},
                    "{points = N, ...}")
     if lb is None:
@@ -367,14 +370,22 @@ def _lobe(v: _Validator, t: dict[str, Any], path: str) -> None:
                 "lobe.search_step_deg in a two-pass lobe plan")
 
 
-def _one_wavelength_polarimetric_lobe(v: _Validator) -> None:
-    """A polarimetric two-pass lobe plan fits the lobe to the first pass's m00 at one
-    wavelength (:mod:`instrument.pipelines.polarimetry.lobe`): over several filters the
-    lobe differs per wavelength and one placement cannot serve them all."""
-    v.error("scan.lobe", "a polarimetric two-pass lobe plan places its second pass from "
-            "the lobe at one wavelength: give [spectral] filters one slot (one plan per "
-            "wavelength), or sample the lobe in one pass with theta_r and "
-            "specular = {half_width_deg, step_deg}")
+def _reference_filter(v: _Validator, lobe: dict[str, Any], spectral: dict[str, Any] | None,
+                      polarimetry: dict[str, Any] | None) -> None:
+    """``lobe.reference_filter``: the ``[spectral]`` slot whose first-pass m00 the lobe of a
+    polarimetric plan over several filters is fitted to
+    (:mod:`instrument.pipelines.polarimetry.lobe`): one of the plan's filters."""
+    where = "scan.lobe.reference_filter"
+    slot = lobe["reference_filter"]
+    if not isinstance(slot, int) or isinstance(slot, bool) or not 1 <= slot <= 12:
+        v.error(where, f"must be a filter-wheel slot, an integer from 1 to 12, got {slot!r}")
+    elif polarimetry is None or spectral is None:
+        v.error(where, "chooses the wavelength a polarimetric lobe is fitted at: it needs "
+                "[polarimetry] and [spectral] filters; leave it out otherwise")
+    elif slot not in spectral["filters"]:
+        v.error(where, f"slot {slot} is not one of the plan's [spectral] filters "
+                f"{list(spectral['filters'])}: name one of them, or leave it out for the "
+                "filter nearest the centre of the band")
 
 
 def _hemisphere(v: _Validator, t: dict[str, Any], path: str) -> None:

@@ -22,6 +22,15 @@ with
   settles) on this bench's clock, plus the goniometer's small step between neighbouring
   geometries (:func:`geometry_seconds`).
 
+Over several ``[spectral]`` filters the first pass runs at every filter; the lobe and the
+σ model are fitted to the m00 of one reference filter
+(:func:`instrument.plans.lobe.reference_filter`: ``lobe.reference_filter``, by default the
+filter nearest the centre of the band) and each placed geometry is read at every filter,
+its cost the plan's estimate of it at all of them. One wavelength's placement, not the
+union of each wavelength's own, because on the measured two-filter bench the placements
+coincide while the union costs a geometry per filter (ADR 0106, amendment; BENCHMARKS.md
+"polarimetry: a lobe over two filters").
+
 The "worth it?" comparison (:func:`single_pass_alternative`) uses the same σ model and
 costs; the second pass's plan (:func:`instrument.plans.lobe.second_pass_text`) carries
 ``[polarimetry]`` and ``[spectral]``, so it is polarimetric with the same settings, and
@@ -48,20 +57,22 @@ from instrument.pipelines.brdf.analyse import DEFAULT_MODELS, analyse
 from instrument.pipelines.polarimetry.pipeline import reduce_polarimetric
 from instrument.plans.build import Plan, build_plan
 from instrument.plans.lobe import (
+    Placement,
     SecondPass,
     SinglePass,
     candidate_pairs,
     lobe_of,
     pass_move_seconds,
     place_points_modelled,
+    reference_filter,
     second_pass_text,
     single_pass_plans,
 )
 from instrument.plans.lobe_budget import predicted_covariance
 from instrument.plans.planfile import PlanSpec, parse_plan
 
-__all__ = ["M00Noise", "M00Rows", "geometry_seconds", "m00_rows", "polarimetric_second_pass",
-           "single_pass_alternative"]
+__all__ = ["LobePlacement", "M00Noise", "M00Rows", "geometry_seconds", "lobe_placement",
+           "m00_rows", "polarimetric_second_pass", "single_pass_alternative"]
 
 
 @dataclass(frozen=True)
@@ -91,10 +102,13 @@ class M00Rows:
                           zero, 0.0, False, "polarimetric m00")
 
 
-def m00_rows(path: str | Path, calibration: str | Path | None = None) -> M00Rows:
+def m00_rows(path: str | Path, calibration: str | Path | None = None,
+             wavelength_nm: float | None = None) -> M00Rows:
     """m00 and its σ per geometry of a polarimetric run (:class:`M00Rows`), reduced as
     ``scatterlab fit`` reduces it (``calibration`` as for
-    :func:`~instrument.pipelines.polarimetry.pipeline.fit_polarimetric_run`).
+    :func:`~instrument.pipelines.polarimetry.pipeline.fit_polarimetric_run`); with
+    ``wavelength_nm``, of the run's wavelength nearest to it only (a run over several
+    filters has one group per geometry and filter).
 
     Raises
     ------
@@ -103,6 +117,11 @@ def m00_rows(path: str | Path, calibration: str | Path | None = None) -> M00Rows
     """
     points = [p for p in reduce_polarimetric(path, calibration).points
               if not p.group.transmitted and p.brdf.normalised_valid]
+    if wavelength_nm is not None and points:
+        have = [p.group.wavelength_nm for p in points]
+        nearest = min(have, key=lambda w: abs(w - wavelength_nm) if math.isfinite(w)
+                      else math.inf)
+        points = [p for p in points if abs(p.group.wavelength_nm - nearest) <= 0.5]
     if not points:
         raise ValueError(f"{path}: no reflected geometry with a positive m00 to fit the lobe "
                          "to")
@@ -215,25 +234,38 @@ def single_pass_alternative(spec: PlanSpec, profile: BenchProfile, model: BRDFMo
     return best
 
 
-def polarimetric_second_pass(first_run: str | Path, spec: PlanSpec, profile: BenchProfile
-                             ) -> SecondPass:
-    """Fit the lobe to the polarimetric first pass's m00 and plan the second pass (module
-    docstring); what :func:`instrument.pipelines.brdf.second_pass.second_pass_plan` returns
-    for a plan with ``[polarimetry]``.
+@dataclass(frozen=True)
+class LobePlacement:
+    """The lobe fitted to the first pass's m00 at one wavelength and the second pass's
+    geometries placed from it (:func:`lobe_placement`)."""
+
+    placement: Placement
+    model: str
+    verdict: str
+    forward: BRDFModel
+    params: NDArray[np.float64]
+    noise: M00Noise
+
+
+def lobe_placement(first_run: str | Path, spec: PlanSpec, profile: BenchProfile,
+                   wavelength_nm: float | None = None) -> LobePlacement:
+    """Fit the lobe to the first pass's m00 (at ``wavelength_nm``, or the run's one
+    wavelength) and place the second pass's geometries (module docstring); each geometry
+    costs the plan's estimate of it at every filter of the plan.
 
     Raises
     ------
     ValueError
-        The first pass cannot be reduced, or too few geometries for the lobe models.
+        The first pass cannot be reduced, too few geometries for the lobe models, or no
+        reachable direction.
     """
     lobe = lobe_of(spec)
     assert lobe is not None
-    rows = m00_rows(first_run)
+    rows = m00_rows(first_run, wavelength_nm=wavelength_nm)
     models = [lobe.prior] if lobe.prior else list(DEFAULT_MODELS)
     res = analyse(rows.brdf_points(), models, run_cv=False)
-    fit = res.chosen_fit
     forward = res.models[res.chosen]
-    params = np.asarray(fit.params, dtype=float)
+    params = np.asarray(res.chosen_fit.params, dtype=float)
     noise = M00Noise.fit(rows.m00, rows.sigma)
     candidates = candidate_pairs(spec, profile, lobe.step_deg)
     if not candidates:
@@ -245,11 +277,36 @@ def polarimetric_second_pass(first_run: str | Path, spec: PlanSpec, profile: Ben
         candidates=candidates, n_points=lobe.points, sigma_of=noise.sigma,
         geometry_s=per_geometry, min_separation_deg=0.5 * lobe.step_deg,
         target=lobe.target)
-    text = second_pass_text(spec.source_text, placement.pairs, Path(first_run).name)
+    return LobePlacement(placement, res.chosen, res.verdict, forward, params, noise)
+
+
+def polarimetric_second_pass(first_run: str | Path, spec: PlanSpec, profile: BenchProfile
+                             ) -> SecondPass:
+    """Fit the lobe to the polarimetric first pass's m00 and plan the second pass (module
+    docstring); what :func:`instrument.pipelines.brdf.second_pass.second_pass_plan` returns
+    for a plan with ``[polarimetry]``. Over several filters the lobe is fitted at the
+    plan's reference filter (:func:`instrument.plans.lobe.reference_filter`) and the second
+    pass reads every filter at the geometries placed from it.
+
+    Raises
+    ------
+    ValueError
+        The first pass cannot be reduced, too few geometries for the lobe models, or a
+        filter without a band in the profile.
+    """
+    lobe = lobe_of(spec)
+    assert lobe is not None
+    ref = reference_filter(spec, profile)
+    lp = lobe_placement(first_run, spec, profile, None if ref is None else ref.center_nm)
+    text = second_pass_text(spec.source_text, lp.placement.pairs, Path(first_run).name)
     spec2 = parse_plan(text, source=f"second pass of {first_run}")
     plan2 = build_plan(replace(spec2, source_text=text), profile)
     t1 = float(build_plan(spec, profile).estimate().total_s)
     t2 = float(plan2.estimate().total_s)
-    alt = single_pass_alternative(spec, profile, forward, params, noise, seconds=t1 + t2)
-    target = lobe.target if lobe.target not in (None, "all") else forward.param_names[-1]
-    return SecondPass(plan2, placement, res.chosen, res.verdict, str(target), t1, t2, alt)
+    alt = single_pass_alternative(spec, profile, lp.forward, lp.params, lp.noise,
+                                  seconds=t1 + t2)
+    target = lobe.target if lobe.target not in (None, "all") else lp.forward.param_names[-1]
+    fitted_at = "" if ref is None else (f"the lobe fitted at {ref.describe()}; the second "
+                                        "pass reads every filter of the plan")
+    return SecondPass(plan2, lp.placement, lp.model, lp.verdict, str(target), t1, t2, alt,
+                      fitted_at)

@@ -61,10 +61,11 @@ DEFAULT_START = (1.5, 0.0, 0.2, 0.1, 0.0)
 UNCALIBRATED = ("uncalibrated: Mueller elements may be biased by the polarimeter's own "
                 "misalignment; run scatterlab calibrate polarimeter")
 #: ... for a PEM run.
-UNCALIBRATED_PEM = ("PEM run reduced with the nominal optical train (DC, 1f and 2f rows at "
-                    "the modulator's amplitude; the mounts' read-back angles): elements may "
-                    "be biased by the train's own misalignment; run scatterlab calibrate "
-                    "polarimeter on the PEM bench")
+UNCALIBRATED_PEM = ("uncalibrated PEM run, reduced with the nominal optical train (DC, 1f "
+                    "and 2f rows at the modulator's amplitude; the mounts' read-back "
+                    "angles): elements may be biased by the train's own misalignment; run "
+                    "scatterlab calibrate polarimeter on the PEM bench, or name a PEM "
+                    "calibration with --calibration (pem=NAME in a batch of both modes)")
 
 
 @dataclass(frozen=True)

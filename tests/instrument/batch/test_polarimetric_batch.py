@@ -159,7 +159,8 @@ def test_batch_fit_passes_the_calibration_and_pbrdf_options_to_polarimetric_runs
         assert g["pbrdf"].attrs["variant"] == "fixed by the user"
     # the batch recorded the options, and the same batch again finds the run done
     assert _options(tmp_path)["polarimetric"] == {
-        "calibration": "lab-a", "start": start, "fixed": ["k"], "distribution": "beckmann"}
+        "calibration": {"drr": "lab-a", "pem": "lab-a"}, "start": start, "fixed": ["k"],
+        "distribution": "beckmann"}
     assert _statuses(glass, tmp_path / "again", "alpha=0.2,albedo=0.2") == ["skipped"]
     # other start values are other options: fitted again
     assert _statuses(glass, tmp_path / "other", "alpha=0.25,albedo=0.2") == ["analysed"]
@@ -222,3 +223,120 @@ def test_fit_takes_the_same_calibration_name_and_start_values(glass_and_scalar, 
     assert not lines["alpha"].endswith("(fixed)")
     assert main(["fit", str(glass), "--calibration", "lab-b", "--no-write"]) == 2
     assert "no polarimeter calibration of that name" in capsys.readouterr().out
+
+
+# --- both polarimeter modes in one batch (ADR 0114, amendment) -----------------------------
+#: The hidden PEM train of sim-polarimetric-pem in its calibration's frame (as
+#: tests/instrument/pipelines/polarimetry/test_pem_calibration.py has it).
+PEM_HIDDEN = np.array([1266.9 / 1230.0, 0.1, -0.7, math.pi / 2, -0.6])
+
+
+def _pem_calibration(folder: Path, name: str) -> Path:
+    from analysis.polarimetry.pem_calibration import PemCalibration
+
+    cal = PolarimeterCalibration(
+        drr=PemCalibration(params=PEM_HIDDEN, cov=np.diag([1e-8] * 5), chi2=100.0, dof=100,
+                           psg_extinction=1e-5, psa_extinction=1e-5),
+        bench="sim-polarimetric-pem", source_scale_w=1e-3, date="2026-11-27T00:00:00Z",
+        quality="hidden train")
+    return save_calibration(cal, folder, name=name)
+
+
+@pytest.fixture(scope="module")
+def pem_glass(tmp_path_factory) -> Path:
+    """A PEM run of the glass at θi 50°, θr 40° and 50° (2 × 8 settings through the engine,
+    on sim-polarimetric-pem with its misaligned train) with ``lab-p.json`` (its hidden
+    train, mode "pem") and ``lab-a.json`` (a DRR's) beside it; made once per session."""
+    from tests.instrument.run.test_pem_run import fast_pem_bench
+    from tests.instrument.run.test_pem_run import plan_text as pem_plan
+
+    def make(folder: Path) -> Path:
+        (folder / "make").mkdir()
+        plan = folder / "make" / "plan.toml"
+        plan.write_text(pem_plan("glass pem", ti="50.0", tr="40.0, 50.0"), encoding="utf-8")
+        bench = fast_pem_bench(folder / "make", None, ideal=False)
+        assert main(["run", str(plan), "--bench", str(bench), "--out",
+                     str(folder / "make" / "runs"), "--no-fsync", "--quiet"]) == 0
+        (run,) = (folder / "make" / "runs").glob("*.h5")
+        (folder / "runs").mkdir()
+        shutil.copy2(run, folder / "runs" / "pem.h5")
+        cals = calibration_folder(folder / "runs")
+        _pem_calibration(cals, "lab-p.json")
+        _calibration("sim-polarimetric", cals, "lab-a.json")
+        return folder / "runs"
+    return made_once(tmp_path_factory, "polbatch-pem", make)
+
+
+def test_a_calibration_of_the_other_mode_stops_batch_fit_and_fit_by_run(pem_glass, tmp_path,
+                                                                       capsys):
+    runs = _copy(pem_glass, tmp_path / "runs")
+    pem = runs / "pem.h5"
+    before = _written(runs)
+    # a DRR's calibration named for a PEM run: refused, the run named, nothing written
+    # (before this, batch fit dropped the name for PEM runs and fitted them uncalibrated)
+    assert main(["batch", "fit", str(pem), "--workers", "0", "--calibration", "lab-a",
+                 "--summary-dir", str(tmp_path / "summary")]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith("error: --calibration lab-a: ") and "calibrates a dual-rotating-" \
+        "retarder polarimeter, run pem.h5 is a PEM run; give one calibration per mode " \
+        "(--calibration drr=lab-a --calibration pem=NAME, or pem=none" in out, out
+    assert _written(runs) == before and not (tmp_path / "summary").exists()
+    # fit refuses it too, in the pipeline's words
+    assert main(["fit", str(pem), "--calibration", "lab-a", "--no-write"]) == 2
+    assert "(mode 'drr'); the run" in capsys.readouterr().out
+    # the other mode's file named for its own mode only: the PEM run is not refused (its
+    # calibration is the default, none beside it under polarimeter-*.json)
+    from instrument.batch.polarimetric_options import check_runs, polarimetric_fit_options
+    by_kind = check_runs([pem], polarimetric_fit_options(["drr=lab-a"]))
+    assert by_kind.pem == [pem]
+    assert check_runs([pem], polarimetric_fit_options(["drr=lab-a", "pem=lab-p"])).pem == [pem]
+
+
+@pytest.mark.slow  # the DRR and PEM runs made once (see above) and both fits: 30-60 s
+def test_a_batch_of_both_modes_takes_one_calibration_per_mode(glass_and_scalar, pem_glass,
+                                                             tmp_path, capsys):
+    runs = _copy(glass_and_scalar, tmp_path / "runs")
+    shutil.copy2(pem_glass / "pem.h5", runs / "pem.h5")
+    shutil.copy2(calibration_folder(pem_glass) / "lab-p.json",
+                 calibration_folder(runs) / "lab-p.json")
+    glass, pem = runs / "glass.h5", runs / "pem.h5"
+    before = _written(runs)
+    # one name over both modes: every run of the mode it does not calibrate is refused
+    for name, refused, mode in (("lab-a", "pem.h5", "PEM"),
+                                ("lab-p", "glass.h5", "dual-rotating-retarder")):
+        assert main(["batch", "fit", str(glass), str(pem), "--workers", "0",
+                     "--calibration", name, "--summary-dir", str(tmp_path / "s")]) == 2
+        out = capsys.readouterr().out
+        assert f"run {refused} is a {mode} run; give one calibration per mode" in out, out
+        assert out.count(" is a ") == 1, out  # the run of the file's own mode is not named
+    assert _written(runs) == before and not (tmp_path / "s").exists()
+    # one per mode: each run reduced with its own
+    assert main(["batch", "fit", str(glass), str(pem), "--workers", "0", "--calibration",
+                 "drr=lab-a", "--calibration", "pem=lab-p", "--summary-dir",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "PEM" not in out  # no note: the PEM run took its calibration
+    (table,) = tmp_path.glob("batch-fit-*.csv")
+    with open(table, newline="", encoding="utf-8") as fh:
+        rows = {Path(r["run"]).name: r for r in csv.DictReader(fh)}
+    for name in ("glass.h5", "pem.h5"):
+        assert rows[name]["status"] == "analysed", rows[name]
+        assert rows[name]["calibrated"] == "True"
+        assert "uncalibrated" not in rows[name]["flags"]
+    cals = calibration_folder(runs)
+    alone = fit_polarimetric_run(pem, calibration=cals / "lab-p.json", report=False,
+                                 write=False).summary
+    assert alone["calibration"] == str(cals / "lab-p.json")
+    assert float(rows["pem.h5"]["chi2"]) == pytest.approx(alone["pbrdf"]["chi2"], rel=1e-9)
+    with h5py.File(results_dir(pem, "fit") / "results.h5") as f:
+        assert f["entry/analysis"].attrs["calibrated"]
+    assert _options(tmp_path)["polarimetric"]["calibration"] == {"drr": "lab-a",
+                                                                  "pem": "lab-p"}
+    # the same batch again finds both done (the record of a PEM run names its calibration)
+    again = tmp_path / "again"
+    assert main(["batch", "fit", str(glass), str(pem), "--workers", "0", "--calibration",
+                 "drr=lab-a", "--calibration", "pem=lab-p", "--summary-dir",
+                 str(again)]) == 0
+    (table,) = again.glob("batch-fit-*.csv")
+    with open(table, newline="", encoding="utf-8") as fh:
+        assert [r["status"] for r in csv.DictReader(fh)] == ["skipped", "skipped"]

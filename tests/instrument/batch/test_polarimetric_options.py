@@ -17,6 +17,7 @@ from instrument.batch.polarimetric_options import (
     PolarimetricOptionError,
     batch_notes,
     calibration_choice,
+    calibration_choices,
     fit_keywords,
     parse_fixed,
     parse_start,
@@ -133,7 +134,53 @@ def test_a_batch_says_once_which_runs_do_not_take_the_options(tmp_path):
                     "the 2 scalar runs of this batch are fitted without them")
     assert batch_notes(runs, polarimetric_fit_options()) == []  # nothing given
     assert batch_notes(BatchRuns([tmp_path / "p.h5"], [], []), options) == []
+    # a PEM run takes the calibration of its mode (ADR 0113): nothing to say about it
     pem = BatchRuns([tmp_path / "p.h5"], [tmp_path / "p.h5"], [])
     (tmp_path / "cal.json").write_text("{}", encoding="utf-8")
-    (note,) = batch_notes(pem, polarimetric_fit_options(str(tmp_path / "cal.json")))
-    assert "does not apply to the 1 PEM run: it is reduced with the nominal" in note
+    assert batch_notes(pem, polarimetric_fit_options(str(tmp_path / "cal.json"))) == []
+
+
+def test_the_calibration_is_chosen_per_polarimeter_mode(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "pem=odd.json").write_text("{}", encoding="utf-8")
+    assert calibration_choices(None) == {"drr": None, "pem": None}
+    # a plain value is every mode's; MODE=VALUE that mode's, over a plain one
+    assert calibration_choices("lab-a") == {"drr": "lab-a", "pem": "lab-a"}
+    assert calibration_choices(["pem=lab-p"]) == {"drr": None, "pem": "lab-p"}
+    assert calibration_choices(["drr=lab-a", "pem=none"]) == {"drr": "lab-a", "pem": "none"}
+    assert calibration_choices(["lab-a", "pem=lab-p"]) == {"drr": "lab-a", "pem": "lab-p"}
+    # a file that exists is a file, '=' in its name or not
+    odd = str(tmp_path / "pem=odd.json")
+    assert calibration_choices(["pem=odd.json"]) == {"drr": odd, "pem": odd}
+    # the plain data again: as it is (workers get it so)
+    assert calibration_choices({"drr": "lab-a", "pem": None}) == {"drr": "lab-a",
+                                                                   "pem": None}
+
+
+@pytest.mark.parametrize(("values", "words"), [
+    (["lab-a", "lab-b"], "2 calibrations for every mode ('lab-a', 'lab-b')"),
+    (["pem=a", "pem=b"], "the pem calibration is given twice ('a' and 'b')"),
+    (["ddr=lab-a"], "before '=' give the polarimeter mode (drr or pem)"),
+    (["pem=cals/missing.json"], "no such file cals/missing.json"),
+    ({"ddr": "lab-a"}, "no polarimeter mode 'ddr'"),
+])
+def test_a_calibration_choice_that_cannot_be_used_is_refused_by_option(values, words):
+    with pytest.raises(PolarimetricOptionError) as err:
+        calibration_choices(values)
+    assert err.value.option == "--calibration" and words in str(err.value), str(err.value)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["", "drr=", "pem="]),
+                          st.sampled_from(["lab-a", "lab-b", "none"])), max_size=3))
+def test_each_mode_gets_its_own_value_else_the_plain_one_else_the_default(pairs):
+    values = [k + v for k, v in pairs]
+    keys = [k for k, _ in pairs]
+    if keys.count("") > 1 or keys.count("drr=") > 1 or keys.count("pem=") > 1:
+        with pytest.raises(PolarimetricOptionError):
+            calibration_choices(values)
+        return
+    plain = next((v for k, v in pairs if k == ""), None)
+    got = calibration_choices(values)
+    for mode in ("drr", "pem"):
+        assert got[mode] == next((v for k, v in pairs if k == f"{mode}="), plain)

@@ -1,9 +1,11 @@
 """A two-pass lobe plan with ``[polarimetry]`` (DRR or PEM, ADR 0106 amendment): the plan is
-accepted, ``scatterlab plan`` prints the polarimetric estimate of the first pass and says
-a second pass follows, the second pass is placed from the first pass's m00 with a σ model
-fitted to it (:mod:`instrument.pipelines.polarimetry.lobe`) and keeps the polarimetry
-settings. The runs through the engine are in
-``tests/instrument/pipelines/polarimetry/test_polarimetric_lobe_run.py``.
+accepted (over several filters too, the lobe fitted at a reference filter), ``scatterlab
+plan`` prints the polarimetric estimate of the first pass and says a second pass follows,
+the second pass is placed from the first pass's m00 with a σ model fitted to it
+(:mod:`instrument.pipelines.polarimetry.lobe`) and keeps the polarimetry settings. The
+runs through the engine are in
+``tests/instrument/pipelines/polarimetry/test_polarimetric_lobe_run.py`` and
+``test_polarimetric_spectral_lobe.py``.
 """
 
 from __future__ import annotations
@@ -22,9 +24,11 @@ from instrument.bench.profile import load_profile
 from instrument.cli import main
 from instrument.pipelines.polarimetry.lobe import M00Noise, geometry_seconds
 from instrument.plans.lobe import (
+    ReferenceFilter,
     _angles_rad,
     candidate_pairs,
     place_points_modelled,
+    reference_filter,
     second_pass_text,
 )
 from instrument.plans.planfile import PlanError, parse_plan
@@ -82,15 +86,58 @@ def test_the_second_pass_keeps_the_polarimetry_and_spectral_settings() -> None:
     assert parse_plan(text).polarimetry == spec.polarimetry
 
 
-def test_a_polarimetric_lobe_over_several_wavelengths_is_refused_naming_the_lobe() -> None:
-    text = plan(polarimetry=PEM) + "[spectral]\nfilters = [1, 2]\n"
+def test_a_polarimetric_lobe_over_several_filters_names_its_reference_filter(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Accepted over several filters (it was refused); the lobe is fitted at the filter
+    nearest the band's centre, or at lobe.reference_filter, and the plan says which."""
+    profile = load_profile("sim-polarimetric-pem-spectral")  # 550 and 650 nm
+    two = plan(polarimetry=PEM) + "[spectral]\nfilters = [2, 1]\n"
+    ref = reference_filter(parse_plan(two), profile)
+    # 550 and 650 nm are equally far from the centre, 600 nm: the shorter wavelength
+    assert ref == ReferenceFilter(1, 550.0, False, 600.0)
+    named = plan(lobe="lobe = { points = 4, reference_filter = 2 }", polarimetry=PEM) \
+        + "[spectral]\nfilters = [1, 2]\n"
+    assert reference_filter(parse_plan(named), profile) == ReferenceFilter(2, 650.0, True,
+                                                                           600.0)
+    # one filter, or none: the run's own wavelength
+    assert reference_filter(parse_plan(plan(polarimetry=PEM) + "[spectral]\nfilters = [2]\n"),
+                            profile) is None
+    path = tmp_path / "lobe.toml"
+    path.write_text(two, encoding="utf-8")
+    assert main(["plan", str(path), "--bench", "sim-polarimetric-pem-spectral", "--out",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "the lobe is fitted at filter 1 (550 nm; the filter nearest the band's centre, " \
+        "600 nm; lobe.reference_filter names another); the second pass reads every " \
+        "filter" in out, out
+    path.write_text(named, encoding="utf-8")
+    assert main(["plan", str(path), "--bench", "sim-polarimetric-pem-spectral", "--out",
+                 str(tmp_path)]) == 0
+    assert "fitted at filter 2 (650 nm; named by lobe.reference_filter)" in \
+        capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("lobe", "tables", "words"), [
+    ("reference_filter = 3", "[spectral]\nfilters = [1, 2]\n",
+     "slot 3 is not one of the plan's [spectral] filters [1, 2]"),
+    ("reference_filter = 0", "[spectral]\nfilters = [1, 2]\n", "an integer from 1 to 12"),
+    ("reference_filter = 1.5", "[spectral]\nfilters = [1, 2]\n", "an integer from 1 to 12"),
+    ('reference_filter = "550"', "[spectral]\nfilters = [1, 2]\n",
+     "an integer from 1 to 12"),
+    ("reference_filter = 1", "", "it needs [polarimetry] and [spectral] filters"),
+])
+def test_a_reference_filter_that_cannot_be_used_is_refused_naming_it(
+        lobe: str, tables: str, words: str) -> None:
+    text = plan(lobe=f"lobe = {{ points = 4, {lobe} }}", polarimetry=PEM) + tables
     with pytest.raises(PlanError) as err:
         parse_plan(text)
-    assert {e.path for e in err.value.errors} == {"scan.lobe"}
-    assert "one slot" in str(err.value)
-    # one wavelength, or the same filters without the lobe, or without polarimetry
-    assert parse_plan(plan(polarimetry=PEM) + "[spectral]\nfilters = [2]\n") is not None
-    assert parse_plan(plan(lobe="", polarimetry=PEM) + "[spectral]\nfilters = [1, 2]\n")
+    assert {e.path for e in err.value.errors} == {"scan.lobe.reference_filter"}
+    assert words in str(err.value), str(err.value)
+    # and without [polarimetry]: the scalar lobe has no reference filter
+    scalar = plan(lobe="lobe = { points = 4, reference_filter = 1 }", polarimetry="") \
+        + "[spectral]\nfilters = [1, 2]\n"
+    with pytest.raises(PlanError, match=r"scan\.lobe\.reference_filter"):
+        parse_plan(scalar)
 
 
 lobe_tables = st.fixed_dictionaries(

@@ -184,7 +184,8 @@ def test_a_polariser_through_run_and_fit_is_recovered_within_3_sigma(polariser_r
     assert train["polarimetry"]["mode"] == "pem" and len(train["polarimetry"]["settings"]) == 8
 
     assert main(["fit", str(path), "--no-write"]) == 0
-    assert "PEM run reduced with the nominal optical train" in capsys.readouterr().out
+    assert ("warning: uncalibrated PEM run, reduced with the nominal optical train"
+            in capsys.readouterr().out)
     (point,) = fit_polarimetric_run(path, report=False, write=False).points
     assert point.group.pem is not None and point.brdf.normalised_valid
     sigma = point.brdf.sigma_normalised.ravel()[1:]
