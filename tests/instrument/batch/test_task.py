@@ -41,15 +41,21 @@ from instrument.run.results import (
     run_lock,
 )
 from tests.instrument.batch.runs import fresh_copy, make_brdf_runs, make_flat_run, parse_cli
+from tests.shared_files import made_once
 from tests.waiting import EVENT_TIMEOUT_S
 
 
-@pytest.fixture(scope="module")
-def runs_dir(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("batch-runs")
+def _make_runs(folder):
     make_brdf_runs(folder, 3)
     make_flat_run(folder)
     return folder
+
+
+# Made once per session (≈ 6 s of CPU): the module's tests are spread over the test
+# processes, and each one that got a test rendered and wrote the three runs again.
+@pytest.fixture(scope="module")
+def runs_dir(tmp_path_factory):
+    return made_once(tmp_path_factory, "batch-runs", _make_runs)
 
 
 @pytest.fixture
