@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from analysis.brdf.reduction.receiver import ReceiverGeometry, receiver_factor
 from analysis.brdf.reduction.detector import solid_angle_sr
+from analysis.brdf.reduction.receiver import ReceiverGeometry, receiver_factor
 from analysis.polarimetry.elements import rotation
 from analysis.polarimetry.pbrdf import (
     QUADRATURE_TOLERANCE,
