@@ -51,7 +51,7 @@ judges it with the project's goodness-of-fit gate
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,10 +61,13 @@ from scipy import optimize
 from analysis.brdf.fresnel import fresnel
 from analysis.brdf.goodness import GoodnessOfFit, goodness_of_fit
 from analysis.brdf.microfacet import beckmann_d, ggx_d, smith_visibility
+from analysis.brdf.reduction.receiver import LEVELS, ReceiverGeometry
 from analysis.polarimetry.elements import rotation
+from analysis.polarimetry.receiver_nodes import MuellerNodes, mueller_nodes
 from analysis.polarimetry.validation import PolarimetryInputError, check_array
 
-__all__ = ["PBRDF_BOUNDS", "PBRDF_PARAMS", "PbrdfFit", "fit_pbrdf", "fresnel_mueller", "pbrdf"]
+__all__ = ["PBRDF_BOUNDS", "PBRDF_PARAMS", "QUADRATURE_TOLERANCE", "PbrdfFit", "fit_pbrdf",
+           "fresnel_mueller", "pbrdf", "pbrdf_on_receiver"]
 
 #: Parameter names, in the order of the parameter vector.
 PBRDF_PARAMS = ("n", "k", "alpha", "albedo", "frame_deg")
@@ -101,10 +104,9 @@ def _rot(eta: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-def _frames(theta: NDArray[np.float64], phi: NDArray[np.float64],
-            k: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Global (e₁, e₂) of beams with propagation k (module docstring)."""
-    s_g = np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], axis=-1)
+def _frames(k: NDArray[np.float64], s_g: NDArray[np.float64]
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Global (e₁, e₂) of beams with propagation k and s axis ``s_g`` ⟂ k (module doc)."""
     return np.cross(k, s_g), -s_g
 
 
@@ -118,6 +120,11 @@ class _Geometry:
     rot_out: NDArray[np.float64]  # R(−η_r)
 
 
+def _s_axis(phi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The global s axis ``s_g = (−sin φ, cos φ, 0)`` of beams at azimuth φ."""
+    return np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], axis=-1)
+
+
 def _geometry(theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
               phi_r: ArrayLike) -> _Geometry:
     arrs = [check_array(name, v) for name, v in (("theta_i", theta_i), ("phi_i", phi_i),
@@ -128,14 +135,23 @@ def _geometry(theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
             raise PolarimetryInputError(name, "must lie in [0, π/2] rad (from the normal)")
     wi = np.stack([np.sin(ti) * np.cos(pi_), np.sin(ti) * np.sin(pi_), np.cos(ti)], axis=-1)
     wr = np.stack([np.sin(tr) * np.cos(pr), np.sin(tr) * np.sin(pr), np.cos(tr)], axis=-1)
+    return _vector_geometry(wi, wr, _s_axis(pi_), _s_axis(pr))
+
+
+def _vector_geometry(wi: NDArray[np.float64], wr: NDArray[np.float64],
+                     s_in: NDArray[np.float64], s_out: NDArray[np.float64]) -> _Geometry:
+    """The geometry of unit vectors ωi, ωr (N, 3) whose beams' frames take the s axes
+    ``s_in``, ``s_out`` (N, 3; unit, ⟂ each beam): each beam's own global s axis at the
+    nominal angles, the receiver's at the nodes of a finite receiver
+    (:mod:`analysis.polarimetry.receiver_nodes`)."""
     v = wi + wr
     vn = np.linalg.norm(v, axis=-1)
     h = np.where(vn[:, None] > 0, v / np.where(vn > 0, vn, 1.0)[:, None], [0.0, 0.0, 1.0])
     cross = np.cross(wi, wr)
     cn = np.linalg.norm(cross, axis=-1)
     k_in, k_out = -wi, wr
-    e1_in, e2_in = _frames(ti, pi_, k_in)
-    e1_out, e2_out = _frames(tr, pr, k_out)
+    e1_in, e2_in = _frames(k_in, s_in)
+    e1_out, e2_out = _frames(k_out, s_out)
     # facet s: ⊥ to the plane of ωi and ωr; when they are parallel (retro-reflection)
     # every s is equivalent and the global s of the incident beam is used
     s_loc = np.where(cn[:, None] > 1e-12, cross / np.where(cn > 1e-12, cn, 1.0)[:, None],
@@ -143,7 +159,7 @@ def _geometry(theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
     eta_i = np.arctan2(np.sum(s_loc * e2_in, -1), np.sum(s_loc * e1_in, -1))
     eta_r = np.arctan2(np.sum(s_loc * e2_out, -1), np.sum(s_loc * e1_out, -1))
     return _Geometry(cos_theta_h=h[:, 2], cos_beta=np.clip(np.sum(wi * h, -1), 0.0, 1.0),
-                     mu_i=np.cos(ti), mu_r=np.cos(tr), rot_in=_rot(eta_i),
+                     mu_i=wi[:, 2], mu_r=wr[:, 2], rot_in=_rot(eta_i),
                      rot_out=_rot(-eta_r))
 
 
@@ -200,6 +216,34 @@ def pbrdf(params: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike, theta_r: Arra
     return _evaluate(p, _geometry(theta_i, phi_i, theta_r, phi_r), distribution)
 
 
+def _node_geometry(nodes: MuellerNodes) -> _Geometry:
+    return _vector_geometry(nodes.wi, nodes.wr, nodes.s_in, nodes.s_out)
+
+
+def pbrdf_on_receiver(params: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike,
+                      theta_r: ArrayLike, phi_r: ArrayLike, receiver: ReceiverGeometry, *,
+                      level: int = 1, distribution: str = "beckmann",
+                      normalise: bool = False) -> NDArray[np.float64]:
+    """The Mueller-matrix BRDF (N, 4, 4) as a finite receiver reads it at the nominal
+    geometries: :func:`pbrdf` integrated over the beam's footprint and the receiver's
+    aperture in the receiver's frames (:mod:`analysis.polarimetry.receiver_nodes`), in
+    units of P Ω cos θr as the reduction divides (``normalise``: the plain average).
+    ``level`` indexes :data:`analysis.brdf.reduction.receiver.LEVELS`."""
+    p = _check_params(params, distribution)
+    nodes = _receiver_nodes(theta_i, phi_i, theta_r, phi_r, receiver, level, normalise)
+    return nodes.average(_evaluate(p, _node_geometry(nodes), distribution))
+
+
+def _receiver_nodes(theta_i: ArrayLike, phi_i: ArrayLike, theta_r: ArrayLike,
+                    phi_r: ArrayLike, receiver: ReceiverGeometry, level: int,
+                    normalise: bool = False) -> MuellerNodes:
+    _geometry(theta_i, phi_i, theta_r, phi_r)  # the angles' checks, with their errors
+    if not 0 <= level < len(LEVELS):
+        raise PolarimetryInputError("level", f"must lie in 0..{len(LEVELS) - 1}, got {level}")
+    return mueller_nodes(theta_i, phi_i, theta_r, phi_r, receiver, level=level,
+                         normalise=normalise)
+
+
 @dataclass(frozen=True)
 class PbrdfFit:
     """The result of :func:`fit_pbrdf`.
@@ -215,12 +259,28 @@ class PbrdfFit:
         Covariance of the parameters (zero rows/columns for fixed ones).
     goodness : GoodnessOfFit
         χ², degrees of freedom, p-value and verdict (the project's gate).
+    receiver_level : int or None
+        The quadrature level of the finite-receiver model (None: point receiver).
+    quadrature_error : float
+        The largest change of a whitened residual (units of σ) from that level to the
+        next at the fitted parameters: the a-posteriori bound of the quadrature's error
+        (0 for a point receiver; :data:`QUADRATURE_TOLERANCE`).
     """
 
     params: NDArray[np.float64]
     sigma: NDArray[np.float64]
     cov: NDArray[np.float64]
     goodness: GoodnessOfFit
+    receiver_level: int | None = None
+    quadrature_error: float = 0.0
+
+
+#: The finite-receiver fit refines its quadrature level until the next level moves no
+#: whitened residual by more than this (in σ): the quadrature's error then changes χ²
+#: by at most 2·0.1·|r| + 0.01 per residual, far inside the gate's √(2ν).
+QUADRATURE_TOLERANCE = 0.1
+#: The level a finite-receiver fit starts at (:data:`analysis.brdf.reduction.receiver.LEVELS`).
+START_LEVEL = 1
 
 
 def _whiteners(cov: NDArray[np.float64]) -> list[NDArray[np.float64]]:
@@ -235,7 +295,8 @@ def _whiteners(cov: NDArray[np.float64]) -> list[NDArray[np.float64]]:
 
 def fit_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike,
               theta_r: ArrayLike, phi_r: ArrayLike, *, start: ArrayLike,
-              fixed: Sequence[str] = (), distribution: str = "beckmann") -> PbrdfFit:
+              fixed: Sequence[str] = (), distribution: str = "beckmann",
+              receiver: ReceiverGeometry | None = None) -> PbrdfFit:
     """Fit the pBRDF to measured Mueller matrices with their full covariances.
 
     Parameters
@@ -252,6 +313,13 @@ def fit_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike
     fixed : sequence of str
         Names from :data:`PBRDF_PARAMS` held at their start value (e.g. ``("k",)`` for a
         dielectric).
+    receiver : ReceiverGeometry or None
+        The beam and receiver the readings integrated over: the model is
+        :func:`pbrdf_on_receiver`, its quadrature level raised from :data:`START_LEVEL`
+        until the next level moves no whitened residual by more than
+        :data:`QUADRATURE_TOLERANCE` (the fit is repeated from its minimum at each new
+        level; the top level's bound is the change from the level below). None: a point
+        receiver at the nominal angles.
 
     Raises
     ------
@@ -274,24 +342,49 @@ def fit_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayLike
                                     f"got {geo.mu_i.size}")
     free = np.array([name not in fixed for name in PBRDF_PARAMS])
     whit = _whiteners(cc)
-    data = mm.reshape(n_geo, 16)
 
     def full(x: NDArray[np.float64]) -> NDArray[np.float64]:
         p = p0.copy()
         p[free] = x
         return p
 
-    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        model = _evaluate(full(x), geo, distribution).reshape(n_geo, 16)
-        return np.concatenate([wg @ (model[g] - data[g]) for g, wg in enumerate(whit)])
+    def model_at(level: int | None) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+        if level is None:
+            return lambda p: _evaluate(p, geo, distribution)
+        assert receiver is not None
+        nodes = _receiver_nodes(theta_i, phi_i, theta_r, phi_r, receiver, level)
+        node_geo = _node_geometry(nodes)
+        return lambda p: nodes.average(_evaluate(p, node_geo, distribution))
 
+    def whitened(values: NDArray[np.float64]) -> NDArray[np.float64]:
+        flat = values.reshape(n_geo, 16)
+        return np.concatenate([wg @ flat[g] for g, wg in enumerate(whit)])
+
+    level = None if receiver is None else START_LEVEL
     x0 = np.clip(p0[free], _LOWER[free] + 1e-9, _UPPER[free] - 1e-9)
-    res = optimize.least_squares(residuals, x0, bounds=(_LOWER[free], _UPPER[free]),
-                                 method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
-                                 gtol=1e-12)
+    quadrature_error = 0.0
+    while True:
+        model = model_at(level)
+
+        def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+            return whitened(model(full(x)) - mm)  # noqa: B023 (used within this pass)
+
+        res = optimize.least_squares(residuals, x0, bounds=(_LOWER[free], _UPPER[free]),
+                                     method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                                     gtol=1e-12)
+        if level is None:
+            break
+        if level + 1 < len(LEVELS):
+            finer = model_at(level + 1)(full(res.x))
+            quadrature_error = float(np.max(np.abs(whitened(finer - model(full(res.x))))))
+            if quadrature_error > QUADRATURE_TOLERANCE:
+                level, x0 = level + 1, res.x
+                continue
+        break
     cov_free = np.linalg.pinv(res.jac.T @ res.jac)
     cov_full = np.zeros((5, 5))
     cov_full[np.ix_(free, free)] = cov_free
     gof = goodness_of_fit(res.fun, int(free.sum()))
     return PbrdfFit(params=full(res.x), sigma=np.sqrt(np.clip(np.diag(cov_full), 0, None)),
-                    cov=cov_full, goodness=gof)
+                    cov=cov_full, goodness=gof, receiver_level=level,
+                    quadrature_error=quadrature_error)

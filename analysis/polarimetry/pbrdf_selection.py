@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from analysis.brdf.reduction.receiver import ReceiverGeometry
 from analysis.brdf.selection import ModelScore, choose_by_criterion
 from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf
 from analysis.polarimetry.validation import PolarimetryInputError
@@ -95,12 +96,13 @@ def select_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayL
                  theta_r: ArrayLike, phi_r: ArrayLike, *, start: ArrayLike,
                  variants: Sequence[str] = tuple(PBRDF_VARIANTS),
                  fixed: Sequence[str] = (), distribution: str = "beckmann",
-                 criterion: str = "bic", delta: float = 2.0) -> PbrdfSelection:
+                 criterion: str = "bic", delta: float = 2.0,
+                 receiver: ReceiverGeometry | None = None) -> PbrdfSelection:
     """Fit every variant and choose the smallest the data support (module docstring).
 
     Parameters
     ----------
-    m, cov, theta_i, phi_i, theta_r, phi_r, distribution
+    m, cov, theta_i, phi_i, theta_r, phi_r, distribution, receiver
         As for :func:`~analysis.polarimetry.pbrdf.fit_pbrdf`.
     start : array_like of shape (5,) or (4,)
         Start values; each variant takes k and albedo from it where it fits them.
@@ -135,7 +137,7 @@ def select_pbrdf(m: ArrayLike, cov: ArrayLike, theta_i: ArrayLike, phi_i: ArrayL
     for name in names:
         held = tuple(dict.fromkeys((*PBRDF_VARIANTS[name], *fixed)))
         fit = fit_pbrdf(m, cov, theta_i, phi_i, theta_r, phi_r, start=_start_for(name, p0),
-                        fixed=held, distribution=distribution)
+                        fixed=held, distribution=distribution, receiver=receiver)
         fits[name] = fit
         k = sum(1 for p in PBRDF_PARAMS if p not in held)
         n = fit.goodness.dof + k

@@ -4,9 +4,10 @@ The first pass is polarimetric over the plan's coarse geometries (its θr grid a
 search around specular). What the lobe machinery of :mod:`instrument.plans.lobe` needs
 from it is scalar: per geometry, m00 (the unpolarised BRDF, 1/sr) with the σ the Mueller
 reduction's covariance gives it (:func:`m00_rows`). The lobe models are fitted to those
-(:func:`instrument.pipelines.brdf.analyse.analyse`, point receiver, as the pBRDF fit takes
-it); the second pass is then placed by :func:`instrument.plans.lobe.place_points_modelled`
-with
+(:func:`instrument.pipelines.brdf.analyse.analyse`, point receiver: placing points needs
+the lobe's shape, not the receiver's 10⁻³ on it, which the pBRDF fit of both passes does
+model); the second pass is then placed by
+:func:`instrument.plans.lobe.place_points_modelled` with
 
 * **σ of a candidate's m00** from a noise model fitted to the first pass's own (m00, σ)
   pairs (:class:`M00Noise`): σ² = a + b·m00 + c·m00², the variance of a reading that has a

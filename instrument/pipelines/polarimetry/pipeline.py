@@ -18,16 +18,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from analysis.brdf.reduction.receiver import ReceiverGeometry
 from analysis.polarimetry.pbrdf import PBRDF_PARAMS, PbrdfFit, fit_pbrdf, pbrdf
 from analysis.polarimetry.pbrdf_selection import PBRDF_VARIANTS, select_pbrdf
 from analysis.polarimetry.validation import PolarimetryInputError
-from instrument.pipelines.brdf.reduce import first_pass_path
+from instrument.pipelines.brdf.reduce import (
+    ReductionOptions,
+    first_pass_path,
+    instrument_function,
+)
 from instrument.pipelines.polarimetry.calibration import (
     CalibrationError,
     PolarimeterCalibration,
@@ -51,7 +56,7 @@ from instrument.run.runfile import check_run_file
 
 __all__ = ["DEFAULT_START", "UNCALIBRATED", "UNCALIBRATED_PEM", "PolarimetricFit",
            "PolarimetricReduction", "fit_polarimetric_run", "polarimetric_options",
-           "reduce_polarimetric"]
+           "receiver_geometry", "reduce_polarimetric"]
 
 #: Start values (n, k, alpha, albedo, frame_deg) of the pBRDF fit: a rough dielectric in
 #: the polarimeter's nominal frame.
@@ -115,10 +120,31 @@ def polarimetric_options(calibration: PolarimeterCalibration | None,
             "distribution": distribution}
 
 
+def receiver_geometry(prun: PolarimetricRun, scale: Scale
+                      ) -> tuple[ReceiverGeometry | None, str]:
+    """What each polarimetric reading integrated (the scalar fit's instrument function,
+    :func:`instrument.pipelines.brdf.reduce.instrument_function`: the beam's footprint,
+    the receiver's aperture, the axes' read-back spread) with the solid angle the
+    reduction divided by, and that model in words. None where the beam's radius is
+    unknown: the pBRDF is then fitted as a point receiver sees it, and the words say so."""
+    rg, info = instrument_function(prun.run, np.zeros(0, dtype=int),
+                                   ReductionOptions(detector="power_meter"))
+    if rg is None:
+        return None, ("point receiver at the nominal angles: the beam's radius is unknown "
+                      f"({info['beam_radius_source']}); set [geometry] beam_radius_mm")
+    rg = replace(rg, solid_angle_sr=scale.solid_angle_sr)
+    return rg, (f"the pBRDF averaged over the beam's footprint (1/e² radius "
+                f"{rg.beam_radius_mm:g} mm, {info['beam_radius_source']}) seen through the "
+                f"{rg.aperture_diameter_mm:g} mm receiver at {rg.distance_mm:g} mm, in the "
+                "receiver's frames")
+
+
 def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
-               fixed: Sequence[str] | None, distribution: str) -> dict[str, Any] | None:
+               fixed: Sequence[str] | None, distribution: str,
+               receiver: ReceiverGeometry | None = None) -> dict[str, Any] | None:
     """The pBRDF fit: with ``fixed`` None the variant the data need (ADR 0107), else the
-    one model with those parameters held."""
+    one model with those parameters held; ``receiver``: the finite receiver's model
+    (:func:`analysis.polarimetry.pbrdf.pbrdf_on_receiver`), None a point receiver."""
     use = [p for p in points if p.brdf.normalised_valid and not p.group.transmitted]
     if not use:
         return None
@@ -129,14 +155,16 @@ def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
     selection: dict[str, Any] | None = None
     fit: PbrdfFit
     if fixed is None:
-        sel = select_pbrdf(m, cov, *ang, start=start, distribution=distribution)
+        sel = select_pbrdf(m, cov, *ang, start=start, distribution=distribution,
+                           receiver=receiver)
         fit = sel.chosen_fit
         held = list(dict.fromkeys(PBRDF_VARIANTS[sel.chosen]))
         variant = sel.chosen
         selection = {"criterion": sel.criterion, "rule": sel.rule,
                      "table": [asdict(r) for r in sel.table]}
     else:
-        fit = fit_pbrdf(m, cov, *ang, start=start, fixed=fixed, distribution=distribution)
+        fit = fit_pbrdf(m, cov, *ang, start=start, fixed=fixed, distribution=distribution,
+                        receiver=receiver)
         held, variant = list(fixed), "fixed by the user"
     gof = fit.goodness
     return {"param_names": list(PBRDF_PARAMS), "params": fit.params.tolist(),
@@ -144,7 +172,9 @@ def _pbrdf_fit(points: Sequence[MuellerPoint], start: Sequence[float],
             "fixed": held, "distribution": distribution, "variant": variant,
             "selection": selection,
             "adequate": bool(gof.adequate), "verdict": gof.verdict(), "chi2": gof.chi2,
-            "dof": gof.dof, "p_value": gof.p_value}
+            "dof": gof.dof, "p_value": gof.p_value,
+            "receiver_level": -1 if fit.receiver_level is None else fit.receiver_level,
+            "quadrature_error_sigma": fit.quadrature_error}
 
 
 def _model_curves(points: Sequence[MuellerPoint], fit: dict[str, Any]
@@ -217,7 +247,8 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
                          start: Sequence[float] = DEFAULT_START,
                          fixed: Sequence[str] | None = None, distribution: str = "beckmann",
                          report_dir: str | Path | None = None, report: bool = True,
-                         write: bool = True, into_run: bool = False) -> PolarimetricFit:
+                         write: bool = True, into_run: bool = False,
+                         receiver_model: bool = True) -> PolarimetricFit:
     """Reduce a polarimetric run to Mueller matrices and fit the pBRDF (module docstring).
 
     ``calibration``: a calibration file, ``"none"`` for the nominal optics, or ``None``
@@ -227,7 +258,10 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     writes the results into the run file's ``/entry/analysis``. ``fixed`` None (the
     default) chooses the pBRDF variant the data need
     (:func:`analysis.polarimetry.pbrdf_selection.select_pbrdf`); a list of parameter
-    names fits the one model with those held at ``start``.
+    names fits the one model with those held at ``start``. ``receiver_model`` fits the
+    pBRDF as the finite receiver reads it (:func:`receiver_geometry`; False: a point
+    receiver at the nominal angles, the model before ADR 0106's amendment "The pBRDF as
+    the receiver reads it").
 
     Raises
     ------
@@ -258,13 +292,17 @@ def fit_polarimetric_run(path: str | Path, *, calibration: str | Path | None = N
     notes.append("m00 in 1/sr through the source scale " + scale.source
                  + " and the receiver's solid angle (point receiver); m_ij/m00 does not "
                  "depend on either")
-    fit = _pbrdf_fit(points, start, fixed, distribution)
+    receiver, receiver_text = (receiver_geometry(prun, scale) if receiver_model else
+                               (None, "point receiver at the nominal angles (as asked)"))
+    notes.append("pBRDF model: " + receiver_text)
+    fit = _pbrdf_fit(points, start, fixed, distribution, receiver)
     summary: dict[str, Any] = {
         "calibrated": cal is not None,
         "calibration": "" if cal is None or cal.path is None else str(cal.path),
         "calibration_text": cal_text, "scale_source": scale.source,
         "source_scale_w": scale.source_w, "solid_angle_sr": scale.solid_angle_sr,
         "noise": prun.noise_source, "notes": notes, "pbrdf": fit,
+        "pbrdf_receiver": receiver_text,
     }
     folder = Path(report_dir) if report_dir is not None else results_dir(path, "fit")
     run = prun.run

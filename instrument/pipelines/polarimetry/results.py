@@ -101,6 +101,13 @@ def fill(g: h5py.Group, points: Sequence[MuellerPoint], summary: Mapping[str, An
         for key in ("distribution", "adequate", "verdict", "chi2", "dof", "p_value",
                     "variant"):
             f.attrs[key] = fit[key]
+        # the forward model: the finite receiver's quadrature level (−1: point receiver)
+        # and its error bound in σ (ADR 0106, amendment "The pBRDF as the receiver reads it")
+        for key in ("receiver_level", "quadrature_error_sigma"):
+            if key in fit:
+                f.attrs[key] = fit[key]
+        if "pbrdf_receiver" in summary:
+            f.attrs["receiver_model"] = summary["pbrdf_receiver"]
         if fit.get("selection"):
             put_json(f, "selection_json", fit["selection"])
     put_json(g, "summary_json", dict(summary))
