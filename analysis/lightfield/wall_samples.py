@@ -118,33 +118,47 @@ class SamplePlan:
     ``n_first`` and the rest), summed separately.
 
     Memory: 12 bytes per weight, two weights per sample that meets the wall (at n_theta
-    1024 on the default search of the example scan ≈ 1 GB; BENCHMARKS.md, "locate at
-    n_theta 1024 in about a minute").
+    1024 on the default search of the example scan 1.5 GB; BENCHMARKS.md, "locate at
+    n_theta 1024 in about a minute").  :meth:`build` gives up (None) beyond a budget.
     """
 
-    def __init__(self, n_rows: int, n_first: int, lo: float, dy: float, y: NDArray[Any],
-                 zs: NDArray[Any], t: NDArray[Any], hi: float) -> None:
+    def __init__(self, parts: list[tuple[Any, Any]]) -> None:
+        self._parts = parts
+
+    @classmethod
+    def build(cls, n_rows: int, n_first: int, lo: float, dy: float, y: NDArray[Any],
+              zs: NDArray[Any], t: NDArray[Any], hi: float,
+              max_bytes: float = np.inf) -> SamplePlan | None:
+        """The plan of the wall rows ``lo + r·dy`` (r < R = ``n_rows``, ``hi`` the last),
+        the ray slopes ``t`` (C,) (the first ``n_first`` one group), the trial points ``y``
+        (increasing) and depths ``zs``; None once its matrices would pass ``max_bytes``
+        (checked depth by depth, before each depth's matrices are made)."""
         from scipy.sparse import csr_matrix
 
         n_cols, n_y = t.size, y.size
-        self.n_rows, self.n_first, self.n_y = n_rows, n_first, n_y
         groups = ((0, n_first), (n_first, n_cols))
-        self._parts: list[tuple[Any, Any]] = []
+        held = 0
+        per_depth: list[tuple[Any, Any]] = []
         for z in zs:
             runs = _runs(n_rows, lo, dy, y, float(z), t, hi)
-            parts = []
+            pair = []
             for j0, j1 in groups:
                 shape = (n_y, n_rows * (j1 - j0))
                 if runs is None or j1 == j0:
-                    parts.append(csr_matrix(shape))
+                    pair.append(csr_matrix(shape))
                     continue
                 ii, _, _, inside, i0, w = (v[j0:j1] for v in runs)
+                # two weights of 8 bytes and two column indices of 4 per sample
+                held += 24 * int(np.count_nonzero(inside))
+                if held > max_bytes:
+                    return None
                 col = i0 + (np.arange(j1 - j0) * n_rows)[:, None]
                 rows, col, w = ii[inside], col[inside], w[inside]
-                parts.append(csr_matrix((np.concatenate([1.0 - w, w]),
-                                         (np.concatenate([rows, rows]),
-                                          np.concatenate([col, col + 1]))), shape=shape))
-            self._parts.append((parts[0], parts[1]))
+                pair.append(csr_matrix((np.concatenate([1.0 - w, w]),
+                                        (np.concatenate([rows, rows]),
+                                         np.concatenate([col, col + 1]))), shape=shape))
+            per_depth.append((pair[0], pair[1]))
+        return cls(per_depth)
 
     @property
     def nbytes(self) -> int:
