@@ -222,7 +222,7 @@ def _stacks(
 
 
 #: Memory the models' sample plan (:class:`.wall_samples.SamplePlan`) may take; beyond it
-#: the models are summed over the runs as the data are (the same answer, ≈ 6× the CPU).
+#: the models are summed over the runs as the data are (the same answer, ≈ 5× the CPU).
 #: The issue's case at n_theta 1024 on the default search takes 1.5 GB.
 SAMPLE_PLAN_MAX_BYTES = 4 * 2**30
 
@@ -797,7 +797,7 @@ def detect_objects(
     The candidates' models (point-response stacks, one per candidate examined) share the
     data's geometry: with ``sample_plan`` their samples are laid out once as sparse
     matrices (:class:`.wall_samples.SamplePlan`, up to :data:`SAMPLE_PLAN_MAX_BYTES`),
-    which gives the same stacks to rounding at a sixth of the CPU; False sums each over
+    which gives the same stacks to rounding at a fifth of the CPU or less; False sums each over
     the rays' runs, as the data's stack (the reference, and less memory).
     """
     from dataclasses import replace
