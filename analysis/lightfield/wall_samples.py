@@ -12,8 +12,11 @@ Each sample is the same linear interpolation, with the same arithmetic, as
 :func:`.propagate.sample_columns` on the whole grid; only the order of the sums over rays
 changes (the results agree to rounding, ~1e-15 relative: ``tests/analysis/lightfield/
 test_wall_samples.py``).  The cost falls with the fraction of pairs that meet the wall,
-at every n_theta alike; the localisation's point-response stacks (one per candidate) are
-where ``locate`` spends its time (BENCHMARKS.md, "locate at n_theta 1024").
+at every n_theta alike.  The localisation's point-response stacks (one per candidate
+examined, 37 on the near-mirror disc) share the data's geometry: :class:`SamplePlan` lays
+the samples' interpolation out once as sparse matrices, and each model is then one sparse
+product per depth (BENCHMARKS.md, "locate at n_theta 1024" and "locate at n_theta 1024 in
+about a minute").
 """
 
 from __future__ import annotations
