@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analysis.lightfield import LightField2D, theta_grid
-from analysis.lightfield.localize import _stacks, point_response
+from analysis.lightfield.localize import _sample_plan, _stacks, point_response
 from analysis.lightfield.spectral import fourier_orders
 
 DOMAIN = (-0.6, 0.6)
@@ -70,3 +70,32 @@ def test_a_grid_that_is_not_increasing_takes_the_reference_path():
     want = _stacks(lf, y[::-1], zs, -0.3, 0.3, phi)
     got = _stacks(lf, y, zs, -0.3, 0.3, phi)
     assert max(_relative_errors([g[:, ::-1] for g in got], want)) < 1e-12
+
+
+@pytest.mark.parametrize(("n_theta", "seed"), [(128, 6), (256, 7)])
+def test_a_point_response_through_the_sample_plan_gives_the_same_stacks(n_theta, seed):
+    """The models' samples laid out once as sparse matrices (SamplePlan) give the sums of
+    the runs, to rounding: the same samples and weights, added in another order."""
+    lf, phi = _case(n_theta, seed)
+    y = np.arange(-90.0, 89.6, 0.5)
+    zs = np.arange(-400.0, -59.0, 13.0)
+    a, b = -0.35, 0.3
+    data = _stacks(lf, y, zs, a, b, phi)
+    plan = _sample_plan(lf, y, zs, a, b, phi)
+    assert plan is not None and plan.nbytes > 0
+    for y0, z0 in ((-8.0, -200.0), (25.0, -90.0), (-70.0, -380.0)):
+        model = point_response(lf, y0, z0, phi)
+        runs = _stacks(model, y, zs, a, b, phi, geometry=(data[2], data[4]))
+        planned = _stacks(model, y, zs, a, b, phi, geometry=(data[2], data[4]), plan=plan)
+        assert max(_relative_errors(planned, runs)) < 1e-12
+    # a random field too: the plan holds the geometry, not the point's shape
+    noisy = lf.with_radiance(np.random.default_rng(seed).normal(size=lf.radiance.shape))
+    runs = _stacks(noisy, y, zs, a, b, phi, geometry=(data[2], data[4]))
+    planned = _stacks(noisy, y, zs, a, b, phi, geometry=(data[2], data[4]), plan=plan)
+    assert max(_relative_errors(planned, runs)) < 1e-12
+
+
+def test_no_plan_where_the_stacks_take_the_reference_path():
+    lf, phi = _case(128, 8)
+    y = np.arange(60.0, -60.1, -1.0)
+    assert _sample_plan(lf, y, np.array([-250.0, -120.0]), -0.3, 0.3, phi) is None
