@@ -89,13 +89,16 @@ class EulerTail:
     l1: float
     l2: float
 
-    def probability(self, u: ArrayLike) -> NDArray[np.float64]:
+    def expected(self, u: ArrayLike) -> NDArray[np.float64]:
+        """``E χ(A_u)`` itself (not capped)."""
         # beyond 40σ every term is 0 in double precision (and ∞ · 0 would give NaN)
         s = np.minimum(np.asarray(u, dtype=float), 40.0)
         g = np.exp(-0.5 * s * s)
-        ec = (self.l0 * ndtr(-s) + self.l1 * g / (2.0 * np.pi)
-              + self.l2 * s * g / (2.0 * np.pi) ** 1.5)
-        return np.clip(ec, 0.0, 1.0)
+        return np.asarray(self.l0 * ndtr(-s) + self.l1 * g / (2.0 * np.pi)
+                          + self.l2 * s * g / (2.0 * np.pi) ** 1.5, dtype=float)
+
+    def probability(self, u: ArrayLike) -> NDArray[np.float64]:
+        return np.clip(self.expected(u), 0.0, 1.0)
 
     def threshold(self, alpha: float) -> float:
         if not 0.0 < alpha < 1.0:
@@ -103,14 +106,11 @@ class EulerTail:
                              f"scan")
 
         def excess(u: float) -> float:
-            s = u
-            g = np.exp(-0.5 * s * s)
-            return float(self.l0 * ndtr(-s) + self.l1 * g / (2.0 * np.pi)
-                         + self.l2 * s * g / (2.0 * np.pi) ** 1.5) - alpha
+            return float(self.expected(u)) - alpha
 
         # E χ falls monotonically for u ≥ 1 when L₁, L₂ ≥ 0; below 1 the formula is no
         # tail estimate, and a threshold there would claim nothing
-        hi = 1.0
+        hi = 2.0
         while excess(hi) > 0.0 and hi < 40.0:
             hi *= 2.0
         return float(brentq(excess, 1.0, hi)) if excess(1.0) > 0.0 else 1.0

@@ -89,3 +89,32 @@ def test_region_mask_and_empty_region() -> None:
     with pytest.raises(ValueError, match="false_alarm"):
         t.threshold(1.5)
     assert np.isfinite(t.probability(np.inf)) and float(t.probability(np.inf)) == 0.0
+
+
+@pytest.mark.parametrize(("axis", "h"), [(0, 0.02), (1, 0.1)])
+def test_metric_is_the_curvature_of_the_statistic_correlation(axis: int, h: float) -> None:
+    """``Λ`` from the responses' derivatives equals ``2(1 − corr(Z(x), Z(x + h)))/h²`` for a
+    small step, the correlation taken from the same noise model on the responses at both
+    places (a finite-difference check of the formula, no sampling)."""
+    from analysis.lightfield import LightField2D, theta_grid
+    from analysis.lightfield.excursion import _quadratic_forms, statistic_metric
+    from analysis.lightfield.ray_fit import ray_model
+    from analysis.lightfield.spectral import fourier_orders
+
+    n, domain = 64, (-0.6, 0.6)
+    y = np.arange(-50.0, 50.1, 1.0)
+    lf = LightField2D(np.zeros((y.size, n)), y, theta_grid(domain, n), domain, 100.0)
+    use = np.abs(lf.theta_rad) <= 0.45
+    p = fourier_orders(n)
+    phi = (np.abs(p) <= 6).astype(float)
+    noise = 1.0 + 0.1 * np.abs(p)  # coloured, as the reconstruction's
+    x = np.array([[5.0, -150.0]])
+    lam = statistic_metric(lf, use, phi, noise, x).metric[0]
+    step = np.zeros(2)
+    step[axis] = h
+    r, _, _ = ray_model(lf, use, phi, np.vstack([x, x + step]))
+    v = np.where(phi > 0, phi**2 * noise, 0.0)
+    q = _quadratic_forms(r[:, None], use, v)[0]
+    corr = q[0, 1] / np.sqrt(q[0, 0] * q[1, 1])
+    assert lam[axis, axis] == pytest.approx(2.0 * (1.0 - corr) / h**2, rel=0.02)
+    assert np.all(np.linalg.eigvalsh(lam) > 0)
