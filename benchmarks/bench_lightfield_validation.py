@@ -287,9 +287,11 @@ def render(brdf: FlatlandBRDF, objects: list[PointObject], cache: Path | None,
     return lf
 
 
-def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int, truths: list | None = None):
-    """Seeded noise on ``lf``, reconstruction, widened detection: (detection, p̂, solvable
-    domain, significance of each true object at its true position)."""
+def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int, truths: list | None = None,
+           false_alarm: float = 0.01):
+    """Seeded noise on ``lf``, reconstruction, widened detection at ``false_alarm`` per scan
+    (the default threshold's): (detection, p̂, solvable domain, significance of each true
+    object at its true position)."""
     rng = np.random.default_rng(seed)
     noisy = lf.with_radiance(lf.radiance + rng.normal(0.0, NOISE, lf.shape))
     rec = reconstruct(noisy, brdf, d2_mm=D2, points_mm=WALL_POINTS)
@@ -298,7 +300,8 @@ def locate(lf: LightField2D, brdf: FlatlandBRDF, seed: int, truths: list | None 
         rec.incident_field, z_mm=Z_GRID, y_mm=Y_GRID, p_max=p_hat,
         solvable_domain_rad=rec.solvable_domain_rad,
         filter_factors=rec.regularization.filter_factors,
-        noise_power=rec.regularization.noise_power, min_measure_fraction=0.1)
+        noise_power=rec.regularization.noise_power, min_measure_fraction=0.1,
+        false_alarm=false_alarm)
     return det, p_hat, rec.solvable_domain_rad, truth_significance(rec, truths or [])
 
 

@@ -456,9 +456,14 @@ class Detection:
     significance : (count,) — amplitude over its standard deviation (σ; NaN without a
         noise model), objects in decreasing order of it
     false_alarm : (count,) — per-scan probability that noise alone gives a peak this
-        significant (``resolution_cells × Q(σ)``)
+        significant anywhere in the searched region (the expected Euler characteristic of
+        the excursion above σ, :mod:`.excursion`; ``resolution_cells × Q(σ)`` without a
+        noise model)
     threshold_sigma : float — the significance an object needed (NaN without noise model)
-    resolution_cells : float — independent cells searched (the trials of one scan)
+    resolution_cells : float — the independent trials one scan amounts to: with a noise
+        model the count whose Bonferroni tail equals the field's at the threshold
+        (``false_alarm / Q(threshold_sigma)``), without one the searched area in
+        resolution cells
     below_positions_mm : (M, 2), below_significance : (M,) — candidates examined that did
         not clear the threshold (or whose fitted brightness is not positive), strongest first
     notes : tuple of str — warnings about the whole detection
@@ -803,14 +808,15 @@ def detect_objects(
     from dataclasses import replace
 
     from scipy.ndimage import binary_dilation
+    from scipy.special import ndtr
 
     from .edge_light import judged_on_clean_rows, line_of_sight, outside_rows
+    from .excursion import expected_euler
     from .significance import (
         amplitude_fit,
         depth_span,
         false_alarm_probability,
         likelihood_region,
-        snr_threshold,
         with_leak,
     )
     from .spectral import fourier_orders
@@ -964,7 +970,17 @@ def detect_objects(
         r_row = resolution(float(z_row))
         n_cells += (np.count_nonzero(enough[i_z]) * step_y * step_z
                     / max(r_row.transverse_mm * r_row.depth_mm, 1e-12))
-    s_star = snr_threshold(false_alarm, n_cells) if noise is not None else float("nan")
+    s_star = float("nan")
+    tail = None
+    if noise is not None:
+        # the per-scan false-alarm rate of the statistic's maximum over the searched region,
+        # from the field's own smoothness (expected Euler characteristic, .excursion); the
+        # cell count above assumed one independent trial per resolution cell, which the
+        # measured null tail did not follow (ADR 0032, amended 2026-11-27)
+        tail = expected_euler(lf_wall, use, phi, noise, y, zs, enough)
+        s_star = tail.threshold(false_alarm)
+        # reported as the number of independent trials with the same tail at s*
+        n_cells = false_alarm / max(float(ndtr(-s_star)), 1e-300)
 
     def assess(pos: NDArray[Any]) -> tuple[NDArray[Any], NDArray[Any], float]:
         """Joint amplitudes, significances (σ) and the residual's excess over the noise
@@ -1403,7 +1419,8 @@ def detect_objects(
         extent_mm=np.asarray(extent, dtype=float).reshape(n, 2),
         components_mm=tuple(np.asarray(mb, dtype=float).reshape(-1, 2) for mb in members),
         significance=np.asarray(signif, dtype=float).reshape(n),
-        false_alarm=false_alarm_probability(signif, n_cells).reshape(n),
+        false_alarm=(false_alarm_probability(signif, n_cells) if tail is None
+                     else tail.probability(signif)).reshape(n),
         threshold_sigma=float(s_star),
         resolution_cells=float(n_cells),
         below_positions_mm=np.asarray([(c.y, c.z) for c, _ in below],

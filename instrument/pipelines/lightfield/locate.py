@@ -116,8 +116,9 @@ def locate_run(
             noise_power=stored["noise_power"], false_alarm=false_alarm,
             min_measure_fraction=min_measure_fraction)
         message = (f"{det.count} object(s) found above {det.threshold_sigma:.1f}σ (false-alarm "
-                   f"probability {false_alarm:g} per scan over {det.resolution_cells:.0f} "
-                   f"resolution cells; highest recovered angular order {p_hat:g})")
+                   f"probability {false_alarm:g} per scan: the search's tail is that of "
+                   f"{det.resolution_cells:.0f} independent trials; highest recovered angular "
+                   f"order {p_hat:g})")
         if searched[0] < zs[0]:
             message += (f"; the depth range was widened to {searched[0]:.0f} mm: an object sat "
                         f"at its far end ({zs[0]:.0f} mm)")
