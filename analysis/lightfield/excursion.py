@@ -56,8 +56,8 @@ __all__ = ["COARSE_Y", "COARSE_Z", "EulerTail", "StatisticMetric", "expected_eul
            "lipschitz_killing", "statistic_metric"]
 
 #: samples of the search grid where the field's metric is evaluated (depths, across)
-COARSE_Z = 12
-COARSE_Y = 15
+COARSE_Z = 8
+COARSE_Y = 10
 #: complex values per chunk of positions in :func:`statistic_metric` (memory bound)
 _CHUNK = 2_000_000
 
