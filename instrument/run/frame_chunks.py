@@ -69,10 +69,19 @@ def encode_frames(frames: Sequence[np.ndarray], ds: h5py.Dataset) -> list[bytes]
     if any(f.dtype != ds.dtype or not f.dtype.isnative or f.shape != ds.shape[1:]
            for f in frames):
         return None
-    threads = min(len(frames), os.cpu_count() or 1, MAX_THREADS)
+    threads = min(len(frames), _usable_cores(), MAX_THREADS)
     if threads <= 1:
         return [encode_chunk(f, level) for f in frames]
     # a pool per point (a few threads, ~0.1 ms to start) rather than one kept across
     # points: nothing to shut down, and nothing stale in a process forked from this one
     with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="run-deflate") as pool:
         return list(pool.map(encode_chunk, frames, [level] * len(frames)))
+
+
+def _usable_cores() -> int:
+    """The cores this process may run on (its affinity where the OS tells it: a
+    container's or ``taskset``'s share, not the machine's count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS has no affinity call
+        return os.cpu_count() or 1
