@@ -56,7 +56,8 @@ def encode_chunk(frame: np.ndarray, level: int) -> bytes:
     raw = np.ascontiguousarray(frame)
     if raw.itemsize > 1:
         raw = raw.view(np.uint8).reshape(-1, raw.itemsize).T
-    return zlib.compress(np.ascontiguousarray(raw).tobytes(), level)
+    # zlib reads the (C-contiguous) array's buffer directly: no bytes copy of the frame
+    return zlib.compress(np.ascontiguousarray(raw).data, level)
 
 
 def encode_frames(frames: Sequence[np.ndarray], ds: h5py.Dataset) -> list[bytes] | None:
