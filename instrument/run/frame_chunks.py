@@ -47,7 +47,8 @@ def deflate_level(ds: h5py.Dataset) -> int | None:
     filters = [plist.get_filter(i) for i in range(plist.get_nfilters())]
     if [f[0] for f in filters] != [h5py.h5z.FILTER_SHUFFLE, h5py.h5z.FILTER_DEFLATE]:
         return None
-    return int(filters[1][2][0])
+    level = filters[1][2]
+    return int(level[0]) if len(level) == 1 else None  # a level HDF5 would not state
 
 
 def encode_chunk(frame: np.ndarray, level: int) -> bytes:
