@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 from hw_mocks.sim.camera import SimulatedCamera  # noqa: E402
 from hw_mocks.sim.sensor import Sensor  # noqa: E402
 from instrument.cli import main as cli_main  # noqa: E402
+from instrument.run.engine import _Writer  # noqa: E402
 from instrument.run.storage import RunStore  # noqa: E402
 
 PLAN = ROOT / "examples" / "brdf_inplane.toml"
@@ -89,10 +90,15 @@ def main() -> None:
     clock.wrap(SimulatedCamera, "photon_rate", "camera: render a new view", only=_renders)
     clock.wrap(Sensor, "expose", "camera: sensor noise per frame")
     clock.wrap(RunStore, "append", "storage: append a point (HDF5, journal, fsync)")
+    # the engine's wait for the previous point's commit (ADR 0010): the part of the
+    # storage that the run waits for, and does not overlap with the next move
+    commit_wait = StageClock()
+    commit_wait.wrap(_Writer, "drain", "engine: waits for the commit")
     print(f"renderer = {args.renderer}; {PLAN.relative_to(ROOT)}")
     for k in range(args.repeat):
-        clock.seconds.clear()
-        clock.calls.clear()
+        for c in (clock, commit_wait):
+            c.seconds.clear()
+            c.calls.clear()
         with tempfile.TemporaryDirectory() as out:
             t0, c0 = time.perf_counter(), time.process_time()
             with contextlib.redirect_stdout(io.StringIO()):
@@ -105,6 +111,9 @@ def main() -> None:
         for stage, seconds in sorted(clock.seconds.items()):
             print(f"    {stage:<48} {seconds:6.1f} s  ({clock.calls[stage]} calls)")
         print(f"    {'the rest (engine, drivers, emulators, meter)':<48} {wall - staged:6.1f} s")
+        for stage, seconds in commit_wait.seconds.items():  # part of the rest
+            n = commit_wait.calls[stage]
+            print(f"      of the rest, {stage:<35} {seconds:6.1f} s  ({n} calls)")
     SimulatedCamera.__init__ = original_init
 
 

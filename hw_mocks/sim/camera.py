@@ -48,8 +48,9 @@ Two renderers compute the same thing (``renderer``, default ``fast``; ADR 0071).
 traces chief rays only in the box that the scene's lit outlines (``lit_outlines``, where a
 scene has them) project to, and one ray outside it for the uniform veil; it takes the
 chief rays' and the pupil's obliquity from :func:`hw_mocks.sim.lens.lens_grid` (they depend
-on the lens, sensor and focus alone); it grows the refined region by a distance transform
-of its bounding box (the same pixels as the reference's dilation of the whole frame);
+on the lens, sensor and focus alone); it grows the refined region by a disk dilation of
+its bounding box, row by row (the same pixels as the reference's dilation of the whole
+frame);
 it reuses the chief ray as the pupil centre's point of Radon's rule, and splits large
 pixel sets between worker threads. The rules, the refined region and the tolerances are
 the reference's, so the two agree within the pupil tolerance
@@ -337,8 +338,9 @@ class SimulatedCamera(Camera):
         traced in the box that the scene's lit outlines (``lit_outlines``, where the scene
         has them) project to, and one ray outside it gives the veil; what depends on the
         lens alone comes cached from :func:`hw_mocks.sim.lens.lens_grid`; the refined
-        region is grown by a distance transform of its bounding box (the same pixels as
-        the reference's disk dilation of the whole frame)."""
+        region is grown by a disk dilation of its bounding box, row by row
+        (:func:`_disk_dilation`: the same pixels as the reference's disk dilation of the
+        whole frame)."""
         p = self.sensor.params
         center, forward, right, down = self.camera_frame(state)
         # to the picometre: the arm's length read back from unit vectors scatters by an
@@ -417,13 +419,11 @@ class SimulatedCamera(Camera):
             return out  # a uniform field: the radiance does not change across the pupil
         todo = chief > lo + 1e-7 * span
         # every pixel within ``grow`` of a lit one (the reference's disk dilation), from
-        # the distance transform of the lit pixels' bounding box grown by ``grow``
+        # the disk dilation of the lit pixels' bounding box grown by ``grow``
         lit_r, lit_c = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
         r0, r1 = max(lit_r[0] - grow, 0), min(lit_r[-1] + grow + 1, todo.shape[0])
         c0, c1 = max(lit_c[0] - grow, 0), min(lit_c[-1] + grow + 1, todo.shape[1])
-        from scipy import ndimage  # where used: see _pupil_integral
-
-        near = ndimage.distance_transform_edt(~todo[r0:r1, c0:c1]) <= grow
+        near = _disk_dilation(todo[r0:r1, c0:c1], grow)
         atol = 1e-9 * float(np.abs(chief).max())
         rho = grid.pupil_radius_mm
         projected = getattr(state.scene, "radiance_projected", None)
@@ -736,6 +736,33 @@ def _disk_structure(radius_px: int) -> NDArray[np.bool_]:
     """A disk of ``radius_px`` pixels for binary dilation."""
     k = np.arange(-radius_px, radius_px + 1)
     return (k[:, None] ** 2 + k[None, :] ** 2) <= radius_px * radius_px
+
+
+def _disk_dilation(mask: NDArray[np.bool_], radius_px: int) -> NDArray[np.bool_]:
+    """Every pixel within ``radius_px`` (Euclidean, whole pixels) of a True pixel of
+    ``mask``: the binary dilation by :func:`_disk_structure` (nothing outside ``mask``
+    counts), which is also the set a Euclidean distance transform puts at ≤ ``radius_px``.
+
+    Built from rows: ``wide[k]`` dilates ``mask`` along x by ±k, and row offset dy takes
+    ``wide[⌊√(r² − dy²)⌋]`` — about 4r + 3 whole-array ORs of booleans, where the distance
+    transform of the main job's refined box took ~12 ms of the one engine thread a view
+    (BENCHMARKS.md, main job, 2026-11-27). Exactly the same pixels: the offsets (dy, dx)
+    taken are those with dy² + dx² ≤ r² (tests/hw_mocks/test_sim_camera_fast.py).
+    """
+    r = int(radius_px)
+    h, w = mask.shape
+    wide = [np.array(mask, dtype=bool)]
+    for k in range(1, min(r, w - 1) + 1):
+        grown = wide[-1].copy()
+        grown[:, k:] |= mask[:, :-k]
+        grown[:, :-k] |= mask[:, k:]
+        wide.append(grown)
+    out = wide[-1].copy()  # dy = 0: the full width ±r
+    for dy in range(1, min(r, h - 1) + 1):
+        row = wide[min(math.isqrt(r * r - dy * dy), len(wide) - 1)]
+        out[dy:] |= row[:-dy]
+        out[:-dy] |= row[dy:]
+    return out
 
 
 def _option(options: dict[str, Any], key: str, kind: type, default: Any, url: str) -> Any:

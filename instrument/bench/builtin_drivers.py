@@ -11,7 +11,10 @@ code reaches them only by the strings here and their URL schemes (``simcam://``,
 
 from __future__ import annotations
 
+import inspect
+import math
 from typing import Any
+from urllib.parse import parse_qsl, urlsplit
 
 from drivers.errors import ConnectionFailed
 from instrument.bench.driver_registry import Device, DriverEntry, Emulator, Option
@@ -54,7 +57,32 @@ def _kind_kwargs(spec: DeviceSpec) -> dict[str, Any]:
 
 
 def _open_apt(cls: type, spec: DeviceSpec) -> Device:
-    return cls(spec.url, stage=spec.stage or "K10CR1", **_axis_kwargs(spec))
+    kw = _axis_kwargs(spec)
+    if spec.url.split("://", 1)[0] == "simapt":
+        kw = _paced_by_emulator(cls, spec.url, kw, ("rts_settle_s", "flush_s"))
+    return cls(spec.url, stage=spec.stage or "K10CR1", **kw)
+
+
+def _paced_by_emulator(cls: type, url: str, kw: dict[str, Any],
+                       pauses: tuple[str, ...]) -> dict[str, Any]:
+    """``kw`` with the driver's default ``pauses`` divided by the emulator's ``speed``.
+
+    The pauses a driver makes on opening for the device's sake (the APT document's RTS
+    cycle, the wait for status messages already in flight) are device time; an emulator
+    URL's ``speed=N`` runs the emulated controller N times faster than the wall clock, so
+    they pass N times faster too (ADR 0115). A pause the profile sets is kept as set.
+    """
+    try:
+        speed = float(dict(parse_qsl(urlsplit(url).query)).get("speed", 1.0))
+    except ValueError:
+        return kw  # the emulator names the bad option when it opens
+    if not (math.isfinite(speed) and speed > 1.0):
+        return kw
+    params = inspect.signature(cls).parameters
+    scaled = {name: float(params[name].default) / speed for name in pauses
+              if name not in kw and name in params
+              and isinstance(params[name].default, float)}
+    return kw | scaled
 
 
 def _open_axis_with_kind(cls: type, spec: DeviceSpec) -> Device:

@@ -39,6 +39,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from instrument.run.frame_chunks import encode_frames
 from instrument.run.journal import Journal
 from instrument.run.layout import (
     FLOAT_FIELDS,
@@ -382,8 +383,14 @@ class RunStore:
         n0 = self.n_frames
         n1 = n0 + len(frames)
         ds.resize(n1, axis=0)
+        # compressed on parallel threads without the GIL, to HDF5's own bytes
+        # (instrument.run.frame_chunks); None: h5py's filters do it
+        chunks = encode_frames([f.data for f in frames], ds)
         for k, f in enumerate(frames):
-            ds[n0 + k] = f.data
+            if chunks is None:
+                ds[n0 + k] = f.data
+            else:
+                ds.id.write_direct_chunk((n0 + k, *(0,) * (ds.ndim - 1)), chunks[k])
         cols = {
             "frame_point": [index] * len(frames),
             "frame_exposure_us": [f.exposure_us for f in frames],

@@ -9,10 +9,19 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from drivers.base import PixelFormat, Roi
 from hw_mocks.sim import lens
-from hw_mocks.sim.camera import OpticsParams, SimulatedCamera, open_from_url
+from hw_mocks.sim.camera import (
+    OpticsParams,
+    SimulatedCamera,
+    _disk_dilation,
+    _disk_structure,
+    open_from_url,
+)
 from hw_mocks.sim.goniometer_scene import GoniometerScene, brdf_from_model
 from hw_mocks.sim.sensor import SensorParams
 from hw_mocks.sim.world import VirtualBench, reset_worlds
@@ -212,3 +221,22 @@ def test_pupil_bundle_projections_are_the_rays():
     assert cos_b.shape == (10, 37)
     np.testing.assert_allclose(project(forward), dirs @ forward, rtol=0.0,
                                atol=4.0 * 2.0**-52)
+
+
+@settings(max_examples=150, deadline=None)
+@given(mask=hnp.arrays(np.bool_, hnp.array_shapes(min_dims=2, max_dims=2, min_side=1,
+                                                   max_side=48),
+                       elements=st.sampled_from([False, False, False, False, True])),
+       radius=st.integers(0, 60))
+def test_the_refined_region_is_the_disk_dilation_and_the_distance_transform(mask, radius):
+    """The fast renderer grows its refined region row by row (``_disk_dilation``): the same
+    pixels as the reference's disk dilation and the distance transform ≤ radius it
+    replaces, at every radius (wider than the mask too) and with no pixel lit."""
+    from scipy import ndimage
+
+    got = _disk_dilation(mask, radius)
+    assert got.dtype == np.bool_ and got.shape == mask.shape
+    want = ndimage.binary_dilation(mask, structure=_disk_structure(radius)) if radius else mask
+    assert np.array_equal(got, want)
+    if mask.any():
+        assert np.array_equal(got, ndimage.distance_transform_edt(~mask) <= radius)

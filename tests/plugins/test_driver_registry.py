@@ -285,3 +285,21 @@ def test_an_environment_without_scatterlabs_entry_points_is_told_to_reinstall():
 
     message = DriverRegistry().unknown_driver_message("thorlabs_apt")
     assert "entry points are missing" in message and "pip install -e ." in message
+
+
+@pytest.mark.parametrize(("query", "options", "expected"), [
+    ("speed=20", "", (0.05 / 20, 0.2 / 20)),   # the emulated controller's clock
+    ("speed=20", "options = { flush_s = 0.3 }\n", (0.05 / 20, 0.3)),  # as the profile says
+    ("", "", (0.05, 0.2)),                     # real time: the APT document's pauses
+    ("step=0.01", "", (0.05, 0.2)),            # a stepped clock has no speed
+])
+def test_an_emulated_apt_controller_is_opened_with_its_pauses_in_its_own_time(
+        query, options, expected):
+    """The open sequence's RTS cycle and in-flight wait are device time (ADR 0115)."""
+    profile = parse_profile(
+        '[bench]\nname = "b"\n[devices.sample_theta]\ndriver = "thorlabs_apt"\n'
+        f'url = "simapt://pace_{unique("apt")}?model=K10CR1&{query}"\n'
+        f'stage = "K10CR1"\n{options}')
+    with open_device(profile.device("sample_theta")) as axis:
+        assert (axis._rts_settle_s, axis._flush_s) == pytest.approx(expected, rel=1e-12)
+        assert axis.info is not None and axis.info.model.startswith("K10CR1")
