@@ -124,14 +124,19 @@ def test_messages_clear_when_they_stop_applying(qtbot, make_window, fast_bench_f
     _connect(qtbot, w)
     bp = w.bench_panel
     det = bp.panels["detector_theta"]
-    det.home.click()
-    qtbot.waitUntil(lambda: "homing" in bp.message.text(), timeout=60000)
+    clock = registry.get("simsmc", "detector_theta").clock
+    # Emulated time stands still while the message is looked for: on a slow machine the
+    # home (or move) would otherwise end before the GUI shows that it is under way.
+    with clock.held():
+        det.home.click()
+        qtbot.waitUntil(lambda: "homing" in bp.message.text(), timeout=60000)
     qtbot.waitUntil(lambda: bp.message.text() == "", timeout=60000)
     assert _state(w, "detector_theta").value("homed")
     _home(qtbot, w, "sample_theta")
     det.target.setValue(40.0)
-    det.go.click()
-    qtbot.waitUntil(lambda: "moving" in bp.message.text(), timeout=60000)
+    with clock.held():
+        det.go.click()
+        qtbot.waitUntil(lambda: "moving" in bp.message.text(), timeout=60000)
     qtbot.waitUntil(lambda: bp.message.text() == "", timeout=60000)
     # the detector in the beam: light on is refused, until the detector moves away
     det.target.setValue(3.0)

@@ -53,7 +53,9 @@ def test_the_basler_panel_shows_and_sets_the_cameras_settings(qtbot, make_window
     panel.bit_depth.activated.emit(k)
     qtbot.waitUntil(lambda: session.states()["camera"].values.get("bit_depth") == 16,
                     timeout=T)
-    assert cam.genicam.get("PixelFormat") == "Mono16" and "16-bit" in panel.summary.text()
+    assert cam.genicam.get("PixelFormat") == "Mono16"
+    # the panel shows the state once the GUI thread has it (the session's dict is ahead)
+    qtbot.waitUntil(lambda: "16-bit" in panel.summary.text(), timeout=T)
     k = panel.trigger.findData("hardware")
     panel.trigger.setCurrentIndex(k)
     panel.trigger.activated.emit(k)

@@ -287,7 +287,7 @@ def test_plan_target_uncertainty_on_two_workers_prints_the_serial_answer(client,
     here = capsys.readouterr().out
     # A worker the nanny restarted (after a heartbeat missed on a loaded box) takes a moment
     # to join again; the sweep itself would run on one, but the printed count would differ.
-    client.wait_for_workers(2, timeout=120)
+    client.wait_for_workers(2, timeout=300)
     assert main([*argv, "--scheduler", client.scheduler.address]) == 0
     there = capsys.readouterr().out
     assert "Dask cluster: 2 worker(s)" in there
