@@ -32,8 +32,8 @@ the number of trials it implies differed from the field's by a factor that depen
 wall (``benchmarks/bench_lightfield_null.py``, BENCHMARKS.md).  Nothing is fitted to seeds:
 ``L₁`` and ``L₂`` are computed per scan from the scan's own filter and noise power.
 
-``Λ`` is evaluated on a coarse sub-grid of the search (:data:`COARSE_Z` depths and
-:data:`COARSE_Y` positions across, evenly spread, the ends included) and interpolated
+``Λ`` is evaluated on a coarse sub-grid of the search (``COARSE_Z`` depths and
+``COARSE_Y`` positions across, evenly spread, the ends included) and interpolated
 linearly in its logarithm against ``ln|z|`` (it varies as a power of the depth:
 ``√Λ_yy ∝ 1/δy ∝ 1/|z|``); the integrals are sums over the search grid's samples that the
 caller marks as searched.

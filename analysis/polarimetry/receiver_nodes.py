@@ -24,7 +24,7 @@ plane of incidence. The reference of a node's beam is the central ray's global s
 normal and the central beam) made perpendicular to the node's direction and normalised;
 the same on the incident side (the beam's rays are parallel unless it diverges). For an
 in-plane bench that axis is the goniometer's rotation axis, the reference of the
-simulated world's Stokes bases too (:func:`hw_mocks.sim.polarisation.transverse_basis`).
+simulated world's Stokes bases too (``hw_mocks.sim.polarisation.transverse_basis``).
 A node's own s_g differs from it by an angle ψ ≈ Δ cot θ about the beam for an offset Δ
 across the plane (about 0.014 rad at the aperture's rim, 5 mm at 300 mm, θr = 30°); the
 m₀₁/m₀₂ mixing that follows, 2ψ, averages out in first order but not in second (2ψ² of
