@@ -19,12 +19,13 @@ import threading
 from dataclasses import dataclass, field
 from typing import Protocol
 
-__all__ = ["Delivery", "FaultInjector", "FaultKind", "FaultRule", "FaultSchedule", "FaultTarget"]
+__all__ = ["Delivery", "FaultInjector", "FaultKind", "FaultRule", "FaultSchedule", "FaultTarget",
+           "HostWriteHold"]
 
 
 class FaultKind(enum.Enum):
     DROP = "drop"                  # the reply never arrives
-    DELAY = "delay"                # it arrives `delay_s` late (past the driver's timeout)
+    DELAY = "delay"                # it arrives `delay_s` late, or once `hold` is set
     SPLIT = "split"                # it arrives in `chunks` pieces `gap_s` apart
     CORRUPT = "corrupt"            # `nbytes` random bit flips
     GARBAGE = "garbage"            # `nbytes` random bytes before it
@@ -49,6 +50,16 @@ class FaultRule:
     hit, so a test can aim at one command's reply (the SMC100's ``TE``, a Zaber move's
     ``BUSY``) without counting the replies before it: over a pty a loaded host may time
     out a query and retry it, which adds a reply and would move a counted fault.
+
+    ``hold`` (``DELAY`` only; ``delay_s`` is then not used): the frame, and everything
+    sent after it, waits on the wire until the test sets this event, however long that
+    is. A reply late by ``delay_s`` of wall-clock time is late only if the host's reading
+    thread ran in time, which a loaded machine does not promise; a held reply is late by
+    construction: the test lets it go once the driver has given up. A hold never set is
+    a lost reply (the link stays open). ``until_host_writes`` (``DELAY`` only): held until
+    the host next writes to the device, so that a retried query's late first reply
+    arrives just ahead of the retry's own, whatever the load (the host writes again only
+    after it gave up on the first).
     """
 
     kind: enum.Enum  # a FaultKind, or an injector's own kind (e.g. USB faults)
@@ -61,6 +72,8 @@ class FaultRule:
     nbytes: int = 1
     code: str | None = None
     on: bytes | None = None
+    hold: threading.Event | None = None
+    until_host_writes: bool = False
     fired: int = 0
     _base: int = field(default=0, repr=False)
     _matched: int = field(default=0, repr=False)
@@ -70,14 +83,26 @@ class FaultRule:
             raise ValueError("a rule needs nth >= 1 or 0 < probability <= 1")
         if self.nth is not None and self.nth < 1:
             raise ValueError("nth counts from 1")
+        if (self.hold is not None or self.until_host_writes) and self.kind is not FaultKind.DELAY:
+            raise ValueError("only a DELAY fault can hold its frame")
+        if self.hold is not None and self.until_host_writes:
+            raise ValueError("a frame is held until an event or until the host writes, "
+                             "not both")
+
+
+class HostWriteHold(threading.Event):
+    """The hold of a ``until_host_writes`` fault: the link sets it when the host next
+    writes to the device."""
 
 
 @dataclass(frozen=True)
 class Delivery:
-    """A piece of bytes to deliver ``delay_s`` after the frame was produced."""
+    """A piece of bytes to deliver ``delay_s`` after the frame was produced and, where
+    ``hold`` is given, not before that event is set."""
 
     delay_s: float
     data: bytes
+    hold: threading.Event | None = None
 
 
 class FaultSchedule:
@@ -183,7 +208,10 @@ class FaultInjector(FaultSchedule):
         if kind is FaultKind.DROP:
             return []
         if kind is FaultKind.DELAY:
-            return [Delivery(d.delay_s + rule.delay_s, d.data) for d in out]
+            hold = HostWriteHold() if rule.until_host_writes else rule.hold
+            if hold is not None:  # late by its release, not by a time
+                return [Delivery(d.delay_s, d.data, hold) for d in out]
+            return [Delivery(d.delay_s + rule.delay_s, d.data, d.hold) for d in out]
         if kind is FaultKind.SPLIT:
             k = max(1, min(rule.chunks, len(data)))
             cuts = sorted(self._rng.sample(range(1, len(data)), k - 1)) if k > 1 else []
@@ -195,7 +223,8 @@ class FaultInjector(FaultSchedule):
             for _ in range(rule.nbytes):
                 if buf:
                     buf[self._rng.randrange(len(buf))] ^= 1 << self._rng.randrange(8)
-            return [Delivery(out[0].delay_s if out else 0.0, bytes(buf))]
+            return [Delivery(out[0].delay_s if out else 0.0, bytes(buf),
+                             out[0].hold if out else None)]
         if kind is FaultKind.GARBAGE:
             junk = bytes(self._rng.randrange(256) for _ in range(rule.nbytes))
             return [Delivery(0.0, junk), *out]

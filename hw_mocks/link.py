@@ -22,15 +22,21 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from hw_mocks import registry
 from hw_mocks.emulator import FirmwareEmulator
+from hw_mocks.faults import HostWriteHold
 
 __all__ = ["EmulatedSerial", "OutboundQueue"]
 
 
 class OutboundQueue:
-    """Bytes in flight from the device to the host, released at their arrival time."""
+    """Bytes in flight from the device to the host, released at their arrival time.
+
+    A frame held by a ``DELAY`` fault (:attr:`hw_mocks.faults.FaultRule.hold`) has no
+    arrival time until its event is set: it arrives when the queue first sees the event
+    set, and nothing behind it overtakes it.
+    """
 
     def __init__(self) -> None:
-        self._items: deque[tuple[float, bytes]] = deque()
+        self._items: deque[tuple[float, bytes, threading.Event | None]] = deque()
         self._last = 0.0
         self._lock = threading.Lock()
 
@@ -41,8 +47,35 @@ class OutboundQueue:
                 for delivery in emulator.faults.process(frame, emulator):
                     # A wire keeps order: nothing overtakes a late frame.
                     at = max(now + delivery.delay_s, self._last)
-                    self._items.append((at, delivery.data))
+                    self._items.append((at, delivery.data, delivery.hold))
                     self._last = at
+
+    def host_wrote(self) -> None:
+        """The host wrote to the device: frames held until then
+        (:class:`~hw_mocks.faults.HostWriteHold`) go."""
+        with self._lock:
+            for _, _, hold in self._items:
+                if isinstance(hold, HostWriteHold):
+                    hold.set()
+
+    def _release_held(self) -> None:
+        """Stamp the held frames whose event is now set with an arrival time (the lock is
+        held by the caller)."""
+        now = time.monotonic()
+        for i, (at, data, hold) in enumerate(self._items):
+            if hold is None:
+                continue
+            if not hold.is_set():
+                return  # it and what is behind it wait
+            at = max(at, now)
+            self._items[i] = (at, data, None)
+            self._last = max(self._last, at)
+            for j in range(i + 1, len(self._items)):  # nothing behind it arrives earlier
+                at_j, data_j, hold_j = self._items[j]
+                self._items[j] = (max(at_j, at), data_j, hold_j)
+
+    def _first_arrived(self, now: float) -> bool:
+        return bool(self._items) and self._items[0][2] is None and self._items[0][0] <= now
 
     def take(self, n: int, *, until: float | None = None) -> bytes:
         """Up to ``n`` bytes that have arrived by now (and by ``until``, when given).
@@ -53,32 +86,45 @@ class OutboundQueue:
         in time on a loaded machine, and a test of the late-reply recovery would pass or
         fail with the machine's load.
         """
-        now = time.monotonic() if until is None else min(time.monotonic(), until)
         out = bytearray()
         with self._lock:
-            while self._items and len(out) < n and self._items[0][0] <= now:
-                at, data = self._items.popleft()
+            self._release_held()
+            now = time.monotonic() if until is None else min(time.monotonic(), until)
+            while len(out) < n and self._first_arrived(now):
+                at, data, _ = self._items.popleft()
                 room = n - len(out)
                 out += data[:room]
                 if len(data) > room:
-                    self._items.appendleft((at, data[room:]))
+                    self._items.appendleft((at, data[room:], None))
         return bytes(out)
 
     def arrived(self) -> int:
-        now = time.monotonic()
         with self._lock:
-            return sum(len(d) for at, d in self._items if at <= now)
+            self._release_held()
+            now = time.monotonic()
+            total = 0
+            for at, data, hold in self._items:
+                if hold is not None or at > now:
+                    break
+                total += len(data)
+            return total
 
     def next_arrival(self) -> float | None:
+        """When the first frame in flight arrives (``None``: nothing in flight, or it is
+        held)."""
         with self._lock:
-            return self._items[0][0] if self._items else None
+            self._release_held()
+            if not self._items or self._items[0][2] is not None:
+                return None
+            return self._items[0][0]
 
     def drop_arrived(self) -> int:
         """Discard what has reached the host buffer (what reset_input_buffer does)."""
-        now = time.monotonic()
         dropped = 0
         with self._lock:
-            while self._items and self._items[0][0] <= now:
+            self._release_held()
+            now = time.monotonic()
+            while self._first_arrived(now):
                 dropped += len(self._items.popleft()[1])
         return dropped
 
@@ -145,6 +191,7 @@ class EmulatedSerial(SerialBase):
         self._check()
         data = bytes(data)
         if self._baud_ok():
+            self._queue.host_wrote()
             self._queue.push(self.emulator.receive(data), self.emulator)
         return len(data)
 

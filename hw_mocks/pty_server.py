@@ -51,6 +51,7 @@ class PtyServer:
                 except OSError:
                     data = b""
                 if data and not self.emulator.faults.disconnected:
+                    self._queue.host_wrote()
                     self._queue.push(self.emulator.receive(data), self.emulator)
             if self.emulator.faults.disconnected:
                 continue  # a dead device neither reads nor answers

@@ -529,6 +529,10 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
         if not deliveries:
             self._in_btag = btag    # lost on the wire: the device thinks it was sent
             return
+        if any(d.hold is not None for d in deliveries):
+            raise ValueError("a held DELAY fault is for serial links; on USB a bulk-IN read "
+                             "never takes a transfer that arrives after its deadline, so "
+                             "delay_s alone makes a reply late")
         # A delayed or split transfer is complete only when its last piece arrives.
         at = time.monotonic() + max(d.delay_s for d in deliveries)
         wire = b"".join(d.data for d in deliveries)
@@ -551,7 +555,10 @@ class EmulatedUsbtmcBackend(usb.backend.IBackend):
                     raise _usb_error("Invalid parameter", _LIBUSB_INVALID, errno.EINVAL)
                 if self.in_halted:
                     raise _stall()
-                now = time.monotonic()
+                # A transfer that arrives after this read's deadline is not part of it,
+                # even when the reading thread was descheduled past the deadline and only
+                # looks now: a late reply stays late however loaded the host.
+                now = min(time.monotonic(), deadline)
                 if self._packets and self._packets[0][0] <= now:
                     return self._take_packets(buff, now)
                 wait = deadline - now

@@ -9,11 +9,15 @@ the command; anything else propagates and fails the test.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import serial
+
 from drivers.errors import ConnectionFailed, DeviceError, DeviceTimeout, ProtocolError
 from hw_mocks.faults import FaultInjector, FaultKind
+from tests.waiting import wait_for
 
 #: The fault kinds of a "random faults on a long session" test.
 SESSION_FAULTS = (FaultKind.DROP, FaultKind.GARBAGE, FaultKind.SPLIT, FaultKind.UNSOLICITED,
@@ -96,3 +100,21 @@ def unplug_and_replug(device, faults: FaultInjector, transport: str,
         return reopen()
     faults.reconnect()
     return device
+
+
+def held_reply(faults: FaultInjector, *, on: bytes | None = None) -> threading.Event:
+    """Hold the next reply (the next one containing ``on``) on the wire until the returned
+    event is set: a reply that is late whatever the machine's load, where one late by a
+    wall-clock delay arrives in time when the driver's thread is descheduled."""
+    release = threading.Event()
+    faults.schedule(FaultKind.DELAY, nth=1, hold=release, on=on)
+    return release
+
+
+def let_held_reply_arrive(release: threading.Event, port: serial.SerialBase) -> None:
+    """Let a :func:`held_reply` go and return once it is in the host's input buffer
+    (``port``, the driver's side of the link), so the driver's next command meets it as
+    stale input, as it would a reply that came after the driver gave up."""
+    release.set()
+    wait_for(lambda: port.in_waiting > 0,  # type: ignore[attr-defined]  # every real port has it
+             what="the held reply in the host's input buffer")

@@ -10,7 +10,6 @@ the command and the cause, always within a bounded time.
 from __future__ import annotations
 
 import pickle
-import time
 
 import pytest
 
@@ -36,7 +35,7 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
-from tests.drivers.fault_checks import corrupted_reads
+from tests.drivers.fault_checks import corrupted_reads, held_reply, let_held_reply_arrive
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
@@ -450,11 +449,10 @@ def test_corrupted_replies_are_retried_or_decoded_never_hang(faulty):
     assert got.right >= 15 and got.right + got.wrong == 30
 
 
-@pytest.mark.parametrize("kind, params", [
-    (FaultKind.DROP, {}),
-    (FaultKind.DELAY, {"delay_s": 0.3}),
-])
-def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
+@pytest.mark.parametrize("late", [False, True], ids=["lost", "late"])
+def test_lost_te_reply_is_a_typed_error_never_retried(faulty, late):
+    """PA's check ``TE`` is lost, or late (held on the wire until the driver has given
+    up, then let in ahead of the next command)."""
     axis, faults = faulty
     axis.reply_timeout = 0.1
     # the readiness queries before PA (TS, TP) may time out on a loaded host's pty and be
@@ -462,15 +460,18 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, kind, params):
     # than at the third reply, which a retry would move onto TP
     axis.retries = QUERY_RETRIES
     before = len(emulator_of(axis).received_log)
-    faults.schedule(kind, nth=1, on=b"TE", **params)
+    release = held_reply(faults, on=b"TE") if late else None
+    if release is None:
+        faults.schedule(FaultKind.DROP, nth=1, on=b"TE")
     with pytest.raises(DeviceTimeout) as info:
         axis.move_to(3.0)
     assert info.value.command == "1PA3" and info.value.device == "beh"
     assert "TE" in str(info.value)
+    if release is not None:
+        let_held_reply_arrive(release, axis._channel.port)  # the host's end of the link
     sent = bytes(emulator_of(axis).received_log[before:])
     assert sent.count(b"1TE\r\n") == 1  # reading TE clears it: never asked twice
     # The documented recovery: the outcome is learnt from status; the move did start.
-    time.sleep(0.35)
     axis.wait(60)
     assert axis.position == pytest.approx(3.0, abs=1e-6)
 

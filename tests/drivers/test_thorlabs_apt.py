@@ -493,9 +493,10 @@ def test_fault_delay_past_timeout_retries_and_discards_the_late_reply():
     motor = open_url(timeout=0.1, stage="PRM1-Z8")
     motor.home(timeout=5.0)
     emu = registry.get("simapt", "ax")
-    emu.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.15)
+    # late past any timeout: it arrives when the host retries, just ahead of the retry's
+    # reply, however loaded the host
+    emu.faults.schedule(FaultKind.DELAY, nth=1, until_host_writes=True)
     assert motor.position == pytest.approx(0.0, abs=1e-3)
-    time.sleep(0.2)
     count = motor.unsolicited_count
     motor.move_to(3.0, wait=True, timeout=5.0)
     assert motor.position == pytest.approx(3.0, abs=motor.position_tolerance)
@@ -662,7 +663,9 @@ def test_unplugged_mid_move_is_typed_and_bounded_then_the_move_is_found_finished
 def test_lost_replies_on_both_transports_are_retried(apt_on):
     motor, emu = apt_on("lost", timeout=0.1)
     count = motor.unsolicited_count
-    for kind, params in [(FaultKind.DROP, {}), (FaultKind.DELAY, {"delay_s": 0.15})]:
+    # the late reply arrives when the host retries (ahead of the retry's reply), so the
+    # first attempt has timed out whatever the load
+    for kind, params in [(FaultKind.DROP, {}), (FaultKind.DELAY, {"until_host_writes": True})]:
         emu.faults.schedule(kind, nth=1, **params)
         before = emu.received_log.count(REQ_VEL)
         assert motor.velocity == pytest.approx(10.0, rel=1e-5)

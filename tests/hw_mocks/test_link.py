@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
+import serial
 from serial.serialutil import SerialException
 
 from hw_mocks import registry
 from hw_mocks.faults import FaultKind
-from tests.hw_mocks.echo_emulator import EchoSerial
+from hw_mocks.pty_server import PtyServer
+from tests.hw_mocks.echo_emulator import EchoEmulator, EchoSerial
 
 
 def open_echo(name="e1", **kw):
@@ -57,15 +60,69 @@ def test_a_fault_aimed_at_a_reply_counts_only_the_replies_that_contain_its_bytes
 
 
 def test_delay_keeps_order_and_arrives_late():
+    """A delayed reply arrives no earlier than its delay, and the reply after it waits
+    behind it. (Only the lower bound is a fact; how much later a loaded host reads it is
+    the machine's business.)"""
     port = open_echo()
     port.emulator.faults.schedule(FaultKind.DELAY, nth=1, delay_s=0.1)
-    port.write(b"a\n")
     t0 = time.monotonic()
-    assert port.read(10) == b""  # 50 ms timeout: nothing yet
+    port.write(b"a\n")
     port.write(b"b\n")
-    port.timeout = 0.5
+    port.timeout = 60.0
     assert port.read(len(b"OK a\r\nOK b\r\n")) == b"OK a\r\nOK b\r\n"
-    assert time.monotonic() - t0 >= 0.09
+    assert time.monotonic() - t0 >= 0.1
+
+
+def test_a_held_reply_and_those_behind_it_arrive_only_when_released():
+    """``hold``: late by construction, however long the host waits or however late it
+    looks; released, it arrives first and the wire's order is kept."""
+    port = open_echo()
+    faults = port.emulator.faults
+    release = threading.Event()
+    faults.schedule(FaultKind.DELAY, nth=1, hold=release)
+    port.write(b"a\n")
+    port.write(b"b\n")
+    assert port.read(10) == b"" and port.in_waiting == 0
+    port.reset_input_buffer()  # drops only what has arrived: nothing
+    release.set()
+    assert port.in_waiting == len(b"OK a\r\nOK b\r\n")
+    port.timeout = 60.0
+    assert port.read(len(b"OK a\r\nOK b\r\n")) == b"OK a\r\nOK b\r\n"
+    port.write(b"c\n")  # the hold was for one frame
+    assert port.read_until(b"\r\n") == b"OK c\r\n"
+    assert faults.log == [(1, FaultKind.DELAY)]
+
+
+def test_a_reply_held_until_the_host_writes_arrives_ahead_of_the_next_reply():
+    """``until_host_writes``: a retried query's first reply comes only when the host has
+    given up on it and asked again, just ahead of the retry's reply."""
+    port = open_echo()
+    port.emulator.faults.schedule(FaultKind.DELAY, nth=1, until_host_writes=True)
+    port.write(b"a\n")
+    assert port.read(10) == b""  # however long the host waits
+    port.write(b"a again\n")
+    port.timeout = 60.0
+    assert port.read_until(b"again\r\n") == b"OK a\r\nOK a again\r\n"
+
+
+def test_only_a_delay_can_hold_its_frame():
+    with pytest.raises(ValueError, match="DELAY"):
+        open_echo().emulator.faults.schedule(FaultKind.DROP, nth=1, hold=threading.Event())
+
+
+def test_a_held_reply_on_a_pty_reaches_the_host_only_when_released():
+    """The pty server's thread keeps a held frame back as the in-process link does."""
+    emulator = EchoEmulator("pty-held")
+    with PtyServer(emulator) as server, serial.Serial(server.path, timeout=0.05) as port:
+        release = threading.Event()
+        emulator.faults.schedule(FaultKind.DELAY, nth=1, hold=release)
+        port.write(b"a\n")
+        port.write(b"b\n")
+        time.sleep(0.2)  # time for the server's thread to run; a held frame stays held
+        assert port.in_waiting == 0  # however long that takes on a loaded box
+        release.set()
+        port.timeout = 60.0
+        assert port.read(len(b"OK a\r\nOK b\r\n")) == b"OK a\r\nOK b\r\n"
 
 
 def test_split_garbage_corrupt_unsolicited():
