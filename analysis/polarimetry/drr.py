@@ -313,6 +313,9 @@ def normalise(m: ArrayLike, cov: ArrayLike) -> tuple[NDArray[np.float64], NDArra
     v = mat.ravel()
     jac = np.eye(16) / m00
     jac[:, 0] -= v / m00**2
+    # n00 = m00/m00 is 1 identically: its row is zero, not 1/m00 − m00/m00², which rounds
+    # to ±1 ulp for some m00 (a variance of 1e-18 where there is none).
+    jac[0, :] = 0.0
     return (mat / m00), jac @ c @ jac.T
 
 

@@ -18,6 +18,7 @@ from analysis.polarimetry import (
     instrument_matrix,
     linear_polariser,
     linear_retarder,
+    normalise,
     pem_instrument_rows,
     reduce,
 )
@@ -57,6 +58,20 @@ def test_normalised_matrix_and_its_covariance():
     np.testing.assert_allclose(est.m_normalised, m / m[0, 0], atol=1e-12)
     assert est.sigma_normalised[0, 0] == 0.0
     assert np.all(est.sigma_normalised.ravel()[1:] > 0)
+
+
+def test_the_normalised_m00_has_no_variance_whatever_the_rounding():
+    """n00 = m00/m00 ≡ 1: its row and column of the covariance are zero for every m00,
+    where 1/m00 − m00/m00² rounds to ±1 ulp for some (seen: σ = 1.8e-18 from an SVD whose
+    m00 differed in the last bit)."""
+    rng = np.random.default_rng(19)
+    cov = np.eye(16) + 0.1
+    for m00 in rng.uniform(1e-3, 2.0, 500):
+        m = rng.uniform(-1.0, 1.0, (4, 4))
+        m[0, 0] = m00
+        mn, cn = normalise(m, cov)
+        assert mn[0, 0] == 1.0
+        assert not np.any(cn[0]) and not np.any(cn[:, 0])
 
 
 def test_pulls_are_standard_normal_over_seeds():
