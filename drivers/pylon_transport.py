@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -282,11 +283,26 @@ class PylonTransport(GenICamTransport):
             raise DeviceTimeout(f"the camera was not ready for a trigger within {timeout:g} s",
                                 device=self.name, command="TriggerSoftware")
 
+    #: Pause between two looks for a grab result while :meth:`retrieve` waits.
+    RETRIEVE_POLL_S = 0.001
+
     def retrieve(self, timeout: float) -> GrabbedBuffer:
+        """The next grab result, waiting at most ``timeout`` s.
+
+        pylon is asked without waiting (``RetrieveResult(0)``), every
+        :data:`RETRIEVE_POLL_S`, until the deadline: pylon's own timed wait once waited
+        forever (hardware trigger, after a camera was removed and reopened in the same
+        process; the emulated camera, the call idle in ``WaitObjects::WaitForAny``), and a
+        wait that ignores its timeout is one no caller can end.
+        """
         pylon = self._pylon
-        ms = max(0, round(timeout * 1000))
-        result = self._call("RetrieveResult", self._cam.RetrieveResult, ms,
-                            pylon.TimeoutHandling_Return)
+        deadline = time.monotonic() + max(timeout, 0.0)
+        while True:
+            result = self._call("RetrieveResult", self._cam.RetrieveResult, 0,
+                                pylon.TimeoutHandling_Return)
+            if (result is not None and result.IsValid()) or time.monotonic() >= deadline:
+                break
+            time.sleep(min(self.RETRIEVE_POLL_S, max(deadline - time.monotonic(), 0.0)))
         if result is None or not result.IsValid():
             if self._cam.IsCameraDeviceRemoved():
                 raise self._removed("RetrieveResult")

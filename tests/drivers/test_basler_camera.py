@@ -9,7 +9,9 @@ removal callback fires while the device stays, so the reconnect finds it again).
 
 from __future__ import annotations
 
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +29,7 @@ from tests.drivers.basler_emulation import (
     write_frame_file,
 )
 from tests.drivers.camera_contract import CameraContract, closing_factory
+from tests.waiting import EVENT_TIMEOUT_S
 
 require_pylon()
 
@@ -280,3 +283,25 @@ def test_a_failed_open_leaves_the_camera_free():
         open_basler_camera(EMULATED_SERIAL, name="cam", emulation=True, trigger_mode="often")
     with open_emulated() as cam:  # not held by the failed attempts
         assert cam.acquire(1)[0].data.shape == (SMALL.height, SMALL.width)
+
+
+def test_a_hardware_trigger_wait_ends_after_a_removed_camera_was_reopened():
+    """A random test order found it: right after the removal test, the next test's wait
+    for a hardware-triggered frame never ended (pylon's timed ``RetrieveResult`` idle in
+    its wait far past the 0.2 s asked, where pytest-timeout cannot reach). The two tests
+    run in that order in a child pytest, so that a wait that never ends fails this test
+    (the child is killed after a generous bound) instead of hanging the suite."""
+    root = Path(__file__).parents[2]
+    here = Path(__file__).relative_to(root).as_posix()
+    ids = [f"{here}::test_removed_camera_is_a_connection_failure_then_reconnects_by_serial",
+           f"{here}::test_hardware_trigger_is_configured_and_a_missing_pulse_times_out"]
+    try:
+        child = subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:randomly",
+             "-p", "no:cacheprovider", *ids],
+            cwd=root, capture_output=True, text=True, timeout=4 * EVENT_TIMEOUT_S)
+    except subprocess.TimeoutExpired as err:
+        raise AssertionError(f"the hardware-trigger wait did not end in "
+                             f"{4 * EVENT_TIMEOUT_S:g} s") from err
+    assert child.returncode == 0, child.stdout[-2000:] + child.stderr[-2000:]
+    assert "2 passed" in child.stdout
