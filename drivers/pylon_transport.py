@@ -290,7 +290,7 @@ class PylonTransport(GenICamTransport):
         """The next grab result, waiting at most ``timeout`` s.
 
         pylon is asked without waiting (``RetrieveResult(0)``), every
-        :data:`RETRIEVE_POLL_S`, until the deadline: pylon's own timed wait once waited
+        ``RETRIEVE_POLL_S`` s, until the deadline: pylon's own timed wait once waited
         forever (hardware trigger, after a camera was removed and reopened in the same
         process; the emulated camera, the call idle in ``WaitObjects::WaitForAny``), and a
         wait that ignores its timeout is one no caller can end.
