@@ -13,6 +13,7 @@ from hw_mocks import registry
 from hw_mocks.faults import FaultKind
 from hw_mocks.pty_server import PtyServer
 from tests.hw_mocks.echo_emulator import EchoEmulator, EchoSerial
+from tests.waiting import wait_for
 
 
 def open_echo(name="e1", **kw):
@@ -118,8 +119,9 @@ def test_a_held_reply_on_a_pty_reaches_the_host_only_when_released():
         emulator.faults.schedule(FaultKind.DELAY, nth=1, hold=release)
         port.write(b"a\n")
         port.write(b"b\n")
-        time.sleep(0.2)  # time for the server's thread to run; a held frame stays held
-        assert port.in_waiting == 0  # however long that takes on a loaded box
+        # both replies made and through the injector (held): none reaches the host
+        wait_for(lambda: emulator.faults.frames_seen >= 2, what="the two replies")
+        assert port.in_waiting == 0
         release.set()
         port.timeout = 60.0
         assert port.read(len(b"OK a\r\nOK b\r\n")) == b"OK a\r\nOK b\r\n"
