@@ -37,6 +37,7 @@ class OutboundQueue:
 
     def __init__(self) -> None:
         self._items: deque[tuple[float, bytes, threading.Event | None]] = deque()
+        self._held = 0  # frames still held: the reads' hot path skips the scan when none
         self._last = 0.0
         self._lock = threading.Lock()
 
@@ -48,12 +49,15 @@ class OutboundQueue:
                     # A wire keeps order: nothing overtakes a late frame.
                     at = max(now + delivery.delay_s, self._last)
                     self._items.append((at, delivery.data, delivery.hold))
+                    self._held += delivery.hold is not None
                     self._last = at
 
     def host_wrote(self) -> None:
         """The host wrote to the device: frames held until then
         (:class:`~hw_mocks.faults.HostWriteHold`) go."""
         with self._lock:
+            if not self._held:
+                return
             for _, _, hold in self._items:
                 if isinstance(hold, HostWriteHold):
                     hold.set()
@@ -61,18 +65,17 @@ class OutboundQueue:
     def _release_held(self) -> None:
         """Stamp the held frames whose event is now set with an arrival time (the lock is
         held by the caller)."""
+        if not self._held:
+            return
         now = time.monotonic()
         for i, (at, data, hold) in enumerate(self._items):
             if hold is None:
                 continue
             if not hold.is_set():
-                return  # it and what is behind it wait
-            at = max(at, now)
-            self._items[i] = (at, data, None)
-            self._last = max(self._last, at)
-            for j in range(i + 1, len(self._items)):  # nothing behind it arrives earlier
-                at_j, data_j, hold_j = self._items[j]
-                self._items[j] = (max(at_j, at), data_j, hold_j)
+                return  # it and what is behind it wait (every read stops at it)
+            self._items[i] = (max(at, now), data, None)
+            self._held -= 1
+            self._last = max(self._last, at, now)
 
     def _first_arrived(self, now: float) -> bool:
         return bool(self._items) and self._items[0][2] is None and self._items[0][0] <= now

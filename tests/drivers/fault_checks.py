@@ -102,19 +102,25 @@ def unplug_and_replug(device, faults: FaultInjector, transport: str,
     return device
 
 
-def held_reply(faults: FaultInjector, *, on: bytes | None = None) -> threading.Event:
-    """Hold the next reply (the next one containing ``on``) on the wire until the returned
-    event is set: a reply that is late whatever the machine's load, where one late by a
-    wall-clock delay arrives in time when the driver's thread is descheduled."""
+def lose_or_hold_reply(faults: FaultInjector, *, late: bool, on: bytes | None = None
+                       ) -> threading.Event | None:
+    """Lose the next reply (the next one containing ``on``), or, ``late``, hold it on the
+    wire until the returned event is set: a reply that is late whatever the machine's
+    load, where one late by a wall-clock delay arrives in time when the driver's thread
+    is descheduled."""
+    if not late:
+        faults.schedule(FaultKind.DROP, nth=1, on=on)
+        return None
     release = threading.Event()
     faults.schedule(FaultKind.DELAY, nth=1, hold=release, on=on)
     return release
 
 
 def let_held_reply_arrive(release: threading.Event, port: serial.SerialBase) -> None:
-    """Let a :func:`held_reply` go and return once it is in the host's input buffer
-    (``port``, the driver's side of the link), so the driver's next command meets it as
-    stale input, as it would a reply that came after the driver gave up."""
+    """Let a held reply (:func:`lose_or_hold_reply`) go and return once it is in the
+    host's input buffer (``port``, the driver's side of the link), so the driver's next
+    command meets it as stale input, as it would a reply that came after the driver gave
+    up."""
     release.set()
     wait_for(lambda: port.in_waiting > 0,  # type: ignore[attr-defined]  # every real port has it
              what="the held reply in the host's input buffer")

@@ -35,7 +35,7 @@ from hw_mocks.faults import FaultKind
 from hw_mocks.firmware.smc100 import Smc100Emulator
 from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
-from tests.drivers.fault_checks import corrupted_reads, held_reply, let_held_reply_arrive
+from tests.drivers.fault_checks import corrupted_reads, let_held_reply_arrive, lose_or_hold_reply
 from tests.drivers.motion_contract import MotionAxisContract
 from tests.drivers.serial_faults import (
     QUERY_FAULTS,
@@ -460,9 +460,7 @@ def test_lost_te_reply_is_a_typed_error_never_retried(faulty, late):
     # than at the third reply, which a retry would move onto TP
     axis.retries = QUERY_RETRIES
     before = len(emulator_of(axis).received_log)
-    release = held_reply(faults, on=b"TE") if late else None
-    if release is None:
-        faults.schedule(FaultKind.DROP, nth=1, on=b"TE")
+    release = lose_or_hold_reply(faults, late=late, on=b"TE")
     with pytest.raises(DeviceTimeout) as info:
         axis.move_to(3.0)
     assert info.value.command == "1PA3" and info.value.device == "beh"

@@ -32,8 +32,8 @@ from hw_mocks.pty_server import PtyServer
 from hw_mocks.transcript import TranscriptSerial
 from tests.drivers.fault_checks import (
     corrupted_reads,
-    held_reply,
     let_held_reply_arrive,
+    lose_or_hold_reply,
     random_fault_session,
     unplug_and_replug,
 )
@@ -345,9 +345,7 @@ def test_lost_status_reply_after_a_setting_is_typed_and_never_asked_twice(faulty
     lockin, faults = faulty
     emulator = emulator_of(lockin)
     before = len(emulator.received_log)
-    release = held_reply(faults) if late else None
-    if release is None:
-        faults.schedule(FaultKind.DROP, nth=1)
+    release = lose_or_hold_reply(faults, late=late)
     with pytest.raises(DeviceTimeout) as info:
         lockin.time_constant_s = 3e-3
     assert info.value.command == "OFLT 5" and info.value.device == "beh"
