@@ -123,9 +123,13 @@ def test_a_wheel_move_is_answered_at_once_and_its_end_arrives_as_an_event(server
     assert end["device_state"]["values"]["position"] == target  # the device as it is now
     assert server.service.bench.filter_wheel.position == target
     # the request (accepted) and its end are both in the audit log
-    rows = [(row.who, row.what, row.status) for row in AuditLog(server.service.db).rows()]
-    assert ("operator-1", f"POST {P}/bench/devices/filter_wheel/settings", 202) in rows
-    assert ("operator-1", f"device settings request {rid} (filter_wheel): done", 200) in rows
+    def rows():
+        return [(row.who, row.what, row.status) for row in AuditLog(server.service.db).rows()]
+
+    # the end's audit row is written beside the done event, not before it: wait for it
+    done = ("operator-1", f"device settings request {rid} (filter_wheel): done", 200)
+    wait_for(lambda: done in rows(), what="the request's end in the audit log")
+    assert ("operator-1", f"POST {P}/bench/devices/filter_wheel/settings", 202) in rows()
     # the sampler reads the device afresh: the next devices message shows the new slot
     wait_for(lambda: server.device("filter_wheel")["values"]["position"] == target, HOLD_S,
              "the wheel's new slot published")
